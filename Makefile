@@ -1,0 +1,28 @@
+# One place that knows how to install: a virtual environment in .venv,
+# created on demand. FMUs are built on demand by the code itself.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+
+.PHONY: reproduce test fmu benchmark clean
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $@
+
+reproduce: $(VENV)/.installed
+	$(BIN)/fnn-cosim reproduce
+
+test: $(VENV)/.installed
+	$(BIN)/python -m pytest -q
+
+fmu: $(VENV)/.installed
+	$(BIN)/fnn-cosim build-fmu --out build/fmus
+
+benchmark: $(VENV)/.installed
+	$(BIN)/python benchmarks/cosim_speed.py
+
+clean:
+	rm -rf build results

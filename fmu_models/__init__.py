@@ -1,0 +1,1 @@
+"""Plant models written once in CasADi and exported as FMI 2.0 / 3.0 FMUs."""

@@ -1,0 +1,169 @@
+"""A model as the FMU sees it: a variable table plus CasADi equations.
+
+:class:`FmuModel` turns the equations, written once in CasADi symbolics, into
+the five functions every FMU of this project is made of (the generic C layer
+in ``fmu_models/c`` calls nothing else):
+
+=============  ==========================  =====================================
+name           signature                   what
+=============  ==========================  =====================================
+``init``       p -> x0                     initial state from the parameters
+``ode``        (t, x, u, p) -> xdot        right-hand side (Model Exchange)
+``out``        (t, x, u, p) -> y           algebraic outputs
+``step``       (t, x, u, p, h) -> x(t+h)   one classical RK4 step, u held
+``jac``        (t, x, u, p) -> J           d[xdot; y]/d[x; u], dense (AD)
+=============  ==========================  =====================================
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Callable, Mapping
+
+import casadi as ca
+
+from .variables import Variable, parameter
+
+__all__ = ["FmuModel", "INTERNAL_STEP"]
+
+# Every model gets this solver parameter; the generic C layer reads it.
+INTERNAL_STEP = parameter(
+    "internal_step", "s",
+    "fixed step of the FMU's internal RK4 integrator; each communication step "
+    "is split into ceil(h / internal_step) equal RK4 steps",
+    1e-3, min=0.0, min_exclusive=True,
+)
+
+Equations = Callable[[ca.SX, Mapping[str, ca.SX]], tuple[Mapping[str, ca.SX], Mapping[str, ca.SX]]]
+
+
+@dataclass(frozen=True)
+class FmuModel:
+    """An FMU model: identifier, variable table and equations.
+
+    ``equations(t, v)`` receives the time and a mapping from every state, input
+    and parameter name to its CasADi symbol; it returns two mappings, state
+    name -> time derivative and output name -> value. ``initial_state(v)``
+    receives the parameter symbols and returns state name -> initial value.
+    """
+
+    identifier: str
+    description: str
+    variables: tuple[Variable, ...]
+    equations: Equations = field(repr=False)
+    initial_state: Callable[[Mapping[str, ca.SX]], Mapping[str, ca.SX]] = field(repr=False)
+
+    def __post_init__(self) -> None:
+        names = [v.name for v in self.all_variables]
+        duplicated = {n for n in names if names.count(n) > 1}
+        if duplicated:
+            raise ValueError(f"model {self.identifier}: duplicated variable names {sorted(duplicated)}")
+
+    @property
+    def all_variables(self) -> tuple[Variable, ...]:
+        return self.variables + (INTERNAL_STEP,)
+
+    def _of(self, causality: str) -> tuple[Variable, ...]:
+        return tuple(v for v in self.all_variables if v.causality == causality)
+
+    @property
+    def states(self) -> tuple[Variable, ...]:
+        return self._of("state")
+
+    @property
+    def inputs(self) -> tuple[Variable, ...]:
+        return self._of("input")
+
+    @property
+    def outputs(self) -> tuple[Variable, ...]:
+        return self._of("output")
+
+    @property
+    def parameters(self) -> tuple[Variable, ...]:
+        return self._of("parameter")
+
+    def variable(self, name: str) -> Variable:
+        for v in self.all_variables:
+            if v.name == name:
+                return v
+        known = ", ".join(v.name for v in self.all_variables)
+        raise KeyError(f"model {self.identifier} has no variable {name!r}; it has: {known}")
+
+    def parameter_values(self, **overrides: float) -> list[float]:
+        """Parameter vector in table order: start values, with ``overrides``
+        checked against each variable's bounds."""
+        for name, value in overrides.items():
+            var = self.variable(name)
+            if var.causality != "parameter":
+                raise KeyError(f"{name!r} is a {var.causality} of {self.identifier}, not a parameter")
+            var.check(value)
+        return [overrides.get(v.name, v.start) for v in self.parameters]
+
+    def input_values(self, **overrides: float) -> list[float]:
+        return [overrides.get(v.name, v.start) for v in self.inputs]
+
+    @cached_property
+    def symbols(self) -> dict[str, ca.SX]:
+        """Vector symbols t, x, u, p, h of the generated functions."""
+        return {
+            "t": ca.SX.sym("t"),
+            "x": ca.SX.sym("x", len(self.states)),
+            "u": ca.SX.sym("u", len(self.inputs)),
+            "p": ca.SX.sym("p", len(self.parameters)),
+            "h": ca.SX.sym("h"),
+        }
+
+    @cached_property
+    def functions(self) -> dict[str, ca.Function]:
+        """The five CasADi functions of the module docstring, keyed by name."""
+        s = self.symbols
+        t, x, u, p, h = s["t"], s["x"], s["u"], s["p"], s["h"]
+        named: dict[str, ca.SX] = {}
+        for vec, group in ((x, self.states), (u, self.inputs), (p, self.parameters)):
+            named.update({v.name: vec[i] for i, v in enumerate(group)})
+
+        derivatives, outputs = self.equations(t, named)
+        missing = {v.name for v in self.states} - set(derivatives)
+        missing |= {v.name for v in self.outputs} - set(outputs)
+        if missing:
+            raise ValueError(f"model {self.identifier}: equations do not define {sorted(missing)}")
+        xdot = ca.vertcat(*[derivatives[v.name] for v in self.states]) if self.states else ca.SX(0, 1)
+        y = ca.vertcat(*[outputs[v.name] for v in self.outputs]) if self.outputs else ca.SX(0, 1)
+        x0_named = self.initial_state(named)
+        x0 = ca.vertcat(*[x0_named[v.name] for v in self.states]) if self.states else ca.SX(0, 1)
+
+        ode = ca.Function("model_ode", [t, x, u, p], [xdot], ["t", "x", "u", "p"], ["xdot"])
+        k1 = ode(t, x, u, p)
+        k2 = ode(t + h / 2, x + h / 2 * k1, u, p)
+        k3 = ode(t + h / 2, x + h / 2 * k2, u, p)
+        k4 = ode(t + h, x + h * k3, u, p)
+        x_next = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        unknowns = ca.vertcat(xdot, y)
+        knowns = ca.vertcat(x, u)
+        return {
+            "init": ca.Function("model_init", [p], [x0], ["p"], ["x0"]),
+            "ode": ode,
+            "out": ca.Function("model_out", [t, x, u, p], [y], ["t", "x", "u", "p"], ["y"]),
+            "step": ca.Function("model_step", [t, x, u, p, h], [x_next], ["t", "x", "u", "p", "h"], ["x_next"]),
+            "jac": ca.Function(
+                "model_jac", [t, x, u, p], [ca.densify(ca.jacobian(unknowns, knowns))],
+                ["t", "x", "u", "p"], ["J"],
+            ),
+        }
+
+    @cached_property
+    def dependencies(self) -> dict[str, list[str]]:
+        """Structural dependencies of each derivative and output on states and
+        inputs, read from the sparsity of the symbolic Jacobian (the
+        ModelStructure of the modelDescription is generated from this)."""
+        s = self.symbols
+        f = self.functions
+        unknowns = ca.vertcat(f["ode"](s["t"], s["x"], s["u"], s["p"]), f["out"](s["t"], s["x"], s["u"], s["p"]))
+        sparsity = ca.jacobian(unknowns, ca.vertcat(s["x"], s["u"])).sparsity()
+        knowns = [v.name for v in self.states + self.inputs]
+        rows = [f"der({v.name})" for v in self.states] + [v.name for v in self.outputs]
+        deps: dict[str, list[str]] = {r: [] for r in rows}
+        r_idx, c_idx = sparsity.get_triplet()
+        for r, c in sorted(zip(r_idx, c_idx)):
+            deps[rows[r]].append(knowns[c])
+        return deps

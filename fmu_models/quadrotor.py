@@ -1,0 +1,153 @@
+"""The quadrotor plant of the paper's section 2, written once in CasADi.
+
+Conventions (paper eqs. 10-11): world frame x north, y east, z **down**;
+body frame x forward, y right, z down; gravity is +g along z_W and the rotor
+thrust pushes along -z_B. Altitude h is therefore -z.
+
+States  p = (x, y, z) [m], v = (u, v, w) [m/s] (world frame, eq. 6),
+        o = (phi, theta, psi) [rad] (Z-Y-X Euler angles, eq. 8),
+        omega_B = (p, q, r) [rad/s] (body rates, eq. 2).
+Inputs  Omega_1..4 [rad/s] rotor speeds, saturated to [0, Omega_max] (section
+        5.2 saturates the control inputs); wind_x, wind_y, wind_z [m/s] wind
+        velocity in the world frame.
+Outputs the 12 states and the thrust and torques actually applied.
+
+Aerodynamic drag (not in the paper, which adds wind in Gazebo) acts on the
+air-relative velocity v_rel = v - v_wind through a linear (rotor drag) and a
+quadratic (body drag) term, see ``docs/plant-model.md``.
+"""
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+
+from .model import FmuModel
+from .rotor import thrust_and_torques
+from .variables import input_, output, parameter, state
+
+__all__ = ["QUADROTOR", "rotation_matrix", "euler_rate_matrix", "hover_rotor_speed", "DEFAULTS"]
+
+# Keeps d|v_rel|/dv_rel finite at v_rel = 0 (the Jacobian at hover would be
+# NaN otherwise); changes the drag force by k_drag_quad * 1e-6 * |v_rel|.
+_SPEED_SMOOTHING = 1e-6  # m/s
+
+_B = 6.55e-6  # N s^2, Table 1
+# Rotor inputs start at the hover speed of the default parameters, so the FMU
+# dropped into any importer hovers until something commands it.
+_HOVER_SPEED = math.sqrt(1.07 * 9.81 / (4 * _B))  # rad/s
+_STATE_NAMES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
+
+_VARIABLES = (
+    state("x", "m", "position north (world frame)"),
+    state("y", "m", "position east (world frame)"),
+    state("z", "m", "position down (world frame; altitude is -z)"),
+    state("u", "m/s", "velocity north (world frame, eq. 6)"),
+    state("v", "m/s", "velocity east (world frame, eq. 6)"),
+    state("w", "m/s", "velocity down (world frame, eq. 6)"),
+    state("phi", "rad", "roll angle (Z-Y-X Euler, eq. 8)"),
+    state("theta", "rad", "pitch angle (Z-Y-X Euler, eq. 8)"),
+    state("psi", "rad", "yaw angle (Z-Y-X Euler, eq. 8)"),
+    state("p", "rad/s", "body roll rate (eq. 2)"),
+    state("q", "rad/s", "body pitch rate (eq. 2)"),
+    state("r", "rad/s", "body yaw rate (eq. 2)"),
+    *(input_(f"Omega_{i}", "rad/s",
+             f"commanded speed of rotor {i} (saturated to [0, Omega_max]); starts at hover",
+             start=_HOVER_SPEED)
+      for i in range(1, 5)),
+    input_("wind_x", "m/s", "wind velocity north (world frame)"),
+    input_("wind_y", "m/s", "wind velocity east (world frame)"),
+    input_("wind_z", "m/s", "wind velocity down (world frame)"),
+    output("T", "N", "total thrust applied, after rotor saturation (eq. 1)"),
+    output("tau_phi", "N.m", "roll torque applied, after rotor saturation (eq. 1)"),
+    output("tau_theta", "N.m", "pitch torque applied, after rotor saturation (eq. 1)"),
+    output("tau_psi", "N.m", "yaw torque applied, after rotor saturation (eq. 1)"),
+    parameter("m", "kg", "vehicle mass (Table 1)", 1.07, min=0.0, min_exclusive=True),
+    parameter("l", "m", "arm length, centre to rotor axis (Table 1)", 0.17, min=0.0, min_exclusive=True),
+    parameter("b", "N.s2", "rotor thrust coefficient, f_i = b Omega_i^2 (Table 1)", _B,
+              min=0.0, min_exclusive=True),
+    parameter("d", "N.m.s2",
+              "rotor drag-torque coefficient, tau_i = d Omega_i^2 (Table 1's 2.66e-2 read as d/b in m; "
+              "docs/plant-model.md)", 2.66e-2 * _B, min=0.0),
+    parameter("Ix", "kg.m2", "moment of inertia about x_B (Table 1)", 3.0e-2, min=0.0, min_exclusive=True),
+    parameter("Iy", "kg.m2", "moment of inertia about y_B (Table 1)", 4.0e-2, min=0.0, min_exclusive=True),
+    parameter("Iz", "kg.m2", "moment of inertia about z_B (Table 1)", 2.1e-2, min=0.0, min_exclusive=True),
+    parameter("g", "m/s2", "gravitational acceleration", 9.81, min=0.0),
+    parameter("k_drag_lin", "N.s/m", "linear (rotor) drag coefficient on the air-relative velocity",
+              0.20, min=0.0),
+    parameter("k_drag_quad", "N.s2/m2", "quadratic (body) drag coefficient, 0.5 rho C_D A",
+              0.04, min=0.0),
+    parameter("Omega_max", "rad/s", "maximum rotor speed (thrust-to-weight about 2)", 900.0,
+              min=0.0, min_exclusive=True),
+    *(parameter(f"{name}_0", unit, f"initial value of {name}", 0.0, **bounds)
+      for name, unit, bounds in (
+          ("x", "m", {}), ("y", "m", {}), ("z", "m", {}),
+          ("u", "m/s", {}), ("v", "m/s", {}), ("w", "m/s", {}),
+          # Euler kinematics (eq. 3) are singular at theta = +-pi/2.
+          ("phi", "rad", {}), ("theta", "rad", {"min": -1.55, "max": 1.55}), ("psi", "rad", {}),
+          ("p", "rad/s", {}), ("q", "rad/s", {}), ("r", "rad/s", {}),
+      )),
+)
+
+
+def rotation_matrix(phi, theta, psi):
+    """R in SO(3), body to world, eq. (8)."""
+    cph, sph = ca.cos(phi), ca.sin(phi)
+    cth, sth = ca.cos(theta), ca.sin(theta)
+    cps, sps = ca.cos(psi), ca.sin(psi)
+    return ca.vertcat(
+        ca.horzcat(cps * cth, cps * sph * sth - cph * sps, sph * sps + cph * cps * sth),
+        ca.horzcat(cth * sps, cph * cps + sph * sps * sth, cph * sps * sth - cps * sph),
+        ca.horzcat(-sth, cth * sph, cph * cth),
+    )
+
+
+def euler_rate_matrix(phi, theta):
+    """T of eq. (3): Euler-angle rates = T @ omega_B (eq. 2)."""
+    return ca.vertcat(
+        ca.horzcat(1, ca.sin(phi) * ca.tan(theta), ca.cos(phi) * ca.tan(theta)),
+        ca.horzcat(0, ca.cos(phi), -ca.sin(phi)),
+        ca.horzcat(0, ca.sin(phi) / ca.cos(theta), ca.cos(phi) / ca.cos(theta)),
+    )
+
+
+def _equations(t, s):
+    omega_sq = [ca.fmin(ca.fmax(s[f"Omega_{i}"], 0), s["Omega_max"]) ** 2 for i in range(1, 5)]
+    thrust, tau_phi, tau_theta, tau_psi = thrust_and_torques(omega_sq, s["b"], s["d"], s["l"])
+
+    R = rotation_matrix(s["phi"], s["theta"], s["psi"])
+    velocity = ca.vertcat(s["u"], s["v"], s["w"])
+    v_rel = velocity - ca.vertcat(s["wind_x"], s["wind_y"], s["wind_z"])
+    speed = ca.sqrt(ca.sumsqr(v_rel) + _SPEED_SMOOTHING**2)
+    drag = -(s["k_drag_lin"] + s["k_drag_quad"] * speed) * v_rel
+    e3 = ca.DM([0, 0, 1])
+    # eqs. (9)-(11) with the drag force added to F
+    acceleration = (-R @ e3 * thrust + drag) / s["m"] + s["g"] * e3
+
+    rates = ca.vertcat(s["p"], s["q"], s["r"])
+    euler_rates = euler_rate_matrix(s["phi"], s["theta"]) @ rates  # eq. (2)
+    inertia = ca.diag(ca.vertcat(s["Ix"], s["Iy"], s["Iz"]))
+    torque = ca.vertcat(tau_phi, tau_theta, tau_psi)
+    angular_acceleration = ca.solve(inertia, -ca.cross(rates, inertia @ rates) + torque)  # eq. (4)
+
+    derivatives = dict(zip(_STATE_NAMES, ca.vertsplit(ca.vertcat(velocity, acceleration, euler_rates,
+                                                                  angular_acceleration))))
+    outputs = {"T": thrust, "tau_phi": tau_phi, "tau_theta": tau_theta, "tau_psi": tau_psi}
+    return derivatives, outputs
+
+
+QUADROTOR = FmuModel(
+    identifier="Quadrotor",
+    description="Quadrotor UAV (Sarabakha/Kayacan LM-FNN paper, section 2) with rotor saturation "
+                "and aerodynamic drag in wind; z axis down",
+    variables=_VARIABLES,
+    equations=_equations,
+    initial_state=lambda s: {name: s[f"{name}_0"] for name in _STATE_NAMES},
+)
+
+DEFAULTS: dict[str, float] = {v.name: v.start for v in QUADROTOR.parameters}
+
+
+def hover_rotor_speed(m=DEFAULTS["m"], g=DEFAULTS["g"], b=DEFAULTS["b"]) -> float:
+    """Rotor speed (rad/s) at which the four rotors together carry the weight."""
+    return math.sqrt(m * g / (4 * b))

@@ -1,0 +1,90 @@
+"""The one table of model variables.
+
+Every FMU model is described by a list of :class:`Variable` entries (name,
+causality, unit, start, bounds, description). The modelDescription.xml files,
+the C value-reference table and the Python constants are all generated from
+that list; no value reference is ever typed by hand.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+__all__ = ["Variable", "UNITS", "state", "input_", "output", "parameter"]
+
+
+# SI base-unit exponents of every unit a model may use (FMI <UnitDefinitions>).
+UNITS: dict[str, dict[str, int]] = {
+    "1": {},
+    "s": {"s": 1},
+    "m": {"m": 1},
+    "m/s": {"m": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2},
+    "rad": {"rad": 1},
+    "rad/s": {"rad": 1, "s": -1},
+    "kg": {"kg": 1},
+    "kg.m2": {"kg": 1, "m": 2},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    # Rotor coefficients multiply Omega^2 with Omega in rad/s.
+    "N.s2": {"kg": 1, "m": 1},
+    "N.m.s2": {"kg": 1, "m": 2},
+    "N.s/m": {"kg": 1, "s": -1},
+    "N.s2/m2": {"kg": 1, "m": -1},
+}
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One scalar Float64 variable of an FMU model.
+
+    ``causality`` is one of ``state`` (a continuous state, exposed as an
+    output), ``input``, ``output`` (an algebraic output) or ``parameter``.
+    ``min``/``max`` are enforced by the FMU on every set; ``min_exclusive``
+    makes the lower bound strict (mass, inertia, step sizes must be > 0).
+    """
+
+    name: str
+    causality: str
+    unit: str
+    description: str
+    start: float | None = None
+    min: float = -math.inf
+    max: float = math.inf
+    min_exclusive: bool = False
+
+    def __post_init__(self) -> None:
+        if self.causality not in ("state", "input", "output", "parameter"):
+            raise ValueError(f"variable {self.name!r}: unknown causality {self.causality!r}")
+        if self.unit not in UNITS:
+            raise ValueError(f"variable {self.name!r}: unit {self.unit!r} is not in UNITS")
+        if self.causality in ("input", "parameter") and self.start is None:
+            raise ValueError(f"variable {self.name!r}: an {self.causality} needs a start value")
+
+    def check(self, value: float) -> None:
+        """Raise ``ValueError`` naming the variable if ``value`` is not admissible."""
+        if not math.isfinite(value):
+            raise ValueError(f"{self.name} = {value!r} is not a finite number")
+        too_low = value <= self.min if self.min_exclusive else value < self.min
+        if too_low or value > self.max:
+            low = "(" if self.min_exclusive else "["
+            raise ValueError(
+                f"{self.name} = {value!r} {self.unit} is outside its range "
+                f"{low}{self.min}, {self.max}]"
+            )
+
+
+def state(name, unit, description):
+    return Variable(name, "state", unit, description)
+
+
+def input_(name, unit, description, start=0.0, **bounds):
+    return Variable(name, "input", unit, description, start, **bounds)
+
+
+def output(name, unit, description):
+    return Variable(name, "output", unit, description)
+
+
+def parameter(name, unit, description, start, **bounds):
+    return Variable(name, "parameter", unit, description, start, **bounds)
