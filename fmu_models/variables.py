@@ -22,6 +22,7 @@ UNITS: dict[str, dict[str, int]] = {
     "m/s2": {"m": 1, "s": -2},
     "rad": {"rad": 1},
     "rad/s": {"rad": 1, "s": -1},
+    "rad/s2": {"rad": 1, "s": -2},
     "kg": {"kg": 1},
     "kg.m2": {"kg": 1, "m": 2},
     "N": {"kg": 1, "m": 1, "s": -2},

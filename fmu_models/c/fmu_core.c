@@ -1,0 +1,399 @@
+/* Model-independent core; see fmu_core.h. */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmu_core.h"
+#include "model_generated.h"
+
+#define STATE_MAGIC 0x464E4E43UL /* "FNNC" */
+
+static const char *const MODE_NAMES[MODE_N] = {
+    "Instantiated", "InitializationMode", "EventMode", "ContinuousTimeMode",
+    "StepComplete", "ConfigurationMode", "Terminated"};
+
+void core_log(Instance *inst, CoreStatus status, const char *fmt, ...) {
+    char message[1024];
+    va_list args;
+    if (!inst || !inst->logger) return;
+    /* errors are always reported; the rest only with debug logging on */
+    if (status < CORE_WARNING && !inst->logging_on) return;
+    va_start(args, fmt);
+    vsnprintf(message, sizeof message, fmt, args);
+    va_end(args);
+    inst->logger(inst->environment, inst->instance_name, status,
+                 status >= CORE_ERROR ? "logStatusError" : "logEvents", message);
+}
+
+CoreStatus core_check_mode(Instance *inst, const char *function, unsigned allowed) {
+    if (!inst) return CORE_ERROR;
+    if (IN(inst->s.mode) & allowed) return CORE_OK;
+    core_log(inst, CORE_ERROR, "%s must not be called in %s", function, MODE_NAMES[inst->s.mode]);
+    return CORE_ERROR;
+}
+
+static void set_defaults(Instance *inst) {
+    memset(&inst->s, 0, sizeof inst->s);
+    inst->s.magic = STATE_MAGIC;
+    inst->s.n_variables = N_VARIABLES;
+    inst->s.mode = MODE_INSTANTIATED;
+    for (size_t i = 0; i < N_VARIABLES; i++) inst->s.v[i] = VAR_START[i];
+    inst->derived_valid = 0;
+}
+
+Instance *core_instantiate(const char *instance_name, CoreKind kind, void *environment,
+                           CoreLogger logger, int logging_on) {
+    Instance *inst = (Instance *)calloc(1, sizeof(Instance));
+    if (!inst) return NULL;
+    const char *name = instance_name ? instance_name : "";
+    inst->instance_name = (char *)malloc(strlen(name) + 1);
+    if (!inst->instance_name) { free(inst); return NULL; }
+    strcpy(inst->instance_name, name);
+    inst->kind = kind;
+    inst->environment = environment;
+    inst->logger = logger;
+    inst->logging_on = logging_on;
+    set_defaults(inst);
+    return inst;
+}
+
+void core_free(Instance *inst) {
+    if (!inst) return;
+    free(inst->instance_name);
+    free(inst);
+}
+
+void core_reset(Instance *inst) { set_defaults(inst); }
+
+/* ---- calls into the CasADi-generated functions ---------------------------- */
+
+#define T_ (inst->s.v[0])
+#define X_ (inst->s.v + VR_X)
+#define DX_ (inst->s.v + VR_DX)
+#define Y_ (inst->s.v + VR_Y)
+#define U_ (inst->s.v + VR_U)
+#define P_ (inst->s.v + VR_P)
+
+static void initial_state(Instance *inst) {
+    inst->arg[0] = P_;
+    inst->res[0] = X_;
+    model_init(inst->arg, inst->res, inst->iw, inst->w, 0);
+    inst->derived_valid = 0;
+}
+
+static void update_derived(Instance *inst) {
+    if (inst->derived_valid) return;
+    if (inst->s.mode == MODE_INSTANTIATED || inst->s.mode == MODE_INITIALIZATION) initial_state(inst);
+    inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
+    inst->res[0] = DX_;
+    model_ode(inst->arg, inst->res, inst->iw, inst->w, 0);
+    inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
+    inst->res[0] = Y_;
+    model_out(inst->arg, inst->res, inst->iw, inst->w, 0);
+    inst->derived_valid = 1;
+}
+
+/* ---- initialization ------------------------------------------------------- */
+
+CoreStatus core_enter_initialization(Instance *inst, double start_time) {
+    if (!isfinite(start_time)) {
+        core_log(inst, CORE_ERROR, "start time = %g is not finite", start_time);
+        return CORE_ERROR;
+    }
+    T_ = start_time;
+    inst->s.mode = MODE_INITIALIZATION;
+    inst->derived_valid = 0;
+    return CORE_OK;
+}
+
+CoreStatus core_exit_initialization(Instance *inst) {
+    initial_state(inst);
+    inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE : MODE_EVENT;
+    update_derived(inst);
+    for (size_t i = 0; i < NX; i++) {
+        if (!isfinite(X_[i])) {
+            core_log(inst, CORE_ERROR, "initial value of %s = %g is not finite", VAR_NAME[VR_X + i], X_[i]);
+            return CORE_ERROR;
+        }
+    }
+    return CORE_OK;
+}
+
+/* ---- get / set ------------------------------------------------------------ */
+
+static CoreStatus check_value(Instance *inst, unsigned vr, double value) {
+    if (!isfinite(value)) {
+        core_log(inst, CORE_ERROR, "%s = %g refused: not a finite number", VAR_NAME[vr], value);
+        return CORE_ERROR;
+    }
+    int too_low = VAR_MIN_EXCLUSIVE[vr] ? value <= VAR_MIN[vr] : value < VAR_MIN[vr];
+    if (too_low || value > VAR_MAX[vr]) {
+        core_log(inst, CORE_ERROR, "%s = %g refused: outside its range %s%g, %g]", VAR_NAME[vr], value,
+                 VAR_MIN_EXCLUSIVE[vr] ? "(" : "[", VAR_MIN[vr], VAR_MAX[vr]);
+        return CORE_ERROR;
+    }
+    return CORE_OK;
+}
+
+CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const double value[]) {
+    if (n > 0 && (!vr || !value)) {
+        core_log(inst, CORE_ERROR, "set: NULL value reference or value array");
+        return CORE_ERROR;
+    }
+    /* check everything first so a refused call changes nothing */
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= N_VARIABLES) {
+            core_log(inst, CORE_ERROR, "set: unknown value reference %u", vr[i]);
+            return CORE_ERROR;
+        }
+        if (vr[i] >= VR_P) {
+            if (inst->s.mode != MODE_INSTANTIATED && inst->s.mode != MODE_INITIALIZATION &&
+                inst->s.mode != MODE_CONFIGURATION) {
+                core_log(inst, CORE_ERROR, "parameter %s can only be set before initialization ends (now in %s)",
+                         VAR_NAME[vr[i]], MODE_NAMES[inst->s.mode]);
+                return CORE_ERROR;
+            }
+        } else if (vr[i] >= VR_U) {
+            if (inst->s.mode == MODE_TERMINATED) {
+                core_log(inst, CORE_ERROR, "input %s cannot be set after termination", VAR_NAME[vr[i]]);
+                return CORE_ERROR;
+            }
+        } else {
+            core_log(inst, CORE_ERROR, "%s is not an input or parameter and cannot be set", VAR_NAME[vr[i]]);
+            return CORE_ERROR;
+        }
+        if (check_value(inst, vr[i], value[i]) != CORE_OK) return CORE_ERROR;
+    }
+    for (size_t i = 0; i < n; i++) inst->s.v[vr[i]] = value[i];
+    if (n > 0) inst->derived_valid = 0;
+    return CORE_OK;
+}
+
+CoreStatus core_get_float64(Instance *inst, const unsigned vr[], size_t n, double value[]) {
+    if (n > 0 && (!vr || !value)) {
+        core_log(inst, CORE_ERROR, "get: NULL value reference or value array");
+        return CORE_ERROR;
+    }
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= N_VARIABLES) {
+            core_log(inst, CORE_ERROR, "get: unknown value reference %u", vr[i]);
+            return CORE_ERROR;
+        }
+    }
+    update_derived(inst);
+    for (size_t i = 0; i < n; i++) value[i] = inst->s.v[vr[i]];
+    return CORE_OK;
+}
+
+/* ---- co-simulation --------------------------------------------------------- */
+
+static int first_non_finite_state(Instance *inst) {
+    for (size_t i = 0; i < NX; i++)
+        if (!isfinite(X_[i])) return (int)i;
+    return -1;
+}
+
+CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
+    if (inst->s.failed) {
+        core_log(inst, CORE_ERROR, "doStep refused: an earlier step failed; reset or restore a saved state");
+        return CORE_ERROR;
+    }
+    if (!(step_size > 0) || !isfinite(step_size)) {
+        core_log(inst, CORE_ERROR, "communication step size = %g refused: it must be positive and finite", step_size);
+        return CORE_ERROR;
+    }
+    if (!isfinite(current_time) || fabs(current_time - T_) > 1e-9 * fmax(1.0, fabs(T_))) {
+        core_log(inst, CORE_ERROR, "doStep at t = %.17g refused: the FMU is at t = %.17g", current_time, T_);
+        return CORE_ERROR;
+    }
+    const double internal_step = inst->s.v[VR_INTERNAL_STEP];
+    double n_real = ceil(step_size / internal_step - 1e-9);
+    if (n_real < 1) n_real = 1;
+    if (n_real > 1e7) {
+        core_log(inst, CORE_ERROR, "communication step %g with internal_step %g needs %g RK4 steps: refused",
+                 step_size, internal_step, n_real);
+        return CORE_ERROR;
+    }
+    const long n = (long)n_real;
+    const double h = step_size / (double)n;
+    memcpy(inst->x_start, X_, NX * sizeof(double));
+    for (long k = 0; k < n; k++) {
+        /* time from a step counter, never accumulated */
+        T_ = current_time + (double)k * h;
+        memcpy(inst->k_tmp, X_, NX * sizeof(double));
+        inst->arg[0] = &T_; inst->arg[1] = inst->k_tmp; inst->arg[2] = U_; inst->arg[3] = P_;
+        inst->arg[4] = &h;
+        inst->res[0] = X_;
+        model_step(inst->arg, inst->res, inst->iw, inst->w, 0);
+    }
+    inst->derived_valid = 0;
+    int bad = first_non_finite_state(inst);
+    if (bad >= 0) {
+        double value = X_[bad];
+        memcpy(X_, inst->x_start, NX * sizeof(double));
+        T_ = current_time;
+        inst->s.failed = 1;
+        core_log(inst, CORE_ERROR, "state %s became %g during the step from t = %g to t = %g",
+                 VAR_NAME[VR_X + bad], value, current_time, current_time + step_size);
+        return CORE_ERROR;
+    }
+    T_ = current_time + step_size;
+    return CORE_OK;
+}
+
+/* ---- model exchange --------------------------------------------------------- */
+
+CoreStatus core_set_time(Instance *inst, double time) {
+    if (!isfinite(time)) {
+        core_log(inst, CORE_ERROR, "time = %g refused: not finite", time);
+        return CORE_ERROR;
+    }
+    T_ = time;
+    inst->derived_valid = 0;
+    return CORE_OK;
+}
+
+CoreStatus core_set_states(Instance *inst, const double x[], size_t nx) {
+    if (nx != NX || (nx > 0 && !x)) {
+        core_log(inst, CORE_ERROR, "set continuous states: expected %d states, got %zu", NX, nx);
+        return CORE_ERROR;
+    }
+    for (size_t i = 0; i < nx; i++) {
+        if (!isfinite(x[i])) {
+            core_log(inst, CORE_ERROR, "state %s = %g refused: not finite", VAR_NAME[VR_X + i], x[i]);
+            return CORE_ERROR;
+        }
+    }
+    memcpy(X_, x, nx * sizeof(double));
+    inst->derived_valid = 0;
+    return CORE_OK;
+}
+
+CoreStatus core_get_states(Instance *inst, double x[], size_t nx) {
+    if (nx != NX || (nx > 0 && !x)) {
+        core_log(inst, CORE_ERROR, "get continuous states: expected %d states, got %zu", NX, nx);
+        return CORE_ERROR;
+    }
+    update_derived(inst);
+    memcpy(x, X_, nx * sizeof(double));
+    return CORE_OK;
+}
+
+CoreStatus core_get_derivatives(Instance *inst, double dx[], size_t nx) {
+    if (nx != NX || (nx > 0 && !dx)) {
+        core_log(inst, CORE_ERROR, "get derivatives: expected %d states, got %zu", NX, nx);
+        return CORE_ERROR;
+    }
+    update_derived(inst);
+    memcpy(dx, DX_, nx * sizeof(double));
+    return CORE_OK;
+}
+
+/* ---- directional derivatives (CasADi AD) ----------------------------------- */
+
+/* Row of d[xdot; y]/d[x; u] for an unknown, -1 for a state (identity row), -2 if invalid. */
+static int unknown_row(unsigned vr) {
+    if (vr >= VR_X && vr < VR_X + NX) return -1;
+    if (vr >= VR_DX && vr < VR_DX + NX) return (int)(vr - VR_DX);
+    if (vr >= VR_Y && vr < VR_Y + NY) return (int)(NX + vr - VR_Y);
+    return -2;
+}
+
+static int known_column(unsigned vr) {
+    if (vr >= VR_X && vr < VR_X + NX) return (int)(vr - VR_X);
+    if (vr >= VR_U && vr < VR_U + NU) return (int)(NX + vr - VR_U);
+    return -1;
+}
+
+CoreStatus core_directional_derivative(Instance *inst,
+                                       const unsigned unknowns[], size_t n_unknowns,
+                                       const unsigned knowns[], size_t n_knowns,
+                                       const double seed[], double sensitivity[]) {
+    if ((n_unknowns && (!unknowns || !sensitivity)) || (n_knowns && (!knowns || !seed))) {
+        core_log(inst, CORE_ERROR, "directional derivative: NULL argument");
+        return CORE_ERROR;
+    }
+    for (size_t i = 0; i < n_unknowns; i++) {
+        if (unknowns[i] >= N_VARIABLES || unknown_row(unknowns[i]) == -2) {
+            core_log(inst, CORE_ERROR, "directional derivative: value reference %u is not a state, derivative or output",
+                     unknowns[i]);
+            return CORE_ERROR;
+        }
+    }
+    for (size_t j = 0; j < n_knowns; j++) {
+        if (knowns[j] >= N_VARIABLES || known_column(knowns[j]) < 0) {
+            core_log(inst, CORE_ERROR, "directional derivative: value reference %u is not a state or input", knowns[j]);
+            return CORE_ERROR;
+        }
+    }
+    update_derived(inst);
+    inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
+    inst->res[0] = inst->jac;
+    model_jac(inst->arg, inst->res, inst->iw, inst->w, 0);
+    const size_t rows = NX + NY; /* CasADi stores dense matrices column-major */
+    for (size_t i = 0; i < n_unknowns; i++) {
+        int row = unknown_row(unknowns[i]);
+        double acc = 0.0;
+        for (size_t j = 0; j < n_knowns; j++) {
+            int col = known_column(knowns[j]);
+            if (row == -1) /* a state as an output: d x / d x = I */
+                acc += knowns[j] == unknowns[i] ? seed[j] : 0.0;
+            else
+                acc += inst->jac[(size_t)col * rows + (size_t)row] * seed[j];
+        }
+        sensitivity[i] = acc;
+    }
+    return CORE_OK;
+}
+
+/* ---- FMU state ------------------------------------------------------------- */
+
+CoreState *core_get_state(Instance *inst, CoreState *reuse) {
+    CoreState *state = reuse ? reuse : (CoreState *)malloc(sizeof(CoreState));
+    if (!state) {
+        core_log(inst, CORE_ERROR, "get FMU state: out of memory");
+        return NULL;
+    }
+    *state = inst->s;
+    return state;
+}
+
+CoreStatus core_set_state(Instance *inst, const CoreState *state) {
+    if (!state || state->magic != STATE_MAGIC || state->n_variables != N_VARIABLES) {
+        core_log(inst, CORE_ERROR, "set FMU state: not a state of this model");
+        return CORE_ERROR;
+    }
+    inst->s = *state;
+    inst->derived_valid = 0;
+    return CORE_OK;
+}
+
+size_t core_serialized_size(void) { return sizeof(CoreState); }
+
+CoreStatus core_serialize(Instance *inst, const CoreState *state, unsigned char *bytes, size_t size) {
+    if (!state || !bytes || size < sizeof(CoreState)) {
+        core_log(inst, CORE_ERROR, "serialize FMU state: buffer of %zu bytes, %zu needed", size, sizeof(CoreState));
+        return CORE_ERROR;
+    }
+    memcpy(bytes, state, sizeof(CoreState));
+    return CORE_OK;
+}
+
+CoreState *core_deserialize(Instance *inst, const unsigned char *bytes, size_t size) {
+    CoreState tmp;
+    if (!bytes || size != sizeof(CoreState)) {
+        core_log(inst, CORE_ERROR, "deserialize FMU state: %zu bytes, expected %zu", size, sizeof(CoreState));
+        return NULL;
+    }
+    memcpy(&tmp, bytes, sizeof tmp);
+    if (tmp.magic != STATE_MAGIC || tmp.n_variables != N_VARIABLES || tmp.mode < 0 || tmp.mode >= MODE_N) {
+        core_log(inst, CORE_ERROR, "deserialize FMU state: the bytes are not a state of this model");
+        return NULL;
+    }
+    CoreState *state = (CoreState *)malloc(sizeof(CoreState));
+    if (!state) return NULL;
+    *state = tmp;
+    return state;
+}

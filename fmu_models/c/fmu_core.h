@@ -1,0 +1,99 @@
+/* Model-independent core shared by the FMI 2.0 and FMI 3.0 layers.
+ *
+ * A model is nothing but the generated "model_config.h" (sizes, the variable
+ * table, bounds and start values, from fmu_models/variables.py) and the
+ * CasADi-generated functions model_init/ode/out/step/jac. This file knows no
+ * model; the FMI layers know no model either, as in the Reference-FMUs.
+ *
+ * Value references index one array of doubles laid out as
+ *   [ time | x (NX) | der(x) (NX) | y (NY) | u (NU) | p (NP) ]
+ */
+#ifndef FMU_CORE_H
+#define FMU_CORE_H
+
+#include <stddef.h>
+#include "model_config.h"
+
+typedef enum {
+    CORE_OK = 0, CORE_WARNING = 1, CORE_DISCARD = 2, CORE_ERROR = 3, CORE_FATAL = 4
+} CoreStatus; /* numerically equal to fmi2Status and fmi3Status */
+
+typedef enum {
+    MODE_INSTANTIATED = 0,
+    MODE_INITIALIZATION,
+    MODE_EVENT,              /* Model Exchange */
+    MODE_CONTINUOUS_TIME,    /* Model Exchange */
+    MODE_STEP_COMPLETE,      /* Co-Simulation */
+    MODE_CONFIGURATION,      /* FMI 3.0 configuration modes */
+    MODE_TERMINATED,
+    MODE_N
+} CoreMode;
+
+#define IN(m) (1u << (m))
+#define ANY_MODE ((1u << MODE_N) - 1u)
+
+typedef enum { KIND_MODEL_EXCHANGE, KIND_CO_SIMULATION } CoreKind;
+
+/* Logger adapter: each FMI layer forwards to its own callback type. */
+typedef void (*CoreLogger)(void *environment, const char *instance_name,
+                           CoreStatus status, const char *category, const char *message);
+
+/* Everything get/set FMU state saves and restores. */
+typedef struct {
+    unsigned long magic;
+    unsigned long n_variables;
+    int mode;
+    int failed;              /* a step produced a non-finite state */
+    double v[N_VARIABLES];   /* v[0] is the time */
+} CoreState;
+
+typedef struct {
+    CoreState s;
+    CoreKind kind;
+    char *instance_name;
+    void *environment;
+    CoreLogger logger;
+    int logging_on;
+    int derived_valid;       /* der(x) and y are up to date */
+    const double *arg[MODEL_SZ_ARG];
+    double *res[MODEL_SZ_RES];
+    long long iw[MODEL_SZ_IW + 1];
+    double w[MODEL_SZ_W + 1];
+    double x_start[NX + 1], k_tmp[NX + 1];
+    double jac[(NX + NY) * (NX + NU) + 1];
+} Instance;
+
+Instance *core_instantiate(const char *instance_name, CoreKind kind, void *environment,
+                           CoreLogger logger, int logging_on);
+void core_free(Instance *inst);
+void core_reset(Instance *inst);
+
+void core_log(Instance *inst, CoreStatus status, const char *fmt, ...);
+/* CORE_OK if the instance is in one of the modes of `allowed`, else logs and errors. */
+CoreStatus core_check_mode(Instance *inst, const char *function, unsigned allowed);
+
+CoreStatus core_enter_initialization(Instance *inst, double start_time);
+CoreStatus core_exit_initialization(Instance *inst);
+
+CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const double value[]);
+CoreStatus core_get_float64(Instance *inst, const unsigned vr[], size_t n, double value[]);
+
+CoreStatus core_do_step(Instance *inst, double current_time, double step_size);
+
+CoreStatus core_set_time(Instance *inst, double time);
+CoreStatus core_set_states(Instance *inst, const double x[], size_t nx);
+CoreStatus core_get_states(Instance *inst, double x[], size_t nx);
+CoreStatus core_get_derivatives(Instance *inst, double dx[], size_t nx);
+
+CoreStatus core_directional_derivative(Instance *inst,
+                                       const unsigned unknowns[], size_t n_unknowns,
+                                       const unsigned knowns[], size_t n_knowns,
+                                       const double seed[], double sensitivity[]);
+
+CoreState *core_get_state(Instance *inst, CoreState *reuse);
+CoreStatus core_set_state(Instance *inst, const CoreState *state);
+size_t core_serialized_size(void);
+CoreStatus core_serialize(Instance *inst, const CoreState *state, unsigned char *bytes, size_t size);
+CoreState *core_deserialize(Instance *inst, const unsigned char *bytes, size_t size);
+
+#endif
