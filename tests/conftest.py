@@ -1,0 +1,14 @@
+"""Shared fixtures: FMUs are built once per test session (content-addressed
+cache, so an unchanged model is not rebuilt across sessions either)."""
+from __future__ import annotations
+
+import pytest
+
+from fmu_models.build import cached_fmu
+from fmu_models.quadrotor import QUADROTOR
+
+
+@pytest.fixture(scope="session")
+def quadrotor_fmu2():
+    """Path of the FMI 2.0 (ME + CS) quadrotor FMU."""
+    return cached_fmu(QUADROTOR, 2)

@@ -1,0 +1,70 @@
+"""A small FMI 2.0 harness for the tests: an instance with captured log
+messages, value references by name, and stepping by a step counter."""
+from __future__ import annotations
+
+import shutil
+import tempfile
+from ctypes import byref
+
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import calloc, free
+from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.logging import addLoggerProxy
+
+
+class Fmi2Instance:
+    """One instantiated, initialized FMI 2.0 instance (CS by default)."""
+
+    def __init__(self, fmu_path, parameters=None, model_exchange=False, unzip_dir=None, initialize=True):
+        self.md = read_model_description(fmu_path)
+        self._own_dir = unzip_dir is None
+        self.unzip_dir = unzip_dir or extract(fmu_path)
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.messages: list[str] = []
+        self._logger = fmi2CallbackLoggerTYPE(self._log)  # keep a reference alive
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = self._logger
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        addLoggerProxy(byref(self.callbacks))
+        cls = FMU2Model if model_exchange else FMU2Slave
+        self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip_dir,
+                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="test")
+        self.fmu.instantiate(callbacks=self.callbacks)
+        self.n = 0
+        self.h = 0.01
+        if initialize:
+            self.initialize(parameters or {})
+
+    def _log(self, env, instance, status, category, message):
+        self.messages.append(message.decode())
+
+    def initialize(self, parameters):
+        self.fmu.setupExperiment(startTime=0.0)
+        self.set(**parameters)
+        self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+
+    def set(self, **values):
+        if values:
+            self.fmu.setReal([self.vr[k] for k in values], [float(v) for v in values.values()])
+
+    def get(self, *names):
+        return np.array(self.fmu.getReal([self.vr[k] for k in names]))
+
+    def step(self, n_steps=1, h=None):
+        h = h or self.h
+        for _ in range(n_steps):
+            self.fmu.doStep(currentCommunicationPoint=self.n * h, communicationStepSize=h)
+            self.n += 1
+
+    def close(self):
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+        if self._own_dir:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+
+
+STATES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")

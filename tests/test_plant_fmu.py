@@ -1,0 +1,318 @@
+"""The quadrotor plant FMU (FMI 2.0): validity, physics, numerics, API robustness."""
+from __future__ import annotations
+
+import math
+from ctypes import POINTER, c_double
+
+import casadi as ca
+import numpy as np
+import pytest
+from fmpy import simulate_fmu
+from fmpy.fmi1 import FMICallException
+from fmpy.validation import validate_fmu
+
+from fmu_models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
+from fmi2_harness import STATES, Fmi2Instance
+
+HOVER = hover_rotor_speed()
+ROTORS_AT_HOVER = {f"Omega_{i}": HOVER for i in range(1, 5)}
+
+
+@pytest.fixture
+def instance(quadrotor_fmu2):
+    instances = []
+
+    def make(**kwargs):
+        inst = Fmi2Instance(quadrotor_fmu2, **kwargs)
+        instances.append(inst)
+        return inst
+
+    yield make
+    for inst in instances:
+        inst.close()
+
+
+def test_fmu_validates_with_no_problems(quadrotor_fmu2):
+    assert validate_fmu(str(quadrotor_fmu2)) == []
+
+
+def test_hover_at_analytic_rotor_speed_holds_position_for_10_s(quadrotor_fmu2):
+    result = simulate_fmu(str(quadrotor_fmu2), stop_time=10.0, output_interval=0.01,
+                          start_values={"z_0": -15.0, **ROTORS_AT_HOVER})
+    assert result["time"][-1] == pytest.approx(10.0)
+    drift = np.sqrt(result["x"] ** 2 + result["y"] ** 2 + (result["z"] + 15.0) ** 2)
+    assert drift.max() < 1e-9
+
+
+def test_free_fall_matches_g_t_squared_over_two(instance):
+    fmu = instance(parameters={"k_drag_lin": 0.0, "k_drag_quad": 0.0})
+    fmu.set(**{f"Omega_{i}": 0.0 for i in range(1, 5)})
+    fmu.step(200)  # 2 s
+    z, w, t = *fmu.get("z", "w"), 2.0
+    g = DEFAULTS["g"]
+    assert z == pytest.approx(g * t**2 / 2, abs=1e-9)  # z points down: falling is +z
+    assert w == pytest.approx(g * t, abs=1e-9)
+
+
+def _input_sequence(n_steps, dt):
+    """A varied, piecewise-constant input sequence: rotor speeds swinging
+    around hover with different phases, and a changing wind."""
+    t = np.arange(n_steps) * dt
+    rotors = [HOVER * (1 + 0.02 * np.sin(2.1 * t + k) + 0.01 * np.sin(7.3 * t * (k + 1))) for k in range(4)]
+    wind = [3 * np.sin(0.5 * t), -2 * np.cos(0.3 * t), 0.5 * np.sin(1.7 * t)]
+    return np.column_stack(rotors + wind)
+
+
+def test_trajectory_matches_independent_cvodes_integration(instance):
+    """The FMU's RK4 (internal step 1 ms) against CasADi's CVODES (BDF,
+    tolerance 1e-12) on the same CasADi model, inputs held over each 10 ms."""
+    dt, n = 0.01, 300
+    inputs = _input_sequence(n, dt)
+    p = QUADROTOR.parameter_values(z_0=-15.0)
+    fmu = instance(parameters={"z_0": -15.0})
+    names = [v.name for v in QUADROTOR.inputs]
+
+    s = QUADROTOR.symbols
+    f = QUADROTOR.functions["ode"]
+    integrator = ca.integrator("reference", "cvodes",
+                               {"x": s["x"], "p": ca.vertcat(s["u"], s["p"]),
+                                "ode": f(0, s["x"], s["u"], s["p"])},
+                               0.0, dt, {"abstol": 1e-12, "reltol": 1e-12})
+    x_ref = np.array(QUADROTOR.functions["init"](p)).ravel()
+    worst = 0.0
+    for k in range(n):
+        fmu.set(**dict(zip(names, inputs[k])))
+        fmu.step()
+        x_ref = np.array(integrator(x0=x_ref, p=np.concatenate([inputs[k], p]))["xf"]).ravel()
+        worst = max(worst, np.abs(fmu.get(*STATES) - x_ref).max())
+    # the trajectory really moved (not a trivial agreement at hover)
+    assert np.abs(x_ref[:3] - [0, 0, -15]).max() > 0.5
+    assert worst < 1e-8
+
+
+def _steps_from_hover(instance, n_steps=50, **inputs):
+    fmu = instance(parameters={"z_0": -15.0})
+    fmu.set(**{**ROTORS_AT_HOVER, **inputs})
+    fmu.step(n_steps)
+    return dict(zip(STATES, fmu.get(*STATES))), dict(zip(("T", "tau_phi", "tau_theta", "tau_psi"),
+                                                         fmu.get("T", "tau_phi", "tau_theta", "tau_psi")))
+
+
+def test_more_thrust_climbs_that_is_moves_towards_negative_z(instance):
+    state, applied = _steps_from_hover(instance, **{f"Omega_{i}": HOVER * 1.05 for i in range(1, 5)})
+    assert applied["T"] > DEFAULTS["m"] * DEFAULTS["g"]
+    assert state["w"] < 0 and state["z"] < -15.0
+
+
+def test_front_rotor_pitches_nose_up_and_vehicle_moves_backwards(instance):
+    state, applied = _steps_from_hover(instance, n_steps=60, Omega_1=HOVER * 1.02, Omega_3=HOVER * 0.98)
+    assert applied["tau_theta"] > 0
+    assert state["q"] > 0 and state["theta"] > 0
+    assert state["u"] < 0  # tilted thrust points aft (eq. 10 with theta > 0)
+
+
+def test_left_rotor_rolls_right_wing_down_and_vehicle_moves_right(instance):
+    state, applied = _steps_from_hover(instance, n_steps=60, Omega_4=HOVER * 1.02, Omega_2=HOVER * 0.98)
+    assert applied["tau_phi"] > 0
+    assert state["p"] > 0 and state["phi"] > 0
+    assert state["v"] > 0  # east, i.e. +y_W
+
+
+def test_yaw_torque_turns_heading(instance):
+    state, applied = _steps_from_hover(instance, Omega_2=HOVER * 1.02, Omega_4=HOVER * 1.02,
+                                       Omega_1=HOVER * 0.98, Omega_3=HOVER * 0.98)
+    assert applied["tau_psi"] > 0
+    assert state["r"] > 0 and state["psi"] > 0
+    assert abs(state["phi"]) < 1e-9 and abs(state["theta"]) < 1e-9
+
+
+def test_wind_drag_pushes_the_vehicle_downwind(instance):
+    state, _ = _steps_from_hover(instance, n_steps=100, wind_x=5.0, wind_y=-3.0)
+    assert state["u"] > 0 and state["v"] < 0
+    assert state["x"] > 0 and state["y"] < 0
+
+
+def test_rotor_speeds_are_saturated_to_zero_and_omega_max(instance):
+    _, applied = _steps_from_hover(instance, n_steps=1, **{f"Omega_{i}": 5000.0 for i in range(1, 5)})
+    assert applied["T"] == pytest.approx(4 * DEFAULTS["b"] * DEFAULTS["Omega_max"] ** 2)
+    _, applied = _steps_from_hover(instance, n_steps=1, **{f"Omega_{i}": -100.0 for i in range(1, 5)})
+    assert applied["T"] == 0.0
+
+
+def test_directional_derivatives_agree_with_finite_differences(quadrotor_fmu2):
+    """A and B of the linearization (Model Exchange: d der(x) / d[x, u]) and
+    the feedthrough d y / d u, against central differences of the FMU itself."""
+    fmu = Fmi2Instance(quadrotor_fmu2, model_exchange=True, initialize=False)
+    try:
+        fmu.fmu.setupExperiment(startTime=0.0)
+        fmu.fmu.enterInitializationMode()
+        fmu.fmu.exitInitializationMode()
+        fmu.fmu.enterContinuousTimeMode()
+
+        def set_states(xv):
+            xv = np.ascontiguousarray(xv, dtype=float)
+            fmu.fmu.setContinuousStates(xv.ctypes.data_as(POINTER(c_double)), len(xv))
+
+        x = np.array([1.0, -2.0, -15.0, 2.0, -1.0, 0.3, 0.2, -0.15, 0.7, 0.3, -0.2, 0.1])
+        set_states(x)
+        u = {"Omega_1": 600.0, "Omega_2": 650.0, "Omega_3": 620.0, "Omega_4": 640.0,
+             "wind_x": 3.0, "wind_y": -1.0, "wind_z": 0.5}
+        fmu.set(**u)
+        derivatives = [f"der({s})" for s in STATES]
+        unknowns = derivatives + ["T", "tau_phi", "tau_theta", "tau_psi", "x", "psi"]  # states as outputs too
+        knowns = list(STATES) + list(u)
+
+        def evaluate(xv, uv):
+            set_states(xv)
+            fmu.set(**dict(zip(u, uv)))
+            return fmu.get(*unknowns)
+
+        u0 = np.array(list(u.values()))
+        checked = 0
+        for j, known in enumerate(knowns):
+            seed = np.zeros(len(knowns))
+            seed[j] = 1.0
+            set_states(x)
+            fmu.set(**u)
+            ad = np.array(fmu.fmu.getDirectionalDerivative([fmu.vr[k] for k in unknowns], [fmu.vr[known]], [1.0]))
+            step = 1e-6 * max(1.0, abs(np.concatenate([x, u0])[j]))
+            if j < len(x):
+                dx = np.zeros_like(x)
+                dx[j] = step
+                fd = (evaluate(x + dx, u0) - evaluate(x - dx, u0)) / (2 * step)
+            else:
+                du = np.zeros_like(u0)
+                du[j - len(x)] = step
+                fd = (evaluate(x, u0 + du) - evaluate(x, u0 - du)) / (2 * step)
+            np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-6, err_msg=f"column d/d{known}")
+            checked += np.count_nonzero(ad)
+        assert checked > 40  # the Jacobian is far from empty
+    finally:
+        fmu.close()
+
+
+def test_saved_and_restored_state_reproduces_the_trajectory_exactly(instance):
+    fmu = instance(parameters={"z_0": -15.0})
+    names = [v.name for v in QUADROTOR.inputs]
+    inputs = _input_sequence(200, 0.01)
+    for k in range(100):
+        fmu.set(**dict(zip(names, inputs[k])))
+        fmu.step()
+    saved = fmu.fmu.getFMUstate()
+    serialized = fmu.fmu.serializeFMUstate(saved)
+
+    def run_rest():
+        fmu.n = 100
+        for k in range(100, 200):
+            fmu.set(**dict(zip(names, inputs[k])))
+            fmu.step()
+        return fmu.get(*STATES)
+
+    first = run_rest()
+    fmu.fmu.setFMUstate(saved)
+    second = run_rest()
+    restored = fmu.fmu.deSerializeFMUstate(serialized)
+    fmu.fmu.setFMUstate(restored)
+    third = run_rest()
+    fmu.fmu.freeFMUstate(saved)
+    fmu.fmu.freeFMUstate(restored)
+    assert np.abs(first[:3] - [0, 0, -15]).max() > 0.1  # it moved
+    np.testing.assert_array_equal(first, second)
+    np.testing.assert_array_equal(first, third)
+
+
+def test_two_instances_do_not_interfere(instance, quadrotor_fmu2):
+    names = [v.name for v in QUADROTOR.inputs]
+    seq_a, seq_b = _input_sequence(100, 0.01), _input_sequence(100, 0.013)[:, ::-1].copy()
+    seq_b[:, :4] = HOVER * 1.01
+
+    def solo(seq, **params):
+        fmu = instance(parameters=params)
+        for row in seq:
+            fmu.set(**dict(zip(names, row)))
+            fmu.step()
+        return fmu.get(*STATES)
+
+    alone_a, alone_b = solo(seq_a, z_0=-15.0), solo(seq_b, m=1.3)
+    a, b = instance(parameters={"z_0": -15.0}), instance(parameters={"m": 1.3})
+    for row_a, row_b in zip(seq_a, seq_b):
+        a.set(**dict(zip(names, row_a)))
+        b.set(**dict(zip(names, row_b)))
+        a.step()
+        b.step()
+    np.testing.assert_array_equal(a.get(*STATES), alone_a)
+    np.testing.assert_array_equal(b.get(*STATES), alone_b)
+    assert not np.allclose(alone_a, alone_b)
+
+
+@pytest.mark.parametrize("name, value", [
+    ("m", -1.0), ("m", 0.0), ("Ix", 0.0), ("Iz", -0.02), ("b", 0.0), ("Omega_max", -5.0),
+    ("internal_step", 0.0), ("theta_0", 2.0), ("k_drag_lin", math.nan), ("g", math.inf),
+])
+def test_non_physical_parameters_are_refused_with_the_name_and_value(instance, name, value):
+    fmu = instance(initialize=False)
+    with pytest.raises(FMICallException):
+        fmu.set(**{name: value})
+    assert any(name in m and f"{value:g}" in m for m in fmu.messages), fmu.messages
+    # the refused value did not stick and the instance still works
+    fmu.initialize({})
+    fmu.step(10)
+    assert np.isfinite(fmu.get(*STATES)).all()
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+def test_non_finite_inputs_are_refused(instance, value):
+    fmu = instance()
+    with pytest.raises(FMICallException):
+        fmu.set(Omega_2=value)
+    assert any("Omega_2" in m and f"{value:g}" in m for m in fmu.messages), fmu.messages
+    fmu.step(5)
+    assert np.isfinite(fmu.get(*STATES)).all()
+
+
+@pytest.mark.parametrize("h", [0.0, -0.01, math.nan])
+def test_non_positive_step_size_is_refused(instance, h):
+    fmu = instance()
+    with pytest.raises(FMICallException):
+        fmu.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=h)
+    assert any("step size" in m and f"{h:g}" in m for m in fmu.messages), fmu.messages
+    fmu.step(5)  # still usable
+
+
+def test_calls_in_the_wrong_state_are_refused(instance):
+    fmu = instance(initialize=False)
+    with pytest.raises(FMICallException):
+        fmu.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.01)
+    assert any("fmi2DoStep" in m and "Instantiated" in m for m in fmu.messages), fmu.messages
+    fmu.initialize({})
+    with pytest.raises(FMICallException):
+        fmu.set(m=2.0)  # parameters are fixed after initialization
+    assert any("parameter m" in m for m in fmu.messages)
+    with pytest.raises(FMICallException):
+        fmu.fmu.enterInitializationMode()
+    with pytest.raises(FMICallException):
+        fmu.fmu.doStep(currentCommunicationPoint=5.0, communicationStepSize=0.01)  # not where the FMU is
+    assert any("t = 5" in m for m in fmu.messages)
+    fmu.step(3)
+    assert np.isfinite(fmu.get(*STATES)).all()
+
+
+def test_unknown_value_reference_is_refused(instance):
+    fmu = instance()
+    with pytest.raises(FMICallException):
+        fmu.fmu.getReal([10_000])
+    assert any("10000" in m for m in fmu.messages)
+
+
+def test_a_diverging_step_is_reported_and_rolled_back(instance):
+    """Absurd but admissible parameters make the state overflow: the step
+    fails with the state's name, and the state before the step is kept."""
+    fmu = instance(parameters={"Ix": 1e-300, "internal_step": 0.01, "phi_0": 0.1, "p_0": 1.0, "q_0": 1.0, "r_0": 1.0,
+                               "Iz": 1e-300})
+    before = None
+    with pytest.raises(FMICallException):
+        for _ in range(100):
+            before = fmu.get(*STATES)
+            fmu.step()
+    assert any("became" in m for m in fmu.messages), fmu.messages
+    np.testing.assert_array_equal(fmu.get(*STATES), before)
