@@ -330,6 +330,7 @@ def test_source_fmu_compiles_on_its_own_with_fmpy_build(quadrotor_fmu2, tmp_path
     with zipfile.ZipFile(quadrotor_fmu2) as zf:
         zf.extractall(unzipped)
     shutil.rmtree(unzipped / "binaries")
+    (tmp_path / "cmake").mkdir()
     build_platform_binary(unzipped.resolve(), build_dir=tmp_path / "cmake")
     result = simulate_fmu(str(unzipped), stop_time=1.0, output_interval=0.01,
                           start_values={"z_0": -15.0, **ROTORS_AT_HOVER})
