@@ -1,0 +1,153 @@
+"""Zero-order TSK fuzzy neural network of the paper's section 4.1.
+
+Two inputs, x1 = e and x2 = de/dt, I = J = 3 Gaussian membership functions
+per input (eqs. 21-22), product T-norm (eqs. 20, 23), normalized firing
+strengths (eq. 25) and the weighted-average output (eq. 24). The rule index
+follows the paper, k = (j - 1) J + i, so with 0-based indices the rule of
+membership functions (i, j) is ``k = j * I + i`` (i runs fastest).
+
+The builders are written with CasADi operations so that the same code is
+evaluated numerically, code-generated to C and differentiated; they accept
+CasADi ``SX``/``MX``/``DM`` values (and numpy arrays, which CasADi converts).
+
+The learnable parameters of one axis are kept in a flat vector, the *axis
+state*, whose layout is given by the slice constants of this module:
+
+=========  =======  ====================================================
+slice      size     content
+=========  =======  ====================================================
+C1         3        c1, centres of the MFs of x1 (m)
+C2         3        c2, centres of the MFs of x2 (m/s)
+SIGMA1     3        sigma1, widths of the MFs of x1 (m)
+SIGMA2     3        sigma2, widths of the MFs of x2 (m/s)
+F          9        f_ij, rule consequents (m/s), rule k = j * I + i
+ALPHA      1        alpha, adaptive learning rate (eq. 38)
+X1_PREV    1        x1 of the previous step (m), for eq. 33
+X2_PREV    1        x2 of the previous step (m/s), for eq. 34
+PRIMED     1        1 once a step has been taken since reset, else 0
+=========  =======  ====================================================
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+__all__ = [
+    "N_MF", "N_RULES", "AXIS_STATE_SIZE",
+    "C1", "C2", "SIGMA1", "SIGMA2", "F", "ALPHA", "X1_PREV", "X2_PREV", "PRIMED",
+    "FnnInit", "membership", "firing_exponent", "firing_strength",
+    "normalized_firing_strength", "fnn_output", "initial_axis_state",
+]
+
+N_MF = 3  # I = J, membership functions per input
+N_RULES = N_MF * N_MF  # I * J rules
+
+C1 = slice(0, 3)
+C2 = slice(3, 6)
+SIGMA1 = slice(6, 9)
+SIGMA2 = slice(9, 12)
+F = slice(12, 21)
+ALPHA = 21
+X1_PREV = 22
+X2_PREV = 23
+PRIMED = 24
+AXIS_STATE_SIZE = 25
+
+
+@dataclass(frozen=True)
+class FnnInit:
+    """Initial values of the FNN of one axis (section 5.1)."""
+
+    c1: tuple[float, float, float] = (-3.0, 1e-4, 3.0)  # m, centres of the MFs of x1 = e
+    c2: tuple[float, float, float] = (-30.0, 1e-4, 30.0)  # m/s, centres of the MFs of x2 = de/dt
+    sigma1: float = 1.5  # m, width of every MF of x1
+    sigma2: float = 15.0  # m/s, width of every MF of x2
+    alpha: float = 1e-3  # m/s^2, initial adaptive learning rate (rate of tau_n in eq. 37; see learning.py)
+    f_high: float = 1e-3  # m/s, f_ij(0) ~ U[0, f_high]
+
+
+def membership(x, c, sigma):
+    """Gaussian membership grades of one input, eqs. (21)-(22).
+
+    .. math:: \\mu_i(x) = \\exp\\left[-(x - c_i)^2 / \\sigma_i^2\\right]
+
+    Parameters
+    ----------
+    x : scalar
+        Input value (m for x1, m/s for x2).
+    c, sigma : vector of length I
+        Centres and widths, same unit as ``x``; sigma > 0.
+
+    Returns
+    -------
+    vector of length I
+        Membership grades in (0, 1].
+    """
+    return ca.exp(-((x - c) / sigma) ** 2)
+
+
+def firing_exponent(x1, x2, c1, c2, sigma1, sigma2):
+    """Exponents of the rule firing strengths, the bracket of eq. (23).
+
+    Returns the vector ``E`` with ``E[j * I + i] = -A1_i^2 - A2_j^2`` where
+    ``A1_i = (x1 - c1_i) / sigma1_i`` and ``A2_j = (x2 - c2_j) / sigma2_j``
+    (eq. 41), so that ``W = exp(E)``.
+    """
+    a1_sq = ((x1 - c1) / sigma1) ** 2
+    a2_sq = ((x2 - c2) / sigma2) ** 2
+    return ca.vertcat(*[-a1_sq[i] - a2_sq[j] for j in range(N_MF) for i in range(N_MF)])
+
+
+def firing_strength(x1, x2, c1, c2, sigma1, sigma2):
+    """Firing strengths W_ij of the I*J rules, product T-norm, eqs. (20), (23).
+
+    .. math:: W_{ij} = \\mu_{1i}(x_1)\\,\\mu_{2j}(x_2)
+
+    Returns a vector of length I*J ordered by rule index k = j * I + i.
+    """
+    return ca.exp(firing_exponent(x1, x2, c1, c2, sigma1, sigma2))
+
+
+def normalized_firing_strength(x1, x2, c1, c2, sigma1, sigma2):
+    """Normalized firing strengths, eq. (25).
+
+    .. math:: \\overline{W}_{ij} = W_{ij} / \\sum_{i,j} W_{ij}
+
+    Computed as a soft-max of the exponents of eq. (23), shifted by their
+    maximum: mathematically identical to eq. (25), but the denominator is
+    at least 1 after the shift, so the result is finite and sums to 1 even
+    when every W_ij underflows to zero (narrow MFs far from the input).
+    """
+    exponent = firing_exponent(x1, x2, c1, c2, sigma1, sigma2)
+    shifted = ca.exp(exponent - ca.mmax(exponent))
+    return shifted / ca.sum1(shifted)
+
+
+def fnn_output(f, w_bar):
+    """FNN output tau_n, the weighted average of eq. (24).
+
+    .. math:: \\tau_n = \\sum_{i,j} f_{ij} \\overline{W}_{ij}
+
+    Parameters
+    ----------
+    f : vector of length I*J
+        Rule consequents (m/s), ordered like ``w_bar``.
+    w_bar : vector of length I*J
+        Normalized firing strengths (eq. 25).
+    """
+    return ca.dot(f, w_bar)
+
+
+def initial_axis_state(rng: np.random.Generator, init: FnnInit = FnnInit()) -> np.ndarray:
+    """Axis state at t = 0 (section 5.1): centres, widths, alpha, and
+    f_ij(0) ~ U[0, f_high] drawn from ``rng``; previous inputs 0, not primed."""
+    state = np.zeros(AXIS_STATE_SIZE)
+    state[C1] = init.c1
+    state[C2] = init.c2
+    state[SIGMA1] = init.sigma1
+    state[SIGMA2] = init.sigma2
+    state[F] = rng.uniform(0.0, init.f_high, N_RULES)
+    state[ALPHA] = init.alpha
+    return state

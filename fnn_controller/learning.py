@@ -1,0 +1,218 @@
+"""Online learning laws of the FNN: SMC (Theorem 1) and LM (Theorem 3).
+
+The continuous-time laws of the paper (eqs. 33-38 and 57-62) are integrated
+by forward Euler over the controller step dt (section 5.1: dt = 0.01 s), with
+the safeguards of :class:`LearningBounds` (each one justified in
+``docs/controller.md``):
+
+* eqs. 33-34 / 57-58, ``c_dot = x_dot``, become ``c += x_k - x_{k-1}``: the
+  previous inputs are part of the axis state; the very first step after a
+  reset has no previous input and leaves c unchanged;
+* the denominators ``(x - c)^2`` of eqs. 35-36 / 59-60 are floored at
+  ``(a_min * sigma)^2``, i.e. ``|A| = |x - c| / sigma`` is taken as at least
+  ``a_min`` (this removes the finite escape of sigma at A = 0);
+* after each update every parameter is projected onto the box of eqs. 27-29
+  (element-wise bounds, which imply the paper's norm bounds);
+* the FNN inputs are clipped to ``|x1| <= x1_max``, ``|x2| <= x2_max``
+  (assumption 27 enforced rather than assumed).
+
+``sgn(0) = 0``: with a zero learning error nothing is learned.
+
+Units. The paper uses one number alpha in two roles: in eq. (37)
+``f_dot = ... alpha`` it is a rate of the output (m/s^2 here, tau being a
+velocity), in eqs. (35)-(36) ``A A_dot = alpha sgn(tau_c)`` it acts as 1/s.
+We keep the paper's single alpha and document it in m/s^2; then gamma of
+eq. (38) is in 1/s and nu in s, gamma of eq. (61) in m/s^2, alpha_bar of
+eq. (62) is dimensionless (compared with W_bar^T W_bar). ``W^T W`` in
+eq. 37 needs no floor: the normalized strengths sum to 1, so
+``W^T W >= 1 / (I J)`` (Cauchy-Schwarz).
+
+Under LM, alpha (which still scales the sigma laws 59-60) is held at its
+initial value: eq. 38 needs nu, which the paper gives for SMC only, and the
+Lyapunov function of Theorem 3 (eq. 63) has no alpha term.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+
+from .fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV
+
+__all__ = [
+    "LearningBounds", "sgn", "sigma_rate", "smc_f_rate", "alpha_rate", "lm_delta",
+    "lm_f_rate", "learning_step", "clip_inputs", "RULES",
+]
+
+RULES = ("smc", "lm")
+
+
+@dataclass(frozen=True)
+class LearningBounds:
+    """Bounds of eqs. (27)-(29) and the floor of eqs. (35)-(36) (not in the paper)."""
+
+    x1_max: float = 20.0  # m, B_x for x1 = e; the FNN input is clipped to +-x1_max
+    x2_max: float = 50.0  # m/s, B_x for x2 = de/dt; the FNN input is clipped to +-x2_max
+    c1_max: float = 50.0  # m, B_c for each element of c1
+    c2_max: float = 150.0  # m/s, B_c for each element of c2
+    sigma1_min: float = 0.05  # m, smallest width of an MF of x1
+    sigma1_max: float = 15.0  # m, B_sigma for each element of sigma1
+    sigma2_min: float = 0.5  # m/s, smallest width of an MF of x2
+    sigma2_max: float = 150.0  # m/s, B_sigma for each element of sigma2
+    f_max: float = 10.0  # m/s, B_f of eq. 29 for each f_ij
+    alpha_max: float = 10.0  # m/s^2, upper bound of the adaptive learning rate alpha
+    a_min: float = 0.5  # 1, floor of |A| = |x - c| / sigma in eqs. 35-36 / 59-60
+
+    def __post_init__(self) -> None:
+        for name in ("x1_max", "x2_max", "c1_max", "c2_max", "sigma1_min", "sigma2_min",
+                     "f_max", "alpha_max", "a_min"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"LearningBounds.{name} = {value!r} must be a positive finite number")
+        for low, high in (("sigma1_min", "sigma1_max"), ("sigma2_min", "sigma2_max")):
+            if not getattr(self, low) < getattr(self, high) < math.inf:
+                raise ValueError(f"LearningBounds needs 0 < {low} < {high} < inf")
+
+
+def sgn(x):
+    """Signum with ``sgn(0) = 0`` (no learning when tau_c is exactly 0)."""
+    return ca.sign(x)
+
+
+def sigma_rate(x, c, sigma, alpha, tau_c, a_min):
+    """Width adaptation of eqs. (35)-(36) (SMC) and (59)-(60) (LM), floored.
+
+    .. math:: \\dot\\sigma_i = -\\frac{\\sigma_i^3}{\\max[(x - c_i)^2,
+              (a_{min}\\sigma_i)^2]}\\,\\alpha\\,\\mathrm{sgn}(\\tau_c)
+
+    With ``a_min = 0`` this is the paper's law, under which
+    ``d(A_i^2)/dt = 2 alpha sgn(tau_c)`` for every MF (the step to eq. 46);
+    the floor makes ``A_i^2`` change at a relative rate of at most
+    ``2 alpha / a_min^2`` where ``|A_i| < a_min`` (membership grade above
+    ``exp(-a_min^2)``), so sigma cannot escape to infinity in finite time.
+
+    Parameters
+    ----------
+    x : scalar
+        FNN input (m or m/s).
+    c, sigma : vectors of length I
+        Centres and widths (unit of ``x``).
+    alpha : scalar
+        Learning rate (1/s).
+    tau_c : scalar
+        Learning error, the PD output (m/s).
+    a_min : float
+        Floor of ``|x - c| / sigma`` (1).
+    """
+    denominator = ca.fmax((x - c) ** 2, (a_min * sigma) ** 2)
+    return -(sigma**3) / denominator * alpha * sgn(tau_c)
+
+
+def smc_f_rate(w_bar, alpha, tau_c):
+    """Consequent adaptation of the SMC law, eq. (37).
+
+    .. math:: \\dot f_{ij} = -\\frac{\\overline{W}_{ij}}{\\overline{W}^T
+              \\overline{W}}\\,\\alpha\\,\\mathrm{sgn}(\\tau_c)
+
+    so that ``sum_ij f_dot_ij W_bar_ij = -alpha sgn(tau_c)`` (eq. 48).
+    """
+    return -w_bar / ca.dot(w_bar, w_bar) * alpha * sgn(tau_c)
+
+
+def alpha_rate(tau_c, alpha, gamma, nu):
+    """Adaptive learning rate of the SMC law, eq. (38).
+
+    .. math:: \\dot\\alpha = \\gamma |\\tau_c| - \\gamma \\nu \\alpha
+    """
+    return gamma * ca.fabs(tau_c) - gamma * nu * alpha
+
+
+def lm_delta(w_bar, alpha_bar):
+    """Levenberg-Marquardt damping of eq. (62): ``max(W_bar^T W_bar, alpha_bar)``."""
+    return ca.fmax(ca.dot(w_bar, w_bar), alpha_bar)
+
+
+def lm_f_rate(w_bar, tau_c, gamma, alpha_bar):
+    """Consequent adaptation of the LM law, eq. (61), by the rank-one identity.
+
+    .. math:: \\dot f = -\\gamma (\\overline{W}\\,\\overline{W}^T + \\delta I)^{-1}
+              \\overline{W}\\,\\mathrm{sgn}(\\tau_c)
+              = -\\gamma \\frac{\\overline{W}}{\\delta + \\overline{W}^T
+              \\overline{W}}\\,\\mathrm{sgn}(\\tau_c)
+
+    with delta of eq. (62). The identity holds because ``W_bar`` is an
+    eigenvector of ``W_bar W_bar^T + delta I`` with eigenvalue
+    ``delta + W_bar^T W_bar``.
+    """
+    w_sq = ca.dot(w_bar, w_bar)
+    delta = ca.fmax(w_sq, alpha_bar)
+    return -gamma * w_bar / (delta + w_sq) * sgn(tau_c)
+
+
+def clip_inputs(x1, x2, bounds: LearningBounds):
+    """FNN inputs clipped to the box of eq. (27)."""
+    return (ca.fmin(ca.fmax(x1, -bounds.x1_max), bounds.x1_max),
+            ca.fmin(ca.fmax(x2, -bounds.x2_max), bounds.x2_max))
+
+
+def _clip(value, low, high):
+    return ca.fmin(ca.fmax(value, low), high)
+
+
+def learning_step(rule: str, state, x1, x2, tau_c, w_bar, dt: float, gamma: float,
+                  nu: float, alpha_bar: float, bounds: LearningBounds = LearningBounds()):
+    """One forward-Euler step of the SMC or LM learning laws for one axis.
+
+    Parameters
+    ----------
+    rule : {"smc", "lm"}
+        ``"smc"``: eqs. (33)-(38); ``"lm"``: eqs. (57)-(62) with alpha held.
+    state : vector of length AXIS_STATE_SIZE
+        Axis state at step k (layout in :mod:`fnn_controller.fnn`).
+    x1, x2 : scalar
+        FNN inputs at step k, already clipped (:func:`clip_inputs`).
+    tau_c : scalar
+        PD output at step k (eq. 19), the learning error (m/s).
+    w_bar : vector of length I*J
+        Normalized firing strengths at step k (eq. 25).
+    dt : float
+        Step (s).
+    gamma, nu : float
+        SMC gains of eq. (38) (gamma is also the LM gain of eq. 61).
+    alpha_bar : float
+        LM constant of eq. (62) (unused by SMC).
+    bounds : LearningBounds
+        Floor and projection box.
+
+    Returns
+    -------
+    vector of length AXIS_STATE_SIZE
+        Axis state at step k + 1.
+    """
+    if rule not in RULES:
+        raise ValueError(f"unknown learning rule {rule!r}; expected one of {RULES}")
+    c1, c2 = state[C1], state[C2]
+    sigma1, sigma2 = state[SIGMA1], state[SIGMA2]
+    f, alpha, primed = state[F], state[ALPHA], state[PRIMED]
+
+    # eqs. 33-34 / 57-58 discretized with the inputs' increments
+    c1_next = _clip(c1 + primed * (x1 - state[X1_PREV]), -bounds.c1_max, bounds.c1_max)
+    c2_next = _clip(c2 + primed * (x2 - state[X2_PREV]), -bounds.c2_max, bounds.c2_max)
+    # eqs. 35-36 / 59-60
+    sigma1_next = _clip(sigma1 + dt * sigma_rate(x1, c1, sigma1, alpha, tau_c, bounds.a_min),
+                        bounds.sigma1_min, bounds.sigma1_max)
+    sigma2_next = _clip(sigma2 + dt * sigma_rate(x2, c2, sigma2, alpha, tau_c, bounds.a_min),
+                        bounds.sigma2_min, bounds.sigma2_max)
+    if rule == "smc":
+        f_dot = smc_f_rate(w_bar, alpha, tau_c)  # eq. 37
+        alpha_next = _clip(alpha + dt * alpha_rate(tau_c, alpha, gamma, nu), 0.0, bounds.alpha_max)  # eq. 38
+    else:
+        f_dot = lm_f_rate(w_bar, tau_c, gamma, alpha_bar)  # eqs. 61-62
+        alpha_next = alpha
+    f_next = _clip(f + dt * f_dot, -bounds.f_max, bounds.f_max)
+
+    next_state = ca.vertcat(c1_next, c2_next, sigma1_next, sigma2_next, f_next, alpha_next,
+                            x1, x2, ca.DM(1.0))
+    assert next_state.shape[0] == AXIS_STATE_SIZE
+    return next_state
