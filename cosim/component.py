@@ -1,0 +1,73 @@
+"""The contract of a Python component of the co-simulation.
+
+A component has named, typed, unit-carrying input and output ports. The
+master calls, once per run, ``set_parameters`` (optional run-level
+overrides), then ``start(t0, h, n_steps, seed)``, then at every
+communication point ``t_n = t0 + n h`` (n = 0 .. n_steps) ``step(n, t_n, u)``
+with the current input values ``u`` (a float64 array in the order of
+``inputs``); ``step`` returns the outputs at ``t_n`` (a float64 array in the
+order of ``outputs``; it may be the same preallocated array every call).
+
+Python components are sampled-data blocks with direct feedthrough: their
+outputs at ``t_n`` may depend on their inputs at ``t_n`` (the controller
+does). The master evaluates them in an order that respects their
+connections (see ``docs/cosim.md``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+__all__ = ["Port", "PythonComponent", "ports"]
+
+
+@dataclass(frozen=True)
+class Port:
+    """One scalar input or output of a component.
+
+    ``type`` follows the FMI 3.0 names (``Float64``, ``Int32``, ``Boolean``);
+    FMI 2.0 ``Real`` is read as ``Float64``. ``unit`` is ``None`` when the
+    component declares none (the unit check is then skipped).
+    """
+
+    name: str
+    unit: str | None = None
+    type: str = "Float64"
+    description: str = ""
+
+
+def ports(*spec: tuple[str, str | None] | str) -> tuple[Port, ...]:
+    """Shorthand: ``ports(("x", "m"), ("u", "m/s"))`` -> Float64 ports."""
+    out = []
+    for item in spec:
+        name, unit = (item, None) if isinstance(item, str) else item
+        out.append(Port(name, unit))
+    return tuple(out)
+
+
+class PythonComponent:
+    """Base class of the Python components (controller adapter, reference).
+
+    Subclasses set ``inputs`` and ``outputs`` (tuples of :class:`Port`) and
+    implement :meth:`step`; they may override :meth:`start` and
+    :meth:`set_parameters`.
+    """
+
+    inputs: tuple[Port, ...] = ()
+    outputs: tuple[Port, ...] = ()
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def set_parameters(self, values: Mapping[str, Any]) -> None:
+        """Apply run-level parameter overrides; refuse unknown names."""
+        if values:
+            raise KeyError(f"component {self.name!r} takes no parameters, got {sorted(values)}")
+
+    def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
+        """Prepare a run of ``n_steps`` steps of ``h`` seconds from ``t0``."""
+
+    def step(self, n: int, t: float, u: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError

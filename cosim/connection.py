@@ -1,0 +1,138 @@
+"""Connections between components, declared by variable name, and their check.
+
+A connection is written ``"Source.variable -> Destination.variable"``, e.g.
+``"WindGust.v_wind_x -> Quadrotor.wind_x"``. One brace group per side expands
+pairwise, so ``"Quadrotor.{x,y,z} -> controller.{x,y,z}"`` is three
+connections.
+
+:func:`check_connections` runs before the first step and refuses, with a
+message naming the connection, any of: an unknown component or variable, a
+source that is not an output, a destination that is not an input, an input
+fed twice, different types, different units (where both sides declare one).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Iterable, Mapping
+
+from .component import Port
+from .errors import ConnectionCheckError
+
+__all__ = ["Connection", "parse_connection", "parse_connections", "check_connections", "Endpoint"]
+
+_BRACES = re.compile(r"\{([^{}]*)\}")
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    component: str
+    variable: str
+
+    def __str__(self) -> str:
+        return f"{self.component}.{self.variable}"
+
+
+@dataclass(frozen=True)
+class Connection:
+    source: Endpoint
+    destination: Endpoint
+
+    def __str__(self) -> str:
+        return f"{self.source} -> {self.destination}"
+
+
+def _endpoint(text: str, whole: str) -> Endpoint:
+    component, dot, variable = text.strip().partition(".")
+    if not dot or not component or not variable:
+        raise ConnectionCheckError(
+            f"connection {whole!r}: {text.strip()!r} is not of the form Component.variable")
+    return Endpoint(component, variable)
+
+
+def _expand(side: str, whole: str) -> list[str]:
+    groups = _BRACES.findall(side)
+    if not groups:
+        return [side]
+    if len(groups) > 1:
+        raise ConnectionCheckError(f"connection {whole!r}: at most one {{a,b,...}} group per side")
+    items = [g.strip() for g in groups[0].split(",")]
+    return [_BRACES.sub(item, side, count=1) for item in items]
+
+
+def parse_connection(text: str) -> list[Connection]:
+    """Parse one connection string (with optional brace expansion)."""
+    if not isinstance(text, str) or text.count("->") != 1:
+        raise ConnectionCheckError(f"connection {text!r} must be a string 'A.out -> B.in'")
+    left, right = text.split("->")
+    sources, destinations = _expand(left, text), _expand(right, text)
+    if len(sources) != len(destinations):
+        raise ConnectionCheckError(
+            f"connection {text!r}: {len(sources)} sources but {len(destinations)} destinations")
+    return [Connection(_endpoint(s, text), _endpoint(d, text)) for s, d in zip(sources, destinations)]
+
+
+def parse_connections(texts: Iterable[str]) -> list[Connection]:
+    out: list[Connection] = []
+    for text in texts:
+        out.extend(parse_connection(text))
+    return out
+
+
+def _find(ports: tuple[Port, ...], name: str) -> Port | None:
+    for p in ports:
+        if p.name == name:
+            return p
+    return None
+
+
+def check_connections(connections: Iterable[Connection], components: Mapping[str, object]) -> list[Connection]:
+    """Check every connection against the components' declared ports.
+
+    ``components`` maps a component name to an object with ``inputs`` and
+    ``outputs`` (tuples of :class:`~cosim.component.Port`); FMUs additionally
+    have ``variables`` (every variable of the modelDescription), which lets
+    the message say *why* a name is not an output or input (e.g. "is a
+    parameter"). Returns the connections as a list; raises
+    :class:`ConnectionCheckError` at the first wrong one.
+    """
+    checked: list[Connection] = []
+    fed: dict[str, Connection] = {}
+    for c in connections:
+        ports: list[Port] = []
+        for end, role, group in ((c.source, "source", "outputs"), (c.destination, "destination", "inputs")):
+            comp = components.get(end.component)
+            if comp is None:
+                raise ConnectionCheckError(
+                    f"connection {c}: unknown component {end.component!r}; components are: "
+                    f"{', '.join(sorted(components))}")
+            port = _find(getattr(comp, group), end.variable)
+            if port is None:
+                variables = getattr(comp, "variables", {})
+                if end.variable in variables:
+                    causality = variables[end.variable].causality
+                    reason = f"is a{'n' if causality[0] in 'aeiou' else ''} {causality}, not an {group[:-1]}"
+                elif _find(getattr(comp, "inputs" if group == "outputs" else "outputs"), end.variable):
+                    reason = f"is an {'input' if group == 'outputs' else 'output'}, not an {group[:-1]}"
+                else:
+                    known = ", ".join(p.name for p in getattr(comp, group)) or "none"
+                    reason = f"does not exist (its {group} are: {known})"
+                raise ConnectionCheckError(f"connection {c}: {role} {end} {reason}")
+            ports.append(port)
+        out_port, in_port = ports
+        if out_port.type != in_port.type:
+            raise ConnectionCheckError(
+                f"connection {c}: type mismatch, {c.source} is {out_port.type} but {c.destination} is {in_port.type}")
+        if out_port.type != "Float64":
+            raise ConnectionCheckError(
+                f"connection {c}: only Float64 (FMI 2.0 Real) signals can be connected, not {out_port.type}")
+        if out_port.unit and in_port.unit and out_port.unit != in_port.unit:
+            raise ConnectionCheckError(
+                f"connection {c}: unit mismatch, {c.source} is in {out_port.unit} but {c.destination} "
+                f"is in {in_port.unit}")
+        key = str(c.destination)
+        if key in fed:
+            raise ConnectionCheckError(f"connection {c}: {c.destination} is already fed by {fed[key]}")
+        fed[key] = c
+        checked.append(c)
+    return checked

@@ -1,0 +1,301 @@
+"""A co-simulation FMU as a component: a thin, fast wrapper over fmpy's slaves.
+
+fmpy's ``FMU2Slave`` (FMI 2.0) and ``FMU3Slave`` (FMI 3.0) do the loading,
+instantiation and status checking (every failed call raises fmpy's
+``FMICallException`` in one place). This module adds what the master needs:
+
+* the FMU is extracted once and instantiated once per :class:`FmuComponent`;
+  :meth:`FmuComponent.start` resets it between runs (``fmiXReset``);
+* ports read from the modelDescription (name, causality, type, unit), so the
+  master can check connections before the first step;
+* a per-step fast path: the value references of the connected inputs and of
+  the wanted outputs are bound once (:meth:`bind`) into ctypes arrays, and each
+  step is one ``set`` of all inputs, one ``doStep`` and one ``get`` of all
+  outputs, the values passing through preallocated numpy buffers with no
+  per-step allocation;
+* the FMU's log messages are collected, and a failed call becomes an
+  :class:`~cosim.errors.FmuCallError` quoting them.
+"""
+from __future__ import annotations
+
+import ctypes
+import shutil
+from collections import deque
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import itertools
+import weakref
+
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+
+from .component import Port
+from .errors import FmuCallError
+
+__all__ = ["FmuComponent", "fmu_ports"]
+
+_TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit float
+
+_FMI2_LOGGER = None
+_FMI2_INSTANCES: dict[int, "weakref.ref[FmuComponent]"] = {}
+_KEYS = itertools.count(1)
+
+
+def _dispatch_fmi2_log(env, instance, status, category, message) -> None:
+    ref = _FMI2_INSTANCES.get(env or 0)
+    component = ref() if ref is not None else None
+    if component is not None:
+        component._log(status, message)
+
+
+def _port(variable) -> Port:
+    return Port(variable.name, variable.unit or None, _TYPE.get(variable.type, variable.type),
+                variable.description or "")
+
+
+def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
+    """The variables of a modelDescription as ports, by causality.
+
+    Keys: ``input``, ``output``, ``parameter`` (FMI 2.0 and 3.0 parameters,
+    tunable or not), ``other`` (locals, independent, calculated parameters).
+    """
+    groups: dict[str, list[Port]] = {"input": [], "output": [], "parameter": [], "other": []}
+    for v in model_description.modelVariables:
+        groups.get(v.causality, groups["other"]).append(_port(v))
+    return {k: tuple(v) for k, v in groups.items()}
+
+
+class _Api:
+    """The four calls of the fast path for one FMI version (set, get, step, reset)."""
+
+    def __init__(self, slave, version: int):
+        self.slave, self.version = slave, version
+        if version == 2:
+            self._set, self._get, self._step = slave.fmi2SetReal, slave.fmi2GetReal, slave.fmi2DoStep
+        else:
+            self._set, self._get, self._step = slave.fmi3SetFloat64, slave.fmi3GetFloat64, slave.fmi3DoStep
+            self._flags = [ctypes.byref(ctypes.c_bool()) for _ in range(3)]
+            self._last = ctypes.byref(ctypes.c_double())
+
+    def set(self, vrs, n: int, values_ptr) -> None:
+        if self.version == 2:
+            self._set(self.slave.component, vrs, n, values_ptr)
+        else:
+            self._set(self.slave.component, vrs, n, values_ptr, n)
+
+    def get(self, vrs, n: int, values_ptr) -> None:
+        if self.version == 2:
+            self._get(self.slave.component, vrs, n, values_ptr)
+        else:
+            self._get(self.slave.component, vrs, n, values_ptr, n)
+
+    def do_step(self, t: float, h: float) -> None:
+        if self.version == 2:
+            self._step(self.slave.component, t, h, 1)
+        else:
+            self._step(self.slave.component, t, h, True, *self._flags, self._last)
+
+
+class FmuComponent:
+    """One instance of a co-simulation FMU (FMI 2.0 or 3.0).
+
+    Parameters
+    ----------
+    name : str
+        Instance name, used in connections (``name.variable``) and messages.
+    path : path of the ``.fmu`` file, or of an already extracted FMU directory.
+    validate : bool
+        Validate the modelDescription against the FMI schema while reading it
+        (fmpy's check). Off by default: our FMUs are validated by their own
+        tests, and third-party FMUs often carry harmless schema problems.
+    """
+
+    def __init__(self, name: str, path: str | Path, validate: bool = False):
+        self.name = name
+        self.path = Path(path)
+        self.model_description = read_model_description(str(self.path), validate=validate)
+        md = self.model_description
+        self.fmi_version = int(md.fmiVersion.split(".")[0])
+        if md.coSimulation is None:
+            raise FmuCallError(f"FMU {name!r} ({self.path}) has no Co-Simulation interface")
+        if self.fmi_version not in (2, 3):
+            raise FmuCallError(f"FMU {name!r}: FMI {md.fmiVersion} is not supported (2.0 or 3.0)")
+        groups = fmu_ports(md)
+        self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
+        self.variables = {v.name: v for v in md.modelVariables}
+        self.messages: deque[str] = deque(maxlen=20)
+        self._slave = None
+        self._unzipdir: Path | None = None
+        self._owns_unzipdir = False
+        self._initialized_once = False
+        self.bind((), ())
+
+    # ---- lifecycle ---------------------------------------------------------
+
+    def _log(self, status: int, message: bytes | str) -> None:
+        text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
+        label = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][status] if 0 <= status < 6 else str(status)
+        self.messages.append(f"[{label}] {text}")
+
+    def instantiate(self) -> None:
+        """Extract (once) and instantiate the FMU; idempotent."""
+        if self._slave is not None:
+            return
+        if self.path.is_dir():
+            self._unzipdir = self.path
+        else:
+            self._unzipdir = Path(extract(str(self.path)))
+            self._owns_unzipdir = True
+        md = self.model_description
+        common = dict(guid=md.guid, unzipDirectory=str(self._unzipdir),
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName=self.name)
+        if self.fmi_version == 2:
+            from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                                   fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+            from fmpy.fmi1 import calloc, free
+            from fmpy.logging import addLoggerProxy
+
+            global _FMI2_LOGGER
+            slave = FMU2Slave(**common)
+            if _FMI2_LOGGER is None:
+                _FMI2_LOGGER = fmi2CallbackLoggerTYPE(_dispatch_fmi2_log)
+            # fmpy's variadic-logger proxy keeps one Python logger per process,
+            # so every FMI 2.0 instance shares one dispatcher and is told
+            # apart by its componentEnvironment (a key into _FMI2_INSTANCES)
+            key = next(_KEYS)
+            _FMI2_INSTANCES[key] = weakref.ref(self)
+            callbacks = fmi2CallbackFunctions()
+            callbacks.logger = _FMI2_LOGGER
+            callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+            callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+            callbacks.componentEnvironment = key
+            addLoggerProxy(ctypes.byref(callbacks))
+            self._callbacks = callbacks  # keep alive as long as the instance
+            slave.instantiate(callbacks=callbacks)
+        else:
+            from fmpy.fmi3 import FMU3Slave
+
+            slave = FMU3Slave(**common)
+            slave.instantiate(logMessage=lambda env, status, category, message: self._log(status, message))
+        self._slave = slave
+        self._api = _Api(slave, self.fmi_version)
+
+    def close(self) -> None:
+        """Free the instance and remove what :meth:`instantiate` extracted."""
+        if self._slave is not None:
+            try:
+                self._slave.terminate()
+            except Exception:
+                pass
+            try:
+                self._slave.freeInstance()
+            except Exception:
+                pass
+            self._slave = None
+        if self._owns_unzipdir and self._unzipdir is not None:
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            self._unzipdir = None
+            self._owns_unzipdir = False
+
+    def __enter__(self) -> "FmuComponent":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _fail(self, what: str, exc: Exception, t: float | None = None) -> FmuCallError:
+        when = f"at t = {t:.4f} s: " if t is not None else ""
+        log = "; ".join(self.messages) or "(the FMU logged nothing)"
+        return FmuCallError(f"{when}{self.name}: {what} failed ({exc}); FMU log: {log}")
+
+    def start(self, t0: float, parameters: Mapping[str, float] | None = None) -> None:
+        """Reset (after the first run), set ``parameters``, initialize at ``t0``
+        and read the bound outputs at ``t0`` into :attr:`y`."""
+        self.instantiate()
+        s = self._slave
+        self.messages.clear()
+        parameters = dict(parameters or {})
+        for key in parameters:
+            var = self.variables.get(key)
+            if var is None or var.causality not in ("parameter", "input"):
+                raise FmuCallError(f"{self.name}: {key!r} is not a parameter or input of this FMU")
+        try:
+            if self._initialized_once:
+                s.reset()
+            if parameters:
+                vrs = [self.variables[k].valueReference for k in parameters]
+                values = [float(v) for v in parameters.values()]
+                if self.fmi_version == 2:
+                    s.setReal(vrs, values)
+                else:
+                    s.setFloat64(vrs, values)
+            if self.fmi_version == 2:
+                s.setupExperiment(startTime=t0)
+                s.enterInitializationMode()
+                s.exitInitializationMode()
+            else:
+                s.enterInitializationMode(startTime=t0)
+                s.exitInitializationMode()
+        except FMICallException as exc:
+            raise self._fail("initialization with " + (repr(parameters) if parameters else "default parameters"),
+                             exc) from None
+        self._initialized_once = True
+        self.read_outputs(t0)
+
+    # ---- fast path -----------------------------------------------------------
+
+    def bind(self, input_names: Sequence[str], output_names: Sequence[str],
+             y: np.ndarray | None = None) -> None:
+        """Fix the inputs set and the outputs read every step, in this order.
+
+        Afterwards :attr:`u` (inputs) and :attr:`y` (outputs) are float64
+        arrays the master fills and reads; :meth:`write_inputs`,
+        :meth:`do_step` and :meth:`read_outputs` move them through the FMU.
+        ``y`` may be given: a contiguous float64 array (e.g. a slice of the
+        master's signal array) the outputs are then read straight into.
+        """
+        def vrs(names):
+            missing = [n for n in names if n not in self.variables]
+            if missing:
+                raise KeyError(f"{self.name} has no variable(s) {missing}")
+            refs = [self.variables[n].valueReference for n in names]
+            return (ctypes.c_uint32 * max(len(refs), 1))(*refs)
+
+        self.input_names, self.output_names = tuple(input_names), tuple(output_names)
+        self._in_vr, self._out_vr = vrs(self.input_names), vrs(self.output_names)
+        self._n_in, self._n_out = len(self.input_names), len(self.output_names)
+        self.u = np.zeros(max(self._n_in, 1))
+        if y is not None:
+            if y.dtype != np.float64 or not y.flags.c_contiguous or y.size != self._n_out:
+                raise ValueError(f"{self.name}: output buffer must be {self._n_out} contiguous float64 values")
+            self.y = y
+        else:
+            self.y = np.zeros(max(self._n_out, 1))
+        self._u_ptr = self.u.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        self._y_ptr = self.y.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+    def write_inputs(self, t: float) -> None:
+        """Set all bound inputs from :attr:`u` in one call."""
+        if self._n_in:
+            try:
+                self._api.set(self._in_vr, self._n_in, self._u_ptr)
+            except FMICallException as exc:
+                values = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.input_names, self.u))
+                raise self._fail(f"setting inputs ({values})", exc, t) from None
+
+    def do_step(self, t: float, h: float) -> None:
+        """Advance the FMU from ``t`` to ``t + h``."""
+        try:
+            self._api.do_step(t, h)
+        except FMICallException as exc:
+            raise self._fail(f"doStep from t = {t!r} by {h!r} s", exc, t) from None
+
+    def read_outputs(self, t: float) -> None:
+        """Get all bound outputs into :attr:`y` in one call."""
+        if self._n_out:
+            try:
+                self._api.get(self._out_vr, self._n_out, self._y_ptr)
+            except FMICallException as exc:
+                raise self._fail("getting outputs", exc, t) from None

@@ -1,0 +1,366 @@
+"""The fixed-step co-simulation master.
+
+Algorithm (stated in full in ``docs/cosim.md``): communication points
+``t_n = t0 + n h`` from the step counter n = 0 .. N. At each ``t_n``:
+
+1. every FMU output is known at ``t_n`` (read after initialization, then after
+   each step);
+2. the Python components are evaluated in topological order of their mutual
+   connections (a sampled-data block may have direct feedthrough: the
+   controller's rotor speeds at ``t_n`` depend on the plant state at ``t_n``);
+   a cycle among them is refused before the first step;
+3. the recorded signals at ``t_n`` are stored (and streamed in blocks), and
+   the guard checks every signal (finite, inside its envelope);
+4. every FMU gets all its connected inputs, taken at ``t_n``, in one call;
+5. every FMU steps from ``t_n`` to ``t_{n+1}`` (Jacobi among FMUs: they only
+   see each other's values at ``t_n``, held constant over the step), and its
+   outputs at ``t_{n+1}`` are read in one call.
+
+All signals live in one float64 array; each connection is an index into it,
+precomputed before the run, so a step allocates nothing but small temporaries.
+"""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from .component import Port, PythonComponent
+from .connection import Connection, check_connections, parse_connections
+from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError
+from .fmu import FmuComponent
+from .guard import Guard
+from .recorder import Recorder
+
+__all__ = ["Master", "RunResult", "PHASES"]
+
+PHASES = ("fmu", "python", "record", "guard")
+
+
+@dataclass
+class RunResult:
+    """What a run produced: the recorded rows (``data[:, 0]`` is time), the
+    status (``ok``, ``diverged``, ``failed``), the error message, and the
+    wall time split into phases (s): FMU calls, each Python component,
+    recording, guard."""
+
+    columns: tuple[str, ...]
+    units: tuple[str | None, ...]
+    data: np.ndarray
+    status: str
+    error: str | None
+    wall_time: float
+    n_steps: int
+    step: float
+    phase_times: dict[str, float] = field(default_factory=dict)
+    csv_path: Path | None = None
+    seed: int = 0
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.data[:, 0]
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.data[:, self.columns.index(name)]
+        except ValueError:
+            raise KeyError(f"signal {name!r} was not recorded; recorded: {', '.join(self.columns)}") from None
+
+
+class Master:
+    """A fixed-step co-simulation of FMUs and Python components.
+
+    Parameters
+    ----------
+    fmus : FMU components, with their base parameter values (``{name: {...}}``
+        in ``fmu_parameters``).
+    components : Python components (:class:`~cosim.component.PythonComponent`).
+    connections : connection strings or :class:`~cosim.connection.Connection`.
+    step : communication step h (s).
+    record : signals (``component.variable``) to record, after ``time``.
+    bounds : ``signal -> (low, high)``, the flight envelope; every recorded,
+        connected or bounded signal is also checked to be finite.
+    """
+
+    def __init__(self, fmus: Sequence[FmuComponent], components: Sequence[PythonComponent],
+                 connections: Sequence[str | Connection], step: float, record: Sequence[str] = (),
+                 bounds: Mapping[str, tuple[float, float]] | None = None,
+                 fmu_parameters: Mapping[str, Mapping[str, float]] | None = None):
+        if not step > 0:
+            raise ValueError(f"step = {step!r} s must be positive")
+        self.step = float(step)
+        self.fmus = list(fmus)
+        self.python = list(components)
+        names = [c.name for c in self.fmus + self.python]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ConnectionCheckError(f"component names must be unique; repeated: {sorted(dup)}")
+        self.components: dict[str, Any] = {c.name: c for c in self.fmus + self.python}
+        self.fmu_parameters = {k: dict(v) for k, v in (fmu_parameters or {}).items()}
+        for key in self.fmu_parameters:
+            if key not in self.components or key not in {f.name for f in self.fmus}:
+                raise ConnectionCheckError(f"parameters given for unknown FMU {key!r}")
+        conns = [c for c in connections if isinstance(c, Connection)]
+        conns += parse_connections([c for c in connections if not isinstance(c, Connection)])
+        self.connections = check_connections(conns, self.components)
+        self.bounds = dict(bounds or {})
+        self._plan(list(record))
+
+    # ---- planning -----------------------------------------------------------
+
+    def _signal_port(self, signal: str) -> Port:
+        comp_name, _, var = signal.partition(".")
+        comp = self.components.get(comp_name)
+        if comp is None or not var:
+            raise ConnectionCheckError(
+                f"signal {signal!r}: unknown component {comp_name!r}; components are: "
+                f"{', '.join(sorted(self.components))}")
+        for port in comp.outputs:
+            if port.name == var:
+                return port
+        for port in comp.inputs:  # an input is recorded as the value its source gives it
+            if port.name == var:
+                return port
+        known = ", ".join(p.name for p in comp.outputs + comp.inputs)
+        raise ConnectionCheckError(f"signal {signal!r}: {comp_name} has no output or input {var!r}; it has: {known}")
+
+    def _order_python(self) -> list[PythonComponent]:
+        """Topological order of the Python components by their connections."""
+        py = {c.name for c in self.python}
+        deps = {c.name: set() for c in self.python}
+        for c in self.connections:
+            if c.source.component in py and c.destination.component in py:
+                deps[c.destination.component].add(c.source.component)
+        order: list[str] = []
+        state: dict[str, int] = {}
+
+        def visit(name: str, path: list[str]) -> None:
+            if state.get(name) == 2:
+                return
+            if state.get(name) == 1:
+                cycle = path[path.index(name):] + [name]
+                raise ConnectionCheckError(
+                    f"algebraic loop among Python components: {' -> '.join(cycle)}; "
+                    f"break it with an FMU or a delay")
+            state[name] = 1
+            for d in sorted(deps[name]):
+                visit(d, path + [name])
+            state[name] = 2
+            order.append(name)
+
+        for c in self.python:  # declared order breaks ties
+            visit(c.name, [])
+        return [self.components[n] for n in order]
+
+    def _plan(self, record: list[str]) -> None:
+        source_of = {str(c.destination): str(c.source) for c in self.connections}
+        self.source_of = source_of
+        for s in record + list(self.bounds):
+            self._signal_port(s)
+            src = source_of.get(s, s)
+            comp, _, var = src.partition(".")
+            if var not in {p.name for p in self.components[comp].outputs}:
+                raise ConnectionCheckError(f"signal {s!r} is an input that nothing feeds; record its source")
+        used = {str(c.source) for c in self.connections}
+        used |= {source_of.get(s, s) for s in record + list(self.bounds)}
+        # Slot layout: time, then each FMU's used outputs (contiguous, so the
+        # FMU writes them straight into the signal array), then each Python
+        # component's outputs (contiguous, one slice assignment per step).
+        slots: dict[str, int] = {"time": 0}
+        blocks: dict[str, slice] = {}
+        for comp in self.fmus + self.python:
+            first = len(slots)
+            for p in comp.outputs:
+                name = f"{comp.name}.{p.name}"
+                if name in used or comp in self.python:
+                    slots[name] = len(slots)
+            blocks[comp.name] = slice(first, len(slots))
+        self.slots = slots
+        self.signals = np.zeros(len(slots))
+
+        self._fmu_in: list[tuple[FmuComponent, np.ndarray]] = []
+        self._fmu_out: list[FmuComponent] = []
+        for fmu in self.fmus:
+            ins = [c for c in self.connections if c.destination.component == fmu.name]
+            block = blocks[fmu.name]
+            outs = [s.partition(".")[2] for s, i in slots.items() if block.start <= i < block.stop]
+            fmu.bind([c.destination.variable for c in ins], outs, self.signals[block] if outs else None)
+            if ins:
+                self._fmu_in.append((fmu, np.array([slots[str(c.source)] for c in ins], dtype=np.intp)))
+            if outs:
+                self._fmu_out.append(fmu)
+
+        self._py: list[tuple[PythonComponent, np.ndarray, slice]] = []
+        for comp in self._order_python():
+            missing = [p.name for p in comp.inputs if f"{comp.name}.{p.name}" not in source_of]
+            if missing:
+                raise ConnectionCheckError(f"inputs of {comp.name} not connected: {', '.join(missing)}")
+            in_idx = np.array([slots[source_of[f"{comp.name}.{p.name}"]] for p in comp.inputs], dtype=np.intp)
+            self._py.append((comp, in_idx, blocks[comp.name]))
+
+        self.record_columns = ("time",) + tuple(record)
+        self.record_units = ("s",) + tuple(self._signal_port(s).unit for s in record)
+        self._rec_idx = np.array([slots[source_of.get(s, s)] for s in self.record_columns], dtype=np.intp)
+        watch_bounds = {source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in self.bounds.items()}
+        watched = [s for s in slots if s != "time"]
+        self.guard = Guard(watched, watch_bounds)
+        self._guard_idx = np.array([slots[s] for s in watched], dtype=np.intp)
+
+    # ---- running --------------------------------------------------------------
+
+    def _split_parameters(self, parameters: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+        split: dict[str, dict[str, Any]] = {name: {} for name in self.components}
+        for key, value in parameters.items():
+            comp, _, var = key.partition(".")
+            if comp not in self.components or not var:
+                raise ConnectionCheckError(
+                    f"parameter {key!r}: expected 'component.name' with a component among "
+                    f"{', '.join(sorted(self.components))}")
+            split[comp][var] = value
+        return split
+
+    def run(self, duration: float, seed: int = 0, parameters: Mapping[str, Any] | None = None,
+            csv_path: str | Path | None = None, t0: float = 0.0, block_rows: int = 100,
+            raise_on_error: bool = True,
+            progress: Callable[[int, int], None] | None = None) -> RunResult:
+        """Run from ``t0`` for ``duration`` seconds (a whole number of steps).
+
+        ``parameters`` overrides, for this run only, FMU parameters and Python
+        component parameters by ``component.name``. With ``raise_on_error``
+        (default) a divergence or FMU failure raises after the partial result
+        is saved (the exception carries it as ``.result``); otherwise the
+        result is returned with its status.
+        """
+        h = self.step
+        n_steps = int(round(duration / h))
+        if n_steps < 1 or abs(n_steps * h - duration) > 1e-9 * max(1.0, abs(duration)):
+            raise ValueError(f"duration = {duration!r} s is not a positive whole number of steps of {h!r} s")
+        split = self._split_parameters(parameters or {})
+        recorder = Recorder(self.record_columns, self.record_units, n_steps + 1, csv_path, block_rows,
+                            meta={"step": h, "t0": t0, "seed": seed})
+        phase = dict.fromkeys(("fmu", "record", "guard"), 0.0)
+        phase.update({f"python:{c.name}": 0.0 for c, *_ in self._py})
+        status, error = "ok", None
+        wall0 = _time.perf_counter()
+        try:
+            for comp in self.python:
+                comp.set_parameters(split[comp.name])
+                comp.start(t0, h, n_steps, seed)
+            for fmu in self.fmus:  # reads the outputs at t0 into the signal array
+                fmu.start(t0, {**self.fmu_parameters.get(fmu.name, {}), **split[fmu.name]})
+            self._loop(t0, n_steps, recorder, phase, progress)
+        except DivergenceError as exc:
+            status, error, failure = "diverged", str(exc), exc
+        except (FmuCallError, CosimError) as exc:
+            status, error, failure = "failed", str(exc), exc
+        except BaseException as exc:  # the partial result is saved even on Ctrl-C
+            recorder.close("failed", f"{type(exc).__name__}: {exc}")
+            raise
+        recorder.close(status, error)
+        result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
+                           status, error, _time.perf_counter() - wall0, n_steps, h, phase,
+                           recorder.path, seed, dict(parameters or {}))
+        if status != "ok" and raise_on_error:
+            failure.result = result
+            raise failure
+        return result
+
+    def _py_plan(self) -> list[tuple]:
+        """Per run: how each Python component gets its inputs. A component
+        may offer ``input_buffers()`` (arrays, in port order, it reads its
+        inputs from); the master then gathers straight into them."""
+        plan = []
+        for comp, in_idx, out_block in self._py:
+            buffers = comp.input_buffers() if hasattr(comp, "input_buffers") else None
+            if buffers is None:
+                targets = [(in_idx, np.zeros(len(in_idx)))]
+                u = targets[0][1]
+            else:
+                sizes = [b.size for b in buffers]
+                if sum(sizes) != len(in_idx):
+                    raise ValueError(f"{comp.name}.input_buffers() sizes {sizes} do not add up to "
+                                     f"its {len(in_idx)} inputs")
+                bounds = np.cumsum([0] + sizes)
+                targets = [(in_idx[a:b], buf) for a, b, buf in zip(bounds[:-1], bounds[1:], buffers)]
+                u = None
+            plan.append((comp.step, targets, u, out_block))
+        return plan
+
+    def _loop(self, t0: float, n_steps: int, recorder: Recorder, phase: dict[str, float],
+              progress: Callable[[int, int], None] | None) -> None:
+        h = self.step
+        signals = self.signals
+        take = np.take
+        clock = _time.perf_counter
+        py = self._py_plan()
+        t_py = [0.0] * len(py)
+        py = [(k, *entry) for k, entry in enumerate(py)]
+        fmu_in = [(f.write_inputs, in_idx, f.u[:len(in_idx)]) for f, in_idx in self._fmu_in]
+        do_steps = [f.do_step for f in self.fmus]
+        reads = [f.read_outputs for f in self._fmu_out]
+        data, rec_idx = recorder.data, self._rec_idx
+        guard_ok, guard_idx = self.guard.ok, self._guard_idx
+        block = recorder.block_rows
+        next_flush = block
+        t_fmu = t_rec = t_guard = 0.0
+        recorded = 0
+        try:
+            for n in range(n_steps + 1):
+                t = t0 + n * h  # time from the step counter, never accumulated
+                signals[0] = t
+                c0 = clock()
+                for k, step, targets, u, out_block in py:
+                    for idx, buf in targets:
+                        take(signals, idx, out=buf)
+                    signals[out_block] = step(n, t, u)
+                    c1 = clock()
+                    t_py[k] += c1 - c0
+                    c0 = c1
+                take(signals, rec_idx, out=data[n])
+                recorded = n + 1
+                if recorded >= next_flush:
+                    recorder.commit(n + 1)
+                    next_flush += block
+                    if progress is not None:
+                        progress(n, n_steps)
+                c1 = clock()
+                t_rec += c1 - c0
+                values = signals[guard_idx]
+                if not guard_ok(values):
+                    self.guard.raise_violation(t, values)
+                c2 = clock()
+                t_guard += c2 - c1
+                if n == n_steps:
+                    break
+                for write, in_idx, u in fmu_in:
+                    take(signals, in_idx, out=u)
+                    write(t)
+                for do_step in do_steps:
+                    do_step(t, h)
+                t_next = t0 + (n + 1) * h
+                for read in reads:
+                    read(t_next)
+                t_fmu += clock() - c2
+        finally:
+            recorder.n_rows = recorded
+            phase["fmu"] += t_fmu
+            phase["record"] += t_rec
+            phase["guard"] += t_guard
+            for (k, *_), (comp, *_rest) in zip(py, self._py):
+                phase[f"python:{comp.name}"] += t_py[k]
+            if progress is not None:
+                progress(n_steps, n_steps)
+
+    def close(self) -> None:
+        for f in self.fmus:
+            f.close()
+
+    def __enter__(self) -> "Master":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
