@@ -287,6 +287,6 @@ class QuadrotorController:
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
                 where = f"x[{bad[0]}] ({PLANT_STATE_NAMES[bad[0]]})" if name == "x" else f"{name}[{bad[0]}]"
-                raise ValueError(f"controller input {where} = {values[bad[0]]!r} is not finite")
+                raise ValueError(f"controller input {where} = {float(values[bad[0]])!r} is not finite")
         raise FloatingPointError(
             "the controller produced a non-finite value from finite inputs; its state is left unchanged")

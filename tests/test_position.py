@@ -1,0 +1,255 @@
+"""The position controller (eqs. 19, 26) and the whole controller step:
+known answers, the fast buffer path against plain CasADi calls, input
+guards, derivatives for linear analysis, and closed loops with the plant
+FMU (hover, the PD's ramp lag, the FNN removing it, per-step cost)."""
+from __future__ import annotations
+
+import math
+import time
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from fmu_models.quadrotor import DEFAULTS, hover_rotor_speed
+from fnn_controller import (STATE_SIZE, GeometricParams, PositionParams, QuadrotorController,
+                            controller_step_function, initial_state, position_controller_function,
+                            velocity_controller_function)
+from fnn_controller.controller import FastFunction
+from fnn_controller.geometric import initial_velocity_state
+from fnn_controller.position import VARIANTS, initial_fnn_state
+from test_geometric import H, PlantFmu, plant_fmu  # noqa: F401  (fixture)
+
+KP, KD = PositionParams().kp, PositionParams().kd
+HOVER = np.array([0, 0, -15.0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+
+
+def test_pd_variant_is_eq_19_and_leaves_the_state_alone():
+    f = position_controller_function("pd")
+    state = initial_fnn_state(0)
+    v_ref, state_next, tau_c, tau_n = (np.array(v).ravel() for v in f([1.0, -2.0, 0.5], [0.3, 4.0, -1.0], state))
+    expected = KP * np.array([1.0, -2.0, 0.5]) + KD * np.array([0.3, 4.0, -1.0])
+    np.testing.assert_allclose(v_ref, expected, rtol=1e-15)
+    np.testing.assert_array_equal(tau_c, v_ref)
+    np.testing.assert_array_equal(tau_n, 0.0)
+    np.testing.assert_array_equal(state_next, state)
+
+
+@pytest.mark.parametrize("variant", ["pd+smc", "pd+lm"])
+def test_fnn_variants_subtract_tau_n_eq_26(variant):
+    f = position_controller_function(variant)
+    v_ref, _, tau_c, tau_n = (np.array(v).ravel() for v in f([1.0, -2.0, 0.5], [0.3, 4.0, -1.0], initial_fnn_state(0)))
+    np.testing.assert_allclose(v_ref, tau_c - tau_n, rtol=1e-15)
+    assert np.all((tau_n >= 0) & (tau_n <= 1e-3))  # weighted average of f_ij(0) in [0, 0.001]
+
+
+def test_unknown_variant_is_refused():
+    with pytest.raises(ValueError, match="pd\\+lm"):
+        position_controller_function("lm")
+
+
+def test_linearization_of_the_pd_position_controller_is_kp_kd():
+    f = position_controller_function("pd")
+    jac = f.jacobian()
+    e, e_dot = ca.DM.zeros(3), ca.DM.zeros(3)
+    out = jac(e=e, e_dot=e_dot, fnn_state=initial_fnn_state(0), out_v_ref=0, out_fnn_state_next=0,
+              out_tau_c=0, out_tau_n=0)
+    np.testing.assert_allclose(np.array(out["jac_v_ref_e"]), KP * np.eye(3), rtol=1e-15)
+    np.testing.assert_allclose(np.array(out["jac_v_ref_e_dot"]), KD * np.eye(3), rtol=1e-15)
+
+
+def test_velocity_controller_jacobian_at_hover_is_finite():
+    f = velocity_controller_function(GeometricParams())
+    args = dict(v_ref=np.zeros(3), v=np.zeros(3), euler=np.zeros(3), omega_b=np.zeros(3), psi_ref=0.0,
+                vel_state=initial_velocity_state())
+    sym = {name: ca.SX.sym(name, f.sparsity_in(i)) for i, name in enumerate(f.name_in())}
+    omega = f.call(sym)["Omega"]
+    for name in ("v_ref", "v", "euler", "omega_b"):
+        jac = ca.Function("j", list(sym.values()), [ca.jacobian(omega, sym[name])])(*args.values())
+        assert np.all(np.isfinite(np.array(jac))), name
+    # d Omega / d v_ref is nonzero along z only at hover (thrust), by symmetry
+    jac_v = np.array(ca.Function("j", list(sym.values()), [ca.jacobian(omega, sym["v_ref"])])(*args.values()))
+    assert np.all(jac_v[:, 2] < 0)  # asking to go down (+z) lowers every rotor speed
+
+
+# ---------------------------------------------------------- fast path, guards
+
+def _random_inputs(rng):
+    x = HOVER + rng.normal(0, [2, 2, 2, 1, 1, 1, 0.2, 0.2, 0.5, 1, 1, 1])
+    return rng.normal(0, 3, 3), rng.normal(0, 2, 3), x, float(rng.normal(0, 0.3))
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_fast_buffer_path_gives_identical_results_to_a_plain_casadi_call(variant):
+    rng = np.random.default_rng(11)
+    ctrl = QuadrotorController(variant)
+    ctrl.reset(seed=5)
+    f = controller_step_function(variant)
+    state = initial_state(5)
+    for _ in range(300):
+        p_ref, p_ref_dot, x, psi_ref = _random_inputs(rng)
+        omega = ctrl.step(p_ref, p_ref_dot, x, psi_ref).copy()
+        plain = f(p_ref=p_ref, p_ref_dot=p_ref_dot, x=x, psi_ref=psi_ref, state=state)
+        np.testing.assert_array_equal(omega, np.array(plain["Omega"]).ravel())
+        for name in ("v_ref", "tau_c", "tau_n", "wrench"):
+            np.testing.assert_array_equal(ctrl.outputs[name], np.array(plain[name]).ravel())
+        state = np.array(plain["state_next"]).ravel()
+        np.testing.assert_array_equal(ctrl.state, state)
+
+
+def test_reset_reproduces_a_run_and_seeds_differ():
+    def run(seed):
+        rng = np.random.default_rng(0)
+        ctrl = QuadrotorController("pd+smc")
+        ctrl.reset(seed)
+        return np.array([ctrl.step(*_random_inputs(rng)).copy() for _ in range(50)]), ctrl.state
+
+    (a, sa), (b, sb), (c, _) = run(1), run(1), run(2)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(sa, sb)
+    assert not np.array_equal(a, c)
+
+
+@pytest.mark.parametrize("name, index, value, expected", [
+    ("x", 7, float("nan"), "x\\[7\\] \\(theta\\) = nan"),
+    ("p_ref", 2, float("inf"), "p_ref\\[2\\] = inf"),
+    ("p_ref_dot", 0, float("-inf"), "p_ref_dot\\[0\\] = -inf"),
+    ("psi_ref", 0, float("nan"), "psi_ref\\[0\\] = nan"),
+])
+def test_non_finite_input_raises_naming_it_and_changes_nothing(name, index, value, expected):
+    ctrl = QuadrotorController("pd+lm")
+    ctrl.reset(seed=3)
+    good = dict(p_ref=np.array([1.0, 0, -15]), p_ref_dot=np.zeros(3), x=HOVER.copy(), psi_ref=0.0)
+    omega = ctrl.step(**good)
+    omega_before, outputs_before, state_before = omega.copy(), {k: v.copy() for k, v in ctrl.outputs.items()}, \
+        ctrl.state
+    bad = {k: (np.array(v, dtype=float) if k != "psi_ref" else v) for k, v in good.items()}
+    if name == "psi_ref":
+        bad["psi_ref"] = value
+    else:
+        bad[name][index] = value
+    with pytest.raises(ValueError, match=expected):
+        ctrl.step(**bad)
+    np.testing.assert_array_equal(ctrl.state, state_before)
+    np.testing.assert_array_equal(omega, omega_before)  # the returned array is untouched
+    for key, array in ctrl.outputs.items():
+        np.testing.assert_array_equal(array, outputs_before[key])
+    # and the controller carries on
+    assert np.all(np.isfinite(ctrl.step(**good)))
+
+
+def test_step_before_reset_and_bad_state_are_refused():
+    ctrl = QuadrotorController("pd")
+    with pytest.raises(RuntimeError, match="reset"):
+        ctrl.step(np.zeros(3), np.zeros(3), HOVER)
+    with pytest.raises(ValueError):
+        ctrl.state = np.full(STATE_SIZE, np.nan)
+
+
+def test_fast_function_refuses_a_state_pair_of_different_sizes():
+    with pytest.raises(ValueError, match="differ"):
+        FastFunction(position_controller_function("pd"), state=("e", "fnn_state_next"))
+
+
+# --------------------------------------------------- closed loop with the FMU
+
+def fly(plant_fmu, variant, p_ref, p_ref_dot, t_end, seed=0, wind=(0, 0, 0), **start):
+    start.setdefault("z", -15.0)
+    plant = PlantFmu(plant_fmu, **start)
+    plant.set_wind(wind)
+    ctrl = QuadrotorController(variant)
+    ctrl.reset(seed)
+    n = int(round(t_end / H))
+    xs, tau_c, tau_n = np.zeros((n + 1, 12)), np.zeros((n, 3)), np.zeros((n, 3))
+    x = plant.state()
+    xs[0] = x
+    for k in range(n):
+        t = k * H  # time from the step counter
+        omega = ctrl.step(p_ref(t), p_ref_dot(t), x)
+        tau_c[k], tau_n[k] = ctrl.outputs["tau_c"], ctrl.outputs["tau_n"]
+        plant.step(omega)
+        x = plant.state()
+        xs[k + 1] = x
+    plant.close()
+    return {"t": np.arange(n + 1) * H, "x": xs, "tau_c": tau_c, "tau_n": tau_n}
+
+
+@pytest.mark.parametrize("variant, position_tol, attitude_tol", [
+    ("pd", 1e-9, 1e-9), ("pd+smc", 0.002, 0.002), ("pd+lm", 0.15, 0.2)])
+def test_hover_at_the_set_point_is_held(plant_fmu, variant, position_tol, attitude_tol):
+    """The LM law moves tau_n at the fixed rate gamma W^T W / (delta + W^T W)
+    times sgn(tau_c), with no adaptive rate to decay: at rest this integral
+    relay keeps a limit cycle (measured +-9 cm, 7.5 degrees). SMC's alpha
+    decays (eq. 38) and the PD has nothing to learn."""
+    log = fly(plant_fmu, variant, lambda t: (0.0, 0.0, -15.0), lambda t: (0.0, 0.0, 0.0), 10.0)
+    assert np.all(np.abs(log["x"][:, 0:3] - [0, 0, -15.0]) < position_tol)
+    assert np.all(np.abs(log["x"][:, 6:9]) < attitude_tol)
+
+
+def _ramp(speed):
+    return (lambda t: (speed * t, 0.0, -15.0)), (lambda t: (speed, 0.0, 0.0))
+
+
+def test_pd_lags_a_ramp_by_the_known_amount(plant_fmu):
+    """No velocity feed-forward: at steady state v* = kp e carries the whole
+    speed, plus what the P velocity loop needs against drag."""
+    log = fly(plant_fmu, "pd", *_ramp(2.5), 12.0)
+    e_x = 2.5 * log["t"] - log["x"][:, 0]
+    drag = (DEFAULTS["k_drag_lin"] + DEFAULTS["k_drag_quad"] * 2.5) * 2.5
+    v_ref = 2.5 + drag / (DEFAULTS["m"] * GeometricParams().k_v)
+    assert e_x[-1] == pytest.approx(v_ref / KP, abs=2e-3)  # 1.056 m
+    assert abs(e_x[-1] - 1.0) < 0.1  # the paper's "about 1 m"
+
+
+@pytest.mark.parametrize("variant", ["pd+smc", "pd+lm"])
+def test_fnn_learns_the_missing_feed_forward_and_takes_over(plant_fmu, variant):
+    log = fly(plant_fmu, variant, *_ramp(2.5), 30.0, seed=1)
+    e_x = 2.5 * log["t"] - log["x"][:, 0]
+    late = log["t"][:-1] >= 20.0
+    assert np.abs(e_x[1:][late]).max() < 0.15  # vs 1.056 m for the PD alone
+    share = np.abs(log["tau_n"][late, 0]) / (np.abs(log["tau_c"][late, 0]) + np.abs(log["tau_n"][late, 0]))
+    assert share.mean() > 0.9
+    assert np.all(np.isfinite(log["x"]))
+
+
+def test_controller_step_cost(capsys):
+    """The budget: the whole controller step within ~10 us from Python."""
+    results = {}
+    for variant in VARIANTS:
+        ctrl = QuadrotorController(variant)
+        ctrl.reset(0)
+        p_ref, p_ref_dot, x = np.array([1.0, 0, -15]), np.array([0.5, 0, 0]), HOVER.copy()
+        for _ in range(200):
+            ctrl.step(p_ref, p_ref_dot, x)
+        best = math.inf
+        for _ in range(5):
+            t0 = time.perf_counter()
+            for _ in range(5000):
+                ctrl.step(p_ref, p_ref_dot, x)
+            best = min(best, (time.perf_counter() - t0) / 5000)
+        results[variant] = best * 1e6
+    with capsys.disabled():
+        print("\ncontroller step cost (us):", {k: round(v, 2) for k, v in results.items()})
+    assert max(results.values()) < 10.0
+
+
+def test_mission_length_closed_loop_with_the_fmu_is_fast(plant_fmu, capsys):
+    """5000 steps (50 s) of controller + plant FMU; the paper's mission budget is 0.25 s."""
+    plant = PlantFmu(plant_fmu, z=-15.0)
+    ctrl = QuadrotorController("pd+lm")
+    ctrl.reset(0)
+    p_ref, p_ref_dot = np.array([0.0, 0.0, -15.0]), np.zeros(3)
+    x = plant.state()
+    fmu, vr_in, vr_out = plant.fmu, plant._vr_omega, plant._vr_state
+    t0 = time.perf_counter()
+    for k in range(5000):
+        omega = ctrl.step(p_ref, p_ref_dot, x)
+        fmu.setReal(vr_in, omega.tolist())
+        fmu.doStep(currentCommunicationPoint=k * H, communicationStepSize=H)
+        x = fmu.getReal(vr_out)
+    elapsed = time.perf_counter() - t0
+    plant.close()
+    with capsys.disabled():
+        print(f"\n50 s mission, controller + plant FMU: {elapsed:.3f} s")
+    assert np.all(np.isfinite(x))
+    assert elapsed < 1.0  # generous for loaded CI machines; measured ~0.1-0.2 s
