@@ -1,7 +1,10 @@
 """Compile a model into an FMU: generated sources + generic C layer -> .fmu.
 
 Each FMU holds its complete sources (so users on other platforms can compile
-it) and the linux64 binary compiled here with the system C compiler.
+it; FMI 3.0 adds ``sources/buildDescription.xml``) and the binary for this
+platform, compiled here with the system C compiler, under
+``binaries/<platform>``: ``linux64`` in FMI 2.0, the platform tuple
+``x86_64-linux`` in FMI 3.0.
 """
 from __future__ import annotations
 
@@ -20,7 +23,7 @@ import fmpy
 
 from .codegen import GENERIC_C_DIR, GENERIC_C_FILES, generate_sources
 from .model import FmuModel
-from .model_description import fmi2_model_description
+from .model_description import fmi2_model_description, fmi3_build_description, fmi3_model_description
 
 __all__ = ["build_fmu", "cached_fmu", "cache_root", "FmuBuildError", "FMI_VERSIONS"]
 
@@ -34,11 +37,35 @@ class FmuBuildError(RuntimeError):
 
 @dataclass(frozen=True)
 class _Flavour:
-    """What differs between FMI versions: the API file, headers, XML writer."""
+    """What differs between FMI versions: the API file, headers, XML writer,
+    and the name of the binary directory of this platform."""
     api_source: str
     headers: tuple[str, ...]
     model_description: Callable[[FmuModel, str], str]
     extra_files: Callable[[FmuModel], dict[str, str]]
+    binary_dir: Callable[[], str]
+
+
+def _platform() -> str:
+    """FMI 2.0 binary directory."""
+    if sys.platform.startswith("linux"):
+        return "linux64"
+    if sys.platform == "darwin":
+        return "darwin64"
+    return "win64"
+
+
+def _platform_tuple() -> str:
+    """FMI 3.0 binary directory, ``<arch>-<os>``, named as fmpy looks it up."""
+    return fmpy.platform_tuple
+
+
+def _library_suffix() -> str:
+    if sys.platform.startswith("linux"):
+        return ".so"
+    if sys.platform == "darwin":
+        return ".dylib"
+    return ".dll"
 
 
 FMI_VERSIONS: dict[int, _Flavour] = {
@@ -47,16 +74,16 @@ FMI_VERSIONS: dict[int, _Flavour] = {
         headers=("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
         model_description=fmi2_model_description,
         extra_files=lambda model: {},
+        binary_dir=_platform,
+    ),
+    3: _Flavour(
+        api_source="fmi3_functions.c",
+        headers=("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"),
+        model_description=fmi3_model_description,
+        extra_files=lambda model: {"sources/buildDescription.xml": fmi3_build_description(model)},
+        binary_dir=_platform_tuple,
     ),
 }
-
-
-def _platform() -> str:
-    if sys.platform.startswith("linux"):
-        return "linux64"
-    if sys.platform == "darwin":
-        return "darwin64"
-    return "win64"
 
 
 def _compiler() -> str:
@@ -88,10 +115,9 @@ def _stage(model: FmuModel, fmi_version: int, root: Path) -> Path:
 def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
     sources = root / "sources"
     c_files = sorted(str(p) for p in sources.glob("*.c"))
-    binary_dir = root / "binaries" / _platform()
+    binary_dir = root / "binaries" / FMI_VERSIONS[fmi_version].binary_dir()
     binary_dir.mkdir(parents=True, exist_ok=True)
-    suffix = {"linux64": ".so", "darwin64": ".dylib"}.get(_platform(), ".dll")
-    out = binary_dir / f"{model.identifier}{suffix}"
+    out = binary_dir / f"{model.identifier}{_library_suffix()}"
     cmd = [_compiler(), *CFLAGS, f"-I{sources}", *c_files, "-o", str(out), "-lm"]
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:

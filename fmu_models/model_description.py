@@ -1,4 +1,5 @@
-"""modelDescription.xml of a model, generated from its variable table.
+"""modelDescription.xml (FMI 2.0 and 3.0) and the FMI 3.0 buildDescription.xml
+of a model, generated from its variable table.
 
 The ModelStructure is read off the CasADi Jacobian: which states and inputs
 each derivative and output depends on, and how (``constant`` where the
@@ -7,6 +8,7 @@ only, ``dependent`` otherwise).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 from xml.sax.saxutils import quoteattr
 
@@ -17,9 +19,11 @@ from .codegen import value_references
 from .model import FmuModel
 from .variables import UNITS
 
-__all__ = ["fmi2_model_description", "derivative_unit", "dependency_kinds", "SOURCE_FILES_FMI2"]
+__all__ = ["fmi2_model_description", "fmi3_model_description", "fmi3_build_description",
+           "derivative_unit", "dependency_kinds", "SOURCE_FILES_FMI2", "SOURCE_FILES_FMI3"]
 
 SOURCE_FILES_FMI2 = ("fmu_core.c", "fmi2_functions.c", "model_generated.c")
+SOURCE_FILES_FMI3 = ("fmu_core.c", "fmi3_functions.c", "model_generated.c")
 
 _DERIVATIVE_UNIT = {"m": "m/s", "m/s": "m/s2", "rad": "rad/s", "rad/s": "rad/s2", "1": "1"}
 
@@ -80,67 +84,121 @@ def _used_units(model: FmuModel) -> set[str]:
     return units
 
 
-def fmi2_model_description(model: FmuModel, guid: str) -> str:
-    """FMI 2.0 modelDescription.xml: Model Exchange and Co-Simulation in one FMU."""
-    refs = value_references(model)
-    ordered = sorted(refs, key=refs.get)  # ModelVariables in value-reference order
-    index = {name: i + 1 for i, name in enumerate(ordered)}  # 1-based, as FMI 2.0 counts
-    by_name = {v.name: v for v in model.all_variables}
+@dataclass(frozen=True)
+class _Entry:
+    """One row of ModelVariables; FMI 2.0 and 3.0 differ only in how it is written."""
 
-    sv = []
-    for name in ordered:
+    name: str
+    vr: int
+    causality: str  # the FMI causality: independent, output, local, input, parameter
+    variability: str
+    initial: str | None
+    description: str
+    unit: str
+    start: float | None = None
+    state: str | None = None  # for der(x): the name of x
+    bounds: tuple[tuple[str, float], ...] = ()
+
+
+def _model_variables(model: FmuModel) -> list[_Entry]:
+    """Every variable of ``model`` in value-reference order (time, x, der(x), y, u, p)."""
+    refs = value_references(model)
+    by_name = {v.name: v for v in model.all_variables}
+    entries = []
+    for name in sorted(refs, key=refs.get):
         vr = refs[name]
         if name == "time":
-            sv.append(f'    <ScalarVariable name="time" valueReference="{vr}" causality="independent" '
-                      f'variability="continuous" description="simulation time"><Real unit="s"/></ScalarVariable>')
+            entries.append(_Entry(name, vr, "independent", "continuous", None, "simulation time", "s"))
             continue
         if name.startswith("der("):
             state = by_name[name[4:-1]]
-            sv.append(f'    <ScalarVariable name={quoteattr(name)} valueReference="{vr}" causality="local" '
-                      f'variability="continuous" initial="calculated" '
-                      f'description={quoteattr("time derivative of " + state.name)}>'
-                      f'<Real unit={quoteattr(derivative_unit(state.unit))} derivative="{index[state.name]}"/>'
-                      f'</ScalarVariable>')
+            entries.append(_Entry(name, vr, "local", "continuous", "calculated", "time derivative of " + state.name,
+                                  derivative_unit(state.unit), state=state.name))
             continue
         v = by_name[name]
-        head = f'    <ScalarVariable name={quoteattr(v.name)} valueReference="{vr}" '
-        desc = f"description={quoteattr(v.description)}"
-        if v.causality in ("state", "output"):
-            sv.append(head + f'causality="output" variability="continuous" initial="calculated" {desc}>'
-                      f'<Real unit={quoteattr(v.unit)}/></ScalarVariable>')
+        if v.causality in ("state", "output"):  # a state is exposed as an output
+            entries.append(_Entry(name, vr, "output", "continuous", "calculated", v.description, v.unit))
         elif v.causality == "input":
-            sv.append(head + f'causality="input" variability="continuous" {desc}>'
-                      f'<Real unit={quoteattr(v.unit)} start="{_fmt(v.start)}"/></ScalarVariable>')
+            entries.append(_Entry(name, vr, "input", "continuous", None, v.description, v.unit, v.start))
         else:
-            bounds = "".join(f' {k}="{_fmt(b)}"' for k, b in (("min", v.min), ("max", v.max))
-                             if b not in (float("inf"), -float("inf")))
-            sv.append(head + f'causality="parameter" variability="fixed" initial="exact" {desc}>'
-                      f'<Real unit={quoteattr(v.unit)} start="{_fmt(v.start)}"{bounds}/></ScalarVariable>')
+            bounds = tuple((k, b) for k, b in (("min", v.min), ("max", v.max))
+                           if b not in (float("inf"), -float("inf")))
+            entries.append(_Entry(name, vr, "parameter", "fixed", "exact", v.description, v.unit, v.start,
+                                  bounds=bounds))
+    return entries
 
+
+def _model_structure(model: FmuModel):
+    """Outputs, state derivatives (both as [(name, [(known, kind)])], in
+    value-reference order) and initial unknowns (names) of the ModelStructure."""
     deps = dependency_kinds(model)
+    entries = _model_variables(model)
+    outputs = [(e.name, [(e.name, "constant")] if model.variable(e.name).causality == "state" else deps[e.name])
+               for e in entries if e.causality == "output"]  # a state as output depends on itself
+    derivatives = [(f"der({v.name})", deps[f"der({v.name})"]) for v in model.states]
+    initial = [e.name for e in entries if e.initial == "calculated"]
+    return outputs, derivatives, initial
 
-    def unknown(name: str, dependencies: list[tuple[str, str]]) -> str:
-        idx = " ".join(str(index[k]) for k, _ in dependencies)
-        kinds = " ".join(kind for _, kind in dependencies)
-        return f'      <Unknown index="{index[name]}" dependencies="{idx}" dependenciesKind="{kinds}"/>'
 
-    outputs = []
-    for name in ordered:
-        if name in by_name and by_name[name].causality == "state":
-            outputs.append(unknown(name, [(name, "constant")]))  # a state as output: itself
-        elif name in by_name and by_name[name].causality == "output":
-            outputs.append(unknown(name, deps[name]))
-    derivatives = [unknown(f"der({v.name})", deps[f"der({v.name})"]) for v in model.states]
-    initial = [f'      <Unknown index="{index[name]}"/>' for name in ordered
-               if name.startswith("der(") or (name in by_name and by_name[name].causality in ("state", "output"))]
+def _unknown(tag: str, key_attribute: str, key, name: str, dependencies=None, indent: int = 6) -> str:
+    """A ModelStructure element; ``key`` maps a variable name to its index (FMI 2.0)
+    or value reference (FMI 3.0)."""
+    head = f'{" " * indent}<{tag} {key_attribute}="{key(name)}"'
+    if dependencies is None:
+        return head + "/>"
+    refs = " ".join(str(key(k)) for k, _ in dependencies)
+    kinds = " ".join(kind for _, kind in dependencies)
+    return head + f' dependencies="{refs}" dependenciesKind="{kinds}"/>'
+
+
+def _variable_attributes(e: _Entry) -> str:
+    initial = f' initial="{e.initial}"' if e.initial else ""
+    return (f'name={quoteattr(e.name)} valueReference="{e.vr}" causality="{e.causality}" '
+            f'variability="{e.variability}"{initial} description={quoteattr(e.description)}')
+
+
+def _value_attributes(e: _Entry, derivative_key) -> str:
+    """unit, start, derivative, min, max of a Real (FMI 2.0) or Float64 (FMI 3.0)."""
+    text = f"unit={quoteattr(e.unit)}"
+    if e.start is not None:
+        text += f' start="{_fmt(e.start)}"'
+    if e.state is not None:
+        text += f' derivative="{derivative_key(e.state)}"'
+    return text + "".join(f' {k}="{_fmt(b)}"' for k, b in e.bounds)
+
+
+def _root_attributes(model: FmuModel) -> str:
+    return (f"description={quoteattr(model.description)}\n"
+            f'  generationTool="fnn-cosim {__version__} with CasADi {ca.__version__}"')
+
+
+def _shared_sections(model: FmuModel) -> str:
+    """UnitDefinitions, LogCategories and DefaultExperiment (same in FMI 2.0 and 3.0)."""
+    return f"""{_unit_definitions(_used_units(model))}
+  <LogCategories>
+    <Category name="logEvents" description="informational messages (with debug logging on)"/>
+    <Category name="logStatusError" description="refused calls and values, failed steps (always logged)"/>
+  </LogCategories>
+  <DefaultExperiment startTime="0" stopTime="10" stepSize="0.01"/>"""
+
+
+def fmi2_model_description(model: FmuModel, guid: str) -> str:
+    """FMI 2.0 modelDescription.xml: Model Exchange and Co-Simulation in one FMU."""
+    entries = _model_variables(model)
+    index = {e.name: i + 1 for i, e in enumerate(entries)}  # 1-based, as FMI 2.0 counts
+    sv = [f"    <ScalarVariable {_variable_attributes(e)}><Real {_value_attributes(e, index.get)}/></ScalarVariable>"
+          for e in entries]
+    outputs, derivatives, initial = _model_structure(model)
+    outputs = [_unknown("Unknown", "index", index.get, name, deps) for name, deps in outputs]
+    derivatives = [_unknown("Unknown", "index", index.get, name, deps) for name, deps in derivatives]
+    initial = [_unknown("Unknown", "index", index.get, name) for name in initial]
 
     sources = "\n".join(f'      <File name="{f}"/>' for f in SOURCE_FILES_FMI2)
     capabilities = ('canGetAndSetFMUstate="true" canSerializeFMUstate="true" '
                     'providesDirectionalDerivative="true" canNotUseMemoryManagementFunctions="true"')
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="{model.identifier}" guid="{guid}"
-  description={quoteattr(model.description)}
-  generationTool="fnn-cosim {__version__} with CasADi {ca.__version__}"
+  {_root_attributes(model)}
   variableNamingConvention="structured" numberOfEventIndicators="0">
   <ModelExchange modelIdentifier="{model.identifier}" {capabilities}>
     <SourceFiles>
@@ -152,12 +210,7 @@ def fmi2_model_description(model: FmuModel, guid: str) -> str:
 {sources}
     </SourceFiles>
   </CoSimulation>
-{_unit_definitions(_used_units(model))}
-  <LogCategories>
-    <Category name="logEvents" description="informational messages (with debug logging on)"/>
-    <Category name="logStatusError" description="refused calls and values, failed steps (always logged)"/>
-  </LogCategories>
-  <DefaultExperiment startTime="0" stopTime="10" stepSize="0.01"/>
+{_shared_sections(model)}
   <ModelVariables>
 {chr(10).join(sv)}
   </ModelVariables>
@@ -173,4 +226,57 @@ def fmi2_model_description(model: FmuModel, guid: str) -> str:
     </InitialUnknowns>
   </ModelStructure>
 </fmiModelDescription>
+"""
+
+
+def fmi3_model_description(model: FmuModel, instantiation_token: str) -> str:
+    """FMI 3.0 modelDescription.xml: Model Exchange and Co-Simulation in one FMU.
+
+    The sources are listed in ``sources/buildDescription.xml``
+    (:func:`fmi3_build_description`), not here as in FMI 2.0. Co-Simulation
+    declares ``hasEventMode``: the model has no events, so an importer that
+    uses Event Mode only ever sees ``fmi3UpdateDiscreteStates`` report nothing.
+    """
+    entries = _model_variables(model)
+    vr = {e.name: e.vr for e in entries}
+    variables = [f"    <Float64 {_variable_attributes(e)} {_value_attributes(e, vr.get)}/>" for e in entries]
+    outputs, derivatives, initial = _model_structure(model)
+    structure = ([_unknown("Output", "valueReference", vr.get, name, deps, 4) for name, deps in outputs]
+                 + [_unknown("ContinuousStateDerivative", "valueReference", vr.get, name, deps, 4)
+                    for name, deps in derivatives]
+                 + [_unknown("InitialUnknown", "valueReference", vr.get, name, indent=4) for name in initial])
+    capabilities = ('canGetAndSetFMUState="true" canSerializeFMUState="true" '
+                    'providesDirectionalDerivatives="true" providesAdjointDerivatives="true"')
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="3.0" modelName="{model.identifier}" instantiationToken="{instantiation_token}"
+  {_root_attributes(model)}
+  variableNamingConvention="structured">
+  <ModelExchange modelIdentifier="{model.identifier}" {capabilities} needsCompletedIntegratorStep="false"/>
+  <CoSimulation modelIdentifier="{model.identifier}" {capabilities}
+    canHandleVariableCommunicationStepSize="true" hasEventMode="true"/>
+{_shared_sections(model)}
+  <ModelVariables>
+{chr(10).join(variables)}
+  </ModelVariables>
+  <ModelStructure>
+{chr(10).join(structure)}
+  </ModelStructure>
+</fmiModelDescription>
+"""
+
+
+def fmi3_build_description(model: FmuModel) -> str:
+    """FMI 3.0 ``sources/buildDescription.xml``: how to compile the source FMU."""
+    sources = "\n".join(f'      <SourceFile name="{f}"/>' for f in SOURCE_FILES_FMI3)
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiBuildDescription fmiVersion="3.0">
+  <BuildConfiguration modelIdentifier="{model.identifier}"
+    description="CasADi-generated model code and the generic FMI 3.0 layer; C99, no dependencies but the C math library">
+    <SourceFileSet language="C99">
+{sources}
+      <IncludeDirectory name="."/>
+    </SourceFileSet>
+    <Library name="m" external="true" description="C math library (link with -lm where it is not part of libc)"/>
+  </BuildConfiguration>
+</fmiBuildDescription>
 """

@@ -307,24 +307,28 @@ static int known_column(unsigned vr) {
     return -1;
 }
 
-CoreStatus core_directional_derivative(Instance *inst,
-                                       const unsigned unknowns[], size_t n_unknowns,
-                                       const unsigned knowns[], size_t n_knowns,
-                                       const double seed[], double sensitivity[]) {
-    if ((n_unknowns && (!unknowns || !sensitivity)) || (n_knowns && (!knowns || !seed))) {
-        core_log(inst, CORE_ERROR, "directional derivative: NULL argument");
+/* Check the value references of a (directional or adjoint) derivative call
+ * and evaluate the dense Jacobian d[xdot; y]/d[x; u] into inst->jac. */
+static CoreStatus evaluate_jacobian(Instance *inst, const char *what,
+                                    const unsigned unknowns[], size_t n_unknowns,
+                                    const unsigned knowns[], size_t n_knowns,
+                                    const double seed[], size_t n_seed,
+                                    const double sensitivity[], size_t n_sensitivity) {
+    if ((n_unknowns && !unknowns) || (n_knowns && !knowns) || (n_seed && !seed) ||
+        (n_sensitivity && !sensitivity)) {
+        core_log(inst, CORE_ERROR, "%s: NULL argument", what);
         return CORE_ERROR;
     }
     for (size_t i = 0; i < n_unknowns; i++) {
         if (unknowns[i] >= N_VARIABLES || unknown_row(unknowns[i]) == -2) {
-            core_log(inst, CORE_ERROR, "directional derivative: value reference %u is not a state, derivative or output",
-                     unknowns[i]);
+            core_log(inst, CORE_ERROR, "%s: value reference %u is not a state, derivative or output",
+                     what, unknowns[i]);
             return CORE_ERROR;
         }
     }
     for (size_t j = 0; j < n_knowns; j++) {
         if (knowns[j] >= N_VARIABLES || known_column(knowns[j]) < 0) {
-            core_log(inst, CORE_ERROR, "directional derivative: value reference %u is not a state or input", knowns[j]);
+            core_log(inst, CORE_ERROR, "%s: value reference %u is not a state or input", what, knowns[j]);
             return CORE_ERROR;
         }
     }
@@ -332,18 +336,43 @@ CoreStatus core_directional_derivative(Instance *inst,
     inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
     inst->res[0] = inst->jac;
     model_jac(inst->arg, inst->res, inst->iw, inst->w, 0);
-    const size_t rows = NX + NY; /* CasADi stores dense matrices column-major */
+    return CORE_OK;
+}
+
+/* partial(unknown, known) * factor; a state as an output has d x / d x = I */
+static double weighted_partial(const Instance *inst, unsigned unknown, unsigned known, double factor) {
+    int row = unknown_row(unknown);
+    if (row == -1) return known == unknown ? factor : 0.0;
+    /* CasADi stores dense matrices column-major */
+    return inst->jac[(size_t)known_column(known) * (NX + NY) + (size_t)row] * factor;
+}
+
+CoreStatus core_directional_derivative(Instance *inst,
+                                       const unsigned unknowns[], size_t n_unknowns,
+                                       const unsigned knowns[], size_t n_knowns,
+                                       const double seed[], double sensitivity[]) {
+    if (evaluate_jacobian(inst, "directional derivative", unknowns, n_unknowns, knowns, n_knowns,
+                          seed, n_knowns, sensitivity, n_unknowns) != CORE_OK)
+        return CORE_ERROR;
     for (size_t i = 0; i < n_unknowns; i++) {
-        int row = unknown_row(unknowns[i]);
         double acc = 0.0;
-        for (size_t j = 0; j < n_knowns; j++) {
-            int col = known_column(knowns[j]);
-            if (row == -1) /* a state as an output: d x / d x = I */
-                acc += knowns[j] == unknowns[i] ? seed[j] : 0.0;
-            else
-                acc += inst->jac[(size_t)col * rows + (size_t)row] * seed[j];
-        }
+        for (size_t j = 0; j < n_knowns; j++) acc += weighted_partial(inst, unknowns[i], knowns[j], seed[j]);
         sensitivity[i] = acc;
+    }
+    return CORE_OK;
+}
+
+CoreStatus core_adjoint_derivative(Instance *inst,
+                                   const unsigned unknowns[], size_t n_unknowns,
+                                   const unsigned knowns[], size_t n_knowns,
+                                   const double seed[], double sensitivity[]) {
+    if (evaluate_jacobian(inst, "adjoint derivative", unknowns, n_unknowns, knowns, n_knowns,
+                          seed, n_unknowns, sensitivity, n_knowns) != CORE_OK)
+        return CORE_ERROR;
+    for (size_t j = 0; j < n_knowns; j++) {
+        double acc = 0.0;
+        for (size_t i = 0; i < n_unknowns; i++) acc += weighted_partial(inst, unknowns[i], knowns[j], seed[i]);
+        sensitivity[j] = acc;
     }
     return CORE_OK;
 }

@@ -89,6 +89,12 @@ CoreStatus core_directional_derivative(Instance *inst,
                                        const unsigned unknowns[], size_t n_unknowns,
                                        const unsigned knowns[], size_t n_knowns,
                                        const double seed[], double sensitivity[]);
+/* Adjoint (reverse) derivative: sensitivity[j] = sum_i seed[i] * d unknowns[i] / d knowns[j],
+ * with seed of length n_unknowns and sensitivity of length n_knowns. */
+CoreStatus core_adjoint_derivative(Instance *inst,
+                                   const unsigned unknowns[], size_t n_unknowns,
+                                   const unsigned knowns[], size_t n_knowns,
+                                   const double seed[], double sensitivity[]);
 
 CoreState *core_get_state(Instance *inst, CoreState *reuse);
 CoreStatus core_set_state(Instance *inst, const CoreState *state);
