@@ -184,8 +184,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     if (!c || !FMUstate) return fmi2Error;
     CoreState *s = core_deserialize(INST, (const unsigned char *)serializedState, size);
     if (!s) return fmi2Error;
-    free(*FMUstate);
-    *FMUstate = s;
+    if (*FMUstate) { /* reuse the importer's state: a pointer it holds stays valid */
+        *(CoreState *)*FMUstate = *s;
+        free(s);
+    } else {
+        *FMUstate = s;
+    }
     return fmi2OK;
 }
 

@@ -110,14 +110,14 @@ CoreStatus core_enter_initialization(Instance *inst, double start_time) {
 
 CoreStatus core_exit_initialization(Instance *inst) {
     initial_state(inst);
-    inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE : MODE_EVENT;
-    update_derived(inst);
     for (size_t i = 0; i < NX; i++) {
         if (!isfinite(X_[i])) {
             core_log(inst, CORE_ERROR, "initial value of %s = %g is not finite", VAR_NAME[VR_X + i], X_[i]);
             return CORE_ERROR;
         }
     }
+    inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE : MODE_EVENT;
+    update_derived(inst);
     return CORE_OK;
 }
 
