@@ -215,18 +215,18 @@ def fmi2_model_description(model: FmuModel, guid: str) -> str:
 {chr(10).join(sv)}
   </ModelVariables>
   <ModelStructure>
-    <Outputs>
-{chr(10).join(outputs)}
-    </Outputs>
-    <Derivatives>
-{chr(10).join(derivatives)}
-    </Derivatives>
-    <InitialUnknowns>
-{chr(10).join(initial)}
-    </InitialUnknowns>
-  </ModelStructure>
+{_fmi2_section("Outputs", outputs)}{_fmi2_section("Derivatives", derivatives)}{_fmi2_section("InitialUnknowns", initial)}  </ModelStructure>
 </fmiModelDescription>
 """
+
+
+def _fmi2_section(tag: str, unknowns: list[str]) -> str:
+    """An FMI 2.0 ModelStructure list; the schema forbids an empty one, so a
+    model without states (or outputs) leaves the element out."""
+    if not unknowns:
+        return ""
+    body = "\n".join(unknowns)
+    return f"    <{tag}>\n{body}\n    </{tag}>\n"
 
 
 def fmi3_model_description(model: FmuModel, instantiation_token: str) -> str:
