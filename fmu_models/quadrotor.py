@@ -126,9 +126,9 @@ def _equations(t, s):
 
     rates = ca.vertcat(s["p"], s["q"], s["r"])
     euler_rates = euler_rate_matrix(s["phi"], s["theta"]) @ rates  # eq. (2)
-    inertia = ca.diag(ca.vertcat(s["Ix"], s["Iy"], s["Iz"]))
+    inertia = ca.vertcat(s["Ix"], s["Iy"], s["Iz"])  # diagonal of I
     torque = ca.vertcat(tau_phi, tau_theta, tau_psi)
-    angular_acceleration = ca.solve(inertia, -ca.cross(rates, inertia @ rates) + torque)  # eq. (4)
+    angular_acceleration = (-ca.cross(rates, inertia * rates) + torque) / inertia  # eq. (4)
 
     derivatives = dict(zip(_STATE_NAMES, ca.vertsplit(ca.vertcat(velocity, acceleration, euler_rates,
                                                                   angular_acceleration))))
