@@ -1,0 +1,210 @@
+"""``fnn-cosim``: run scenarios, reproduce Table 2 and Table 3, build the FMUs.
+
+Subcommands::
+
+    fnn-cosim run SCENARIO [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots]
+    fnn-cosim table2 [--out DIR] [--seeds 10] [--winds 1,3,5] [--duration S] [--workers 2]
+    fnn-cosim table3 [--out DIR] [--seeds 10] [--duration S] [--workers 2]
+    fnn-cosim reproduce [--out DIR] [--seeds 10] [--duration S] [--workers 2]
+    fnn-cosim scenarios
+    fnn-cosim build-fmu [--out DIR]
+
+SCENARIO is a TOML file or the name of a shipped scenario (``circles``,
+``figure8``). Results go under ``results/`` unless ``--out`` says otherwise.
+Errors (bad scenario, wrong connection, divergence) print one message and
+exit with status 1.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any, Sequence
+
+__all__ = ["main"]
+
+DEFAULT_OUT = Path("results")
+
+
+def _value(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _overrides(pairs: Sequence[str]) -> dict[str, Any]:
+    out = {}
+    for pair in pairs:
+        key, eq, value = pair.partition("=")
+        if not eq or not key:
+            raise SystemExit(f"--set {pair!r}: expected KEY=VALUE, e.g. --set wind.speed=5")
+        out[key.strip()] = _value(value.strip())
+    return out
+
+
+def _workers(n: int | None) -> int:
+    return max(1, min(n or 1, os.cpu_count() or 1))
+
+
+# ---- run ------------------------------------------------------------------------------
+
+def _cmd_run(args) -> int:
+    from .experiments import run_once, write_json
+    from .plots import run_figures
+    from .progress import Progress
+    from .scenario import load_scenario
+
+    overrides = _overrides(args.set)
+    if args.variant:
+        overrides["controller.variant"] = args.variant
+    if args.seed is not None:
+        overrides["simulation.seed"] = args.seed
+    scenario = load_scenario(args.scenario, overrides)
+    out = Path(args.out) if args.out else DEFAULT_OUT / f"run-{scenario.name}"
+    bar = Progress(int(round(scenario.duration / scenario.step)), f"run {scenario.name}", enabled=not args.quiet)
+    result, summary = run_once(scenario, out, progress=lambda n, total: bar.update(n))
+    bar.close()
+    figures = [] if args.no_plots else run_figures(out, result, scenario)
+    summary["figures"] = [str(p) for p in figures]
+    write_json(out / "summary.json", summary)
+    lines = [f"# Run of {scenario.name}", "", scenario.description, "",
+             f"- status: {summary['status']}" + (f" ({summary['error']})" if summary["error"] else ""),
+             f"- seed: {summary['seed']}, controller: {summary['variant']}",
+             f"- simulated {result.time[-1] - result.time[0]:.2f} s in {summary['wall_time_s']:.3f} s "
+             f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
+    if "rmse_m" in summary:
+        lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
+    lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]
+    (out / "summary.md").write_text("\n".join(lines))
+    print("\n".join(lines[4:-2]))
+    print(f"results: {out}")
+    if summary["status"] != "ok":
+        print(f"error: {summary['error']}", file=sys.stderr)
+        return 1
+    return 0
+
+
+# ---- tables and reproduction ------------------------------------------------------------
+
+def _cmd_table2(args) -> int:
+    from .report import table2
+
+    winds = [float(w) for w in args.winds.split(",")]
+    out = Path(args.out) if args.out else DEFAULT_OUT / "table2"
+    summary = table2(out, seeds=args.seeds, winds=winds, duration=args.duration, workers=_workers(args.workers),
+                     show_progress=not args.quiet)
+    print(summary["markdown"])
+    print(f"{len(summary['runs'])} runs in {summary['wall_time_s']:.1f} s; table: {out / 'table2.md'}, "
+          f"data: {out / 'summary.json'}")
+    return 0
+
+
+def _cmd_table3(args) -> int:
+    from .report import table3
+
+    out = Path(args.out) if args.out else DEFAULT_OUT / "table3"
+    summary = table3(out, seeds=args.seeds, duration=args.duration, workers=_workers(args.workers),
+                     show_progress=not args.quiet)
+    print(summary["markdown"])
+    print(f"{len(summary['runs'])} runs in {summary['wall_time_s']:.1f} s; table: {out / 'table3.md'}, "
+          f"data: {out / 'summary.json'}")
+    return 0
+
+
+def _cmd_reproduce(args) -> int:
+    from .report import reproduce
+
+    out = Path(args.out) if args.out else DEFAULT_OUT
+    path = reproduce(out, seeds=args.seeds, workers=_workers(args.workers), duration=args.duration,
+                     show_progress=not args.quiet)
+    print(f"report: {path}")
+    return 0
+
+
+def _cmd_scenarios(args) -> int:
+    from .scenario import load_scenario, shipped_scenarios
+
+    for name, path in sorted(shipped_scenarios().items()):
+        print(f"{name:10s} {load_scenario(path).description}  ({path})")
+    return 0
+
+
+# ---- build-fmu (FMU export; owned with fmu_models) ---------------------------------------
+
+def _cmd_build_fmu(args) -> int:
+    """Build every model of the catalog in every FMI version the exporter
+    supports; print the path of each FMU written, one per line."""
+    from fmu_models.build import FMI_VERSIONS, build_fmu
+    from fmu_models.catalog import MODELS
+
+    for model in MODELS.values():
+        for version in sorted(FMI_VERSIONS):
+            print(build_fmu(model, Path(args.out), version))
+    return 0
+
+
+# ---- entry point ------------------------------------------------------------------------
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    def common(sp, seeds=True):
+        sp.add_argument("--out", help="output directory (default: under results/)")
+        sp.add_argument("--quiet", action="store_true", help="no progress bar")
+        if seeds:
+            sp.add_argument("--seeds", type=int, default=10, help="runs per cell, seeds 0..N-1 (default 10)")
+            sp.add_argument("--duration", type=float, help="override the missions' duration (s)")
+            sp.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+
+    r = sub.add_parser("run", help="run one scenario: results CSV, plots, summary")
+    r.add_argument("scenario", help="TOML file or shipped scenario name (circles, figure8)")
+    r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scenario value, e.g. --set wind.speed=5 (repeatable)")
+    r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
+    r.add_argument("--variant", choices=("pd", "pd+smc", "pd+lm"), help="controller variant")
+    r.add_argument("--no-plots", action="store_true")
+    common(r, seeds=False)
+    r.set_defaults(func=_cmd_run)
+
+    t2 = sub.add_parser("table2", help="Table 2: PD, PD+SMC, PD+LM at 1, 3, 5 m/s")
+    t2.add_argument("--winds", default="1,3,5", help="wind speeds in m/s (default 1,3,5)")
+    common(t2)
+    t2.set_defaults(func=_cmd_table2)
+
+    t3 = sub.add_parser("table3", help="Table 3: the figure-8")
+    common(t3)
+    t3.set_defaults(func=_cmd_table3)
+
+    rp = sub.add_parser("reproduce", help="Tables 2 and 3 and the figures into results/report.md")
+    common(rp)
+    rp.set_defaults(func=_cmd_reproduce)
+
+    sc = sub.add_parser("scenarios", help="list the shipped scenarios")
+    sc.set_defaults(func=_cmd_scenarios)
+
+    b = sub.add_parser("build-fmu", help="build every model as FMI 2.0 (and 3.0) FMUs")
+    b.add_argument("--out", default="build/fmus", help="output directory (default build/fmus)")
+    b.set_defaults(func=_cmd_build_fmu)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from .errors import CosimError
+
+    args = _parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except CosimError as exc:
+        print(f"fnn-cosim: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("fnn-cosim: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,202 @@
+"""Runs and sweeps: one scenario run with its files, and the parallel sweeps
+behind Table 2 and Table 3.
+
+A sweep extracts each FMU once, then starts ``workers`` processes; each
+builds one master (instantiating its FMUs and controllers once) and runs its
+share of the jobs, resetting between runs. A job is (variant, wind speed,
+seed); its result is the RMSE, the status and the wall time.
+"""
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from .metrics import euclidean_error, rmse
+from .scenario import Scenario, build_master, parse_scenario, apply_overrides
+
+__all__ = ["Job", "run_once", "sweep", "cells", "VARIANTS", "VARIANT_LABELS"]
+
+VARIANTS = ("pd", "pd+smc", "pd+lm")
+VARIANT_LABELS = {"pd": "PD", "pd+smc": "PD+SMC-FNN", "pd+lm": "PD+LM-FNN"}
+
+
+@dataclass(frozen=True)
+class Job:
+    variant: str
+    wind: float | None  # m/s; None keeps the scenario's
+    seed: int
+
+
+def _parameters(scenario: Scenario, job: Job) -> dict[str, Any]:
+    params: dict[str, Any] = {"controller.variant": job.variant}
+    if job.wind is not None:
+        params[scenario.wind_parameter("speed")] = job.wind
+    return params
+
+
+def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None = None,
+             variant: str | None = None, progress: Callable[[int, int], None] | None = None, master=None):
+    """Run ``scenario`` once; with ``out_dir``, stream ``results.csv`` there.
+
+    Returns ``(result, summary)``: the :class:`~cosim.master.RunResult` and a
+    JSON-ready summary (status, error, RMSE, max error, wall time, real-time
+    factor, per-phase cost per step in microseconds).
+    """
+    own = master is None
+    master = master or build_master(scenario)
+    params = {"controller.variant": variant} if variant else {}
+    try:
+        csv = Path(out_dir) / "results.csv" if out_dir is not None else None
+        result = master.run(scenario.duration, seed=scenario.seed if seed is None else seed, parameters=params,
+                            csv_path=csv, t0=scenario.start_time, block_rows=scenario.block_rows,
+                            raise_on_error=False, progress=progress)
+    finally:
+        if own:
+            master.close()
+    return result, summarize(scenario, result, variant)
+
+
+def summarize(scenario: Scenario, result, variant: str | None = None) -> dict[str, Any]:
+    summary: dict[str, Any] = {
+        "scenario": scenario.name, "status": result.status, "error": result.error, "seed": result.seed,
+        "variant": variant or (scenario.controller or {}).get("variant"),
+        "duration_s": scenario.duration, "step_s": scenario.step, "rows": int(result.data.shape[0]),
+        "wall_time_s": result.wall_time,
+        "real_time_factor": (result.time[-1] - result.time[0]) / result.wall_time if len(result.time) > 1 else None,
+        "cost_per_step_us": {k: v / max(result.n_steps, 1) * 1e6 for k, v in result.phase_times.items()},
+    }
+    if scenario.position_signals:
+        e = euclidean_error(result, scenario.position_signals, scenario.reference_signals)
+        summary["rmse_m"] = rmse(result, scenario.position_signals, scenario.reference_signals)
+        summary["max_error_m"] = float(e.max()) if len(e) else None
+        summary["final_error_m"] = float(e[-1]) if len(e) else None
+    if result.csv_path is not None:
+        summary["results_csv"] = str(result.csv_path)
+    return summary
+
+
+# ---- parallel sweeps ---------------------------------------------------------------
+
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(scenario: Scenario, fmu_dirs: dict[str, str]) -> None:
+    _WORKER["scenario"] = scenario
+    _WORKER["master"] = build_master(scenario, {k: Path(v) for k, v in fmu_dirs.items()})
+
+
+def _run_job(job: Job) -> dict[str, Any]:
+    scenario, master = _WORKER["scenario"], _WORKER["master"]
+    result = master.run(scenario.duration, seed=job.seed, parameters=_parameters(scenario, job),
+                        t0=scenario.start_time, raise_on_error=False)
+    value = rmse(result, scenario.position_signals, scenario.reference_signals)
+    return {"variant": job.variant, "wind_m_s": job.wind, "seed": job.seed, "status": result.status,
+            "error": result.error, "rmse_m": value if result.status == "ok" else None,
+            "wall_time_s": result.wall_time, "pid": os.getpid()}
+
+
+def _extract_fmus(scenario: Scenario, into: Path) -> dict[str, str]:
+    from fmpy import extract
+
+    from .scenario import _fmu_file
+
+    dirs = {}
+    for name, spec in scenario.fmus.items():
+        target = into / name
+        extract(str(_fmu_file(name, spec)), str(target))
+        dirs[name] = str(target)
+    return dirs
+
+
+def sweep(scenario: Scenario, jobs: Sequence[Job], workers: int = 2,
+          progress: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
+    """Run every job; results in the order of ``jobs``.
+
+    Only the metric signals are recorded (no CSV). ``workers = 1`` runs in
+    this process (no multiprocessing).
+    """
+    lean = parse_scenario(apply_overrides(scenario.raw, {
+        "record.signals": list(dict.fromkeys(scenario.position_signals + scenario.reference_signals))}),
+        source=scenario.source)
+    results: list[dict[str, Any] | None] = [None] * len(jobs)
+    tmp = Path(tempfile.mkdtemp(prefix="fnn-cosim-fmus-"))
+    try:
+        dirs = _extract_fmus(lean, tmp)
+        if workers <= 1:
+            _init_worker(lean, dirs)
+            try:
+                for i, job in enumerate(jobs):
+                    results[i] = _run_job(job)
+                    if progress:
+                        progress(results[i])
+            finally:
+                _WORKER.pop("master").close()
+        else:
+            method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+            ctx = multiprocessing.get_context(method)
+            with ctx.Pool(workers, initializer=_init_worker, initargs=(lean, dirs)) as pool:
+                indexed = list(enumerate(jobs))
+                for i, res in pool.imap_unordered(_indexed_job, indexed, chunksize=1):
+                    results[i] = res
+                    if progress:
+                        progress(res)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return results  # type: ignore[return-value]
+
+
+def _indexed_job(item: tuple[int, Job]) -> tuple[int, dict[str, Any]]:
+    i, job = item
+    return i, _run_job(job)
+
+
+def cells(results: Iterable[dict[str, Any]], key: str = "wind_m_s") -> dict[str, dict[Any, dict[str, Any]]]:
+    """Group job results by variant and ``key``: mean, sample std (ddof = 1),
+    number of runs, number failed, and every run's RMSE."""
+    grouped: dict[str, dict[Any, list[dict[str, Any]]]] = {}
+    for r in results:
+        grouped.setdefault(r["variant"], {}).setdefault(r[key], []).append(r)
+    out: dict[str, dict[Any, dict[str, Any]]] = {}
+    for variant, by in grouped.items():
+        out[variant] = {}
+        for k, runs in by.items():
+            values = np.array([r["rmse_m"] for r in runs if r["rmse_m"] is not None], dtype=float)
+            out[variant][k] = {
+                "mean": float(values.mean()) if values.size else None,
+                "std": float(values.std(ddof=1)) if values.size > 1 else 0.0 if values.size else None,
+                "runs": len(runs), "failed": sum(r["status"] != "ok" for r in runs),
+                "rmse": [r["rmse_m"] for r in sorted(runs, key=lambda r: r["seed"])],
+                "seeds": sorted(r["seed"] for r in runs),
+                "errors": [r["error"] for r in runs if r["error"]],
+            }
+    return out
+
+
+def write_json(path: Path, data: Any) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=1, default=_json_default))
+    return path
+
+
+def _json_default(obj):
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
+
+
+def timed(fn, *args, **kwargs):
+    t = time.perf_counter()
+    value = fn(*args, **kwargs)
+    return value, time.perf_counter() - t

@@ -1,0 +1,37 @@
+"""Tracking metrics of a run.
+
+Euclidean position error e(t_n) = |p*(t_n) - p(t_n)| (m, Fig. 9) and its RMSE
+over every communication point of the run, n = 0 .. N (Tables 2 and 3):
+
+    RMSE = sqrt( (1 / (N + 1)) * sum_n |p*(t_n) - p(t_n)|^2 )
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["position_error", "euclidean_error", "rmse", "pd_share"]
+
+
+def position_error(result, position: Sequence[str], reference: Sequence[str]) -> np.ndarray:
+    """p* - p per axis, shape (rows, len(position)) (m)."""
+    return np.column_stack([result[r] - result[p] for p, r in zip(position, reference)])
+
+
+def euclidean_error(result, position: Sequence[str], reference: Sequence[str]) -> np.ndarray:
+    """|p* - p| per row (m), the curve of Fig. 9."""
+    return np.linalg.norm(position_error(result, position, reference), axis=1)
+
+
+def rmse(result, position: Sequence[str], reference: Sequence[str]) -> float:
+    """Euclidean RMSE (m) over all recorded rows."""
+    e = position_error(result, position, reference)
+    return float(np.sqrt(np.mean(np.sum(e * e, axis=1)))) if len(e) else float("nan")
+
+
+def pd_share(tau_c: np.ndarray, tau_n: np.ndarray) -> np.ndarray:
+    """|tau_c| / (|tau_c| + |tau_n|): the PD's share of the control effort
+    (1 while the FNN has learned nothing, toward 0 once it has taken over)."""
+    total = np.abs(tau_c) + np.abs(tau_n)
+    return np.divide(np.abs(tau_c), total, out=np.ones_like(total), where=total > 0)

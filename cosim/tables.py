@@ -1,0 +1,108 @@
+"""Table 2 and Table 3 of the paper, ours beside theirs, as markdown.
+
+Cells are the Euclidean RMSE (m), mean ± sample standard deviation over the
+runs (seeds of f_ij(0)). The reduction over PD is 100 (1 - RMSE / RMSE_PD) %.
+A cell of ours that differs from the paper's by more than 30 % is marked
+with a dagger; the report lists them for explanation.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+__all__ = ["PAPER_TABLE2", "PAPER_TABLE3", "table2_markdown", "table3_markdown", "deviations",
+           "DEVIATION_LIMIT"]
+
+PAPER_TABLE2: dict[str, dict[float, float]] = {  # m, section 5.4
+    "pd": {1.0: 0.966, 3.0: 1.006, 5.0: 1.204},
+    "pd+smc": {1.0: 0.337, 3.0: 0.452, 5.0: 0.600},
+    "pd+lm": {1.0: 0.316, 3.0: 0.477, 5.0: 0.689},
+}
+PAPER_TABLE3: dict[str, float] = {"pd": 0.327, "pd+smc": 0.210, "pd+lm": 0.228}  # m, section 6.1
+DEVIATION_LIMIT = 0.30
+LABELS = {"pd": "PD", "pd+smc": "PD+SMC-FNN", "pd+lm": "PD+LM-FNN"}
+
+
+def _fmt(cell: Mapping[str, Any] | None) -> str:
+    if not cell or cell.get("mean") is None:
+        return "diverged" if cell and cell.get("failed") else "–"
+    text = f"{cell['mean']:.3f} ± {cell['std']:.3f}"
+    if cell.get("failed"):
+        text += f" ({cell['failed']}/{cell['runs']} diverged)"
+    return text
+
+
+def _dev(ours: float | None, paper: float) -> str:
+    if ours is None:
+        return ""
+    return " †" if abs(ours - paper) / paper > DEVIATION_LIMIT else ""
+
+
+def _reduction(value: float | None, pd: float | None) -> str:
+    if value is None or not pd:
+        return "–"
+    return f"{100 * (1 - value / pd):.0f} %"
+
+
+def table2_markdown(cells: Mapping[str, Mapping[float, Mapping[str, Any]]], winds=(1.0, 3.0, 5.0)) -> str:
+    """Table 2 (ours vs paper) and the reduction over PD, in markdown."""
+    head = "| Controller | " + " | ".join(f"{w:g} m/s ours | {w:g} m/s paper" for w in winds) + " |"
+    lines = ["Average Euclidean RMSE (m), mean ± std over the seeds; † = differs from the paper by more "
+             f"than {DEVIATION_LIMIT:.0%}.", "", head, "|" + "---|" * (1 + 2 * len(winds))]
+    for v in ("pd", "pd+smc", "pd+lm"):
+        if v not in cells:
+            continue
+        row = [LABELS[v]]
+        for w in winds:
+            cell = cells[v].get(w)
+            paper = PAPER_TABLE2[v].get(w)
+            row.append(_fmt(cell) + (_dev(cell and cell.get("mean"), paper) if paper else ""))
+            row.append(f"{paper:.3f}" if paper else "–")
+        lines.append("| " + " | ".join(row) + " |")
+    lines += ["", "Reduction of the RMSE over PD alone:", "",
+              "| Controller | " + " | ".join(f"{w:g} m/s ours | {w:g} m/s paper" for w in winds) + " |",
+              "|" + "---|" * (1 + 2 * len(winds))]
+    for v in ("pd+smc", "pd+lm"):
+        if v not in cells or "pd" not in cells:
+            continue
+        row = [LABELS[v]]
+        for w in winds:
+            ours = (cells[v].get(w) or {}).get("mean")
+            pd = (cells["pd"].get(w) or {}).get("mean")
+            row += [_reduction(ours, pd), _reduction(PAPER_TABLE2[v].get(w), PAPER_TABLE2["pd"].get(w))]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def table3_markdown(cells: Mapping[str, Mapping[Any, Mapping[str, Any]]]) -> str:
+    """Table 3 (ours in simulation vs the paper's flight experiment), in markdown."""
+    lines = ["Average Euclidean RMSE (m), mean ± std over the seeds (ours: simulation; paper: flights); "
+             f"† = differs from the paper by more than {DEVIATION_LIMIT:.0%}.", "",
+             "| Controller | ours | paper | reduction over PD, ours | paper |", "|---|---|---|---|---|"]
+    pd = next(iter(cells.get("pd", {}).values()), {}).get("mean") if "pd" in cells else None
+    for v in ("pd", "pd+smc", "pd+lm"):
+        if v not in cells:
+            continue
+        cell = next(iter(cells[v].values()))
+        paper = PAPER_TABLE3[v]
+        red = ("–", "–") if v == "pd" else (_reduction(cell.get("mean"), pd),
+                                            _reduction(paper, PAPER_TABLE3["pd"]))
+        lines.append(f"| {LABELS[v]} | {_fmt(cell)}{_dev(cell.get('mean'), paper)} | {paper:.3f} | {red[0]} | {red[1]} |")
+    return "\n".join(lines) + "\n"
+
+
+def deviations(cells2: Mapping | None, cells3: Mapping | None) -> list[dict[str, Any]]:
+    """Every cell of ours more than 30 % away from the paper's."""
+    out = []
+    for v, by in (cells2 or {}).items():
+        for w, cell in by.items():
+            paper = PAPER_TABLE2.get(v, {}).get(w)
+            if paper and cell.get("mean") is not None and abs(cell["mean"] - paper) / paper > DEVIATION_LIMIT:
+                out.append({"table": 2, "variant": v, "wind_m_s": w, "ours": cell["mean"], "paper": paper,
+                            "relative": cell["mean"] / paper - 1})
+    for v, by in (cells3 or {}).items():
+        cell = next(iter(by.values()))
+        paper = PAPER_TABLE3.get(v)
+        if paper and cell.get("mean") is not None and abs(cell["mean"] - paper) / paper > DEVIATION_LIMIT:
+            out.append({"table": 3, "variant": v, "ours": cell["mean"], "paper": paper,
+                        "relative": cell["mean"] / paper - 1})
+    return out

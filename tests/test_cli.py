@@ -1,0 +1,61 @@
+"""The fnn-cosim command line: run, errors, scenarios, build-fmu."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from cosim.cli import main
+from cosim.recorder import read_results
+
+
+def test_run_writes_results_plots_and_summary(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(["run", "circles", "--set", "simulation.duration=2.0", "--set", "wind.speed=5",
+                 "--variant", "pd+smc", "--seed", "4", "--out", str(out), "--quiet"])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "ok" and summary["variant"] == "pd+smc" and summary["seed"] == 4
+    assert 0 < summary["rmse_m"] < 1.5 and summary["rows"] == 201
+    assert {"fmu", "record", "guard", "python:controller", "python:reference"} <= set(summary["cost_per_step_us"])
+    for name in ("results.csv", "results.csv.json", "summary.md", "trajectory.png", "error.png",
+                 "control_signals.png", "wind.png"):
+        assert (out / name).is_file(), name
+    columns, data = read_results(out / "results.csv")
+    assert data.shape == (201, len(columns)) and data[-1, 0] == pytest.approx(2.0)
+    assert f"Euclidean RMSE: {summary['rmse_m']:.4f} m" in capsys.readouterr().out
+
+
+def test_bad_scenario_value_exits_with_its_message(tmp_path, capsys):
+    code = main(["run", "circles", "--set", "simulation.step=-0.01", "--out", str(tmp_path), "--quiet"])
+    assert code == 1
+    assert "fnn-cosim: error: simulation.step = -0.01: must be positive" in capsys.readouterr().err
+
+
+def test_divergence_exits_nonzero_and_keeps_the_partial_csv(tmp_path, capsys):
+    out = tmp_path / "div"
+    code = main(["run", "circles", "--set", 'envelope={ "Quadrotor.z" = [-15.2, -14.8] }',
+                 "--set", "simulation.duration=10.0", "--out", str(out), "--quiet", "--no-plots"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "diverged at t = " in err and "Quadrotor.z = " in err and "outside its envelope [-15.2, -14.8]" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "diverged"
+    columns, data = read_results(out / "results.csv")
+    assert 1 < len(data) < 1001 and len(data) == summary["rows"]
+
+
+def test_scenarios_lists_the_shipped_missions(capsys):
+    assert main(["scenarios"]) == 0
+    out = capsys.readouterr().out
+    assert "circles" in out and "figure8" in out
+
+
+def test_build_fmu_prints_one_path_per_fmu(tmp_path, capsys):
+    from fmu_models.build import FMI_VERSIONS
+    from fmu_models.catalog import MODELS
+
+    assert main(["build-fmu", "--out", str(tmp_path)]) == 0
+    paths = capsys.readouterr().out.split()
+    assert len(paths) == len(MODELS) * len(FMI_VERSIONS)
+    assert all(p.endswith(".fmu") and (tmp_path / p).exists() for p in paths)

@@ -1,0 +1,65 @@
+"""Table 2 and Table 3 on a reduced setting: the FNN rows beat PD; the
+markdown and summary.json hold every cell."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from cosim.cli import main
+from cosim.tables import PAPER_TABLE2, deviations, table2_markdown, table3_markdown
+
+
+def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):
+    out = tmp_path / "t2"
+    assert main(["table2", "--seeds", "2", "--winds", "1,5", "--duration", "15", "--workers", "2",
+                 "--out", str(out), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["runs"]) == 2 * 2 * 3 and all(r["status"] == "ok" for r in summary["runs"])
+    assert len({r["pid"] for r in summary["runs"]}) == 2  # both workers took part
+    cells = summary["cells"]
+    for wind in ("1", "5"):
+        pd = cells["pd"][wind]["mean"]
+        assert cells["pd"][wind]["runs"] == 2 and len(cells["pd"][wind]["rmse"]) == 2
+        for fnn in ("pd+smc", "pd+lm"):
+            assert cells[fnn][wind]["mean"] < 0.75 * pd, (fnn, wind, cells[fnn][wind]["mean"], pd)
+    md = (out / "table2.md").read_text()
+    assert "| PD+LM-FNN |" in md and "0.966" in md and "Reduction of the RMSE over PD" in md
+    assert "| PD+LM-FNN |" in capsys.readouterr().out
+
+
+def test_table3_reduced(tmp_path):
+    out = tmp_path / "t3"
+    assert main(["table3", "--seeds", "1", "--duration", "20", "--workers", "1", "--out", str(out),
+                 "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["cells"]["pd+lm"]["mean"] < summary["cells"]["pd"]["mean"]
+    assert "0.327" in (out / "table3.md").read_text()
+
+
+def test_markdown_known_answer():
+    cells = {v: {w: {"mean": x, "std": 0.01, "runs": 10, "failed": 0} for w, x in by.items()}
+             for v, by in PAPER_TABLE2.items()}
+    cells["pd+lm"][5.0]["mean"] = 0.3  # more than 30 % below the paper's 0.689
+    md = table2_markdown(cells)
+    assert "| PD | 0.966 ± 0.010 | 0.966 |" in md
+    assert "0.300 ± 0.010 †" in md
+    assert "| PD+SMC-FNN | 65 % | 65 % | 55 % | 55 % | 50 % | 50 % |" in md
+    devs = deviations(cells, None)
+    assert devs == [{"table": 2, "variant": "pd+lm", "wind_m_s": 5.0, "ours": 0.3, "paper": 0.689,
+                     "relative": pytest.approx(0.3 / 0.689 - 1)}]
+    t3 = table3_markdown({"pd": {None: {"mean": 0.327, "std": 0, "runs": 1, "failed": 0}},
+                          "pd+lm": {None: {"mean": 0.2, "std": 0, "runs": 1, "failed": 1}}})
+    assert "| PD+LM-FNN | 0.200 ± 0.000 (1/1 diverged) | 0.228 | 39 % | 30 % |" in t3
+
+
+@pytest.mark.slow
+def test_full_reproduction(tmp_path):
+    """The whole job (about 20 s on 2 cores): report with both tables and every figure."""
+    assert main(["reproduce", "--out", str(tmp_path), "--quiet"]) == 0
+    report = (tmp_path / "report.md").read_text()
+    assert "## Table 2" in report and "## Table 3" in report
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert len(summary["table2"]["runs"]) == 90 and len(summary["table3"]["runs"]) == 30
+    for f in summary["figures"]["files"]:
+        assert (tmp_path / "figures").joinpath(f).exists()
