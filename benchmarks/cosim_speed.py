@@ -1,0 +1,111 @@
+"""Speed of the co-simulation, measured in one run.
+
+Prints, for the 50 s mission of section 5.2 (circles, 3 m/s gust) with
+PD+LM-FNN at dt = 0.01 s (5000 steps):
+
+* the wall time (median of --repeats runs, after one warm-up run) with the
+  scenario's 23 recorded signals kept in memory, and with them also streamed
+  to a CSV file, and the real-time factor;
+* the per-step cost split into FMU calls (set inputs, doStep, get outputs of
+  both FMUs), controller, reference, recording and the divergence guard;
+* ``fmpy.simulate_fmu`` of the plant FMU alone over the same 50 s with the
+  same output interval, as a reference;
+* ``table2``: the 90 runs on --workers processes (skip with --no-table2).
+
+Targets on a 2-core machine: the mission under 0.25 s, table2 under 20 s.
+
+    .venv/bin/python benchmarks/cosim_speed.py [--repeats 7] [--workers 2] [--json out.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def _median_runs(master, scenario, repeats: int, csv: Path | None):
+    times, results = [], []
+    master.run(scenario.duration, seed=0, csv_path=csv)  # warm-up
+    for i in range(repeats):
+        t = time.perf_counter()
+        r = master.run(scenario.duration, seed=i, csv_path=csv)
+        times.append(time.perf_counter() - t)
+        results.append(r)
+    return statistics.median(times), times, results
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--no-table2", action="store_true")
+    p.add_argument("--json", help="also write the figures to this JSON file")
+    args = p.parse_args(argv)
+
+    import fmpy
+
+    from cosim.experiments import VARIANTS, Job, sweep
+    from cosim.scenario import _fmu_file, build_master, load_scenario
+
+    scenario = load_scenario("circles", {"controller.variant": "pd+lm", "wind.speed": 3.0})
+    n_steps = int(round(scenario.duration / scenario.step))
+    figures: dict = {"steps": n_steps, "cores": os.cpu_count()}
+
+    with build_master(scenario) as master, tempfile.TemporaryDirectory() as tmp:
+        med_mem, times_mem, results = _median_runs(master, scenario, args.repeats, None)
+        med_csv, times_csv, _ = _median_runs(master, scenario, args.repeats, Path(tmp) / "r.csv")
+    assert all(r.status == "ok" for r in results)
+    phases: dict[str, list[float]] = {}
+    for r in results:
+        for k, v in r.phase_times.items():
+            phases.setdefault(k, []).append(v / n_steps * 1e6)
+    per_step = {k: statistics.median(v) for k, v in phases.items()}
+    figures["mission_wall_s"] = {"in_memory": med_mem, "with_csv": med_csv,
+                                 "runs_in_memory": times_mem, "runs_with_csv": times_csv}
+    figures["real_time_factor"] = {"in_memory": scenario.duration / med_mem, "with_csv": scenario.duration / med_csv}
+    figures["per_step_us"] = per_step
+    figures["per_step_us"]["total"] = med_mem / n_steps * 1e6
+
+    plant = str(_fmu_file("Quadrotor", scenario.fmus["Quadrotor"]))
+    fmpy_times = []
+    for _ in range(max(3, args.repeats // 2)):
+        t = time.perf_counter()
+        fmpy.simulate_fmu(plant, stop_time=scenario.duration, output_interval=scenario.step,
+                          start_values={"z_0": -15.0}, validate=False)
+        fmpy_times.append(time.perf_counter() - t)
+    figures["fmpy_simulate_fmu_plant_alone_s"] = statistics.median(fmpy_times)
+
+    print(f"50 s mission (circles, PD+LM-FNN, 3 m/s gust), {n_steps} steps of {scenario.step} s, "
+          f"median of {args.repeats}:")
+    print(f"  wall time, recording in memory : {med_mem * 1e3:7.1f} ms   real-time factor {scenario.duration / med_mem:6.0f}")
+    print(f"  wall time, also streaming CSV  : {med_csv * 1e3:7.1f} ms   real-time factor {scenario.duration / med_csv:6.0f}")
+    print("  cost per step (median, in memory):")
+    names = {"fmu": "FMU calls (2 FMUs: set, doStep, get)", "python:controller": "controller (adapter + CasADi)",
+             "python:reference": "reference trajectory", "record": "recording (23 signals)",
+             "guard": "divergence guard", "total": "total (wall / steps)"}
+    for k in ("fmu", "python:controller", "python:reference", "record", "guard", "total"):
+        print(f"    {names[k]:40s} {per_step[k]:6.2f} us")
+    print(f"  fmpy.simulate_fmu, plant FMU alone, 50 s: {figures['fmpy_simulate_fmu_plant_alone_s'] * 1e3:7.1f} ms")
+
+    if not args.no_table2:
+        jobs = [Job(v, w, s) for s in range(10) for w in (1.0, 3.0, 5.0) for v in VARIANTS]
+        t = time.perf_counter()
+        res = sweep(scenario, jobs, workers=args.workers)
+        wall = time.perf_counter() - t
+        assert all(r["status"] == "ok" for r in res)
+        figures["table2_wall_s"] = wall
+        figures["table2_workers"] = args.workers
+        print(f"table2: {len(jobs)} runs of 50 s on {args.workers} workers: {wall:.1f} s "
+              f"({wall / len(jobs) * 1e3:.0f} ms a run, including worker start-up)")
+    if args.json:
+        Path(args.json).write_text(json.dumps(figures, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
