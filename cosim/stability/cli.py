@@ -1,0 +1,67 @@
+"""``fnn-cosim stability``: the linear stability report of the PD baseline.
+
+Usable on its own (``python -m cosim.stability.cli --out DIR``) and as a
+subcommand: :func:`add_parser` adds it to the ``fnn-cosim`` parser.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Sequence
+
+__all__ = ["add_parser", "run", "main"]
+
+DEFAULT_OUT = "results/stability"
+_DESCRIPTION = ("Linear stability report of the PD baseline (poles, margins, Bode/Nyquist/pole-zero plots, "
+                "kp-kd sweep, ramp error), checked against the co-simulation; see docs/stability.md.")
+
+
+def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    parser.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default: {DEFAULT_OUT})")
+    parser.add_argument("--kp", type=float, default=None, help="PD proportional gain (default: the paper's 2.5)")
+    parser.add_argument("--kd", type=float, default=None, help="PD derivative gain (default: the paper's 0.005)")
+    parser.add_argument("--speed", type=float, default=2.5, help="forward-flight and ramp speed, m/s (default 2.5)")
+    parser.add_argument("--wind", type=float, default=3.0,
+                        help="steady wind of the third operating point, m/s, along [-1, -1, 0] (default 3)")
+    parser.add_argument("--no-cosim", action="store_true",
+                        help="linear analysis only: skip the co-simulation checks and the finite-time runs")
+    return parser
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``stability`` subcommand to an ``argparse`` subparsers object;
+    its handler is stored as ``func`` (call ``args.func(args)``)."""
+    parser = subparsers.add_parser(
+        "stability", help="linear stability analysis of the PD baseline, checked against the co-simulation",
+        description=_DESCRIPTION)
+    _arguments(parser)
+    parser.set_defaults(func=run)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the study for parsed arguments; prints the report's path and verdicts."""
+    from .study import run_stability_analysis
+
+    study = run_stability_analysis(args.out, speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
+                                   cosim=not args.no_cosim)
+    for a in study.analyses:
+        p = a.poles["discrete"]
+        outer = min(m.gain_margin for m in a.margins["discrete"] if m.loop.startswith("outer"))
+        pm = min(m.phase_margin for m in a.margins["discrete"] if m.loop.startswith("outer"))
+        print(f"{a.op.name:>13}: {'stable' if p.stable else 'UNSTABLE'} (max |z| = {p.stability_measure:.5f}, "
+              f"least damping {p.least_damping:.3f}); outer loops GM >= {outer:.3g}, PM >= {pm:.3g} deg")
+    print(f"ramp lag at {study.ramp.speed:g} m/s: V/kp = {study.ramp.ideal:.3f} m, linear {study.ramp.linear_discrete:.3f} m, "
+          f"trim {study.ramp.trim:.3f} m"
+          + (f", co-simulation {study.ramp_nonlinear:.3f} m" if study.ramp_nonlinear is not None else ""))
+    print(f"report: {study.report_path}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = _arguments(argparse.ArgumentParser(prog="fnn-cosim stability", description=_DESCRIPTION))
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,233 @@
+"""The learning laws' finite-time claims, evaluated on recorded runs.
+
+The paper's claims (section 4), with tau = tau_c - tau_n the control
+(eq. 26), ``B`` a bound of ``|d tau/dt|`` (eq. 30) and S_p = tau_c/K_d (eq. 68):
+
+* **SMC, Theorem 1, eq. (53)**: if ``B <= alpha*/2`` then
+  ``dV_c/dt <= -alpha*/2 |tau_c| + nu alpha*^2/4``, so V_c decreases until
+  ``|tau_c| < nu alpha*/2``. With the smallest admissible ``alpha* = 2 B`` the
+  neighbourhood is ``|tau_c| < nu B``. No reaching time is given.
+* **LM, Theorem 3, eq. (66)**: with ``delta = W^T W`` (the proof's choice) and
+  ``gamma > B/4`` (as printed), ``dV_c/dt <= -gamma/4 |tau_c|``. From eq. (65),
+  ``-gamma/2 |tau_c| + B |tau_c| <= -gamma/4 |tau_c|`` actually needs
+  ``B <= gamma/4``, i.e. ``gamma >= 4 B``; both conditions are reported.
+* **LM, Theorem 4, eq. (70)**: ``S_p`` reaches zero within
+  ``t_h <= 4 K_d S_p(0)/gamma = 4 |tau_c(0)|/gamma``.
+
+What a run shows (per axis): ``B`` measured as ``max |Delta tau|/h`` (and its
+99th percentile), the time |tau_c| enters eq. (53)'s neighbourhood for good,
+the first time tau_c reaches zero (changes sign), the largest |tau_c| after
+t_h, and for LM the delta the law actually uses (``max(W^T W, alpha_bar)``,
+eq. 62) and the resulting decrease rate ``gamma W^T W/(delta + W^T W)``
+against the proof's gamma/2.
+
+The runs are co-simulations by the master (plant FMU, h = 0.01 s) with the
+controller component extended to keep its learned state
+(:class:`RecordingController`): a 1 m position step from hover, and the
+paper's mission (shipped scenario ``circles``, 3 m/s gust).
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from fnn_controller import STATE_SIZE, PositionParams, normalized_firing_strength
+from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2
+from fnn_controller.learning import clip_inputs
+from fnn_controller.position import axis_slice
+
+from ..controller import ControllerComponent
+
+__all__ = ["RecordingController", "Run", "AxisClaims", "record_run", "evaluate_claims", "default_runs",
+           "finite_time_report"]
+
+_AXES = ("x", "y", "z")
+
+
+class RecordingController(ControllerComponent):
+    """:class:`~cosim.controller.ControllerComponent` that also keeps the
+    controller state (FNN parameters, alpha) *before* every step, in
+    :attr:`states` (n_steps + 1, STATE_SIZE)."""
+
+    def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
+        super().start(t0, h, n_steps, seed)
+        self.states = np.zeros((n_steps + 1, STATE_SIZE))
+
+    def step(self, n: int, t: float, u):
+        self.states[n] = self.controller(self.variant).state
+        return super().step(n, t, u)
+
+
+@dataclass(frozen=True, eq=False)
+class Run:
+    """One recorded co-simulation: time (n,), per axis (n, 3) the position
+    error e, its derivative e_dot, tau_c, tau_n and tau = v*; the controller
+    states (n, STATE_SIZE); its variant and gains."""
+
+    name: str
+    variant: str
+    t: np.ndarray
+    e: np.ndarray
+    e_dot: np.ndarray
+    tau_c: np.ndarray
+    tau_n: np.ndarray
+    tau: np.ndarray
+    states: np.ndarray
+    position: PositionParams
+    status: str = "ok"
+
+
+def _scenario(base: str, variant: str, overrides: dict):
+    from ..scenario import load_scenario, parse_scenario
+
+    sc = load_scenario(base, overrides)
+    raw = copy.deepcopy(sc.raw)
+    ctrl = raw.pop("controller", {})
+    raw.setdefault("components", {})["controller"] = {
+        "factory": "cosim.stability.finite_time:RecordingController",
+        "parameters": {"variant": variant, "position": ctrl.get("position", {}),
+                       "geometric": ctrl.get("geometric", {}), "psi_ref": ctrl.get("psi_ref", 0.0)}}
+    signals = [f"reference.{s}" for s in ("x", "y", "z", "vx", "vy", "vz")]
+    signals += [f"Quadrotor.{s}" for s in ("x", "y", "z", "u", "v", "w")]
+    signals += [f"controller.{k}_{a}" for k in ("tau_c", "tau_n", "v_ref") for a in _AXES]
+    raw["record"] = {"signals": signals}
+    return parse_scenario(raw, source=sc.source, name=sc.name)
+
+
+def record_run(name: str, variant: str, scenario: str = "circles", overrides: dict | None = None) -> Run:
+    """Run ``scenario`` (shipped name or path, with dotted ``overrides``) with
+    the controller ``variant`` and record what the claims need."""
+    from ..scenario import build_master
+
+    sc = _scenario(scenario, variant, overrides or {})
+    with build_master(sc) as master:
+        result = master.run(sc.duration, seed=sc.seed, raise_on_error=False)
+        ctrl = master.components["controller"]
+        states = ctrl.states[:len(result.time)].copy()
+        position = ctrl.position
+
+    def cols(fmt):
+        return np.column_stack([result[fmt.format(a=a)] for a in _AXES])
+
+    e = cols("reference.{a}") - cols("Quadrotor.{a}")
+    vel = np.column_stack([result[f"Quadrotor.{s}"] for s in ("u", "v", "w")])
+    e_dot = np.column_stack([result[f"reference.v{a}"] for a in _AXES]) - vel
+    return Run(name, variant, result.time.copy(), e, e_dot, cols("controller.tau_c_{a}"),
+               cols("controller.tau_n_{a}"), cols("controller.v_ref_{a}"), states, position, result.status)
+
+
+def _wtw_function(params: PositionParams) -> ca.Function:
+    x1, x2 = ca.SX.sym("x1"), ca.SX.sym("x2")
+    s = ca.SX.sym("axis_state", AXIS_STATE_SIZE)
+    c1, c2 = clip_inputs(x1, x2, params.bounds)
+    w = normalized_firing_strength(c1, c2, s[C1], s[C2], s[SIGMA1], s[SIGMA2])
+    return ca.Function("w_bar_squared", [x1, x2, s], [ca.dot(w, w)])
+
+
+def _w_squared(run: Run, axis: int) -> np.ndarray:
+    """W_bar^T W_bar at every sample (eq. 25 evaluated by the controller's own function)."""
+    f = _wtw_function(run.position).map(len(run.t))
+    states = run.states[:, axis_slice(axis)].T
+    return np.array(f(run.e[:, axis][None, :], run.e_dot[:, axis][None, :], states)).ravel()
+
+
+@dataclass(frozen=True)
+class AxisClaims:
+    """The bounds of eqs. (53), (66), (70) next to what one axis of a run shows.
+
+    Times in s from the start of the run; ``nan`` where an event never happens.
+    """
+
+    run: str
+    variant: str
+    axis: str
+    tau_c0: float  # m/s, |tau_c(0)|
+    tau_c_max: float  # m/s, max |tau_c| over the run
+    B: float  # m/s^2, max |d tau/dt| on the run
+    B99: float  # m/s^2, its 99th percentile
+    gamma: float
+    final_band: float  # m/s, max |tau_c| over the last fifth of the run
+    t_zero: float  # s, first time tau_c reaches 0 (changes sign)
+    # SMC, eq. 53
+    nu: float = math.nan
+    radius_53: float = math.nan  # m/s, nu alpha*/2 with alpha* = 2 B
+    t_enter_53: float = math.nan  # s, |tau_c| < radius_53 from then on
+    alpha_min: float = math.nan
+    alpha_max: float = math.nan
+    # LM, eqs. 66 and 70
+    t_h_70: float = math.nan  # s, 4 |tau_c(0)| / gamma
+    max_after_t_h: float = math.nan  # m/s, max |tau_c| for t >= t_h
+    printed_condition: bool | None = None  # gamma > B/4
+    needed_condition: bool | None = None  # gamma >= 4 B
+    delta_is_wtw: float = math.nan  # fraction of samples where delta = W^T W (the proof's choice)
+    rate_min: float = math.nan  # m/s^2, min of gamma W^T W / (delta + W^T W)
+    rate_max: float = math.nan
+
+
+def _enter_for_good(t: np.ndarray, inside: np.ndarray) -> float:
+    if inside.all():
+        return float(t[0])
+    if not inside[-1]:
+        return math.nan
+    return float(t[np.flatnonzero(~inside)[-1] + 1])
+
+
+def evaluate_claims(run: Run, axis: int) -> AxisClaims:
+    """:class:`AxisClaims` of ``axis`` (0, 1, 2) of ``run``."""
+    t, tc, tau = run.t, run.tau_c[:, axis], run.tau[:, axis]
+    h = float(t[1] - t[0])
+    rates = np.abs(np.diff(tau)) / h
+    B, B99 = float(rates.max()), float(np.percentile(rates, 99))
+    sign = np.sign(tc)
+    crossing = np.flatnonzero((sign[1:] != sign[0]) | (sign[1:] == 0))
+    t_zero = float(t[crossing[0] + 1]) if sign[0] != 0 and crossing.size else (0.0 if sign[0] == 0 else math.nan)
+    last = t >= t[0] + 0.8 * (t[-1] - t[0])
+    common = dict(run=run.name, variant=run.variant, axis=_AXES[axis], tau_c0=float(abs(tc[0])),
+                  tau_c_max=float(np.abs(tc).max()), B=B, B99=B99,
+                  final_band=float(np.abs(tc[last]).max()), t_zero=t_zero)
+    p = run.position
+    if run.variant == "pd+smc":
+        nu = p.nu[axis]
+        radius = nu * B  # nu alpha*/2 with alpha* = 2 B
+        alpha = run.states[:, axis_slice(axis)][:, ALPHA]
+        return AxisClaims(gamma=p.gamma_smc[axis], nu=nu, radius_53=radius,
+                          t_enter_53=_enter_for_good(t, np.abs(tc) < radius),
+                          alpha_min=float(alpha.min()), alpha_max=float(alpha.max()), **common)
+    if run.variant == "pd+lm":
+        gamma, alpha_bar = p.gamma_lm[axis], p.alpha_bar[axis]
+        t_h = 4.0 * float(abs(tc[0])) / gamma  # eq. 70 with S_p(0) = tau_c(0)/K_d
+        wtw = _w_squared(run, axis)
+        delta = np.maximum(wtw, alpha_bar)  # eq. 62
+        rate = gamma * wtw / (delta + wtw)
+        after = t >= t[0] + t_h
+        return AxisClaims(gamma=gamma, t_h_70=t_h,
+                          max_after_t_h=float(np.abs(tc[after]).max()) if after.any() else math.nan,
+                          printed_condition=bool(gamma > B / 4), needed_condition=bool(gamma >= 4 * B),
+                          delta_is_wtw=float(np.mean(wtw >= alpha_bar)), rate_min=float(rate.min()),
+                          rate_max=float(rate.max()), **common)
+    raise ValueError(f"run {run.name!r}: variant {run.variant!r} has no learning law (pd+smc or pd+lm)")
+
+
+def default_runs(variants=("pd+smc", "pd+lm"), kp: float | None = None, kd: float | None = None) -> list[Run]:
+    """The two recorded runs per variant: a 1 m step of the x reference from
+    hover (20 s, no wind), and the paper's mission (50 s, 3 m/s gust); PD
+    gains of the ``circles`` scenario (the paper's) unless given."""
+    gains = {f"controller.position.{k}": float(v) for k, v in (("kp", kp), ("kd", kd)) if v is not None}
+    runs = []
+    for variant in variants:
+        runs.append(record_run("step 1 m", variant, "circles", {
+            "trajectory": {"kind": "hover", "x": 1.0, "y": 0.0, "z": -15.0},
+            "wind.speed": 0.0, "simulation.duration": 20.0, **gains}))
+        runs.append(record_run("circles, 3 m/s gust", variant, "circles", {"wind.speed": 3.0, **gains}))
+    return runs
+
+
+def finite_time_report(runs: list[Run] | None = None) -> list[AxisClaims]:
+    """:func:`evaluate_claims` for every axis of every run (default:
+    :func:`default_runs`)."""
+    runs = default_runs() if runs is None else runs
+    return [evaluate_claims(run, a) for run in runs for a in range(3)]

@@ -1,0 +1,180 @@
+"""Linearization of the plant and the controller at an operating point, from
+the one source of truth.
+
+* Plant: ``QUADROTOR.functions["jac"]`` (CasADi AD of the equations the FMU
+  is generated from), rows der(x), columns [x, u] -- or, for any FMI 2.0
+  FMU with directional derivatives, ``fmi2GetDirectionalDerivative`` in
+  Model Exchange (:func:`linearize_plant_fmu`). A test checks that the two
+  agree.
+
+  .. math:: \\delta\\dot x = A\\,\\delta x + B_\\Omega\\,\\delta\\Omega + B_w\\,\\delta w
+
+* Velocity controller (eqs. 13-18 + rotor inversion):
+  ``casadi.jacobian`` of ``velocity_controller_function(geometric)``,
+  a static map ``delta Omega = K_r delta v* + K_x delta x``.
+* PD position controller (eq. 19): ``casadi.jacobian`` of
+  ``position_controller_function("pd", position)``: ``delta v* = K_e delta e
+  + K_edot delta e_dot`` (``K_e = kp I``, ``K_edot = kd I``).
+
+The master runs ``controller_step_function("pd", ...)``, which composes the
+same two laws (``fnn_controller.controller``); :func:`linearize_controller_step`
+differentiates that function so a test can check the composition.
+"""
+from __future__ import annotations
+
+import shutil
+from ctypes import POINTER, c_double
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from fmu_models.quadrotor import QUADROTOR
+from fnn_controller import controller_step_function, position_controller_function, velocity_controller_function
+from fnn_controller.geometric import initial_velocity_state
+
+from .operating_points import STATE_NAMES, OperatingPoint, _check_geometric
+
+__all__ = [
+    "INPUT_NAMES", "PlantLinearization", "ControllerLinearization",
+    "linearize_plant", "linearize_plant_fmu", "linearize_velocity_controller",
+    "linearize_position_controller", "linearize_controller", "linearize_controller_step",
+]
+
+INPUT_NAMES = tuple(v.name for v in QUADROTOR.inputs)  # Omega_1..4, wind_x, wind_y, wind_z
+_N_X = len(STATE_NAMES)
+
+
+@dataclass(frozen=True, eq=False)
+class PlantLinearization:
+    """``A`` (12 x 12, d der(x)/dx) and ``B`` (12 x 7, d der(x)/du, columns
+    Omega_1..4 in rad/s then wind_x, wind_y, wind_z in m/s)."""
+
+    A: np.ndarray
+    B: np.ndarray
+
+    @property
+    def B_omega(self) -> np.ndarray:
+        return self.B[:, :4]
+
+    @property
+    def B_wind(self) -> np.ndarray:
+        return self.B[:, 4:7]
+
+
+@dataclass(frozen=True, eq=False)
+class ControllerLinearization:
+    """Static gains of the linearized controller at an operating point.
+
+    ``K_r`` (4 x 3): d Omega / d v*;  ``K_x`` (4 x 12): d Omega / d x (the
+    velocity controller reads v, the Euler angles and the body rates; the
+    position columns are zero);  ``K_e``, ``K_edot`` (3 x 3): d v* / d e and
+    d v* / d(de/dt) of the PD law.
+    """
+
+    K_r: np.ndarray
+    K_x: np.ndarray
+    K_e: np.ndarray
+    K_edot: np.ndarray
+
+
+def linearize_plant(op: OperatingPoint) -> PlantLinearization:
+    """A and B of the plant at ``op`` from the CasADi Jacobian
+    ``QUADROTOR.functions["jac"]`` (= d[xdot; y]/d[x; u])."""
+    J = np.array(QUADROTOR.functions["jac"](0.0, op.x, op.plant_u, op.plant_p))
+    return PlantLinearization(A=J[:_N_X, :_N_X].copy(), B=J[:_N_X, _N_X:].copy())
+
+
+def linearize_plant_fmu(fmu_path: str | Path, op: OperatingPoint) -> PlantLinearization:
+    """A and B of an FMI 2.0 FMU at ``op`` from its directional derivatives.
+
+    The FMU is instantiated for Model Exchange, initialized with
+    ``op.plant_parameters``, put in continuous-time mode at state ``op.x`` and
+    inputs ``op.plant_u``; column j of [A B] is
+    ``fmi2GetDirectionalDerivative(der(x), [known_j], [1])``. The FMU must
+    provide directional derivatives and have the quadrotor's variable names.
+    """
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Model
+
+    md = read_model_description(str(fmu_path))
+    if md.modelExchange is None or not md.modelExchange.providesDirectionalDerivative:
+        raise ValueError(f"{fmu_path}: no Model Exchange interface with directional derivatives")
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    unzip_dir = extract(str(fmu_path))
+    fmu = FMU2Model(guid=md.guid, unzipDirectory=unzip_dir, modelIdentifier=md.modelExchange.modelIdentifier,
+                    instanceName="linearize")
+    try:
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        if op.plant_parameters:
+            fmu.setReal([vr[k] for k in op.plant_parameters], [float(v) for v in op.plant_parameters.values()])
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.enterContinuousTimeMode()
+        x = np.ascontiguousarray(op.x, dtype=float)
+        fmu.setContinuousStates(x.ctypes.data_as(POINTER(c_double)), len(x))
+        fmu.setReal([vr[n] for n in INPUT_NAMES], [float(v) for v in op.plant_u])
+        unknowns = [vr[f"der({n})"] for n in STATE_NAMES]
+        knowns = list(STATE_NAMES) + list(INPUT_NAMES)
+        columns = [fmu.getDirectionalDerivative(unknowns, [vr[k]], [1.0]) for k in knowns]
+        J = np.array(columns, dtype=float).T
+    finally:
+        try:
+            fmu.terminate()
+        finally:
+            fmu.freeInstance()
+            shutil.rmtree(unzip_dir, ignore_errors=True)
+    return PlantLinearization(A=J[:, :_N_X], B=J[:, _N_X:])
+
+
+def _jacobian(f: ca.Function, output: str, inputs: list[str], values: dict) -> list[np.ndarray]:
+    """d f[output] / d f[input] for each input, evaluated at ``values``."""
+    sym = [ca.SX.sym(n, f.size_in(n)) for n in f.name_in()]
+    out = f.call(dict(zip(f.name_in(), sym)))[output]
+    jac = ca.Function(f"{f.name()}_jacobian", sym, [ca.densify(ca.jacobian(out, sym[f.index_in(n)])) for n in inputs])
+    return [np.array(m) for m in jac(*[values[n] for n in f.name_in()])]
+
+
+def linearize_velocity_controller(op: OperatingPoint) -> tuple[np.ndarray, np.ndarray]:
+    """``K_r = d Omega/d v*`` (4 x 3) and ``K_x = d Omega/d x`` (4 x 12) of
+    ``velocity_controller_function(op.geometric)`` at ``op``."""
+    _check_geometric(op.geometric)
+    f = velocity_controller_function(op.geometric)
+    values = {"v_ref": op.v_ref, "v": op.x[3:6], "euler": op.x[6:9], "omega_b": op.x[9:12],
+              "psi_ref": op.psi_ref, "vel_state": initial_velocity_state()}
+    K_r, K_v, K_euler, K_rates = _jacobian(f, "Omega", ["v_ref", "v", "euler", "omega_b"], values)
+    K_x = np.zeros((4, _N_X))
+    K_x[:, 3:6], K_x[:, 6:9], K_x[:, 9:12] = K_v, K_euler, K_rates
+    return K_r, K_x
+
+
+def linearize_position_controller(op: OperatingPoint) -> tuple[np.ndarray, np.ndarray]:
+    """``K_e = d v*/d e`` and ``K_edot = d v*/d(de/dt)`` (3 x 3 each) of
+    ``position_controller_function("pd", op.position)`` at ``op``."""
+    f = position_controller_function("pd", op.position)
+    values = {"e": op.position_error, "e_dot": op.p_ref_dot - op.x[3:6],
+              "fnn_state": np.zeros(f.numel_in(2))}
+    K_e, K_edot = _jacobian(f, "v_ref", ["e", "e_dot"], values)
+    return K_e, K_edot
+
+
+def linearize_controller(op: OperatingPoint) -> ControllerLinearization:
+    """All static gains of the linearized controller at ``op``."""
+    K_r, K_x = linearize_velocity_controller(op)
+    K_e, K_edot = linearize_position_controller(op)
+    return ControllerLinearization(K_r=K_r, K_x=K_x, K_e=K_e, K_edot=K_edot)
+
+
+def linearize_controller_step(op: OperatingPoint) -> dict[str, np.ndarray]:
+    """Jacobians of ``controller_step_function("pd", ...)`` -- the function
+    the co-simulation master evaluates -- with respect to ``p_ref``,
+    ``p_ref_dot`` and ``x`` (each 4 x n: d Omega / d input)."""
+    f = controller_step_function("pd", op.position, op.geometric)
+    p_ref = op.x[0:3] + op.position_error
+    values = {"p_ref": p_ref, "p_ref_dot": op.p_ref_dot, "x": op.x, "psi_ref": op.psi_ref,
+              "state": np.concatenate([np.zeros(f.numel_in(4) - 10), initial_velocity_state()])}
+    names = ["p_ref", "p_ref_dot", "x"]
+    return dict(zip(names, _jacobian(f, "Omega", names, values)))
+

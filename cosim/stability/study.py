@@ -1,0 +1,116 @@
+"""The whole stability study in one call: every analysis of the package at
+the default operating points, checked against the co-simulation.
+
+>>> from cosim.stability import run_stability_analysis
+>>> study = run_stability_analysis("results/stability")   # doctest: +SKIP
+>>> study.analyses[0].poles["discrete"].stable             # doctest: +SKIP
+True
+
+:func:`stability_study` computes (no files); :func:`run_stability_analysis`
+also writes the markdown report and the PNG figures
+(:mod:`cosim.stability.report`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from fnn_controller import GeometricParams, PositionParams
+
+from .analysis import (CircleError, GainSweep, OperatingPointAnalysis, RampError, analyze, circle_error,
+                       critical_gain_factor, gain_sweep, ramp_error)
+from .finite_time import AxisClaims, Run, default_runs, evaluate_claims
+from .operating_points import OperatingPoint, default_operating_points
+from .validation import GainCheck, StepCheck, check_gains, check_step, pd_mission_rmse, ramp_lag
+
+__all__ = ["StabilityStudy", "stability_study", "run_stability_analysis", "SWEEP_KP", "SWEEP_KD", "STEP_CHECKS"]
+
+SWEEP_KP = np.linspace(0.05, 25.0, 126)  # 1/s
+SWEEP_KD = np.linspace(-1.5, 8.0, 96)  # 1
+# (kind, axis, size): small enough to keep the rotors away from saturation
+# (about 0.9 N m of roll/pitch torque at hover: a 4 cm position step already
+# asks for 3 degrees of tilt at once)
+STEP_CHECKS = (("position", "x", 0.02), ("position", "y", 0.02), ("position", "z", 0.1),
+               ("velocity", "x", 0.05), ("velocity", "y", 0.05), ("velocity", "z", 0.05))
+GAIN_FACTORS = (0.85, 1.07, 1.3)  # gain pairs checked: these multiples of the critical factor
+
+
+@dataclass(eq=False)
+class StabilityStudy:
+    """Everything :func:`stability_study` computed (see the module docstring)."""
+
+    dt: float
+    position: PositionParams
+    operating_points: list[OperatingPoint]
+    analyses: list[OperatingPointAnalysis]
+    sweeps: list[GainSweep]
+    critical_factors: dict[str, dict[str, float]]
+    ramp: RampError
+    circle: CircleError
+    ramp_nonlinear: float | None = None
+    mission_rmse: dict[float, float] | None = None
+    step_checks: list[StepCheck] = field(default_factory=list)
+    gain_checks: list[GainCheck] = field(default_factory=list)
+    runs: list[Run] = field(default_factory=list)
+    finite_time: list[AxisClaims] = field(default_factory=list)
+    report_path: Path | None = None
+    figures: dict[str, Path] = field(default_factory=dict)
+
+    def analysis(self, name: str) -> OperatingPointAnalysis:
+        for a in self.analyses:
+            if a.op.name == name:
+                return a
+        raise KeyError(f"no operating point {name!r}; have {[a.op.name for a in self.analyses]}")
+
+
+def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.01, kp: float | None = None,
+                    kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
+                    geometric: GeometricParams = GeometricParams()) -> StabilityStudy:
+    """Run every analysis.
+
+    Parameters
+    ----------
+    speed : forward-flight speed (m/s) of the operating points and the ramp.
+    wind_speed : steady wind (m/s) of the third operating point, along the
+        paper's gust direction [-1, -1, 0].
+    dt : controller and communication step (s) of the discrete loops.
+    kp, kd : PD gains (default: the paper's 2.5, 0.005).
+    cosim : also run the co-simulation checks (steps, gains, ramp, mission,
+        finite-time runs); about 2 s.
+    sweep_kp, sweep_kd : the grid of the gain sweep.
+    """
+    position = PositionParams()
+    position = replace(position, kp=position.kp if kp is None else kp, kd=position.kd if kd is None else kd, dt=dt)
+    geometric = replace(geometric, dt=dt)
+    ops = default_operating_points(speed, wind_speed, position=position, geometric=geometric)
+    analyses = [analyze(op, dt) for op in ops]
+    sweeps = [gain_sweep(ops[0], sweep_kp, sweep_kd, None), gain_sweep(ops[0], sweep_kp, sweep_kd, dt),
+              gain_sweep(ops[0], sweep_kp, sweep_kd, dt, 1), gain_sweep(ops[-1], sweep_kp, sweep_kd, dt)]
+    bases = {"continuous": (None, 0), "discrete": (dt, 0), "discrete+1": (dt, 1)}
+    critical = {op.name: {k: critical_gain_factor(op, s, d) for k, (s, d) in bases.items()} for op in ops}
+    study = StabilityStudy(dt, position, ops, analyses, sweeps, critical,
+                           ramp_error(ops[0], ops[1], speed, dt), circle_error(ops[0], dt=dt))
+    if cosim:
+        hover = ops[0]
+        study.step_checks = [check_step(hover, kind, axis, size) for kind, axis, size in STEP_CHECKS]
+        c = critical[hover.name]["discrete"]
+        study.gain_checks = [check_gains(hover, f * c * position.kp, f * c * position.kd, dt=dt)
+                             for f in GAIN_FACTORS]
+        study.ramp_nonlinear = ramp_lag(hover, speed, dt=dt)[0]
+        study.mission_rmse = pd_mission_rmse()
+        study.runs = default_runs(kp=kp, kd=kd)
+        study.finite_time = [evaluate_claims(run, a) for run in study.runs for a in range(3)]
+    return study
+
+
+def run_stability_analysis(out_dir: str | Path = "results/stability", **kwargs) -> StabilityStudy:
+    """:func:`stability_study` (same keyword arguments), then write
+    ``out_dir/stability.md`` and the PNG figures; returns the study with
+    ``report_path`` and ``figures`` set."""
+    from .report import write_report
+
+    study = stability_study(**kwargs)
+    write_report(study, out_dir)
+    return study

@@ -1,0 +1,205 @@
+"""The linear analysis checked against the nonlinear co-simulation (plant FMU
++ master), the learning laws' finite-time claims on recorded runs, and the
+report / command."""
+from __future__ import annotations
+
+import math
+
+import control as ct
+import numpy as np
+import pytest
+
+from cosim.stability import critical_gain_factor, hover
+from cosim.stability.finite_time import AxisClaims, Run, evaluate_claims, record_run
+from cosim.stability.loops import LoopModel
+from cosim.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
+from fnn_controller import STATE_SIZE, PositionParams
+from fnn_controller.controller import initial_state
+
+H = 0.01
+TOLERANCE = 0.01  # of the step: the stated agreement of linear model and co-simulation
+
+
+@pytest.fixture(scope="module")
+def op():
+    return hover()
+
+
+@pytest.fixture(scope="module")
+def fmu(quadrotor_fmu2):
+    return quadrotor_fmu2
+
+
+@pytest.mark.parametrize("kind, axis, size", [
+    ("position", "x", 0.02), ("position", "y", 0.02), ("position", "z", 0.1),
+    ("velocity", "x", 0.05), ("velocity", "y", 0.05), ("velocity", "z", 0.05)])
+def test_small_steps_from_hover_match_the_linear_model(op, fmu, kind, axis, size):
+    """Every sample of the compared quantity (3 axes) within 1 % of the step."""
+    chk = check_step(op, kind, axis, size, fmu=fmu)
+    assert chk.nonlinear.status == "ok"
+    assert chk.relative < TOLERANCE, f"{kind} {axis}: {100 * chk.relative:.3f} % of the step"
+    moved = chk.nonlinear.x[-1, "xyz".index(axis) + (0 if kind == "position" else 3)]
+    assert abs(moved) > 0.9 * size  # the step happened (not two zero responses)
+
+
+def test_the_master_adds_no_delay_the_delayed_model_fits_worse(op, fmu):
+    """The ZOH loop without delay matches the co-simulation 10x better than
+    the same loop with one step of delay on the rotor commands."""
+    step = (0.02, 0.0, 0.0)
+    nl = position_step(op, step, 3.0, fmu=fmu)
+    errors = {}
+    for delay in (0, 1):
+        sys = LoopModel(op, H, delay).closed_loop()
+        t = nl.t
+        u = np.zeros((sys.ninputs, t.size))
+        u[0] = step[0]
+        lin = ct.forced_response(sys, t, u).outputs[:12].T
+        errors[delay] = np.abs(lin[:, 3] - nl.x[:, 3]).max()  # velocity u, the most sensitive
+    assert errors[1] > 10 * errors[0]
+
+
+def test_large_steps_leave_the_linear_range_rotor_saturation(op, fmu):
+    """A 1 m step asks for more roll/pitch torque than the rotors give: the
+    linear model no longer holds (documented limit of the analysis)."""
+    chk = check_step(op, "position", "x", 1.0, fmu=fmu)
+    assert chk.relative > 0.1
+
+
+def test_unstable_gains_grow_in_the_co_simulation_and_stable_ones_decay(op, fmu):
+    """Along the ray through the paper's gains: 0.85x the critical factor
+    decays, 1.3x grows (at the rate of the dominant pole until the rotors
+    saturate), exactly as the linear analysis says."""
+    c = critical_gain_factor(op, H)
+    stable = check_gains(op, 0.85 * c * 2.5, 0.85 * c * 0.005, fmu=fmu)
+    unstable = check_gains(op, 1.3 * c * 2.5, 1.3 * c * 0.005, fmu=fmu)
+    assert stable.linear_stable and not unstable.linear_stable
+    assert stable.nonlinear_growth < -0.2 and stable.amplification < 0.2
+    assert unstable.pole_growth > 0.3
+    assert unstable.nonlinear_growth > 0.3 and unstable.amplification > 10
+
+
+def test_just_past_the_boundary_the_co_simulation_grows_at_the_dominant_poles_rate(op, fmu):
+    c = critical_gain_factor(op, H)
+    g = check_gains(op, 1.07 * c * 2.5, 1.07 * c * 0.005, duration=8.0, fmu=fmu)
+    assert not g.linear_stable
+    assert g.nonlinear_growth == pytest.approx(g.pole_growth, abs=0.02)
+    assert g.nonlinear_status == "ok"  # still small after 8 s: no saturation yet
+
+
+def test_pd_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fmu):
+    """The co-simulated lag behind a 2.5 m/s ramp equals e* of the forward
+    flight trim (the nonlinear drag included) and is about V/kp = 1 m."""
+    from cosim.stability import forward_flight
+
+    lag, run = ramp_lag(op, 2.5, duration=15.0, fmu=fmu)
+    assert run.status == "ok"
+    assert lag == pytest.approx(forward_flight(2.5).position_error[0], abs=1e-4)
+    assert lag == pytest.approx(2.5 / 2.5, abs=0.06)
+
+
+def test_ramp_reference_follows_the_trajectory_contract():
+    r = Ramp(speed=2.0, t_start=1.0, x0=1.0, z0=-5.0)
+    p, v = r.reference(np.array([0.0, 1.0, 2.5]))
+    np.testing.assert_allclose(p[:, 0], [1.0, 1.0, 4.0])
+    np.testing.assert_allclose(p[:, 2], -5.0)
+    np.testing.assert_allclose(v[:, 0], [0.0, 2.0, 2.0])
+    assert p.shape == v.shape == (3, 3)
+
+
+def test_growth_rate_of_a_known_exponential():
+    t = np.arange(0, 10, H)
+    for sigma in (-0.4, 0.0, 0.25):
+        y = np.exp(sigma * t) * np.sin(7.0 * t)
+        assert growth_rate(t, y) == pytest.approx(sigma, abs=1e-3)
+    assert math.isnan(growth_rate(t[:50], t[:50]))
+
+
+def test_kd_below_minus_one_runs_away_in_the_co_simulation_too(op, fmu):
+    """kd < -1 cancels the velocity feedback (v* = ... - kd v): the analysis
+    finds a fast unstable pair, and the co-simulated vehicle runs away."""
+    g = check_gains(op, 2.5, -1.5, size=0.01, duration=6.0, fmu=fmu)
+    assert not g.linear_stable and g.pole_growth > 1.0
+    assert g.amplification > 10
+
+
+# ---- finite-time claims -----------------------------------------------------------------
+
+def _synthetic_run(variant, tau_c, tau, t):
+    n = t.size
+    states = np.tile(initial_state(0), (n, 1))
+    zeros = np.zeros((n, 3))
+    return Run("synthetic", variant, t, zeros, zeros, tau_c, zeros, tau, states, PositionParams())
+
+
+def test_claims_of_a_known_learning_error():
+    """tau_c = 1 - t on x (reaches zero at t = 1 s), tau = 0.3 t: B = 0.3,
+    SMC radius nu B, LM t_h = 4 |tau_c(0)| / gamma; tau_c = exp(-3 t)
+    enters the radius for good at ln(1/radius)/3."""
+    t = np.arange(0, 3.0 + H / 2, H)
+    tc = np.zeros((t.size, 3))
+    tc[:, 0] = 1.0 - t
+    tau = np.zeros((t.size, 3))
+    tau[:, 0] = 0.3 * t
+    smc = evaluate_claims(_synthetic_run("pd+smc", tc, tau, t), 0)
+    assert smc.B == pytest.approx(0.3) and smc.tau_c0 == 1.0
+    assert smc.t_zero == pytest.approx(1.0, abs=H / 2)
+    assert smc.radius_53 == pytest.approx(0.85 * 0.3)
+    assert math.isnan(smc.t_enter_53)  # |1 - t| leaves the radius again after t = 1.255 s
+    assert math.isnan(evaluate_claims(_synthetic_run("pd+lm", tc[:100], tau[:100], t[:100]), 0).max_after_t_h)
+    decaying = tc.copy()
+    decaying[:, 0] = np.exp(-3 * t)
+    smc = evaluate_claims(_synthetic_run("pd+smc", decaying, tau, t), 0)
+    assert smc.t_enter_53 == pytest.approx(math.log(1 / 0.255) / 3, abs=H)
+    assert math.isnan(smc.t_zero)
+    lm = evaluate_claims(_synthetic_run("pd+lm", tc, tau, t), 0)
+    assert lm.t_h_70 == pytest.approx(4 * 1.0 / 1.5)
+    assert lm.max_after_t_h == pytest.approx(2.0)  # |1 - t| at the end, t = 3 s
+    assert lm.printed_condition and lm.needed_condition  # 1.5 >= 4 * 0.3
+    assert lm.delta_is_wtw == 0.0  # W^T W <= 1 < alpha_bar_x = 1.1: delta is never W^T W
+    assert 1.5 / 9 / (1.1 + 1 / 9) - 1e-12 <= lm.rate_min <= lm.rate_max <= 1.5 / 2.1 + 1e-12
+    with pytest.raises(ValueError, match="pd\\+smc or pd\\+lm"):
+        evaluate_claims(_synthetic_run("pd", tc, tau, t), 0)
+
+
+def test_lm_step_run_reaches_zero_inside_t_h_but_does_not_stay(fmu):
+    """A 1 m x step from hover under PD + LM: tau_c first reaches zero well
+    inside eq. 70's t_h, then chatters (relay limit cycle) instead of
+    staying on the manifold; eq. 66's gamma >= 4B fails on the run."""
+    run = record_run("step", "pd+lm", "circles", {
+        "trajectory": {"kind": "hover", "x": 1.0, "y": 0.0, "z": -15.0},
+        "wind.speed": 0.0, "simulation.duration": 10.0})
+    assert run.status == "ok" and run.states.shape == (run.t.size, STATE_SIZE)
+    c: AxisClaims = evaluate_claims(run, 0)
+    assert c.tau_c0 == pytest.approx(2.5, rel=1e-9)  # kp e(0) = 2.5 x 1 m
+    assert c.t_h_70 == pytest.approx(4 * 2.5 / 1.5)
+    assert c.t_zero < c.t_h_70
+    assert c.max_after_t_h > 0.05  # not on the sliding manifold after t_h
+    assert c.printed_condition and not c.needed_condition
+    assert c.delta_is_wtw == 0.0 and c.rate_max < 0.75  # below the gamma/2 of eq. 65
+
+
+def test_smc_step_run_converges_and_alpha_adapts(fmu):
+    run = record_run("step", "pd+smc", "circles", {
+        "trajectory": {"kind": "hover", "x": 1.0, "y": 0.0, "z": -15.0},
+        "wind.speed": 0.0, "simulation.duration": 10.0})
+    c = evaluate_claims(run, 0)
+    assert c.final_band < 0.01 < c.tau_c0
+    assert c.alpha_max > 100 * c.alpha_min  # eq. 38 moved alpha
+    assert c.radius_53 > c.tau_c_max  # eq. 53's neighbourhood does not bind on this run
+
+
+# ---- the report and the command ---------------------------------------------------------
+
+def test_command_writes_the_report_and_figures(tmp_path, capsys):
+    from cosim.cli import main
+
+    assert main(["stability", "--out", str(tmp_path), "--no-cosim"]) == 0
+    text = (tmp_path / "stability.md").read_text()
+    for needle in ("## Closed-loop poles", "## Margins", "## Where stability stops", "## Ramp error",
+                   "| hover | discrete h (co-sim) | **yes**", "| forward_wind | outer x |"):
+        assert needle in text
+    for name in ("gain_sweep", "bode_outer_hover", "nyquist_outer_forward_wind", "pzmap_forward"):
+        png = tmp_path / f"{name}.png"
+        assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    out = capsys.readouterr().out
+    assert "hover: stable" in out and "report:" in out

@@ -1,0 +1,292 @@
+"""Linear stability analysis (cosim.stability): trims, linearizations from the
+one source of truth, the python-control loops and the analyses -- known
+answers wherever one can be derived by hand."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import casadi as ca
+import control as ct
+import numpy as np
+import pytest
+
+from fmu_models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
+from fnn_controller import GeometricParams, PositionParams
+from cosim.stability import (LoopModel, critical_gain_factor, forward_flight, gain_sweep, hover, linearize_controller,
+                             linearize_controller_step, linearize_plant, linearize_plant_fmu, loop_margins,
+                             ramp_error, trim_plant)
+from cosim.stability.analysis import affine_closed_loop, analyze, closed_loop_poles
+from cosim.stability.operating_points import STATE_NAMES
+
+H = 0.01
+NO_DRAG = {"k_drag_lin": 0.0, "k_drag_quad": 0.0}
+I = {n: i for i, n in enumerate(STATE_NAMES)}
+
+
+@pytest.fixture(scope="module")
+def ops():
+    return {"hover": hover(), "forward": forward_flight(2.5), "forward_wind": forward_flight(2.5, 3.0)}
+
+
+# ---- operating points ----------------------------------------------------------------
+
+def test_every_operating_point_is_an_equilibrium_of_the_closed_loop(ops):
+    for op in ops.values():
+        xdot = np.array(QUADROTOR.functions["ode"](0.0, op.x, op.plant_u, op.plant_p)).ravel()
+        np.testing.assert_allclose(xdot[3:], 0.0, atol=1e-10, err_msg=op.name)  # v, Euler angles, rates steady
+        np.testing.assert_allclose(xdot[:3], op.x[3:6], atol=1e-12)  # moving at the trimmed velocity
+        # the PD outputs v* at e*, with de/dt = 0
+        np.testing.assert_allclose(op.position.kp * op.position_error, op.v_ref, rtol=1e-12, atol=1e-14)
+
+
+def test_plant_trim_and_closed_loop_trim_give_the_same_rotor_speeds(ops):
+    for op in ops.values():
+        x, omega = trim_plant(op.x[3:6], op.wind, psi=op.x[8])
+        np.testing.assert_allclose(omega, op.omega, rtol=1e-9, err_msg=op.name)
+        np.testing.assert_allclose(x[6:8], op.x[6:8], atol=1e-10)
+
+
+def test_hover_trim_is_the_hover_rotor_speed_and_level(ops):
+    op = ops["hover"]
+    np.testing.assert_allclose(op.omega, hover_rotor_speed(), rtol=1e-12)
+    np.testing.assert_allclose(op.x[6:12], 0.0, atol=1e-12)
+    np.testing.assert_allclose(op.v_ref, 0.0, atol=1e-12)
+
+
+def test_without_drag_forward_flight_needs_no_velocity_error_and_lags_v_over_kp():
+    """No drag: level flight needs no force, so v* = V and the PD lags V/kp."""
+    op = forward_flight(2.5, plant_parameters=NO_DRAG)
+    np.testing.assert_allclose(op.x[6:8], 0.0, atol=1e-10)
+    np.testing.assert_allclose(op.v_ref, [2.5, 0, 0], atol=1e-10)
+    np.testing.assert_allclose(op.position_error, [1.0, 0, 0], atol=1e-10)
+
+
+def test_forward_flight_trim_balances_the_drag_with_the_p_velocity_loop(ops):
+    """m k_v (v* - V) = (k_lin + k_quad V) V (docs/controller.md, 1.056 m)."""
+    op = ops["forward"]
+    drag = (DEFAULTS["k_drag_lin"] + DEFAULTS["k_drag_quad"] * 2.5) * 2.5
+    v_ref = 2.5 + drag / (DEFAULTS["m"] * GeometricParams().k_v)
+    assert op.v_ref[0] == pytest.approx(v_ref, rel=1e-6)
+    assert op.position_error[0] == pytest.approx(v_ref / 2.5, rel=1e-6)
+    assert op.x[7] < 0  # nose down (pitch negative) to fly north in NED
+
+
+# ---- linearization -------------------------------------------------------------------
+
+def test_hover_linearization_is_the_known_double_integrator_chain(ops):
+    """Hand-derived A and B at hover (NED, z down, thrust along -z_B)."""
+    lin = linearize_plant(ops["hover"])
+    A, B = lin.A, lin.B
+    m, g, b, l, d = (DEFAULTS[k] for k in ("m", "g", "b", "l", "d"))
+    Ix, Iy, Iz, k_lin = DEFAULTS["Ix"], DEFAULTS["Iy"], DEFAULTS["Iz"], DEFAULTS["k_drag_lin"]
+    w = hover_rotor_speed()
+    expected = np.zeros((12, 12))
+    for p, v in (("x", "u"), ("y", "v"), ("z", "w"), ("phi", "p"), ("theta", "q"), ("psi", "r")):
+        expected[I[p], I[v]] = 1.0
+    expected[I["u"], I["theta"]] = -g  # pitch up (theta > 0) tilts the thrust backwards
+    expected[I["v"], I["phi"]] = g
+    for v in ("u", "v", "w"):
+        expected[I[v], I[v]] = -k_lin / m  # the quadratic drag has zero slope at rest
+    np.testing.assert_allclose(A, expected, atol=1e-6)
+    dT = 2 * b * w  # dT/dOmega_i
+    expected_B = np.zeros((12, 7))
+    expected_B[I["w"], :4] = -dT / m
+    expected_B[I["p"], :4] = [0, -dT * l / Ix, 0, dT * l / Ix]
+    expected_B[I["q"], :4] = [dT * l / Iy, 0, -dT * l / Iy, 0]
+    expected_B[I["r"], :4] = np.array([-1, 1, -1, 1]) * 2 * d * w / Iz
+    expected_B[[I["u"], I["v"], I["w"]], [4, 5, 6]] = k_lin / m  # wind drags the vehicle along
+    np.testing.assert_allclose(B, expected_B, rtol=1e-9, atol=1e-6)
+
+
+def test_fmu_directional_derivatives_agree_with_the_casadi_jacobian(quadrotor_fmu2, ops):
+    """Model Exchange fmi2GetDirectionalDerivative(der(x), [x, u]) at each point."""
+    for op in ops.values():
+        a, f = linearize_plant(op), linearize_plant_fmu(quadrotor_fmu2, op)
+        np.testing.assert_allclose(f.A, a.A, rtol=1e-10, atol=1e-10, err_msg=op.name)
+        np.testing.assert_allclose(f.B, a.B, rtol=1e-10, atol=1e-12, err_msg=op.name)
+
+
+def test_fmu_linearization_honours_plant_parameters(quadrotor_fmu2):
+    op = hover(plant_parameters={"m": 2.0, **NO_DRAG})
+    f = linearize_plant_fmu(quadrotor_fmu2, op)
+    assert f.A[I["u"], I["u"]] == 0.0
+    assert f.B[I["w"], 0] == pytest.approx(-2 * DEFAULTS["b"] * op.omega[0] / 2.0, rel=1e-12)
+
+
+def test_pd_jacobian_is_kp_kd_and_the_composition_is_the_masters_function(ops):
+    """The two linearized laws composed = the Jacobian of
+    controller_step_function("pd"), the function the master runs."""
+    for op in ops.values():
+        c = linearize_controller(op)
+        np.testing.assert_allclose(c.K_e, 2.5 * np.eye(3), rtol=1e-15)
+        np.testing.assert_allclose(c.K_edot, 0.005 * np.eye(3), rtol=1e-15)
+        step = linearize_controller_step(op)
+        scale = np.abs(step["x"]).max()
+        e_of_x = np.hstack([-c.K_e, -c.K_edot, np.zeros((3, 6))])  # e = p* - p, e_dot = p*_dot - v
+        np.testing.assert_allclose(c.K_x + c.K_r @ e_of_x, step["x"], atol=1e-12 * scale)
+        np.testing.assert_allclose(c.K_r @ c.K_e, step["p_ref"], atol=1e-12 * scale)
+        np.testing.assert_allclose(c.K_r @ c.K_edot, step["p_ref_dot"], atol=1e-12 * scale)
+
+
+def test_velocity_controller_gain_at_hover_is_the_known_thrust_and_tilt_gain(ops):
+    """d Omega / d v*_z: a desired climb (v*_z < 0) speeds all rotors up by
+    m k_v / (4 dT/dOmega); d Omega_1 / d v*_x from the tilt command."""
+    c = linearize_controller(ops["hover"])
+    m, b, k_v = DEFAULTS["m"], DEFAULTS["b"], GeometricParams().k_v
+    w = hover_rotor_speed()
+    np.testing.assert_allclose(c.K_r[:, 2], -m * k_v / (4 * 2 * b * w), rtol=1e-9)
+    assert c.K_r[0, 0] < 0 < c.K_r[2, 0]  # v*_x > 0: pitch nose down, rotor 1 (front) slows
+    assert np.all(c.K_x[:, 0:3] == 0.0)  # the velocity controller does not read the position
+
+
+def test_zoh_sampled_plant_is_the_linearization_of_the_fmu_step():
+    """c2d(A, B, 'zoh') = the Jacobian of what the FMU does over one
+    communication step (10 internal RK4 steps of 1 ms, inputs held)."""
+    op = forward_flight(2.5, 3.0)
+    f = QUADROTOR.functions["step"]
+    x = ca.SX.sym("x", 12)
+    u = ca.SX.sym("u", 7)
+    xn = x
+    for k in range(10):
+        xn = f(k * 1e-3, xn, u, op.plant_p, 1e-3)
+    jac = ca.Function("step_jacobian", [x, u], [ca.jacobian(xn, x), ca.jacobian(xn, u)])
+    Ad, Bd = (np.array(m) for m in jac(op.x, op.plant_u))
+    sampled = LoopModel(op, dt=H).plant
+    np.testing.assert_allclose(sampled.A, Ad, atol=1e-9)
+    np.testing.assert_allclose(sampled.B, Bd, atol=1e-9 * np.abs(Bd).max())
+
+
+def test_finite_difference_rate_rule_is_refused():
+    with pytest.raises(ValueError, match="desired_rate"):
+        hover(geometric=GeometricParams(desired_rate="finite_difference"))
+
+
+# ---- loops -------------------------------------------------------------------------------
+
+def test_loop_model_refuses_a_delay_in_continuous_time_and_bad_arguments(ops):
+    with pytest.raises(ValueError, match="discrete"):
+        LoopModel(ops["hover"], dt=None, delay_steps=1)
+    with pytest.raises(ValueError, match="non-negative"):
+        LoopModel(ops["hover"], dt=H, delay_steps=-1)
+    with pytest.raises(ValueError, match="axis"):
+        LoopModel(ops["hover"]).outer_loop("w")
+    with pytest.raises(ValueError, match="rotor"):
+        LoopModel(ops["hover"]).rotor_loop(5)
+
+
+def test_one_step_delay_block_delays_by_one_sample(ops):
+    hold = LoopModel(ops["hover"], dt=H, delay_steps=2).hold
+    resp = ct.forced_response(hold, np.arange(5) * H, np.vstack([[1, 0, 0, 0, 0]] * 4))
+    np.testing.assert_array_equal(resp.outputs[0], [0, 0, 1, 0, 0])
+
+
+def test_closing_the_broken_outer_loop_gives_the_closed_loop_poles(ops):
+    """feedback(L, 1) of the x loop (other loops closed inside L) has the
+    poles of the whole closed loop, up to the modes L cannot see."""
+    model = LoopModel(ops["forward_wind"], dt=H)
+    closed = np.sort_complex(model.closed_loop().poles())
+    via_l = ct.feedback(model.outer_loop("x"), 1).poles()
+    for p in closed:
+        assert np.min(np.abs(via_l - p)) < 1e-6
+
+
+def test_closed_loop_state_matrix_is_affine_in_the_pd_gains(ops):
+    op = ops["forward_wind"]
+    A0, Akp, Akd = affine_closed_loop(op, dt=H)
+    for kp, kd in ((0.7, 0.3), (6.0, -0.4), (2.5, 0.005)):
+        direct = LoopModel(op, dt=H, kp=kp, kd=kd).closed_loop().A
+        np.testing.assert_allclose(A0 + kp * Akp + kd * Akd, direct, atol=1e-9)
+
+
+# ---- analyses ------------------------------------------------------------------------
+
+def test_paper_gains_are_stable_with_margins_at_every_operating_point(ops):
+    for op in ops.values():
+        res = analyze(op, H, time_bases=("continuous", "discrete"))
+        for key in ("continuous", "discrete"):
+            assert res.poles[key].stable, (op.name, key)
+            assert res.poles[key].least_damping > 0.55
+        outer = [m for m in res.margins["discrete"] if m.loop.startswith("outer")]
+        assert all(3.5 < m.gain_margin for m in outer)
+        assert all(60.0 < m.phase_margin < 70.0 for m in outer)
+
+
+def test_hover_closed_loop_has_the_documented_slowest_pair(ops):
+    """docs/controller.md: slowest 3.6 rad/s (zeta 0.74), least damped 0.57."""
+    p = closed_loop_poles(LoopModel(ops["hover"], dt=H).closed_loop())
+    assert p.slowest == pytest.approx(3.58, abs=0.01)
+    assert p.least_damping == pytest.approx(0.575, abs=0.005)
+
+
+def test_critical_gain_factor_equals_the_outer_loop_gain_margin(ops):
+    """Eigenvalues (bisection) and python-control's margins agree: at hover
+    x and y are decoupled and equal, z has the larger margin."""
+    op = ops["hover"]
+    for dt, delay in ((None, 0), (H, 0), (H, 1)):
+        gm = loop_margins(LoopModel(op, dt, delay).outer_loop("x")).gain_margin
+        assert critical_gain_factor(op, dt, delay) == pytest.approx(gm, rel=1e-4)
+
+
+def test_margins_on_the_frequency_response_match_the_polynomial_route(ops):
+    L = LoopModel(ops["hover"]).outer_loop("x")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gm, pm, sm, *_ = ct.stability_margins(ct.minreal(ct.tf(L), tol=1e-7, verbose=False))
+    m = loop_margins(L)
+    assert m.gain_margin == pytest.approx(gm, rel=1e-6)
+    assert m.phase_margin == pytest.approx(pm, rel=1e-6)
+    assert m.stability_margin == pytest.approx(sm, rel=1e-6)
+
+
+def test_margins_known_answers_for_the_ideal_outer_loop():
+    """Perfect velocity loop: L = kp/s has PM 90 deg, no phase crossover; its
+    ZOH version L = kp h/(z - 1) crosses -180 deg at z = -1 with GM 2/(kp h)."""
+    kp = 2.5
+    m = loop_margins(ct.tf([kp], [1, 0]))
+    assert m.phase_margin == pytest.approx(90.0, abs=1e-3) and math.isinf(m.gain_margin)
+    assert m.w_gain_crossover == pytest.approx(kp, rel=1e-4)
+    md = loop_margins(ct.tf([kp * H], [1, -1], H))
+    assert md.gain_margin == pytest.approx(2 / (kp * H), rel=1e-3)
+    assert md.phase_margin == pytest.approx(90.0 - math.degrees(kp * H / 2), abs=0.01)
+
+
+def test_gain_sweep_maps_the_paper_point_inside_and_the_boundary_where_the_margin_says(ops):
+    op = ops["hover"]
+    kp = np.linspace(0.5, 20.0, 40)
+    kd = np.array([-1.2, -0.5, 0.005, 3.0, 7.5])
+    sw = gain_sweep(op, kp, kd, dt=H)
+    assert sw.is_stable(2.5, 0.005)
+    assert not sw.stable[0].any()  # kd < -1: the D term cancels the velocity loop
+    assert not sw.stable[-1].any()  # kd too large: the velocity loop's gain k_v (1 + kd) is too high
+    assert sw.stable[3].sum() > sw.stable[2].sum()  # some kd widens the kp range
+    c = critical_gain_factor(op, H)
+    step = kp[1] - kp[0]
+    assert c * 2.5 - step <= sw.kp_limit(0.005) <= c * 2.5 + step
+
+
+def test_ramp_lag_is_v_over_kp_for_the_type_1_loop():
+    """Known answer without drag: 1.000 m at 2.5 m/s; with the linear drag of
+    hover, V/kp (1 + k_lin/(m k_v)); the trim adds the quadratic drag."""
+    ideal = ramp_error(hover(plant_parameters=NO_DRAG), speed=2.5, dt=H)
+    assert ideal.linear_discrete == pytest.approx(1.0, abs=1e-6)
+    assert ideal.linear_continuous == pytest.approx(1.0, abs=1e-6)
+    assert ideal.trim == pytest.approx(1.0, abs=1e-9)
+    r = ramp_error(hover(), speed=2.5, dt=H)
+    factor = 1 + DEFAULTS["k_drag_lin"] / (DEFAULTS["m"] * GeometricParams().k_v)
+    assert r.linear_discrete == pytest.approx(factor, abs=1e-5)
+    assert r.trim == pytest.approx(1.0561, abs=1e-4)
+    lag = ramp_error(hover(position=PositionParams(kp=5.0)), speed=2.5, dt=H)
+    assert lag.linear_continuous == pytest.approx(factor / 2, abs=1e-5)
+
+
+def test_discrete_gain_margin_at_the_nyquist_frequency_is_confirmed_by_the_poles(ops):
+    """The rotor loops of the sampled inner loop cross -180 deg at z = -1
+    (python-control alone reports no crossover there): scaling the loop by
+    0.98 GM keeps every pole in the closed unit disc, by 1.02 GM does not."""
+    L = LoopModel(ops["hover"], dt=H).rotor_loop(1)
+    m = loop_margins(L)
+    assert m.w_phase_crossover == pytest.approx(math.pi / H)
+    assert 5.0 < m.gain_margin < 10.0
+    assert np.abs(ct.feedback(0.98 * m.gain_margin * L, 1).poles()).max() <= 1.0 + 1e-9
+    assert np.abs(ct.feedback(1.02 * m.gain_margin * L, 1).poles()).max() > 1.001
