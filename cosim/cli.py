@@ -8,6 +8,7 @@ Subcommands::
     fnn-cosim reproduce [--out DIR] [--seeds 10] [--duration S] [--workers 2]
     fnn-cosim scenarios
     fnn-cosim build-fmu [--out DIR]
+    fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim]
 
 SCENARIO is a TOML file or the name of a shipped scenario (``circles``,
 ``figure8``). Results go under ``results/`` unless ``--out`` says otherwise.
@@ -189,6 +190,10 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("build-fmu", help="build every model as FMI 2.0 (and 3.0) FMUs")
     b.add_argument("--out", default="build/fmus", help="output directory (default build/fmus)")
     b.set_defaults(func=_cmd_build_fmu)
+
+    from .stability.cli import add_parser as add_stability_parser  # linear stability report (cosim/stability)
+
+    add_stability_parser(sub)
     return p
 
 
