@@ -97,10 +97,7 @@ def _cmd_table2(args) -> int:
     out = Path(args.out) if args.out else DEFAULT_OUT / "table2"
     summary = table2(out, seeds=args.seeds, winds=winds, duration=args.duration, workers=_workers(args.workers),
                      show_progress=not args.quiet)
-    print(summary["markdown"])
-    print(f"{len(summary['runs'])} runs in {summary['wall_time_s']:.1f} s; table: {out / 'table2.md'}, "
-          f"data: {out / 'summary.json'}")
-    return 0
+    return _print_table(summary, out / "table2.md", out / "summary.json")
 
 
 def _cmd_table3(args) -> int:
@@ -109,9 +106,12 @@ def _cmd_table3(args) -> int:
     out = Path(args.out) if args.out else DEFAULT_OUT / "table3"
     summary = table3(out, seeds=args.seeds, duration=args.duration, workers=_workers(args.workers),
                      show_progress=not args.quiet)
+    return _print_table(summary, out / "table3.md", out / "summary.json")
+
+
+def _print_table(summary, table_path: Path, data_path: Path) -> int:
     print(summary["markdown"])
-    print(f"{len(summary['runs'])} runs in {summary['wall_time_s']:.1f} s; table: {out / 'table3.md'}, "
-          f"data: {out / 'summary.json'}")
+    print(f"{len(summary['runs'])} runs in {summary['wall_time_s']:.1f} s; table: {table_path}, data: {data_path}")
     return 0
 
 

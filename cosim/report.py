@@ -55,13 +55,7 @@ def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5
         "paper": {v: {f"{w:g}": x for w, x in by.items()} for v, by in PAPER_TABLE2.items()},
         "runs": results,
     }
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "table2.md").write_text(f"# Table 2: {sc.description}\n\n{md}")
-    write_json(out_dir / "summary.json", summary)
-    summary["markdown"] = md
-    summary["cells_by_float"] = table
-    return summary
+    return _write_table(out_dir, 2, sc.description, md, table, summary)
 
 
 def table3(out_dir: Path, seeds: int = 10, duration: float | None = None, workers: int = 2,
@@ -77,9 +71,15 @@ def table3(out_dir: Path, seeds: int = 10, duration: float | None = None, worker
         "workers": workers, "wall_time_s": wall,
         "cells": {v: next(iter(by.values())) for v, by in table.items()}, "paper": PAPER_TABLE3, "runs": results,
     }
+    return _write_table(out_dir, 3, sc.description, md, table, summary)
+
+
+def _write_table(out_dir, number: int, description: str, md: str, table, summary: dict[str, Any]) -> dict[str, Any]:
+    """Write ``table<number>.md`` and ``summary.json``; return the summary with
+    the markdown and the float-keyed cells added for the caller."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "table3.md").write_text(f"# Table 3: {sc.description}\n\n{md}")
+    (out_dir / f"table{number}.md").write_text(f"# Table {number}: {description}\n\n{md}")
     write_json(out_dir / "summary.json", summary)
     summary["markdown"] = md
     summary["cells_by_float"] = table
