@@ -34,20 +34,48 @@ from fmpy.fmi1 import FMICallException
 from .component import Port
 from .errors import FmuCallError
 
-__all__ = ["FmuComponent", "fmu_ports"]
+__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks"]
 
 _TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit float
 
 _FMI2_LOGGER = None
-_FMI2_INSTANCES: dict[int, "weakref.ref[FmuComponent]"] = {}
+_FMI2_LOG_RECEIVERS: dict[int, weakref.WeakMethod] = {}
 _KEYS = itertools.count(1)
 
 
 def _dispatch_fmi2_log(env, instance, status, category, message) -> None:
-    ref = _FMI2_INSTANCES.get(env or 0)
-    component = ref() if ref is not None else None
-    if component is not None:
-        component._log(status, message)
+    ref = _FMI2_LOG_RECEIVERS.get(env or 0)
+    receiver = ref() if ref is not None else None
+    if receiver is not None:
+        receiver(status, message)
+
+
+def fmi2_callbacks(receive_log):
+    """FMI 2.0 callbacks whose log messages reach ``receive_log(status, message)``
+    (a bound method, held weakly), formatted by fmpy's variadic-logger proxy.
+
+    fmpy's proxy keeps one Python logger per process, so every FMI 2.0
+    instance shares one dispatcher and is told apart by its
+    componentEnvironment, a key into the receivers. Keep the returned
+    structure alive as long as the instance.
+    """
+    from fmpy.fmi1 import calloc, free
+    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                           fmi2CallbackLoggerTYPE)
+    from fmpy.logging import addLoggerProxy
+
+    global _FMI2_LOGGER
+    if _FMI2_LOGGER is None:
+        _FMI2_LOGGER = fmi2CallbackLoggerTYPE(_dispatch_fmi2_log)
+    key = next(_KEYS)
+    _FMI2_LOG_RECEIVERS[key] = weakref.WeakMethod(receive_log)
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = _FMI2_LOGGER
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    callbacks.componentEnvironment = key
+    addLoggerProxy(ctypes.byref(callbacks))
+    return callbacks
 
 
 def _port(variable) -> Port:
@@ -152,28 +180,11 @@ class FmuComponent:
         common = dict(guid=md.guid, unzipDirectory=str(self._unzipdir),
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName=self.name)
         if self.fmi_version == 2:
-            from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                                   fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
-            from fmpy.fmi1 import calloc, free
-            from fmpy.logging import addLoggerProxy
+            from fmpy.fmi2 import FMU2Slave
 
-            global _FMI2_LOGGER
             slave = FMU2Slave(**common)
-            if _FMI2_LOGGER is None:
-                _FMI2_LOGGER = fmi2CallbackLoggerTYPE(_dispatch_fmi2_log)
-            # fmpy's variadic-logger proxy keeps one Python logger per process,
-            # so every FMI 2.0 instance shares one dispatcher and is told
-            # apart by its componentEnvironment (a key into _FMI2_INSTANCES)
-            key = next(_KEYS)
-            _FMI2_INSTANCES[key] = weakref.ref(self)
-            callbacks = fmi2CallbackFunctions()
-            callbacks.logger = _FMI2_LOGGER
-            callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-            callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-            callbacks.componentEnvironment = key
-            addLoggerProxy(ctypes.byref(callbacks))
-            self._callbacks = callbacks  # keep alive as long as the instance
-            slave.instantiate(callbacks=callbacks)
+            self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
+            slave.instantiate(callbacks=self._callbacks)
         else:
             from fmpy.fmi3 import FMU3Slave
 

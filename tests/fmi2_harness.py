@@ -3,15 +3,12 @@ messages, value references by name, and stepping by a step counter."""
 from __future__ import annotations
 
 import shutil
-import tempfile
-from ctypes import byref
 
 import numpy as np
 from fmpy import extract, read_model_description
-from fmpy.fmi1 import calloc, free
-from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
-from fmpy.logging import addLoggerProxy
+from fmpy.fmi2 import FMU2Model, FMU2Slave
+
+from cosim.fmu import fmi2_callbacks
 
 
 class Fmi2Instance:
@@ -23,22 +20,18 @@ class Fmi2Instance:
         self.unzip_dir = unzip_dir or extract(fmu_path)
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.messages: list[str] = []
-        self._logger = fmi2CallbackLoggerTYPE(self._log)  # keep a reference alive
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = self._logger
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(byref(self.callbacks))
+        self.callbacks = fmi2_callbacks(self._log)  # messages of this instance only
         cls = FMU2Model if model_exchange else FMU2Slave
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip_dir,
                        modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="test")
         self.fmu.instantiate(callbacks=self.callbacks)
         self.n = 0
         self.h = 0.01
+        self.initialized = False
         if initialize:
             self.initialize(parameters or {})
 
-    def _log(self, env, instance, status, category, message):
+    def _log(self, status, message):
         self.messages.append(message.decode())
 
     def initialize(self, parameters):
@@ -46,6 +39,7 @@ class Fmi2Instance:
         self.set(**parameters)
         self.fmu.enterInitializationMode()
         self.fmu.exitInitializationMode()
+        self.initialized = True
 
     def set(self, **values):
         if values:
@@ -61,7 +55,8 @@ class Fmi2Instance:
             self.n += 1
 
     def close(self):
-        self.fmu.terminate()
+        if self.initialized:  # terminate is refused before initialization
+            self.fmu.terminate()
         self.fmu.freeInstance()
         if self._own_dir:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)

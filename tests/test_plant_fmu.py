@@ -335,3 +335,15 @@ def test_source_fmu_compiles_on_its_own_with_fmpy_build(quadrotor_fmu2, tmp_path
     result = simulate_fmu(str(unzipped), stop_time=1.0, output_interval=0.01,
                           start_values={"z_0": -15.0, **ROTORS_AT_HOVER})
     assert abs(result["z"][-1] + 15.0) < 1e-9
+
+
+def test_log_messages_reach_the_instance_that_wrote_them(instance):
+    """fmpy keeps one FMI 2.0 logger per process; with two live instances each
+    refusal must still be reported to its own instance."""
+    first, second = instance(initialize=False), instance(initialize=False)
+    with pytest.raises(FMICallException):
+        first.set(m=-1.0)
+    with pytest.raises(FMICallException):
+        second.set(Ix=-2.0)
+    assert any("m = -1" in m for m in first.messages) and not any("Ix" in m for m in first.messages)
+    assert any("Ix = -2" in m for m in second.messages) and not any("m = -1" in m for m in second.messages)
