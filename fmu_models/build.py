@@ -12,7 +12,6 @@ import hashlib
 import os
 import shutil
 import subprocess
-import sys
 import tempfile
 import zipfile
 from dataclasses import dataclass
@@ -43,29 +42,7 @@ class _Flavour:
     headers: tuple[str, ...]
     model_description: Callable[[FmuModel, str], str]
     extra_files: Callable[[FmuModel], dict[str, str]]
-    binary_dir: Callable[[], str]
-
-
-def _platform() -> str:
-    """FMI 2.0 binary directory."""
-    if sys.platform.startswith("linux"):
-        return "linux64"
-    if sys.platform == "darwin":
-        return "darwin64"
-    return "win64"
-
-
-def _platform_tuple() -> str:
-    """FMI 3.0 binary directory, ``<arch>-<os>``, named as fmpy looks it up."""
-    return fmpy.platform_tuple
-
-
-def _library_suffix() -> str:
-    if sys.platform.startswith("linux"):
-        return ".so"
-    if sys.platform == "darwin":
-        return ".dylib"
-    return ".dll"
+    binary_dir: str
 
 
 FMI_VERSIONS: dict[int, _Flavour] = {
@@ -74,14 +51,14 @@ FMI_VERSIONS: dict[int, _Flavour] = {
         headers=("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
         model_description=fmi2_model_description,
         extra_files=lambda model: {},
-        binary_dir=_platform,
+        binary_dir=fmpy.platform,  # e.g. linux64: where fmpy looks for FMI 2.0 binaries
     ),
     3: _Flavour(
         api_source="fmi3_functions.c",
         headers=("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"),
         model_description=fmi3_model_description,
         extra_files=lambda model: {"sources/buildDescription.xml": fmi3_build_description(model)},
-        binary_dir=_platform_tuple,
+        binary_dir=fmpy.platform_tuple,  # e.g. x86_64-linux, FMI 3.0 naming
     ),
 }
 
@@ -115,9 +92,9 @@ def _stage(model: FmuModel, fmi_version: int, root: Path) -> Path:
 def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
     sources = root / "sources"
     c_files = sorted(str(p) for p in sources.glob("*.c"))
-    binary_dir = root / "binaries" / FMI_VERSIONS[fmi_version].binary_dir()
+    binary_dir = root / "binaries" / FMI_VERSIONS[fmi_version].binary_dir
     binary_dir.mkdir(parents=True, exist_ok=True)
-    out = binary_dir / f"{model.identifier}{_library_suffix()}"
+    out = binary_dir / f"{model.identifier}{fmpy.sharedLibraryExtension}"
     cmd = [_compiler(), *CFLAGS, f"-I{sources}", *c_files, "-o", str(out), "-lm"]
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
