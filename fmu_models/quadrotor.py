@@ -32,10 +32,12 @@ __all__ = ["QUADROTOR", "rotation_matrix", "euler_rate_matrix", "hover_rotor_spe
 # NaN otherwise); changes the drag force by k_drag_quad * 1e-6 * |v_rel|.
 _SPEED_SMOOTHING = 1e-6  # m/s
 
+_M = 1.07  # kg, Table 1
+_G = 9.81  # m/s^2
 _B = 6.55e-6  # N s^2, Table 1
 # Rotor inputs start at the hover speed of the default parameters, so the FMU
 # dropped into any importer hovers until something commands it.
-_HOVER_SPEED = math.sqrt(1.07 * 9.81 / (4 * _B))  # rad/s
+_HOVER_SPEED = math.sqrt(_M * _G / (4 * _B))  # rad/s
 _STATE_NAMES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
 
 _VARIABLES = (
@@ -62,7 +64,7 @@ _VARIABLES = (
     output("tau_phi", "N.m", "roll torque applied, after rotor saturation (eq. 1)"),
     output("tau_theta", "N.m", "pitch torque applied, after rotor saturation (eq. 1)"),
     output("tau_psi", "N.m", "yaw torque applied, after rotor saturation (eq. 1)"),
-    parameter("m", "kg", "vehicle mass (Table 1)", 1.07, min=0.0, min_exclusive=True),
+    parameter("m", "kg", "vehicle mass (Table 1)", _M, min=0.0, min_exclusive=True),
     parameter("l", "m", "arm length, centre to rotor axis (Table 1)", 0.17, min=0.0, min_exclusive=True),
     parameter("b", "N.s2", "rotor thrust coefficient, f_i = b Omega_i^2 (Table 1)", _B,
               min=0.0, min_exclusive=True),
@@ -72,7 +74,7 @@ _VARIABLES = (
     parameter("Ix", "kg.m2", "moment of inertia about x_B (Table 1)", 3.0e-2, min=0.0, min_exclusive=True),
     parameter("Iy", "kg.m2", "moment of inertia about y_B (Table 1)", 4.0e-2, min=0.0, min_exclusive=True),
     parameter("Iz", "kg.m2", "moment of inertia about z_B (Table 1)", 2.1e-2, min=0.0, min_exclusive=True),
-    parameter("g", "m/s2", "gravitational acceleration", 9.81, min=0.0),
+    parameter("g", "m/s2", "gravitational acceleration", _G, min=0.0),
     parameter("k_drag_lin", "N.s/m", "linear (rotor) drag coefficient on the air-relative velocity",
               0.20, min=0.0),
     parameter("k_drag_quad", "N.s2/m2", "quadratic (body) drag coefficient, 0.5 rho C_D A",
