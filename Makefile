@@ -22,6 +22,8 @@ fmu: $(VENV)/.installed
 	$(BIN)/fnn-cosim build-fmu --out build/fmus
 
 benchmark: $(VENV)/.installed
+	$(BIN)/python benchmarks/cli_startup.py
+	$(BIN)/python benchmarks/controller_speed.py
 	$(BIN)/python benchmarks/cosim_speed.py
 
 clean:

@@ -12,7 +12,10 @@ PD+LM-FNN at dt = 0.01 s (5000 steps):
   same output interval, as a reference;
 * ``table2``: the 90 runs on --workers processes (skip with --no-table2).
 
-Targets on a 2-core machine: the mission under 0.25 s, table2 under 20 s.
+Targets, as ratios measured in this run: the whole mission (two FMUs, the
+controller, recording, the guard) at most 3x fmpy's own loop over the plant
+FMU alone. Printed, never asserted: a slow or busy machine changes the
+figures, not the verdict of the test suite.
 
     .venv/bin/python benchmarks/cosim_speed.py [--repeats 7] [--workers 2] [--json out.json]
 """
@@ -91,6 +94,9 @@ def main(argv=None) -> int:
     for k in ("fmu", "python:controller", "python:reference", "record", "guard", "total"):
         print(f"    {names[k]:40s} {per_step[k]:6.2f} us")
     print(f"  fmpy.simulate_fmu, plant FMU alone, 50 s: {figures['fmpy_simulate_fmu_plant_alone_s'] * 1e3:7.1f} ms")
+    figures["ratio_mission_to_fmpy_plant_alone"] = med_mem / figures["fmpy_simulate_fmu_plant_alone_s"]
+    print(f"  ratio, whole mission (2 FMUs + controller + recording) / fmpy plant alone: "
+          f"{figures['ratio_mission_to_fmpy_plant_alone']:.2f}  (target <= 3)")
 
     if not args.no_table2:
         jobs = [Job(v, w, s) for s in range(10) for w in (1.0, 3.0, 5.0) for v in VARIANTS]

@@ -4,8 +4,6 @@ guards, derivatives for linear analysis, and closed loops with the plant
 FMU (hover, the PD's ramp lag, the FNN removing it, per-step cost)."""
 from __future__ import annotations
 
-import math
-import time
 
 import casadi as ca
 import numpy as np
@@ -212,44 +210,21 @@ def test_fnn_learns_the_missing_feed_forward_and_takes_over(plant_fmu, variant):
     assert np.all(np.isfinite(log["x"]))
 
 
-def test_controller_step_cost(capsys):
-    """The budget: the whole controller step within ~10 us from Python."""
-    results = {}
-    for variant in VARIANTS:
-        ctrl = QuadrotorController(variant)
-        ctrl.reset(0)
-        p_ref, p_ref_dot, x = np.array([1.0, 0, -15]), np.array([0.5, 0, 0]), HOVER.copy()
-        for _ in range(200):
-            ctrl.step(p_ref, p_ref_dot, x)
-        best = math.inf
-        for _ in range(5):
-            t0 = time.perf_counter()
-            for _ in range(5000):
-                ctrl.step(p_ref, p_ref_dot, x)
-            best = min(best, (time.perf_counter() - t0) / 5000)
-        results[variant] = best * 1e6
-    with capsys.disabled():
-        print("\ncontroller step cost (us):", {k: round(v, 2) for k, v in results.items()})
-    assert max(results.values()) < 10.0
-
-
-def test_mission_length_closed_loop_with_the_fmu_is_fast(plant_fmu, capsys):
-    """5000 steps (50 s) of controller + plant FMU; the paper's mission budget is 0.25 s."""
+def test_mission_length_closed_loop_with_the_fmu_holds_hover(plant_fmu):
+    """5000 steps (50 s) of controller + plant FMU through the fast paths the
+    master uses: PD+LM-FNN holds the hover it starts in. (Its cost is printed
+    by benchmarks/controller_speed.py, never asserted here.)"""
     plant = PlantFmu(plant_fmu, z=-15.0)
     ctrl = QuadrotorController("pd+lm")
     ctrl.reset(0)
     p_ref, p_ref_dot = np.array([0.0, 0.0, -15.0]), np.zeros(3)
     x = plant.state()
     fmu, vr_in, vr_out = plant.fmu, plant._vr_omega, plant._vr_state
-    t0 = time.perf_counter()
     for k in range(5000):
         omega = ctrl.step(p_ref, p_ref_dot, x)
         fmu.setReal(vr_in, omega.tolist())
         fmu.doStep(currentCommunicationPoint=k * H, communicationStepSize=H)
         x = fmu.getReal(vr_out)
-    elapsed = time.perf_counter() - t0
     plant.close()
-    with capsys.disabled():
-        print(f"\n50 s mission, controller + plant FMU: {elapsed:.3f} s")
     assert np.all(np.isfinite(x))
-    assert elapsed < 1.0  # generous for loaded CI machines; measured ~0.1-0.2 s
+    assert np.linalg.norm(np.array(x[0:3]) - p_ref) < 0.2  # m; LM holds a small oscillation at hover

@@ -16,7 +16,6 @@ def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):
                  "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["runs"]) == 2 * 2 * 3 and all(r["status"] == "ok" for r in summary["runs"])
-    assert len({r["pid"] for r in summary["runs"]}) == 2  # both workers took part
     cells = summary["cells"]
     for wind in ("1", "5"):
         pd = cells["pd"][wind]["mean"]
