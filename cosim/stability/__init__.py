@@ -16,23 +16,36 @@ Modules, one job each:
   66, 70) on recorded runs;
 * :mod:`~cosim.stability.study`, :mod:`~cosim.stability.report`,
   :mod:`~cosim.stability.cli` -- all of it, the report, the command.
-"""
-from .analysis import (GainSweep, LoopMargins, PoleReport, analyze, circle_error, closed_loop_poles,
-                       critical_gain_factor, gain_sweep, loop_margins, ramp_error)
-from .linearize import (linearize_controller, linearize_controller_step, linearize_plant, linearize_plant_fmu,
-                        linearize_position_controller, linearize_velocity_controller)
-from .loops import LoopModel
-from .operating_points import (OperatingPoint, default_operating_points, forward_flight, hover, operating_point,
-                               trim_closed_loop, trim_plant)
-from .study import StabilityStudy, run_stability_analysis, stability_study
 
-__all__ = [
-    "GainSweep", "LoopMargins", "PoleReport", "analyze", "circle_error", "closed_loop_poles",
-    "critical_gain_factor", "gain_sweep", "loop_margins", "ramp_error",
-    "linearize_controller", "linearize_controller_step", "linearize_plant", "linearize_plant_fmu",
-    "linearize_position_controller", "linearize_velocity_controller",
-    "LoopModel",
-    "OperatingPoint", "default_operating_points", "forward_flight", "hover", "operating_point",
-    "trim_closed_loop", "trim_plant",
-    "StabilityStudy", "run_stability_analysis", "stability_study",
-]
+The names below load their module (and python-control, scipy) on first use,
+so that ``fnn-cosim`` can add the ``stability`` subcommand without paying
+for them in every other command.
+"""
+from importlib import import_module
+
+_EXPORTS = {
+    "analysis": ("GainSweep", "LoopMargins", "PoleReport", "analyze", "circle_error", "closed_loop_poles",
+                 "critical_gain_factor", "gain_sweep", "loop_margins", "ramp_error"),
+    "linearize": ("linearize_controller", "linearize_controller_step", "linearize_plant", "linearize_plant_fmu",
+                  "linearize_position_controller", "linearize_velocity_controller"),
+    "loops": ("LoopModel",),
+    "operating_points": ("OperatingPoint", "default_operating_points", "forward_flight", "hover", "operating_point",
+                         "trim_closed_loop", "trim_plant"),
+    "study": ("StabilityStudy", "run_stability_analysis", "stability_study"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+
+__all__ = list(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + __all__)
