@@ -12,8 +12,11 @@ Subcommands::
 
 SCENARIO is a TOML file or the name of a shipped scenario (``circles``,
 ``figure8``). Results go under ``results/`` unless ``--out`` says otherwise.
-Errors (bad scenario, wrong connection, divergence) print one message and
-exit with status 1.
+Errors print one line on stderr (``--debug`` adds the traceback): a bad
+scenario, connection or FMU file (a broken archive, no binary for this
+platform, a parameter the FMU refuses) exits with status 2 before anything
+runs; a run that diverges or fails mid-way exits with status 1 and keeps its
+partial results.
 """
 from __future__ import annotations
 
@@ -27,6 +30,8 @@ from typing import Any, Sequence
 __all__ = ["main"]
 
 DEFAULT_OUT = Path("results")
+EXIT_RUN_FAILED = 1  # a run diverged or an FMU failed mid-run (partial results kept)
+EXIT_BAD_INPUT = 2  # a scenario, connection or FMU file is wrong: refused before anything ran
 
 
 def _value(text: str) -> Any:
@@ -54,7 +59,6 @@ def _workers(n: int | None) -> int:
 
 def _cmd_run(args) -> int:
     from .experiments import run_once, write_json
-    from .plots import run_figures
     from .progress import Progress
     from .scenario import load_scenario
 
@@ -66,25 +70,32 @@ def _cmd_run(args) -> int:
     scenario = load_scenario(args.scenario, overrides)
     out = Path(args.out) if args.out else DEFAULT_OUT / f"run-{scenario.name}"
     bar = Progress(int(round(scenario.duration / scenario.step)), f"run {scenario.name}", enabled=not args.quiet)
-    result, summary = run_once(scenario, out, progress=lambda n, total: bar.update(n))
-    bar.close()
-    figures = [] if args.no_plots else run_figures(out, result, scenario)
+    try:
+        result, summary = run_once(scenario, out, progress=lambda n, total: bar.update(n))
+    finally:
+        bar.close()
+    figures = []
+    if not args.no_plots and summary["rows"] > 1:
+        from .plots import run_figures  # matplotlib only when there is something to draw
+
+        figures = run_figures(out, result, scenario)
     summary["figures"] = [str(p) for p in figures]
     write_json(out / "summary.json", summary)
+    simulated = result.time[-1] - result.time[0] if summary["rows"] else 0.0
     lines = [f"# Run of {scenario.name}", "", scenario.description, "",
              f"- status: {summary['status']}" + (f" ({summary['error']})" if summary["error"] else ""),
              f"- seed: {summary['seed']}, controller: {summary['variant']}",
-             f"- simulated {result.time[-1] - result.time[0]:.2f} s in {summary['wall_time_s']:.3f} s "
+             f"- simulated {simulated:.2f} s in {summary['wall_time_s']:.3f} s "
              f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
-    if "rmse_m" in summary:
+    if summary.get("rmse_m") is not None:
         lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]
     (out / "summary.md").write_text("\n".join(lines))
     print("\n".join(lines[4:-2]))
     print(f"results: {out}")
     if summary["status"] != "ok":
-        print(f"error: {summary['error']}", file=sys.stderr)
-        return 1
+        print(f"fnn-cosim: error: {summary['error']}", file=sys.stderr)
+        return EXIT_RUN_FAILED
     return 0
 
 
@@ -151,6 +162,7 @@ def _cmd_build_fmu(args) -> int:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
+    p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
 
     def common(sp, seeds=True):
@@ -191,21 +203,27 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default="build/fmus", help="output directory (default build/fmus)")
     b.set_defaults(func=_cmd_build_fmu)
 
-    from .stability.cli import add_parser as add_stability_parser  # linear stability report (cosim/stability)
+    # the subcommand's own module: argparse only; python-control loads when it runs
+    from .stability.cli import add_parser as add_stability_parser
 
     add_stability_parser(sub)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from .errors import CosimError
+    from .errors import ConnectionCheckError, CosimError, FmuLoadError, ScenarioError
 
     args = _parser().parse_args(argv)
     try:
         return args.func(args)
     except CosimError as exc:
+        if args.debug:
+            import traceback
+
+            traceback.print_exc()
         print(f"fnn-cosim: error: {exc}", file=sys.stderr)
-        return 1
+        bad_input = isinstance(exc, (ScenarioError, ConnectionCheckError, FmuLoadError))
+        return EXIT_BAD_INPUT if bad_input else EXIT_RUN_FAILED
     except KeyboardInterrupt:
         print("fnn-cosim: interrupted", file=sys.stderr)
         return 130

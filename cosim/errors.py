@@ -2,13 +2,20 @@
 
 All derive from :class:`CosimError`, so a caller (the CLI) can catch one type
 and print the message; the messages name the connection, key, signal or FMI
-call concerned, never just a status code.
+call concerned, never just a status code, and fit on one line.
 """
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
-__all__ = ["CosimError", "ConnectionCheckError", "ScenarioError", "DivergenceError", "FmuCallError"]
+__all__ = ["CosimError", "ConnectionCheckError", "ScenarioError", "DivergenceError", "FmuError", "FmuLoadError",
+           "FmuCallError", "one_line"]
+
+
+def one_line(text: str) -> str:
+    """``text`` with its line breaks and runs of blanks folded into single spaces."""
+    return " ".join(str(text).split())
 
 
 class CosimError(Exception):
@@ -38,5 +45,34 @@ class DivergenceError(CosimError):
         super().__init__(f"diverged at t = {time:.4f} s: {signal} = {value!r} {what}")
 
 
-class FmuCallError(CosimError):
-    """An FMI call returned an error status; carries the FMU's own log messages."""
+class FmuError(CosimError):
+    """Something went wrong with one FMU instance.
+
+    Attributes: ``instance`` (its name in the co-simulation), ``path`` (the
+    FMU file), ``reason`` (what went wrong, one line, quoting the FMU's own
+    log where it said why).
+    """
+
+    def __init__(self, instance: str, path: str | Path | None, reason: str):
+        self.instance, self.path, self.reason = instance, path, one_line(reason)
+        where = f"{instance} ({path})" if path is not None else instance
+        super().__init__(f"{where}: {self.reason}")
+
+
+class FmuLoadError(FmuError):
+    """The FMU file cannot be used: not a zip archive, a broken
+    modelDescription.xml, no binary for this platform, refused instantiation."""
+
+
+class FmuCallError(FmuError):
+    """An FMI call returned an error status; carries the FMU's own log messages.
+
+    ``variable`` and ``value`` name the parameter the FMU refused when the
+    failing call set one (at start-up), else ``None``; ``log`` is what the
+    FMU itself logged about it (one line, empty if it logged nothing).
+    """
+
+    def __init__(self, instance: str, path: str | Path | None, reason: str, variable: str | None = None,
+                 value: float | None = None, log: str = ""):
+        super().__init__(instance, path, reason)
+        self.variable, self.value, self.log = variable, value, one_line(log)

@@ -20,8 +20,9 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from .errors import FmuError
 from .metrics import euclidean_error, rmse
-from .scenario import Scenario, build_master, parse_scenario, apply_overrides
+from .scenario import Scenario, apply_overrides, build_master, fmu_error_in_scenario, parse_scenario
 
 __all__ = ["Job", "run_once", "sweep", "cells", "VARIANTS", "VARIANT_LABELS"]
 
@@ -59,6 +60,8 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
         result = master.run(scenario.duration, seed=scenario.seed if seed is None else seed, parameters=params,
                             csv_path=csv, t0=scenario.start_time, block_rows=scenario.block_rows,
                             raise_on_error=False, progress=progress)
+    except FmuError as exc:  # could not start: a parameter refused, told with its scenario key
+        raise fmu_error_in_scenario(scenario, exc) from None
     finally:
         if own:
             master.close()

@@ -14,25 +14,30 @@ instantiation and status checking (every failed call raises fmpy's
   outputs, the values passing through preallocated numpy buffers with no
   per-step allocation;
 * the FMU's log messages are collected, and a failed call becomes an
-  :class:`~cosim.errors.FmuCallError` quoting them.
+  :class:`~cosim.errors.FmuCallError` quoting them;
+* a file that is no usable FMU (not a zip archive, a broken
+  modelDescription.xml, no binary for this platform, an instantiation the FMU
+  refuses) is an :class:`~cosim.errors.FmuLoadError` that names the file and
+  the cause in one line, raised when the component is made.
 """
 from __future__ import annotations
 
 import ctypes
+import itertools
+import os
 import shutil
+import weakref
+import zipfile
 from collections import deque
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
-import itertools
-import weakref
-
-from fmpy import extract, read_model_description
+from fmpy import extract, platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 
 from .component import Port
-from .errors import FmuCallError
+from .errors import FmuCallError, FmuLoadError
 
 __all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks"]
 
@@ -143,13 +148,13 @@ class FmuComponent:
     def __init__(self, name: str, path: str | Path, validate: bool = False):
         self.name = name
         self.path = Path(path)
-        self.model_description = read_model_description(str(self.path), validate=validate)
-        md = self.model_description
+        self.model_description = md = self._read_model_description(validate)
         self.fmi_version = int(md.fmiVersion.split(".")[0])
-        if md.coSimulation is None:
-            raise FmuCallError(f"FMU {name!r} ({self.path}) has no Co-Simulation interface")
         if self.fmi_version not in (2, 3):
-            raise FmuCallError(f"FMU {name!r}: FMI {md.fmiVersion} is not supported (2.0 or 3.0)")
+            raise FmuLoadError(name, self.path, f"FMI {md.fmiVersion} is not supported (2.0 or 3.0)")
+        if md.coSimulation is None:
+            raise FmuLoadError(name, self.path, "the FMU has no Co-Simulation interface")
+        self._check_binary()
         groups = fmu_ports(md)
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
         self.variables = {v.name: v for v in md.modelVariables}
@@ -159,6 +164,43 @@ class FmuComponent:
         self._owns_unzipdir = False
         self._initialized_once = False
         self.bind((), ())
+
+    def _read_model_description(self, validate: bool):
+        """fmpy's reading of the modelDescription, its failures told in one line."""
+        try:
+            return read_model_description(str(self.path), validate=validate)
+        except zipfile.BadZipFile as exc:
+            reason = f"not an FMU: not a zip archive ({exc})"
+        except KeyError:
+            reason = "not an FMU: the archive holds no modelDescription.xml"
+        except OSError as exc:
+            reason = f"cannot read modelDescription.xml: {exc.strerror or exc}"
+        except Exception as exc:  # lxml's syntax errors, fmpy's validation and attribute errors
+            reason = f"broken modelDescription.xml: {type(exc).__name__}: {exc}"
+        raise FmuLoadError(self.name, self.path, reason) from None
+
+    def _file_names(self) -> list[str]:
+        if self.path.is_dir():
+            return [Path(root, f).relative_to(self.path).as_posix()
+                    for root, _, files in os.walk(self.path) for f in files]
+        with zipfile.ZipFile(self.path) as archive:
+            return archive.namelist()
+
+    def _check_binary(self) -> None:
+        """Refuse, before any extraction, an FMU with no binary where fmpy
+        will look for one on this platform; name the platforms it has."""
+        folder = platform if self.fmi_version == 2 else platform_tuple
+        wanted = f"binaries/{folder}/{self.model_description.coSimulation.modelIdentifier}{sharedLibraryExtension}"
+        names = self._file_names()
+        if wanted in names:
+            return
+        has = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+        sources = any(n.startswith("sources/") for n in names)
+        raise FmuLoadError(self.name, self.path,
+                           f"no binary for this platform ({wanted} is missing); the FMU has binaries for: "
+                           f"{', '.join(has) if has else 'no platform'}"
+                           + ("; it carries C sources: compile them with fmpy.build.build_platform_binary"
+                              if sources else ""))
 
     # ---- lifecycle ---------------------------------------------------------
 
@@ -174,22 +216,31 @@ class FmuComponent:
         if self.path.is_dir():
             self._unzipdir = self.path
         else:
-            self._unzipdir = Path(extract(str(self.path)))
+            try:
+                self._unzipdir = Path(extract(str(self.path)))
+            except (zipfile.BadZipFile, OSError) as exc:
+                raise FmuLoadError(self.name, self.path, f"cannot extract the archive: {exc}") from None
             self._owns_unzipdir = True
         md = self.model_description
         common = dict(guid=md.guid, unzipDirectory=str(self._unzipdir),
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName=self.name)
-        if self.fmi_version == 2:
-            from fmpy.fmi2 import FMU2Slave
+        self.messages.clear()
+        try:
+            if self.fmi_version == 2:
+                from fmpy.fmi2 import FMU2Slave
 
-            slave = FMU2Slave(**common)
-            self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
-            slave.instantiate(callbacks=self._callbacks)
-        else:
-            from fmpy.fmi3 import FMU3Slave
+                slave = FMU2Slave(**common)
+                self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
+                slave.instantiate(callbacks=self._callbacks)
+            else:
+                from fmpy.fmi3 import FMU3Slave
 
-            slave = FMU3Slave(**common)
-            slave.instantiate(logMessage=lambda env, status, category, message: self._log(status, message))
+                slave = FMU3Slave(**common)
+                slave.instantiate(logMessage=lambda env, status, category, message: self._log(status, message))
+        except Exception as exc:  # fmpy raises plain Exceptions here; the FMU's log says why
+            self.close()
+            said = "; ".join(self.messages)
+            raise FmuLoadError(self.name, self.path, f"instantiation failed: {said or exc}") from None
         self._slave = slave
         self._api = _Api(slave, self.fmi_version)
 
@@ -216,14 +267,21 @@ class FmuComponent:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _fail(self, what: str, exc: Exception, t: float | None = None) -> FmuCallError:
+    def _fail(self, what: str, exc: Exception, t: float | None = None, variable: str | None = None,
+              value: float | None = None) -> FmuCallError:
         when = f"at t = {t:.4f} s: " if t is not None else ""
-        log = "; ".join(self.messages) or "(the FMU logged nothing)"
-        return FmuCallError(f"{when}{self.name}: {what} failed ({exc}); FMU log: {log}")
+        log = "; ".join(self.messages)
+        return FmuCallError(self.name, self.path,
+                            f"{when}{what} failed ({exc}); FMU log: {log or '(the FMU logged nothing)'}",
+                            variable, value, log)
 
     def start(self, t0: float, parameters: Mapping[str, float] | None = None) -> None:
         """Reset (after the first run), set ``parameters``, initialize at ``t0``
-        and read the bound outputs at ``t0`` into :attr:`y`."""
+        and read the bound outputs at ``t0`` into :attr:`y`.
+
+        Parameters are set one by one, so a refusal names the parameter
+        (:attr:`FmuCallError.variable`) and quotes the FMU's reason.
+        """
         self.instantiate()
         s = self._slave
         self.messages.clear()
@@ -231,17 +289,21 @@ class FmuComponent:
         for key in parameters:
             var = self.variables.get(key)
             if var is None or var.causality not in ("parameter", "input"):
-                raise FmuCallError(f"{self.name}: {key!r} is not a parameter or input of this FMU")
+                raise FmuCallError(self.name, self.path, f"{key!r} is not a parameter or input of this FMU", key,
+                                   parameters[key])
+        set_float = s.setReal if self.fmi_version == 2 else s.setFloat64
         try:
             if self._initialized_once:
                 s.reset()
-            if parameters:
-                vrs = [self.variables[k].valueReference for k in parameters]
-                values = [float(v) for v in parameters.values()]
-                if self.fmi_version == 2:
-                    s.setReal(vrs, values)
-                else:
-                    s.setFloat64(vrs, values)
+        except FMICallException as exc:
+            raise self._fail("reset", exc) from None
+        self._initialized_once = True  # from here on, parameters may be set: the next start resets
+        for key, value in parameters.items():
+            try:
+                set_float([self.variables[key].valueReference], [float(value)])
+            except FMICallException as exc:
+                raise self._fail(f"setting parameter {key} = {value!r}", exc, variable=key, value=value) from None
+        try:
             if self.fmi_version == 2:
                 s.setupExperiment(startTime=t0)
                 s.enterInitializationMode()
@@ -252,7 +314,6 @@ class FmuComponent:
         except FMICallException as exc:
             raise self._fail("initialization with " + (repr(parameters) if parameters else "default parameters"),
                              exc) from None
-        self._initialized_once = True
         self.read_outputs(t0)
 
     # ---- fast path -----------------------------------------------------------

@@ -252,6 +252,10 @@ class Master:
                 comp.start(t0, h, n_steps, seed)
             for fmu in self.fmus:  # reads the outputs at t0 into the signal array
                 fmu.start(t0, {**self.fmu_parameters.get(fmu.name, {}), **split[fmu.name]})
+        except BaseException as exc:  # nothing ran: a refused start is raised, never a run's status
+            recorder.close("failed", f"could not start: {exc}")
+            raise
+        try:
             self._loop(t0, n_steps, recorder, phase, progress)
         except DivergenceError as exc:
             status, error, failure = "diverged", str(exc), exc

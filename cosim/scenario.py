@@ -15,7 +15,8 @@ Schema (every key optional unless marked; units SI; see ``docs/cosim.md``)::
     [fmus.<Name>]                        # one table per FMU instance, at least one
     model = "Quadrotor"                  # a model of fmu_models.catalog (built on demand), or
     path = "other.fmu"                   #   an FMU file (relative to the scenario file)
-    fmi_version = 2                      # 2 or 3 (catalog models)
+    fmi_version = 2                      # 2 or 3: the version built (catalog models, default 2) or the
+                                         #   version the file must have (FMU files, default: any)
     parameters = { z_0 = -15.0 }         # checked against the model's variables and ranges
 
     [wind]                               # shorthand for the WindGust FMU's parameters
@@ -69,7 +70,7 @@ from .config import check_number
 from .errors import ScenarioError
 
 __all__ = ["Scenario", "load_scenario", "parse_scenario", "shipped_scenarios", "scenario_path",
-           "apply_overrides", "build_master", "WIND_KEYS"]
+           "apply_overrides", "build_master", "fmu_error_in_scenario", "WIND_KEYS"]
 
 _TOP = {"name", "description", "connections", "simulation", "fmus", "wind", "trajectory", "controller",
         "components", "record", "envelope", "metrics"}
@@ -200,9 +201,14 @@ def parse_scenario(raw: Mapping[str, Any], source: Path | None = None, name: str
         _unknown(where + ".", spec, _FMU)
         if ("model" in spec) == ("path" in spec):
             raise ScenarioError(f"{where}: give exactly one of 'model' (a catalog model) or 'path' (an FMU file)")
-        version = check_number(f"{where}.fmi_version", spec.get("fmi_version", 2), integer=True)
-        if version not in (2, 3):
-            raise ScenarioError(f"{where}.fmi_version = {version!r}: expected 2 or 3")
+        # A catalog model is built in the version asked (2 by default); an FMU
+        # file is what it is, and a version given for it must match (checked
+        # when the file is read, in build_master).
+        version = spec.get("fmi_version", 2 if "model" in spec else None)
+        if version is not None:
+            check_number(f"{where}.fmi_version", version, integer=True)
+            if version not in (2, 3):
+                raise ScenarioError(f"{where}.fmi_version = {version!r}: expected 2 or 3")
         params = _table(f"{where}.parameters", spec.get("parameters", {}))
         entry: dict[str, Any] = {"fmi_version": version, "parameters": params}
         if "model" in spec:
@@ -368,6 +374,33 @@ def _fmu_file(name: str, spec: Mapping[str, Any]) -> Path:
     return cached_fmu(MODELS[spec["model"]], spec["fmi_version"])
 
 
+def _check_fmu_file(scenario: Scenario, fmu) -> None:
+    """What the scenario says of an FMU file (its FMI version, its
+    parameters) against what the file declares."""
+    spec = scenario.fmus[fmu.name]
+    version = spec.get("fmi_version")
+    if version is not None and fmu.fmi_version != version:
+        raise ScenarioError(f"fmus.{fmu.name}.fmi_version = {version}: the FMU file {fmu.path} is FMI "
+                            f"{fmu.model_description.fmiVersion}")
+    for key in spec["parameters"]:
+        var = fmu.variables.get(key)
+        if var is None or var.causality not in ("parameter", "input"):
+            raise ScenarioError(f"fmus.{fmu.name}.parameters.{key}: the FMU file {fmu.path} has no parameter {key!r}")
+
+
+def fmu_error_in_scenario(scenario: Scenario, exc) -> ScenarioError:
+    """An :class:`~cosim.errors.FmuError` told in the scenario's words: the
+    key that brought the FMU (or the parameter it refused), the file, the cause."""
+    spec = scenario.fmus.get(exc.instance, {})
+    if getattr(exc, "variable", None) is not None:
+        said = exc.log or exc.reason
+        return ScenarioError(f"fmus.{exc.instance}.parameters.{exc.variable} = {exc.value!r}: refused by the FMU "
+                             f"{exc.path}: {said}")
+    if "model" in spec:
+        return ScenarioError(f"fmus.{exc.instance}.model = {spec['model']!r} ({exc.path}): {exc.reason}")
+    return ScenarioError(f"fmus.{exc.instance}.path = {str(exc.path)!r}: {exc.reason}")
+
+
 def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None):
     """A :class:`~cosim.master.Master` for ``scenario`` (FMUs built on demand).
 
@@ -375,18 +408,27 @@ def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None
     directory to use instead (the sweeps extract once and share it).
     """
     from .controller import ControllerComponent
+    from .errors import FmuError
     from .fmu import FmuComponent
     from .master import Master
     from .trajectory import ReferenceComponent, make_trajectory
 
     fmu_files = dict(fmu_files or {})
-    fmus = [FmuComponent(name, fmu_files.get(name) or _fmu_file(name, spec)) for name, spec in scenario.fmus.items()]
-    # parameters of FMUs given by path: check against their modelDescription now
-    for fmu in fmus:
-        for key in scenario.fmus[fmu.name]["parameters"]:
-            var = fmu.variables.get(key)
-            if var is None or var.causality not in ("parameter", "input"):
-                raise ScenarioError(f"fmus.{fmu.name}.parameters.{key}: the FMU has no parameter {key!r}")
+    fmus = []
+    try:
+        for name, spec in scenario.fmus.items():
+            fmu = FmuComponent(name, fmu_files.get(name) or _fmu_file(name, spec))
+            fmus.append(fmu)
+            fmu.instantiate()  # a file that cannot run is refused now, before anything is written
+            _check_fmu_file(scenario, fmu)
+    except FmuError as exc:
+        for fmu in fmus:
+            fmu.close()
+        raise fmu_error_in_scenario(scenario, exc) from None
+    except ScenarioError:
+        for fmu in fmus:
+            fmu.close()
+        raise
     python = []
     if scenario.trajectory is not None:
         params = {k: float(v) for k, v in scenario.trajectory.items() if k != "kind"}

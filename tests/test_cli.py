@@ -2,10 +2,14 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
-from cosim.cli import main
+from cosim.cli import EXIT_BAD_INPUT, EXIT_RUN_FAILED, main
 from cosim.recorder import read_results
 
 
@@ -28,7 +32,7 @@ def test_run_writes_results_plots_and_summary(tmp_path, capsys):
 
 def test_bad_scenario_value_exits_with_its_message(tmp_path, capsys):
     code = main(["run", "circles", "--set", "simulation.step=-0.01", "--out", str(tmp_path), "--quiet"])
-    assert code == 1
+    assert code == EXIT_BAD_INPUT
     assert "fnn-cosim: error: simulation.step = -0.01: must be positive" in capsys.readouterr().err
 
 
@@ -36,7 +40,7 @@ def test_divergence_exits_nonzero_and_keeps_the_partial_csv(tmp_path, capsys):
     out = tmp_path / "div"
     code = main(["run", "circles", "--set", 'envelope={ "Quadrotor.z" = [-15.2, -14.8] }',
                  "--set", "simulation.duration=10.0", "--out", str(out), "--quiet", "--no-plots"])
-    assert code == 1
+    assert code == EXIT_RUN_FAILED
     err = capsys.readouterr().err
     assert "diverged at t = " in err and "Quadrotor.z = " in err and "outside its envelope [-15.2, -14.8]" in err
     summary = json.loads((out / "summary.json").read_text())
@@ -59,3 +63,31 @@ def test_build_fmu_prints_one_path_per_fmu(tmp_path, capsys):
     paths = capsys.readouterr().out.split()
     assert len(paths) == len(MODELS) * len(FMI_VERSIONS)
     assert all(p.endswith(".fmu") and (tmp_path / p).exists() for p in paths)
+
+
+HEAVY_MODULES = ("control", "scipy.signal", "matplotlib")
+
+
+def _imported_modules(*argv: str, cwd) -> tuple[subprocess.CompletedProcess, set[str]]:
+    """Run the ``fnn-cosim`` entry point in a fresh interpreter and return
+    every module it imported (Python's own ``-X importtime`` listing)."""
+    script = Path(sys.executable).with_name("fnn-cosim")
+    command = [str(script)] if script.exists() else [sys.executable, "-m", "cosim.cli"]
+    env = {**os.environ, "PYTHONPROFILEIMPORTTIME": "1"}
+    proc = subprocess.run(command + list(argv), capture_output=True, text=True, env=env, cwd=cwd)
+    modules = {line.rsplit("|", 1)[1].strip() for line in proc.stderr.splitlines()
+               if line.startswith("import time:") and line.count("|") == 2}
+    return proc, modules - {"imported package"}
+
+
+@pytest.mark.parametrize("argv", [("--help",), ("run", "circles", "--no-plots", "--quiet",
+                                                "--set", "simulation.duration=0.5")])
+def test_the_command_line_loads_no_analysis_or_plotting_library_it_does_not_use(tmp_path, argv):
+    if argv[0] == "run":
+        argv += ("--out", str(tmp_path / "run"))
+    proc, modules = _imported_modules(*argv, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "cosim.cli" in modules
+    if argv[0] == "run":
+        assert {"fmpy", "casadi", "fnn_controller"} <= modules  # the listing sees what the run used
+    assert not modules & set(HEAVY_MODULES), sorted(modules & set(HEAVY_MODULES))

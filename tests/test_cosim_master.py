@@ -8,7 +8,6 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import numpy as np
@@ -222,44 +221,62 @@ def test_exception_mid_run_keeps_the_rows_before_it(fmus, tmp_path):
 
 def test_fmu_error_is_reported_with_the_fmu_log(fmus):
     master = _master(fmus)
-    with pytest.raises(FmuCallError, match=r"Quadrotor: initialization with .* failed .*m = -1 refused"):
+    with pytest.raises(FmuCallError, match=r"Quadrotor \(.*Quadrotor.fmu\): setting parameter m = -1.0 failed "
+                                           r".*FMU log: \[ERROR\] m = -1 refused") as refused:
         master.run(0.1, parameters={"Quadrotor.m": -1.0})
-    master.run(0.1)  # the instance is still usable
+    assert (refused.value.variable, refused.value.value) == ("m", -1.0)
+    assert refused.value.log.startswith("[ERROR] m = -1 refused")
+    assert master.run(0.1).status == "ok"  # the instance is still usable
+
+
+def test_a_refused_start_raises_even_where_run_failures_are_returned(fmus, tmp_path):
+    """Nothing ran, so there is no result to return: the refusal is raised, and
+    the results file that was opened says why."""
+    master = _master(fmus)
+    csv = tmp_path / "refused.csv"
+    with pytest.raises(FmuCallError, match="m = -1 refused"):
+        master.run(0.1, parameters={"Quadrotor.m": -1.0}, csv_path=csv, raise_on_error=False)
+    sidecar = sidecar_path(csv).read_text()
+    assert '"status": "failed"' in sidecar and "could not start" in sidecar and "m = -1 refused" in sidecar
+    assert read_results(csv)[1].shape[0] == 0
 
 
 def test_killed_run_leaves_a_readable_partial_result(tmp_path, fmu_paths):
-    """SIGKILL mid-run: the CSV holds every flushed block and reads back."""
+    """SIGKILL mid-run: the CSV holds every flushed block and reads back.
+
+    The child's stand-in controller, once four blocks of 10 rows are flushed
+    (step 45), says so on stdout and waits on stdin; it is killed right then,
+    so the test races no clock."""
     csv = tmp_path / "killed.csv"
     script = textwrap.dedent(f"""
-        import sys, time
+        import sys
         sys.path.insert(0, {str(Path(__file__).parent)!r})
         from test_cosim_master import ConstantRotors, _master
         from cosim.fmu import FmuComponent
 
-        class Slow(ConstantRotors):
+        class WaitsToBeKilled(ConstantRotors):
             def step(self, n, t, u):
-                time.sleep(0.002)
+                if n == 45:
+                    print("flushed", flush=True)
+                    sys.stdin.readline()
                 return self.y
 
         fmus = [FmuComponent("Quadrotor", {str(fmu_paths['Quadrotor'])!r}),
                 FmuComponent("WindGust", {str(fmu_paths['WindGust'])!r})]
-        _master(fmus, Slow()).run(100.0, csv_path={str(csv)!r}, block_rows=10)
+        _master(fmus, WaitsToBeKilled()).run(100.0, csv_path={str(csv)!r}, block_rows=10)
     """)
-    proc = subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parents[1])
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parents[1],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            if csv.exists() and csv.read_text().count("\n") > 40:
-                break
-            assert proc.poll() is None, "the run ended before it could be killed"
-            time.sleep(0.05)
-        else:
-            pytest.fail("no rows were streamed within 60 s")
+        said = proc.stdout.readline()  # blocks until step 45, or returns "" if the child ended
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
+        proc.stdin.close()
+        proc.stdout.close()
+    assert said == "flushed\n", "the run ended before it could be killed"
     columns, data = read_results(csv)
-    assert columns[0] == "time" and len(data) >= 40 and len(data) % 10 == 0
+    assert columns[0] == "time" and len(data) == 40  # rows 0..39, four blocks of 10; row 40.. unflushed
     np.testing.assert_allclose(data[:, 0], 0.01 * np.arange(len(data)))
     assert '"status": "running"' in sidecar_path(csv).read_text()
 
