@@ -34,7 +34,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     script = Path(sys.executable).with_name("fnn-cosim")
-    cli = [str(script), "--help"] if script.exists() else [sys.executable, "-m", "cosim.cli", "--help"]
+    cli = [str(script), "--help"] if script.exists() else [sys.executable, "-m", "quadrotor_paper.cli", "--help"]
     reference = [sys.executable, "-c", "import numpy, casadi, fmpy"]
     _wall(cli), _wall(reference)  # warm the file cache
     times: dict[str, list[float]] = {"cli": [], "reference": []}

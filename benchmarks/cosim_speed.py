@@ -52,8 +52,9 @@ def main(argv=None) -> int:
 
     import fmpy
 
-    from cosim.experiments import VARIANTS, Job, sweep
-    from cosim.scenario import _fmu_file, build_master, load_scenario
+    import quadrotor_paper  # noqa: F401  (registers the paper's scenarios)
+    from quadrotor_paper.experiments import VARIANTS, Job, sweep
+    from cosim.scenario import build_master, fmu_file, load_scenario
 
     scenario = load_scenario("circles", {"controller.variant": "pd+lm", "wind.speed": 3.0})
     n_steps = int(round(scenario.duration / scenario.step))
@@ -74,7 +75,7 @@ def main(argv=None) -> int:
     figures["per_step_us"] = per_step
     figures["per_step_us"]["total"] = med_mem / n_steps * 1e6
 
-    plant = str(_fmu_file("Quadrotor", scenario.fmus["Quadrotor"]))
+    plant = str(fmu_file(scenario.fmus["Quadrotor"]))
     fmpy_times = []
     for _ in range(max(3, args.repeats // 2)):
         t = time.perf_counter()

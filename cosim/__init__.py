@@ -1,6 +1,10 @@
-"""Fixed-step co-simulation of FMUs (FMI 2.0 / 3.0 through fmpy) and Python
-components, with the paper's missions as TOML scenarios and the ``fnn-cosim``
-command line. See ``docs/cosim.md``; the entry points are
-:func:`cosim.scenario.load_scenario`, :func:`cosim.scenario.build_master` and
-:class:`cosim.master.Master`.
+"""A fixed-step co-simulation engine: FMUs (FMI 2.0 / 3.0 through fmpy) and
+Python components, joined by checked connections, recorded as they run,
+guarded against divergence, described by TOML scenarios.
+
+The engine knows no model and no mission: component kinds, scenario sections,
+models built on demand and shipped scenarios are registered by the packages
+that provide them (:mod:`cosim.registry`). Entry points:
+:func:`cosim.scenario.load_scenario`, :func:`cosim.scenario.build_master`,
+:class:`cosim.master.Master`. See ``docs/cosim.md``.
 """

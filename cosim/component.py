@@ -48,7 +48,7 @@ def ports(*spec: tuple[str, str | None] | str) -> tuple[Port, ...]:
 
 
 class PythonComponent:
-    """Base class of the Python components (controller adapter, reference).
+    """Base class of the Python components (controllers, references, sensors, ...).
 
     Subclasses set ``inputs`` and ``outputs`` (tuples of :class:`Port`) and
     implement :meth:`step`; they may override :meth:`start` and

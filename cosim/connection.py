@@ -1,8 +1,8 @@
 """Connections between components, declared by variable name, and their check.
 
 A connection is written ``"Source.variable -> Destination.variable"``, e.g.
-``"WindGust.v_wind_x -> Quadrotor.wind_x"``. One brace group per side expands
-pairwise, so ``"Quadrotor.{x,y,z} -> controller.{x,y,z}"`` is three
+``"Source.y -> Plant.u"``. One brace group per side expands
+pairwise, so ``"Plant.{x,y,z} -> controller.{x,y,z}"`` is three
 connections.
 
 :func:`check_connections` runs before the first step and refuses, with a

@@ -7,7 +7,7 @@ Algorithm (stated in full in ``docs/cosim.md``): communication points
    each step);
 2. the Python components are evaluated in topological order of their mutual
    connections (a sampled-data block may have direct feedthrough: the
-   controller's rotor speeds at ``t_n`` depend on the plant state at ``t_n``);
+   a controller's command at ``t_n`` may depend on the plant state at ``t_n``);
    a cycle among them is refused before the first step;
 3. the recorded signals at ``t_n`` are stored (and streamed in blocks), and
    the guard checks every signal (finite, inside its envelope);

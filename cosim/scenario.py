@@ -1,6 +1,9 @@
 """Scenarios: TOML files describing a co-simulation, validated before anything runs.
 
-Schema (every key optional unless marked; units SI; see ``docs/cosim.md``)::
+The engine reads the generic sections; every other top-level table is either
+an alias of a registered component kind or a registered section
+(:mod:`cosim.registry`). Schema (every key optional unless marked; units SI;
+see ``docs/cosim.md``)::
 
     name = "circles"                     # str, default: the file name
     description = "..."                  # str
@@ -9,49 +12,33 @@ Schema (every key optional unless marked; units SI; see ``docs/cosim.md``)::
     [simulation]
     duration = 50.0                      # s, > 0, a whole number of steps
     step = 0.01                          # s, > 0
-    seed = 0                             # int >= 0: the controller's f_ij(0)
+    seed = 0                             # int >= 0: passed to every component's start()
     start_time = 0.0                     # s
 
     [fmus.<Name>]                        # one table per FMU instance, at least one
-    model = "Quadrotor"                  # a model of fmu_models.catalog (built on demand), or
+    model = "Plant"                      # a registered model (built on demand), or
     path = "other.fmu"                   #   an FMU file (relative to the scenario file)
-    fmi_version = 2                      # 2 or 3: the version built (catalog models, default 2) or the
+    fmi_version = 2                      # 2 or 3: the version built (models, default 2) or the
                                          #   version the file must have (FMU files, default: any)
-    parameters = { z_0 = -15.0 }         # checked against the model's variables and ranges
+    parameters = { x_0 = 1.0 }           # checked against the model's variables and ranges
 
-    [wind]                               # shorthand for the WindGust FMU's parameters
-    fmu = "WindGust"                     # the instance it configures
-    speed = 3.0                          # m/s            -> v_w
-    direction = [-1.0, -1.0, 0.0]        # 1, non-zero    -> dir_x, dir_y, dir_z
-    switch_times = [17.0, 34.0]          # s, increasing  -> t_switch_1, t_switch_2
-    ramp_time = 0.0                      # s              -> ramp_time
-    turbulence = 0.0                     # m/s RMS        -> turbulence
-    turbulence_seed = 0                  # int            -> turbulence_seed
+    [components.<name>]                  # a Python component
+    kind = "step_source"                 # a registered component kind, or
+    factory = "package.module:callable"  #   any callable (name=<name>, **parameters)
+    amplitude = 1.0                      # every other key is a parameter of the component
 
-    [trajectory]                         # the Python component "reference"
-    kind = "two_circles"                 # hover | two_circles | figure_eight
-    radius = 10.0                        # ... the parameters of that kind
+    [<alias>]                            # a registered kind's short section (e.g. [source] for
+                                         #   [components.source]); its `kind` key picks among
+                                         #   the kinds sharing the alias
 
-    [controller]                         # the Python component "controller"
-    variant = "pd+lm"                    # pd | pd+smc | pd+lm
-    psi_ref = 0.0                        # rad
-    [controller.position]                # fnn_controller.PositionParams fields (kp, kd, ...)
-    [controller.geometric]               # fnn_controller.GeometricParams fields (k_v, ...)
-
-    [components.<name>]                  # any other Python component
-    factory = "package.module:Class"     # called with name=<name> and **parameters
-    parameters = { ... }
+    [<section>]                          # a registered section (e.g. one that sets FMU parameters)
 
     [record]
-    signals = ["Quadrotor.x", ...]       # what the results CSV holds (after time)
+    signals = ["Plant.x", ...]           # what the results CSV holds (after time)
     block_rows = 100                     # rows per flushed block
 
     [envelope]                           # divergence bounds, [low, high] per signal
-    "Quadrotor.phi" = [-1.4, 1.4]
-
-    [metrics]                            # what the summary computes (optional)
-    position = ["Quadrotor.x", "Quadrotor.y", "Quadrotor.z"]
-    reference = ["reference.x", "reference.y", "reference.z"]
+    "Plant.x" = [-10.0, 10.0]
 
 Errors are :class:`~cosim.errors.ScenarioError` naming the key and value.
 """
@@ -59,34 +46,33 @@ from __future__ import annotations
 
 import copy
 import importlib
-import math
 import tomllib
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
+from . import registry
 from .config import check_number
-from .errors import ScenarioError
+from .errors import FmuError, ScenarioError
 
 __all__ = ["Scenario", "load_scenario", "parse_scenario", "shipped_scenarios", "scenario_path",
-           "apply_overrides", "build_master", "fmu_error_in_scenario", "WIND_KEYS"]
+           "apply_overrides", "build_master", "fmu_file", "fmu_error_in_scenario", "check_fmu_parameters",
+           "table", "string", "strings", "refuse_unknown"]
 
-_TOP = {"name", "description", "connections", "simulation", "fmus", "wind", "trajectory", "controller",
-        "components", "record", "envelope", "metrics"}
+GENERIC = ("name", "description", "connections", "simulation", "fmus", "components", "record", "envelope")
 _SIMULATION = {"duration", "step", "seed", "start_time"}
 _FMU = {"model", "path", "fmi_version", "parameters"}
-WIND_KEYS = {"speed": "v_w", "ramp_time": "ramp_time", "turbulence": "turbulence",
-             "turbulence_seed": "turbulence_seed"}
-_WIND = {"fmu", "direction", "switch_times", *WIND_KEYS}
-_CONTROLLER = {"variant", "psi_ref", "position", "geometric"}
 _RECORD = {"signals", "block_rows"}
-_METRICS = {"position", "reference"}
 
 
 @dataclass
 class Scenario:
-    """A validated scenario (plain data; :func:`build_master` makes it runnable)."""
+    """A validated scenario (plain data; :func:`build_master` makes it runnable).
+
+    ``fmus``: instance -> ``{"model" | "path", "fmi_version", "parameters"}``;
+    ``components``: instance -> ``{"kind" | "factory", "parameters"}``;
+    ``sections``: the value each registered section's parser returned.
+    """
 
     name: str
     description: str
@@ -94,46 +80,43 @@ class Scenario:
     step: float
     seed: int
     start_time: float
-    fmus: dict[str, dict[str, Any]]  # name -> {"model" | "path", "fmi_version", "parameters"}
-    connections: list[str]
-    trajectory: dict[str, Any] | None
-    controller: dict[str, Any] | None
+    fmus: dict[str, dict[str, Any]]
     components: dict[str, dict[str, Any]]
+    connections: list[str]
     record: list[str]
     block_rows: int
     envelope: dict[str, tuple[float, float]]
-    position_signals: list[str]
-    reference_signals: list[str]
-    wind_fmu: str | None = None
+    sections: dict[str, Any] = field(default_factory=dict)
     source: Path | None = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
-    def wind_parameter(self, key: str = "speed") -> str:
-        """The run-level parameter name (``Fmu.var``) of a ``[wind]`` key."""
-        if self.wind_fmu is None:
-            raise ScenarioError(f"scenario {self.name!r} has no [wind] section")
-        return f"{self.wind_fmu}.{WIND_KEYS[key]}"
+    @property
+    def n_steps(self) -> int:
+        return int(round(self.duration / self.step))
 
 
-def _unknown(where: str, table: Mapping[str, Any], known: set[str]) -> None:
-    extra = sorted(set(table) - known)
+# ---- small validators, shared with the sections of applications ---------------------
+
+def refuse_unknown(where: str, values: Mapping[str, Any], known) -> None:
+    """Refuse the first key of ``values`` not in ``known``; ``where`` ends with a dot (or is empty)."""
+    extra = sorted(set(values) - set(known))
     if extra:
         raise ScenarioError(f"{where}{extra[0]}: unknown key; known keys: {', '.join(sorted(known))}")
 
 
-def _table(where: str, value: Any) -> dict[str, Any]:
+def table(where: str, value: Any) -> dict[str, Any]:
     if not isinstance(value, Mapping):
         raise ScenarioError(f"{where} = {value!r}: expected a table")
     return dict(value)
 
 
-def _string(where: str, value: Any) -> str:
+def string(where: str, value: Any) -> str:
     if not isinstance(value, str):
         raise ScenarioError(f"{where} = {value!r}: expected a string")
     return value
 
 
-def _strings(where: str, value: Any) -> list[str]:
+def strings(where: str, value: Any) -> list[str]:
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
         raise ScenarioError(f"{where} = {value!r}: expected a list of strings")
     return list(value)
@@ -154,197 +137,182 @@ def apply_overrides(raw: dict[str, Any], overrides: Mapping[str, Any]) -> dict[s
     return out
 
 
-def _check_fmu_parameters(where: str, model_name: str, params: dict[str, Any]) -> None:
-    from fmu_models.catalog import MODELS
-
-    model = MODELS[model_name]
+def check_fmu_parameters(where: str, fmu: Mapping[str, Any], params: Mapping[str, Any]) -> None:
+    """Every value a finite number; for a registered model, a known parameter
+    or input in its range (an FMU file is checked when it is read)."""
     for key, value in params.items():
         check_number(f"{where}.{key}", value)
+    model = registry.fmu_models().get(fmu.get("model"))
+    if model is None or model.check_parameter is None:
+        return
+    for key, value in params.items():
         try:
-            var = model.variable(key)
-        except KeyError:
-            known = ", ".join(v.name for v in model.parameters + model.inputs)
-            raise ScenarioError(f"{where}.{key}: {model_name} has no parameter {key!r}; "
-                                f"parameters and inputs: {known}") from None
-        if var.causality not in ("parameter", "input"):
-            raise ScenarioError(f"{where}.{key}: {key!r} is a{'n' if var.causality[0] in 'aeiou' else ''} "
-                                f"{var.causality} of {model_name}, not a parameter")
-        try:
-            var.check(float(value))
+            model.check_parameter(key, float(value))
+        except KeyError as exc:
+            raise ScenarioError(f"{where}.{key}: {exc.args[0]}") from None
         except ValueError as exc:
             raise ScenarioError(f"{where}.{key}: {exc}") from None
 
 
-def parse_scenario(raw: Mapping[str, Any], source: Path | None = None, name: str | None = None) -> Scenario:
-    """Validate a scenario given as a mapping (a parsed TOML document)."""
-    from fmu_models.catalog import MODELS
+# ---- one parser per generic section -------------------------------------------------
 
-    raw = dict(raw)
-    _unknown("", raw, _TOP)
-    sim = _table("simulation", raw.get("simulation", {}))
-    _unknown("simulation.", sim, _SIMULATION)
+def _parse_simulation(raw: Mapping[str, Any]) -> dict[str, Any]:
+    sim = table("simulation", raw.get("simulation", {}))
+    refuse_unknown("simulation.", sim, _SIMULATION)
     duration = float(check_number("simulation.duration", sim.get("duration", 50.0), positive=True))
     step = float(check_number("simulation.step", sim.get("step", 0.01), positive=True))
     n = round(duration / step)
     if n < 1 or abs(n * step - duration) > 1e-9 * max(1.0, duration):
         raise ScenarioError(f"simulation.duration = {duration!r}: not a whole number of steps of {step!r} s")
-    seed = check_number("simulation.seed", sim.get("seed", 0), integer=True, nonnegative=True)
-    start_time = float(check_number("simulation.start_time", sim.get("start_time", 0.0)))
+    return {"duration": duration, "step": step,
+            "seed": check_number("simulation.seed", sim.get("seed", 0), integer=True, nonnegative=True),
+            "start_time": float(check_number("simulation.start_time", sim.get("start_time", 0.0)))}
 
-    fmus_raw = _table("fmus", raw.get("fmus", {}))
+
+def _parse_fmu(where: str, spec: Any, source: Path | None) -> dict[str, Any]:
+    spec = table(where, spec)
+    refuse_unknown(where + ".", spec, _FMU)
+    if ("model" in spec) == ("path" in spec):
+        raise ScenarioError(f"{where}: give exactly one of 'model' (a registered model) or 'path' (an FMU file)")
+    # A registered model is built in the version asked (2 by default); an FMU
+    # file is what it is, and a version given for it must match (checked
+    # when the file is read, in build_master).
+    version = spec.get("fmi_version", 2 if "model" in spec else None)
+    if version is not None:
+        check_number(f"{where}.fmi_version", version, integer=True)
+        if version not in (2, 3):
+            raise ScenarioError(f"{where}.fmi_version = {version!r}: expected 2 or 3")
+    entry: dict[str, Any] = {"fmi_version": version, "parameters": table(f"{where}.parameters",
+                                                                         spec.get("parameters", {}))}
+    if "model" in spec:
+        entry["model"] = string(f"{where}.model", spec["model"])
+        models = registry.fmu_models()
+        if entry["model"] not in models:
+            raise ScenarioError(f"{where}.model = {entry['model']!r}: unknown model; known: "
+                                f"{', '.join(sorted(models)) or '(none registered)'}")
+    else:
+        path = Path(string(f"{where}.path", spec["path"]))
+        if not path.is_absolute() and source is not None:
+            path = source.parent / path
+        if not path.exists():
+            raise ScenarioError(f"{where}.path = {spec['path']!r}: no such file ({path})")
+        entry["path"] = path
+    check_fmu_parameters(f"{where}.parameters", entry, entry["parameters"])
+    return entry
+
+
+def _parse_fmus(raw: Mapping[str, Any], source: Path | None) -> dict[str, dict[str, Any]]:
+    fmus_raw = table("fmus", raw.get("fmus", {}))
     if not fmus_raw:
         raise ScenarioError("fmus: at least one [fmus.<Name>] table is required")
-    fmus: dict[str, dict[str, Any]] = {}
-    for inst, spec in fmus_raw.items():
-        where = f"fmus.{inst}"
-        spec = _table(where, spec)
-        _unknown(where + ".", spec, _FMU)
-        if ("model" in spec) == ("path" in spec):
-            raise ScenarioError(f"{where}: give exactly one of 'model' (a catalog model) or 'path' (an FMU file)")
-        # A catalog model is built in the version asked (2 by default); an FMU
-        # file is what it is, and a version given for it must match (checked
-        # when the file is read, in build_master).
-        version = spec.get("fmi_version", 2 if "model" in spec else None)
-        if version is not None:
-            check_number(f"{where}.fmi_version", version, integer=True)
-            if version not in (2, 3):
-                raise ScenarioError(f"{where}.fmi_version = {version!r}: expected 2 or 3")
-        params = _table(f"{where}.parameters", spec.get("parameters", {}))
-        entry: dict[str, Any] = {"fmi_version": version, "parameters": params}
-        if "model" in spec:
-            model = _string(f"{where}.model", spec["model"])
-            if model not in MODELS:
-                raise ScenarioError(f"{where}.model = {model!r}: unknown model; known: {', '.join(sorted(MODELS))}")
-            _check_fmu_parameters(f"{where}.parameters", model, params)
-            entry["model"] = model
+    return {inst: _parse_fmu(f"fmus.{inst}", spec, source) for inst, spec in fmus_raw.items()}
+
+
+def _component(where: str, kind_name: str, parameters: dict[str, Any]) -> dict[str, Any]:
+    kinds = registry.component_kinds()
+    kind = kinds.get(kind_name)
+    if kind is None:
+        raise ScenarioError(f"{where}.kind = {kind_name!r}: unknown component kind; known: "
+                            f"{', '.join(sorted(kinds)) or '(none registered)'}")
+    if kind.check is not None:
+        kind.check(where, parameters)
+    return {"kind": kind_name, "parameters": parameters}
+
+
+def _parse_alias(section: str, value: Any) -> tuple[str, dict[str, Any]]:
+    """``[alias]`` -> (instance name, component entry)."""
+    kinds = registry.aliases()[section]
+    params = table(section, value)
+    if "kind" in params or len(kinds) > 1:
+        choice = string(f"{section}.kind", params.pop("kind", ""))
+        names = [k.name for k in kinds]
+        if choice not in names:
+            raise ScenarioError(f"{section}.kind = {choice!r}: expected one of {', '.join(names)}")
+        kind = kinds[names.index(choice)]
+    else:
+        kind = kinds[0]
+    return kind.instance or section, _component(section, kind.name, params)
+
+
+def _parse_components(raw: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    components: dict[str, dict[str, Any]] = {}
+    for section in registry.aliases():
+        if section in raw:
+            name, entry = _parse_alias(section, raw[section])
+            components[name] = entry
+    for name, spec in table("components", raw.get("components", {})).items():
+        where = f"components.{name}"
+        spec = table(where, spec)
+        if name in components:
+            raise ScenarioError(f"{where}: a component of that name is already given by its short section")
+        if ("kind" in spec) == ("factory" in spec):
+            raise ScenarioError(f"{where}: give exactly one of 'kind' (a registered component kind) or "
+                                f"'factory' ('package.module:callable')")
+        params = {k: v for k, v in spec.items() if k not in ("kind", "factory")}
+        if "kind" in spec:
+            components[name] = _component(where, string(f"{where}.kind", spec["kind"]), params)
         else:
-            path = Path(_string(f"{where}.path", spec["path"]))
-            if not path.is_absolute() and source is not None:
-                path = source.parent / path
-            if not path.exists():
-                raise ScenarioError(f"{where}.path = {spec['path']!r}: no such file ({path})")
-            for key, value in params.items():
-                check_number(f"{where}.parameters.{key}", value)
-            entry["path"] = path
-        fmus[inst] = entry
+            factory = string(f"{where}.factory", spec["factory"])
+            if factory.count(":") != 1:
+                raise ScenarioError(f"{where}.factory = {factory!r}: expected 'package.module:callable'")
+            components[name] = {"factory": factory, "parameters": params}
+    return components
 
-    wind_fmu = None
-    if "wind" in raw:
-        wind = _table("wind", raw["wind"])
-        _unknown("wind.", wind, _WIND)
-        wind_fmu = _string("wind.fmu", wind.get("fmu", "WindGust"))
-        if wind_fmu not in fmus:
-            raise ScenarioError(f"wind.fmu = {wind_fmu!r}: no such FMU in [fmus]; FMUs: {', '.join(fmus)}")
-        params = fmus[wind_fmu]["parameters"]
-        for key, target in WIND_KEYS.items():
-            if key in wind:
-                params[target] = check_number(f"wind.{key}", wind[key], nonnegative=True,
-                                              integer=key == "turbulence_seed")
-        if "direction" in wind:
-            d = wind["direction"]
-            if not isinstance(d, list) or len(d) != 3:
-                raise ScenarioError(f"wind.direction = {d!r}: expected a list of 3 numbers")
-            d = [check_number(f"wind.direction[{i}]", v) for i, v in enumerate(d)]
-            if math.hypot(*d) == 0:
-                raise ScenarioError(f"wind.direction = {d!r}: must not be the zero vector")
-            params.update(dir_x=d[0], dir_y=d[1], dir_z=d[2])
-        if "switch_times" in wind:
-            s = wind["switch_times"]
-            if not isinstance(s, list) or len(s) != 2:
-                raise ScenarioError(f"wind.switch_times = {s!r}: expected a list of 2 times (s)")
-            s = [check_number(f"wind.switch_times[{i}]", v, nonnegative=True) for i, v in enumerate(s)]
-            if s[1] < s[0]:
-                raise ScenarioError(f"wind.switch_times = {s!r}: the second switch must not come before the first")
-            params.update(t_switch_1=s[0], t_switch_2=s[1])
-        if "model" in fmus[wind_fmu]:
-            _check_fmu_parameters(f"fmus.{wind_fmu}.parameters (from [wind])", fmus[wind_fmu]["model"], params)
 
-    trajectory = None
-    if "trajectory" in raw:
-        from .trajectory import TRAJECTORIES
+def _parse_record(raw: Mapping[str, Any]) -> tuple[list[str], int]:
+    rec = table("record", raw.get("record", {}))
+    refuse_unknown("record.", rec, _RECORD)
+    return (strings("record.signals", rec.get("signals", [])),
+            check_number("record.block_rows", rec.get("block_rows", 100), integer=True, positive=True))
 
-        trajectory = _table("trajectory", raw["trajectory"])
-        kind = _string("trajectory.kind", trajectory.get("kind", ""))
-        if kind not in TRAJECTORIES:
-            raise ScenarioError(f"trajectory.kind = {kind!r}: expected one of {', '.join(TRAJECTORIES)}")
-        from dataclasses import fields
 
-        known = {f.name for f in fields(TRAJECTORIES[kind])}
-        _unknown("trajectory.", {k: v for k, v in trajectory.items() if k != "kind"}, known)
-        for key, value in trajectory.items():
-            if key != "kind":
-                check_number(f"trajectory.{key}", value)
-        try:
-            TRAJECTORIES[kind](**{k: float(v) for k, v in trajectory.items() if k != "kind"})
-        except ValueError as exc:
-            raise ScenarioError(f"trajectory: {exc}") from None
-
-    controller = None
-    if "controller" in raw:
-        controller = _table("controller", raw["controller"])
-        _unknown("controller.", controller, _CONTROLLER)
-        from .controller import ControllerComponent
-
-        # builds the parameter dataclasses: every gain is checked here
-        for key in ("position", "geometric"):
-            _table(f"controller.{key}", controller.get(key, {}))
-        ControllerComponent(controller.get("variant", "pd+lm"), controller.get("position"),
-                            controller.get("geometric"),
-                            float(check_number("controller.psi_ref", controller.get("psi_ref", 0.0))))
-
-    components = {}
-    for cname, spec in _table("components", raw.get("components", {})).items():
-        spec = _table(f"components.{cname}", spec)
-        _unknown(f"components.{cname}.", spec, {"factory", "parameters"})
-        factory = _string(f"components.{cname}.factory", spec.get("factory"))
-        if factory.count(":") != 1:
-            raise ScenarioError(f"components.{cname}.factory = {factory!r}: expected 'package.module:callable'")
-        components[cname] = {"factory": factory,
-                             "parameters": _table(f"components.{cname}.parameters", spec.get("parameters", {}))}
-
-    if "connections" not in raw:
-        raise ScenarioError("connections: required (a list of 'A.out -> B.in' strings)")
-    connections = _strings("connections", raw["connections"])
-
-    rec = _table("record", raw.get("record", {}))
-    _unknown("record.", rec, _RECORD)
-    record = _strings("record.signals", rec.get("signals", []))
-    block_rows = check_number("record.block_rows", rec.get("block_rows", 100), integer=True, positive=True)
-
+def _parse_envelope(raw: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
     envelope = {}
-    for signal, bounds in _table("envelope", raw.get("envelope", {})).items():
+    for signal, bounds in table("envelope", raw.get("envelope", {})).items():
         if not isinstance(bounds, list) or len(bounds) != 2:
             raise ScenarioError(f"envelope.{signal} = {bounds!r}: expected [low, high]")
         low, high = (float(check_number(f"envelope.{signal}[{i}]", b)) for i, b in enumerate(bounds))
         if not low < high:
             raise ScenarioError(f"envelope.{signal} = {bounds!r}: low must be below high")
         envelope[signal] = (low, high)
+    return envelope
 
-    metrics = _table("metrics", raw.get("metrics", {}))
-    _unknown("metrics.", metrics, _METRICS)
-    position = _strings("metrics.position", metrics.get("position", []))
-    reference = _strings("metrics.reference", metrics.get("reference", []))
-    if len(position) != len(reference):
-        raise ScenarioError(f"metrics: position has {len(position)} signals but reference has {len(reference)}")
 
+def parse_scenario(raw: Mapping[str, Any], source: Path | None = None, name: str | None = None) -> Scenario:
+    """Validate a scenario given as a mapping (a parsed TOML document)."""
+    raw = dict(raw)
+    extra_sections = registry.sections()
+    refuse_unknown("", raw, set(GENERIC) | set(registry.aliases()) | set(extra_sections))
+    simulation = _parse_simulation(raw)
+    fmus = _parse_fmus(raw, source)
+    sections = {key: section.parse(key, table(key, raw[key]), fmus)
+                for key, section in extra_sections.items() if key in raw}
+    components = _parse_components(raw)
+    if "connections" not in raw:
+        raise ScenarioError("connections: required (a list of 'A.out -> B.in' strings)")
+    record, block_rows = _parse_record(raw)
     name = raw.get("name", name or (source.stem if source else "scenario"))
     return Scenario(
-        name=_string("name", name), description=_string("description", raw.get("description", "")),
-        duration=duration, step=step, seed=seed, start_time=start_time, fmus=fmus, connections=connections,
-        trajectory=trajectory, controller=controller, components=components, record=record,
-        block_rows=block_rows, envelope=envelope, position_signals=position, reference_signals=reference,
-        wind_fmu=wind_fmu, source=source, raw=copy.deepcopy(raw),
+        name=string("name", name), description=string("description", raw.get("description", "")),
+        **simulation, fmus=fmus, components=components, connections=strings("connections", raw["connections"]),
+        record=record, block_rows=block_rows, envelope=_parse_envelope(raw), sections=sections, source=source,
+        raw=copy.deepcopy(raw),
     )
 
 
+# ---- files ----------------------------------------------------------------------------
+
 def shipped_scenarios() -> dict[str, Path]:
-    """The scenarios shipped in ``cosim/scenarios``, by name."""
-    root = resources.files("cosim") / "scenarios"
-    return {Path(str(p)).stem: Path(str(p)) for p in root.iterdir() if str(p).endswith(".toml")}
+    """The scenarios of the registered folders, by name."""
+    out: dict[str, Path] = {}
+    for folder in registry.scenario_folders():
+        for path in sorted(folder.glob("*.toml")):
+            out.setdefault(path.stem, path)
+    return out
 
 
 def scenario_path(name_or_path: str | Path) -> Path:
-    """A path as given, or the shipped scenario of that name."""
+    """A path as given, or the registered scenario of that name."""
     path = Path(name_or_path)
     if path.exists():
         return path
@@ -365,13 +333,13 @@ def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None 
     return parse_scenario(apply_overrides(raw, overrides or {}), source=path)
 
 
-def _fmu_file(name: str, spec: Mapping[str, Any]) -> Path:
+# ---- from scenario to master ---------------------------------------------------------------
+
+def fmu_file(spec: Mapping[str, Any]) -> Path:
+    """The FMU file of an ``[fmus.X]`` entry (a registered model is built on demand)."""
     if "path" in spec:
         return Path(spec["path"])
-    from fmu_models.build import cached_fmu
-    from fmu_models.catalog import MODELS
-
-    return cached_fmu(MODELS[spec["model"]], spec["fmi_version"])
+    return registry.fmu_models()[spec["model"]].build(spec["fmi_version"])
 
 
 def _check_fmu_file(scenario: Scenario, fmu) -> None:
@@ -388,7 +356,7 @@ def _check_fmu_file(scenario: Scenario, fmu) -> None:
             raise ScenarioError(f"fmus.{fmu.name}.parameters.{key}: the FMU file {fmu.path} has no parameter {key!r}")
 
 
-def fmu_error_in_scenario(scenario: Scenario, exc) -> ScenarioError:
+def fmu_error_in_scenario(scenario: Scenario, exc: FmuError) -> ScenarioError:
     """An :class:`~cosim.errors.FmuError` told in the scenario's words: the
     key that brought the FMU (or the parameter it refused), the file, the cause."""
     spec = scenario.fmus.get(exc.instance, {})
@@ -401,23 +369,13 @@ def fmu_error_in_scenario(scenario: Scenario, exc) -> ScenarioError:
     return ScenarioError(f"fmus.{exc.instance}.path = {str(exc.path)!r}: {exc.reason}")
 
 
-def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None):
-    """A :class:`~cosim.master.Master` for ``scenario`` (FMUs built on demand).
-
-    ``fmu_files`` may give, per instance, an FMU file or an extracted FMU
-    directory to use instead (the sweeps extract once and share it).
-    """
-    from .controller import ControllerComponent
-    from .errors import FmuError
+def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
     from .fmu import FmuComponent
-    from .master import Master
-    from .trajectory import ReferenceComponent, make_trajectory
 
-    fmu_files = dict(fmu_files or {})
     fmus = []
     try:
         for name, spec in scenario.fmus.items():
-            fmu = FmuComponent(name, fmu_files.get(name) or _fmu_file(name, spec))
+            fmu = FmuComponent(name, fmu_files.get(name) or fmu_file(spec))
             fmus.append(fmu)
             fmu.instantiate()  # a file that cannot run is refused now, before anything is written
             _check_fmu_file(scenario, fmu)
@@ -425,24 +383,40 @@ def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None
         for fmu in fmus:
             fmu.close()
         raise fmu_error_in_scenario(scenario, exc) from None
-    except ScenarioError:
+    except BaseException:
         for fmu in fmus:
             fmu.close()
         raise
-    python = []
-    if scenario.trajectory is not None:
-        params = {k: float(v) for k, v in scenario.trajectory.items() if k != "kind"}
-        python.append(ReferenceComponent(make_trajectory(scenario.trajectory["kind"], **params)))
-    if scenario.controller is not None:
-        c = scenario.controller
-        python.append(ControllerComponent(c.get("variant", "pd+lm"), c.get("position"), c.get("geometric"),
-                                          float(c.get("psi_ref", 0.0))))
-    for cname, spec in scenario.components.items():
-        module, _, attr = spec["factory"].partition(":")
-        try:
-            factory = getattr(importlib.import_module(module), attr)
-        except (ImportError, AttributeError) as exc:
-            raise ScenarioError(f"components.{cname}.factory = {spec['factory']!r}: {exc}") from None
-        python.append(factory(name=cname, **spec["parameters"]))
-    return Master(fmus, python, scenario.connections, scenario.step, scenario.record, scenario.envelope,
-                  {name: spec["parameters"] for name, spec in scenario.fmus.items()})
+    return fmus
+
+
+def _make_component(name: str, spec: Mapping[str, Any], context: registry.BuildContext):
+    if "kind" in spec:
+        return registry.component_kinds()[spec["kind"]].build(name, spec["parameters"], context)
+    module, _, attr = spec["factory"].partition(":")
+    try:
+        factory = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ScenarioError(f"components.{name}.factory = {spec['factory']!r}: {exc}") from None
+    return factory(name=name, **spec["parameters"])
+
+
+def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None):
+    """A :class:`~cosim.master.Master` for ``scenario`` (FMUs built on demand
+    and instantiated at once, so a file that cannot run is refused here).
+
+    ``fmu_files`` may give, per instance, an FMU file or an extracted FMU
+    directory to use instead (sweeps extract once and share it).
+    """
+    from .master import Master
+
+    fmus = _make_fmus(scenario, dict(fmu_files or {}))
+    try:
+        context = registry.BuildContext(scenario, {f.name: f for f in fmus})
+        python = [_make_component(name, spec, context) for name, spec in scenario.components.items()]
+        return Master(fmus, python, scenario.connections, scenario.step, scenario.record, scenario.envelope,
+                      {name: spec["parameters"] for name, spec in scenario.fmus.items()})
+    except BaseException:
+        for fmu in fmus:
+            fmu.close()
+        raise

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.cli import EXIT_BAD_INPUT, EXIT_RUN_FAILED, main
+from quadrotor_paper.cli import EXIT_BAD_INPUT, EXIT_RUN_FAILED, main
 from cosim.recorder import read_results
 
 
@@ -72,7 +72,7 @@ def _imported_modules(*argv: str, cwd) -> tuple[subprocess.CompletedProcess, set
     """Run the ``fnn-cosim`` entry point in a fresh interpreter and return
     every module it imported (Python's own ``-X importtime`` listing)."""
     script = Path(sys.executable).with_name("fnn-cosim")
-    command = [str(script)] if script.exists() else [sys.executable, "-m", "cosim.cli"]
+    command = [str(script)] if script.exists() else [sys.executable, "-m", "quadrotor_paper.cli"]
     env = {**os.environ, "PYTHONPROFILEIMPORTTIME": "1"}
     proc = subprocess.run(command + list(argv), capture_output=True, text=True, env=env, cwd=cwd)
     modules = {line.rsplit("|", 1)[1].strip() for line in proc.stderr.splitlines()
@@ -87,7 +87,7 @@ def test_the_command_line_loads_no_analysis_or_plotting_library_it_does_not_use(
         argv += ("--out", str(tmp_path / "run"))
     proc, modules = _imported_modules(*argv, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "cosim.cli" in modules
+    assert "quadrotor_paper.cli" in modules
     if argv[0] == "run":
         assert {"fmpy", "casadi", "fnn_controller"} <= modules  # the listing sees what the run used
     assert not modules & set(HEAVY_MODULES), sorted(modules & set(HEAVY_MODULES))

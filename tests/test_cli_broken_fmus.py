@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.cli import EXIT_BAD_INPUT, main
+from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 from cosim.scenario import scenario_path
 from fmu_models.build import cached_fmu
 from fmu_models.catalog import MODELS

@@ -8,6 +8,7 @@ import pytest
 
 from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.scenario import apply_overrides, build_master, load_scenario, parse_scenario, shipped_scenarios
+from quadrotor_paper.missions import wind_parameter
 
 
 def _raw(name="circles"):
@@ -29,12 +30,13 @@ def test_paper_values_in_the_shipped_missions():
     assert circles.fmus["Quadrotor"]["parameters"]["z_0"] == -15.0
     assert {"dir_x": -1.0, "dir_y": -1.0, "dir_z": 0.0, "t_switch_1": 17.0,
             "t_switch_2": 34.0}.items() <= circles.fmus["WindGust"]["parameters"].items()
-    assert circles.trajectory == {"kind": "two_circles", "radius": 10.0, "speed": 2.5, "climb": 5.0,
-                                  "x0": 0.0, "y0": 0.0, "z0": -15.0}
+    assert circles.components["reference"] == {
+        "kind": "two_circles", "parameters": {"radius": 10.0, "speed": 2.5, "climb": 5.0, "x0": 0.0, "y0": 0.0,
+                                              "z0": -15.0}}
     eight = load_scenario("figure8")
     assert eight.fmus["WindGust"]["parameters"]["v_w"] == 2.0
     assert (eight.fmus["WindGust"]["parameters"]["dir_x"], eight.fmus["WindGust"]["parameters"]["dir_y"]) == (1.0, -1.0)
-    assert eight.trajectory["max_speed"] == 1.0
+    assert eight.components["reference"]["parameters"]["max_speed"] == 1.0
 
 
 @pytest.mark.parametrize("overrides, message", [
@@ -108,13 +110,12 @@ def test_bad_toml_is_reported_with_the_file(tmp_path):
 def test_overrides_and_wind_shorthand():
     sc = load_scenario("circles", {"wind.speed": 5.0, "simulation.duration": 2.0})
     assert sc.fmus["WindGust"]["parameters"]["v_w"] == 5.0 and sc.duration == 2.0
-    assert sc.wind_parameter("speed") == "WindGust.v_w"
+    assert wind_parameter(sc, "speed") == "WindGust.v_w"
 
 
 def test_custom_python_component_from_a_factory(tmp_path):
     raw = _raw()
-    raw["components"] = {"probe": {"factory": "cosim.controller:ControllerComponent",
-                                   "parameters": {"variant": "pd"}}}
+    raw["components"] = {"probe": {"factory": "quadrotor_paper.controller:ControllerComponent", "variant": "pd"}}
     # the factory is called with name= and the parameters; its inputs are then unconnected
     with pytest.raises(ConnectionCheckError, match="inputs of probe not connected: x_ref"):
         build_master(parse_scenario(raw))

@@ -9,10 +9,10 @@ import control as ct
 import numpy as np
 import pytest
 
-from cosim.stability import critical_gain_factor, hover
-from cosim.stability.finite_time import AxisClaims, Run, evaluate_claims, record_run
-from cosim.stability.loops import LoopModel
-from cosim.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
+from quadrotor_paper.stability import critical_gain_factor, hover
+from quadrotor_paper.learning_claims import AxisClaims, Run, evaluate_claims, record_run
+from quadrotor_paper.stability.loops import LoopModel
+from quadrotor_paper.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
 from fnn_controller import STATE_SIZE, PositionParams
 from fnn_controller.controller import initial_state
 
@@ -89,7 +89,7 @@ def test_just_past_the_boundary_the_co_simulation_grows_at_the_dominant_poles_ra
 def test_pd_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fmu):
     """The co-simulated lag behind a 2.5 m/s ramp equals e* of the forward
     flight trim (the nonlinear drag included) and is about V/kp = 1 m."""
-    from cosim.stability import forward_flight
+    from quadrotor_paper.stability import forward_flight
 
     lag, run = ramp_lag(op, 2.5, duration=15.0, fmu=fmu)
     assert run.status == "ok"
@@ -191,7 +191,7 @@ def test_smc_step_run_converges_and_alpha_adapts(fmu):
 # ---- the report and the command ---------------------------------------------------------
 
 def test_command_writes_the_report_and_figures(tmp_path, capsys):
-    from cosim.cli import main
+    from quadrotor_paper.cli import main
 
     assert main(["stability", "--out", str(tmp_path), "--no-cosim"]) == 0
     text = (tmp_path / "stability.md").read_text()

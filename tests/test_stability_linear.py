@@ -1,4 +1,4 @@
-"""Linear stability analysis (cosim.stability): trims, linearizations from the
+"""Linear stability analysis (quadrotor_paper.stability): trims, linearizations from the
 one source of truth, the python-control loops and the analyses -- known
 answers wherever one can be derived by hand."""
 from __future__ import annotations
@@ -13,11 +13,11 @@ import pytest
 
 from fmu_models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
 from fnn_controller import GeometricParams, PositionParams
-from cosim.stability import (LoopModel, critical_gain_factor, forward_flight, gain_sweep, hover, linearize_controller,
+from quadrotor_paper.stability import (LoopModel, critical_gain_factor, forward_flight, gain_sweep, hover, linearize_controller,
                              linearize_controller_step, linearize_plant, linearize_plant_fmu, loop_margins,
                              ramp_error, trim_plant)
-from cosim.stability.analysis import affine_closed_loop, analyze, closed_loop_poles
-from cosim.stability.operating_points import STATE_NAMES
+from quadrotor_paper.stability.analysis import affine_closed_loop, analyze, closed_loop_poles
+from quadrotor_paper.stability.operating_points import STATE_NAMES
 
 H = 0.01
 NO_DRAG = {"k_drag_lin": 0.0, "k_drag_quad": 0.0}

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from cosim.cli import main
-from cosim.tables import PAPER_TABLE2, deviations, table2_markdown, table3_markdown
+from quadrotor_paper.cli import main
+from quadrotor_paper.tables import PAPER_TABLE2, deviations, table2_markdown, table3_markdown
 
 
 def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.experiments import Job, sweep
+from quadrotor_paper.experiments import Job, sweep
 from cosim.scenario import load_scenario
 
 REFERENCE = json.loads((Path(__file__).parent / "data" / "short_tables_reference.json").read_text())

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.trajectory import TRAJECTORIES, FigureEight, ReferenceComponent, TwoCircles, make_trajectory
+from quadrotor_paper.trajectories import TRAJECTORIES, FigureEight, ReferenceComponent, TwoCircles, make_trajectory
 
 
 @pytest.mark.parametrize("kind", sorted(TRAJECTORIES))

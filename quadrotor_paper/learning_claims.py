@@ -40,7 +40,7 @@ from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2
 from fnn_controller.learning import clip_inputs
 from fnn_controller.position import axis_slice
 
-from ..controller import ControllerComponent
+from .controller import ControllerComponent
 
 __all__ = ["RecordingController", "Run", "AxisClaims", "record_run", "evaluate_claims", "default_runs",
            "finite_time_report"]
@@ -49,7 +49,7 @@ _AXES = ("x", "y", "z")
 
 
 class RecordingController(ControllerComponent):
-    """:class:`~cosim.controller.ControllerComponent` that also keeps the
+    """:class:`~quadrotor_paper.controller.ControllerComponent` that also keeps the
     controller state (FNN parameters, alpha) *before* every step, in
     :attr:`states` (n_steps + 1, STATE_SIZE)."""
 
@@ -82,15 +82,15 @@ class Run:
 
 
 def _scenario(base: str, variant: str, overrides: dict):
-    from ..scenario import load_scenario, parse_scenario
+    from cosim.scenario import load_scenario, parse_scenario
 
     sc = load_scenario(base, overrides)
     raw = copy.deepcopy(sc.raw)
     ctrl = raw.pop("controller", {})
     raw.setdefault("components", {})["controller"] = {
-        "factory": "cosim.stability.finite_time:RecordingController",
-        "parameters": {"variant": variant, "position": ctrl.get("position", {}),
-                       "geometric": ctrl.get("geometric", {}), "psi_ref": ctrl.get("psi_ref", 0.0)}}
+        "factory": "quadrotor_paper.learning_claims:RecordingController",
+        "variant": variant, "position": ctrl.get("position", {}),
+        "geometric": ctrl.get("geometric", {}), "psi_ref": ctrl.get("psi_ref", 0.0)}
     signals = [f"reference.{s}" for s in ("x", "y", "z", "vx", "vy", "vz")]
     signals += [f"Quadrotor.{s}" for s in ("x", "y", "z", "u", "v", "w")]
     signals += [f"controller.{k}_{a}" for k in ("tau_c", "tau_n", "v_ref") for a in _AXES]
@@ -101,7 +101,7 @@ def _scenario(base: str, variant: str, overrides: dict):
 def record_run(name: str, variant: str, scenario: str = "circles", overrides: dict | None = None) -> Run:
     """Run ``scenario`` (shipped name or path, with dotted ``overrides``) with
     the controller ``variant`` and record what the claims need."""
-    from ..scenario import build_master
+    from cosim.scenario import build_master
 
     sc = _scenario(scenario, variant, overrides or {})
     with build_master(sc) as master:

@@ -59,8 +59,8 @@ def _workers(n: int | None) -> int:
 
 def _cmd_run(args) -> int:
     from .experiments import run_once, write_json
-    from .progress import Progress
-    from .scenario import load_scenario
+    from cosim.progress import Progress
+    from cosim.scenario import load_scenario
 
     overrides = _overrides(args.set)
     if args.variant:
@@ -137,7 +137,7 @@ def _cmd_reproduce(args) -> int:
 
 
 def _cmd_scenarios(args) -> int:
-    from .scenario import load_scenario, shipped_scenarios
+    from cosim.scenario import load_scenario, shipped_scenarios
 
     for name, path in sorted(shipped_scenarios().items()):
         print(f"{name:10s} {load_scenario(path).description}  ({path})")
@@ -211,7 +211,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from .errors import ConnectionCheckError, CosimError, FmuLoadError, ScenarioError
+    from cosim.errors import ConnectionCheckError, CosimError, FmuLoadError, ScenarioError
 
     args = _parser().parse_args(argv)
     try:

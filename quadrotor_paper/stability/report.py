@@ -1,5 +1,5 @@
 """The stability report: a markdown file and PNG figures from a
-:class:`~cosim.stability.study.StabilityStudy`.
+:class:`~quadrotor_paper.stability.study.StabilityStudy`.
 
 Plots are python-control's (``bode_plot``, ``nyquist_plot``,
 ``pole_zero_plot``) and matplotlib's, on the Agg backend (no display).
@@ -171,7 +171,7 @@ def _markdown(study, figures: dict[str, Path]) -> str:
     dt = study.dt
     kp, kd = study.position.kp, study.position.kd
     md = [f"# Linear stability of the PD baseline (kp = {kp:g}, kd = {kd:g})", ""]
-    md += ["Written by `fnn-cosim stability` (`cosim.stability.run_stability_analysis`); method and "
+    md += ["Written by `fnn-cosim stability` (`quadrotor_paper.stability.run_stability_analysis`); method and "
            "discussion in `docs/stability.md`.", ""]
     md += ["## Loop structure", "",
            "Plant (12 states, CasADi Jacobian = the FMU's directional derivatives) -> rotor speeds from the "

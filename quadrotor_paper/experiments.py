@@ -20,9 +20,11 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from .errors import FmuError
+from cosim.errors import FmuError
 from .metrics import euclidean_error, rmse
-from .scenario import Scenario, apply_overrides, build_master, fmu_error_in_scenario, parse_scenario
+from cosim.scenario import Scenario, apply_overrides, build_master, fmu_error_in_scenario, fmu_file, parse_scenario
+
+from .missions import controller_variant, metric_signals, wind_parameter
 
 __all__ = ["Job", "run_once", "sweep", "cells", "VARIANTS", "VARIANT_LABELS"]
 
@@ -40,7 +42,7 @@ class Job:
 def _parameters(scenario: Scenario, job: Job) -> dict[str, Any]:
     params: dict[str, Any] = {"controller.variant": job.variant}
     if job.wind is not None:
-        params[scenario.wind_parameter("speed")] = job.wind
+        params[wind_parameter(scenario, "speed")] = job.wind
     return params
 
 
@@ -71,15 +73,16 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
 def summarize(scenario: Scenario, result, variant: str | None = None) -> dict[str, Any]:
     summary: dict[str, Any] = {
         "scenario": scenario.name, "status": result.status, "error": result.error, "seed": result.seed,
-        "variant": variant or (scenario.controller or {}).get("variant"),
+        "variant": variant or controller_variant(scenario),
         "duration_s": scenario.duration, "step_s": scenario.step, "rows": int(result.data.shape[0]),
         "wall_time_s": result.wall_time,
         "real_time_factor": (result.time[-1] - result.time[0]) / result.wall_time if len(result.time) > 1 else None,
         "cost_per_step_us": {k: v / max(result.n_steps, 1) * 1e6 for k, v in result.phase_times.items()},
     }
-    if scenario.position_signals:
-        e = euclidean_error(result, scenario.position_signals, scenario.reference_signals)
-        summary["rmse_m"] = rmse(result, scenario.position_signals, scenario.reference_signals)
+    position, reference = metric_signals(scenario)
+    if position:
+        e = euclidean_error(result, position, reference)
+        summary["rmse_m"] = rmse(result, position, reference)
         summary["max_error_m"] = float(e.max()) if len(e) else None
         summary["final_error_m"] = float(e[-1]) if len(e) else None
     if result.csv_path is not None:
@@ -101,7 +104,7 @@ def _run_job(job: Job) -> dict[str, Any]:
     scenario, master = _WORKER["scenario"], _WORKER["master"]
     result = master.run(scenario.duration, seed=job.seed, parameters=_parameters(scenario, job),
                         t0=scenario.start_time, raise_on_error=False)
-    value = rmse(result, scenario.position_signals, scenario.reference_signals)
+    value = rmse(result, *metric_signals(scenario))
     return {"variant": job.variant, "wind_m_s": job.wind, "seed": job.seed, "status": result.status,
             "error": result.error, "rmse_m": value if result.status == "ok" else None,
             "wall_time_s": result.wall_time, "pid": os.getpid()}
@@ -110,12 +113,10 @@ def _run_job(job: Job) -> dict[str, Any]:
 def _extract_fmus(scenario: Scenario, into: Path) -> dict[str, str]:
     from fmpy import extract
 
-    from .scenario import _fmu_file
-
     dirs = {}
     for name, spec in scenario.fmus.items():
         target = into / name
-        extract(str(_fmu_file(name, spec)), str(target))
+        extract(str(fmu_file(spec)), str(target))
         dirs[name] = str(target)
     return dirs
 
@@ -128,7 +129,7 @@ def sweep(scenario: Scenario, jobs: Sequence[Job], workers: int = 2,
     this process (no multiprocessing).
     """
     lean = parse_scenario(apply_overrides(scenario.raw, {
-        "record.signals": list(dict.fromkeys(scenario.position_signals + scenario.reference_signals))}),
+        "record.signals": list(dict.fromkeys(sum(metric_signals(scenario), [])))}),
         source=scenario.source)
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     tmp = Path(tempfile.mkdtemp(prefix="fnn-cosim-fmus-"))

@@ -1,6 +1,6 @@
 """``fnn-cosim stability``: the linear stability report of the PD baseline.
 
-Usable on its own (``python -m cosim.stability.cli --out DIR``) and as a
+Usable on its own (``python -m quadrotor_paper.stability.cli --out DIR``) and as a
 subcommand: :func:`add_parser` adds it to the ``fnn-cosim`` parser.
 """
 from __future__ import annotations

@@ -3,13 +3,13 @@
 The nonlinear side is the real thing: the plant FMU (FMI 2.0 co-simulation,
 ``fmu_models.build.cached_fmu``) and the controller, run by the
 co-simulation master (:class:`cosim.master.Master`, h = 0.01 s). The linear
-side is :class:`~cosim.stability.loops.LoopModel` in discrete time at the same
+side is :class:`~quadrotor_paper.stability.loops.LoopModel` in discrete time at the same
 step, simulated by ``control.forced_response``. Both start at the operating
 point and see the same reference from t = 0, so their samples at t_n can be
 compared one to one.
 
 * :func:`position_step` -- the PD + velocity controller + plant after a step
-  of the position reference (master with :class:`~cosim.controller.ControllerComponent`);
+  of the position reference (master with :class:`~quadrotor_paper.controller.ControllerComponent`);
 * :func:`velocity_step` -- the inner loop alone after a step of the desired
   velocity (master with :class:`VelocityCommandComponent`, which runs
   ``velocity_controller_function`` -- the law inside the full controller);
@@ -32,11 +32,11 @@ from fnn_controller import GeometricParams, velocity_controller_function
 from fnn_controller.controller import FastFunction
 from fnn_controller.geometric import initial_velocity_state
 
-from ..component import Port, PythonComponent
+from cosim.component import Port, PythonComponent
 from ..controller import ControllerComponent
-from ..fmu import FmuComponent
-from ..master import Master
-from ..trajectory import Hover, ReferenceComponent
+from cosim.fmu import FmuComponent
+from cosim.master import Master
+from ..trajectories import Hover, ReferenceComponent
 from .loops import LoopModel
 from .operating_points import STATE_NAMES, OperatingPoint
 
@@ -69,7 +69,7 @@ class Response:
 
 @dataclass(frozen=True)
 class Ramp:
-    """A trajectory (the contract of ``cosim.trajectory``): hold ``start``,
+    """A trajectory (the contract of ``quadrotor_paper.trajectories``): hold ``start``,
     then from ``t_start`` move along +x at ``speed`` (m/s)."""
 
     speed: float = 2.5  # m/s
@@ -216,14 +216,16 @@ def growth_rate(t: np.ndarray, y: np.ndarray, t_min: float = 0.0) -> float:
 def pd_mission_rmse(wind_speeds=(0.0, 1.0, 3.0, 5.0), scenario: str = "circles") -> dict[float, float]:
     """Euclidean RMSE (m) of the PD alone on the paper's mission (the shipped
     ``circles`` scenario, §5.2) for each gust speed (m/s) -- Table 2's PD row."""
-    from ..scenario import build_master, load_scenario
+    from cosim.scenario import build_master, load_scenario
+
+    from ..missions import metric_signals, wind_parameter
 
     sc = load_scenario(scenario, {"controller.variant": "pd"})
     out = {}
     with build_master(sc) as master:
         for speed in wind_speeds:
-            run = master.run(sc.duration, seed=sc.seed, parameters={sc.wind_parameter("speed"): float(speed)})
-            err = sum((run[p] - run[r]) ** 2 for p, r in zip(sc.position_signals, sc.reference_signals))
+            run = master.run(sc.duration, seed=sc.seed, parameters={wind_parameter(sc, "speed"): float(speed)})
+            err = sum((run[p] - run[r]) ** 2 for p, r in zip(*metric_signals(sc)))
             out[float(speed)] = float(np.sqrt(np.mean(err)))
     return out
 

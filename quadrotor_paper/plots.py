@@ -21,6 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .metrics import euclidean_error  # noqa: E402
+from .missions import controller_variant, metric_signals  # noqa: E402
 
 __all__ = ["wind_profile", "trajectories_3d", "control_signals", "euclidean_errors", "run_figures",
            "wind_series"]
@@ -43,13 +44,12 @@ def wind_series(scenario, speeds=(1.0, 3.0, 5.0)) -> dict[float, np.ndarray]:
     ``speed -> array (n, 4)`` of t, v_wind_x, v_wind_y, v_wind_z."""
     import fmpy
 
-    from .scenario import _fmu_file
+    from cosim.scenario import fmu_file
 
-    name = scenario.wind_fmu
-    spec = scenario.fmus[name]
+    spec = scenario.fmus[scenario.sections["wind"]["fmu"]]
     out = {}
     for v in speeds:
-        r = fmpy.simulate_fmu(str(_fmu_file(name, spec)), stop_time=scenario.duration, output_interval=scenario.step,
+        r = fmpy.simulate_fmu(str(fmu_file(spec)), stop_time=scenario.duration, output_interval=scenario.step,
                               start_values={**spec["parameters"], "v_w": v}, validate=False,
                               output=["v_wind_x", "v_wind_y", "v_wind_z"])
         out[v] = np.column_stack([r["time"], r["v_wind_x"], r["v_wind_y"], r["v_wind_z"]])
@@ -121,9 +121,9 @@ def euclidean_errors(path: Path, results: Mapping[str, object], position, refere
 def run_figures(out_dir: Path, result, scenario, variant: str | None = None) -> list[Path]:
     """The figures one run's recording allows, written into ``out_dir``."""
     out_dir = Path(out_dir)
-    variant = variant or (scenario.controller or {}).get("variant", "run")
+    variant = variant or controller_variant(scenario) or "run"
     written = []
-    pos, ref = scenario.position_signals, scenario.reference_signals
+    pos, ref = metric_signals(scenario)
     cols = set(result.columns)
     if pos and set(pos + ref) <= cols and len(result.time) > 1:
         written.append(trajectories_3d(out_dir / "trajectory.png", {variant: result}, pos, ref,

@@ -21,8 +21,9 @@ import numpy as np
 from . import plots
 from .experiments import VARIANTS, Job, cells, run_once, sweep, write_json
 from .metrics import pd_share, rmse
-from .progress import Progress
-from .scenario import Scenario, load_scenario
+from .missions import metric_signals
+from cosim.progress import Progress
+from cosim.scenario import Scenario, load_scenario
 from .tables import DEVIATION_LIMIT, PAPER_TABLE2, PAPER_TABLE3, deviations, table2_markdown, table3_markdown
 
 __all__ = ["table2", "table3", "figures", "reproduce"]
@@ -121,7 +122,7 @@ def figures(out_dir: Path, wind: float = 3.0, seed: int = 0, duration: float | N
             info["runs"][f"{label}/{v}"] = entry
             bar.update()
         bar.close()
-        pos, ref = sc.position_signals, sc.reference_signals
+        pos, ref = metric_signals(sc)
         if name == "circles":
             info["files"].append(plots.wind_profile(out_dir / "fig5_wind_profile.png",
                                                     plots.wind_series(sc, (1.0, 3.0, 5.0))))

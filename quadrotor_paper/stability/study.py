@@ -1,14 +1,14 @@
 """The whole stability study in one call: every analysis of the package at
 the default operating points, checked against the co-simulation.
 
->>> from cosim.stability import run_stability_analysis
+>>> from quadrotor_paper.stability import run_stability_analysis
 >>> study = run_stability_analysis("results/stability")   # doctest: +SKIP
 >>> study.analyses[0].poles["discrete"].stable             # doctest: +SKIP
 True
 
 :func:`stability_study` computes (no files); :func:`run_stability_analysis`
 also writes the markdown report and the PNG figures
-(:mod:`cosim.stability.report`).
+(:mod:`quadrotor_paper.stability.report`).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from fnn_controller import GeometricParams, PositionParams
 
 from .analysis import (CircleError, GainSweep, OperatingPointAnalysis, RampError, analyze, circle_error,
                        critical_gain_factor, gain_sweep, ramp_error)
-from .finite_time import AxisClaims, Run, default_runs, evaluate_claims
+from ..learning_claims import AxisClaims, Run, default_runs, evaluate_claims
 from .operating_points import OperatingPoint, default_operating_points
 from .validation import GainCheck, StepCheck, check_gains, check_step, pd_mission_rmse, ramp_lag
 

@@ -3,19 +3,19 @@ against the nonlinear co-simulation (``docs/stability.md``).
 
 Modules, one job each:
 
-* :mod:`~cosim.stability.operating_points` -- trimmed steady flights
+* :mod:`~quadrotor_paper.stability.operating_points` -- trimmed steady flights
   (CasADi rootfinders on the plant and controller functions);
-* :mod:`~cosim.stability.linearize` -- Jacobians of the plant (CasADi or the
+* :mod:`~quadrotor_paper.stability.linearize` -- Jacobians of the plant (CasADi or the
   FMU's directional derivatives) and of the controller's CasADi functions;
-* :mod:`~cosim.stability.loops` -- the loops as ``control.interconnect``
+* :mod:`~quadrotor_paper.stability.loops` -- the loops as ``control.interconnect``
   systems, continuous or sampled (ZOH, optional delay), and broken loops;
-* :mod:`~cosim.stability.analysis` -- poles, damping, margins, gain sweep,
+* :mod:`~quadrotor_paper.stability.analysis` -- poles, damping, margins, gain sweep,
   ramp and circle errors;
-* :mod:`~cosim.stability.validation` -- the same steps in the co-simulation;
-* :mod:`~cosim.stability.finite_time` -- the learning laws' bounds (eqs. 53,
+* :mod:`~quadrotor_paper.stability.validation` -- the same steps in the co-simulation;
+* :mod:`~quadrotor_paper.stability.finite_time` -- the learning laws' bounds (eqs. 53,
   66, 70) on recorded runs;
-* :mod:`~cosim.stability.study`, :mod:`~cosim.stability.report`,
-  :mod:`~cosim.stability.cli` -- all of it, the report, the command.
+* :mod:`~quadrotor_paper.stability.study`, :mod:`~quadrotor_paper.stability.report`,
+  :mod:`~quadrotor_paper.stability.cli` -- all of it, the report, the command.
 
 The names below load their module (and python-control, scipy) on first use,
 so that ``fnn-cosim`` can add the ``stability`` subcommand without paying

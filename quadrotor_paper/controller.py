@@ -25,14 +25,17 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .component import Port, PythonComponent
-from .config import dataclass_from_mapping
-from .errors import DivergenceError, ScenarioError
+from cosim.component import Port, PythonComponent
+from cosim.config import check_number, dataclass_from_mapping
+from cosim.errors import DivergenceError, ScenarioError
+from cosim.scenario import refuse_unknown, table
 
 __all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS"]
 
 _STATE = (("x", "m"), ("y", "m"), ("z", "m"), ("u", "m/s"), ("v", "m/s"), ("w", "m/s"),
           ("phi", "rad"), ("theta", "rad"), ("psi", "rad"), ("p", "rad/s"), ("q", "rad/s"), ("r", "rad/s"))
+
+_PARAMETERS = ("variant", "psi_ref", "position", "geometric")
 
 CONTROLLER_INPUTS = (
     *(Port(f"{a}_ref", "m", description=f"reference position {a}") for a in "xyz"),
@@ -81,6 +84,20 @@ class ControllerComponent(PythonComponent):
         self.default_variant = self._check_variant(variant)
         self.variant = self.default_variant
         self._out = np.zeros(len(self.outputs))
+
+    @classmethod
+    def from_parameters(cls, name: str, parameters: Mapping[str, Any], context=None) -> "ControllerComponent":
+        """The component of a scenario's ``[controller]`` (or ``[components.NAME]
+        kind = "fnn_controller"``) table; errors name ``name.key``."""
+        refuse_unknown(f"{name}.", parameters, _PARAMETERS)
+        for key in ("position", "geometric"):
+            table(f"{name}.{key}", parameters.get(key, {}))
+        psi_ref = float(check_number(f"{name}.psi_ref", parameters.get("psi_ref", 0.0)))
+        try:
+            return cls(parameters.get("variant", "pd+lm"), parameters.get("position"), parameters.get("geometric"),
+                       psi_ref, name=name)
+        except ValueError as exc:  # a parameter dataclass refused a combination of values
+            raise ScenarioError(f"{name}: {exc}") from None
 
     def _check_variant(self, variant: Any) -> str:
         if variant not in self._fc.VARIANTS:

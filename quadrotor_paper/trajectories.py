@@ -19,7 +19,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .component import Port, PythonComponent
+from cosim.component import Port, PythonComponent
 
 __all__ = ["Hover", "TwoCircles", "FigureEight", "TRAJECTORIES", "make_trajectory", "ReferenceComponent",
            "REFERENCE_OUTPUTS"]

@@ -263,7 +263,7 @@ def _ramp_lag(model: LoopModel, speed: float, duration: float, axis: int = 0) ->
 def ramp_error(hover_op: OperatingPoint, forward_op: OperatingPoint | None = None, speed: float = 2.5,
                dt: float = 0.01, duration: float = 30.0) -> RampError:
     """The ramp lag the models predict (see :class:`RampError`); ``forward_op``
-    defaults to :func:`~cosim.stability.operating_points.forward_flight` at
+    defaults to :func:`~quadrotor_paper.stability.operating_points.forward_flight` at
     ``speed`` with the controller of ``hover_op``."""
     from .operating_points import forward_flight
 

@@ -1,0 +1,168 @@
+"""What a scenario may name, registered by the packages that provide it.
+
+The engine knows no model, component or mission by name. Applications
+register:
+
+* :class:`ComponentKind` -- a kind of Python component, named by
+  ``[components.NAME] kind = "..."``; it may also own a short top-level
+  section (an *alias*: ``[trajectory]`` for ``[components.reference]``);
+* :class:`Section` -- a top-level table that is no component (e.g. a
+  shorthand that sets FMU parameters, or the signals a metric compares);
+* :class:`FmuModel` -- a model the engine builds into an FMU on demand, named
+  by ``[fmus.NAME] model = "..."``;
+* folders of shipped scenario files, loadable by name.
+
+Registration happens when the providing package is imported, and packages
+installed with an entry point in the group ``cosim.plugins`` (a callable
+that registers) are imported the first time a registry is read, so a
+scenario file finds its kinds without the caller importing anything.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+__all__ = ["ComponentKind", "Section", "FmuModel", "BuildContext", "register_component_kind", "register_section",
+           "register_fmu_model", "register_scenarios", "component_kinds", "sections", "fmu_models",
+           "aliases", "scenario_folders", "PLUGIN_GROUP"]
+
+PLUGIN_GROUP = "cosim.plugins"
+
+
+@dataclass(frozen=True)
+class BuildContext:
+    """What a component factory may look at while the master is built: the
+    scenario and the FMU components already made (by instance name), e.g.
+    to take a plant's parameters as a controller's nominal model."""
+
+    scenario: Any
+    fmus: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class ComponentKind:
+    """A kind of Python component.
+
+    ``build(name, parameters, context)`` returns the component (a
+    :class:`~cosim.component.PythonComponent`); ``check(where, parameters)``
+    validates the parameters when the scenario is read, raising
+    :class:`~cosim.errors.ScenarioError` naming ``where.key``. ``alias`` is
+    a top-level section that stands for ``[components.<instance>]`` of this
+    kind; several kinds may share one alias section, whose ``kind`` key then
+    picks among them (``[trajectory] kind = "two_circles"``).
+    """
+
+    name: str
+    build: Callable[[str, Mapping[str, Any], BuildContext], Any]
+    check: Callable[[str, Mapping[str, Any]], None] | None = None
+    description: str = ""
+    alias: str | None = None
+    instance: str | None = None
+
+
+@dataclass(frozen=True)
+class Section:
+    """A top-level scenario table that is no component.
+
+    ``parse(where, table, fmus)`` validates the table and returns its value
+    (kept in ``Scenario.sections[name]``); it may set FMU parameters in
+    ``fmus`` (``{instance: {"parameters": {...}, ...}}``).
+    """
+
+    name: str
+    parse: Callable[[str, Mapping[str, Any], dict[str, dict[str, Any]]], Any]
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class FmuModel:
+    """A model built into an FMU on demand.
+
+    ``build(fmi_version)`` returns the path of the FMU (cached by the
+    builder). ``check_parameter(name, value)``, if given, refuses an unknown
+    name with ``KeyError`` and an inadmissible value with ``ValueError``,
+    both naming the variable, so a scenario is checked before any build.
+    """
+
+    name: str
+    build: Callable[[int], Path]
+    check_parameter: Callable[[str, float], None] | None = None
+
+
+_KINDS: dict[str, ComponentKind] = {}
+_SECTIONS: dict[str, Section] = {}
+_MODELS: dict[str, FmuModel] = {}
+_SCENARIO_FOLDERS: list[Path] = []
+_plugins_loaded = False
+
+
+def _register(table: dict, key: str, entry: Any, what: str) -> None:
+    if table.get(key, entry) != entry:
+        raise ValueError(f"{what} {key!r} is registered twice, differently")
+    table[key] = entry
+
+
+def register_component_kind(kind: ComponentKind) -> ComponentKind:
+    if kind.alias is not None and kind.alias in _SECTIONS:
+        raise ValueError(f"alias section [{kind.alias}] of kind {kind.name!r} is already a section")
+    _register(_KINDS, kind.name, kind, "component kind")
+    return kind
+
+
+def register_section(section: Section) -> Section:
+    if any(k.alias == section.name for k in _KINDS.values()):
+        raise ValueError(f"section [{section.name}] is already an alias of a component kind")
+    _register(_SECTIONS, section.name, section, "section")
+    return section
+
+
+def register_fmu_model(model: FmuModel) -> FmuModel:
+    _register(_MODELS, model.name, model, "FMU model")
+    return model
+
+
+def register_scenarios(folder: str | Path) -> None:
+    """A folder of ``*.toml`` scenario files, loadable by their stem."""
+    folder = Path(folder)
+    if folder not in _SCENARIO_FOLDERS:
+        _SCENARIO_FOLDERS.append(folder)
+
+
+def _load_plugins() -> None:
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    for entry in entry_points(group=PLUGIN_GROUP):
+        entry.load()()
+
+
+def component_kinds() -> dict[str, ComponentKind]:
+    _load_plugins()
+    return dict(_KINDS)
+
+
+def aliases() -> dict[str, tuple[ComponentKind, ...]]:
+    """Alias section -> the kinds that share it."""
+    out: dict[str, tuple[ComponentKind, ...]] = {}
+    for kind in component_kinds().values():
+        if kind.alias is not None:
+            out[kind.alias] = out.get(kind.alias, ()) + (kind,)
+    return out
+
+
+def sections() -> dict[str, Section]:
+    _load_plugins()
+    return dict(_SECTIONS)
+
+
+def fmu_models() -> dict[str, FmuModel]:
+    _load_plugins()
+    return dict(_MODELS)
+
+
+def scenario_folders() -> list[Path]:
+    _load_plugins()
+    return list(_SCENARIO_FOLDERS)

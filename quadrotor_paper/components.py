@@ -1,0 +1,103 @@
+"""What the paper's application adds to the engine's registry: the FMU models
+of ``fmu_models``, the trajectories and the flight controller as component
+kinds (with their short sections ``[trajectory]`` and ``[controller]``), the
+``[wind]`` and ``[metrics]`` sections, and the shipped scenarios.
+
+:func:`register` runs when :mod:`quadrotor_paper` is imported, and through
+the ``cosim.plugins`` entry point whenever the engine reads a scenario.
+Nothing heavy is imported here: the builders import what they build.
+"""
+from __future__ import annotations
+
+from dataclasses import fields
+from pathlib import Path
+from typing import Any, Mapping
+
+from cosim import registry
+from cosim.config import check_number
+from cosim.errors import ScenarioError
+from cosim.scenario import refuse_unknown
+
+__all__ = ["register", "TRAJECTORY_INSTANCE", "CONTROLLER_INSTANCE"]
+
+TRAJECTORY_INSTANCE = "reference"
+CONTROLLER_INSTANCE = "controller"
+
+
+def _fmu_model(model) -> registry.FmuModel:
+    from fmu_models.build import cached_fmu
+
+    def check_parameter(name: str, value: float) -> None:
+        try:
+            var = model.variable(name)
+        except KeyError:
+            known = ", ".join(v.name for v in model.parameters + model.inputs)
+            raise KeyError(f"{model.identifier} has no parameter {name!r}; parameters and inputs: {known}") from None
+        if var.causality not in ("parameter", "input"):
+            article = "an" if var.causality[0] in "aeiou" else "a"
+            raise KeyError(f"{name!r} is {article} {var.causality} of {model.identifier}, not a parameter")
+        var.check(value)
+
+    return registry.FmuModel(model.identifier, lambda version: cached_fmu(model, version), check_parameter)
+
+
+def _trajectory_kind(name: str) -> registry.ComponentKind:
+    def check(where: str, params: Mapping[str, Any]) -> None:
+        from .trajectories import TRAJECTORIES
+
+        cls = TRAJECTORIES[name]
+        refuse_unknown(f"{where}.", params, {f.name for f in fields(cls)})
+        for key, value in params.items():
+            check_number(f"{where}.{key}", value)
+        try:
+            cls(**{k: float(v) for k, v in params.items()})
+        except ValueError as exc:
+            raise ScenarioError(f"{where}: {exc}") from None
+
+    def build(instance: str, params: Mapping[str, Any], context) -> Any:
+        from .trajectories import ReferenceComponent, make_trajectory
+
+        return ReferenceComponent(make_trajectory(name, **{k: float(v) for k, v in params.items()}), instance)
+
+    return registry.ComponentKind(name, build, check, f"reference trajectory {name}",
+                                  alias="trajectory", instance=TRAJECTORY_INSTANCE)
+
+
+def _controller_kind() -> registry.ComponentKind:
+    def check(where: str, params: Mapping[str, Any]) -> None:
+        from .controller import ControllerComponent
+
+        ControllerComponent.from_parameters(where, params)
+
+    def build(instance: str, params: Mapping[str, Any], context) -> Any:
+        from .controller import ControllerComponent
+
+        return ControllerComponent.from_parameters(instance, params, context)
+
+    return registry.ComponentKind("fnn_controller", build, check,
+                                  "PD + FNN position control and geometric velocity control (paper Fig. 2)",
+                                  alias="controller", instance=CONTROLLER_INSTANCE)
+
+
+_registered = False
+
+
+def register() -> None:
+    """Register the models, kinds, sections and scenarios (once per process)."""
+    global _registered
+    if _registered:
+        return
+    _registered = True
+    from fmu_models.catalog import MODELS
+
+    from .missions import parse_metrics, parse_wind
+    from .trajectories import TRAJECTORIES
+
+    for model in MODELS.values():
+        registry.register_fmu_model(_fmu_model(model))
+    for name in TRAJECTORIES:
+        registry.register_component_kind(_trajectory_kind(name))
+    registry.register_component_kind(_controller_kind())
+    registry.register_section(registry.Section("wind", parse_wind, "shorthand for the WindGust FMU's parameters"))
+    registry.register_section(registry.Section("metrics", parse_metrics, "signals of the tracking error"))
+    registry.register_scenarios(Path(__file__).parent / "scenarios")
