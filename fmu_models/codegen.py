@@ -54,12 +54,10 @@ def _config_header(model: FmuModel, guid: str, work: dict[str, int]) -> str:
     names = ["time"] + [""] * (len(refs) - 1)
     mins = [-math.inf] * len(refs)
     maxs = [math.inf] * len(refs)
-    exclusive = [0] * len(refs)
     starts = [0.0] * len(refs)
     for v in model.all_variables:
         vr = refs[v.name]
         names[vr], mins[vr], maxs[vr] = v.name, v.min, v.max
-        exclusive[vr] = int(v.min_exclusive)
         starts[vr] = v.start if v.start is not None else 0.0
     for v in model.states:
         names[refs[f"der({v.name})"]] = f"der({v.name})"
@@ -97,7 +95,6 @@ def _config_header(model: FmuModel, guid: str, work: dict[str, int]) -> str:
 {table("char *const", "VAR_NAME", names, _c_string)}
 {table("double", "VAR_MIN", mins, _c_double)}
 {table("double", "VAR_MAX", maxs, _c_double)}
-{table("unsigned char", "VAR_MIN_EXCLUSIVE", exclusive, str)}
 {table("double", "VAR_START", starts, _c_double)}
 #endif
 """
@@ -121,7 +118,7 @@ def generate_sources(model: FmuModel, directory: Path) -> str:
         for key in ("sz_arg", "sz_res", "sz_iw", "sz_w")
     }
     digest = hashlib.sha256((directory / "model_generated.c").read_bytes())
-    digest.update(repr([(v.name, v.causality, v.unit, v.start, v.min, v.max, v.min_exclusive)
+    digest.update(repr([(v.name, v.causality, v.unit, v.start, v.min, v.max)
                         for v in model.all_variables]).encode())
     h = digest.hexdigest()
     guid = f"{{{h[0:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"

@@ -38,6 +38,17 @@ _B = 6.55e-6  # N s^2, Table 1
 # Rotor inputs start at the hover speed of the default parameters, so the FMU
 # dropped into any importer hovers until something commands it.
 _HOVER_SPEED = math.sqrt(_M * _G / (4 * _B))  # rad/s
+# Inclusive lower bounds (FMI min is inclusive) of the parameters that must be
+# positive: orders of magnitude below any real quadrotor, they keep out zero
+# and the tiny values next to it, where dividing by m or I overflows. Reasons
+# in docs/plant-model.md, "Parameter bounds".
+_FLOOR = {
+    "m": 1e-3,  # kg: 1 g
+    "l": 1e-3,  # m: 1 mm
+    "b": 1e-12,  # N s^2: a propeller of about 4 mm diameter
+    "I": 1e-9,  # kg m^2: 1 g at 1 mm, the floors of m and l together
+    "Omega_max": 1.0,  # rad/s: about 10 rpm
+}
 _STATE_NAMES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
 
 _VARIABLES = (
@@ -64,23 +75,22 @@ _VARIABLES = (
     output("tau_phi", "N.m", "roll torque applied, after rotor saturation (eq. 1)"),
     output("tau_theta", "N.m", "pitch torque applied, after rotor saturation (eq. 1)"),
     output("tau_psi", "N.m", "yaw torque applied, after rotor saturation (eq. 1)"),
-    parameter("m", "kg", "vehicle mass (Table 1)", _M, min=0.0, min_exclusive=True),
-    parameter("l", "m", "arm length, centre to rotor axis (Table 1)", 0.17, min=0.0, min_exclusive=True),
-    parameter("b", "N.s2", "rotor thrust coefficient, f_i = b Omega_i^2 (Table 1)", _B,
-              min=0.0, min_exclusive=True),
+    parameter("m", "kg", "vehicle mass (Table 1)", _M, min=_FLOOR["m"]),
+    parameter("l", "m", "arm length, centre to rotor axis (Table 1)", 0.17, min=_FLOOR["l"]),
+    parameter("b", "N.s2", "rotor thrust coefficient, f_i = b Omega_i^2 (Table 1)", _B, min=_FLOOR["b"]),
     parameter("d", "N.m.s2",
               "rotor drag-torque coefficient, tau_i = d Omega_i^2 (Table 1's 2.66e-2 read as d/b in m; "
               "docs/plant-model.md)", 2.66e-2 * _B, min=0.0),
-    parameter("Ix", "kg.m2", "moment of inertia about x_B (Table 1)", 3.0e-2, min=0.0, min_exclusive=True),
-    parameter("Iy", "kg.m2", "moment of inertia about y_B (Table 1)", 4.0e-2, min=0.0, min_exclusive=True),
-    parameter("Iz", "kg.m2", "moment of inertia about z_B (Table 1)", 2.1e-2, min=0.0, min_exclusive=True),
+    parameter("Ix", "kg.m2", "moment of inertia about x_B (Table 1)", 3.0e-2, min=_FLOOR["I"]),
+    parameter("Iy", "kg.m2", "moment of inertia about y_B (Table 1)", 4.0e-2, min=_FLOOR["I"]),
+    parameter("Iz", "kg.m2", "moment of inertia about z_B (Table 1)", 2.1e-2, min=_FLOOR["I"]),
     parameter("g", "m/s2", "gravitational acceleration", _G, min=0.0),
     parameter("k_drag_lin", "N.s/m", "linear (rotor) drag coefficient on the air-relative velocity",
               0.20, min=0.0),
     parameter("k_drag_quad", "N.s2/m2", "quadratic (body) drag coefficient, 0.5 rho C_D A",
               0.04, min=0.0),
     parameter("Omega_max", "rad/s", "maximum rotor speed (thrust-to-weight about 2)", 900.0,
-              min=0.0, min_exclusive=True),
+              min=_FLOOR["Omega_max"]),
     *(parameter(f"{name}_0", unit, f"initial value of {name}", 0.0, **bounds)
       for name, unit, bounds in (
           ("x", "m", {}), ("y", "m", {}), ("z", "m", {}),

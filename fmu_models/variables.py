@@ -41,8 +41,10 @@ class Variable:
 
     ``causality`` is one of ``state`` (a continuous state, exposed as an
     output), ``input``, ``output`` (an algebraic output) or ``parameter``.
-    ``min``/``max`` are enforced by the FMU on every set; ``min_exclusive``
-    makes the lower bound strict (mass, inertia, step sizes must be > 0).
+    ``min``/``max`` are enforced by the FMU on every set and written into
+    the modelDescription. Both are inclusive, as FMI's are: a quantity that
+    must be positive gets a stated positive floor, never an implied open
+    bound the modelDescription could not express.
     """
 
     name: str
@@ -52,7 +54,6 @@ class Variable:
     start: float | None = None
     min: float = -math.inf
     max: float = math.inf
-    min_exclusive: bool = False
 
     def __post_init__(self) -> None:
         if self.causality not in ("state", "input", "output", "parameter"):
@@ -61,17 +62,23 @@ class Variable:
             raise ValueError(f"variable {self.name!r}: unit {self.unit!r} is not in UNITS")
         if self.causality in ("input", "parameter") and self.start is None:
             raise ValueError(f"variable {self.name!r}: an {self.causality} needs a start value")
+        if not self.min <= self.max:
+            raise ValueError(f"variable {self.name!r}: min = {self.min!r} is above max = {self.max!r}")
+        if self.start is not None:
+            self.check(self.start)  # a default the FMU would refuse is a bug in the table
 
     def check(self, value: float) -> None:
-        """Raise ``ValueError`` naming the variable if ``value`` is not admissible."""
+        """Raise ``ValueError`` naming the variable if ``value`` is not admissible.
+
+        The same test as the FMU's (``check_value`` in ``fmu_models/c/fmu_core.c``):
+        finite and within ``[min, max]``.
+        """
         if not math.isfinite(value):
             raise ValueError(f"{self.name} = {value!r} is not a finite number")
-        too_low = value <= self.min if self.min_exclusive else value < self.min
-        if too_low or value > self.max:
-            low = "(" if self.min_exclusive else "["
+        if not self.min <= value <= self.max:
             raise ValueError(
                 f"{self.name} = {value!r} {self.unit} is outside its range "
-                f"{low}{self.min}, {self.max}]"
+                f"[{self.min!r}, {self.max!r}]"
             )
 
 

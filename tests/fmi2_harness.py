@@ -11,6 +11,30 @@ from fmpy.fmi2 import FMU2Model, FMU2Slave
 from cosim.fmu import fmi2_callbacks
 
 
+def logged(value: float) -> str:
+    """``value`` as the FMU writes it in a log message (``exact`` in
+    ``fmu_models/c/fmu_core.c``): ``%g``, with more digits only where needed
+    to read back as the same double."""
+    for digits in range(6, 18):
+        text = "%.*g" % (digits, value)
+        if float(text) == value:
+            break
+    return text
+
+
+class LogCollector:
+    """Receives the log messages of one FMI 2.0 instance (see
+    :func:`cosim.fmu.fmi2_callbacks`, which holds ``receive`` weakly: keep the
+    collector alive as long as the instance)."""
+
+    def __init__(self) -> None:
+        self.messages: list[str] = []
+        self.callbacks = fmi2_callbacks(self.receive)
+
+    def receive(self, status, message) -> None:
+        self.messages.append(message.decode())
+
+
 class Fmi2Instance:
     """One instantiated, initialized FMI 2.0 instance (CS by default)."""
 
@@ -19,20 +43,17 @@ class Fmi2Instance:
         self._own_dir = unzip_dir is None
         self.unzip_dir = unzip_dir or extract(fmu_path)
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.messages: list[str] = []
-        self.callbacks = fmi2_callbacks(self._log)  # messages of this instance only
+        self.log = LogCollector()  # messages of this instance only
+        self.messages = self.log.messages
         cls = FMU2Model if model_exchange else FMU2Slave
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip_dir,
                        modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="test")
-        self.fmu.instantiate(callbacks=self.callbacks)
+        self.fmu.instantiate(callbacks=self.log.callbacks)
         self.n = 0
         self.h = 0.01
         self.initialized = False
         if initialize:
             self.initialize(parameters or {})
-
-    def _log(self, status, message):
-        self.messages.append(message.decode())
 
     def initialize(self, parameters):
         self.fmu.setupExperiment(startTime=0.0)

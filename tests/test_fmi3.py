@@ -482,7 +482,8 @@ def test_wrong_token_and_scheduled_execution_give_no_instance(unzipped, descript
     log = LogRecorder()
     with pytest.raises(Exception, match="Failed to instantiate"):
         fmu.instantiate(logMessage=log)
-    assert any("instantiation token" in m and "{not-this-fmu}" in m for m in log.errors())
+    assert any("instantiation token" in m and '"{not-this-fmu}"' in m and description.guid in m
+               for m in log.errors())
 
     se = FMU3ScheduledExecution(guid=description.guid, unzipDirectory=str(unzipped), modelIdentifier="Quadrotor")
     log = LogRecorder()

@@ -2,17 +2,21 @@
 from __future__ import annotations
 
 import math
-from ctypes import POINTER, c_double
+import sys
+from ctypes import POINTER, byref, c_double
 
 import casadi as ca
 import numpy as np
 import pytest
-from fmpy import simulate_fmu
+from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave, fmi2CoSimulation
 from fmpy.validation import validate_fmu
 
+from fmu_models.build import cached_fmu
+from fmu_models.catalog import MODELS
 from fmu_models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
-from fmi2_harness import STATES, Fmi2Instance
+from fmi2_harness import STATES, Fmi2Instance, LogCollector, logged
 
 HOVER = hover_rotor_speed()
 ROTORS_AT_HOVER = {f"Omega_{i}": HOVER for i in range(1, 5)}
@@ -304,18 +308,171 @@ def test_unknown_value_reference_is_refused(instance):
     assert any("10000" in m for m in fmu.messages)
 
 
-def test_a_diverging_step_is_reported_and_rolled_back(instance):
-    """Absurd but admissible parameters make the state overflow: the step
-    fails with the state's name, and the state before the step is kept."""
-    fmu = instance(parameters={"Ix": 1e-300, "internal_step": 0.01, "phi_0": 0.1, "p_0": 1.0, "q_0": 1.0, "r_0": 1.0,
-                               "Iz": 1e-300})
-    before = None
+def _fail_a_step(instance):
+    """Fly 10 steps at hover, save the FMU state, then make the next step
+    overflow with a finite, admissible but absurd wind of 1e200 m/s (the wind
+    inputs are unbounded; |v_rel|^2 in the drag overflows). Returns the
+    instance, the saved state and the states before the failed step."""
+    fmu = instance(parameters={"z_0": -15.0})
+    fmu.set(**ROTORS_AT_HOVER)
+    fmu.step(10)
+    saved = fmu.fmu.getFMUstate()
+    before = fmu.get(*STATES)
+    fmu.set(wind_x=1e200)
     with pytest.raises(FMICallException):
-        for _ in range(100):
-            before = fmu.get(*STATES)
-            fmu.step()
+        fmu.step()
+    return fmu, saved, before
+
+
+def test_a_diverging_step_is_reported_and_rolled_back(instance):
+    """The step fails with the state's name, and the state and time before
+    the step are kept."""
+    fmu, saved, before = _fail_a_step(instance)
     assert any("became" in m for m in fmu.messages), fmu.messages
     np.testing.assert_array_equal(fmu.get(*STATES), before)
+    assert fmu.get("time")[0] == 10 * fmu.h
+    fmu.fmu.freeFMUstate(saved)
+
+
+def test_the_diverging_step_message_names_time_inputs_and_parameters(instance):
+    """The log alone says when the step failed and every input and parameter
+    in effect, each value exact enough to reproduce the step."""
+    fmu, saved, _ = _fail_a_step(instance)
+    fmu.fmu.freeFMUstate(saved)
+    message = next(m for m in fmu.messages if "became" in m)
+    t0 = 10 * fmu.h
+    assert f"during the step from t = {logged(t0)} to t = {logged(t0 + fmu.h)}" in message
+    assert "wind_x = 1e+200" in message and f"Omega_1 = {logged(HOVER)}" in message
+    assert f"m = {logged(DEFAULTS['m'])}" in message and "z_0 = -15" in message
+    for v in QUADROTOR.inputs + QUADROTOR.parameters:  # all of them, none cut
+        assert f" {v.name} = " in message, v.name
+    assert not message.endswith("...")
+
+
+def test_the_instance_survives_a_diverging_step(instance):
+    """Further steps are refused until a saved state is restored or the
+    instance is reset; then it flies again."""
+    fmu, saved, before = _fail_a_step(instance)
+    with pytest.raises(FMICallException):
+        fmu.step()
+    assert any("earlier step failed" in m for m in fmu.messages), fmu.messages
+
+    fmu.fmu.setFMUstate(saved)
+    fmu.fmu.freeFMUstate(saved)
+    np.testing.assert_array_equal(fmu.get(*STATES), before)
+    fmu.step(5)  # the saved state had no wind
+    assert np.isfinite(fmu.get(*STATES)).all() and fmu.get("time")[0] == pytest.approx(15 * fmu.h)
+
+    fmu.fmu.reset()
+    fmu.n = 0
+    fmu.initialize({"z_0": -15.0})
+    fmu.step(5)
+    assert np.isfinite(fmu.get(*STATES)).all() and fmu.get("wind_x")[0] == 0.0
+
+
+def test_wrong_guid_is_refused_naming_both_guids(quadrotor_fmu2, tmp_path):
+    """The message repeats the GUID given (bounded, "(null)" for NULL) and the
+    FMU's own, as the FMI 3.0 layer does with the instantiation token."""
+    guid = read_model_description(quadrotor_fmu2).guid
+    unzipped = extract(quadrotor_fmu2, unzipdir=tmp_path)
+    log = LogCollector()
+    fmu = FMU2Slave(guid="{wrong}", unzipDirectory=unzipped, modelIdentifier="Quadrotor", instanceName="wrong")
+    with pytest.raises(Exception, match="Failed to instantiate"):
+        fmu.instantiate(callbacks=log.callbacks)
+    assert any('"{wrong}"' in m and guid in m for m in log.messages), log.messages
+
+    long_guid = "{" + "x" * 1000 + "}"
+    for given, shown in ((None, '"(null)"'), (long_guid.encode(), '"{' + "x" * 63 + '"')):
+        component = fmu.fmi2Instantiate(b"wrong", fmi2CoSimulation, given, b"", byref(log.callbacks),
+                                        False, False)
+        assert component is None
+        assert shown in log.messages[-1] and guid in log.messages[-1], log.messages[-1]
+
+
+# ---- declared bounds against the FMU's checks, every parameter of every model ----
+
+_PARAMETERS = [(model.identifier, v.name) for model in MODELS.values() for v in model.parameters]
+
+
+@pytest.fixture(scope="module")
+def unzipped_fmu2(tmp_path_factory):
+    """The extracted FMI 2.0 FMU of a catalog model, by identifier, extracted once."""
+    directories = {}
+
+    def get(identifier):
+        if identifier not in directories:
+            target = tmp_path_factory.mktemp(identifier)
+            directories[identifier] = extract(cached_fmu(MODELS[identifier], 2), unzipdir=target)
+        return directories[identifier]
+
+    return get
+
+
+def _declared_range(directory, name):
+    """(min, max) of parameter ``name`` in the modelDescription; +-inf where none is declared."""
+    variable = next(v for v in read_model_description(directory).modelVariables if v.name == name)
+    low = -math.inf if variable.min is None else float(variable.min)
+    high = math.inf if variable.max is None else float(variable.max)
+    return low, high
+
+
+def _python_accepts(variable, value):
+    try:
+        variable.check(value)
+    except ValueError:
+        return False
+    return True
+
+
+def _assert_fmu_refuses(directory, name, value, start):
+    """``value`` set on a fresh instance is refused with a message naming it, and changes nothing."""
+    fmu = Fmi2Instance(directory, unzip_dir=directory, initialize=False)
+    try:
+        with pytest.raises(FMICallException):
+            fmu.set(**{name: value})
+        assert any(m.startswith(f"{name} = {logged(value)} refused") for m in fmu.messages), fmu.messages
+        assert fmu.get(name)[0] == start
+    finally:
+        fmu.close()
+
+
+def _assert_fmu_accepts(directory, name, value, run=True):
+    """``value`` set before initialization is taken exactly; with ``run`` the
+    instance then initializes and takes a step without a complaint."""
+    fmu = Fmi2Instance(directory, unzip_dir=directory, initialize=False)
+    try:
+        fmu.set(**{name: value})  # raises FMICallException if refused
+        assert fmu.get(name)[0] == value
+        if run:
+            fmu.initialize({})
+            fmu.step()
+        assert not fmu.messages, fmu.messages
+    finally:
+        fmu.close()
+
+
+@pytest.mark.parametrize("identifier, name", _PARAMETERS)
+def test_declared_range_is_exactly_what_the_fmu_accepts(unzipped_fmu2, identifier, name):
+    """FMI's min and max are inclusive: each declared bound is accepted by the
+    FMU (set, initialize, step), the next double beyond it is refused, and
+    Variable.check agrees at both points. Where no bound is declared, the FMU
+    and Variable.check take the most negative (positive) finite double."""
+    directory = unzipped_fmu2(identifier)
+    variable = MODELS[identifier].variable(name)
+    low, high = _declared_range(directory, name)
+    assert (low, high) == (variable.min, variable.max)  # the XML says what the table says
+    assert low <= variable.start <= high
+    for bound, outward in ((low, -math.inf), (high, math.inf)):
+        if math.isinf(bound):
+            extreme = math.copysign(sys.float_info.max, outward)
+            assert _python_accepts(variable, extreme)
+            _assert_fmu_accepts(directory, name, extreme, run=False)  # may well overflow in a step
+            continue
+        beyond = float(np.nextafter(bound, outward))
+        assert _python_accepts(variable, bound)
+        _assert_fmu_accepts(directory, name, bound)
+        assert not _python_accepts(variable, beyond)
+        _assert_fmu_refuses(directory, name, beyond, variable.start)
 
 
 def test_source_fmu_compiles_on_its_own_with_fmpy_build(quadrotor_fmu2, tmp_path):

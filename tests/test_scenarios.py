@@ -47,7 +47,7 @@ def test_paper_values_in_the_shipped_missions():
     ({"simulation.duration": 1.005}, "simulation.duration = 1.005: not a whole number of steps of 0.01 s"),
     ({"simulation.seed": 1.5}, "simulation.seed = 1.5: expected an integer"),
     ({"simulation.seed": -1}, "simulation.seed = -1: must not be negative"),
-    ({"fmus.Quadrotor.parameters.m": -1.07}, "fmus.Quadrotor.parameters.m: m = -1.07 kg is outside its range (0.0, inf]"),
+    ({"fmus.Quadrotor.parameters.m": -1.07}, "fmus.Quadrotor.parameters.m: m = -1.07 kg is outside its range [0.001, inf]"),
     ({"fmus.Quadrotor.parameters.mass": 1.0}, "fmus.Quadrotor.parameters.mass: Quadrotor has no parameter 'mass'"),
     ({"fmus.Quadrotor.parameters.x": 1.0}, "fmus.Quadrotor.parameters.x: 'x' is a state of Quadrotor, not a parameter"),
     ({"fmus.Quadrotor.parameters.Ix": float("nan")}, "fmus.Quadrotor.parameters.Ix = nan: expected a finite number"),

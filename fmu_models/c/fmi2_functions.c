@@ -54,7 +54,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     }
     const char *name = instanceName ? instanceName : "";
     if (!fmuGUID || strcmp(fmuGUID, MODEL_GUID) != 0) {
-        forward_log(env, name, CORE_ERROR, "logStatusError", "fmi2Instantiate: wrong GUID, this FMU is " MODEL_GUID);
+        /* both GUIDs, as the FMI 3.0 layer does: the given one says which
+         * modelDescription the importer read; cut, it can be any length */
+        char message[256];
+        snprintf(message, sizeof message, "fmi2Instantiate: wrong GUID \"%.64s\", this FMU is " MODEL_GUID,
+                 fmuGUID ? fmuGUID : "(null)");
+        forward_log(env, name, CORE_ERROR, "logStatusError", message);
         free(env);
         return NULL;
     }

@@ -9,13 +9,18 @@
 #include "model_generated.h"
 
 #define STATE_MAGIC 0x464E4E43UL /* "FNNC" */
+/* Room for the longest message, the failed-step report with every input and
+ * parameter of the plant (about 1.5 kB at worst); a longer report, of a bigger
+ * model, ends in "..." (message_append). */
+#define MESSAGE_SIZE 2048
+#define NUMBER_SIZE 32 /* "%.17g" of any double, with sign and exponent */
 
 static const char *const MODE_NAMES[MODE_N] = {
     "Instantiated", "InitializationMode", "EventMode", "ContinuousTimeMode",
     "StepComplete", "ConfigurationMode", "Terminated"};
 
 void core_log(Instance *inst, CoreStatus status, const char *fmt, ...) {
-    char message[1024];
+    char message[MESSAGE_SIZE];
     va_list args;
     if (!inst || !inst->logger) return;
     /* errors are always reported; the rest only with debug logging on */
@@ -25,6 +30,42 @@ void core_log(Instance *inst, CoreStatus status, const char *fmt, ...) {
     va_end(args);
     inst->logger(inst->environment, inst->instance_name, status,
                  status >= CORE_ERROR ? "logStatusError" : "logEvents", message);
+}
+
+/* "%g", with as many more digits as it takes to read back as the same double:
+ * a logged value can be typed back in exactly and a value just below a bound
+ * does not print as the bound, yet 0.2 prints as "0.2", not "0.20000000000000001". */
+static const char *exact(char buffer[NUMBER_SIZE], double value) {
+    for (int digits = 6; digits <= 17; digits++) {
+        snprintf(buffer, NUMBER_SIZE, "%.*g", digits, value);
+        if (!isfinite(value) || strtod(buffer, NULL) == value) break;
+    }
+    return buffer;
+}
+
+/* A message built piece by piece in a fixed buffer. A piece that does not fit
+ * is dropped whole and the message ends in "...", so it is never cut silently. */
+typedef struct {
+    char text[MESSAGE_SIZE];
+    size_t length;
+    int truncated;
+} Message;
+
+static void message_append(Message *msg, const char *fmt, ...) {
+    static const char MARK[] = "...";
+    const size_t room = sizeof msg->text - sizeof MARK; /* always keep space for the mark */
+    va_list args;
+    int n;
+    if (msg->truncated) return;
+    va_start(args, fmt);
+    n = vsnprintf(msg->text + msg->length, sizeof msg->text - msg->length, fmt, args);
+    va_end(args);
+    if (n >= 0 && msg->length + (size_t)n <= room) {
+        msg->length += (size_t)n;
+        return;
+    }
+    memcpy(msg->text + msg->length, MARK, sizeof MARK);
+    msg->truncated = 1;
 }
 
 CoreStatus core_check_mode(Instance *inst, const char *function, unsigned allowed) {
@@ -128,10 +169,11 @@ static CoreStatus check_value(Instance *inst, unsigned vr, double value) {
         core_log(inst, CORE_ERROR, "%s = %g refused: not a finite number", VAR_NAME[vr], value);
         return CORE_ERROR;
     }
-    int too_low = VAR_MIN_EXCLUSIVE[vr] ? value <= VAR_MIN[vr] : value < VAR_MIN[vr];
-    if (too_low || value > VAR_MAX[vr]) {
-        core_log(inst, CORE_ERROR, "%s = %g refused: outside its range %s%g, %g]", VAR_NAME[vr], value,
-                 VAR_MIN_EXCLUSIVE[vr] ? "(" : "[", VAR_MIN[vr], VAR_MAX[vr]);
+    /* inclusive on both sides, as FMI's min and max (and Variable.check) are */
+    if (!(value >= VAR_MIN[vr] && value <= VAR_MAX[vr])) {
+        char v[NUMBER_SIZE], lo[NUMBER_SIZE], hi[NUMBER_SIZE];
+        core_log(inst, CORE_ERROR, "%s = %s refused: outside its range [%s, %s]", VAR_NAME[vr], exact(v, value),
+                 exact(lo, VAR_MIN[vr]), exact(hi, VAR_MAX[vr]));
         return CORE_ERROR;
     }
     return CORE_OK;
@@ -195,6 +237,27 @@ static int first_non_finite_state(Instance *inst) {
     return -1;
 }
 
+/* Append "label: name = value, ..." for the n variables from value reference first. */
+static void append_values(Message *msg, const Instance *inst, const char *label, size_t first, size_t n) {
+    char number[NUMBER_SIZE];
+    message_append(msg, "; %s:", label);
+    if (n == 0) message_append(msg, " none");
+    for (size_t i = 0; i < n; i++)
+        message_append(msg, "%s %s = %s", i ? "," : "", VAR_NAME[first + i], exact(number, inst->s.v[first + i]));
+}
+
+/* Everything needed to reproduce a failed step from the log alone: which state,
+ * when, and every input and parameter in effect. */
+static void report_non_finite_state(Instance *inst, int bad, double value, double t0, double t1) {
+    Message msg = {{0}, 0, 0};
+    char v[NUMBER_SIZE], from[NUMBER_SIZE], to[NUMBER_SIZE];
+    message_append(&msg, "state %s became %s during the step from t = %s to t = %s", VAR_NAME[VR_X + bad],
+                   exact(v, value), exact(from, t0), exact(to, t1));
+    append_values(&msg, inst, "inputs", VR_U, NU);
+    append_values(&msg, inst, "parameters", VR_P, NP);
+    core_log(inst, CORE_ERROR, "%s", msg.text);
+}
+
 CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
     if (inst->s.failed) {
         core_log(inst, CORE_ERROR, "doStep refused: an earlier step failed; reset or restore a saved state");
@@ -235,8 +298,7 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
         memcpy(X_, inst->x_start, NX * sizeof(double));
         T_ = current_time;
         inst->s.failed = 1;
-        core_log(inst, CORE_ERROR, "state %s became %g during the step from t = %g to t = %g",
-                 VAR_NAME[VR_X + bad], value, current_time, current_time + step_size);
+        report_non_finite_state(inst, bad, value, current_time, current_time + step_size);
         return CORE_ERROR;
     }
     T_ = current_time + step_size;
