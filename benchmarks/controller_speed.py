@@ -42,14 +42,14 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     from fnn_controller import QuadrotorController
-    from fnn_controller.position import VARIANTS
+    from fnn_controller.variants import variant_names
 
     p_ref, p_ref_dot = np.array([1.0, 0.0, -15.0]), np.array([0.5, 0.0, 0.0])
     x = np.zeros(12)
     x[2] = -15.0
     print(f"controller step, best of {args.repeats} x {args.steps} calls:")
     print(f"  {'variant':8s} {'fast path':>12s} {'plain call':>12s} {'ratio':>8s}")
-    for variant in VARIANTS:
+    for variant in variant_names():
         ctrl = QuadrotorController(variant)
         ctrl.reset(0)
         fast = _best_per_call(lambda: ctrl.step(p_ref, p_ref_dot, x), args.steps, args.repeats)

@@ -53,7 +53,8 @@ def main(argv=None) -> int:
     import fmpy
 
     import quadrotor_paper  # noqa: F401  (registers the paper's scenarios)
-    from quadrotor_paper.experiments import VARIANTS, Job, sweep
+    from fnn_controller.variants import variant_names
+    from quadrotor_paper.experiments import Job, sweep
     from cosim.scenario import build_master, fmu_file, load_scenario
 
     scenario = load_scenario("circles", {"controller.variant": "pd+lm", "wind.speed": 3.0})
@@ -100,7 +101,7 @@ def main(argv=None) -> int:
           f"{figures['ratio_mission_to_fmpy_plant_alone']:.2f}  (target <= 3)")
 
     if not args.no_table2:
-        jobs = [Job(v, w, s) for s in range(10) for w in (1.0, 3.0, 5.0) for v in VARIANTS]
+        jobs = [Job(v, w, s) for s in range(10) for w in (1.0, 3.0, 5.0) for v in variant_names()]
         t = time.perf_counter()
         res = sweep(scenario, jobs, workers=args.workers)
         wall = time.perf_counter() - t

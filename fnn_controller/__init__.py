@@ -14,20 +14,22 @@ co-simulation, C code generation and linearization):
 Values the paper leaves open are documented in ``docs/controller.md``.
 """
 from .controller import (STATE_SIZE, FastFunction, QuadrotorController, controller_step_function,
-                         initial_state)
+                         initial_state, state_size)
 from .fnn import FnnInit, fnn_output, firing_strength, membership, normalized_firing_strength
 from .geometric import (GeometricParams, VehicleParams, initial_velocity_state, velocity_controller,
                         velocity_controller_function)
 from .learning import LearningBounds, learning_step, lm_f_rate, smc_f_rate
-from .position import (FNN_STATE_SIZE, VARIANTS, PositionParams, initial_fnn_state, pd_law,
-                       position_controller, position_controller_function)
+from .position import (FNN_STATE_SIZE, PositionParams, initial_fnn_state, pd_law, position_controller,
+                       position_controller_function)
+from .variants import Variant, register_variant, variant, variant_names, variants
 
 __all__ = [
     "STATE_SIZE", "FastFunction", "QuadrotorController", "controller_step_function", "initial_state",
+    "state_size", "Variant", "register_variant", "variant", "variant_names", "variants",
     "FnnInit", "fnn_output", "firing_strength", "membership", "normalized_firing_strength",
     "GeometricParams", "VehicleParams", "initial_velocity_state", "velocity_controller",
     "velocity_controller_function",
     "LearningBounds", "learning_step", "lm_f_rate", "smc_f_rate",
-    "FNN_STATE_SIZE", "VARIANTS", "PositionParams", "initial_fnn_state", "pd_law",
+    "FNN_STATE_SIZE", "PositionParams", "initial_fnn_state", "pd_law",
     "position_controller", "position_controller_function",
 ]

@@ -46,16 +46,21 @@ import casadi as ca
 import numpy as np
 
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
-from .position import FNN_STATE_SIZE, VARIANTS, PositionParams, initial_fnn_state, position_controller
+from .position import FNN_STATE_SIZE, PositionParams, fnn_state_size, initial_fnn_state, position_controller
 
 __all__ = [
-    "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES",
+    "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES", "state_size",
     "controller_step_function", "initial_state", "FastFunction", "QuadrotorController",
 ]
 
-STATE_SIZE = FNN_STATE_SIZE + VEL_STATE_SIZE
+STATE_SIZE = FNN_STATE_SIZE + VEL_STATE_SIZE  # the paper's variants
 FNN_STATE = slice(0, FNN_STATE_SIZE)
 VEL_STATE = slice(FNN_STATE_SIZE, STATE_SIZE)
+
+
+def state_size(variant: str) -> int:
+    """Size of the whole controller state of ``variant``: position part, then velocity part."""
+    return fnn_state_size(variant) + VEL_STATE_SIZE
 PLANT_STATE_NAMES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
 
 _INPUTS = ("p_ref", "p_ref_dot", "x", "psi_ref")
@@ -69,8 +74,7 @@ def controller_step_function(variant: str = "pd+lm", position: PositionParams = 
     ``e = p_ref - p`` (eq. 12) and ``e_dot = p_ref_dot - v`` are formed
     inside from the plant state.
     """
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown position-controller variant {variant!r}; expected one of {VARIANTS}")
+    n_fnn = fnn_state_size(variant)  # refuses an unknown variant, naming the known ones
     if abs(position.dt - geometric.dt) > 1e-15:
         raise ValueError(f"position.dt = {position.dt} s and geometric.dt = {geometric.dt} s must agree: "
                          "outer and inner loop run in the same step")
@@ -78,11 +82,11 @@ def controller_step_function(variant: str = "pd+lm", position: PositionParams = 
     p_ref_dot = ca.SX.sym("p_ref_dot", 3)
     x = ca.SX.sym("x", 12)
     psi_ref = ca.SX.sym("psi_ref")
-    state = ca.SX.sym("state", STATE_SIZE)
+    state = ca.SX.sym("state", n_fnn + VEL_STATE_SIZE)
 
     pos, vel = x[0:3], x[3:6]
-    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[FNN_STATE], position)
-    inner = velocity_controller(outer["v_ref"], vel, x[6:9], x[9:12], psi_ref, state[VEL_STATE], geometric)
+    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position)
+    inner = velocity_controller(outer["v_ref"], vel, x[6:9], x[9:12], psi_ref, state[n_fnn:], geometric)
     state_next = ca.vertcat(outer["fnn_state_next"], inner["vel_state_next"])
     outputs = [inner["Omega"], state_next, outer["v_ref"], outer["tau_c"], outer["tau_n"], inner["wrench"]]
     check = sum(ca.sum1(v) for v in [p_ref, p_ref_dot, x, psi_ref, state] + outputs)
@@ -95,10 +99,11 @@ def controller_step_function(variant: str = "pd+lm", position: PositionParams = 
     )
 
 
-def initial_state(seed: int | np.random.Generator, position: PositionParams = PositionParams()) -> np.ndarray:
-    """Controller state after reset: FNN initial values of section 5.1
+def initial_state(seed: int | np.random.Generator, position: PositionParams = PositionParams(),
+                  variant: str = "pd+lm") -> np.ndarray:
+    """Controller state after reset: the variant's initial values of section 5.1
     (f_ij(0) from ``seed``) followed by the velocity-controller state."""
-    return np.concatenate([initial_fnn_state(seed, position), initial_velocity_state()])
+    return np.concatenate([initial_fnn_state(seed, position, variant), initial_velocity_state()])
 
 
 class FastFunction:
@@ -182,8 +187,8 @@ class QuadrotorController:
 
     Parameters
     ----------
-    variant : {"pd", "pd+smc", "pd+lm"}
-        Position-controller variant.
+    variant : str
+        Position-controller variant, a name registered in :mod:`fnn_controller.variants`.
     position : PositionParams
     geometric : GeometricParams
 
@@ -215,7 +220,7 @@ class QuadrotorController:
 
     def reset(self, seed: int | np.random.Generator) -> None:
         """Initial FNN parameters of section 5.1, f_ij(0) drawn from ``seed``."""
-        self._fast.state[:] = initial_state(seed, self.position)
+        self._fast.state[:] = initial_state(seed, self.position, self.variant)
         self._has_state = True
 
     @property
@@ -226,8 +231,9 @@ class QuadrotorController:
     @state.setter
     def state(self, value: Sequence[float]) -> None:
         value = np.asarray(value, dtype=float)
-        if value.shape != (STATE_SIZE,) or not np.all(np.isfinite(value)):
-            raise ValueError(f"state must be {STATE_SIZE} finite numbers, got shape {value.shape}")
+        size = self._fast.state.size
+        if value.shape != (size,) or not np.all(np.isfinite(value)):
+            raise ValueError(f"state must be {size} finite numbers, got shape {value.shape}")
         self._fast.state[:] = value
         self._has_state = True
 

@@ -7,11 +7,13 @@ error ``e = p* - p`` (eq. 12) and its derivative ``de/dt = p*_dot - v``
 (from the reference derivative and the measured velocity; no finite
 differences). There is no velocity feed-forward: the paper has none.
 
-Variants, selected by name: ``"pd"`` (FNN off, tau_n = 0, state passed
-through unchanged), ``"pd+smc"``, ``"pd+lm"``.
+The learning part is the variant's (:mod:`fnn_controller.variants`: ``"pd"``,
+FNN off, tau_n = 0, state passed through unchanged; ``"pd+smc"``;
+``"pd+lm"``; and whatever else is registered).
 
 The position-controller state ``fnn_state`` is the three axis states
-(x, y, z; layout in :mod:`fnn_controller.fnn`) stacked, 3 * 25 = 75 numbers.
+(x, y, z) stacked; for the paper's variants (layout in
+:mod:`fnn_controller.fnn`) 3 * 25 = 75 numbers.
 """
 from __future__ import annotations
 
@@ -20,37 +22,47 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from .fnn import (AXIS_STATE_SIZE, C1, C2, F, SIGMA1, SIGMA2, FnnInit, fnn_output,
-                  initial_axis_state, normalized_firing_strength)
-from .learning import LearningBounds, clip_inputs, learning_step
+from .fnn import AXIS_STATE_SIZE, FnnInit
+from .learning import LearningBounds
+from .parameters import check_ranges, param
 
 __all__ = [
-    "VARIANTS", "FNN_STATE_SIZE", "PositionParams", "pd_law", "position_axis",
+    "FNN_STATE_SIZE", "PositionParams", "pd_law", "position_axis", "fnn_state_size",
     "position_controller", "position_controller_function", "initial_fnn_state", "axis_slice",
 ]
 
-VARIANTS = ("pd", "pd+smc", "pd+lm")
-FNN_STATE_SIZE = 3 * AXIS_STATE_SIZE
+FNN_STATE_SIZE = 3 * AXIS_STATE_SIZE  # the paper's variants
 
 
 @dataclass(frozen=True)
 class PositionParams:
     """Gains of the position controller, paper values (section 5.1)."""
 
-    kp: float = 2.5  # 1/s, proportional gain of eq. 19
-    kd: float = 0.005  # 1 (s/s), derivative gain of eq. 19
-    dt: float = 0.01  # s, learning (and controller) step
-    gamma_smc: tuple[float, float, float] = (1.5, 1.5, 1.5)  # 1/s, gamma of eq. 38 for x, y, z
-    nu: tuple[float, float, float] = (0.85, 0.85, 0.2)  # s, nu of eq. 38 for x, y, z
-    gamma_lm: tuple[float, float, float] = (1.5, 1.5, 1.5)  # m/s^2, gamma of eq. 61 for x, y, z
-    alpha_bar: tuple[float, float, float] = (1.1, 1.1, 0.9)  # 1, alpha_bar of eq. 62 for x, y, z
+    kp: float = param(2.5, "1/s", "proportional gain of eq. 19")  # any sign: the stability analysis sweeps it
+    kd: float = param(0.005, "1", "derivative gain of eq. 19 (s/s)")
+    dt: float = param(0.01, "s", "learning (and controller) step", min=1e-4, max=1.0)
+    gamma_smc: tuple[float, float, float] = param((1.5, 1.5, 1.5), "1/s", "gamma of eq. 38 for x, y, z", min=0.0)
+    nu: tuple[float, float, float] = param((0.85, 0.85, 0.2), "s", "nu of eq. 38 for x, y, z", min=0.0)
+    gamma_lm: tuple[float, float, float] = param((1.5, 1.5, 1.5), "m/s2", "gamma of eq. 61 for x, y, z", min=0.0)
+    alpha_bar: tuple[float, float, float] = param((1.1, 1.1, 0.9), "1", "alpha_bar of eq. 62 for x, y, z",
+                                                  min=0.0)
     init: FnnInit = field(default_factory=FnnInit)  # initial FNN values (section 5.1)
     bounds: LearningBounds = field(default_factory=LearningBounds)  # eqs. 27-29 and floors
 
+    def __post_init__(self) -> None:
+        check_ranges(self)
 
-def axis_slice(axis: int) -> slice:
+
+def axis_slice(axis: int, axis_state_size: int = AXIS_STATE_SIZE) -> slice:
     """Slice of axis ``axis`` (0 = x, 1 = y, 2 = z) in the position-controller state."""
-    return slice(axis * AXIS_STATE_SIZE, (axis + 1) * AXIS_STATE_SIZE)
+    return slice(axis * axis_state_size, (axis + 1) * axis_state_size)
+
+
+def fnn_state_size(variant: str) -> int:
+    """Size of the position-controller state of ``variant`` (three axes)."""
+    from .variants import variant as lookup
+
+    return 3 * lookup(variant).axis_state_size
 
 
 def pd_law(e, e_dot, kp, kd):
@@ -58,23 +70,18 @@ def pd_law(e, e_dot, kp, kd):
     return kp * e + kd * e_dot
 
 
-def _check_variant(variant: str) -> None:
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown position-controller variant {variant!r}; expected one of {VARIANTS}")
-
-
 def position_axis(variant: str, e, e_dot, axis_state, axis: int, params: PositionParams = PositionParams()):
     """One step of the position controller of one axis, eqs. (19), (24)-(26).
 
     Parameters
     ----------
-    variant : {"pd", "pd+smc", "pd+lm"}
+    variant : a registered variant name (:func:`fnn_controller.variants.variant_names`)
     e : scalar
         Position error p* - p of this axis (m), eq. (12).
     e_dot : scalar
         Its derivative p*_dot - v (m/s).
-    axis_state : vector of length AXIS_STATE_SIZE
-        FNN parameters of this axis at step k.
+    axis_state : vector
+        The variant's parameters of this axis at step k.
     axis : int
         0, 1, 2 for x, y, z (selects the per-axis learning gains).
     params : PositionParams
@@ -83,25 +90,14 @@ def position_axis(variant: str, e, e_dot, axis_state, axis: int, params: Positio
     -------
     dict
         ``tau`` (the desired velocity v*, eq. 26), ``tau_c`` (eq. 19),
-        ``tau_n`` (eq. 24), ``w_bar`` (eq. 25) and ``state_next``.
+        ``tau_n`` (eq. 24) and ``state_next``.
     """
-    _check_variant(variant)
+    from .variants import variant as lookup
+
+    law = lookup(variant).axis_law
     tau_c = pd_law(e, e_dot, params.kp, params.kd)
-    x1, x2 = clip_inputs(e, e_dot, params.bounds)
-    w_bar = normalized_firing_strength(x1, x2, axis_state[C1], axis_state[C2],
-                                       axis_state[SIGMA1], axis_state[SIGMA2])
-    if variant == "pd":
-        tau_n = 0.0 * tau_c
-        state_next = axis_state
-    else:
-        tau_n = fnn_output(axis_state[F], w_bar)
-        state_next = learning_step(
-            variant[3:], axis_state, x1, x2, tau_c, w_bar, params.dt,
-            gamma=params.gamma_smc[axis] if variant == "pd+smc" else params.gamma_lm[axis],
-            nu=params.nu[axis], alpha_bar=params.alpha_bar[axis], bounds=params.bounds,
-        )
-    return {"tau": tau_c - tau_n, "tau_c": tau_c, "tau_n": tau_n, "w_bar": w_bar,
-            "state_next": state_next}
+    tau_n, state_next = law(e, e_dot, tau_c, axis_state, axis, params)
+    return {"tau": tau_c - tau_n, "tau_c": tau_c, "tau_n": tau_n, "state_next": state_next}
 
 
 def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParams = PositionParams()):
@@ -109,10 +105,10 @@ def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParam
 
     Parameters
     ----------
-    variant : {"pd", "pd+smc", "pd+lm"}
+    variant : a registered variant name
     e, e_dot : 3-vectors
         Position error p* - p (m, eq. 12) and its derivative p*_dot - v (m/s).
-    fnn_state : vector of length FNN_STATE_SIZE
+    fnn_state : vector of length ``fnn_state_size(variant)``
         Stacked axis states (x, y, z).
     params : PositionParams
 
@@ -120,9 +116,10 @@ def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParam
     -------
     dict
         ``v_ref`` (3, m/s, eq. 26), ``tau_c`` (3), ``tau_n`` (3),
-        ``fnn_state_next`` (FNN_STATE_SIZE).
+        ``fnn_state_next`` (``fnn_state_size(variant)``).
     """
-    axes = [position_axis(variant, e[a], e_dot[a], fnn_state[axis_slice(a)], a, params) for a in range(3)]
+    size = fnn_state_size(variant) // 3
+    axes = [position_axis(variant, e[a], e_dot[a], fnn_state[axis_slice(a, size)], a, params) for a in range(3)]
     return {
         "v_ref": ca.vertcat(*[ax["tau"] for ax in axes]),
         "tau_c": ca.vertcat(*[ax["tau_c"] for ax in axes]),
@@ -134,15 +131,14 @@ def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParam
 def position_controller_function(variant: str, params: PositionParams = PositionParams()) -> ca.Function:
     """The position controller as one CasADi function.
 
-    ``position_controller_<variant>(e[3], e_dot[3], fnn_state[75])
+    ``position_controller_<variant>(e[3], e_dot[3], fnn_state[n])
     -> (v_ref[3], fnn_state_next[75], tau_c[3], tau_n[3])`` with the units
     and meaning of :func:`position_controller`. The variant name in the
     function name has ``+`` replaced by ``_``.
     """
-    _check_variant(variant)
     e = ca.SX.sym("e", 3)
     e_dot = ca.SX.sym("e_dot", 3)
-    fnn_state = ca.SX.sym("fnn_state", FNN_STATE_SIZE)
+    fnn_state = ca.SX.sym("fnn_state", fnn_state_size(variant))
     out = position_controller(variant, e, e_dot, fnn_state, params)
     return ca.Function(
         f"position_controller_{variant.replace('+', '_')}",
@@ -153,15 +149,19 @@ def position_controller_function(variant: str, params: PositionParams = Position
     )
 
 
-def initial_fnn_state(rng: np.random.Generator | int, params: PositionParams = PositionParams()) -> np.ndarray:
-    """Position-controller state at t = 0 (section 5.1) for the three axes.
+def initial_fnn_state(rng: np.random.Generator | int, params: PositionParams = PositionParams(),
+                      variant: str = "pd+lm") -> np.ndarray:
+    """Position-controller state of ``variant`` at t = 0 (section 5.1) for the three axes.
 
     ``rng`` is a ``numpy.random.Generator`` or an integer seed (there is no
-    default: every run names its randomness); the f_ij(0) of the x, y and z
-    axes are drawn from it in that order.
+    default: every run names its randomness); the x, y and z axes draw from
+    it in that order (for the paper's variants, their f_ij(0)).
     """
+    from .variants import variant as lookup
+
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
         rng = np.random.default_rng(int(rng))
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator or an int seed, not {rng!r}")
-    return np.concatenate([initial_axis_state(rng, params.init) for _ in range(3)])
+    draw = lookup(variant).initial_axis_state
+    return np.concatenate([draw(rng, params) for _ in range(3)])

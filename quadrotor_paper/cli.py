@@ -161,6 +161,8 @@ def _cmd_build_fmu(args) -> int:
 # ---- entry point ------------------------------------------------------------------------
 
 def _parser() -> argparse.ArgumentParser:
+    from fnn_controller.variants import variant_names
+
     p = argparse.ArgumentParser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
@@ -178,7 +180,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario value, e.g. --set wind.speed=5 (repeatable)")
     r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
-    r.add_argument("--variant", choices=("pd", "pd+smc", "pd+lm"), help="controller variant")
+    r.add_argument("--variant", choices=variant_names(), help="controller variant")
     r.add_argument("--no-plots", action="store_true")
     common(r, seeds=False)
     r.set_defaults(func=_cmd_run)

@@ -59,7 +59,7 @@ class ControllerComponent(PythonComponent):
 
     Parameters
     ----------
-    variant : ``"pd"``, ``"pd+smc"`` or ``"pd+lm"``; run-level parameter
+    variant : a registered variant (``"pd"``, ``"pd+smc"``, ``"pd+lm"``, ...); run-level parameter
         ``variant`` switches it for one run.
     position, geometric : mappings of :class:`fnn_controller.PositionParams`
         and :class:`fnn_controller.GeometricParams` fields (nested tables for
@@ -100,8 +100,9 @@ class ControllerComponent(PythonComponent):
             raise ScenarioError(f"{name}: {exc}") from None
 
     def _check_variant(self, variant: Any) -> str:
-        if variant not in self._fc.VARIANTS:
-            raise ScenarioError(f"{self.name}.variant = {variant!r}: expected one of {', '.join(self._fc.VARIANTS)}")
+        names = self._fc.variant_names()
+        if variant not in names:
+            raise ScenarioError(f"{self.name}.variant = {variant!r}: expected one of {', '.join(names)}")
         return variant
 
     def controller(self, variant: str):

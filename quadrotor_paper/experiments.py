@@ -26,10 +26,7 @@ from cosim.scenario import Scenario, apply_overrides, build_master, fmu_error_in
 
 from .missions import controller_variant, metric_signals, wind_parameter
 
-__all__ = ["Job", "run_once", "sweep", "cells", "VARIANTS", "VARIANT_LABELS"]
-
-VARIANTS = ("pd", "pd+smc", "pd+lm")
-VARIANT_LABELS = {"pd": "PD", "pd+smc": "PD+SMC-FNN", "pd+lm": "PD+LM-FNN"}
+__all__ = ["Job", "run_once", "sweep", "cells"]
 
 
 @dataclass(frozen=True)

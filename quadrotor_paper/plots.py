@@ -26,8 +26,15 @@ from .missions import controller_variant, metric_signals  # noqa: E402
 __all__ = ["wind_profile", "trajectories_3d", "control_signals", "euclidean_errors", "run_figures",
            "wind_series"]
 
-COLORS = {"pd": "tab:red", "pd+smc": "tab:blue", "pd+lm": "tab:green", "reference": "black"}
-LABELS = {"pd": "PD", "pd+smc": "PD+SMC-FNN", "pd+lm": "PD+LM-FNN"}
+COLORS = {"pd": "tab:red", "pd+smc": "tab:blue", "pd+lm": "tab:green", "reference": "black"}  # Figs. 6, 9
+
+
+def _label(name: str) -> str:
+    """The registered variant's label; other names (a run's) as they are."""
+    from fnn_controller.variants import variants
+
+    v = variants().get(name)
+    return v.label if v is not None else name
 
 
 def _save(fig, path: Path) -> Path:
@@ -78,11 +85,11 @@ def trajectories_3d(path: Path, results: Mapping[str, object], position, referen
         ax = fig.add_subplot(1, n, i, projection="3d")
         ax.plot(r[reference[0]], r[reference[1]], -r[reference[2]], "--", color="black", lw=1, label="reference")
         ax.plot(r[position[0]], r[position[1]], -r[position[2]], color=COLORS.get(variant, "tab:purple"),
-                lw=1.2, label=LABELS.get(variant, variant))
+                lw=1.2, label=_label(variant))
         ax.set_xlabel("x north (m)")
         ax.set_ylabel("y east (m)")
         ax.set_zlabel("altitude (m)")
-        ax.set_title(LABELS.get(variant, variant))
+        ax.set_title(_label(variant))
         ax.legend(fontsize=8, loc="upper left")
     fig.suptitle(title)
     return _save(fig, path)
@@ -95,7 +102,7 @@ def control_signals(path: Path, result, variant: str, title: str, controller: st
     for ax, a in zip(axes, "xyz"):
         ax.plot(t, result[f"{controller}.tau_c_{a}"], color="tab:red", lw=1, label="PD, tau_c")
         ax.plot(t, result[f"{controller}.tau_n_{a}"], color=COLORS.get(variant, "tab:blue"), lw=1,
-                label=f"FNN, tau_n ({LABELS.get(variant, variant)})")
+                label=f"FNN, tau_n ({_label(variant)})")
         ax.set_ylabel(f"{a} axis (m/s)")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, loc="upper right")
@@ -109,7 +116,7 @@ def euclidean_errors(path: Path, results: Mapping[str, object], position, refere
     fig, ax = plt.subplots(figsize=(7, 3.8))
     for variant, r in results.items():
         ax.plot(r.time, euclidean_error(r, position, reference), color=COLORS.get(variant, "tab:purple"), lw=1,
-                label=LABELS.get(variant, variant))
+                label=_label(variant))
     ax.set_xlabel("time (s)")
     ax.set_ylabel("|p* - p| (m)")
     ax.set_title(title)

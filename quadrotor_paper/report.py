@@ -19,7 +19,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import plots
-from .experiments import VARIANTS, Job, cells, run_once, sweep, write_json
+from fnn_controller.variants import variant_names
+
+from .experiments import Job, cells, run_once, sweep, write_json
 from .metrics import pd_share, rmse
 from .missions import metric_signals
 from cosim.progress import Progress
@@ -45,7 +47,7 @@ def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5
            workers: int = 2, scenario: str = "circles", show_progress: bool = True) -> dict[str, Any]:
     """Table 2: every variant at every wind speed, ``seeds`` runs each."""
     sc = load_scenario(scenario, _overrides(duration))
-    jobs = [Job(v, float(w), s) for s in range(seeds) for w in winds for v in VARIANTS]
+    jobs = [Job(v, float(w), s) for s in range(seeds) for w in winds for v in variant_names()]
     results, wall = _sweep_with_progress(sc, jobs, workers, "table2", show_progress)
     table = cells(results)
     md = table2_markdown(table, tuple(float(w) for w in winds))
@@ -63,7 +65,7 @@ def table3(out_dir: Path, seeds: int = 10, duration: float | None = None, worker
            scenario: str = "figure8", show_progress: bool = True) -> dict[str, Any]:
     """Table 3: every variant on the figure-8, ``seeds`` runs each."""
     sc = load_scenario(scenario, _overrides(duration))
-    jobs = [Job(v, None, s) for s in range(seeds) for v in VARIANTS]
+    jobs = [Job(v, None, s) for s in range(seeds) for v in variant_names()]
     results, wall = _sweep_with_progress(sc, jobs, workers, "table3", show_progress)
     table = cells(results)
     md = table3_markdown(table)
@@ -110,8 +112,8 @@ def figures(out_dir: Path, wind: float = 3.0, seed: int = 0, duration: float | N
             overrides["wind.speed"] = wind
         sc = load_scenario(name, overrides)
         results = {}
-        bar = Progress(len(VARIANTS), f"figures ({name})", enabled=show_progress)
-        for v in VARIANTS:
+        bar = Progress(len(variant_names()), f"figures ({name})", enabled=show_progress)
+        for v in variant_names():
             run_dir = out_dir / "runs" / f"{label}-{v.replace('+', '_')}"
             result, summary = run_once(sc, run_dir, seed=seed, variant=v)
             write_json(run_dir / "summary.json", summary)

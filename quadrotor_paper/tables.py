@@ -9,8 +9,10 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
+from fnn_controller.variants import variant, variant_names
+
 __all__ = ["PAPER_TABLE2", "PAPER_TABLE3", "table2_markdown", "table3_markdown", "deviations",
-           "DEVIATION_LIMIT"]
+           "DEVIATION_LIMIT", "BASELINE"]
 
 PAPER_TABLE2: dict[str, dict[float, float]] = {  # m, section 5.4
     "pd": {1.0: 0.966, 3.0: 1.006, 5.0: 1.204},
@@ -19,7 +21,7 @@ PAPER_TABLE2: dict[str, dict[float, float]] = {  # m, section 5.4
 }
 PAPER_TABLE3: dict[str, float] = {"pd": 0.327, "pd+smc": 0.210, "pd+lm": 0.228}  # m, section 6.1
 DEVIATION_LIMIT = 0.30
-LABELS = {"pd": "PD", "pd+smc": "PD+SMC-FNN", "pd+lm": "PD+LM-FNN"}
+BASELINE = "pd"  # the variant every reduction is measured against
 
 
 def _fmt(cell: Mapping[str, Any] | None) -> str:
@@ -43,32 +45,40 @@ def _reduction(value: float | None, pd: float | None) -> str:
     return f"{100 * (1 - value / pd):.0f} %"
 
 
+def _label(v: str) -> str:
+    return variant(v).label
+
+
+def _rows(cells: Mapping[str, Any]) -> list[str]:
+    """The registered variants that have cells, the paper's first (registration order)."""
+    return [v for v in variant_names() if v in cells]
+
+
 def table2_markdown(cells: Mapping[str, Mapping[float, Mapping[str, Any]]], winds=(1.0, 3.0, 5.0)) -> str:
-    """Table 2 (ours vs paper) and the reduction over PD, in markdown."""
+    """Table 2 (ours vs paper) and the reduction over PD, in markdown; a
+    variant the paper has not flown gets "–" in the paper's columns."""
     head = "| Controller | " + " | ".join(f"{w:g} m/s ours | {w:g} m/s paper" for w in winds) + " |"
     lines = ["Average Euclidean RMSE (m), mean ± std over the seeds; † = differs from the paper by more "
              f"than {DEVIATION_LIMIT:.0%}.", "", head, "|" + "---|" * (1 + 2 * len(winds))]
-    for v in ("pd", "pd+smc", "pd+lm"):
-        if v not in cells:
-            continue
-        row = [LABELS[v]]
+    for v in _rows(cells):
+        row = [_label(v)]
         for w in winds:
             cell = cells[v].get(w)
-            paper = PAPER_TABLE2[v].get(w)
+            paper = PAPER_TABLE2.get(v, {}).get(w)
             row.append(_fmt(cell) + (_dev(cell and cell.get("mean"), paper) if paper else ""))
             row.append(f"{paper:.3f}" if paper else "–")
         lines.append("| " + " | ".join(row) + " |")
     lines += ["", "Reduction of the RMSE over PD alone:", "",
               "| Controller | " + " | ".join(f"{w:g} m/s ours | {w:g} m/s paper" for w in winds) + " |",
               "|" + "---|" * (1 + 2 * len(winds))]
-    for v in ("pd+smc", "pd+lm"):
-        if v not in cells or "pd" not in cells:
+    for v in _rows(cells):
+        if v == BASELINE or BASELINE not in cells:
             continue
-        row = [LABELS[v]]
+        row = [_label(v)]
         for w in winds:
             ours = (cells[v].get(w) or {}).get("mean")
-            pd = (cells["pd"].get(w) or {}).get("mean")
-            row += [_reduction(ours, pd), _reduction(PAPER_TABLE2[v].get(w), PAPER_TABLE2["pd"].get(w))]
+            pd = (cells[BASELINE].get(w) or {}).get("mean")
+            row += [_reduction(ours, pd), _reduction(PAPER_TABLE2.get(v, {}).get(w), PAPER_TABLE2[BASELINE].get(w))]
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 
@@ -78,15 +88,15 @@ def table3_markdown(cells: Mapping[str, Mapping[Any, Mapping[str, Any]]]) -> str
     lines = ["Average Euclidean RMSE (m), mean ± std over the seeds (ours: simulation; paper: flights); "
              f"† = differs from the paper by more than {DEVIATION_LIMIT:.0%}.", "",
              "| Controller | ours | paper | reduction over PD, ours | paper |", "|---|---|---|---|---|"]
-    pd = next(iter(cells.get("pd", {}).values()), {}).get("mean") if "pd" in cells else None
-    for v in ("pd", "pd+smc", "pd+lm"):
-        if v not in cells:
-            continue
+    pd = next(iter(cells[BASELINE].values()), {}).get("mean") if BASELINE in cells else None
+    for v in _rows(cells):
         cell = next(iter(cells[v].values()))
-        paper = PAPER_TABLE3[v]
-        red = ("–", "–") if v == "pd" else (_reduction(cell.get("mean"), pd),
-                                            _reduction(paper, PAPER_TABLE3["pd"]))
-        lines.append(f"| {LABELS[v]} | {_fmt(cell)}{_dev(cell.get('mean'), paper)} | {paper:.3f} | {red[0]} | {red[1]} |")
+        paper = PAPER_TABLE3.get(v)
+        red = ("–", "–") if v == BASELINE else (_reduction(cell.get("mean"), pd),
+                                                _reduction(paper, PAPER_TABLE3[BASELINE]))
+        shown = f"{paper:.3f}" if paper else "–"
+        lines.append(f"| {_label(v)} | {_fmt(cell)}{_dev(cell.get('mean'), paper) if paper else ''} | {shown} | "
+                     f"{red[0]} | {red[1]} |")
     return "\n".join(lines) + "\n"
 
 

@@ -15,7 +15,8 @@ from fnn_controller import (STATE_SIZE, GeometricParams, PositionParams, Quadrot
                             velocity_controller_function)
 from fnn_controller.controller import FastFunction
 from fnn_controller.geometric import initial_velocity_state
-from fnn_controller.position import VARIANTS, initial_fnn_state
+from fnn_controller.position import initial_fnn_state
+from fnn_controller.variants import variant_names
 from test_geometric import H, PlantFmu, plant_fmu  # noqa: F401  (fixture)
 
 KP, KD = PositionParams().kp, PositionParams().kd
@@ -77,7 +78,7 @@ def _random_inputs(rng):
     return rng.normal(0, 3, 3), rng.normal(0, 2, 3), x, float(rng.normal(0, 0.3))
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", variant_names())
 def test_fast_buffer_path_gives_identical_results_to_a_plain_casadi_call(variant):
     rng = np.random.default_rng(11)
     ctrl = QuadrotorController(variant)

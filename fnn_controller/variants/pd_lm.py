@@ -1,0 +1,14 @@
+"""PD + type-1 FNN trained by the Levenberg-Marquardt laws of Theorem 3 (eqs. 57-62)."""
+from __future__ import annotations
+
+from ..fnn import AXIS_STATE_SIZE
+from .registry import Variant, register_variant
+from .type1 import type1_axis_law, type1_axis_state_bounds, type1_initial_axis_state
+
+PD_LM = register_variant(Variant(
+    name="pd+lm", label="PD+LM-FNN",
+    description="PD + type-1 FNN trained by the LM laws (eqs. 57-62), alpha held",
+    axis_law=type1_axis_law("lm", "gamma_lm"),
+    initial_axis_state=type1_initial_axis_state,
+    axis_state_size=AXIS_STATE_SIZE, axis_state_bounds=type1_axis_state_bounds, parameters=("gamma_lm", "alpha_bar", "init", "bounds"),
+))

@@ -1,0 +1,80 @@
+"""The registry of position-controller variants.
+
+A variant is the learning part of the position controller of §3.1: the PD of
+eq. (19) runs in every variant, and the variant adds ``tau_n`` (eq. 24) and
+says how its per-axis state evolves. Each variant is registered once, here,
+by its own module; everything else (the CasADi controller functions, the
+co-simulation component, the tables, the plots, the command line, the
+stability analysis and the controller FMU) reads :func:`variants`.
+
+A variant's ``axis_law(e, e_dot, tau_c, axis_state, axis, params)`` returns
+``(tau_n, axis_state_next)`` as CasADi expressions for one axis (0 = x, 1 = y,
+2 = z): ``e = p* - p`` (m, eq. 12), ``e_dot`` (m/s), ``tau_c`` the PD output
+(m/s, eq. 19), ``axis_state`` the variant's learned parameters of that axis
+(``axis_state_size`` numbers) and ``params`` the
+:class:`~fnn_controller.position.PositionParams`. ``initial_axis_state(rng,
+params)`` draws the state of one axis at reset (§5.1). ``parameters`` names
+the fields of ``PositionParams`` the law reads beyond the PD's ``kp``,
+``kd`` and ``dt`` (their units, defaults and ranges are on the fields).
+``axis_state_bounds(params)`` gives the box ``(low, high)`` the law keeps
+each axis state in (its projections), which the contract test checks.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+__all__ = ["Variant", "register_variant", "variants", "variant", "variant_names"]
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    label: str
+    description: str
+    axis_law: Callable[..., tuple[Any, Any]]
+    initial_axis_state: Callable[..., Any]
+    axis_state_size: int
+    axis_state_bounds: Callable[..., tuple[Any, Any]]
+    parameters: tuple[str, ...] = ()
+    learns: bool = True
+
+
+_VARIANTS: dict[str, Variant] = {}
+
+
+def register_variant(v: Variant) -> Variant:
+    """Add ``v``; a name registered twice differently is refused."""
+    if _VARIANTS.get(v.name, v) != v:
+        raise ValueError(f"controller variant {v.name!r} is registered twice, differently")
+    from ..position import PositionParams
+
+    fields = set(PositionParams.__dataclass_fields__)
+    unknown = [p for p in v.parameters if p not in fields]
+    if unknown:
+        raise ValueError(f"variant {v.name!r} names parameters PositionParams does not have: {unknown}")
+    _VARIANTS[v.name] = v
+    return v
+
+
+def unregister_variant(name: str) -> None:
+    """Remove a variant (for tests that register a toy one)."""
+    _VARIANTS.pop(name, None)
+
+
+def variants() -> dict[str, Variant]:
+    """Every registered variant, in registration order (the paper's first)."""
+    return dict(_VARIANTS)
+
+
+def variant_names() -> tuple[str, ...]:
+    return tuple(_VARIANTS)
+
+
+def variant(name: str) -> Variant:
+    """The variant called ``name``; a ``ValueError`` listing the known ones otherwise."""
+    try:
+        return _VARIANTS[name]
+    except KeyError:
+        raise ValueError(f"unknown position-controller variant {name!r}; expected one of "
+                         f"{', '.join(_VARIANTS)}") from None
