@@ -9,9 +9,19 @@ with the current input values ``u`` (a float64 array in the order of
 order of ``outputs``; it may be the same preallocated array every call).
 
 Python components are sampled-data blocks with direct feedthrough: their
-outputs at ``t_n`` may depend on their inputs at ``t_n`` (the controller
-does). The master evaluates them in an order that respects their
+outputs at ``t_n`` may depend on their inputs at ``t_n`` (a controller's
+do). The master evaluates them in an order that respects their
 connections (see ``docs/cosim.md``).
+
+Two optional parts of the contract:
+
+* ``input_buffers()`` -- arrays, in port order, the component reads its
+  inputs from; the master then gathers the inputs straight into them (no
+  copy in ``step``, which then receives ``u = None``);
+* ``internals`` and ``internal_values()`` -- internal signals (learned
+  parameters, filter states) the component publishes: they can be recorded
+  and bounded like outputs, by ``component.name``, but not connected. The
+  master reads them after each step only when some are recorded or bounded.
 """
 from __future__ import annotations
 
@@ -51,12 +61,14 @@ class PythonComponent:
     """Base class of the Python components (controllers, references, sensors, ...).
 
     Subclasses set ``inputs`` and ``outputs`` (tuples of :class:`Port`) and
-    implement :meth:`step`; they may override :meth:`start` and
-    :meth:`set_parameters`.
+    implement :meth:`step`; they may override :meth:`start`,
+    :meth:`set_parameters`, :meth:`input_buffers`, and publish
+    ``internals`` with :meth:`internal_values`.
     """
 
     inputs: tuple[Port, ...] = ()
     outputs: tuple[Port, ...] = ()
+    internals: tuple[Port, ...] = ()
 
     def __init__(self, name: str):
         self.name = name
@@ -69,5 +81,17 @@ class PythonComponent:
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
         """Prepare a run of ``n_steps`` steps of ``h`` seconds from ``t0``."""
 
-    def step(self, n: int, t: float, u: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+    def input_buffers(self) -> list[np.ndarray] | None:
+        """Arrays (float64, in port order, sizes adding up to ``len(inputs)``)
+        the master writes the inputs into before each step, or ``None`` (the
+        default): then ``step`` receives them as ``u``. Asked once per run,
+        after :meth:`start`."""
+        return None
+
+    def internal_values(self) -> np.ndarray:
+        """The current values of ``internals``, in their order (after the
+        step just taken)."""
+        return np.zeros(0)
+
+    def step(self, n: int, t: float, u: np.ndarray | None) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError

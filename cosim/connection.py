@@ -57,7 +57,7 @@ def _expand(side: str, whole: str) -> list[str]:
     if len(groups) > 1:
         raise ConnectionCheckError(f"connection {whole!r}: at most one {{a,b,...}} group per side")
     items = [g.strip() for g in groups[0].split(",")]
-    return [_BRACES.sub(item, side, count=1) for item in items]
+    return [_BRACES.sub(lambda _, item=item: item, side, count=1) for item in items]  # no escapes in names
 
 
 def parse_connection(text: str) -> list[Connection]:

@@ -1,10 +1,11 @@
 """Divergence detection: every watched signal finite and inside its envelope.
 
-One vectorized test per step, ``|s - mid| <= half`` over all watched signals:
-it is false for NaN (every comparison with NaN is) and for +-inf (the
-half-widths are finite), so the same test catches non-finite values and
-envelope violations. Signals without declared bounds get the finite bound
-1e300, i.e. are only checked for being finite numbers.
+One vectorized test per step, ``low <= s <= high`` over all watched signals
+(bounds inclusive, compared exactly): it is false for NaN (every comparison
+with NaN is) and for +-inf (every bound is finite: an infinite or missing
+bound is taken as +-1e300), so the same test catches non-finite values and
+envelope violations. Signals without declared bounds are only checked for
+being finite numbers.
 """
 from __future__ import annotations
 
@@ -45,15 +46,14 @@ class Guard:
             lo[i] = max(low, -UNBOUNDED) if not math.isinf(low) else -UNBOUNDED
             hi[i] = min(high, UNBOUNDED) if not math.isinf(high) else UNBOUNDED
             self.bounds[name] = (low, high)
-        self._mid = (lo + hi) / 2
-        self._half = (hi - lo) / 2
+        self._lo, self._hi = lo, hi
 
     def ok(self, values: np.ndarray) -> bool:
-        return bool((np.abs(values - self._mid) <= self._half).all())
+        return bool(((values >= self._lo) & (values <= self._hi)).all())
 
     def raise_violation(self, t: float, values: np.ndarray) -> None:
         """Raise :class:`DivergenceError` for the first violating signal."""
-        bad = ~(np.abs(values - self._mid) <= self._half)
+        bad = ~((values >= self._lo) & (values <= self._hi))
         i = int(np.argmax(bad))
         name = self.names[i]
         value = float(values[i])

@@ -18,6 +18,10 @@ Algorithm (stated in full in ``docs/cosim.md``): communication points
 
 All signals live in one float64 array; each connection is an index into it,
 precomputed before the run, so a step allocates nothing but small temporaries.
+
+The loop holds no clock: ``run(..., profile=True)`` wraps each phase (the FMU
+exchange, each Python component, recording, the guard) in a timer before the
+loop starts, and the result's ``phase_times`` says where the time went.
 """
 from __future__ import annotations
 
@@ -35,17 +39,16 @@ from .fmu import FmuComponent
 from .guard import Guard
 from .recorder import Recorder
 
-__all__ = ["Master", "RunResult", "PHASES"]
-
-PHASES = ("fmu", "python", "record", "guard")
+__all__ = ["Master", "RunResult"]
 
 
 @dataclass
 class RunResult:
     """What a run produced: the recorded rows (``data[:, 0]`` is time), the
-    status (``ok``, ``diverged``, ``failed``), the error message, and the
-    wall time split into phases (s): FMU calls, each Python component,
-    recording, guard."""
+    status (``ok``, ``diverged``, ``failed``), the error message, the wall
+    time, and (for a profiled run) its split into phases (s): ``fmu`` (the
+    FMU exchange), ``python:<name>`` (each Python component), ``record``,
+    ``guard``."""
 
     columns: tuple[str, ...]
     units: tuple[str | None, ...]
@@ -82,8 +85,9 @@ class Master:
     connections : connection strings or :class:`~cosim.connection.Connection`.
     step : communication step h (s).
     record : signals (``component.variable``) to record, after ``time``.
-    bounds : ``signal -> (low, high)``, the flight envelope; every recorded,
-        connected or bounded signal is also checked to be finite.
+    bounds : ``signal -> (low, high)``, the envelope (inclusive); every
+        signal the master holds (the FMU outputs in use, every Python output,
+        the internal signals recorded) is also checked to be finite.
     """
 
     def __init__(self, fmus: Sequence[FmuComponent], components: Sequence[PythonComponent],
@@ -115,18 +119,22 @@ class Master:
     def _signal_port(self, signal: str) -> Port:
         comp_name, _, var = signal.partition(".")
         comp = self.components.get(comp_name)
-        if comp is None or not var:
+        if comp is None:
             raise ConnectionCheckError(
                 f"signal {signal!r}: unknown component {comp_name!r}; components are: "
                 f"{', '.join(sorted(self.components))}")
-        for port in comp.outputs:
+        if not var:
+            raise ConnectionCheckError(f"signal {signal!r}: expected 'component.variable'")
+        internals = getattr(comp, "internals", ())
+        for port in comp.outputs + internals:
             if port.name == var:
                 return port
         for port in comp.inputs:  # an input is recorded as the value its source gives it
             if port.name == var:
                 return port
-        known = ", ".join(p.name for p in comp.outputs + comp.inputs)
-        raise ConnectionCheckError(f"signal {signal!r}: {comp_name} has no output or input {var!r}; it has: {known}")
+        known = ", ".join(p.name for p in comp.outputs + comp.inputs + internals)
+        kinds = "output, input or internal signal" if internals else "output or input"
+        raise ConnectionCheckError(f"signal {signal!r}: {comp_name} has no {kinds} {var!r}; it has: {known}")
 
     def _order_python(self) -> list[PythonComponent]:
         """Topological order of the Python components by their connections."""
@@ -163,13 +171,15 @@ class Master:
             self._signal_port(s)
             src = source_of.get(s, s)
             comp, _, var = src.partition(".")
-            if var not in {p.name for p in self.components[comp].outputs}:
+            readable = self.components[comp].outputs + getattr(self.components[comp], "internals", ())
+            if var not in {p.name for p in readable}:
                 raise ConnectionCheckError(f"signal {s!r} is an input that nothing feeds; record its source")
         used = {str(c.source) for c in self.connections}
         used |= {source_of.get(s, s) for s in record + list(self.bounds)}
         # Slot layout: time, then each FMU's used outputs (contiguous, so the
         # FMU writes them straight into the signal array), then each Python
-        # component's outputs (contiguous, one slice assignment per step).
+        # component's outputs (contiguous, one slice assignment per step),
+        # then the internal signals that are recorded or bounded.
         slots: dict[str, int] = {"time": 0}
         blocks: dict[str, slice] = {}
         for comp in self.fmus + self.python:
@@ -179,6 +189,15 @@ class Master:
                 if name in used or comp in self.python:
                     slots[name] = len(slots)
             blocks[comp.name] = slice(first, len(slots))
+        published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for comp in self.python:
+            picked = [(i, f"{comp.name}.{p.name}") for i, p in enumerate(comp.internals)
+                      if f"{comp.name}.{p.name}" in used]
+            for _, name in picked:
+                slots[name] = len(slots)
+            if picked:
+                published[comp.name] = (np.array([i for i, _ in picked], dtype=np.intp),
+                                        np.array([slots[name] for _, name in picked], dtype=np.intp))
         self.slots = slots
         self.signals = np.zeros(len(slots))
 
@@ -194,13 +213,13 @@ class Master:
             if outs:
                 self._fmu_out.append(fmu)
 
-        self._py: list[tuple[PythonComponent, np.ndarray, slice]] = []
+        self._py: list[tuple[PythonComponent, np.ndarray, slice, tuple[np.ndarray, np.ndarray] | None]] = []
         for comp in self._order_python():
             missing = [p.name for p in comp.inputs if f"{comp.name}.{p.name}" not in source_of]
             if missing:
                 raise ConnectionCheckError(f"inputs of {comp.name} not connected: {', '.join(missing)}")
             in_idx = np.array([slots[source_of[f"{comp.name}.{p.name}"]] for p in comp.inputs], dtype=np.intp)
-            self._py.append((comp, in_idx, blocks[comp.name]))
+            self._py.append((comp, in_idx, blocks[comp.name], published.get(comp.name)))
 
         self.record_columns = ("time",) + tuple(record)
         self.record_units = ("s",) + tuple(self._signal_port(s).unit for s in record)
@@ -225,15 +244,18 @@ class Master:
 
     def run(self, duration: float, seed: int = 0, parameters: Mapping[str, Any] | None = None,
             csv_path: str | Path | None = None, t0: float = 0.0, block_rows: int = 100,
-            raise_on_error: bool = True,
-            progress: Callable[[int, int], None] | None = None) -> RunResult:
+            raise_on_error: bool = True, progress: Callable[[int, int], None] | None = None,
+            profile: bool = False) -> RunResult:
         """Run from ``t0`` for ``duration`` seconds (a whole number of steps).
 
         ``parameters`` overrides, for this run only, FMU parameters and Python
         component parameters by ``component.name``. With ``raise_on_error``
         (default) a divergence or FMU failure raises after the partial result
         is saved (the exception carries it as ``.result``); otherwise the
-        result is returned with its status.
+        result is returned with its status. A failure before the first step
+        (a parameter the FMU refuses, a component that cannot start) always
+        raises: there is no run to return. ``profile`` times each phase of
+        the loop (``RunResult.phase_times``), at a small cost per step.
         """
         h = self.step
         n_steps = int(round(duration / h))
@@ -242,8 +264,7 @@ class Master:
         split = self._split_parameters(parameters or {})
         recorder = Recorder(self.record_columns, self.record_units, n_steps + 1, csv_path, block_rows,
                             meta={"step": h, "t0": t0, "seed": seed})
-        phase = dict.fromkeys(("fmu", "record", "guard"), 0.0)
-        phase.update({f"python:{c.name}": 0.0 for c, *_ in self._py})
+        phase_times: dict[str, float] = {}
         status, error = "ok", None
         wall0 = _time.perf_counter()
         try:
@@ -256,7 +277,7 @@ class Master:
             recorder.close("failed", f"could not start: {exc}")
             raise
         try:
-            self._loop(t0, n_steps, recorder, phase, progress)
+            self._loop(t0, n_steps, recorder, progress, phase_times if profile else None)
         except DivergenceError as exc:
             status, error, failure = "diverged", str(exc), exc
         except (FmuCallError, CosimError) as exc:
@@ -266,98 +287,107 @@ class Master:
             raise
         recorder.close(status, error)
         result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
-                           status, error, _time.perf_counter() - wall0, n_steps, h, phase,
+                           status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
                            recorder.path, seed, dict(parameters or {}))
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure
         return result
 
-    def _py_plan(self) -> list[tuple]:
-        """Per run: how each Python component gets its inputs. A component
-        may offer ``input_buffers()`` (arrays, in port order, it reads its
-        inputs from); the master then gathers straight into them."""
-        plan = []
-        for comp, in_idx, out_block in self._py:
-            buffers = comp.input_buffers() if hasattr(comp, "input_buffers") else None
-            if buffers is None:
-                targets = [(in_idx, np.zeros(len(in_idx)))]
-                u = targets[0][1]
-            else:
-                sizes = [b.size for b in buffers]
-                if sum(sizes) != len(in_idx):
-                    raise ValueError(f"{comp.name}.input_buffers() sizes {sizes} do not add up to "
-                                     f"its {len(in_idx)} inputs")
-                bounds = np.cumsum([0] + sizes)
-                targets = [(in_idx[a:b], buf) for a, b, buf in zip(bounds[:-1], bounds[1:], buffers)]
-                u = None
-            plan.append((comp.step, targets, u, out_block))
-        return plan
+    # ---- the loop and its phases -------------------------------------------------
 
-    def _loop(self, t0: float, n_steps: int, recorder: Recorder, phase: dict[str, float],
-              progress: Callable[[int, int], None] | None) -> None:
-        h = self.step
-        signals = self.signals
-        take = np.take
-        clock = _time.perf_counter
-        py = self._py_plan()
-        t_py = [0.0] * len(py)
-        py = [(k, *entry) for k, entry in enumerate(py)]
-        fmu_in = [(f.write_inputs, in_idx, f.u[:len(in_idx)]) for f, in_idx in self._fmu_in]
+    def _py_phase(self, comp: PythonComponent, in_idx: np.ndarray, out_block: slice,
+                  published: tuple[np.ndarray, np.ndarray] | None) -> Callable[[int, float], None]:
+        """One Python component's step at ``t_n``: gather its inputs (straight
+        into its :meth:`~cosim.component.PythonComponent.input_buffers`, if it
+        offers them), step it, store its outputs and published internals."""
+        signals, take, step = self.signals, np.take, comp.step
+        buffers = comp.input_buffers()
+        if buffers is None:
+            u = np.zeros(len(in_idx))
+            targets = [(in_idx, u)]
+        else:
+            sizes = [b.size for b in buffers]
+            if sum(sizes) != len(in_idx):
+                raise ValueError(f"{comp.name}.input_buffers() sizes {sizes} do not add up to "
+                                 f"its {len(in_idx)} inputs")
+            edges = np.cumsum([0] + sizes)
+            targets = [(in_idx[a:b], buf) for a, b, buf in zip(edges[:-1], edges[1:], buffers)]
+            u = None
+
+        if published is None:
+            def phase(n: int, t: float) -> None:
+                for idx, buf in targets:
+                    take(signals, idx, out=buf)
+                signals[out_block] = step(n, t, u)
+        else:
+            which, slots = published
+            internal_values = comp.internal_values
+
+            def phase(n: int, t: float) -> None:
+                for idx, buf in targets:
+                    take(signals, idx, out=buf)
+                signals[out_block] = step(n, t, u)
+                signals[slots] = internal_values()[which]
+        return phase
+
+    def _fmu_phase(self, t0: float) -> Callable[[int, float], None]:
+        """Every FMU from ``t_n`` to ``t_{n+1}``: set all its connected inputs
+        (taken at ``t_n``), doStep, read its outputs at ``t_{n+1}``."""
+        signals, take, h = self.signals, np.take, self.step
+        writes = [(f.write_inputs, in_idx, f.u[:len(in_idx)]) for f, in_idx in self._fmu_in]
         do_steps = [f.do_step for f in self.fmus]
         reads = [f.read_outputs for f in self._fmu_out]
+
+        def phase(n: int, t: float) -> None:
+            for write, in_idx, u in writes:
+                take(signals, in_idx, out=u)
+                write(t)
+            for do_step in do_steps:
+                do_step(t, h)
+            t_next = t0 + (n + 1) * h  # from the step counter, never accumulated
+            for read in reads:
+                read(t_next)
+        return phase
+
+    def _loop(self, t0: float, n_steps: int, recorder: Recorder, progress: Callable[[int, int], None] | None,
+              phase_times: dict[str, float] | None) -> None:
+        h, signals, take = self.step, self.signals, np.take
         data, rec_idx = recorder.data, self._rec_idx
-        guard_ok, guard_idx = self.guard.ok, self._guard_idx
+        guard_ok, guard_idx, guard = self.guard.ok, self._guard_idx, self.guard
         block = recorder.block_rows
-        next_flush = block
-        t_fmu = t_rec = t_guard = 0.0
-        recorded = 0
-        try:
-            for n in range(n_steps + 1):
-                t = t0 + n * h  # time from the step counter, never accumulated
-                signals[0] = t
-                c0 = clock()
-                for k, step, targets, u, out_block in py:
-                    for idx, buf in targets:
-                        take(signals, idx, out=buf)
-                    signals[out_block] = step(n, t, u)
-                    c1 = clock()
-                    t_py[k] += c1 - c0
-                    c0 = c1
-                take(signals, rec_idx, out=data[n])
-                recorded = n + 1
-                if recorded >= next_flush:
-                    recorder.commit(n + 1)
-                    next_flush += block
-                    if progress is not None:
-                        progress(n, n_steps)
-                c1 = clock()
-                t_rec += c1 - c0
-                values = signals[guard_idx]
-                if not guard_ok(values):
-                    self.guard.raise_violation(t, values)
-                c2 = clock()
-                t_guard += c2 - c1
-                if n == n_steps:
-                    break
-                for write, in_idx, u in fmu_in:
-                    take(signals, in_idx, out=u)
-                    write(t)
-                for do_step in do_steps:
-                    do_step(t, h)
-                t_next = t0 + (n + 1) * h
-                for read in reads:
-                    read(t_next)
-                t_fmu += clock() - c2
-        finally:
-            recorder.n_rows = recorded
-            phase["fmu"] += t_fmu
-            phase["record"] += t_rec
-            phase["guard"] += t_guard
-            for (k, *_), (comp, *_rest) in zip(py, self._py):
-                phase[f"python:{comp.name}"] += t_py[k]
-            if progress is not None:
-                progress(n_steps, n_steps)
+
+        def record(n: int, t: float) -> None:
+            take(signals, rec_idx, out=data[n])
+            recorder.n_rows = n + 1
+            if (n + 1) % block == 0:
+                recorder.commit(n + 1)
+                if progress is not None:
+                    progress(n, n_steps)
+
+        def check(n: int, t: float) -> None:
+            values = signals[guard_idx]
+            if not guard_ok(values):
+                guard.raise_violation(t, values)
+
+        python = [(f"python:{comp.name}", self._py_phase(comp, *rest)) for comp, *rest in self._py]
+        exchange = self._fmu_phase(t0)
+        if phase_times is not None:  # timed from outside: the loop below is the same either way
+            python = [(name, _timed(phase, phase_times, name)) for name, phase in python]
+            record, check = _timed(record, phase_times, "record"), _timed(check, phase_times, "guard")
+            exchange = _timed(exchange, phase_times, "fmu")
+        steps = [phase for _, phase in python]
+        for n in range(n_steps + 1):
+            t = t0 + n * h  # time from the step counter, never accumulated
+            signals[0] = t
+            for phase in steps:
+                phase(n, t)
+            record(n, t)
+            check(n, t)
+            if n < n_steps:
+                exchange(n, t)
+        if progress is not None:
+            progress(n_steps, n_steps)
 
     def close(self) -> None:
         for f in self.fmus:
@@ -368,3 +398,17 @@ class Master:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _timed(phase: Callable[[int, float], None], totals: dict[str, float], name: str) -> Callable[[int, float], None]:
+    """``phase`` with its wall time added to ``totals[name]`` on every call."""
+    clock = _time.perf_counter
+    totals.setdefault(name, 0.0)
+
+    def timed(n: int, t: float) -> None:
+        c = clock()
+        try:
+            phase(n, t)
+        finally:
+            totals[name] += clock() - c
+    return timed

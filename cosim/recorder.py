@@ -94,10 +94,14 @@ class Recorder:
 def read_results(path: str | Path) -> tuple[list[str], np.ndarray]:
     """Columns and rows of a results CSV, complete or cut short.
 
-    A last line cut by a killed process (fewer fields than the header) is
-    dropped; everything before it is returned.
+    A last line cut by a killed process is dropped (every row is written
+    with its newline, so a last line without one is cut, even if it has all
+    its fields); everything before it is returned.
     """
-    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    text = Path(path).read_text(encoding="utf-8")
+    lines = text.splitlines()
+    if lines and not text.endswith("\n"):
+        lines = lines[:-1] if len(lines) > 1 else lines
     if not lines:
         raise ValueError(f"{path}: empty results file (no header)")
     columns = lines[0].split(",")

@@ -1,0 +1,290 @@
+"""Toys for the engine's own tests: one tiny FMU and a few Python components.
+
+Nothing here knows the quadrotor, the wind gust or the flight controller; the
+engine (:mod:`cosim`) is exercised on models whose answers can be derived by
+hand.
+
+The FMU, ``ToyFirstOrderLag``, is built by ``fmu_models``' exporter::
+
+    dy/dt = (k u - y) / tau,      y(t0) = y_0,      rate = dy/dt (an output)
+
+With ``u`` held constant over ``[t, t + h]`` the exact solution is
+
+    y(t + h) = k u + (y(t) - k u) exp(-h / tau),
+
+which the FMU's internal RK4 (``internal_step``) reproduces to round-off for
+``h / tau`` small per internal step.
+
+The Python components (:class:`Constant`, :class:`Step`, :class:`PController`
+(publishing the internal signal ``error``),
+:class:`Gain`, :class:`Probe` (no outputs), :class:`Failing`) take run-level
+parameters and return to their base values when a run gives none.
+
+:func:`register_toys` registers toy component kinds, an alias section, a
+section and the toy FMU model in :mod:`cosim.registry`, every name prefixed
+``toy_`` so nothing can clash with an application's registrations.
+"""
+from __future__ import annotations
+
+import functools
+import math
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+import pytest
+
+from cosim import registry
+from cosim.component import PythonComponent, ports
+from cosim.config import check_number
+from cosim.errors import ScenarioError
+from cosim.scenario import check_fmu_parameters, refuse_unknown
+from fmu_models.build import cached_fmu
+from fmu_models.model import FmuModel
+from fmu_models.variables import input_, output, parameter, state
+
+__all__ = ["LAG", "LAG_TAU", "LAG_K", "lag_fmu_path", "lag_step", "lag_fmu2", "lag_fmu3", "Constant", "Step",
+           "PController", "Gain", "Probe", "Failing", "make_gain", "register_toys", "BUILDS"]
+
+# ---- the toy FMU ----------------------------------------------------------------------------
+
+LAG_TAU = 0.5  # s, default time constant
+LAG_K = 2.0  # default gain
+
+LAG = FmuModel(
+    identifier="ToyFirstOrderLag",
+    description="Toy first-order lag dy/dt = (k u - y) / tau for the engine's tests",
+    variables=(
+        state("y", "m", "lag output"),
+        input_("u", "m", "lag input", start=0.0),
+        output("rate", "m/s", "dy/dt = (k u - y) / tau"),
+        parameter("tau", "s", "time constant", LAG_TAU, min=1e-3),
+        parameter("k", "1", "static gain", LAG_K),
+        parameter("y_0", "m", "initial value of y", 0.0),
+    ),
+    equations=lambda t, v: ({"y": (v["k"] * v["u"] - v["y"]) / v["tau"]},
+                            {"rate": (v["k"] * v["u"] - v["y"]) / v["tau"]}),
+    initial_state=lambda v: {"y": v["y_0"]},
+)
+
+
+@functools.lru_cache(maxsize=None)
+def lag_fmu_path(fmi_version: int) -> Path:
+    """The toy FMU file (content-addressed cache: built once, then reused)."""
+    return cached_fmu(LAG, fmi_version)
+
+
+def lag_step(y: float, u: float, h: float, tau: float = LAG_TAU, k: float = LAG_K) -> float:
+    """Exact y(t + h) of the lag from y(t) with u held over the step."""
+    return k * u + (y - k * u) * math.exp(-h / tau)
+
+
+@pytest.fixture(scope="session")
+def lag_fmu2() -> Path:
+    return lag_fmu_path(2)
+
+
+@pytest.fixture(scope="session")
+def lag_fmu3() -> Path:
+    return lag_fmu_path(3)
+
+
+# ---- toy Python components ---------------------------------------------------------------
+
+class _Toy(PythonComponent):
+    """A component with named float parameters: base values at construction,
+    run-level overrides per run (unknown names refused)."""
+
+    defaults: dict[str, float] = {}
+
+    def __init__(self, name: str, **base: float):
+        super().__init__(name)
+        unknown = set(base) - set(self.defaults)
+        if unknown:
+            raise TypeError(f"{type(self).__name__} takes no parameter(s) {sorted(unknown)}")
+        self.base = {**self.defaults, **{k: float(v) for k, v in base.items()}}
+        self.p = dict(self.base)
+        self.starts: list[tuple[float, float, int, int]] = []
+
+    def set_parameters(self, values: Mapping[str, Any]) -> None:
+        unknown = set(values) - set(self.defaults)
+        if unknown:
+            raise KeyError(f"component {self.name!r} has no parameter(s) {sorted(unknown)}")
+        self.p = {**self.base, **{k: float(v) for k, v in values.items()}}
+
+    def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
+        self.starts.append((t0, h, n_steps, seed))
+
+
+class Constant(_Toy):
+    """out = value."""
+
+    outputs = ports(("out", "m"))
+    defaults = {"value": 1.0}
+
+    def step(self, n, t, u):
+        return np.array([self.p["value"]])
+
+
+class Step(_Toy):
+    """out = before for t < at, after from t = at on (1 ns tolerance)."""
+
+    outputs = ports(("out", "m"))
+    defaults = {"before": 0.0, "after": 1.0, "at": 0.0}
+
+    def step(self, n, t, u):
+        return np.array([self.p["after"] if t >= self.p["at"] - 1e-9 else self.p["before"]])
+
+
+class PController(_Toy):
+    """u = kp (r - y): direct feedthrough from y. Publishes the internal
+    signal ``error`` = r - y (recordable and boundable, not connectable) and
+    counts the calls of :meth:`internal_values`."""
+
+    inputs = ports(("r", "m"), ("y", "m"))
+    outputs = ports(("u", "m"))
+    internals = ports(("error", "m"))
+    defaults = {"kp": 1.0}
+
+    def __init__(self, name: str, **base: float):
+        super().__init__(name, **base)
+        self.error = np.zeros(1)
+        self.internal_reads = 0
+
+    def step(self, n, t, u):
+        self.error[0] = u[0] - u[1]
+        return np.array([self.p["kp"] * self.error[0]])
+
+    def internal_values(self):
+        self.internal_reads += 1
+        return self.error
+
+
+class Gain(_Toy):
+    """y = gain * u; ports without units (the unit check is skipped)."""
+
+    inputs = ports("u")
+    outputs = ports("y")
+    defaults = {"gain": 1.0}
+
+    def step(self, n, t, u):
+        return self.p["gain"] * u
+
+
+class Probe(_Toy):
+    """No outputs: remembers (n, t, inputs) of every call; ``hook(n, t, u)``
+    is called too if given."""
+
+    inputs = ports(("y", "m"))
+    outputs = ()
+
+    def __init__(self, name: str, hook: Callable[[int, float, np.ndarray], None] | None = None):
+        super().__init__(name)
+        self.hook = hook
+        self.calls: list[tuple[int, float, np.ndarray]] = []
+
+    def start(self, t0, h, n_steps, seed):
+        super().start(t0, h, n_steps, seed)
+        self.calls = []
+
+    def step(self, n, t, u):
+        self.calls.append((n, t, np.array(u, dtype=float)))
+        if self.hook is not None:
+            self.hook(n, t, u)
+        return np.empty(0)
+
+
+class Failing(_Toy):
+    """out = 1 until ``at``, then raises (mode 'raise') or outputs NaN or +inf."""
+
+    outputs = ports(("out", "m"))
+    defaults = {"at": 0.5}
+
+    def __init__(self, name: str, mode: str = "raise", **base: float):
+        super().__init__(name, **base)
+        self.mode = mode
+
+    def step(self, n, t, u):
+        if t >= self.p["at"] - 1e-9:
+            if self.mode == "raise":
+                raise RuntimeError(f"toy failure at n = {n}")
+            return np.array([math.nan if self.mode == "nan" else math.inf])
+        return np.array([1.0])
+
+
+def make_gain(name: str, **parameters: float) -> Gain:
+    """A factory for ``[components.X] factory = "toy_models:make_gain"``."""
+    return Gain(name, **parameters)
+
+
+# ---- toy registrations ------------------------------------------------------------------------
+
+BUILDS: list[int] = []  # FMI versions the registered toy model was built for, in order
+
+
+def _numbers_only(cls) -> Callable[[str, Mapping[str, Any]], None]:
+    def check(where: str, params: Mapping[str, Any]) -> None:
+        refuse_unknown(f"{where}.", params, cls.defaults)
+        for key, value in params.items():
+            check_number(f"{where}.{key}", value)
+    return check
+
+
+def _builder(cls) -> Callable[[str, Mapping[str, Any], registry.BuildContext], PythonComponent]:
+    def build(name: str, params: Mapping[str, Any], context: registry.BuildContext) -> PythonComponent:
+        return cls(name, **params)
+    return build
+
+
+def _build_lag(fmi_version: int) -> Path:
+    BUILDS.append(fmi_version)
+    return lag_fmu_path(fmi_version)
+
+
+def _check_lag_parameter(name: str, value: float) -> None:
+    var = LAG.variable(name)  # KeyError naming the variable
+    if var.causality not in ("parameter", "input"):
+        raise KeyError(f"{name!r} is a {var.causality} of {LAG.identifier}, not a parameter")
+    var.check(value)  # ValueError naming the variable and its range
+
+
+def _parse_toy_lag(where: str, table: Mapping[str, Any], fmus: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """``[toy_lag] fmu = "Lag", time_constant = 0.25, gain = 3.0``: sets the FMU's tau and k."""
+    refuse_unknown(f"{where}.", table, {"fmu", "time_constant", "gain"})
+    fmu = table.get("fmu", "Lag")
+    if fmu not in fmus:
+        raise ScenarioError(f"{where}.fmu = {fmu!r}: no such FMU; FMUs are: {', '.join(fmus)}")
+    params = {name: table[key] for key, name in (("time_constant", "tau"), ("gain", "k")) if key in table}
+    check_fmu_parameters(f"{where}", fmus[fmu], params)
+    fmus[fmu]["parameters"].update({k: float(v) for k, v in params.items()})
+    return {"fmu": fmu, **params}
+
+
+_registered = False
+
+
+def register_toys() -> None:
+    """Register the toy kinds, sections and model (once per process).
+
+    Kinds ``toy_constant`` and ``toy_step`` share the alias section
+    ``[toy_source]`` (instance ``source``); ``toy_p_controller`` has the
+    alias ``[toy_controller]`` (instance ``ctrl``); ``toy_gain`` has none.
+    Section ``[toy_lag]`` sets the lag's parameters; model
+    ``toy_FirstOrderLag`` builds the toy FMU on demand.
+    """
+    global _registered
+    if _registered:
+        return
+    _registered = True
+    registry.register_component_kind(registry.ComponentKind(
+        "toy_constant", _builder(Constant), _numbers_only(Constant), "toy constant source",
+        alias="toy_source", instance="source"))
+    registry.register_component_kind(registry.ComponentKind(
+        "toy_step", _builder(Step), _numbers_only(Step), "toy step source", alias="toy_source", instance="source"))
+    registry.register_component_kind(registry.ComponentKind(
+        "toy_p_controller", _builder(PController), _numbers_only(PController), "toy P controller",
+        alias="toy_controller", instance="ctrl"))
+    registry.register_component_kind(registry.ComponentKind(
+        "toy_gain", _builder(Gain), _numbers_only(Gain), "toy gain"))
+    registry.register_section(registry.Section("toy_lag", _parse_toy_lag, "toy shorthand for the lag's parameters"))
+    registry.register_fmu_model(registry.FmuModel("toy_FirstOrderLag", _build_lag, _check_lag_parameter))
