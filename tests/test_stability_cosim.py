@@ -161,6 +161,24 @@ def test_claims_of_a_known_learning_error():
         evaluate_claims(_synthetic_run("pd", tc, tau, t), 0)
 
 
+def test_lm_terms_are_the_controllers_law():
+    """delta (eq. 62) and the decrease rate (eq. 61) are evaluated from
+    fnn_controller.learning: with alpha_bar below W^T W (>= 1/9), delta is
+    W^T W and the rate is the proof's gamma/2; with alpha_bar above it, delta
+    is alpha_bar and the rate gamma W^T W/(alpha_bar + W^T W)."""
+    from quadrotor_paper.learning_claims import _lm_terms
+
+    t = np.arange(0, 1.0 + H / 2, H)
+    zeros = np.zeros((t.size, 3))
+    run = _synthetic_run("pd+lm", zeros, zeros, t)
+    wtw, delta, rate = _lm_terms(run, 0, 1.5, 1e-3)
+    assert np.all(wtw >= 1 / 9 - 1e-12) and np.all(delta == wtw)
+    assert rate == pytest.approx(0.75, rel=1e-12)
+    wtw, delta, rate = _lm_terms(run, 0, 1.5, 2.0)
+    assert np.all(delta == 2.0)
+    assert rate == pytest.approx(1.5 * wtw / (2.0 + wtw), rel=1e-12)
+
+
 def test_lm_step_run_reaches_zero_inside_t_h_but_does_not_stay(fmu):
     """A 1 m x step from hover under PD + LM: tau_c first reaches zero well
     inside eq. 70's t_h, then chatters (relay limit cycle) instead of

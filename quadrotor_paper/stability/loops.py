@@ -35,15 +35,17 @@ from functools import cached_property
 import control as ct
 import numpy as np
 
-from .linearize import ControllerLinearization, PlantLinearization, linearize_controller, linearize_plant
+from .linearize import (INPUT_NAMES, ControllerLinearization, PlantLinearization, linearize_controller,
+                        linearize_plant)
 from .operating_points import STATE_NAMES, OperatingPoint
 
 __all__ = ["AXES", "LoopModel"]
 
 AXES = ("x", "y", "z")
-_ROTORS = tuple(f"Omega_{i}" for i in range(1, 5))
+# the plant's inputs and states are named by its variable table (QUADROTOR)
+_ROTORS = INPUT_NAMES[0:4]  # Omega_1..4
+_WIND = INPUT_NAMES[4:7]  # wind_x wind_y wind_z
 _CMDS = tuple(f"Omega_cmd_{i}" for i in range(1, 5))
-_WIND = ("wind_x", "wind_y", "wind_z")
 _V_REF = tuple(f"v_ref_{a}" for a in AXES)
 _TAU_C = tuple(f"tau_c_{a}" for a in AXES)
 _P_REF = tuple(f"{a}_ref" for a in AXES)

@@ -3,6 +3,8 @@
 
 Plots are python-control's (``bode_plot``, ``nyquist_plot``,
 ``pole_zero_plot``) and matplotlib's, on the Agg backend (no display).
+One function per figure (``_figure_*``) and one per report section
+(``_section_*``); :func:`make_figures` and :func:`_markdown` put them in order.
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ import control as ct  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..tables import PAPER_TABLE2  # noqa: E402
 from .analysis import TIME_BASES  # noqa: E402
 from .loops import AXES  # noqa: E402
 
@@ -25,6 +28,7 @@ _BASE_TEXT = {"continuous": "continuous", "discrete": "discrete h (co-sim)", "di
 
 
 def _f(x: float, digits: int = 3) -> str:
+    """``x`` with ``digits`` significant digits; "–" for None/nan, "∞" for inf."""
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "–"
     if isinstance(x, float) and math.isinf(x):
@@ -33,68 +37,92 @@ def _f(x: float, digits: int = 3) -> str:
 
 
 def _deg(rad: float) -> str:
+    """An angle in rad written in degrees, two decimals."""
     return f"{math.degrees(rad):.2f}"
+
+
+def _sweep_label(sw) -> str:
+    """The loop a gain sweep maps: operating point and time base."""
+    return f"{sw.operating_point}, " + ("continuous" if sw.dt is None else
+                                        f"discrete{' + 1-step delay' if sw.delay_steps else ''}")
+
+
+def _step_unit(kind: str) -> str:
+    """Unit of a step check's size: m for a position step, m/s for a velocity step."""
+    return "m" if kind == "position" else "m/s"
 
 
 # ---- figures ---------------------------------------------------------------------------
 
 def _omega(dt: float) -> np.ndarray:
+    """Frequencies (rad/s) of the Bode plots: 1e-2 up to just below pi/dt."""
     return np.logspace(-2, math.log10(0.999 * math.pi / dt), 600)
 
 
 def _save(fig, out: Path, name: str, figures: dict) -> None:
+    """Write ``fig`` to ``out/name.png``, close it and record it in ``figures``."""
     path = out / f"{name}.png"
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     figures[name] = path
 
 
-def make_figures(study, out_dir: Path) -> dict[str, Path]:
-    """Write every figure into ``out_dir``; returns name -> path."""
-    out = Path(out_dir)
-    figures: dict[str, Path] = {}
+def _figure_bode_outer(a, loops: list, dt: float):
+    """Bode plot of the three outer PD loops of one operating point (discrete)."""
+    fig = plt.figure(figsize=(7, 6))
+    ct.bode_plot(loops, omega=_omega(dt), label=[f"outer {ax}" for ax in AXES],
+                 title=f"Outer PD loops broken at the PD output, {a.op.name} (discrete, h = {dt} s)")
+    return fig
+
+
+def _figure_bode_inner(a, dt: float):
+    """Bode plot of the inner loops (velocity x/y/z, rotor 1) of one operating point."""
+    model = a.models["discrete"]
+    fig = plt.figure(figsize=(7, 6))
+    inner = [model.velocity_loop(ax) for ax in AXES] + [model.rotor_loop(1)]
+    ct.bode_plot(inner, omega=_omega(dt), label=[f"velocity {ax}" for ax in AXES] + ["rotor 1"],
+                 title=f"Inner loop broken at the measured velocity / rotor 1, {a.op.name}")
+    return fig
+
+
+def _figure_nyquist_outer(a, loops: list):
+    """Nyquist plot of the three outer PD loops of one operating point, near -1."""
+    fig = plt.figure(figsize=(6.5, 6))
+    ct.nyquist_plot(loops, label=[f"outer {ax}" for ax in AXES], max_curve_magnitude=4,
+                    title=f"Nyquist, outer loops, {a.op.name} (discrete)")
+    ax_ = plt.gca()
+    ax_.set_xlim(-2.0, 1.0)
+    ax_.set_ylim(-2.5, 2.5)
+    return fig
+
+
+def _figure_pzmap(a, dt: float):
+    """Pole-zero map of the outer x loop beside the closed-loop poles in the
+    z-plane with the unit circle, one operating point."""
+    model = a.models["discrete"]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5))
+    ct.pole_zero_plot(model.outer_loop("x"), ax=axes[0], title="L_outer_x: poles (x), zeros (o)")
+    cl = a.poles["discrete"].poles
+    theta = np.linspace(0, 2 * math.pi, 400)
+    axes[1].plot(np.cos(theta), np.sin(theta), "k:", lw=0.8)
+    axes[1].plot(cl.real, cl.imag, "x", ms=8)
+    axes[1].set_aspect("equal")
+    axes[1].set_title(f"closed-loop poles (z-plane), max |z| = {a.poles['discrete'].stability_measure:.4f}")
+    axes[1].grid(True)
+    fig.suptitle(f"{a.op.name}: pole-zero map (discrete, h = {dt} s)")
+    return fig
+
+
+def _figure_gain_sweep(study):
+    """Stability boundaries of the (kp, kd) sweeps, hover's discrete stable
+    region shaded, the paper's gains starred."""
     dt = study.dt
-    for a in study.analyses:
-        model = a.models["discrete"]
-        loops = [model.outer_loop(ax) for ax in AXES]
-        fig = plt.figure(figsize=(7, 6))
-        ct.bode_plot(loops, omega=_omega(dt), label=[f"outer {ax}" for ax in AXES],
-                     title=f"Outer PD loops broken at the PD output, {a.op.name} (discrete, h = {dt} s)")
-        _save(fig, out, f"bode_outer_{a.op.name}", figures)
-
-        fig = plt.figure(figsize=(7, 6))
-        inner = [model.velocity_loop(ax) for ax in AXES] + [model.rotor_loop(1)]
-        ct.bode_plot(inner, omega=_omega(dt), label=[f"velocity {ax}" for ax in AXES] + ["rotor 1"],
-                     title=f"Inner loop broken at the measured velocity / rotor 1, {a.op.name}")
-        _save(fig, out, f"bode_inner_{a.op.name}", figures)
-
-        fig = plt.figure(figsize=(6.5, 6))
-        ct.nyquist_plot(loops, label=[f"outer {ax}" for ax in AXES], max_curve_magnitude=4,
-                        title=f"Nyquist, outer loops, {a.op.name} (discrete)")
-        ax_ = plt.gca()
-        ax_.set_xlim(-2.0, 1.0)
-        ax_.set_ylim(-2.5, 2.5)
-        _save(fig, out, f"nyquist_outer_{a.op.name}", figures)
-
-        fig, axes = plt.subplots(1, 2, figsize=(11, 5))
-        ct.pole_zero_plot(model.outer_loop("x"), ax=axes[0], title="L_outer_x: poles (x), zeros (o)")
-        cl = a.poles["discrete"].poles
-        theta = np.linspace(0, 2 * math.pi, 400)
-        axes[1].plot(np.cos(theta), np.sin(theta), "k:", lw=0.8)
-        axes[1].plot(cl.real, cl.imag, "x", ms=8)
-        axes[1].set_aspect("equal")
-        axes[1].set_title(f"closed-loop poles (z-plane), max |z| = {a.poles['discrete'].stability_measure:.4f}")
-        axes[1].grid(True)
-        fig.suptitle(f"{a.op.name}: pole-zero map (discrete, h = {dt} s)")
-        _save(fig, out, f"pzmap_{a.op.name}", figures)
-
     fig, ax = plt.subplots(figsize=(8, 6))
     styles = {(None, 0): ("C0", "-"), (dt, 0): ("C1", "--"), (dt, 1): ("C2", ":")}
     for sw in study.sweeps[:3]:
         color, ls = styles[(sw.dt, sw.delay_steps)]
         ax.contour(sw.kp, sw.kd, sw.measure - sw.threshold, levels=[0.0], colors=color, linestyles=ls)
-        ax.plot([], [], color=color, ls=ls, label=f"{sw.operating_point}, "
-                + ("continuous" if sw.dt is None else f"discrete{' + 1-step delay' if sw.delay_steps else ''}"))
+        ax.plot([], [], color=color, ls=ls, label=_sweep_label(sw))
     hover_d = study.sweeps[1]
     ax.contourf(hover_d.kp, hover_d.kd, hover_d.stable.astype(float), levels=[0.5, 1.5], colors=["#d8f0d8"])
     sw = study.sweeps[3]
@@ -107,205 +135,292 @@ def make_figures(study, out_dir: Path) -> dict[str, Path]:
     ax.set_title("Stable region of the PD gains (shaded: hover, discrete, h = co-simulation step)")
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(True, alpha=0.3)
-    _save(fig, out, "gain_sweep", figures)
+    return fig
 
-    if study.step_checks:
-        fig, axes = plt.subplots(2, 3, figsize=(13, 6.5), sharex="row")
-        for ax, chk in zip(axes.ravel(), study.step_checks):
-            i = "xyz".index(chk.axis) + (0 if chk.kind == "position" else 3)
-            unit = "m" if chk.kind == "position" else "m/s"
-            ax.plot(chk.nonlinear.t, chk.nonlinear.x[:, i], lw=2.5, alpha=0.5, label="co-simulation (FMU)")
-            ax.plot(chk.linear.t, chk.linear.x[:, i], "k--", lw=1, label="linear, discrete")
-            ax.set_title(f"{chk.kind} step {chk.size:g} {unit} on {chk.axis}: max error {100 * chk.relative:.2f} %")
-            ax.set_xlabel("t (s)")
-            ax.grid(True, alpha=0.3)
-        axes[0, 0].legend(fontsize=8)
-        fig.tight_layout()
-        _save(fig, out, "steps_linear_vs_nonlinear", figures)
 
-    if study.gain_checks:
-        fig, axes = plt.subplots(len(study.gain_checks), 1, figsize=(9, 2.6 * len(study.gain_checks)), sharex=True)
-        for ax, g in zip(np.atleast_1d(axes), study.gain_checks):
-            ax.plot(g.nonlinear.t, g.nonlinear.x[:, 0] - g.size, lw=2.5, alpha=0.5, label="co-simulation")
-            ax.plot(g.linear.t, g.linear.x[:, 0] - g.size, "k--", lw=1, label="linear")
-            ax.set_title(f"kp = {g.kp:.3g}, kd = {g.kd:.3g}: linear {'stable' if g.linear_stable else 'UNSTABLE'}, "
-                         f"pole growth {g.pole_growth:+.3f} 1/s, co-sim growth {g.nonlinear_growth:+.3f} 1/s",
-                         fontsize=9)
-            ax.set_ylabel("x - x* (m)")
-            ax.grid(True, alpha=0.3)
-        np.atleast_1d(axes)[0].legend(fontsize=8)
-        np.atleast_1d(axes)[-1].set_xlabel("t (s)")
-        fig.tight_layout()
-        _save(fig, out, "gains_across_the_boundary", figures)
-
-    if study.runs:
-        runs = [r for r in study.runs if r.name.startswith("step")]
-        fig, ax = plt.subplots(figsize=(9, 4.5))
-        for run in runs:
-            ax.semilogy(run.t, np.maximum(np.abs(run.tau_c[:, 0]), 1e-6), label=f"|tau_c,x|, {run.variant}")
-        claims = {(c.variant, c.run, c.axis): c for c in study.finite_time}
-        lm = claims.get(("pd+lm", runs[0].name, "x")) if runs else None
-        smc = claims.get(("pd+smc", runs[0].name, "x")) if runs else None
-        if lm is not None:
-            ax.axvline(lm.t_h_70, color="C1", ls="--", label=f"eq. 70: t_h <= {lm.t_h_70:.2f} s (LM)")
-        if smc is not None:
-            ax.axhline(smc.radius_53, color="C0", ls=":", label=f"eq. 53: nu B = {smc.radius_53:.2f} m/s (SMC)")
+def _figure_steps(study):
+    """The step checks: co-simulation and discrete linear loop overlaid, one
+    panel per step."""
+    fig, axes = plt.subplots(2, 3, figsize=(13, 6.5), sharex="row")
+    for ax, chk in zip(axes.ravel(), study.step_checks):
+        i = "xyz".index(chk.axis) + (0 if chk.kind == "position" else 3)
+        ax.plot(chk.nonlinear.t, chk.nonlinear.x[:, i], lw=2.5, alpha=0.5, label="co-simulation (FMU)")
+        ax.plot(chk.linear.t, chk.linear.x[:, i], "k--", lw=1, label="linear, discrete")
+        ax.set_title(f"{chk.kind} step {chk.size:g} {_step_unit(chk.kind)} on {chk.axis}: "
+                     f"max error {100 * chk.relative:.2f} %")
         ax.set_xlabel("t (s)")
-        ax.set_ylabel("|tau_c| (m/s)")
-        ax.set_title("Learning error after a 1 m step of the x reference (co-simulation)")
-        ax.legend(fontsize=8)
-        ax.grid(True, alpha=0.3, which="both")
-        _save(fig, out, "finite_time", figures)
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _figure_gains(study):
+    """The gain checks across the stability boundary: x error of the
+    co-simulation and the linear loop, one panel per gain pair."""
+    fig, axes = plt.subplots(len(study.gain_checks), 1, figsize=(9, 2.6 * len(study.gain_checks)), sharex=True)
+    for ax, g in zip(np.atleast_1d(axes), study.gain_checks):
+        ax.plot(g.nonlinear.t, g.nonlinear.x[:, 0] - g.size, lw=2.5, alpha=0.5, label="co-simulation")
+        ax.plot(g.linear.t, g.linear.x[:, 0] - g.size, "k--", lw=1, label="linear")
+        ax.set_title(f"kp = {g.kp:.3g}, kd = {g.kd:.3g}: linear {'stable' if g.linear_stable else 'UNSTABLE'}, "
+                     f"pole growth {g.pole_growth:+.3f} 1/s, co-sim growth {g.nonlinear_growth:+.3f} 1/s",
+                     fontsize=9)
+        ax.set_ylabel("x - x* (m)")
+        ax.grid(True, alpha=0.3)
+    np.atleast_1d(axes)[0].legend(fontsize=8)
+    np.atleast_1d(axes)[-1].set_xlabel("t (s)")
+    fig.tight_layout()
+    return fig
+
+
+def _figure_finite_time(study):
+    """|tau_c,x| of the step runs (log scale) with eq. 70's t_h (LM) and
+    eq. 53's radius (SMC), from :mod:`quadrotor_paper.learning_claims`."""
+    runs = [r for r in study.runs if r.name.startswith("step")]
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for run in runs:
+        ax.semilogy(run.t, np.maximum(np.abs(run.tau_c[:, 0]), 1e-6), label=f"|tau_c,x|, {run.variant}")
+    claims = {(c.variant, c.run, c.axis): c for c in study.finite_time}
+    lm = claims.get(("pd+lm", runs[0].name, "x")) if runs else None
+    smc = claims.get(("pd+smc", runs[0].name, "x")) if runs else None
+    if lm is not None:
+        ax.axvline(lm.t_h_70, color="C1", ls="--", label=f"eq. 70: t_h <= {lm.t_h_70:.2f} s (LM)")
+    if smc is not None:
+        ax.axhline(smc.radius_53, color="C0", ls=":", label=f"eq. 53: nu B = {smc.radius_53:.2f} m/s (SMC)")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("|tau_c| (m/s)")
+    ax.set_title("Learning error after a 1 m step of the x reference (co-simulation)")
+    ax.legend(fontsize=8)
+    ax.grid(True, alpha=0.3, which="both")
+    return fig
+
+
+def make_figures(study, out_dir: Path) -> dict[str, Path]:
+    """Write every figure into ``out_dir``; returns name -> path.
+
+    Per operating point the outer-loop Bode, inner-loop Bode, Nyquist and
+    pole-zero plots; then the gain sweep and, when the study ran them, the
+    step checks, the gain checks and the finite-time runs.
+    """
+    out = Path(out_dir)
+    figures: dict[str, Path] = {}
+    dt = study.dt
+    for a in study.analyses:
+        name = a.op.name
+        loops = [a.models["discrete"].outer_loop(ax) for ax in AXES]
+        _save(_figure_bode_outer(a, loops, dt), out, f"bode_outer_{name}", figures)
+        _save(_figure_bode_inner(a, dt), out, f"bode_inner_{name}", figures)
+        _save(_figure_nyquist_outer(a, loops), out, f"nyquist_outer_{name}", figures)
+        _save(_figure_pzmap(a, dt), out, f"pzmap_{name}", figures)
+    _save(_figure_gain_sweep(study), out, "gain_sweep", figures)
+    if study.step_checks:
+        _save(_figure_steps(study), out, "steps_linear_vs_nonlinear", figures)
+    if study.gain_checks:
+        _save(_figure_gains(study), out, "gains_across_the_boundary", figures)
+    if study.runs:
+        _save(_figure_finite_time(study), out, "finite_time", figures)
     return figures
 
 
 # ---- markdown --------------------------------------------------------------------------
 
 def _table(header: list[str], rows: list[list[str]]) -> str:
+    """A markdown table: header row, separator, one line per row."""
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     return "\n".join(lines)
 
 
-def _markdown(study, figures: dict[str, Path]) -> str:
-    dt = study.dt
+def _section_title(study) -> list[str]:
+    """Title with the PD gains, and where the report comes from."""
     kp, kd = study.position.kp, study.position.kd
-    md = [f"# Linear stability of the PD baseline (kp = {kp:g}, kd = {kd:g})", ""]
-    md += ["Written by `fnn-cosim stability` (`quadrotor_paper.stability.run_stability_analysis`); method and "
-           "discussion in `docs/stability.md`.", ""]
-    md += ["## Loop structure", "",
-           "Plant (12 states, CasADi Jacobian = the FMU's directional derivatives) -> rotor speeds from the "
-           "geometric velocity controller (static gain, Jacobian of `velocity_controller_function`) <- desired "
-           "velocity v* from the PD (Jacobian of `position_controller_function(\"pd\")`). Both controllers run "
-           f"at h = {dt} s. The co-simulation master evaluates the controller at t_n on the plant state at t_n "
-           "and holds the rotor speeds over [t_n, t_n+1): **ZOH, no extra delay**. 'discrete+1' adds one "
-           "step of delay on the rotor commands, to show what a delay would cost.", ""]
+    return [f"# Linear stability of the PD baseline (kp = {kp:g}, kd = {kd:g})", "",
+            "Written by `fnn-cosim stability` (`quadrotor_paper.stability.run_stability_analysis`); method and "
+            "discussion in `docs/stability.md`.", ""]
 
-    md += ["## Operating points", ""]
-    rows = []
-    for op in study.operating_points:
-        rows.append([op.name, op.description, _deg(op.x[6]), _deg(op.x[7]), _deg(op.x[8]),
-                     f"{op.omega.mean():.1f}", ", ".join(f"{v:.3f}" for v in op.v_ref),
-                     ", ".join(f"{v:.3f}" for v in op.position_error)])
-    md += [_table(["point", "flight", "phi (deg)", "theta (deg)", "psi (deg)", "mean Omega (rad/s)",
-                   "v* (m/s)", "e* (m)"], rows), ""]
 
-    md += ["## Closed-loop poles", ""]
+def _section_loop_structure(study) -> list[str]:
+    """What is linearized and how the master's sampling enters (ZOH, no delay)."""
+    return ["## Loop structure", "",
+            "Plant (12 states, CasADi Jacobian = the FMU's directional derivatives) -> rotor speeds from the "
+            "geometric velocity controller (static gain, Jacobian of `velocity_controller_function`) <- desired "
+            "velocity v* from the PD (Jacobian of `position_controller_function(\"pd\")`). Both controllers run "
+            f"at h = {study.dt} s. The co-simulation master evaluates the controller at t_n on the plant state at "
+            "t_n and holds the rotor speeds over [t_n, t_n+1): **ZOH, no extra delay**. 'discrete+1' adds one "
+            "step of delay on the rotor commands, to show what a delay would cost.", ""]
+
+
+def _section_operating_points(study) -> list[str]:
+    """The trimmed operating points: attitude, rotor speed, v* and e*."""
+    rows = [[op.name, op.description, _deg(op.x[6]), _deg(op.x[7]), _deg(op.x[8]),
+             f"{op.omega.mean():.1f}", ", ".join(f"{v:.3f}" for v in op.v_ref),
+             ", ".join(f"{v:.3f}" for v in op.position_error)] for op in study.operating_points]
+    return ["## Operating points", "",
+            _table(["point", "flight", "phi (deg)", "theta (deg)", "psi (deg)", "mean Omega (rad/s)",
+                    "v* (m/s)", "e* (m)"], rows), ""]
+
+
+def _section_poles(study) -> list[str]:
+    """Closed-loop stability per operating point and time base, and the
+    poles of the discrete loop at hover."""
     rows = []
     for a in study.analyses:
         for key in TIME_BASES:
             p = a.poles[key]
-            measure = f"max Re s = {p.stability_measure:.3f}" if p.dt is None else f"max abs z = {p.stability_measure:.5f}"
+            measure = (f"max Re s = {p.stability_measure:.3f}" if p.dt is None
+                       else f"max abs z = {p.stability_measure:.5f}")
             rows.append([a.op.name, _BASE_TEXT[key], "**yes**" if p.stable else "**NO**", measure,
                          f"{p.least_damping:.3f}", f"{p.slowest:.3f}", f"{np.max(p.wn):.1f}"])
-    md += [_table(["point", "time base", "stable", "spectral measure", "least damping ratio",
-                   "slowest wn (rad/s)", "fastest wn (rad/s)"], rows), ""]
     hov = study.analyses[0].poles["discrete"]
-    md += ["Poles of the discrete loop at hover (wn, damping from python-control's `damp`):", ""]
-    md += [_table(["pole z", "wn (rad/s)", "damping"],
-                  [[f"{z.real:.5f}{z.imag:+.5f}j", f"{w:.3f}", f"{zeta:.3f}"] for z, w, zeta in hov.table()]), ""]
+    return ["## Closed-loop poles", "",
+            _table(["point", "time base", "stable", "spectral measure", "least damping ratio",
+                    "slowest wn (rad/s)", "fastest wn (rad/s)"], rows), "",
+            "Poles of the discrete loop at hover (wn, damping from python-control's `damp`):", "",
+            _table(["pole z", "wn (rad/s)", "damping"],
+                   [[f"{z.real:.5f}{z.imag:+.5f}j", f"{w:.3f}", f"{zeta:.3f}"] for z, w, zeta in hov.table()]), ""]
 
-    md += ["## Margins (discrete loop of the co-simulation)", "",
-           "Each loop broken at one point, every other loop closed; `control.stability_margins` on the "
-           "frequency response. Outer: the PD loop of an axis broken at the PD output (v*). Velocity: the "
-           "inner loop alone broken at the measured velocity. Rotor: the inner loop alone broken at one "
-           "rotor-speed command.", ""]
-    rows = []
-    for a in study.analyses:
-        for m in a.margins["discrete"]:
-            rows.append([a.op.name, m.loop, _f(m.gain_margin), _f(m.gain_margin_db, 3), _f(m.phase_margin, 3),
-                         _f(m.stability_margin), _f(m.w_gain_crossover), _f(m.w_phase_crossover)])
-    md += [_table(["point", "loop", "gain margin", "GM (dB)", "phase margin (deg)", "stability margin",
-                   "w_gc (rad/s)", "w_pc (rad/s)"], rows), ""]
-    md += ["Outer-loop margins in each time base:", ""]
-    rows = []
+
+def _section_margins(study) -> list[str]:
+    """Margins of every broken loop (discrete), and the outer loops' margins
+    in each time base."""
+    rows = [[a.op.name, m.loop, _f(m.gain_margin), _f(m.gain_margin_db, 3), _f(m.phase_margin, 3),
+             _f(m.stability_margin), _f(m.w_gain_crossover), _f(m.w_phase_crossover)]
+            for a in study.analyses for m in a.margins["discrete"]]
+    outer_rows = []
     for a in study.analyses:
         for key in TIME_BASES:
             outer = [m for m in a.margins[key] if m.loop.startswith("outer")]
-            rows.append([a.op.name, _BASE_TEXT[key]] + [f"{_f(m.gain_margin)} / {_f(m.phase_margin, 3)}°" for m in outer])
-    md += [_table(["point", "time base", "outer x GM / PM", "outer y GM / PM", "outer z GM / PM"], rows), ""]
+            outer_rows.append([a.op.name, _BASE_TEXT[key]]
+                              + [f"{_f(m.gain_margin)} / {_f(m.phase_margin, 3)}°" for m in outer])
+    return ["## Margins (discrete loop of the co-simulation)", "",
+            "Each loop broken at one point, every other loop closed; `control.stability_margins` on the "
+            "frequency response. Outer: the PD loop of an axis broken at the PD output (v*). Velocity: the "
+            "inner loop alone broken at the measured velocity. Rotor: the inner loop alone broken at one "
+            "rotor-speed command.", "",
+            _table(["point", "loop", "gain margin", "GM (dB)", "phase margin (deg)", "stability margin",
+                    "w_gc (rad/s)", "w_pc (rad/s)"], rows), "",
+            "Outer-loop margins in each time base:", "",
+            _table(["point", "time base", "outer x GM / PM", "outer y GM / PM", "outer z GM / PM"], outer_rows), ""]
 
-    md += ["## Where stability stops: the gain sweep", ""]
-    rows = [[name, _BASE_TEXT[k], _f(c, 4), f"({c * kp:.3g}, {c * kd:.3g})"]
-            for name, per in study.critical_factors.items() for k, c in per.items()]
-    md += ["Scaling both PD gains by c (the outer loops' common gain): the loop turns unstable at", "",
-           _table(["point", "time base", "critical c", "(kp, kd) there"], rows), ""]
+
+def _section_gain_sweep(study) -> list[str]:
+    """The critical factor of both PD gains, and the stable region of each sweep."""
+    kp, kd = study.position.kp, study.position.kd
+    critical = [[name, _BASE_TEXT[k], _f(c, 4), f"({c * kp:.3g}, {c * kd:.3g})"]
+                for name, per in study.critical_factors.items() for k, c in per.items()]
     rows = []
     for sw in study.sweeps:
-        label = f"{sw.operating_point}, " + ("continuous" if sw.dt is None else
-                                             f"discrete{' + 1-step delay' if sw.delay_steps else ''}")
         kd_ok = sw.kd[sw.stable.any(axis=1)]
-        rows.append([label, _f(sw.kp_limit(kd), 3), _f(sw.kp_limit(0.0), 3), _f(sw.kp_limit(2.0), 3),
+        rows.append([_sweep_label(sw), _f(sw.kp_limit(kd), 3), _f(sw.kp_limit(0.0), 3), _f(sw.kp_limit(2.0), 3),
                      f"{kd_ok.min():.2f} .. {kd_ok.max():.2f}" if kd_ok.size else "none",
                      "yes" if sw.is_stable(kp, kd) else "NO"])
-    md += [f"Grid kp in [{study.sweeps[0].kp[0]:g}, {study.sweeps[0].kp[-1]:g}], kd in "
-           f"[{study.sweeps[0].kd[0]:g}, {study.sweeps[0].kd[-1]:g}] (same gains on all axes):", "",
-           _table(["loop", f"largest stable kp at kd = {kd:g}", "at kd = 0", "at kd = 2", "kd with some stable kp",
-                   "paper's gains stable"], rows), ""]
+    grid = study.sweeps[0]
+    return ["## Where stability stops: the gain sweep", "",
+            "Scaling both PD gains by c (the outer loops' common gain): the loop turns unstable at", "",
+            _table(["point", "time base", "critical c", "(kp, kd) there"], critical), "",
+            f"Grid kp in [{grid.kp[0]:g}, {grid.kp[-1]:g}], kd in "
+            f"[{grid.kd[0]:g}, {grid.kd[-1]:g}] (same gains on all axes):", "",
+            _table(["loop", f"largest stable kp at kd = {kd:g}", "at kd = 0", "at kd = 2", "kd with some stable kp",
+                    "paper's gains stable"], rows), ""]
 
+
+def _section_ramp(study) -> list[str]:
+    """The ramp lag in each model, the circle error of the linear loop and,
+    when the study ran it, the PD's mission RMSE beside the paper's Table 2."""
     r = study.ramp
-    md += ["## Ramp error (Table 2's PD error)", "",
-           f"Reference moving at V = {r.speed:g} m/s, no feed-forward (the paper has none): the outer loop is "
-           "type 1 (one integrator, the position), so it follows a ramp with a constant lag.", "",
-           _table(["model", "lag (m)"], [
-               [f"ideal type-1 loop, V/kp", f"{r.ideal:.4f}"],
-               ["linear loop at hover, continuous (forced response)", f"{r.linear_continuous:.4f}"],
-               ["linear loop at hover, discrete", f"{r.linear_discrete:.4f}"],
-               [f"trim at {r.speed:g} m/s (nonlinear drag): e* = v*/kp", f"{r.trim:.4f}"],
-               ["co-simulation (plant FMU), after 15 s", _f(study.ramp_nonlinear, 5)]]), "",
-           f"Linear model on the mission's circle (R = {study.circle.radius:g} m at {study.circle.speed:g} m/s): "
-           f"error amplitude x {study.circle.amplitude_x:.3f} m, y {study.circle.amplitude_y:.3f} m, "
-           f"RMS {study.circle.rms:.3f} m."]
+    md = ["## Ramp error (Table 2's PD error)", "",
+          f"Reference moving at V = {r.speed:g} m/s, no feed-forward (the paper has none): the outer loop is "
+          "type 1 (one integrator, the position), so it follows a ramp with a constant lag.", "",
+          _table(["model", "lag (m)"], [
+              ["ideal type-1 loop, V/kp", f"{r.ideal:.4f}"],
+              ["linear loop at hover, continuous (forced response)", f"{r.linear_continuous:.4f}"],
+              ["linear loop at hover, discrete", f"{r.linear_discrete:.4f}"],
+              [f"trim at {r.speed:g} m/s (nonlinear drag): e* = v*/kp", f"{r.trim:.4f}"],
+              ["co-simulation (plant FMU), after 15 s", _f(study.ramp_nonlinear, 5)]]), "",
+          f"Linear model on the mission's circle (R = {study.circle.radius:g} m at {study.circle.speed:g} m/s): "
+          f"error amplitude x {study.circle.amplitude_x:.3f} m, y {study.circle.amplitude_y:.3f} m, "
+          f"RMS {study.circle.rms:.3f} m."]
     if study.mission_rmse:
-        paper = {1.0: 0.966, 3.0: 1.006, 5.0: 1.204}
+        paper = PAPER_TABLE2["pd"]
         md += ["", _table(["gust speed (m/s)", "PD RMSE, co-simulation (m)", "PD RMSE, paper Table 2 (m)"],
                           [[f"{w:g}", f"{v:.3f}", _f(paper.get(w), 4)] for w, v in study.mission_rmse.items()])]
-    md += [""]
+    return md + [""]
 
-    if study.step_checks:
-        md += ["## Linear model vs co-simulation", "",
-               "Steps from hover, same reference from t = 0, discrete linear loop vs plant FMU + master; "
-               "largest |difference| over the response and the three axes of the stepped quantity:", "",
-               _table(["step", "size", "max abs(linear - co-sim)", "relative to the step"],
-                      [[f"{c.kind} {c.axis}", f"{c.size:g} {'m' if c.kind == 'position' else 'm/s'}",
-                        f"{c.max_error:.2e}", f"{100 * c.relative:.3f} %"] for c in study.step_checks]), ""]
-    if study.gain_checks:
-        md += ["Gain pairs along the ray through the paper's gains, a 1 cm x step from hover:", "",
-               _table(["kp", "kd", "linear verdict", "dominant pole: growth (1/s), freq (rad/s)",
-                       "co-sim growth (1/s)", "co-sim status", "error after the run / initial"],
-                      [[f"{g.kp:.3g}", f"{g.kd:.3g}", "stable" if g.linear_stable else "**unstable**",
-                        f"{g.pole_growth:+.3f}, {g.pole_frequency:.2f}", f"{g.nonlinear_growth:+.3f}",
-                        g.nonlinear_status, f"{g.amplification:.3g}"] for g in study.gain_checks]), ""]
 
-    if study.finite_time:
-        md += ["## The learning laws' finite-time claims on recorded runs", "",
-               "B = max |d tau/dt| on the run (99th percentile in brackets). SMC: eq. 53's neighbourhood "
-               "|tau_c| < nu alpha*/2 = nu B (alpha* = 2B, the smallest allowed). LM: eq. 70's t_h = "
-               "4 K_d S_p(0)/gamma = 4|tau_c(0)|/gamma; eq. 66 as printed needs gamma > B/4, its algebra "
-               "needs gamma >= 4B; the proof sets delta = W^T W, the law uses max(W^T W, alpha_bar).", ""]
-        rows = []
-        for c in study.finite_time:
-            if c.variant == "pd+smc":
-                claim = f"radius nu B = {c.radius_53:.3g} m/s; entered for good at {_f(c.t_enter_53)} s"
-                if c.radius_53 >= c.tau_c_max:
-                    claim += " (never binding: the whole run is inside)"
-                extra = f"alpha in [{c.alpha_min:.2g}, {c.alpha_max:.2g}]"
-            else:
-                claim = (f"t_h <= {c.t_h_70:.3g} s; max abs(tau_c) after t_h = {c.max_after_t_h:.3g} m/s; "
-                         f"gamma > B/4: {'yes' if c.printed_condition else 'NO'}, gamma >= 4B: "
-                         f"{'yes' if c.needed_condition else 'NO'}")
-                extra = (f"delta = W^T W in {100 * c.delta_is_wtw:.0f} % of samples; decrease rate "
-                         f"{c.rate_min:.2f}..{c.rate_max:.2f} m/s² (proof: gamma/2 = {c.gamma / 2:.2f})")
-            rows.append([c.run, c.variant, c.axis, f"{c.tau_c0:.3g} / {c.tau_c_max:.3g}", f"{c.B:.3g} ({c.B99:.3g})", claim,
-                         f"{_f(c.t_zero)} s", f"{c.final_band:.3g}", extra])
-        md += [_table(["run", "law", "axis", "abs(tau_c): at 0 / max (m/s)", "B (m/s²)", "paper's bound on this run",
-                       "tau_c first reaches 0", "max abs(tau_c), last fifth (m/s)", "assumptions"], rows), ""]
+def _section_cosim_steps(study) -> list[str]:
+    """Small steps from hover: largest difference of linear loop and co-simulation."""
+    if not study.step_checks:
+        return []
+    return ["## Linear model vs co-simulation", "",
+            "Steps from hover, same reference from t = 0, discrete linear loop vs plant FMU + master; "
+            "largest |difference| over the response and the three axes of the stepped quantity:", "",
+            _table(["step", "size", "max abs(linear - co-sim)", "relative to the step"],
+                   [[f"{c.kind} {c.axis}", f"{c.size:g} {_step_unit(c.kind)}",
+                     f"{c.max_error:.2e}", f"{100 * c.relative:.3f} %"] for c in study.step_checks]), ""]
 
-    md += ["## Figures", ""]
-    md += [f"* `{p.name}`" + (f"\n\n  ![{name}]({p.name})" if name in ("gain_sweep", "steps_linear_vs_nonlinear")
-                              else "") for name, p in figures.items()]
-    md += [""]
-    return "\n".join(md)
+
+def _section_cosim_gains(study) -> list[str]:
+    """Gain pairs across the boundary: linear verdict next to the co-simulation's growth."""
+    if not study.gain_checks:
+        return []
+    return ["Gain pairs along the ray through the paper's gains, a 1 cm x step from hover:", "",
+            _table(["kp", "kd", "linear verdict", "dominant pole: growth (1/s), freq (rad/s)",
+                    "co-sim growth (1/s)", "co-sim status", "error after the run / initial"],
+                   [[f"{g.kp:.3g}", f"{g.kd:.3g}", "stable" if g.linear_stable else "**unstable**",
+                     f"{g.pole_growth:+.3f}, {g.pole_frequency:.2f}", f"{g.nonlinear_growth:+.3f}",
+                     g.nonlinear_status, f"{g.amplification:.3g}"] for g in study.gain_checks]), ""]
+
+
+def _finite_time_row(c) -> list[str]:
+    """One row of the finite-time table: an :class:`~quadrotor_paper.learning_claims.AxisClaims`
+    with the bound of its law (eq. 53 for SMC, eqs. 66 and 70 for LM)."""
+    if c.variant == "pd+smc":
+        claim = f"radius nu B = {c.radius_53:.3g} m/s; entered for good at {_f(c.t_enter_53)} s"
+        if c.radius_53 >= c.tau_c_max:
+            claim += " (never binding: the whole run is inside)"
+        extra = f"alpha in [{c.alpha_min:.2g}, {c.alpha_max:.2g}]"
+    else:
+        claim = (f"t_h <= {c.t_h_70:.3g} s; max abs(tau_c) after t_h = {c.max_after_t_h:.3g} m/s; "
+                 f"gamma > B/4: {'yes' if c.printed_condition else 'NO'}, gamma >= 4B: "
+                 f"{'yes' if c.needed_condition else 'NO'}")
+        extra = (f"delta = W^T W in {100 * c.delta_is_wtw:.0f} % of samples; decrease rate "
+                 f"{c.rate_min:.2f}..{c.rate_max:.2f} m/s² (proof: gamma/2 = {c.gamma / 2:.2f})")
+    return [c.run, c.variant, c.axis, f"{c.tau_c0:.3g} / {c.tau_c_max:.3g}", f"{c.B:.3g} ({c.B99:.3g})", claim,
+            f"{_f(c.t_zero)} s", f"{c.final_band:.3g}", extra]
+
+
+def _section_finite_time(study) -> list[str]:
+    """The learning laws' finite-time claims on the recorded runs
+    (:mod:`quadrotor_paper.learning_claims`)."""
+    if not study.finite_time:
+        return []
+    return ["## The learning laws' finite-time claims on recorded runs", "",
+            "B = max |d tau/dt| on the run (99th percentile in brackets). SMC: eq. 53's neighbourhood "
+            "|tau_c| < nu alpha*/2 = nu B (alpha* = 2B, the smallest allowed). LM: eq. 70's t_h = "
+            "4 K_d S_p(0)/gamma = 4|tau_c(0)|/gamma; eq. 66 as printed needs gamma > B/4, its algebra "
+            "needs gamma >= 4B; the proof sets delta = W^T W, the law uses max(W^T W, alpha_bar).", "",
+            _table(["run", "law", "axis", "abs(tau_c): at 0 / max (m/s)", "B (m/s²)", "paper's bound on this run",
+                    "tau_c first reaches 0", "max abs(tau_c), last fifth (m/s)", "assumptions"],
+                   [_finite_time_row(c) for c in study.finite_time]), ""]
+
+
+def _section_figures(figures: dict[str, Path]) -> list[str]:
+    """The list of figure files; the gain sweep and the steps shown inline."""
+    return (["## Figures", ""]
+            + [f"* `{p.name}`" + (f"\n\n  ![{name}]({p.name})" if name in ("gain_sweep", "steps_linear_vs_nonlinear")
+                                  else "") for name, p in figures.items()]
+            + [""])
+
+
+_SECTIONS = (_section_title, _section_loop_structure, _section_operating_points, _section_poles,
+             _section_margins, _section_gain_sweep, _section_ramp, _section_cosim_steps, _section_cosim_gains,
+             _section_finite_time)
+
+
+def _markdown(study, figures: dict[str, Path]) -> str:
+    """The report's markdown: every section of :data:`_SECTIONS` in order, then the figures."""
+    md = [line for section in _SECTIONS for line in section(study)]
+    return "\n".join(md + _section_figures(figures))
 
 
 def write_report(study, out_dir: str | Path) -> Path:

@@ -1,5 +1,7 @@
 """The whole stability study in one call: every analysis of the package at
-the default operating points, checked against the co-simulation.
+the default operating points, checked against the co-simulation, and the
+learning laws' finite-time claims on recorded runs (those come from
+:mod:`quadrotor_paper.learning_claims`, outside this package).
 
 >>> from quadrotor_paper.stability import run_stability_analysis
 >>> study = run_stability_analysis("results/stability")   # doctest: +SKIP
@@ -77,8 +79,8 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
         paper's gust direction [-1, -1, 0].
     dt : controller and communication step (s) of the discrete loops.
     kp, kd : PD gains (default: the paper's 2.5, 0.005).
-    cosim : also run the co-simulation checks (steps, gains, ramp, mission,
-        finite-time runs); about 2 s.
+    cosim : also run the co-simulation checks (steps, gains, ramp, mission)
+        and the finite-time runs of :mod:`quadrotor_paper.learning_claims`.
     sweep_kp, sweep_kd : the grid of the gain sweep.
     """
     position = PositionParams()

@@ -46,7 +46,6 @@ __all__ = [
     "StepCheck", "GainCheck", "check_step", "check_gains", "ENVELOPE",
 ]
 
-_UNITS = ("m", "m", "m", "m/s", "m/s", "m/s", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s")
 _STATE_GROUP = "{" + ",".join(STATE_NAMES) + "}"
 # flipping over or falling out of the sky ends a run as "diverged"
 ENVELOPE = {"Quadrotor.phi": (-1.2, 1.2), "Quadrotor.theta": (-1.2, 1.2), "Quadrotor.z": (-100.0, 0.0)}
@@ -91,7 +90,7 @@ class VelocityCommandComponent(PythonComponent):
     velocity: plant state in, rotor speeds out (eqs. 13-18, evaluated by
     ``velocity_controller_function`` through its fast buffer path)."""
 
-    inputs = tuple(Port(n, u, description="plant state") for n, u in zip(STATE_NAMES, _UNITS))
+    inputs = tuple(Port(v.name, v.unit, description="plant state") for v in QUADROTOR.states)
     outputs = tuple(Port(f"Omega_{i}", "rad/s", description=f"rotor {i} speed command") for i in range(1, 5))
 
     def __init__(self, v_ref=(0.0, 0.0, 0.0), geometric: GeometricParams = GeometricParams(),
@@ -215,18 +214,20 @@ def growth_rate(t: np.ndarray, y: np.ndarray, t_min: float = 0.0) -> float:
 
 def pd_mission_rmse(wind_speeds=(0.0, 1.0, 3.0, 5.0), scenario: str = "circles") -> dict[float, float]:
     """Euclidean RMSE (m) of the PD alone on the paper's mission (the shipped
-    ``circles`` scenario, §5.2) for each gust speed (m/s) -- Table 2's PD row."""
+    ``circles`` scenario, §5.2) for each gust speed (m/s) -- Table 2's PD row,
+    by :func:`quadrotor_paper.metrics.rmse` on the scenario's ``[metrics]`` signals."""
     from cosim.scenario import build_master, load_scenario
 
+    from ..metrics import rmse
     from ..missions import metric_signals, wind_parameter
 
     sc = load_scenario(scenario, {"controller.variant": "pd"})
+    position, reference = metric_signals(sc)
     out = {}
     with build_master(sc) as master:
         for speed in wind_speeds:
             run = master.run(sc.duration, seed=sc.seed, parameters={wind_parameter(sc, "speed"): float(speed)})
-            err = sum((run[p] - run[r]) ** 2 for p, r in zip(*metric_signals(sc)))
-            out[float(speed)] = float(np.sqrt(np.mean(err)))
+            out[float(speed)] = rmse(run, position, reference)
     return out
 
 
