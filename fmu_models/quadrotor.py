@@ -26,7 +26,7 @@ from .model import FmuModel
 from .rotor import thrust_and_torques
 from .variables import input_, output, parameter, state
 
-__all__ = ["QUADROTOR", "rotation_matrix", "euler_rate_matrix", "hover_rotor_speed", "DEFAULTS"]
+__all__ = ["QUADROTOR", "STATE_NAMES", "rotation_matrix", "euler_rate_matrix", "hover_rotor_speed", "DEFAULTS"]
 
 # Keeps d|v_rel|/dv_rel finite at v_rel = 0 (the Jacobian at hover would be
 # NaN otherwise); changes the drag force by k_drag_quad * 1e-6 * |v_rel|.
@@ -49,9 +49,8 @@ _FLOOR = {
     "I": 1e-9,  # kg m^2: 1 g at 1 mm, the floors of m and l together
     "Omega_max": 1.0,  # rad/s: about 10 rpm
 }
-_STATE_NAMES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
 
-_VARIABLES = (
+_STATES = (
     state("x", "m", "position north (world frame)"),
     state("y", "m", "position east (world frame)"),
     state("z", "m", "position down (world frame; altitude is -z)"),
@@ -64,6 +63,14 @@ _VARIABLES = (
     state("p", "rad/s", "body roll rate (eq. 2)"),
     state("q", "rad/s", "body pitch rate (eq. 2)"),
     state("r", "rad/s", "body yaw rate (eq. 2)"),
+)
+# The 12 states in table order: the one list of the plant's state names.
+STATE_NAMES: tuple[str, ...] = tuple(v.name for v in _STATES)
+# Euler kinematics (eq. 3) are singular at theta = +-pi/2.
+_INITIAL_BOUNDS = {"theta": {"min": -1.55, "max": 1.55}}
+
+_VARIABLES = (
+    *_STATES,
     *(input_(f"Omega_{i}", "rad/s",
              f"commanded speed of rotor {i} (saturated to [0, Omega_max]); starts at hover",
              start=_HOVER_SPEED)
@@ -91,14 +98,8 @@ _VARIABLES = (
               0.04, min=0.0),
     parameter("Omega_max", "rad/s", "maximum rotor speed (thrust-to-weight about 2)", 900.0,
               min=_FLOOR["Omega_max"]),
-    *(parameter(f"{name}_0", unit, f"initial value of {name}", 0.0, **bounds)
-      for name, unit, bounds in (
-          ("x", "m", {}), ("y", "m", {}), ("z", "m", {}),
-          ("u", "m/s", {}), ("v", "m/s", {}), ("w", "m/s", {}),
-          # Euler kinematics (eq. 3) are singular at theta = +-pi/2.
-          ("phi", "rad", {}), ("theta", "rad", {"min": -1.55, "max": 1.55}), ("psi", "rad", {}),
-          ("p", "rad/s", {}), ("q", "rad/s", {}), ("r", "rad/s", {}),
-      )),
+    *(parameter(f"{v.name}_0", v.unit, f"initial value of {v.name}", 0.0, **_INITIAL_BOUNDS.get(v.name, {}))
+      for v in _STATES),
 )
 
 
@@ -142,7 +143,7 @@ def _equations(t, s):
     torque = ca.vertcat(tau_phi, tau_theta, tau_psi)
     angular_acceleration = (-ca.cross(rates, inertia * rates) + torque) / inertia  # eq. (4)
 
-    derivatives = dict(zip(_STATE_NAMES, ca.vertsplit(ca.vertcat(velocity, acceleration, euler_rates,
+    derivatives = dict(zip(STATE_NAMES, ca.vertsplit(ca.vertcat(velocity, acceleration, euler_rates,
                                                                   angular_acceleration))))
     outputs = {"T": thrust, "tau_phi": tau_phi, "tau_theta": tau_theta, "tau_psi": tau_psi}
     return derivatives, outputs
@@ -154,7 +155,7 @@ QUADROTOR = FmuModel(
                 "and aerodynamic drag in wind; z axis down",
     variables=_VARIABLES,
     equations=_equations,
-    initial_state=lambda s: {name: s[f"{name}_0"] for name in _STATE_NAMES},
+    initial_state=lambda s: {name: s[f"{name}_0"] for name in STATE_NAMES},
 )
 
 DEFAULTS: dict[str, float] = {v.name: v.start for v in QUADROTOR.parameters}

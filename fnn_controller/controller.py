@@ -45,12 +45,15 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from fmu_models.quadrotor import STATE_NAMES
+
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
 from .position import FNN_STATE_SIZE, PositionParams, fnn_state_size, initial_fnn_state, position_controller
 
 __all__ = [
-    "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES", "state_size",
-    "controller_step_function", "initial_state", "FastFunction", "QuadrotorController",
+    "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES", "OUTPUTS", "state_size",
+    "controller_step_function", "flat_step_function", "initial_state", "raise_non_finite", "FastFunction",
+    "QuadrotorController",
 ]
 
 STATE_SIZE = FNN_STATE_SIZE + VEL_STATE_SIZE  # the paper's variants
@@ -61,7 +64,22 @@ VEL_STATE = slice(FNN_STATE_SIZE, STATE_SIZE)
 def state_size(variant: str) -> int:
     """Size of the whole controller state of ``variant``: position part, then velocity part."""
     return fnn_state_size(variant) + VEL_STATE_SIZE
-PLANT_STATE_NAMES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
+PLANT_STATE_NAMES = STATE_NAMES  # x y z u v w phi theta psi p q r, the plant's table
+
+# The controller's outputs as one vector ``y`` (the flat step function's),
+# name, unit, meaning: the one layout the co-simulation component and the
+# controller FMU publish.
+OUTPUTS: tuple[tuple[str, str, str], ...] = (
+    *((f"Omega_{i}", "rad/s", f"rotor {i} speed command") for i in range(1, 5)),
+    *((f"v_ref_{a}", "m/s", f"desired velocity {a}, v* = tau_c - tau_n (eq. 26)") for a in "xyz"),
+    *((f"tau_c_{a}", "m/s", f"PD output {a} (eq. 19)") for a in "xyz"),
+    *((f"tau_n_{a}", "m/s", f"FNN output {a} (eq. 24)") for a in "xyz"),
+    ("T", "N", "thrust demand (eq. 18), before saturation"),
+    ("tau_phi", "N.m", "roll torque demand (eq. 18)"),
+    ("tau_theta", "N.m", "pitch torque demand (eq. 18)"),
+    ("tau_psi", "N.m", "yaw torque demand (eq. 18)"),
+)
+_Y_PARTS = ("Omega", "v_ref", "tau_c", "tau_n", "wrench")  # in the order of OUTPUTS
 
 _INPUTS = ("p_ref", "p_ref_dot", "x", "psi_ref")
 
@@ -97,6 +115,32 @@ def controller_step_function(variant: str = "pd+lm", position: PositionParams = 
         list(_INPUTS) + ["state"],
         ["Omega", "state_next", "v_ref", "tau_c", "tau_n", "wrench", "check"],
     )
+
+
+def flat_step_function(variant: str = "pd+lm", position: PositionParams = PositionParams(),
+                       geometric: GeometricParams = GeometricParams()) -> ca.Function:
+    """:func:`controller_step_function` with its outputs in one vector:
+    ``(p_ref, p_ref_dot, x, psi_ref, state) -> (y[17], state_next, check)``,
+    ``y`` laid out as :data:`OUTPUTS` (what a component returns in one piece)."""
+    f = controller_step_function(variant, position, geometric)
+    args = f.sx_in()
+    res = dict(zip(f.name_out(), f.call(args)))
+    return ca.Function(f"{f.name()}_flat", args, [ca.vertcat(*(res[k] for k in _Y_PARTS)), res["state_next"],
+                                                   res["check"]],
+                       f.name_in(), ["y", "state_next", "check"])
+
+
+def raise_non_finite(inputs: dict[str, np.ndarray]) -> None:
+    """Raise ``ValueError`` naming the first non-finite controller input and
+    its value, else ``FloatingPointError`` (finite inputs, non-finite result)."""
+    for name in _INPUTS:
+        values = inputs[name]
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            where = f"x[{bad[0]}] ({PLANT_STATE_NAMES[bad[0]]})" if name == "x" else f"{name}[{bad[0]}]"
+            raise ValueError(f"controller input {where} = {float(values[bad[0]])!r} is not finite")
+    raise FloatingPointError(
+        "the controller produced a non-finite value from finite inputs; its state is left unchanged")
 
 
 def initial_state(seed: int | np.random.Generator, position: PositionParams = PositionParams(),
@@ -283,16 +327,6 @@ class QuadrotorController:
         fast.evaluate()
         pending = fast.pending
         if not math.isfinite(pending["check"][0]):
-            self._raise_non_finite()
+            raise_non_finite(self.inputs)
         fast.commit()
         return pending["Omega"]
-
-    def _raise_non_finite(self) -> None:
-        for name in _INPUTS:
-            values = self.inputs[name]
-            bad = np.flatnonzero(~np.isfinite(values))
-            if bad.size:
-                where = f"x[{bad[0]}] ({PLANT_STATE_NAMES[bad[0]]})" if name == "x" else f"{name}[{bad[0]}]"
-                raise ValueError(f"controller input {where} = {float(values[bad[0]])!r} is not finite")
-        raise FloatingPointError(
-            "the controller produced a non-finite value from finite inputs; its state is left unchanged")

@@ -35,7 +35,7 @@ import casadi as ca
 import numpy as np
 
 __all__ = [
-    "N_MF", "N_RULES", "AXIS_STATE_SIZE",
+    "N_MF", "N_RULES", "AXIS_STATE_SIZE", "AXIS_STATE_PORTS",
     "C1", "C2", "SIGMA1", "SIGMA2", "F", "ALPHA", "X1_PREV", "X2_PREV", "PRIMED",
     "FnnInit", "membership", "firing_exponent", "firing_strength",
     "normalized_firing_strength", "fnn_output", "initial_axis_state",
@@ -54,6 +54,19 @@ X1_PREV = 22
 X2_PREV = 23
 PRIMED = 24
 AXIS_STATE_SIZE = 25
+
+# Name and unit of every element of the axis state, in layout order: how the
+# learned parameters are published (``f_12`` is the rule of MF 1 of x1 and MF
+# 2 of x2; the co-simulation component appends the axis, ``f_12_x``).
+AXIS_STATE_PORTS: tuple[tuple[str, str], ...] = (
+    *((f"c1_{i}", "m") for i in range(1, N_MF + 1)),
+    *((f"c2_{j}", "m/s") for j in range(1, N_MF + 1)),
+    *((f"sigma1_{i}", "m") for i in range(1, N_MF + 1)),
+    *((f"sigma2_{j}", "m/s") for j in range(1, N_MF + 1)),
+    *((f"f_{i}{j}", "m/s") for j in range(1, N_MF + 1) for i in range(1, N_MF + 1)),  # k = j * I + i
+    ("alpha", "m/s2"), ("x1_prev", "m"), ("x2_prev", "m/s"), ("primed", "1"),
+)
+assert len(AXIS_STATE_PORTS) == AXIS_STATE_SIZE
 
 
 @dataclass(frozen=True)

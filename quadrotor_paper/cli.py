@@ -2,7 +2,7 @@
 
 Subcommands::
 
-    fnn-cosim run SCENARIO [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots]
+    fnn-cosim run SCENARIO [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots] [--profile]
     fnn-cosim table2 [--out DIR] [--seeds 10] [--winds 1,3,5] [--duration S] [--workers 2]
     fnn-cosim table3 [--out DIR] [--seeds 10] [--duration S] [--workers 2]
     fnn-cosim reproduce [--out DIR] [--seeds 10] [--duration S] [--workers 2]
@@ -71,7 +71,7 @@ def _cmd_run(args) -> int:
     out = Path(args.out) if args.out else DEFAULT_OUT / f"run-{scenario.name}"
     bar = Progress(int(round(scenario.duration / scenario.step)), f"run {scenario.name}", enabled=not args.quiet)
     try:
-        result, summary = run_once(scenario, out, progress=lambda n, total: bar.update(n))
+        result, summary = run_once(scenario, out, progress=lambda n, total: bar.update(n), profile=args.profile)
     finally:
         bar.close()
     figures = []
@@ -182,6 +182,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
     r.add_argument("--variant", choices=variant_names(), help="controller variant")
     r.add_argument("--no-plots", action="store_true")
+    r.add_argument("--profile", action="store_true", help="time each phase of the loop (summary.json: cost_per_step_us)")
     common(r, seeds=False)
     r.set_defaults(func=_cmd_run)
 

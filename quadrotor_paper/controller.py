@@ -1,70 +1,110 @@
 """The flight controller of ``fnn_controller`` as a component of the master.
 
-A thin adapter: it owns one :class:`fnn_controller.QuadrotorController` per
-variant used (built on first use, so a worker of ``table2`` switches between
-PD, PD+SMC-FNN and PD+LM-FNN without rebuilding), copies the 18 inputs into
-the controller's own buffers, calls its fast path once per step and returns
-the rotor speeds followed by the diagnostic signals in one preallocated array.
+One adapter, no layer between it and CasADi: per variant used it holds the
+flat step function (:func:`fnn_controller.controller.flat_step_function`)
+behind a :class:`~fnn_controller.FastFunction` (built on first use, so a
+worker of ``table2`` switches between variants without rebuilding); the
+master gathers the 18 inputs straight into the function's input arrays
+(``input_buffers``) and takes the 17 outputs from its output vector.
 
 Ports (NED world frame, SI units):
 
-======== ========================================================== =====
-inputs   x_ref y_ref z_ref (p*), vx_ref vy_ref vz_ref (dp*/dt)       m, m/s
-         x y z u v w phi theta psi p q r (plant state)               SI
-outputs  Omega_1..Omega_4 (rotor speeds, to the plant)               rad/s
-         v_ref_x/y/z (v* = tau_c - tau_n, eq. 26)                    m/s
-         tau_c_x/y/z (PD part, eq. 19), tau_n_x/y/z (FNN part, eq. 24) m/s
-         T tau_phi tau_theta tau_psi (eq. 18, before saturation)     N, N.m
-======== ========================================================== =====
+========= ========================================================== =====
+inputs    x_ref y_ref z_ref (p*), vx_ref vy_ref vz_ref (dp*/dt)       m, m/s
+          x y z u v w phi theta psi p q r (plant state)               SI
+outputs   Omega_1..Omega_4 (rotor speeds, to the plant)               rad/s
+          v_ref_x/y/z (v* = tau_c - tau_n, eq. 26)                    m/s
+          tau_c_x/y/z (PD part, eq. 19), tau_n_x/y/z (FNN part, eq. 24) m/s
+          T tau_phi tau_theta tau_psi (eq. 18, before saturation)     N, N.m
+internals the learned parameters of each axis, e.g. ``f_12_x``,
+          ``sigma1_2_z``, ``alpha_y`` (the variant's axis state ports)
+========= ========================================================== =====
 
-The run's seed is passed to ``reset(seed)``, which draws f_ij(0) (§5.1).
+The controller's nominal vehicle (mass, inertia, rotor coefficients, the
+rotor limit) is the plant's: ``plant`` names the FMU instance it is taken
+from (default ``Quadrotor``; its scenario parameters over the FMU's start
+values), and ``nominal = { m = 1.2 }`` is a deliberate, named mismatch.
+
+The run's seed draws f_ij(0) (§5.1) at every start.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import asdict, fields
 from typing import Any, Mapping
 
 import numpy as np
 
 from cosim.component import Port, PythonComponent
 from cosim.config import check_number, dataclass_from_mapping
-from cosim.errors import DivergenceError, ScenarioError
-from cosim.scenario import refuse_unknown, table
+from cosim.errors import CosimError, DivergenceError, ScenarioError
+from cosim.scenario import refuse_unknown, string, table
 
-__all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS"]
+__all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT"]
 
-_STATE = (("x", "m"), ("y", "m"), ("z", "m"), ("u", "m/s"), ("v", "m/s"), ("w", "m/s"),
-          ("phi", "rad"), ("theta", "rad"), ("psi", "rad"), ("p", "rad/s"), ("q", "rad/s"), ("r", "rad/s"))
+DEFAULT_PLANT = "Quadrotor"
+_PARAMETERS = ("variant", "psi_ref", "position", "geometric", "plant", "nominal")
+_AXES = "xyz"
 
-_PARAMETERS = ("variant", "psi_ref", "position", "geometric")
 
-CONTROLLER_INPUTS = (
-    *(Port(f"{a}_ref", "m", description=f"reference position {a}") for a in "xyz"),
-    *(Port(f"v{a}_ref", "m/s", description=f"reference velocity d{a}*/dt") for a in "xyz"),
-    *(Port(name, unit, description="plant state") for name, unit in _STATE),
-)
-CONTROLLER_OUTPUTS = (
-    *(Port(f"Omega_{i}", "rad/s", description=f"rotor {i} speed command") for i in range(1, 5)),
-    *(Port(f"v_ref_{a}", "m/s", description=f"desired velocity {a}, eq. 26") for a in "xyz"),
-    *(Port(f"tau_c_{a}", "m/s", description=f"PD output {a}, eq. 19") for a in "xyz"),
-    *(Port(f"tau_n_{a}", "m/s", description=f"FNN output {a}, eq. 24") for a in "xyz"),
-    Port("T", "N", description="thrust demand, eq. 18"),
-    Port("tau_phi", "N.m", description="roll torque demand, eq. 18"),
-    Port("tau_theta", "N.m", description="pitch torque demand, eq. 18"),
-    Port("tau_psi", "N.m", description="yaw torque demand, eq. 18"),
-)
+def _ports() -> tuple[tuple[Port, ...], tuple[Port, ...]]:
+    from fmu_models.quadrotor import QUADROTOR
+    from fnn_controller.controller import OUTPUTS
+
+    inputs = (
+        *(Port(f"{a}_ref", "m", description=f"reference position {a}") for a in _AXES),
+        *(Port(f"v{a}_ref", "m/s", description=f"reference velocity d{a}*/dt") for a in _AXES),
+        *(Port(v.name, v.unit, description=f"plant state: {v.description}") for v in QUADROTOR.states),
+    )
+    return inputs, tuple(Port(name, unit, description=text) for name, unit, text in OUTPUTS)
+
+
+CONTROLLER_INPUTS, CONTROLLER_OUTPUTS = _ports()
+
+
+def _internals(variant_name: str) -> tuple[Port, ...]:
+    from fnn_controller.variants import variant
+
+    v = variant(variant_name)
+    return tuple(Port(f"{name}_{axis}", unit, description=f"learned state of axis {axis} ({v.label})")
+                 for axis in _AXES for name, unit in v.axis_state_ports)
+
+
+def _nominal_vehicle(name: str, plant: str, nominal: Mapping[str, Any], context) -> dict[str, float]:
+    """The vehicle the controller assumes: the plant FMU's parameters, then
+    the deliberate mismatch ``nominal``."""
+    from fnn_controller import VehicleParams
+
+    keys = [f.name for f in fields(VehicleParams)]
+    vehicle: dict[str, float] = {}
+    fmu = context.fmus.get(plant) if context is not None and plant else None
+    if context is not None and plant and fmu is None:
+        raise ScenarioError(f"{name}.plant = {plant!r}: no such FMU in [fmus]; FMUs: {', '.join(context.fmus)}")
+    if fmu is not None:
+        given = context.scenario.fmus[plant]["parameters"]
+        for key in keys:
+            var = fmu.variables.get(key)
+            if key in given:
+                vehicle[key] = float(given[key])
+            elif var is not None and var.start is not None:
+                vehicle[key] = float(var.start)
+    vehicle.update(nominal)
+    return vehicle
 
 
 class ControllerComponent(PythonComponent):
-    """PD / PD+SMC-FNN / PD+LM-FNN position control + geometric velocity control.
+    """PD + FNN position control and geometric velocity control (paper Fig. 2).
 
     Parameters
     ----------
-    variant : a registered variant (``"pd"``, ``"pd+smc"``, ``"pd+lm"``, ...); run-level parameter
-        ``variant`` switches it for one run.
+    variant : a registered variant (``"pd"``, ``"pd+smc"``, ``"pd+lm"``, ...);
+        the run-level parameter ``variant`` switches it for one run.
     position, geometric : mappings of :class:`fnn_controller.PositionParams`
         and :class:`fnn_controller.GeometricParams` fields (nested tables for
-        ``init``, ``bounds``, ``vehicle``); unset fields keep the defaults.
+        ``init``, ``bounds``); unset fields keep the defaults.
     psi_ref : commanded yaw (rad).
+    vehicle : :class:`fnn_controller.VehicleParams` fields, the nominal model
+        (see :meth:`from_parameters` for how a scenario ties it to the plant).
     """
 
     inputs = CONTROLLER_INPUTS
@@ -72,30 +112,50 @@ class ControllerComponent(PythonComponent):
 
     def __init__(self, variant: str = "pd+lm", position: Mapping[str, Any] | None = None,
                  geometric: Mapping[str, Any] | None = None, psi_ref: float = 0.0,
-                 name: str = "controller"):
+                 name: str = "controller", vehicle: Mapping[str, Any] | None = None):
         super().__init__(name)
         import fnn_controller as fc
 
         self._fc = fc
         self.position = dataclass_from_mapping(fc.PositionParams, position or {}, f"{name}.position")
-        self.geometric = dataclass_from_mapping(fc.GeometricParams, geometric or {}, f"{name}.geometric")
+        geometric = dict(geometric or {})
+        if vehicle is not None:
+            geometric["vehicle"] = {**geometric.get("vehicle", {}), **vehicle}
+        self.geometric = dataclass_from_mapping(fc.GeometricParams, geometric, f"{name}.geometric")
         self.psi_ref = float(psi_ref)
-        self._controllers: dict[str, Any] = {}
         self.default_variant = self._check_variant(variant)
         self.variant = self.default_variant
-        self._out = np.zeros(len(self.outputs))
+        self.internals = _internals(self.default_variant)
+        self._functions: dict[str, Any] = {}
 
     @classmethod
     def from_parameters(cls, name: str, parameters: Mapping[str, Any], context=None) -> "ControllerComponent":
         """The component of a scenario's ``[controller]`` (or ``[components.NAME]
-        kind = "fnn_controller"``) table; errors name ``name.key``."""
+        kind = "fnn_controller"``) table; errors name ``name.key``.
+
+        ``plant`` (default ``"Quadrotor"``, ``""`` for none) is the FMU whose
+        parameters are the nominal vehicle; ``nominal`` overrides some of them
+        on purpose (model mismatch). The vehicle is not set through
+        ``geometric.vehicle``: one way to say it.
+        """
         refuse_unknown(f"{name}.", parameters, _PARAMETERS)
-        for key in ("position", "geometric"):
+        for key in ("position", "geometric", "nominal"):
             table(f"{name}.{key}", parameters.get(key, {}))
+        if "vehicle" in parameters.get("geometric", {}):
+            raise ScenarioError(f"{name}.geometric.vehicle: the nominal vehicle is the plant's "
+                                f"({name}.plant); set a deliberate mismatch in {name}.nominal")
         psi_ref = float(check_number(f"{name}.psi_ref", parameters.get("psi_ref", 0.0)))
+        plant = string(f"{name}.plant", parameters.get("plant", DEFAULT_PLANT))
+        from fnn_controller import VehicleParams
+
+        nominal = asdict(dataclass_from_mapping(VehicleParams, parameters.get("nominal", {}), f"{name}.nominal"))
+        nominal = {k: v for k, v in nominal.items() if k in parameters.get("nominal", {})}
+        if context is not None and plant not in context.fmus and "plant" not in parameters:
+            plant = ""  # no FMU of the default name: the controller keeps its own defaults
+        vehicle = _nominal_vehicle(name, plant, nominal, context)
         try:
             return cls(parameters.get("variant", "pd+lm"), parameters.get("position"), parameters.get("geometric"),
-                       psi_ref, name=name)
+                       psi_ref, name=name, vehicle=vehicle)
         except ValueError as exc:  # a parameter dataclass refused a combination of values
             raise ScenarioError(f"{name}: {exc}") from None
 
@@ -105,11 +165,14 @@ class ControllerComponent(PythonComponent):
             raise ScenarioError(f"{self.name}.variant = {variant!r}: expected one of {', '.join(names)}")
         return variant
 
-    def controller(self, variant: str):
-        """The :class:`fnn_controller.QuadrotorController` of ``variant`` (built once)."""
-        if variant not in self._controllers:
-            self._controllers[variant] = self._fc.QuadrotorController(variant, self.position, self.geometric)
-        return self._controllers[variant]
+    def function(self, variant: str):
+        """The :class:`~fnn_controller.FastFunction` of ``variant``'s flat step (built once)."""
+        if variant not in self._functions:
+            from fnn_controller.controller import FastFunction, flat_step_function
+
+            self._functions[variant] = FastFunction(flat_step_function(variant, self.position, self.geometric),
+                                                    state=("state", "state_next"))
+        return self._functions[variant]
 
     def set_parameters(self, values: Mapping[str, Any]) -> None:
         unknown = set(values) - {"variant", "psi_ref"}
@@ -124,27 +187,36 @@ class ControllerComponent(PythonComponent):
                                 f"the communication step {h} s")
         if not hasattr(self, "_psi"):
             self._psi = self.psi_ref
-        ctrl = self.controller(self.variant)
-        ctrl.reset(seed)
-        ins = ctrl.inputs
-        self._p_ref, self._p_ref_dot, self._x = ins["p_ref"], ins["p_ref_dot"], ins["x"]
-        ins["psi_ref"][0] = self._psi
-        self._advance = ctrl.advance
-        self._ctrl = ctrl
+        fast = self.function(self.variant)
+        fast.state[:] = self._fc.initial_state(seed, self.position, self.variant)
+        fast.inputs["psi_ref"][0] = self._psi
+        self._fast = fast
+        self._n_internal = len(self.internals)
+        self._same_layout = _internals(self.variant) == self.internals
 
     def input_buffers(self) -> list[np.ndarray]:
-        """The controller's own input arrays (p*, dp*/dt, plant state): the
-        master gathers the 18 inputs straight into them."""
-        return [self._p_ref, self._p_ref_dot, self._x]
+        """The step function's own input arrays (p*, dp*/dt, plant state)."""
+        ins = self._fast.inputs
+        return [ins["p_ref"], ins["p_ref_dot"], ins["x"]]
 
     def step(self, n: int, t: float, u: np.ndarray | None) -> np.ndarray:
+        fast = self._fast
         if u is not None:  # called without input_buffers(): copy the inputs in
-            self._p_ref[:] = u[0:3]
-            self._p_ref_dot[:] = u[3:6]
-            self._x[:] = u[6:18]
-        try:
-            omega = self._advance()
-        except (ValueError, FloatingPointError) as exc:
-            raise DivergenceError(t, f"{self.name} ({exc})", float("nan"), None) from None
-        o = self._ctrl.outputs
-        return np.concatenate((omega, o["v_ref"], o["tau_c"], o["tau_n"], o["wrench"]), out=self._out)
+            ins = fast.inputs
+            ins["p_ref"][:], ins["p_ref_dot"][:], ins["x"][:] = u[0:3], u[3:6], u[6:18]
+        fast.evaluate()
+        pending = fast.pending
+        if not math.isfinite(pending["check"][0]):
+            try:
+                self._fc.controller.raise_non_finite(fast.inputs)
+            except (ValueError, FloatingPointError) as exc:
+                raise DivergenceError(t, f"{self.name} ({exc})", float("nan"), None) from None
+        fast.commit()
+        return pending["y"]
+
+    def internal_values(self) -> np.ndarray:
+        """The learned state of the three axes (the position part of the state)."""
+        if not self._same_layout:
+            raise CosimError(f"{self.name}: its internal signals are those of variant {self.default_variant!r}; "
+                             f"variant {self.variant!r} has another state layout")
+        return self._fast.state[:self._n_internal]

@@ -44,12 +44,14 @@ def _parameters(scenario: Scenario, job: Job) -> dict[str, Any]:
 
 
 def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None = None,
-             variant: str | None = None, progress: Callable[[int, int], None] | None = None, master=None):
+             variant: str | None = None, progress: Callable[[int, int], None] | None = None, master=None,
+             profile: bool = False):
     """Run ``scenario`` once; with ``out_dir``, stream ``results.csv`` there.
 
     Returns ``(result, summary)``: the :class:`~cosim.master.RunResult` and a
     JSON-ready summary (status, error, RMSE, max error, wall time, real-time
-    factor, per-phase cost per step in microseconds).
+    factor and, with ``profile``, the cost per step of each phase in
+    microseconds).
     """
     own = master is None
     master = master or build_master(scenario)
@@ -58,7 +60,7 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
         csv = Path(out_dir) / "results.csv" if out_dir is not None else None
         result = master.run(scenario.duration, seed=scenario.seed if seed is None else seed, parameters=params,
                             csv_path=csv, t0=scenario.start_time, block_rows=scenario.block_rows,
-                            raise_on_error=False, progress=progress)
+                            raise_on_error=False, progress=progress, profile=profile)
     except FmuError as exc:  # could not start: a parameter refused, told with its scenario key
         raise fmu_error_in_scenario(scenario, exc) from None
     finally:
@@ -74,8 +76,9 @@ def summarize(scenario: Scenario, result, variant: str | None = None) -> dict[st
         "duration_s": scenario.duration, "step_s": scenario.step, "rows": int(result.data.shape[0]),
         "wall_time_s": result.wall_time,
         "real_time_factor": (result.time[-1] - result.time[0]) / result.wall_time if len(result.time) > 1 else None,
-        "cost_per_step_us": {k: v / max(result.n_steps, 1) * 1e6 for k, v in result.phase_times.items()},
     }
+    if result.phase_times:
+        summary["cost_per_step_us"] = {k: v / max(result.n_steps, 1) * 1e6 for k, v in result.phase_times.items()}
     position, reference = metric_signals(scenario)
     if position:
         e = euclidean_error(result, position, reference)

@@ -1,5 +1,12 @@
 """The learning laws' finite-time claims, evaluated on recorded runs.
 
+This module is part of the paper application, outside the linear stability
+package (it was ``quadrotor_paper/stability/finite_time.py``): it checks the
+FNN's learning laws, which have no linearization. The stability report
+(``fnn-cosim stability``, :mod:`quadrotor_paper.stability.report`) still
+includes its results as the section "The learning laws' finite-time claims
+on recorded runs" (``docs/stability.md``).
+
 The paper's claims (section 4), with tau = tau_c - tau_n the control
 (eq. 26), ``B`` a bound of ``|d tau/dt|`` (eq. 30) and S_p = tau_c/K_d (eq. 68):
 
@@ -21,6 +28,13 @@ t_h, and for LM the delta the law actually uses (``max(W^T W, alpha_bar)``,
 eq. 62) and the resulting decrease rate ``gamma W^T W/(delta + W^T W)``
 against the proof's gamma/2.
 
+No law is written again here: W_bar (eq. 25), delta (eq. 62) and the f rate
+(eq. 61) are the controller's own CasADi definitions
+(``fnn_controller.fnn.normalized_firing_strength``,
+``fnn_controller.learning.clip_inputs``, ``lm_delta``, ``lm_f_rate``), built
+into one ``casadi.Function`` and mapped over the samples of a run
+(:func:`_lm_function`).
+
 The runs are co-simulations by the master (plant FMU, h = 0.01 s) with the
 controller component extended to keep its learned state
 (:class:`RecordingController`): a 1 m position step from hover, and the
@@ -31,13 +45,14 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
-from fnn_controller import STATE_SIZE, PositionParams, normalized_firing_strength
-from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2
-from fnn_controller.learning import clip_inputs
+from fnn_controller import STATE_SIZE, PositionParams
+from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2, normalized_firing_strength
+from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
 from fnn_controller.position import axis_slice
 
 from .controller import ControllerComponent
@@ -58,7 +73,7 @@ class RecordingController(ControllerComponent):
         self.states = np.zeros((n_steps + 1, STATE_SIZE))
 
     def step(self, n: int, t: float, u):
-        self.states[n] = self.controller(self.variant).state
+        self.states[n] = self._fast.state
         return super().step(n, t, u)
 
 
@@ -120,19 +135,33 @@ def record_run(name: str, variant: str, scenario: str = "circles", overrides: di
                cols("controller.tau_n_{a}"), cols("controller.v_ref_{a}"), states, position, result.status)
 
 
-def _wtw_function(params: PositionParams) -> ca.Function:
+@lru_cache(maxsize=None)
+def _lm_function(bounds: LearningBounds) -> ca.Function:
+    """The LM law's terms at one sample, from the controller's definitions.
+
+    Inputs ``x1 = e``, ``x2 = de/dt`` (clipped by ``clip_inputs``), the axis
+    state, ``gamma`` and ``alpha_bar``; outputs ``W_bar^T W_bar`` (W_bar of
+    eq. 25), ``delta = lm_delta(W_bar, alpha_bar)`` (eq. 62) and the decrease
+    rate of tau_n, ``-W_bar^T lm_f_rate(W_bar, 1, gamma, alpha_bar)`` (eq. 61
+    with sgn(tau_c) = 1), which is ``gamma W^T W/(delta + W^T W)``.
+    """
     x1, x2 = ca.SX.sym("x1"), ca.SX.sym("x2")
     s = ca.SX.sym("axis_state", AXIS_STATE_SIZE)
-    c1, c2 = clip_inputs(x1, x2, params.bounds)
+    gamma, alpha_bar = ca.SX.sym("gamma"), ca.SX.sym("alpha_bar")
+    c1, c2 = clip_inputs(x1, x2, bounds)
     w = normalized_firing_strength(c1, c2, s[C1], s[C2], s[SIGMA1], s[SIGMA2])
-    return ca.Function("w_bar_squared", [x1, x2, s], [ca.dot(w, w)])
+    rate = -ca.dot(w, lm_f_rate(w, 1.0, gamma, alpha_bar))
+    return ca.Function("lm_claims", [x1, x2, s, gamma, alpha_bar], [ca.dot(w, w), lm_delta(w, alpha_bar), rate],
+                       ["x1", "x2", "axis_state", "gamma", "alpha_bar"], ["w_bar_squared", "delta", "rate"])
 
 
-def _w_squared(run: Run, axis: int) -> np.ndarray:
-    """W_bar^T W_bar at every sample (eq. 25 evaluated by the controller's own function)."""
-    f = _wtw_function(run.position).map(len(run.t))
+def _lm_terms(run: Run, axis: int, gamma: float, alpha_bar: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """W_bar^T W_bar, delta (eq. 62) and the decrease rate at every sample of
+    ``axis`` of ``run``: :func:`_lm_function` mapped over the samples."""
+    f = _lm_function(run.position.bounds).map(len(run.t))
     states = run.states[:, axis_slice(axis)].T
-    return np.array(f(run.e[:, axis][None, :], run.e_dot[:, axis][None, :], states)).ravel()
+    out = f(run.e[:, axis][None, :], run.e_dot[:, axis][None, :], states, gamma, alpha_bar)
+    return tuple(np.array(o).ravel() for o in out)
 
 
 @dataclass(frozen=True)
@@ -200,14 +229,12 @@ def evaluate_claims(run: Run, axis: int) -> AxisClaims:
     if run.variant == "pd+lm":
         gamma, alpha_bar = p.gamma_lm[axis], p.alpha_bar[axis]
         t_h = 4.0 * float(abs(tc[0])) / gamma  # eq. 70 with S_p(0) = tau_c(0)/K_d
-        wtw = _w_squared(run, axis)
-        delta = np.maximum(wtw, alpha_bar)  # eq. 62
-        rate = gamma * wtw / (delta + wtw)
+        wtw, delta, rate = _lm_terms(run, axis, gamma, alpha_bar)  # eqs. 25, 61, 62
         after = t >= t[0] + t_h
         return AxisClaims(gamma=gamma, t_h_70=t_h,
                           max_after_t_h=float(np.abs(tc[after]).max()) if after.any() else math.nan,
                           printed_condition=bool(gamma > B / 4), needed_condition=bool(gamma >= 4 * B),
-                          delta_is_wtw=float(np.mean(wtw >= alpha_bar)), rate_min=float(rate.min()),
+                          delta_is_wtw=float(np.mean(delta == wtw)), rate_min=float(rate.min()),
                           rate_max=float(rate.max()), **common)
     raise ValueError(f"run {run.name!r}: variant {run.variant!r} has no learning law (pd+smc or pd+lm)")
 

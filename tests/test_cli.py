@@ -16,7 +16,7 @@ from cosim.recorder import read_results
 def test_run_writes_results_plots_and_summary(tmp_path, capsys):
     out = tmp_path / "run"
     code = main(["run", "circles", "--set", "simulation.duration=2.0", "--set", "wind.speed=5",
-                 "--variant", "pd+smc", "--seed", "4", "--out", str(out), "--quiet"])
+                 "--variant", "pd+smc", "--seed", "4", "--out", str(out), "--quiet", "--profile"])
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "ok" and summary["variant"] == "pd+smc" and summary["seed"] == 4

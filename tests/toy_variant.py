@@ -18,7 +18,8 @@ def axis_law(e, e_dot, tau_c, axis_state, axis, params):
 TOY = Variant(
     name=NAME, label="PD+toy", description="PD with 20 % more gain, through tau_n (a test variant)",
     axis_law=axis_law, initial_axis_state=lambda rng, params: np.zeros(1), axis_state_size=1,
-    axis_state_bounds=lambda params: (np.full(1, -np.inf), np.full(1, np.inf)), learns=False,
+    axis_state_bounds=lambda params: (np.full(1, -np.inf), np.full(1, np.inf)),
+    axis_state_ports=(("last_tau_c", "m/s"),), learns=False,
 )
 
 

@@ -1,7 +1,7 @@
 """PD + type-1 FNN trained by the Levenberg-Marquardt laws of Theorem 3 (eqs. 57-62)."""
 from __future__ import annotations
 
-from ..fnn import AXIS_STATE_SIZE
+from ..fnn import AXIS_STATE_PORTS, AXIS_STATE_SIZE
 from .registry import Variant, register_variant
 from .type1 import type1_axis_law, type1_axis_state_bounds, type1_initial_axis_state
 
@@ -10,5 +10,6 @@ PD_LM = register_variant(Variant(
     description="PD + type-1 FNN trained by the LM laws (eqs. 57-62), alpha held",
     axis_law=type1_axis_law("lm", "gamma_lm"),
     initial_axis_state=type1_initial_axis_state,
-    axis_state_size=AXIS_STATE_SIZE, axis_state_bounds=type1_axis_state_bounds, parameters=("gamma_lm", "alpha_bar", "init", "bounds"),
+    axis_state_size=AXIS_STATE_SIZE, axis_state_bounds=type1_axis_state_bounds,
+    axis_state_ports=AXIS_STATE_PORTS, parameters=("gamma_lm", "alpha_bar", "init", "bounds"),
 ))

@@ -17,7 +17,9 @@ params)`` draws the state of one axis at reset (§5.1). ``parameters`` names
 the fields of ``PositionParams`` the law reads beyond the PD's ``kp``,
 ``kd`` and ``dt`` (their units, defaults and ranges are on the fields).
 ``axis_state_bounds(params)`` gives the box ``(low, high)`` the law keeps
-each axis state in (its projections), which the contract test checks.
+each axis state in (its projections), which the contract test checks;
+``axis_state_ports`` names each element with its unit (how the learned
+parameters are published and recorded).
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ class Variant:
     initial_axis_state: Callable[..., Any]
     axis_state_size: int
     axis_state_bounds: Callable[..., tuple[Any, Any]]
+    axis_state_ports: tuple[tuple[str, str], ...]
     parameters: tuple[str, ...] = ()
     learns: bool = True
 
@@ -49,6 +52,9 @@ def register_variant(v: Variant) -> Variant:
         raise ValueError(f"controller variant {v.name!r} is registered twice, differently")
     from ..position import PositionParams
 
+    if len(v.axis_state_ports) != v.axis_state_size:
+        raise ValueError(f"variant {v.name!r}: {len(v.axis_state_ports)} axis state ports for a state of "
+                         f"{v.axis_state_size}")
     fields = set(PositionParams.__dataclass_fields__)
     unknown = [p for p in v.parameters if p not in fields]
     if unknown:
