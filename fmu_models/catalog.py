@@ -4,9 +4,9 @@
 """
 from __future__ import annotations
 
-from .model import FmuModel
-from .quadrotor import QUADROTOR
-from .wind_gust import WIND_GUST
+from .export.model import FmuModel
+from .models.quadrotor import QUADROTOR
+from .models.wind_gust import WIND_GUST
 
 __all__ = ["MODELS", "model"]
 

@@ -45,7 +45,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from fmu_models.quadrotor import STATE_NAMES
+from fmu_models.models.quadrotor import STATE_NAMES
 
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
 from .position import FNN_STATE_SIZE, PositionParams, fnn_state_size, initial_fnn_state, position_controller

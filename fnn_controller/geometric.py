@@ -1,7 +1,7 @@
 """Geometric velocity controller on SE(3) of section 3.2 (eqs. 13-18, after
 Lee, Leok and McClamroch), followed by the inverse rotor model.
 
-Conventions are the plant's (``fmu_models.quadrotor``): world and body z axes
+Conventions are the plant's (``fmu_models.models.quadrotor``): world and body z axes
 point down, gravity is ``+g e3``, the rotors push along ``-z_B``, so
 ``m v_dot = -T R e3 + m g e3``. In this convention (which is Lee et al.'s),
 the desired third body axis is
@@ -29,7 +29,7 @@ Additions the paper leaves open (justified in ``docs/controller.md``):
   one controller step (``desired_rate="finite_difference"``), for which the
   previous R* is the controller's state;
 * rotor speeds from the inverse of the plant's rotor model
-  (``fmu_models.rotor.rotor_speeds_squared``), squared speeds clipped to
+  (``fmu_models.models.rotor.rotor_speeds_squared``), squared speeds clipped to
   ``[0, Omega_max^2]``.
 
 The velocity-controller state ``vel_state`` (VEL_STATE_SIZE = 10) holds the
@@ -44,8 +44,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from fmu_models.quadrotor import DEFAULTS, rotation_matrix
-from fmu_models.rotor import rotor_speeds_squared
+from fmu_models.models.quadrotor import DEFAULTS, rotation_matrix
+from fmu_models.models.rotor import rotor_speeds_squared
 
 __all__ = [
     "VehicleParams", "GeometricParams", "DESIRED_RATE_RULES", "VEL_STATE_SIZE",
@@ -174,7 +174,7 @@ def thrust_and_torque(force, R, e_R, e_omega, omega_b, params: GeometricParams =
 def rotor_speeds(thrust, tau, vehicle: VehicleParams = VehicleParams()):
     """Rotor speeds (rad/s) by the inverse rotor model, saturated.
 
-    Squared speeds from ``fmu_models.rotor.rotor_speeds_squared`` (plus
+    Squared speeds from ``fmu_models.models.rotor.rotor_speeds_squared`` (plus
     configuration), each clipped to ``[0, Omega_max^2]`` before the root.
     """
     squares = rotor_speeds_squared(thrust, tau[0], tau[1], tau[2], vehicle.b, vehicle.d, vehicle.l)

@@ -145,9 +145,7 @@ def lm_f_rate(w_bar, tau_c, gamma, alpha_bar):
     eigenvector of ``W_bar W_bar^T + delta I`` with eigenvalue
     ``delta + W_bar^T W_bar``.
     """
-    w_sq = ca.dot(w_bar, w_bar)
-    delta = ca.fmax(w_sq, alpha_bar)
-    return -gamma * w_bar / (delta + w_sq) * sgn(tau_c)
+    return -gamma * w_bar / (lm_delta(w_bar, alpha_bar) + ca.dot(w_bar, w_bar)) * sgn(tau_c)
 
 
 def clip_inputs(x1, x2, bounds: LearningBounds):

@@ -149,7 +149,7 @@ def _cmd_scenarios(args) -> int:
 def _cmd_build_fmu(args) -> int:
     """Build every model of the catalog in every FMI version the exporter
     supports; print the path of each FMU written, one per line."""
-    from fmu_models.build import FMI_VERSIONS, build_fmu
+    from fmu_models.export.build import FMI_VERSIONS, build_fmu
     from fmu_models.catalog import MODELS
 
     for model in MODELS.values():

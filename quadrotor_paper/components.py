@@ -25,7 +25,7 @@ CONTROLLER_INSTANCE = "controller"
 
 
 def _fmu_model(model) -> registry.FmuModel:
-    from fmu_models.build import cached_fmu
+    from fmu_models.export.build import cached_fmu
 
     def check_parameter(name: str, value: float) -> None:
         try:

@@ -40,7 +40,7 @@ from cosim.config import check_number, dataclass_from_mapping
 from cosim.errors import CosimError, DivergenceError, ScenarioError
 from cosim.scenario import refuse_unknown, string, table
 
-__all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT"]
+__all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT", "internal_ports"]
 
 DEFAULT_PLANT = "Quadrotor"
 _PARAMETERS = ("variant", "psi_ref", "position", "geometric", "plant", "nominal")
@@ -48,7 +48,7 @@ _AXES = "xyz"
 
 
 def _ports() -> tuple[tuple[Port, ...], tuple[Port, ...]]:
-    from fmu_models.quadrotor import QUADROTOR
+    from fmu_models.models.quadrotor import QUADROTOR
     from fnn_controller.controller import OUTPUTS
 
     inputs = (
@@ -62,7 +62,9 @@ def _ports() -> tuple[tuple[Port, ...], tuple[Port, ...]]:
 CONTROLLER_INPUTS, CONTROLLER_OUTPUTS = _ports()
 
 
-def _internals(variant_name: str) -> tuple[Port, ...]:
+def internal_ports(variant_name: str) -> tuple[Port, ...]:
+    """The learned state the component publishes for ``variant_name``: each
+    axis state port of the variant, per axis (``f_12_x``)."""
     from fnn_controller.variants import variant
 
     v = variant(variant_name)
@@ -125,7 +127,7 @@ class ControllerComponent(PythonComponent):
         self.psi_ref = float(psi_ref)
         self.default_variant = self._check_variant(variant)
         self.variant = self.default_variant
-        self.internals = _internals(self.default_variant)
+        self.internals = internal_ports(self.default_variant)
         self._functions: dict[str, Any] = {}
 
     @classmethod
@@ -192,7 +194,7 @@ class ControllerComponent(PythonComponent):
         fast.inputs["psi_ref"][0] = self._psi
         self._fast = fast
         self._n_internal = len(self.internals)
-        self._same_layout = _internals(self.variant) == self.internals
+        self._same_layout = internal_ports(self.variant) == self.internals
 
     def input_buffers(self) -> list[np.ndarray]:
         """The step function's own input arrays (p*, dp*/dt, plant state)."""

@@ -13,7 +13,6 @@ import multiprocessing
 import os
 import shutil
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
@@ -21,9 +20,9 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from cosim.errors import FmuError
-from .metrics import euclidean_error, rmse
 from cosim.scenario import Scenario, apply_overrides, build_master, fmu_error_in_scenario, fmu_file, parse_scenario
 
+from .metrics import euclidean_error, rmse
 from .missions import controller_variant, metric_signals, wind_parameter
 
 __all__ = ["Job", "run_once", "sweep", "cells"]
@@ -199,8 +198,3 @@ def _json_default(obj):
         return str(obj)
     raise TypeError(f"not JSON serializable: {type(obj).__name__}")
 
-
-def timed(fn, *args, **kwargs):
-    t = time.perf_counter()
-    value = fn(*args, **kwargs)
-    return value, time.perf_counter() - t

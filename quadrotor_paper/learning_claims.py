@@ -35,9 +35,9 @@ No law is written again here: W_bar (eq. 25), delta (eq. 62) and the f rate
 into one ``casadi.Function`` and mapped over the samples of a run
 (:func:`_lm_function`).
 
-The runs are co-simulations by the master (plant FMU, h = 0.01 s) with the
-controller component extended to keep its learned state
-(:class:`RecordingController`): a 1 m position step from hover, and the
+The runs are co-simulations by the master (plant FMU, h = 0.01 s) that
+record the learned state the controller component publishes (its internal
+signals ``controller.f_12_x``, ...): a 1 m position step from hover, and the
 paper's mission (shipped scenario ``circles``, 3 m/s gust).
 """
 from __future__ import annotations
@@ -50,38 +50,25 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from fnn_controller import STATE_SIZE, PositionParams
+from fnn_controller import PositionParams
 from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2, normalized_firing_strength
 from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
-from fnn_controller.position import axis_slice
+from fnn_controller.position import axis_slice, initial_fnn_state
 
-from .controller import ControllerComponent
+from .controller import internal_ports
 
-__all__ = ["RecordingController", "Run", "AxisClaims", "record_run", "evaluate_claims", "default_runs",
+__all__ = ["Run", "AxisClaims", "record_run", "evaluate_claims", "default_runs",
            "finite_time_report"]
 
 _AXES = ("x", "y", "z")
-
-
-class RecordingController(ControllerComponent):
-    """:class:`~quadrotor_paper.controller.ControllerComponent` that also keeps the
-    controller state (FNN parameters, alpha) *before* every step, in
-    :attr:`states` (n_steps + 1, STATE_SIZE)."""
-
-    def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
-        super().start(t0, h, n_steps, seed)
-        self.states = np.zeros((n_steps + 1, STATE_SIZE))
-
-    def step(self, n: int, t: float, u):
-        self.states[n] = self._fast.state
-        return super().step(n, t, u)
 
 
 @dataclass(frozen=True, eq=False)
 class Run:
     """One recorded co-simulation: time (n,), per axis (n, 3) the position
     error e, its derivative e_dot, tau_c, tau_n and tau = v*; the controller
-    states (n, STATE_SIZE); its variant and gains."""
+    position-controller states *before* each step (n, 3 x axis state); its
+    variant and gains."""
 
     name: str
     variant: str
@@ -99,16 +86,12 @@ class Run:
 def _scenario(base: str, variant: str, overrides: dict):
     from cosim.scenario import load_scenario, parse_scenario
 
-    sc = load_scenario(base, overrides)
+    sc = load_scenario(base, {**overrides, "controller.variant": variant})
     raw = copy.deepcopy(sc.raw)
-    ctrl = raw.pop("controller", {})
-    raw.setdefault("components", {})["controller"] = {
-        "factory": "quadrotor_paper.learning_claims:RecordingController",
-        "variant": variant, "position": ctrl.get("position", {}),
-        "geometric": ctrl.get("geometric", {}), "psi_ref": ctrl.get("psi_ref", 0.0)}
     signals = [f"reference.{s}" for s in ("x", "y", "z", "vx", "vy", "vz")]
     signals += [f"Quadrotor.{s}" for s in ("x", "y", "z", "u", "v", "w")]
     signals += [f"controller.{k}_{a}" for k in ("tau_c", "tau_n", "v_ref") for a in _AXES]
+    signals += [f"controller.{port.name}" for port in internal_ports(variant)]
     raw["record"] = {"signals": signals}
     return parse_scenario(raw, source=sc.source, name=sc.name)
 
@@ -121,9 +104,11 @@ def record_run(name: str, variant: str, scenario: str = "circles", overrides: di
     sc = _scenario(scenario, variant, overrides or {})
     with build_master(sc) as master:
         result = master.run(sc.duration, seed=sc.seed, raise_on_error=False)
-        ctrl = master.components["controller"]
-        states = ctrl.states[:len(result.time)].copy()
-        position = ctrl.position
+        position = master.components["controller"].position
+    # the published state is the one after each step: the state before step n is the one after n - 1
+    after = np.column_stack([result[f"controller.{port.name}"] for port in internal_ports(variant)])
+    initial = initial_fnn_state(sc.seed, position, variant)
+    states = np.vstack([initial, after[:-1]])
 
     def cols(fmt):
         return np.column_stack([result[fmt.format(a=a)] for a in _AXES])

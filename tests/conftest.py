@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from fmu_models.build import cached_fmu
-from fmu_models.quadrotor import QUADROTOR
+from fmu_models.export.build import cached_fmu
+from fmu_models.models.quadrotor import QUADROTOR
 
 
 @pytest.fixture(scope="session")

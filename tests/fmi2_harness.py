@@ -9,11 +9,12 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
 from cosim.fmu import fmi2_callbacks
+from fmu_models.models.quadrotor import STATE_NAMES
 
 
 def logged(value: float) -> str:
     """``value`` as the FMU writes it in a log message (``exact`` in
-    ``fmu_models/c/fmu_core.c``): ``%g``, with more digits only where needed
+    ``fmu_models/export/c/fmu_core.c``): ``%g``, with more digits only where needed
     to read back as the same double."""
     for digits in range(6, 18):
         text = "%.*g" % (digits, value)
@@ -83,4 +84,4 @@ class Fmi2Instance:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
 
 
-STATES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
+STATES = STATE_NAMES

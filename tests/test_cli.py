@@ -56,7 +56,7 @@ def test_scenarios_lists_the_shipped_missions(capsys):
 
 
 def test_build_fmu_prints_one_path_per_fmu(tmp_path, capsys):
-    from fmu_models.build import FMI_VERSIONS
+    from fmu_models.export.build import FMI_VERSIONS
     from fmu_models.catalog import MODELS
 
     assert main(["build-fmu", "--out", str(tmp_path)]) == 0

@@ -11,7 +11,7 @@ import pytest
 
 from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 from cosim.scenario import scenario_path
-from fmu_models.build import cached_fmu
+from fmu_models.export.build import cached_fmu
 from fmu_models.catalog import MODELS
 
 _PLANT_AS_MODEL = 'model = "Quadrotor"\nfmi_version = 2\n'

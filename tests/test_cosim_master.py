@@ -19,9 +19,9 @@ from cosim.fmu import FmuComponent
 from cosim.master import Master
 from cosim.recorder import read_results, sidecar_path
 from cosim.scenario import build_master, load_scenario
-from fmu_models.build import cached_fmu
+from fmu_models.export.build import cached_fmu
 from fmu_models.catalog import MODELS
-from fmu_models.quadrotor import hover_rotor_speed
+from fmu_models.models.quadrotor import hover_rotor_speed
 
 WIND_TO_PLANT = "WindGust.v_wind_{x,y,z} -> Quadrotor.wind_{x,y,z}"
 ROTORS_TO_PLANT = "standin.Omega_{1,2,3,4} -> Quadrotor.Omega_{1,2,3,4}"
@@ -288,7 +288,7 @@ def test_duration_must_be_whole_steps(fmus):
 
 def test_fmi3_fmu_runs_like_fmi2():
     """Both FMI versions through the same master (skipped until FMI 3.0 export exists)."""
-    from fmu_models.build import FmuBuildError
+    from fmu_models.export.build import FmuBuildError
 
     try:
         paths3 = {name: cached_fmu(model, 3) for name, model in MODELS.items()}

@@ -2,7 +2,7 @@
 
 The FMU is built once per module (content-addressed cache) and extracted once;
 every test creates its own instances. Value references come from
-:func:`fmu_models.codegen.value_references`, never typed by hand.
+:func:`fmu_models.export.codegen.value_references`, never typed by hand.
 """
 from __future__ import annotations
 
@@ -21,10 +21,10 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
 
-from fmu_models.build import cached_fmu
-from fmu_models.codegen import value_references
-from fmu_models.model_description import SOURCE_FILES_FMI3
-from fmu_models.quadrotor import QUADROTOR, hover_rotor_speed
+from fmu_models.export.build import cached_fmu
+from fmu_models.export.codegen import value_references
+from fmu_models.export.model_description import SOURCE_FILES_FMI3
+from fmu_models.models.quadrotor import QUADROTOR, hover_rotor_speed
 
 VR = value_references(QUADROTOR)
 STATES = [v.name for v in QUADROTOR.states]

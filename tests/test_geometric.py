@@ -13,13 +13,12 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from fmu_models.build import cached_fmu
-from fmu_models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
+from fmu_models.export.build import cached_fmu
+from fmu_models.models.quadrotor import DEFAULTS, QUADROTOR, STATE_NAMES, hover_rotor_speed
 from fnn_controller.controller import FastFunction
 from fnn_controller.geometric import (GeometricParams, hat, initial_velocity_state, vee, velocity_controller,
                                       velocity_controller_function)
 
-STATE_NAMES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
 H = 0.01  # s, communication step = controller step
 M, G = DEFAULTS["m"], DEFAULTS["g"]
 

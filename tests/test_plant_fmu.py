@@ -13,9 +13,9 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2CoSimulation
 from fmpy.validation import validate_fmu
 
-from fmu_models.build import cached_fmu
+from fmu_models.export.build import cached_fmu
 from fmu_models.catalog import MODELS
-from fmu_models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
+from fmu_models.models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
 from fmi2_harness import STATES, Fmi2Instance, LogCollector, logged
 
 HOVER = hover_rotor_speed()

@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from fmu_models.quadrotor import DEFAULTS, hover_rotor_speed
+from fmu_models.models.quadrotor import DEFAULTS, hover_rotor_speed
 from fnn_controller import (STATE_SIZE, GeometricParams, PositionParams, QuadrotorController,
                             controller_step_function, initial_state, position_controller_function,
                             velocity_controller_function)

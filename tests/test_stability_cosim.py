@@ -13,7 +13,7 @@ from quadrotor_paper.stability import critical_gain_factor, hover
 from quadrotor_paper.learning_claims import AxisClaims, Run, evaluate_claims, record_run
 from quadrotor_paper.stability.loops import LoopModel
 from quadrotor_paper.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
-from fnn_controller import STATE_SIZE, PositionParams
+from fnn_controller import FNN_STATE_SIZE, PositionParams
 from fnn_controller.controller import initial_state
 
 H = 0.01
@@ -186,7 +186,7 @@ def test_lm_step_run_reaches_zero_inside_t_h_but_does_not_stay(fmu):
     run = record_run("step", "pd+lm", "circles", {
         "trajectory": {"kind": "hover", "x": 1.0, "y": 0.0, "z": -15.0},
         "wind.speed": 0.0, "simulation.duration": 10.0})
-    assert run.status == "ok" and run.states.shape == (run.t.size, STATE_SIZE)
+    assert run.status == "ok" and run.states.shape == (run.t.size, FNN_STATE_SIZE)
     c: AxisClaims = evaluate_claims(run, 0)
     assert c.tau_c0 == pytest.approx(2.5, rel=1e-9)  # kp e(0) = 2.5 x 1 m
     assert c.t_h_70 == pytest.approx(4 * 2.5 / 1.5)

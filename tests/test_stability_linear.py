@@ -11,7 +11,7 @@ import control as ct
 import numpy as np
 import pytest
 
-from fmu_models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
+from fmu_models.models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
 from fnn_controller import GeometricParams, PositionParams
 from quadrotor_paper.stability import (LoopModel, critical_gain_factor, forward_flight, gain_sweep, hover, linearize_controller,
                              linearize_controller_step, linearize_plant, linearize_plant_fmu, loop_margins,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import toy_variant
-from fmu_models.quadrotor import DEFAULTS, hover_rotor_speed
+from fmu_models.models.quadrotor import DEFAULTS, hover_rotor_speed
 from fnn_controller import PositionParams, QuadrotorController
 from fnn_controller.variants import unregister_variant, variant, variant_names
 from test_geometric import H, plant_fmu  # noqa: F401  (fixture)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 
-from fmu_models.build import cached_fmu
-from fmu_models.wind_gust import WIND_GUST, gust_speed_factor
+from fmu_models.export.build import cached_fmu
+from fmu_models.models.wind_gust import WIND_GUST, gust_speed_factor
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +71,7 @@ def test_zero_state_model_builds_and_runs_in_both_interfaces(wind_fmu):
 @pytest.mark.parametrize("version", [2, 3])
 def test_validates(version):
     """The stateless model passes fmpy's validation in every FMI version built."""
-    from fmu_models.build import FMI_VERSIONS
+    from fmu_models.export.build import FMI_VERSIONS
 
     if version not in FMI_VERSIONS:
         pytest.skip(f"FMI {version} export not available")

@@ -30,7 +30,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from fmu_models.quadrotor import QUADROTOR
+from fmu_models.models.quadrotor import QUADROTOR
 from fnn_controller import controller_step_function, position_controller_function, velocity_controller_function
 from fnn_controller.geometric import initial_velocity_state
 

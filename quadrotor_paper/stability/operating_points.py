@@ -2,7 +2,7 @@
 plant and controller functions (the one source of truth).
 
 An operating point is a steady flight of the *closed loop*: the plant of
-``fmu_models.quadrotor`` (``QUADROTOR.functions["ode"]``) flown by the PD
+``fmu_models.models.quadrotor`` (``QUADROTOR.functions["ode"]``) flown by the PD
 position controller and the geometric velocity controller of
 ``fnn_controller`` (the functions the co-simulation master runs). At a
 steady flight at world velocity ``V`` in a steady wind ``w``:
@@ -36,7 +36,7 @@ from typing import Mapping
 import casadi as ca
 import numpy as np
 
-from fmu_models.quadrotor import QUADROTOR, hover_rotor_speed
+from fmu_models.models.quadrotor import QUADROTOR, hover_rotor_speed
 from fnn_controller import GeometricParams, PositionParams, position_controller_function, velocity_controller_function
 from fnn_controller.geometric import initial_velocity_state
 

@@ -1,7 +1,7 @@
 """The linear model checked against the nonlinear co-simulation.
 
 The nonlinear side is the real thing: the plant FMU (FMI 2.0 co-simulation,
-``fmu_models.build.cached_fmu``) and the controller, run by the
+``fmu_models.export.build.cached_fmu``) and the controller, run by the
 co-simulation master (:class:`cosim.master.Master`, h = 0.01 s). The linear
 side is :class:`~quadrotor_paper.stability.loops.LoopModel` in discrete time at the same
 step, simulated by ``control.forced_response``. Both start at the operating
@@ -27,7 +27,7 @@ from pathlib import Path
 import control as ct
 import numpy as np
 
-from fmu_models.quadrotor import QUADROTOR
+from fmu_models.models.quadrotor import QUADROTOR
 from fnn_controller import GeometricParams, velocity_controller_function
 from fnn_controller.controller import FastFunction
 from fnn_controller.geometric import initial_velocity_state
@@ -115,7 +115,7 @@ class VelocityCommandComponent(PythonComponent):
 
 def plant_fmu_path(fmi_version: int = 2) -> Path:
     """The quadrotor FMU (built on demand, content-addressed cache)."""
-    from fmu_models.build import cached_fmu
+    from fmu_models.export.build import cached_fmu
 
     return cached_fmu(QUADROTOR, fmi_version)
 

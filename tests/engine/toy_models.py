@@ -39,9 +39,9 @@ from cosim.component import PythonComponent, ports
 from cosim.config import check_number
 from cosim.errors import ScenarioError
 from cosim.scenario import check_fmu_parameters, refuse_unknown
-from fmu_models.build import cached_fmu
-from fmu_models.model import FmuModel
-from fmu_models.variables import input_, output, parameter, state
+from fmu_models.export.build import cached_fmu
+from fmu_models.export.model import FmuModel
+from fmu_models.export.variables import input_, output, parameter, state
 
 __all__ = ["LAG", "LAG_TAU", "LAG_K", "lag_fmu_path", "lag_step", "lag_fmu2", "lag_fmu3", "Constant", "Step",
            "PController", "Gain", "Probe", "Failing", "make_gain", "register_toys", "BUILDS"]

@@ -1,9 +1,9 @@
 """C sources of a model: the CasADi-generated functions and ``model_config.h``.
 
 The generated pair ``model_generated.c/.h`` holds the numerical code
-(model_init/ode/out/step/jac, see :mod:`fmu_models.model`); ``model_config.h``
+(model_init/ode/out/step/jac, see :mod:`fmu_models.export.model`); ``model_config.h``
 holds the sizes, the value-reference layout and the variable table (names,
-bounds, start values) that the generic C layer in ``fmu_models/c`` reads.
+bounds, start values) that the generic C layer in ``fmu_models/export/c`` reads.
 """
 from __future__ import annotations
 

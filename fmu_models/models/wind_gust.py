@@ -39,8 +39,8 @@ import math
 
 import casadi as ca
 
-from .model import FmuModel
-from .variables import output, parameter
+from ..export.model import FmuModel
+from ..export.variables import output, parameter
 
 __all__ = ["WIND_GUST", "N_SINES", "TURBULENCE_BAND", "SWITCH_TOLERANCE", "gust_speed_factor"]
 

@@ -14,7 +14,7 @@ from xml.sax.saxutils import quoteattr
 
 import casadi as ca
 
-from . import __version__
+from .. import __version__
 from .codegen import value_references
 from .model import FmuModel
 from .variables import UNITS

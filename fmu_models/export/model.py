@@ -2,7 +2,7 @@
 
 :class:`FmuModel` turns the equations, written once in CasADi symbolics, into
 the five functions every FMU of this project is made of (the generic C layer
-in ``fmu_models/c`` calls nothing else):
+in ``fmu_models/export/c`` calls nothing else):
 
 =============  ==========================  =====================================
 name           signature                   what
@@ -153,20 +153,3 @@ class FmuModel:
                 ["t", "x", "u", "p"], ["J"],
             ),
         }
-
-    @cached_property
-    def dependencies(self) -> dict[str, list[str]]:
-        """Structural dependencies of each derivative and output on states and
-        inputs, read from the sparsity of the symbolic Jacobian (the
-        ModelStructure of the modelDescription is generated from this)."""
-        s = self.symbols
-        f = self.functions
-        unknowns = ca.vertcat(f["ode"](s["t"], s["x"], s["u"], s["p"]), f["out"](s["t"], s["x"], s["u"], s["p"]))
-        sparsity = ca.jacobian(unknowns, ca.vertcat(s["x"], s["u"])).sparsity()
-        knowns = [v.name for v in self.states + self.inputs]
-        rows = [f"der({v.name})" for v in self.states] + [v.name for v in self.outputs]
-        deps: dict[str, list[str]] = {r: [] for r in rows}
-        r_idx, c_idx = sparsity.get_triplet()
-        for r, c in sorted(zip(r_idx, c_idx)):
-            deps[rows[r]].append(knowns[c])
-        return deps

@@ -70,7 +70,7 @@ class Variable:
     def check(self, value: float) -> None:
         """Raise ``ValueError`` naming the variable if ``value`` is not admissible.
 
-        The same test as the FMU's (``check_value`` in ``fmu_models/c/fmu_core.c``):
+        The same test as the FMU's (``check_value`` in ``fmu_models/export/c/fmu_core.c``):
         finite and within ``[min, max]``.
         """
         if not math.isfinite(value):

@@ -22,9 +22,9 @@ import math
 
 import casadi as ca
 
-from .model import FmuModel
+from ..export.model import FmuModel
 from .rotor import thrust_and_torques
-from .variables import input_, output, parameter, state
+from ..export.variables import input_, output, parameter, state
 
 __all__ = ["QUADROTOR", "STATE_NAMES", "rotation_matrix", "euler_rate_matrix", "hover_rotor_speed", "DEFAULTS"]
 

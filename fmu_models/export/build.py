@@ -129,7 +129,7 @@ def cache_root() -> Path:
     checkout, else ~/.cache/fnn-cosim."""
     if os.environ.get("FNN_COSIM_CACHE"):
         return Path(os.environ["FNN_COSIM_CACHE"])
-    repo = Path(__file__).resolve().parents[1]
+    repo = Path(__file__).resolve().parents[2]
     if (repo / "pyproject.toml").exists():
         return repo / "build" / "fmu-cache"
     return Path.home() / ".cache" / "fnn-cosim"

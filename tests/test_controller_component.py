@@ -1,0 +1,61 @@
+"""The controller as a co-simulation component: its nominal vehicle tied to
+the plant FMU by default, a mismatch only when the scenario names it; its
+learned state published as internal signals that record like outputs."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from cosim.errors import ScenarioError
+from cosim.scenario import build_master, load_scenario
+from fmu_models.models.quadrotor import DEFAULTS
+from fnn_controller import VehicleParams, initial_state
+from fnn_controller.fnn import AXIS_STATE_PORTS, F
+
+
+def _vehicle(overrides=None) -> VehicleParams:
+    sc = load_scenario("circles", {"simulation.duration": 0.1, **(overrides or {})})
+    with build_master(sc) as master:
+        return master.components["controller"].geometric.vehicle
+
+
+def test_the_nominal_vehicle_is_the_plants():
+    vehicle = _vehicle()
+    assert dataclasses.asdict(vehicle) == pytest.approx({f.name: DEFAULTS[f.name]
+                                                         for f in dataclasses.fields(VehicleParams)}, rel=1e-15)
+
+
+def test_a_heavier_plant_makes_a_heavier_nominal_model():
+    vehicle = _vehicle({"fmus.Quadrotor.parameters.m": 1.3, "fmus.Quadrotor.parameters.Ix": 0.05})
+    assert (vehicle.m, vehicle.Ix, vehicle.Iy) == (1.3, 0.05, DEFAULTS["Iy"])
+
+
+def test_a_mismatch_is_a_named_setting():
+    vehicle = _vehicle({"fmus.Quadrotor.parameters.m": 1.3, "controller.nominal": {"m": 1.07, "b": 7e-6}})
+    assert (vehicle.m, vehicle.b, vehicle.Iz) == (1.07, 7e-6, DEFAULTS["Iz"])
+
+
+@pytest.mark.parametrize("overrides, message", [
+    ({"controller.nominal": {"mass": 1.0}}, "controller.nominal.mass: unknown key"),
+    ({"controller.plant": "Hexacopter"}, "controller.plant = 'Hexacopter': no such FMU in [fmus]"),
+    ({"controller.geometric": {"vehicle": {"m": 2.0}}}, "controller.geometric.vehicle: the nominal vehicle is the plant's"),
+])
+def test_a_wrong_tie_is_refused_naming_the_key(overrides, message):
+    with pytest.raises(ScenarioError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        sc = load_scenario("circles", overrides)
+        build_master(sc).close()
+
+
+def test_the_learned_state_records_like_an_output():
+    names = [f"controller.{name}_{axis}" for axis in "xyz" for name, _ in AXIS_STATE_PORTS]
+    sc = load_scenario("circles", {"simulation.duration": 1.0, "record.signals": ["Quadrotor.x"] + names})
+    with build_master(sc) as master:
+        result = master.run(sc.duration, seed=3)
+    learned = np.column_stack([result[n] for n in names])
+    start = initial_state(3, master.components["controller"].position, "pd+lm")[:len(names)]
+    f_x = slice(F.start, F.stop)
+    assert not np.allclose(learned[-1, f_x], start[f_x])  # the FNN of x has learned in 1 s
+    assert result.units[result.columns.index("controller.f_11_x")] == "m/s"
+    assert np.all(np.isfinite(learned))
