@@ -1,7 +1,7 @@
 /* Model-independent core shared by the FMI 2.0 and FMI 3.0 layers.
  *
  * A model is nothing but the generated "model_config.h" (sizes, the variable
- * table, bounds and start values, from fmu_models/variables.py) and the
+ * table, bounds and start values, from fmu_models/export/variables.py) and the
  * CasADi-generated functions model_init/ode/out/step/jac. This file knows no
  * model; the FMI layers know no model either, as in the Reference-FMUs.
  *
