@@ -251,7 +251,7 @@ def test_killed_run_leaves_a_readable_partial_result(tmp_path, fmu_paths):
     script = textwrap.dedent(f"""
         import sys
         sys.path.insert(0, {str(Path(__file__).parent)!r})
-        from test_cosim_master import ConstantRotors, _master
+        from test_master_with_the_plant import ConstantRotors, _master
         from cosim.fmu import FmuComponent
 
         class WaitsToBeKilled(ConstantRotors):
@@ -265,7 +265,7 @@ def test_killed_run_leaves_a_readable_partial_result(tmp_path, fmu_paths):
                 FmuComponent("WindGust", {str(fmu_paths['WindGust'])!r})]
         _master(fmus, WaitsToBeKilled()).run(100.0, csv_path={str(csv)!r}, block_rows=10)
     """)
-    proc = subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parents[1],
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parents[2],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         said = proc.stdout.readline()  # blocks until step 45, or returns "" if the child ended
