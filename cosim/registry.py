@@ -20,7 +20,6 @@ scenario file finds its kinds without the caller importing anything.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -135,6 +134,8 @@ def _load_plugins() -> None:
     if _plugins_loaded:
         return
     _plugins_loaded = True
+    from importlib.metadata import entry_points  # slow to import: only when a registry is read
+
     for entry in entry_points(group=PLUGIN_GROUP):
         entry.load()()
 

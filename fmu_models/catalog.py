@@ -1,21 +1,49 @@
 """Every FMU model of the project, by identifier.
 
-``fnn-cosim build-fmu`` builds each of them; scenarios name them here.
+``fnn-cosim build-fmu`` builds each of them; scenarios name them here. A
+model's module is imported (and its CasADi equations built) only when the
+model is asked for: listing the names costs nothing.
 """
 from __future__ import annotations
 
-from .export.model import FmuModel
-from .models.quadrotor import QUADROTOR
-from .models.wind_gust import WIND_GUST
+from importlib import import_module
+from typing import TYPE_CHECKING, Iterator, Mapping
 
-__all__ = ["MODELS", "model"]
+if TYPE_CHECKING:
+    from .export.model import FmuModel
 
-MODELS: dict[str, FmuModel] = {"Quadrotor": QUADROTOR, "WindGust": WIND_GUST}
+__all__ = ["MODELS", "MODEL_NAMES", "model"]
+
+# identifier -> (module, attribute): one line per model
+_WHERE: dict[str, tuple[str, str]] = {
+    "Quadrotor": ("fmu_models.models.quadrotor", "QUADROTOR"),
+    "WindGust": ("fmu_models.models.wind_gust", "WIND_GUST"),
+}
+MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 
 
-def model(name: str) -> FmuModel:
+def model(name: str) -> "FmuModel":
     """The model called ``name``; a ``KeyError`` listing the known names otherwise."""
     try:
-        return MODELS[name]
+        module, attribute = _WHERE[name]
     except KeyError:
-        raise KeyError(f"unknown FMU model {name!r}; known models: {', '.join(sorted(MODELS))}") from None
+        raise KeyError(f"unknown FMU model {name!r}; known models: {', '.join(sorted(_WHERE))}") from None
+    return getattr(import_module(module), attribute)
+
+
+class _Models(Mapping):
+    """``MODELS[name]``: the models by identifier, each imported on first use."""
+
+    def __getitem__(self, name: str) -> "FmuModel":
+        if name not in _WHERE:
+            raise KeyError(name)
+        return model(name)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_WHERE)
+
+    def __len__(self) -> int:
+        return len(_WHERE)
+
+
+MODELS: Mapping[str, "FmuModel"] = _Models()

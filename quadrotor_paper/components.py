@@ -24,10 +24,18 @@ TRAJECTORY_INSTANCE = "reference"
 CONTROLLER_INSTANCE = "controller"
 
 
-def _fmu_model(model) -> registry.FmuModel:
-    from fmu_models.export.build import cached_fmu
+def _fmu_model(identifier: str) -> registry.FmuModel:
+    """The catalog's model ``identifier``, imported (and built) only when a
+    scenario checks one of its parameters or needs its FMU."""
+    from fmu_models.catalog import model as catalog_model
+
+    def build(version: int):
+        from fmu_models.export.build import cached_fmu
+
+        return cached_fmu(catalog_model(identifier), version)
 
     def check_parameter(name: str, value: float) -> None:
+        model = catalog_model(identifier)
         try:
             var = model.variable(name)
         except KeyError:
@@ -38,7 +46,7 @@ def _fmu_model(model) -> registry.FmuModel:
             raise KeyError(f"{name!r} is {article} {var.causality} of {model.identifier}, not a parameter")
         var.check(value)
 
-    return registry.FmuModel(model.identifier, lambda version: cached_fmu(model, version), check_parameter)
+    return registry.FmuModel(identifier, build, check_parameter)
 
 
 def _trajectory_kind(name: str) -> registry.ComponentKind:
@@ -88,13 +96,13 @@ def register() -> None:
     if _registered:
         return
     _registered = True
-    from fmu_models.catalog import MODELS
+    from fmu_models.catalog import MODEL_NAMES
 
     from .missions import parse_metrics, parse_wind
     from .trajectories import TRAJECTORIES
 
-    for model in MODELS.values():
-        registry.register_fmu_model(_fmu_model(model))
+    for identifier in MODEL_NAMES:
+        registry.register_fmu_model(_fmu_model(identifier))
     for name in TRAJECTORIES:
         registry.register_component_kind(_trajectory_kind(name))
     registry.register_component_kind(_controller_kind())
