@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import copy
 import importlib
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -344,16 +345,23 @@ def fmu_file(spec: Mapping[str, Any]) -> Path:
 
 def _check_fmu_file(scenario: Scenario, fmu) -> None:
     """What the scenario says of an FMU file (its FMI version, its
-    parameters) against what the file declares."""
+    parameters and their declared ranges) against what the file declares; a
+    value the FMU refuses although its description allows it is refused at
+    start-up, quoting the FMU (:func:`fmu_error_in_scenario`)."""
     spec = scenario.fmus[fmu.name]
     version = spec.get("fmi_version")
     if version is not None and fmu.fmi_version != version:
         raise ScenarioError(f"fmus.{fmu.name}.fmi_version = {version}: the FMU file {fmu.path} is FMI "
                             f"{fmu.model_description.fmiVersion}")
-    for key in spec["parameters"]:
+    for key, value in spec["parameters"].items():
         var = fmu.variables.get(key)
         if var is None or var.causality not in ("parameter", "input"):
             raise ScenarioError(f"fmus.{fmu.name}.parameters.{key}: the FMU file {fmu.path} has no parameter {key!r}")
+        low = float(var.min) if var.min is not None else -math.inf
+        high = float(var.max) if var.max is not None else math.inf
+        if not low <= float(value) <= high:
+            raise ScenarioError(f"fmus.{fmu.name}.parameters.{key} = {value!r}: outside the range [{low:g}, {high:g}] "
+                                f"the FMU file {fmu.path} declares")
 
 
 def fmu_error_in_scenario(scenario: Scenario, exc: FmuError) -> ScenarioError:

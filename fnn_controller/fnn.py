@@ -34,6 +34,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from .parameters import check_ranges, param
+
 __all__ = [
     "N_MF", "N_RULES", "AXIS_STATE_SIZE", "AXIS_STATE_PORTS",
     "C1", "C2", "SIGMA1", "SIGMA2", "F", "ALPHA", "X1_PREV", "X2_PREV", "PRIMED",
@@ -73,12 +75,16 @@ assert len(AXIS_STATE_PORTS) == AXIS_STATE_SIZE
 class FnnInit:
     """Initial values of the FNN of one axis (section 5.1)."""
 
-    c1: tuple[float, float, float] = (-3.0, 1e-4, 3.0)  # m, centres of the MFs of x1 = e
-    c2: tuple[float, float, float] = (-30.0, 1e-4, 30.0)  # m/s, centres of the MFs of x2 = de/dt
-    sigma1: float = 1.5  # m, width of every MF of x1
-    sigma2: float = 15.0  # m/s, width of every MF of x2
-    alpha: float = 1e-3  # m/s^2, initial adaptive learning rate (rate of tau_n in eq. 37; see learning.py)
-    f_high: float = 1e-3  # m/s, f_ij(0) ~ U[0, f_high]
+    c1: tuple[float, float, float] = param((-3.0, 1e-4, 3.0), "m", "initial centres of the MFs of x1 = e")
+    c2: tuple[float, float, float] = param((-30.0, 1e-4, 30.0), "m/s", "initial centres of the MFs of x2 = de/dt")
+    sigma1: float = param(1.5, "m", "initial width of every MF of x1", min=1e-9)
+    sigma2: float = param(15.0, "m/s", "initial width of every MF of x2", min=1e-9)
+    alpha: float = param(1e-3, "m/s2", "initial adaptive learning rate (rate of tau_n in eq. 37; see learning.py)",
+                         min=0.0)
+    f_high: float = param(1e-3, "m/s", "f_ij(0) ~ U[0, f_high]", min=0.0)
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
 
 
 def membership(x, c, sigma):

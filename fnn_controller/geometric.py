@@ -44,8 +44,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from fmu_models.models.quadrotor import DEFAULTS, rotation_matrix
+from fmu_models.models.quadrotor import QUADROTOR, rotation_matrix
 from fmu_models.models.rotor import rotor_speeds_squared
+
+from .parameters import check_ranges, param
 
 __all__ = [
     "VehicleParams", "GeometricParams", "DESIRED_RATE_RULES", "VEL_STATE_SIZE",
@@ -58,41 +60,53 @@ DESIRED_RATE_RULES = ("zero", "finite_difference")
 VEL_STATE_SIZE = 10
 
 
+def _plant_param(name: str):
+    """A field of the nominal vehicle: the plant's parameter ``name`` (default,
+    unit, description and range from the plant's variable table)."""
+    v = QUADROTOR.variable(name)
+    return param(v.start, v.unit, f"nominal {v.description}", min=v.min, max=v.max)
+
+
 @dataclass(frozen=True)
 class VehicleParams:
     """Nominal vehicle the controller assumes (plant defaults, Table 1)."""
 
-    m: float = DEFAULTS["m"]  # kg, mass
-    g: float = DEFAULTS["g"]  # m/s^2, gravitational acceleration
-    Ix: float = DEFAULTS["Ix"]  # kg m^2, inertia about x_B
-    Iy: float = DEFAULTS["Iy"]  # kg m^2, inertia about y_B
-    Iz: float = DEFAULTS["Iz"]  # kg m^2, inertia about z_B
-    l: float = DEFAULTS["l"]  # m, arm length
-    b: float = DEFAULTS["b"]  # N s^2, rotor thrust coefficient
-    d: float = DEFAULTS["d"]  # N m s^2, rotor drag-torque coefficient
-    Omega_max: float = DEFAULTS["Omega_max"]  # rad/s, maximum rotor speed
+    # Units, descriptions and ranges are the plant's (its variable table): one source.
+    m: float = _plant_param("m")
+    g: float = _plant_param("g")
+    Ix: float = _plant_param("Ix")
+    Iy: float = _plant_param("Iy")
+    Iz: float = _plant_param("Iz")
+    l: float = _plant_param("l")
+    b: float = _plant_param("b")
+    d: float = _plant_param("d")
+    Omega_max: float = _plant_param("Omega_max")
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
 
 
 @dataclass(frozen=True)
 class GeometricParams:
     """Gains and rules of the geometric velocity controller (not in the paper)."""
 
-    k_v: float = 5.0  # 1/s, velocity gain per unit mass (physical gain m k_v, N s/m)
-    k_R: tuple[float, float, float] = (400.0, 400.0, 64.0)  # 1/s^2, attitude gain per unit inertia (I k_R, N m)
-    k_omega: tuple[float, float, float] = (40.0, 40.0, 16.0)  # 1/s, rate gain per unit inertia (I k_omega, N m s)
-    tilt_max: float = math.radians(35.0)  # rad, largest angle of z_B* from the vertical
-    fz_min: float = 0.2  # 1, floor of the vertical desired force, as a fraction of m g
-    desired_rate: str = "zero"  # rule for R*_dot in eq. 17: "zero" or "finite_difference"
-    dt: float = 0.01  # s, controller step (used by the finite-difference rule)
+    k_v: float = param(5.0, "1/s", "velocity gain per unit mass (physical gain m k_v, N s/m)", min=0.0)
+    k_R: tuple[float, float, float] = param((400.0, 400.0, 64.0), "1/s2",
+                                            "attitude gain per unit inertia (physical I k_R, N m)", min=0.0)
+    k_omega: tuple[float, float, float] = param((40.0, 40.0, 16.0), "1/s",
+                                                "rate gain per unit inertia (physical I k_omega, N m s)", min=0.0)
+    # (0, pi/2) as an inclusive range: 1e-6 rad up to 1e-6 rad short of the horizontal
+    tilt_max: float = param(math.radians(35.0), "rad", "largest angle of z_B* from the vertical",
+                            min=1e-6, max=math.pi / 2 - 1e-6)
+    fz_min: float = param(0.2, "1", "floor of the vertical desired force, as a fraction of m g", min=1e-6, max=1.0)
+    desired_rate: str = "zero"  # rule for R*_dot in eq. 17: "zero" or "finite_difference" (structural)
+    dt: float = param(0.01, "s", "controller step (used by the finite-difference rule)", min=1e-4, max=1.0)
     vehicle: VehicleParams = field(default_factory=VehicleParams)  # nominal vehicle
 
     def __post_init__(self) -> None:
         if self.desired_rate not in DESIRED_RATE_RULES:
             raise ValueError(f"desired_rate {self.desired_rate!r} is not one of {DESIRED_RATE_RULES}")
-        if not 0.0 < self.tilt_max < math.pi / 2:
-            raise ValueError(f"tilt_max = {self.tilt_max!r} rad must be in (0, pi/2)")
-        if not 0.0 < self.fz_min <= 1.0:
-            raise ValueError(f"fz_min = {self.fz_min!r} must be in (0, 1]")
+        check_ranges(self)
 
 
 def hat(w):
@@ -125,7 +139,7 @@ def desired_force(v_ref, v, params: GeometricParams = GeometricParams()):
     force = veh.m * params.k_v * (v - v_ref) + veh.m * veh.g * e3
     fz = ca.fmax(force[2], params.fz_min * veh.m * veh.g)
     horizontal_sq = force[0] ** 2 + force[1] ** 2
-    allowed_sq = (fz * math.tan(params.tilt_max)) ** 2
+    allowed_sq = (fz * ca.tan(params.tilt_max)) ** 2
     scale = ca.sqrt(allowed_sq / ca.fmax(horizontal_sq, allowed_sq))
     return ca.vertcat(scale * force[0], scale * force[1], fz)
 

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import casadi as ca
 
 from .fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV
+from .parameters import check_ranges, param
 
 __all__ = [
     "LearningBounds", "sgn", "sigma_rate", "smc_f_rate", "alpha_rate", "lm_delta",
@@ -52,24 +53,22 @@ RULES = ("smc", "lm")
 class LearningBounds:
     """Bounds of eqs. (27)-(29) and the floor of eqs. (35)-(36) (not in the paper)."""
 
-    x1_max: float = 20.0  # m, B_x for x1 = e; the FNN input is clipped to +-x1_max
-    x2_max: float = 50.0  # m/s, B_x for x2 = de/dt; the FNN input is clipped to +-x2_max
-    c1_max: float = 50.0  # m, B_c for each element of c1
-    c2_max: float = 150.0  # m/s, B_c for each element of c2
-    sigma1_min: float = 0.05  # m, smallest width of an MF of x1
-    sigma1_max: float = 15.0  # m, B_sigma for each element of sigma1
-    sigma2_min: float = 0.5  # m/s, smallest width of an MF of x2
-    sigma2_max: float = 150.0  # m/s, B_sigma for each element of sigma2
-    f_max: float = 10.0  # m/s, B_f of eq. 29 for each f_ij
-    alpha_max: float = 10.0  # m/s^2, upper bound of the adaptive learning rate alpha
-    a_min: float = 0.5  # 1, floor of |A| = |x - c| / sigma in eqs. 35-36 / 59-60
+    # Every bound is positive: at least 1e-9 in its unit (FMI ranges are inclusive).
+    x1_max: float = param(20.0, "m", "B_x for x1 = e (eq. 27); the FNN input is clipped to +-x1_max", min=1e-9)
+    x2_max: float = param(50.0, "m/s", "B_x for x2 = de/dt (eq. 27); the FNN input is clipped to +-x2_max",
+                          min=1e-9)
+    c1_max: float = param(50.0, "m", "B_c for each element of c1 (eq. 28)", min=1e-9)
+    c2_max: float = param(150.0, "m/s", "B_c for each element of c2 (eq. 28)", min=1e-9)
+    sigma1_min: float = param(0.05, "m", "smallest width of an MF of x1", min=1e-9)
+    sigma1_max: float = param(15.0, "m", "B_sigma for each element of sigma1 (eq. 28)", min=1e-9)
+    sigma2_min: float = param(0.5, "m/s", "smallest width of an MF of x2", min=1e-9)
+    sigma2_max: float = param(150.0, "m/s", "B_sigma for each element of sigma2 (eq. 28)", min=1e-9)
+    f_max: float = param(10.0, "m/s", "B_f of eq. 29 for each f_ij", min=1e-9)
+    alpha_max: float = param(10.0, "m/s2", "upper bound of the adaptive learning rate alpha", min=1e-9)
+    a_min: float = param(0.5, "1", "floor of |A| = |x - c| / sigma in eqs. 35-36 / 59-60", min=1e-9)
 
     def __post_init__(self) -> None:
-        for name in ("x1_max", "x2_max", "c1_max", "c2_max", "sigma1_min", "sigma2_min",
-                     "f_max", "alpha_max", "a_min"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"LearningBounds.{name} = {value!r} must be a positive finite number")
+        check_ranges(self)
         for low, high in (("sigma1_min", "sigma1_max"), ("sigma2_min", "sigma2_max")):
             if not getattr(self, low) < getattr(self, high) < math.inf:
                 raise ValueError(f"LearningBounds needs 0 < {low} < {high} < inf")

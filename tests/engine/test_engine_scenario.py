@@ -349,13 +349,22 @@ def test_an_unknown_parameter_of_an_fmu_file_is_refused_when_building(file_scena
         build_master(sc)
 
 
-def test_a_value_refused_by_an_fmu_file_is_told_in_the_scenario_words(file_scenario):
-    """The file's ranges are the FMU's to enforce: at start, then named by key."""
+def test_a_value_outside_the_declared_range_of_an_fmu_file_is_refused_when_building(file_scenario):
+    """An FMU file's values are checked against the ranges its description
+    declares when the master is built, before anything runs."""
     path = file_scenario('path = "lag.fmu"\nparameters = { internal_step = 0.0 }')
     sc = load_scenario(path)  # an FMU file's values are not range-checked when read
+    with pytest.raises(ScenarioError, match=r"fmus\.Lag\.parameters\.internal_step = 0\.0: outside the range "
+                                            r"\[1e-06, inf\] the FMU file .*lag\.fmu declares"):
+        build_master(sc)
+
+
+def test_a_value_refused_by_an_fmu_file_is_told_in_the_scenario_words(file_scenario):
+    """A value the FMU refuses at start (here a run-level one) is named by its key, quoting the FMU."""
+    sc = load_scenario(file_scenario('path = "lag.fmu"'))
     with build_master(sc) as master:
         with pytest.raises(FmuCallError) as info:
-            master.run(1.0)
+            master.run(1.0, parameters={"Lag.internal_step": 0.0})
     assert info.value.variable == "internal_step" and info.value.value == 0.0
     err = fmu_error_in_scenario(sc, info.value)
     assert isinstance(err, ScenarioError)

@@ -129,13 +129,30 @@ def test_wrong_guid_quotes_the_fmus_own_message(tmp_path, plant2, capsys):
     _assert_one_line(code, err, "fmus.Quadrotor.path", str(fmu), "instantiation failed", "wrong GUID")
 
 
-@pytest.mark.parametrize("key, value, said", [("m", "-1", "m = -1 refused"), ("theta_0", "2", "theta_0 = 2 refused")])
-def test_parameter_refused_by_an_fmu_given_by_path(tmp_path, plant2, capsys, key, value, said):
+@pytest.mark.parametrize("key, value, declared", [("m", "-1", "[0.001, inf]"), ("theta_0", "2", "[-1.55, 1.55]")])
+def test_parameter_outside_the_declared_range_of_an_fmu_given_by_path(tmp_path, plant2, capsys, key, value, declared):
     fmu = tmp_path / "Quadrotor.fmu"
     fmu.write_bytes(plant2.read_bytes())
     scenario = _scenario_with_plant_file(tmp_path, fmu)
     code, err = _run(scenario, capsys, "--set", f"fmus.Quadrotor.parameters.{key}={value}")
-    _assert_one_line(code, err, f"fmus.Quadrotor.parameters.{key} = {value}:", str(fmu), said)
+    _assert_one_line(code, err, f"fmus.Quadrotor.parameters.{key} = {value}:", str(fmu),
+                     f"outside the range {declared} the FMU file")
+
+
+def test_parameter_the_fmu_refuses_although_its_description_allows_it(tmp_path, plant2, capsys):
+    """A file whose modelDescription declares m >= -10 while its binary refuses
+    m <= 0: the refusal comes from the FMU at start-up, quoted as it said it."""
+    def widen_m(name, data):
+        if name == "modelDescription.xml":
+            data = re.sub(rb'(name="m" [^>]*>\s*<Real [^>]*?)min="0.001"', rb'\1min="-10"', data, count=1)
+        return name, data
+
+    fmu = _rewrite(plant2, tmp_path / "Quadrotor.fmu", widen_m)
+    assert b'min="-10"' in zipfile.ZipFile(fmu).read("modelDescription.xml")
+    code, err = _run(_scenario_with_plant_file(tmp_path, fmu), capsys, "--set", "fmus.Quadrotor.parameters.m=-1",
+                     "--set", 'controller.nominal={ m = 1.07 }')
+    _assert_one_line(code, err, "fmus.Quadrotor.parameters.m = -1:", "refused by the FMU", str(fmu),
+                     "m = -1 refused")
 
 
 def test_fmi3_file_where_the_scenario_says_fmi2(tmp_path, capsys):

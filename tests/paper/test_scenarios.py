@@ -67,7 +67,7 @@ def test_paper_values_in_the_shipped_missions():
     ({"controller.position.kq": 1.0}, "controller.position.kq: unknown key; known keys: kp, kd"),
     ({"controller.position.kp": "2.5"}, "controller.position.kp = '2.5': expected a number"),
     ({"controller.position.nu": [0.85, 0.85]}, "controller.position.nu = [0.85, 0.85]: expected a list of 3 values"),
-    ({"controller.geometric.tilt_max": 2.0}, "tilt_max = 2.0 rad must be in (0, pi/2)"),
+    ({"controller.geometric.tilt_max": 2.0}, "GeometricParams.tilt_max = 2.0 rad is outside its range [1e-06, 1.5708]"),
     ({"record.signals": "Quadrotor.x"}, "record.signals = 'Quadrotor.x': expected a list of strings"),
     ({"envelope": {"Quadrotor.phi": [1.2, -1.2]}}, "envelope.Quadrotor.phi = [1.2, -1.2]: low must be below high"),
     ({"metrics.position": ["Quadrotor.x"]}, "metrics: position has 1 signals but reference has 3"),
