@@ -40,7 +40,7 @@ __all__ = [
     "N_MF", "N_RULES", "AXIS_STATE_SIZE", "AXIS_STATE_PORTS",
     "C1", "C2", "SIGMA1", "SIGMA2", "F", "ALPHA", "X1_PREV", "X2_PREV", "PRIMED",
     "FnnInit", "membership", "firing_exponent", "firing_strength",
-    "normalized_firing_strength", "fnn_output", "initial_axis_state",
+    "normalized_firing_strength", "fnn_output", "initial_axis_state", "initial_axis_expression",
 ]
 
 N_MF = 3  # I = J, membership functions per input
@@ -159,14 +159,23 @@ def fnn_output(f, w_bar):
     return ca.dot(f, w_bar)
 
 
+def initial_axis_expression(init: FnnInit, r):
+    """Axis state at t = 0 (section 5.1) from N_RULES uniform numbers ``r`` in
+    [0, 1): centres, widths, alpha, ``f_ij(0) = f_high r_ij`` (so f_ij(0) ~
+    U[0, f_high]); previous inputs 0, not primed. CasADi (symbolic ``init``
+    and ``r`` inside the controller FMU) or numbers alike."""
+    ones = ca.DM.ones(N_MF)
+    return ca.vertcat(*init.c1, *init.c2, init.sigma1 * ones, init.sigma2 * ones, init.f_high * r,
+                      init.alpha, 0.0, 0.0, 0.0)
+
+
 def initial_axis_state(rng: np.random.Generator, init: FnnInit = FnnInit()) -> np.ndarray:
-    """Axis state at t = 0 (section 5.1): centres, widths, alpha, and
-    f_ij(0) ~ U[0, f_high] drawn from ``rng``; previous inputs 0, not primed."""
-    state = np.zeros(AXIS_STATE_SIZE)
-    state[C1] = init.c1
-    state[C2] = init.c2
-    state[SIGMA1] = init.sigma1
-    state[SIGMA2] = init.sigma2
-    state[F] = rng.uniform(0.0, init.f_high, N_RULES)
-    state[ALPHA] = init.alpha
+    """:func:`initial_axis_expression` with ``r = rng.random(N_RULES)``, as numbers.
+
+    ``f_high * rng.random()`` is bit for bit numpy's ``rng.uniform(0, f_high)``
+    (numpy computes ``0 + (f_high - 0) * random()``), and the controller FMU
+    draws the same ``r`` from the same seed (``numpy_random.c``).
+    """
+    state = np.array(ca.DM(initial_axis_expression(init, rng.random(N_RULES)))).ravel()
+    assert state.shape == (AXIS_STATE_SIZE,)
     return state

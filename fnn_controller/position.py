@@ -157,11 +157,11 @@ def initial_fnn_state(rng: np.random.Generator | int, params: PositionParams = P
     default: every run names its randomness); the x, y and z axes draw from
     it in that order (for the paper's variants, their f_ij(0)).
     """
-    from .variants import variant as lookup
+    from .variants import initial_axis_state, variant as lookup
 
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
         rng = np.random.default_rng(int(rng))
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator or an int seed, not {rng!r}")
-    draw = lookup(variant).initial_axis_state
-    return np.concatenate([draw(rng, params) for _ in range(3)])
+    v = lookup(variant)
+    return np.concatenate([initial_axis_state(v, rng, params) for _ in range(3)])

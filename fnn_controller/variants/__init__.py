@@ -4,8 +4,10 @@ Adding a variant: a module here (or anywhere) that calls
 :func:`register_variant` with a :class:`Variant`, imported by this package
 (add it to the list below) or by the user before the variant is named.
 """
-from .registry import Variant, register_variant, unregister_variant, variant, variant_names, variants
+from .registry import (Variant, initial_axis_state, register_variant, unregister_variant, variant, variant_names,
+                       variants)
 
 from . import pd, pd_smc, pd_lm  # noqa: E402,F401  (the paper's three, in the paper's order)
 
-__all__ = ["Variant", "register_variant", "unregister_variant", "variant", "variant_names", "variants"]
+__all__ = ["Variant", "initial_axis_state", "register_variant", "unregister_variant", "variant", "variant_names",
+           "variants"]

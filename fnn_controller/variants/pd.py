@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from ..fnn import AXIS_STATE_PORTS, AXIS_STATE_SIZE
 from .registry import Variant, register_variant
-from .type1 import type1_axis_state_bounds, type1_initial_axis_state
+from .type1 import TYPE1_RANDOM, type1_axis_state_bounds, type1_initial_axis
 
 
 def axis_law(e, e_dot, tau_c, axis_state, axis, params):
@@ -16,7 +16,7 @@ def axis_law(e, e_dot, tau_c, axis_state, axis, params):
 
 PD = register_variant(Variant(
     name="pd", label="PD", description="PD position controller alone (eq. 19)",
-    axis_law=axis_law, initial_axis_state=type1_initial_axis_state,
+    axis_law=axis_law, initial_axis=type1_initial_axis, n_random=TYPE1_RANDOM,
     axis_state_size=AXIS_STATE_SIZE, axis_state_bounds=type1_axis_state_bounds,
     axis_state_ports=AXIS_STATE_PORTS, learns=False,
 ))

@@ -12,8 +12,11 @@ A variant's ``axis_law(e, e_dot, tau_c, axis_state, axis, params)`` returns
 2 = z): ``e = p* - p`` (m, eq. 12), ``e_dot`` (m/s), ``tau_c`` the PD output
 (m/s, eq. 19), ``axis_state`` the variant's learned parameters of that axis
 (``axis_state_size`` numbers) and ``params`` the
-:class:`~fnn_controller.position.PositionParams`. ``initial_axis_state(rng,
-params)`` draws the state of one axis at reset (§5.1). ``parameters`` names
+:class:`~fnn_controller.position.PositionParams`. ``initial_axis(params, r)``
+is the state of one axis at reset (§5.1) from ``n_random`` uniform numbers
+``r`` in [0, 1), as a CasADi expression (numbers in, numbers out, so the
+Python path and the controller FMU draw the same state from the same seed:
+:func:`initial_axis_state`). ``parameters`` names
 the fields of ``PositionParams`` the law reads beyond the PD's ``kp``,
 ``kd`` and ``dt`` (their units, defaults and ranges are on the fields).
 ``axis_state_bounds(params)`` gives the box ``(low, high)`` the law keeps
@@ -26,7 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable
 
-__all__ = ["Variant", "register_variant", "variants", "variant", "variant_names"]
+__all__ = ["Variant", "register_variant", "variants", "variant", "variant_names", "initial_axis_state"]
 
 
 @dataclass(frozen=True)
@@ -35,7 +38,8 @@ class Variant:
     label: str
     description: str
     axis_law: Callable[..., tuple[Any, Any]]
-    initial_axis_state: Callable[..., Any]
+    initial_axis: Callable[..., Any]
+    n_random: int
     axis_state_size: int
     axis_state_bounds: Callable[..., tuple[Any, Any]]
     axis_state_ports: tuple[tuple[str, str], ...]
@@ -84,3 +88,16 @@ def variant(name: str) -> Variant:
     except KeyError:
         raise ValueError(f"unknown position-controller variant {name!r}; expected one of "
                          f"{', '.join(_VARIANTS)}") from None
+
+
+def initial_axis_state(v: Variant, rng, params):
+    """One axis's state at reset, as numbers: ``v.initial_axis(params, r)``
+    with ``r = rng.random(v.n_random)``."""
+    import casadi as ca
+    import numpy as np
+
+    state = np.array(ca.DM(v.initial_axis(params, rng.random(v.n_random)))).ravel()
+    if state.shape != (v.axis_state_size,):
+        raise ValueError(f"variant {v.name!r}: initial axis state of shape {state.shape}, "
+                         f"expected ({v.axis_state_size},)")
+    return state

@@ -5,14 +5,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fnn import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV, fnn_output,
-                   initial_axis_state, normalized_firing_strength)
+from ..fnn import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, N_RULES, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV,
+                   fnn_output, initial_axis_expression, normalized_firing_strength)
 from ..learning import clip_inputs, learning_step
 
 
-def type1_initial_axis_state(rng, params):
-    """§5.1's initial values, f_ij(0) ~ U[0, f_high] from ``rng``."""
-    return initial_axis_state(rng, params.init)
+TYPE1_RANDOM = N_RULES  # uniform numbers drawn per axis: one per f_ij(0)
+
+
+def type1_initial_axis(params, r):
+    """§5.1's initial values, ``f_ij(0) = f_high r_ij``."""
+    return initial_axis_expression(params.init, r)
 
 
 def type1_axis_state_bounds(params):
