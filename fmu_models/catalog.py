@@ -18,6 +18,9 @@ __all__ = ["MODELS", "MODEL_NAMES", "model"]
 _WHERE: dict[str, tuple[str, str]] = {
     "Quadrotor": ("fmu_models.models.quadrotor", "QUADROTOR"),
     "WindGust": ("fmu_models.models.wind_gust", "WIND_GUST"),
+    "ReferenceHover": ("fmu_models.models.reference", "REFERENCE_HOVER"),
+    "ReferenceTwoCircles": ("fmu_models.models.reference", "REFERENCE_TWO_CIRCLES"),
+    "ReferenceFigureEight": ("fmu_models.models.reference", "REFERENCE_FIGURE_EIGHT"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 

@@ -79,9 +79,33 @@ OUTPUTS: tuple[tuple[str, str, str], ...] = (
     ("tau_theta", "N.m", "pitch torque demand (eq. 18)"),
     ("tau_psi", "N.m", "yaw torque demand (eq. 18)"),
 )
-_Y_PARTS = ("Omega", "v_ref", "tau_c", "tau_n", "wrench")  # in the order of OUTPUTS
+Y_PARTS = ("Omega", "v_ref", "tau_c", "tau_n", "wrench")  # in the order of OUTPUTS
 
 _INPUTS = ("p_ref", "p_ref_dot", "x", "psi_ref")
+
+
+def controller_step(variant: str, position: PositionParams, geometric: GeometricParams,
+                    p_ref, p_ref_dot, x, psi_ref, state) -> dict[str, ca.SX]:
+    """The step as CasADi expressions of the given inputs (the body of
+    :func:`controller_step_function`): ``Omega``, ``state_next``, ``v_ref``,
+    ``tau_c``, ``tau_n``, ``wrench``. The parameters may be numbers or
+    symbols (:mod:`fnn_controller.parametric`)."""
+    n_fnn = fnn_state_size(variant)  # refuses an unknown variant, naming the known ones
+    numeric = not isinstance(position.dt, ca.SX)  # a parametric build shares one dt symbol
+    if numeric and abs(position.dt - geometric.dt) > 1e-15:
+        raise ValueError(f"position.dt = {position.dt} s and geometric.dt = {geometric.dt} s must agree: "
+                         "outer and inner loop run in the same step")
+    pos, vel = x[0:3], x[3:6]
+    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position)
+    inner = velocity_controller(outer["v_ref"], vel, x[6:9], x[9:12], psi_ref, state[n_fnn:], geometric)
+    return {"Omega": inner["Omega"], "state_next": ca.vertcat(outer["fnn_state_next"], inner["vel_state_next"]),
+            "v_ref": outer["v_ref"], "tau_c": outer["tau_c"], "tau_n": outer["tau_n"], "wrench": inner["wrench"]}
+
+
+def step_symbols(variant: str) -> list[ca.SX]:
+    """The input symbols ``p_ref, p_ref_dot, x, psi_ref, state`` of ``variant``'s step."""
+    return [ca.SX.sym("p_ref", 3), ca.SX.sym("p_ref_dot", 3), ca.SX.sym("x", 12), ca.SX.sym("psi_ref"),
+            ca.SX.sym("state", fnn_state_size(variant) + VEL_STATE_SIZE)]
 
 
 def controller_step_function(variant: str = "pd+lm", position: PositionParams = PositionParams(),
@@ -92,29 +116,13 @@ def controller_step_function(variant: str = "pd+lm", position: PositionParams = 
     ``e = p_ref - p`` (eq. 12) and ``e_dot = p_ref_dot - v`` are formed
     inside from the plant state.
     """
-    n_fnn = fnn_state_size(variant)  # refuses an unknown variant, naming the known ones
-    if abs(position.dt - geometric.dt) > 1e-15:
-        raise ValueError(f"position.dt = {position.dt} s and geometric.dt = {geometric.dt} s must agree: "
-                         "outer and inner loop run in the same step")
-    p_ref = ca.SX.sym("p_ref", 3)
-    p_ref_dot = ca.SX.sym("p_ref_dot", 3)
-    x = ca.SX.sym("x", 12)
-    psi_ref = ca.SX.sym("psi_ref")
-    state = ca.SX.sym("state", n_fnn + VEL_STATE_SIZE)
-
-    pos, vel = x[0:3], x[3:6]
-    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position)
-    inner = velocity_controller(outer["v_ref"], vel, x[6:9], x[9:12], psi_ref, state[n_fnn:], geometric)
-    state_next = ca.vertcat(outer["fnn_state_next"], inner["vel_state_next"])
-    outputs = [inner["Omega"], state_next, outer["v_ref"], outer["tau_c"], outer["tau_n"], inner["wrench"]]
-    check = sum(ca.sum1(v) for v in [p_ref, p_ref_dot, x, psi_ref, state] + outputs)
-    return ca.Function(
-        f"controller_step_{variant.replace('+', '_')}",
-        [p_ref, p_ref_dot, x, psi_ref, state],
-        outputs + [check],
-        list(_INPUTS) + ["state"],
-        ["Omega", "state_next", "v_ref", "tau_c", "tau_n", "wrench", "check"],
-    )
+    args = step_symbols(variant)
+    res = controller_step(variant, position, geometric, *args)
+    names = ["Omega", "state_next", "v_ref", "tau_c", "tau_n", "wrench"]
+    outputs = [res[k] for k in names]
+    check = sum(ca.sum1(v) for v in args + outputs)
+    return ca.Function(f"controller_step_{variant.replace('+', '_')}", args, outputs + [check],
+                       list(_INPUTS) + ["state"], names + ["check"])
 
 
 def flat_step_function(variant: str = "pd+lm", position: PositionParams = PositionParams(),
@@ -125,7 +133,7 @@ def flat_step_function(variant: str = "pd+lm", position: PositionParams = Positi
     f = controller_step_function(variant, position, geometric)
     args = f.sx_in()
     res = dict(zip(f.name_out(), f.call(args)))
-    return ca.Function(f"{f.name()}_flat", args, [ca.vertcat(*(res[k] for k in _Y_PARTS)), res["state_next"],
+    return ca.Function(f"{f.name()}_flat", args, [ca.vertcat(*(res[k] for k in Y_PARTS)), res["state_next"],
                                                    res["check"]],
                        f.name_in(), ["y", "state_next", "check"])
 

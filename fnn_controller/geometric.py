@@ -178,9 +178,9 @@ def thrust_and_torque(force, R, e_R, e_omega, omega_b, params: GeometricParams =
     Returns ``(T, tau)``: thrust (N), body torques (N m, 3-vector).
     """
     veh = params.vehicle
-    inertia = ca.DM([veh.Ix, veh.Iy, veh.Iz])
+    inertia = ca.vertcat(veh.Ix, veh.Iy, veh.Iz)
     thrust = ca.dot(force, R[:, 2])
-    tau = (-inertia * ca.DM(params.k_R) * e_R - inertia * ca.DM(params.k_omega) * e_omega
+    tau = (-inertia * ca.vertcat(*params.k_R) * e_R - inertia * ca.vertcat(*params.k_omega) * e_omega
            + ca.cross(omega_b, inertia * omega_b))
     return thrust, tau
 

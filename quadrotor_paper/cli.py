@@ -87,7 +87,7 @@ def _cmd_run(args) -> int:
              f"- seed: {summary['seed']}, controller: {summary['variant']}",
              f"- simulated {simulated:.2f} s in {summary['wall_time_s']:.3f} s "
              f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
-    if summary.get("rmse_m") is not None:
+    if summary.get("max_error_m") is not None:
         lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]
     (out / "summary.md").write_text("\n".join(lines))

@@ -29,6 +29,7 @@ The run's seed draws f_ij(0) (§5.1) at every start.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, fields
 from typing import Any, Mapping
@@ -168,12 +169,18 @@ class ControllerComponent(PythonComponent):
         return variant
 
     def function(self, variant: str):
-        """The :class:`~fnn_controller.FastFunction` of ``variant``'s flat step (built once)."""
+        """The :class:`~fnn_controller.FastFunction` of ``variant``'s parametric
+        step (built once; the same function the controller FMU is generated
+        from), its parameter input filled from this component's parameters."""
         if variant not in self._functions:
-            from fnn_controller.controller import FastFunction, flat_step_function
+            from fnn_controller.controller import FastFunction
+            from fnn_controller.parametric import parameter_vector, parametric_step_function
 
-            self._functions[variant] = FastFunction(flat_step_function(variant, self.position, self.geometric),
-                                                    state=("state", "state_next"))
+            structure = dataclasses.replace(self._fc.GeometricParams(), desired_rate=self.geometric.desired_rate)
+            fast = FastFunction(parametric_step_function(variant, self._fc.PositionParams(), structure),
+                                state=("state", "state_next"))
+            fast.inputs["p"][:] = parameter_vector(variant, self.position, self.geometric)
+            self._functions[variant] = fast
         return self._functions[variant]
 
     def set_parameters(self, values: Mapping[str, Any]) -> None:

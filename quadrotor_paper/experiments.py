@@ -79,7 +79,7 @@ def summarize(scenario: Scenario, result, variant: str | None = None) -> dict[st
     if result.phase_times:
         summary["cost_per_step_us"] = {k: v / max(result.n_steps, 1) * 1e6 for k, v in result.phase_times.items()}
     position, reference = metric_signals(scenario)
-    if position:
+    if position and len(result.time):
         e = euclidean_error(result, position, reference)
         summary["rmse_m"] = rmse(result, position, reference)
         summary["max_error_m"] = float(e.max()) if len(e) else None

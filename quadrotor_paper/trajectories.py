@@ -8,39 +8,64 @@ of shape (n, 3), world frame NED (z down: altitude is -z). It is pure and
 vectorized, so the master evaluates it once for the whole time grid of a run.
 The controller needs v* for de/dt = v* - v (eq. 12 differentiated).
 
+The three trajectories here are written once, in CasADi, in
+:mod:`fmu_models.models.reference`, which also exports each as a stateless
+FMU (``ReferenceHover``, ``ReferenceTwoCircles``, ``ReferenceFigureEight``):
+``reference(t)`` evaluates that definition (the FMU model's own ``out``
+function) on the whole time grid at once, and the parameters' admissible
+ranges are the FMU's declared ones, checked when a dataclass is made.
+
 The paper's §5.2 and §6.1 describe their missions in one paragraph each; the
 choices made here to pin them down are listed in ``docs/cosim.md``.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
-from typing import Any, Mapping
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
 from cosim.component import Port, PythonComponent
+from fmu_models.models import reference as _reference
 
 __all__ = ["Hover", "TwoCircles", "FigureEight", "TRAJECTORIES", "make_trajectory", "ReferenceComponent",
            "REFERENCE_OUTPUTS"]
 
 
+class _CasadiReference:
+    """What the three dataclasses share: their fields are the parameters of
+    the FMU model ``_model`` (``_renamed`` maps a field to its FMU parameter
+    where the names differ), checked against its declared ranges when an
+    instance is made, and ``reference(t)`` evaluates that model's CasADi
+    definition."""
+
+    _model: ClassVar[Any]
+    _renamed: ClassVar[Mapping[str, str]] = {}
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            variable = self._model.variable(self._renamed.get(f.name, f.name))
+            _reference.check_parameter(variable, getattr(self, f.name), name=f.name)
+
+    def reference(self, t):
+        values = {self._renamed.get(f.name, f.name): getattr(self, f.name) for f in fields(self)}
+        return _reference.evaluate(self._model, t, values)
+
+
 @dataclass(frozen=True)
-class Hover:
+class Hover(_CasadiReference):
     """Hold a fixed position: p* = (x, y, z), v* = 0."""
 
     x: float = 0.0  # m
     y: float = 0.0  # m
     z: float = -15.0  # m (NED: 15 m altitude)
 
-    def reference(self, t):
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        p = np.tile([self.x, self.y, self.z], (t.size, 1))
-        return p, np.zeros_like(p)
+    _model: ClassVar[Any] = _reference.REFERENCE_HOVER
+    _renamed: ClassVar[Mapping[str, str]] = {"x": "x0", "y": "y0", "z": "z0"}  # x, y, z are its outputs
 
 
 @dataclass(frozen=True)
-class TwoCircles:
+class TwoCircles(_CasadiReference):
     """The simulation mission of §5.2: two circles, clockwise then
     counter-clockwise, climbing then descending, at a constant speed.
 
@@ -62,50 +87,25 @@ class TwoCircles:
     y0: float = 0.0  # m
     z0: float = -15.0  # m (NED: hover at 15 m)
 
-    def __post_init__(self):
-        for name in ("radius", "speed"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)!r} must be positive")
+    _model: ClassVar[Any] = _reference.REFERENCE_TWO_CIRCLES
 
     @property
     def slope(self) -> float:
         """Altitude change per metre of horizontal path (1)."""
-        return self.climb / (2 * math.pi * self.radius)
+        return _reference.two_circles_timing(self.radius, self.speed, self.climb)[0]
 
     @property
     def horizontal_speed(self) -> float:
-        return self.speed / math.sqrt(1 + self.slope ** 2)
+        return _reference.two_circles_timing(self.radius, self.speed, self.climb)[1]
 
     @property
     def path_time(self) -> float:
         """Time (s) to fly both circles."""
-        return 4 * math.pi * self.radius / self.horizontal_speed
-
-    def reference(self, t):
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        R, vh, k = self.radius, self.horizontal_speed, self.slope
-        circle = 2 * math.pi * R
-        s = np.clip(vh * t, 0.0, 2 * circle)  # horizontal arc length flown
-        moving = (t >= 0) & (vh * t < 2 * circle)
-        first = s < circle
-        # first circle: centre (x0, y0 + R), angle beta from -pi/2 increasing (clockwise from above, NED)
-        # second circle: centre (x0, y0 - R), angle from +pi/2 decreasing (counter-clockwise)
-        beta = np.where(first, -math.pi / 2 + s / R, math.pi / 2 - (s - circle) / R)
-        centre_y = np.where(first, self.y0 + R, self.y0 - R)
-        turn = np.where(first, 1.0, -1.0)  # d beta / d s * R
-        x = self.x0 + R * np.cos(beta)
-        y = centre_y + R * np.sin(beta)
-        altitude_gain = np.where(first, k * s, k * (2 * circle - s))
-        z = self.z0 - altitude_gain
-        sdot = np.where(moving, vh, 0.0)
-        vx = -np.sin(beta) * turn * sdot
-        vy = np.cos(beta) * turn * sdot
-        vz = np.where(first, -k, k) * sdot
-        return np.column_stack([x, y, z]), np.column_stack([vx, vy, vz])
+        return _reference.two_circles_timing(self.radius, self.speed, self.climb)[2]
 
 
 @dataclass(frozen=True)
-class FigureEight:
+class FigureEight(_CasadiReference):
     """The '8'-shaped time-based trajectory of the experiment, §6.1.
 
     A lemniscate of Gerono at constant altitude,
@@ -123,26 +123,15 @@ class FigureEight:
     y0: float = 0.0  # m
     z0: float = -1.5  # m (NED: 1.5 m altitude)
 
-    def __post_init__(self):
-        for name in ("max_speed", "half_length", "half_width"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)!r} must be positive")
+    _model: ClassVar[Any] = _reference.REFERENCE_FIGURE_EIGHT
 
     @property
     def omega(self) -> float:
-        return self.max_speed / math.hypot(self.half_length, 2 * self.half_width)
+        return _reference.figure_eight_timing(self.max_speed, self.half_length, self.half_width)[0]
 
     @property
     def lap_time(self) -> float:
-        return 2 * math.pi / self.omega
-
-    def reference(self, t):
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        w, a, c = self.omega, self.half_length, self.half_width
-        p = np.column_stack([self.x0 + a * np.sin(w * t), self.y0 + c * np.sin(2 * w * t),
-                             np.full_like(t, self.z0)])
-        v = np.column_stack([a * w * np.cos(w * t), 2 * c * w * np.cos(2 * w * t), np.zeros_like(t)])
-        return p, v
+        return _reference.figure_eight_timing(self.max_speed, self.half_length, self.half_width)[1]
 
 
 TRAJECTORIES: dict[str, type] = {"hover": Hover, "two_circles": TwoCircles, "figure_eight": FigureEight}

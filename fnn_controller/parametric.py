@@ -1,0 +1,163 @@
+"""The controller step with its parameters as an input, not as constants.
+
+:func:`controller_step_function` bakes the gains into the expressions. Here
+the same laws are built once more on *symbolic* parameters: every gain,
+learning rate, bound and nominal-vehicle value the variant reads becomes an
+element of one input vector ``p``, described by a table (name, unit,
+description, range, default) read off the parameter dataclasses' fields.
+One function then serves the co-simulation's fast path (``p`` filled from
+the scenario) and the controller FMU (``p`` its FMI parameters), so both
+evaluate the very same expression graph.
+
+Parameter names: PositionParams fields by name (``kp``, ``gamma_lm_x``: per
+axis tuples end in ``_x``, ``_y``, ``_z``), nested tables with a dot
+(``init.c1_1``, ``bounds.f_max``, ``vehicle.m``: other tuples end in ``_1``,
+``_2``, ``_3``), GeometricParams fields by name (``k_v``, ``k_R_x``);
+``dt`` is one parameter, the step of both loops.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .controller import _INPUTS, Y_PARTS, controller_step, step_symbols
+from .geometric import GeometricParams, initial_velocity_state
+from .parameters import parameter_info
+from .position import PositionParams, fnn_state_size
+from .variants import variant as lookup
+
+__all__ = ["Parameter", "parameter_table", "parametric_step_function", "parameter_vector",
+           "initial_state_function", "PER_AXIS"]
+
+# Tuple fields that hold one value per axis x, y, z (the others are numbered 1, 2, 3).
+PER_AXIS = {"gamma_smc", "nu", "gamma_lm", "alpha_bar", "k_R", "k_omega"}
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One scalar parameter of the parametric step: its name, where it sits in
+    the parameter dataclasses (``path``, with a tuple index last where there is
+    one), default value, unit, description and inclusive range."""
+
+    name: str
+    path: tuple[Any, ...]
+    default: float
+    unit: str
+    description: str
+    min: float
+    max: float
+
+
+def _scalars(obj, prefix: str, path: tuple, fields: set[str] | None):
+    """(name, path, value, info) of every documented scalar of ``obj``, recursing
+    into nested parameter dataclasses; ``fields`` limits the top level."""
+    infos = {i.name: i for i in parameter_info(type(obj))}
+    for f in dataclasses.fields(obj):
+        if fields is not None and f.name not in fields:
+            continue
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            yield from _scalars(value, f"{prefix}{f.name}.", path + (f.name,), None)
+        elif f.name in infos:
+            info = infos[f.name]
+            if isinstance(value, tuple):
+                suffixes = "xyz" if f.name in PER_AXIS else "123"
+                for i, v in enumerate(value):
+                    yield f"{prefix}{f.name}_{suffixes[i]}", path + (f.name, i), float(v), info
+            else:
+                yield f"{prefix}{f.name}", path + (f.name,), float(value), info
+
+
+def parameter_table(variant: str, position: PositionParams = PositionParams(),
+                    geometric: GeometricParams = GeometricParams()) -> tuple[Parameter, ...]:
+    """The parameters of ``variant``'s parametric step, defaults from
+    ``position`` and ``geometric``: the PD's ``kp``, ``kd``, ``dt``, the
+    fields the variant reads (:attr:`Variant.parameters`), and every field of
+    the geometric controller and its nominal vehicle."""
+    own = {"kp", "kd", "dt", *lookup(variant).parameters}
+    table = [Parameter(name, ("position",) + path, value, info.unit, info.description, info.min, info.max)
+             for name, path, value, info in _scalars(position, "", (), own)]
+    table += [Parameter(name, ("geometric",) + path, value, info.unit, info.description, info.min, info.max)
+              for name, path, value, info in _scalars(geometric, "", (), None) if name != "dt"]
+    names = [p.name for p in table]
+    assert len(set(names)) == len(names), names
+    return tuple(table)
+
+
+def _replace(obj, path: tuple, value):
+    """``obj`` with the leaf at ``path`` replaced, skipping the dataclasses'
+    checks (a symbol is no number to check)."""
+    head, rest = path[0], path[1:]
+    current = getattr(obj, head)
+    if rest and dataclasses.is_dataclass(current):
+        new = _replace(current, rest, value)
+    elif rest:  # a tuple element
+        items = list(current)
+        items[rest[0]] = value
+        new = tuple(items)
+    else:
+        new = value
+    copy = object.__new__(type(obj))
+    for f in dataclasses.fields(obj):
+        object.__setattr__(copy, f.name, new if f.name == head else getattr(obj, f.name))
+    return copy
+
+
+def _symbolic(table: tuple[Parameter, ...], position: PositionParams, geometric: GeometricParams, p: ca.SX):
+    """``position`` and ``geometric`` with every parameter of ``table`` replaced
+    by its element of ``p`` (and the geometric ``dt`` by the one ``dt``)."""
+    params = {"position": position, "geometric": geometric}
+    for i, entry in enumerate(table):
+        params[entry.path[0]] = _replace(params[entry.path[0]], entry.path[1:], p[i])
+        if entry.name == "dt":
+            params["geometric"] = _replace(params["geometric"], ("dt",), p[i])
+    return params["position"], params["geometric"]
+
+
+@lru_cache(maxsize=None)
+def parametric_step_function(variant: str, position: PositionParams = PositionParams(),
+                             geometric: GeometricParams = GeometricParams()) -> ca.Function:
+    """``controller_step_<variant>_parametric(p_ref[3], p_ref_dot[3], x[12],
+    psi_ref, state[n], p[m]) -> (y[17], state_next[n], check)``: the flat step
+    of :func:`~fnn_controller.controller.flat_step_function` with the
+    parameters of :func:`parameter_table` as the input ``p``. ``position``
+    and ``geometric`` give the structural choices (``desired_rate``) and the
+    constants of the fields that are no parameter of ``variant``."""
+    table = parameter_table(variant, position, geometric)
+    p = ca.SX.sym("p", len(table))
+    sym_position, sym_geometric = _symbolic(table, position, geometric, p)
+    args = step_symbols(variant)
+    res = controller_step(variant, sym_position, sym_geometric, *args)
+    y = ca.vertcat(*(res[k] for k in Y_PARTS))
+    # finite exactly when every input, parameter and output is
+    check = sum(ca.sum1(v) for v in args + [p, y, res["state_next"]])
+    return ca.Function(f"controller_step_{variant.replace('+', '_')}_parametric", args + [p],
+                       [y, res["state_next"], check], list(_INPUTS) + ["state", "p"], ["y", "state_next", "check"])
+
+
+def parameter_vector(variant: str, position: PositionParams = PositionParams(),
+                     geometric: GeometricParams = GeometricParams()) -> np.ndarray:
+    """The values of :func:`parameter_table` for these parameters, in table order."""
+    return np.array([p.default for p in parameter_table(variant, position, geometric)])
+
+
+@lru_cache(maxsize=None)
+def initial_state_function(variant: str, position: PositionParams = PositionParams(),
+                           geometric: GeometricParams = GeometricParams()) -> ca.Function:
+    """``initial_state_<variant>(p[m], r[3 n_random]) -> state0[n]``: the
+    controller state after reset from the parameters and the uniform numbers
+    of the three axes (x, y, z, in that order), then the velocity controller's."""
+    v = lookup(variant)
+    table = parameter_table(variant, position, geometric)
+    p = ca.SX.sym("p", len(table))
+    r = ca.SX.sym("r", 3 * v.n_random)
+    sym_position, _ = _symbolic(table, position, geometric, p)
+    axes = [v.initial_axis(sym_position, r[a * v.n_random:(a + 1) * v.n_random]) for a in range(3)]
+    state0 = ca.vertcat(*axes, ca.DM(initial_velocity_state()))
+    assert state0.shape[0] == fnn_state_size(variant) + len(initial_velocity_state())
+    return ca.Function(f"initial_state_{variant.replace('+', '_')}", [p, r], [state0], ["p", "r"], ["state0"])

@@ -1,0 +1,547 @@
+"""SSP archives of toy FMUs: export -> load round trip, the SSP 1.0 schema,
+the master on a loaded archive, every refusal; and (with libcosimpy) how
+libcosim's fixed-step algorithm orders a step, shown with a probe FMU whose
+answers are derived by hand. ``docs/ssp.md`` quotes what these tests find."""
+from __future__ import annotations
+
+import gc
+import re
+import subprocess
+import sys
+import tomllib
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lxml import etree
+
+import cosim
+import toy_models
+from cosim.connection import parse_connections
+from cosim.errors import ConnectionCheckError, ScenarioError
+from cosim.scenario import build_master, parse_scenario
+from cosim.ssp import (COSIM_ANNOTATION, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, export_ssp, load_ssp,
+                       ssd_schema_errors)
+from fmu_models.export.build import cached_fmu
+from fmu_models.export.model import FmuModel
+from fmu_models.export.variables import input_, output, parameter, state
+
+SCENARIO = """
+name = "toy_chain"
+description = "three first-order lags in a chain"
+connections = ["{A,B}.y -> {B,C}.u"]
+
+[simulation]
+duration = 2.0
+step = 0.1
+seed = 7
+start_time = 0.5
+
+[fmus.A]
+model = "toy_FirstOrderLag"
+parameters = { y_0 = 1.5, u = 2.0 }
+
+[fmus.B]
+model = "toy_FirstOrderLag"
+parameters = { tau = 0.25 }
+
+[fmus.C]
+model = "toy_FirstOrderLag"
+parameters = { k = 0.5, y_0 = -1.0 }
+
+[record]
+signals = ["A.y", "B.y", "C.y", "B.rate", "C.rate", "C.u"]
+block_rows = 4
+
+[envelope]
+"C.y" = [-10.0, 10.0]
+"""
+
+
+@pytest.fixture(scope="module", autouse=True)
+def toys():
+    toy_models.register_toys()
+
+
+@pytest.fixture
+def scenario():
+    return parse_scenario(tomllib.loads(SCENARIO))
+
+
+@pytest.fixture
+def archive(scenario, tmp_path):
+    return export_ssp(scenario, tmp_path / "toy_chain.ssp")
+
+
+def ssd_of(path: Path) -> etree._Element:
+    with zipfile.ZipFile(path) as z:
+        return etree.fromstring(z.read(SSD_NAME))
+
+
+def expanded(connections):
+    return [(str(c.source), str(c.destination)) for c in parse_connections(connections)]
+
+
+# ---- round trip -------------------------------------------------------------------------------
+
+def test_round_trip_gives_the_same_scenario(scenario, archive):
+    loaded = load_ssp(archive)
+    assert list(loaded.fmus) == ["A", "B", "C"]
+    for name in scenario.fmus:
+        assert loaded.fmus[name]["parameters"] == scenario.fmus[name]["parameters"]
+        assert loaded.fmus[name]["path"].read_bytes() == toy_models.lag_fmu_path(2).read_bytes()
+    assert expanded(loaded.connections) == expanded(scenario.connections) == [("A.y", "B.u"), ("B.y", "C.u")]
+    assert loaded.components == {}
+    for key in ("name", "description", "duration", "step", "seed", "start_time", "record", "block_rows",
+                "envelope"):
+        assert getattr(loaded, key) == getattr(scenario, key), key
+    assert loaded.source.name == SSD_NAME and loaded.source.parent.is_dir()
+
+
+def test_archive_holds_the_ssd_and_one_fmu_per_instance(archive):
+    with zipfile.ZipFile(archive) as z:
+        files = {n for n in z.namelist() if not n.endswith("/")}
+        assert files == {SSD_NAME, "resources/A.fmu", "resources/B.fmu", "resources/C.fmu"}
+        assert z.read("resources/B.fmu") == toy_models.lag_fmu_path(2).read_bytes()
+    root = ssd_of(archive)
+    assert root.get("version") == "1.0" and root.get("name") == "toy_chain"
+    components = root.findall("ssd:System/ssd:Elements/ssd:Component", NS)
+    assert [(c.get("name"), c.get("type"), c.get("source")) for c in components] == [
+        (n, "application/x-fmu-sharedlibrary", f"resources/{n}.fmu") for n in "ABC"]
+    # inputs, outputs, and the parameters the scenario sets, with the modelDescription's types and units
+    a = {c.get("name"): (c.get("kind"), c[0].tag.split("}")[1], c[0].get("unit"))
+         for c in components[0].findall("ssd:Connectors/ssd:Connector", NS)}
+    assert a == {"y": ("output", "Real", "m"), "rate": ("output", "Real", "m/s"), "u": ("input", "Real", "m"),
+                 "y_0": ("parameter", "Real", "m")}
+    values = {p.get("name"): p[0].get("value") for p in components[0].iterfind(".//ssv:Parameter", NS)}
+    assert values == {"y_0": "1.5", "u": "2.0"}
+    units = {u.get("name"): dict(u.find("ssc:BaseUnit", NS).attrib) for u in root.findall("ssd:Units/ssc:Unit", NS)}
+    assert units == {"m": {"m": "1"}, "m/s": {"m": "1", "s": "-1"}, "s": {"s": "1"}, "1": {}}
+    connections = [(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))
+                   for c in root.findall("ssd:System/ssd:Connections/ssd:Connection", NS)]
+    assert connections == [("A", "y", "B", "u"), ("B", "y", "C", "u")]
+    experiment = root.find("ssd:DefaultExperiment", NS)
+    assert (experiment.get("startTime"), experiment.get("stopTime")) == ("0.5", "2.5")
+    osp = experiment.find("ssd:Annotations/ssc:Annotation", NS)
+    assert osp.get("type") == OSP_ANNOTATION
+    fixed = osp.find(f"{{{OSP_NAMESPACE}}}Algorithm/{{{OSP_NAMESPACE}}}FixedStepAlgorithm")
+    assert fixed.get("baseStepSize") == "0.1"
+    assert root.find("ssd:System/ssd:Annotations/ssc:Annotation", NS).get("type") == COSIM_ANNOTATION
+
+
+def test_namespaces_are_declared_on_the_root_only(archive):
+    """libcosim's Boost.PropertyTree reader takes an xmlns attribute on
+    osp:Algorithm for an algorithm ("Unknown algorithm: <xmlattr>")."""
+    with zipfile.ZipFile(archive) as z:
+        text = z.read(SSD_NAME).decode()
+    assert text.count("xmlns:") == 5
+    assert re.search(r"<ssd:SystemStructureDescription [^>]*xmlns:osp=", text)
+    assert "<osp:Algorithm>" in text and "<ssv:ParameterSet version" in text
+
+
+def test_fmi3_round_trip(scenario, tmp_path):
+    """An FMI 3.0 FMU goes into an archive as well (libcosim cannot run it; our master can)."""
+    for spec in scenario.fmus.values():
+        spec["fmi_version"] = 3
+    loaded = load_ssp(export_ssp(scenario, tmp_path / "fmi3.ssp"))
+    assert loaded.fmus["A"]["path"].read_bytes() == toy_models.lag_fmu_path(3).read_bytes()
+    with build_master(scenario) as m1, build_master(loaded) as m2:
+        assert np.array_equal(m1.run(scenario.duration, t0=0.5).data, m2.run(loaded.duration, t0=0.5).data)
+
+
+# ---- the SSP 1.0 schema ------------------------------------------------------------------------
+
+def test_the_ssd_is_valid_against_the_ssp_1_0_schema(archive):
+    with zipfile.ZipFile(archive) as z:
+        ssd = z.read(SSD_NAME)
+    assert ssd_schema_errors(ssd) == []
+    # the check is a real one, inline parameter sets included
+    assert "'bogus' is not an element of the set" in ssd_schema_errors(ssd.replace(b'"input"', b'"bogus"', 1))[0]
+    assert "'abc' is not a valid value of the atomic type 'xs:double'" in \
+        ssd_schema_errors(ssd.replace(b'value="1.5"', b'value="abc"'))[0]
+
+
+def test_units_stay_before_the_default_experiment(archive):
+    """pyssp-standard 0.9.1 writes ssd:Units after ssd:DefaultExperiment,
+    which the schema refuses; the export puts them back."""
+    root = ssd_of(archive)
+    tags = [etree.QName(child).localname for child in root]
+    assert tags == ["System", "Units", "DefaultExperiment"]
+    units = root.find("ssd:Units", NS)
+    root.remove(units)
+    root.append(units)
+    assert "Units': This element is not expected" in ssd_schema_errors(etree.tostring(root))[0]
+
+
+# ---- the master on a loaded archive --------------------------------------------------------------
+
+def test_master_runs_the_loaded_archive_as_the_original(scenario, archive):
+    loaded = load_ssp(archive)
+    with build_master(scenario) as m1, build_master(loaded) as m2:
+        r1 = m1.run(scenario.duration, seed=scenario.seed, t0=scenario.start_time)
+        r2 = m2.run(loaded.duration, seed=loaded.seed, t0=loaded.start_time)
+    assert r1.columns == r2.columns
+    assert np.array_equal(r1.data, r2.data)
+    # and the values are the lags': A from y_0 = 1.5 with u = 2 (k = 2, tau = 0.5)
+    y = 1.5
+    for n in range(3):
+        assert r2["A.y"][n] == pytest.approx(y, abs=1e-12)
+        y = toy_models.lag_step(y, 2.0, 0.1)
+
+
+def test_load_from_the_folder_the_ssd_and_extract_to(archive, tmp_path):
+    folder = tmp_path / "unpacked"
+    by_archive = load_ssp(archive, extract_to=folder)
+    assert by_archive.source == folder / SSD_NAME and (folder / "resources" / "A.fmu").is_file()
+    for other in (load_ssp(folder), load_ssp(folder / SSD_NAME)):
+        assert other.fmus == by_archive.fmus and other.connections == by_archive.connections
+
+
+def test_the_temporary_extraction_lives_as_long_as_the_scenario(archive):
+    loaded = load_ssp(archive)
+    folder = loaded.source.parent
+    assert folder.is_dir()
+    del loaded
+    gc.collect()
+    assert not folder.exists()
+
+
+def test_overrides_and_fallbacks(archive, tmp_path):
+    loaded = load_ssp(archive, overrides={"simulation.duration": 0.5, "fmus.B.parameters.tau": 0.75})
+    assert loaded.duration == 0.5 and loaded.fmus["B"]["parameters"]["tau"] == 0.75
+    # without the OSP annotation and the stop time, the arguments give them
+    folder = _edited(archive, tmp_path, lambda root: [
+        _drop(root, "ssd:DefaultExperiment/ssd:Annotations"),
+        root.find("ssd:DefaultExperiment", NS).attrib.pop("stopTime")])
+    with pytest.raises(ScenarioError, match=r"SystemStructure.ssd: no step size: the ssd:DefaultExperiment has no "
+                                            r"OSP annotation \(osp:FixedStepAlgorithm baseStepSize\); give one"):
+        load_ssp(folder)
+    with pytest.raises(ScenarioError, match="no duration: the ssd:DefaultExperiment has no stopTime"):
+        load_ssp(folder, step=0.05)
+    loaded = load_ssp(folder, step=0.05, duration=1.0)
+    assert (loaded.step, loaded.duration, loaded.start_time) == (0.05, 1.0, 0.5)
+    # the archive's values win over the fallbacks
+    assert load_ssp(archive, step=0.05, duration=1.0).step == 0.1
+
+
+def test_an_archive_without_the_engines_annotation_records_every_output(archive, tmp_path):
+    folder = _edited(archive, tmp_path, lambda root: _drop(root, "ssd:System/ssd:Annotations"))
+    loaded = load_ssp(folder)
+    assert loaded.record == [f"{c}.{v}" for c in "ABC" for v in ("y", "rate")]
+    assert (loaded.seed, loaded.envelope, loaded.block_rows) == (0, {}, 100)
+
+
+# ---- refusals: export ---------------------------------------------------------------------------
+
+def test_export_refuses_python_components_naming_them(tmp_path):
+    raw = tomllib.loads(SCENARIO)
+    raw["connections"] = ["source.out -> ctrl.r", "A.y -> ctrl.y", "ctrl.u -> B.u"]
+    raw["toy_source"] = {"kind": "toy_constant", "value": 1.0}
+    raw["toy_controller"] = {"kp": 1.0}
+    raw["record"] = {}
+    raw["envelope"] = {}
+    out = tmp_path / "x.ssp"
+    with pytest.raises(ScenarioError, match=r"^scenario 'toy_chain': an SSP archive holds FMUs only; remove the "
+                                            r"Python component\(s\) ctrl, source "):
+        export_ssp(parse_scenario(raw), out)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("edit, error, message", [
+    (lambda raw, bad: raw["fmus"]["A"].update(path=str(bad), fmi_version=None) or raw["fmus"]["A"].pop("model"),
+     ScenarioError, r"^fmus\.A\.path = '.*not_an_fmu\.fmu': not an FMU: not a zip archive"),
+    (lambda raw, bad: raw["fmus"]["A"].update(path=str(toy_models.lag_fmu_path(3)), fmi_version=2)
+     or raw["fmus"]["A"].pop("model"),
+     ScenarioError, r"^fmus\.A\.fmi_version = 2: the FMU file .*ToyFirstOrderLag\.fmu is FMI 3\.0$"),
+    (lambda raw, bad: raw["fmus"]["A"].update(path=str(toy_models.lag_fmu_path(2)), parameters={"nope": 1.0})
+     or raw["fmus"]["A"].pop("model"),
+     ScenarioError, r"^fmus\.A\.parameters\.nope: the FMU file .* has no parameter 'nope'$"),
+    (lambda raw, bad: raw.update(connections=["A.y -> B.rate"]),
+     ConnectionCheckError, r"^connection A\.y -> B\.rate: destination B\.rate is an output, not an input$"),
+    (lambda raw, bad: raw.update(record={"signals": ["A.nope"]}),
+     ScenarioError, r"^record\.signals: 'A\.nope' is no input or output of an FMU of the scenario \(A, B, C\)$"),
+])
+def test_export_refuses_what_the_master_would(tmp_path, edit, error, message):
+    raw = tomllib.loads(SCENARIO)
+    bad = tmp_path / "not_an_fmu.fmu"
+    bad.write_text("hello")
+    edit(raw, bad)
+    out = tmp_path / "x.ssp"
+    with pytest.raises(error, match=message):
+        export_ssp(parse_scenario(raw), out)
+    assert not out.exists() and not list(tmp_path.glob(".x.ssp*"))
+
+
+# ---- refusals: bad archives ----------------------------------------------------------------------
+
+def _drop(root, path):
+    node = root.find(path, NS)
+    node.getparent().remove(node)
+
+
+def _edited(archive: Path, tmp_path: Path, edit) -> Path:
+    """The archive extracted to a folder, its SSD changed by ``edit(root)``."""
+    folder = tmp_path / f"edited{len(list(tmp_path.glob('edited*')))}"
+    with zipfile.ZipFile(archive) as z:
+        z.extractall(folder)
+    tree = etree.parse(str(folder / SSD_NAME))
+    edit(tree.getroot())
+    tree.write(str(folder / SSD_NAME), xml_declaration=True, encoding="utf-8")
+    return folder
+
+
+def _component(root, name):
+    return root.find(f"ssd:System/ssd:Elements/ssd:Component[@name='{name}']", NS)
+
+
+def _connection(root, i):
+    return root.findall("ssd:System/ssd:Connections/ssd:Connection", NS)[i - 1]
+
+
+def _add(parent, prefix, tag, **attrib):
+    return etree.SubElement(parent, f"{{{NS[prefix]}}}{tag}", **attrib)
+
+
+def _value(root, component, parameter):
+    return _component(root, component).find(f".//ssv:Parameter[@name='{parameter}']", NS)[0]
+
+
+BAD_SSDS = [
+    (lambda r: _connection(r, 2).set("startElement", "Plant"),
+     "ssd:Connection 2: startElement 'Plant' is no component; components are: A, B, C"),
+    (lambda r: _connection(r, 1).set("endConnector", "w"), "ssd:Connection 1: endConnector 'w' is no connector of 'B'"),
+    (lambda r: _connection(r, 1).attrib.pop("startElement"),
+     "ssd:Connection 1: no startElement: connections to the system's own connectors are not supported"),
+    (lambda r: _add(_connection(r, 2), "ssc", "LinearTransformation", factor="2"),
+     "ssd:Connection 2: LinearTransformation: transformations and other connection contents are not supported"),
+    (lambda r: _component(r, "B").set("source", "resources/Missing.fmu"),
+     "ssd:Component 'B': source 'resources/Missing.fmu': no such file in the archive"),
+    (lambda r: _component(r, "B").set("source", "https://example.org/B.fmu"),
+     "ssd:Component 'B': source 'https://example.org/B.fmu': only files inside the archive"),
+    (lambda r: _component(r, "B").set("type", "application/x-ssp-definition"),
+     "ssd:Component 'B': type 'application/x-ssp-definition' is not supported (application/x-fmu-sharedlibrary "
+     "only)"),
+    (lambda r: _component(r, "B").set("name", "A"), "ssd:Component 'A': a component of that name is already given"),
+    (lambda r: _add(r.find("ssd:System/ssd:Elements", NS), "ssd", "System", name="Sub"),
+     "ssd:Elements child 4: ssd:System 'Sub': only ssd:Component elements (FMUs) are supported"),
+    (lambda r: [_component(r, n).getparent().remove(_component(r, n)) for n in "ABC"] and
+     _drop(r, "ssd:System/ssd:Connections"),
+     "ssd:System 'toy_chain': no ssd:Component (an FMU) in its ssd:Elements"),
+    (lambda r: _value(r, "A", "y_0").set("value", "abc"),
+     "ssd:Component 'A': ssd:ParameterBinding 1: ssv:Parameter 'y_0': value = 'abc' is not a number"),
+    (lambda r: _value(r, "A", "y_0").set("value", "inf"),
+     "ssv:Parameter 'y_0': value = 'inf' is not a finite number"),
+    (lambda r: setattr(_value(r, "A", "u"), "tag", f"{{{NS['ssv']}}}String"),
+     "ssd:ParameterBinding 1: ssv:Parameter 'u': String: only Real, Integer and Boolean values are supported"),
+    (lambda r: _component(r, "C").find(".//ssd:ParameterBinding", NS).set("source", "resources/C.ssv"),
+     "ssd:Component 'C': ssd:ParameterBinding 1: source 'resources/C.ssv': no such file in the archive"),
+    (lambda r: _add(_component(r, "C").find(".//ssd:ParameterBinding", NS), "ssd", "ParameterMapping"),
+     "ssd:Component 'C': ssd:ParameterBinding 1: ssd:ParameterMapping is not supported"),
+    (lambda r: r.find("ssd:DefaultExperiment", NS).set("stopTime", "soon"),
+     "ssd:DefaultExperiment: stopTime = 'soon' is not a number"),
+    (lambda r: r.find(f".//{{{OSP_NAMESPACE}}}FixedStepAlgorithm").set("baseStepSize", "0"),
+     "ssd:DefaultExperiment: osp:FixedStepAlgorithm: baseStepSize = '0' is not positive"),
+    (lambda r: r.find("ssd:DefaultExperiment", NS).set("stopTime", "2.55"),
+     "simulation.duration = 2.05: not a whole number of steps of 0.1 s"),
+    (lambda r: _drop(r, "ssd:System"), "no ssd:System"),
+]
+
+
+@pytest.mark.parametrize("edit, message", BAD_SSDS, ids=[m.split(":")[0][:40] for _, m in BAD_SSDS])
+def test_a_bad_ssd_is_refused_naming_the_element(archive, tmp_path, edit, message):
+    folder = _edited(archive, tmp_path, edit)
+    with pytest.raises(ScenarioError) as info:
+        load_ssp(folder)
+    text = str(info.value)
+    assert text.startswith(f"{folder}: {SSD_NAME}: ")
+    assert message in text
+    assert "\n" not in text
+
+
+def test_bad_files_are_refused(archive, tmp_path):
+    not_zip = tmp_path / "x.ssp"
+    not_zip.write_text("hello")
+    with pytest.raises(ScenarioError, match=r"x\.ssp: not an SSP archive: not a zip archive \(File is not a zip"):
+        load_ssp(not_zip)
+    no_ssd = tmp_path / "y.ssp"
+    with zipfile.ZipFile(no_ssd, "w") as z:
+        z.writestr("resources/A.fmu", b"")
+    with pytest.raises(ScenarioError, match=r"y\.ssp: not an SSP archive: it holds no SystemStructure\.ssd$"):
+        load_ssp(no_ssd)
+    with pytest.raises(ScenarioError, match=r"holds no SystemStructure\.ssd$"):
+        load_ssp(tmp_path)
+    with pytest.raises(ScenarioError, match=r"nothing\.ssp: no such file$"):
+        load_ssp(tmp_path / "nothing.ssp")
+    folder = _edited(archive, tmp_path, lambda root: None)
+    (folder / SSD_NAME).write_text("<ssd:SystemStructureDescription")
+    with pytest.raises(ScenarioError, match=r"SystemStructure\.ssd: not well-formed XML: .*line 1"):
+        load_ssp(folder)
+    (folder / SSD_NAME).write_text("<SystemStructureDescription/>")
+    with pytest.raises(ScenarioError, match="the root element is SystemStructureDescription, not "
+                                            "ssd:SystemStructureDescription"):
+        load_ssp(folder)
+
+
+def test_an_external_parameter_set_is_read(archive, tmp_path):
+    """``ssd:ParameterBinding source="...ssv"`` (relative to the SSD) works like the inline one."""
+    folder = _edited(archive, tmp_path, lambda root: None)
+    tree = etree.parse(str(folder / SSD_NAME))
+    binding = _component(tree.getroot(), "C").find(".//ssd:ParameterBinding", NS)
+    values = binding.find("ssd:ParameterValues", NS)
+    etree.ElementTree(values[0]).write(str(folder / "resources" / "C.ssv"))
+    binding.remove(values)
+    binding.set("source", "resources/C.ssv")
+    tree.write(str(folder / SSD_NAME))
+    assert load_ssp(folder).fmus["C"]["parameters"] == {"k": 0.5, "y_0": -1.0}
+
+
+# ---- the engine stays generic ---------------------------------------------------------------------
+
+def test_cosim_ssp_imports_nothing_of_the_application_nor_pyssp():
+    """pyssp-standard (and its pint, xmlschema) is imported by the export only."""
+    code = ("import cosim.ssp, sys; print(sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'quadrotor_paper', 'fnn_controller', 'fmu_models', 'pyssp_standard', 'libcosimpy', 'pint'}))")
+    root = Path(cosim.__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
+
+
+# ---- libcosim: how its fixed-step algorithm orders a step ------------------------------------------
+
+PROBE = FmuModel(
+    identifier="ToySspProbe",
+    description="Probe for co-simulation ordering: clock c (dc/dt = 1), integral s of the input (ds/dt = u), "
+                "echo = u (direct feedthrough)",
+    variables=(
+        state("c", "1", "clock: c(t) = c_0 + t - t0"),
+        state("s", "1", "integral of the input"),
+        input_("u", "1", "input", start=-7.0),
+        output("echo", "1", "the input as it is when read (direct feedthrough)"),
+        parameter("c_0", "1", "clock at t0", 0.0),
+        parameter("s_0", "1", "integral at t0", 0.0),
+    ),
+    equations=lambda t, v: ({"c": 1.0 + 0.0 * v["c"], "s": v["u"]}, {"echo": v["u"]}),
+    initial_state=lambda v: {"c": v["c_0"], "s": v["s_0"]},
+)
+H = 0.1
+
+
+@pytest.fixture(scope="module")
+def probe_fmu():
+    return cached_fmu(PROBE, 2)
+
+
+def probe_archive(probe_fmu, tmp_path, fmus, connections, signals, duration=1.0):
+    raw = {"name": "probes", "connections": connections, "simulation": {"duration": duration, "step": H},
+           "fmus": {name: {"path": str(probe_fmu), "parameters": p} for name, p in fmus.items()},
+           "record": {"signals": signals}}
+    return export_ssp(parse_scenario(raw), tmp_path / "probes.ssp")
+
+
+def both(path, signals):
+    """The archive run by libcosim and by our master."""
+    from cosim.ssp import run_libcosim
+
+    loaded = load_ssp(path)
+    with build_master(loaded) as master:
+        ours = master.run(loaded.duration)
+    return run_libcosim(path, signals), ours
+
+
+CHAIN = ["A.c -> B.u", "B.echo -> C.u"]
+CHAIN_SIGNALS = ["A.c", "A.echo", "B.u", "B.s", "B.echo", "C.u", "C.s", "C.echo"]
+
+
+@pytest.fixture
+def chain(probe_fmu, tmp_path):
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
+    path = probe_archive(probe_fmu, tmp_path, {"A": {"c_0": 100.0}, "B": {}, "C": {}}, CHAIN, CHAIN_SIGNALS)
+    return both(path, CHAIN_SIGNALS)
+
+
+def test_libcosim_transfers_connected_values_at_initialization(chain):
+    """Before the first step libcosim runs (number of simulators) rounds of
+    set inputs / get outputs in initialization mode, transferring between
+    them: B.u gets A.c(t0) = 100, and B's direct-feedthrough echo reaches C
+    (two hops) before the first doStep."""
+    lc, _ = chain
+    assert lc["B.u"][0] == lc["B.echo"][0] == 100.0
+    assert lc["C.u"][0] == lc["C.echo"][0] == 100.0
+    assert lc["C.s"][1] == pytest.approx(H * 100.0, abs=1e-12)  # C integrated 100 over the first step
+    # an input nothing feeds keeps its start value (no binding in the archive: the FMU's own, -7)
+    assert np.all(lc["A.echo"] == -7.0)
+
+
+def test_libcosim_is_jacobi_and_reads_outputs_right_after_do_step(chain):
+    """Each step: every FMU gets the values transferred after the previous
+    step (the outputs at t_n), steps to t_{n+1}, and its outputs are read at
+    once, before anything new is set: a direct-feedthrough output read at
+    t_{n+1} still shows the input of the step just taken."""
+    lc, _ = chain
+    a_c = lc["A.c"]
+    assert np.allclose(np.diff(lc["B.s"]), H * a_c[:-1], atol=1e-12)  # u over [t_n, t_n+1] = A.c(t_n)
+    assert np.array_equal(lc["B.echo"][1:], a_c[:-1])  # echo at t_n+1 = A.c(t_n)
+    # one more step of delay per direct-feedthrough hop: C integrates B.echo(t_n) = A.c(t_n-1)
+    assert np.allclose(np.diff(lc["C.s"])[1:], H * a_c[:-2], atol=1e-12)
+
+
+def test_our_master_differs_from_libcosim_at_initialization_only(chain):
+    """Our master orders each step as libcosim does (Jacobi among FMUs,
+    outputs read right after doStep) but transfers nothing before the first
+    step: outputs at t0 are read after each FMU's initialization with its
+    inputs at their start values (-7), and that is what a second hop gets
+    over the first step. docs/ssp.md relies on this; update both if the
+    master's initialization changes."""
+    lc, ours = chain
+    assert ours["B.echo"][0] == -7.0 and lc["B.echo"][0] == 100.0  # ours: B's input start value at t0
+    assert ours["C.s"][1] == pytest.approx(H * -7.0) and lc["C.s"][1] == pytest.approx(H * 100.0)
+    for name in ("A.c", "B.s"):  # A's clock and B's integral agree all along
+        assert np.allclose(ours[name], lc[name], rtol=0, atol=1e-12), name
+    assert np.array_equal(ours["B.echo"][1:], lc["B.echo"][1:])
+    # C, one hop further, differs by what it integrated over the first step only
+    assert np.allclose(ours["C.s"] - lc["C.s"], np.r_[0.0, np.full(len(lc["C.s"]) - 1, H * (-7.0 - 100.0))],
+                       atol=1e-12)
+
+
+def test_a_loop_through_a_direct_feedthrough_fmu_lags_one_step(probe_fmu, tmp_path):
+    """Plant P (s integrates u) and an FMU 'controller' K (echo = u) in a loop,
+    P.s -> K.u, K.echo -> P.u: P receives K's output read after K's previous
+    step, i.e. K's answer to P.s(t_{n-1}): s_{n+1} = s_n + h s_{n-1}, in
+    libcosim and in our master; only the first step differs (libcosim: K
+    answered P.s(t0) at initialization; ours: K's start value)."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
+    signals = ["P.s", "P.u", "K.echo"]
+    path = probe_archive(probe_fmu, tmp_path, {"P": {"s_0": 1.0}, "K": {}}, ["P.s -> K.u", "K.echo -> P.u"],
+                         signals, duration=0.5)
+    lc, ours = both(path, signals)
+    for s, first in ((lc["P.s"], 1.0), (ours["P.s"], -7.0)):
+        assert s[1] == pytest.approx(1.0 + H * first, abs=1e-12)
+        assert np.allclose(s[2:], s[1:-1] + H * s[:-2], atol=1e-12)
+    # a Python controller in our master would give s_{n+1} = s_n + h s_n (no delay): 1.1, 1.21, ...
+    assert lc["P.s"][2] == pytest.approx(1.2) and not lc["P.s"][2] == pytest.approx(1.21)
+
+
+def test_libcosim_runs_the_exported_toy_chain_as_our_master(archive):
+    """The lag chain: every state agrees; a direct-feedthrough output (rate)
+    differs only at t0, where libcosim has already transferred A.y to B.u.
+    A recorded input differs by one row: our master records the value its
+    source gives it at t_n (what the FMU gets for [t_n, t_n+1]); libcosim
+    reads the FMU's input after the step, i.e. what it held over [t_n-1, t_n]."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
+    from cosim.ssp import run_libcosim
+
+    loaded = load_ssp(archive)
+    with build_master(loaded) as master:
+        ours = master.run(loaded.duration, t0=loaded.start_time)
+    lc = run_libcosim(archive, loaded.record)
+    assert lc.columns == ours.columns and np.array_equal(lc.time, ours.time)
+    for name in ("A.y", "B.y", "C.y"):
+        assert np.allclose(lc[name], ours[name], rtol=0, atol=1e-12), name
+    assert np.array_equal(ours["C.u"], ours["B.y"])
+    assert lc["C.u"][0] == ours["C.u"][0] and np.allclose(lc["C.u"][1:], ours["C.u"][:-1], rtol=0, atol=1e-12)
+    for name in ("B.rate", "C.rate"):
+        assert np.allclose(lc[name][1:], ours[name][1:], rtol=0, atol=1e-12), name
+    assert ours["B.rate"][0] == pytest.approx((0.0 - 0.0) / 0.25)  # B.u still at its start value 0
+    assert lc["B.rate"][0] == pytest.approx((2.0 * 1.5 - 0.0) / 0.25)  # B.u = A.y(t0) = 1.5 already
