@@ -13,6 +13,16 @@ name           signature                   what
 ``step``       (t, x, u, p, h) -> x(t+h)   one classical RK4 step, u held
 ``jac``        (t, x, u, p) -> J           d[xdot; y]/d[x; u], dense (AD)
 =============  ==========================  =====================================
+
+A sampled-data model (a controller: a :class:`Sampled` part, no continuous
+states) is made of two others instead:
+
+=============  ==========================  =====================================
+``dinit``      (p, r) -> z0                discrete state at initialization from
+                                           the parameters and ``n_random``
+                                           uniform numbers in [0, 1)
+``dstep``      (t, u, p, z) -> (y, z+)     outputs and next discrete state
+=============  ==========================  =====================================
 """
 from __future__ import annotations
 
@@ -41,6 +51,26 @@ Equations = Callable[[ca.SX, Mapping[str, ca.SX]], tuple[Mapping[str, ca.SX], Ma
 
 
 @dataclass(frozen=True)
+class Sampled:
+    """The discrete-time part of a sampled-data model, stepped once per
+    communication step of exactly ``sample_period`` (a parameter's name).
+
+    ``update(t, v)`` receives the time and every input, parameter and
+    discrete state by name and returns ``(outputs, next discrete state)``,
+    both by name. ``initial(v, r)`` receives the parameters by name and a
+    vector of ``n_random`` uniform numbers, which the FMU draws from numpy's
+    ``default_rng(seed)`` with ``seed`` a parameter's name, and returns the
+    discrete state by name.
+    """
+
+    update: Callable[[ca.SX, Mapping[str, ca.SX]], tuple[Mapping[str, ca.SX], Mapping[str, ca.SX]]]
+    initial: Callable[[Mapping[str, ca.SX], ca.SX], Mapping[str, ca.SX]]
+    n_random: int
+    seed: str
+    sample_period: str
+
+
+@dataclass(frozen=True)
 class FmuModel:
     """An FMU model: identifier, variable table and equations.
 
@@ -53,18 +83,28 @@ class FmuModel:
     identifier: str
     description: str
     variables: tuple[Variable, ...]
-    equations: Equations = field(repr=False)
-    initial_state: Callable[[Mapping[str, ca.SX]], Mapping[str, ca.SX]] = field(repr=False)
+    equations: Equations | None = field(default=None, repr=False)
+    initial_state: Callable[[Mapping[str, ca.SX]], Mapping[str, ca.SX]] | None = field(default=None, repr=False)
+    sampled: Sampled | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         names = [v.name for v in self.all_variables]
         duplicated = {n for n in names if names.count(n) > 1}
         if duplicated:
             raise ValueError(f"model {self.identifier}: duplicated variable names {sorted(duplicated)}")
+        if (self.sampled is None) == (self.equations is None):
+            raise ValueError(f"model {self.identifier}: give equations (continuous) or a sampled part, not both")
+        if self.sampled is not None:
+            if self.states:
+                raise ValueError(f"model {self.identifier}: a sampled-data model has no continuous states")
+            for role, name in (("seed", self.sampled.seed), ("sample_period", self.sampled.sample_period)):
+                if name not in {v.name for v in self.parameters}:
+                    raise ValueError(f"model {self.identifier}: its {role} {name!r} is not a parameter")
 
     @property
     def all_variables(self) -> tuple[Variable, ...]:
-        return self.variables + (INTERNAL_STEP,)
+        """The table, plus the integrator's ``internal_step`` for a continuous model."""
+        return self.variables + ((INTERNAL_STEP,) if self.sampled is None else ())
 
     def _of(self, causality: str) -> tuple[Variable, ...]:
         return tuple(v for v in self.all_variables if v.causality == causality)
@@ -72,6 +112,10 @@ class FmuModel:
     @property
     def states(self) -> tuple[Variable, ...]:
         return self._of("state")
+
+    @property
+    def discrete_states(self) -> tuple[Variable, ...]:
+        return self._of("discrete")
 
     @property
     def inputs(self) -> tuple[Variable, ...]:
@@ -114,6 +158,8 @@ class FmuModel:
             "u": ca.SX.sym("u", len(self.inputs)),
             "p": ca.SX.sym("p", len(self.parameters)),
             "h": ca.SX.sym("h"),
+            "z": ca.SX.sym("z", len(self.discrete_states)),
+            "r": ca.SX.sym("r", self.sampled.n_random if self.sampled else 0),
         }
 
     @cached_property
@@ -122,8 +168,10 @@ class FmuModel:
         s = self.symbols
         t, x, u, p, h = s["t"], s["x"], s["u"], s["p"], s["h"]
         named: dict[str, ca.SX] = {}
-        for vec, group in ((x, self.states), (u, self.inputs), (p, self.parameters)):
+        for vec, group in ((x, self.states), (u, self.inputs), (p, self.parameters), (s["z"], self.discrete_states)):
             named.update({v.name: vec[i] for i, v in enumerate(group)})
+        if self.sampled is not None:
+            return self._sampled_functions(named)
 
         derivatives, outputs = self.equations(t, named)
         missing = {v.name for v in self.states} - set(derivatives)
@@ -152,4 +200,23 @@ class FmuModel:
                 "model_jac", [t, x, u, p], [ca.densify(ca.jacobian(unknowns, knowns))],
                 ["t", "x", "u", "p"], ["J"],
             ),
+        }
+
+    def _sampled_functions(self, named: dict[str, ca.SX]) -> dict[str, ca.Function]:
+        """``dinit`` and ``dstep`` of a sampled-data model."""
+        s = self.symbols
+        t, u, p, z, r = s["t"], s["u"], s["p"], s["z"], s["r"]
+        outputs, z_next = self.sampled.update(t, named)
+        params = {v.name: named[v.name] for v in self.parameters}
+        z0 = self.sampled.initial(params, r)
+        missing = ({v.name for v in self.outputs} - set(outputs)) | ({v.name for v in self.discrete_states} - set(z_next))
+        missing |= {v.name for v in self.discrete_states} - set(z0)
+        if missing:
+            raise ValueError(f"model {self.identifier}: the sampled part does not define {sorted(missing)}")
+        y = ca.vertcat(*[outputs[v.name] for v in self.outputs])
+        z_plus = ca.vertcat(*[z_next[v.name] for v in self.discrete_states])
+        z_init = ca.vertcat(*[z0[v.name] for v in self.discrete_states])
+        return {
+            "dinit": ca.Function("model_dinit", [p, r], [z_init], ["p", "r"], ["z0"]),
+            "dstep": ca.Function("model_dstep", [t, u, p, z], [y, z_plus], ["t", "u", "p", "z"], ["y", "z_next"]),
         }

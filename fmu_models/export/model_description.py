@@ -22,8 +22,8 @@ from .variables import UNITS
 __all__ = ["fmi2_model_description", "fmi3_model_description", "fmi3_build_description",
            "derivative_unit", "dependency_kinds", "SOURCE_FILES_FMI2", "SOURCE_FILES_FMI3"]
 
-SOURCE_FILES_FMI2 = ("fmu_core.c", "fmi2_functions.c", "model_generated.c")
-SOURCE_FILES_FMI3 = ("fmu_core.c", "fmi3_functions.c", "model_generated.c")
+SOURCE_FILES_FMI2 = ("fmu_core.c", "numpy_random.c", "fmi2_functions.c", "model_generated.c")
+SOURCE_FILES_FMI3 = ("fmu_core.c", "numpy_random.c", "fmi3_functions.c", "model_generated.c")
 
 _DERIVATIVE_UNIT = {"m": "m/s", "m/s": "m/s2", "rad": "rad/s", "rad/s": "rad/s2", "1": "1"}
 
@@ -41,14 +41,19 @@ def _fmt(value: float) -> str:
 
 @lru_cache(maxsize=None)
 def dependency_kinds(model: FmuModel) -> dict[str, list[tuple[str, str]]]:
-    """For each derivative ``der(name)`` and output: [(known name, kind)]."""
+    """For each derivative ``der(name)`` and output: [(known name, kind)]
+    (a sampled-data model's outputs: on the inputs their first sample reads)."""
     s = model.symbols
     f = model.functions
-    t, x, u, p = s["t"], s["x"], s["u"], s["p"]
-    unknowns = ca.vertcat(f["ode"](t, x, u, p), f["out"](t, x, u, p))
+    t, x, u, p, z = s["t"], s["x"], s["u"], s["p"], s["z"]
+    if model.sampled is not None:
+        unknowns = f["dstep"](t, u, p, z)[0]
+        variable_part = ca.vertcat(t, u, z)
+    else:
+        unknowns = ca.vertcat(f["ode"](t, x, u, p), f["out"](t, x, u, p))
+        variable_part = ca.vertcat(t, x, u)
     knowns = ca.vertcat(x, u)
     jac = ca.jacobian(unknowns, knowns)
-    variable_part = ca.vertcat(t, x, u)
     known_names = [v.name for v in model.states + model.inputs]
     rows = [f"der({v.name})" for v in model.states] + [v.name for v in model.outputs]
     result: dict[str, list[tuple[str, str]]] = {}
@@ -116,8 +121,11 @@ def _model_variables(model: FmuModel) -> list[_Entry]:
                                   derivative_unit(state.unit), state=state.name))
             continue
         v = by_name[name]
+        held = "discrete" if model.sampled is not None else "continuous"  # sample-and-hold outputs
         if v.causality in ("state", "output"):  # a state is exposed as an output
-            entries.append(_Entry(name, vr, "output", "continuous", "calculated", v.description, v.unit))
+            entries.append(_Entry(name, vr, "output", held, "calculated", v.description, v.unit))
+        elif v.causality == "discrete":
+            entries.append(_Entry(name, vr, "local", "discrete", "calculated", v.description, v.unit))
         elif v.causality == "input":
             entries.append(_Entry(name, vr, "input", "continuous", None, v.description, v.unit, v.start))
         else:
@@ -136,7 +144,8 @@ def _model_structure(model: FmuModel):
     outputs = [(e.name, [(e.name, "constant")] if model.variable(e.name).causality == "state" else deps[e.name])
                for e in entries if e.causality == "output"]  # a state as output depends on itself
     derivatives = [(f"der({v.name})", deps[f"der({v.name})"]) for v in model.states]
-    initial = [e.name for e in entries if e.initial == "calculated"]
+    initial = [e.name for e in entries if e.initial == "calculated" and e.causality != "local"
+               or e.name.startswith("der(")]
     return outputs, derivatives, initial
 
 
@@ -173,13 +182,15 @@ def _root_attributes(model: FmuModel) -> str:
 
 
 def _shared_sections(model: FmuModel) -> str:
-    """UnitDefinitions, LogCategories and DefaultExperiment (same in FMI 2.0 and 3.0)."""
+    """UnitDefinitions, LogCategories and DefaultExperiment (same in FMI 2.0 and 3.0);
+    a sampled-data model's step is its sample period."""
+    step = model.variable(model.sampled.sample_period).start if model.sampled is not None else 0.01
     return f"""{_unit_definitions(_used_units(model))}
   <LogCategories>
     <Category name="logEvents" description="informational messages (with debug logging on)"/>
     <Category name="logStatusError" description="refused calls and values, failed steps (always logged)"/>
   </LogCategories>
-  <DefaultExperiment startTime="0" stopTime="10" stepSize="0.01"/>"""
+  <DefaultExperiment startTime="0" stopTime="10" stepSize="{_fmt(step)}"/>"""
 
 
 def fmi2_model_description(model: FmuModel, guid: str) -> str:
@@ -194,18 +205,21 @@ def fmi2_model_description(model: FmuModel, guid: str) -> str:
     initial = [_unknown("Unknown", "index", index.get, name) for name in initial]
 
     sources = "\n".join(f'      <File name="{f}"/>' for f in SOURCE_FILES_FMI2)
+    sampled = model.sampled is not None
     capabilities = ('canGetAndSetFMUstate="true" canSerializeFMUstate="true" '
-                    'providesDirectionalDerivative="true" canNotUseMemoryManagementFunctions="true"')
-    return f"""<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="{model.identifier}" guid="{guid}"
-  {_root_attributes(model)}
-  variableNamingConvention="structured" numberOfEventIndicators="0">
+                    f'providesDirectionalDerivative="{str(not sampled).lower()}" '
+                    'canNotUseMemoryManagementFunctions="true"')
+    model_exchange = "" if sampled else f"""
   <ModelExchange modelIdentifier="{model.identifier}" {capabilities}>
     <SourceFiles>
 {sources}
     </SourceFiles>
-  </ModelExchange>
-  <CoSimulation modelIdentifier="{model.identifier}" canHandleVariableCommunicationStepSize="true" {capabilities}>
+  </ModelExchange>"""
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{model.identifier}" guid="{guid}"
+  {_root_attributes(model)}
+  variableNamingConvention="structured" numberOfEventIndicators="0">{model_exchange}
+  <CoSimulation modelIdentifier="{model.identifier}" canHandleVariableCommunicationStepSize="{str(not sampled).lower()}" {capabilities}>
     <SourceFiles>
 {sources}
     </SourceFiles>
@@ -245,15 +259,22 @@ def fmi3_model_description(model: FmuModel, instantiation_token: str) -> str:
                  + [_unknown("ContinuousStateDerivative", "valueReference", vr.get, name, deps, 4)
                     for name, deps in derivatives]
                  + [_unknown("InitialUnknown", "valueReference", vr.get, name, indent=4) for name in initial])
+    sampled = model.sampled is not None
+    derivatives_flag = str(not sampled).lower()
     capabilities = ('canGetAndSetFMUState="true" canSerializeFMUState="true" '
-                    'providesDirectionalDerivatives="true" providesAdjointDerivatives="true"')
+                    f'providesDirectionalDerivatives="{derivatives_flag}" '
+                    f'providesAdjointDerivatives="{derivatives_flag}"')
+    model_exchange = "" if sampled else (f'\n  <ModelExchange modelIdentifier="{model.identifier}" {capabilities} '
+                                         'needsCompletedIntegratorStep="false"/>')
+    cosimulation = (f'canHandleVariableCommunicationStepSize="false" fixedInternalStepSize="'
+                    f'{_fmt(model.variable(model.sampled.sample_period).start)}"' if sampled
+                    else 'canHandleVariableCommunicationStepSize="true" hasEventMode="true"')
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="3.0" modelName="{model.identifier}" instantiationToken="{instantiation_token}"
   {_root_attributes(model)}
-  variableNamingConvention="structured">
-  <ModelExchange modelIdentifier="{model.identifier}" {capabilities} needsCompletedIntegratorStep="false"/>
+  variableNamingConvention="structured">{model_exchange}
   <CoSimulation modelIdentifier="{model.identifier}" {capabilities}
-    canHandleVariableCommunicationStepSize="true" hasEventMode="true"/>
+    {cosimulation}/>
 {_shared_sections(model)}
   <ModelVariables>
 {chr(10).join(variables)}

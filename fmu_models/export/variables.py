@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["Variable", "UNITS", "state", "input_", "output", "parameter"]
+__all__ = ["Variable", "UNITS", "state", "discrete", "input_", "output", "parameter"]
 
 
 # SI base-unit exponents of every unit a model may use (FMI <UnitDefinitions>).
@@ -23,6 +23,8 @@ UNITS: dict[str, dict[str, int]] = {
     "rad": {"rad": 1},
     "rad/s": {"rad": 1, "s": -1},
     "rad/s2": {"rad": 1, "s": -2},
+    "1/s": {"s": -1},
+    "1/s2": {"s": -2},
     "kg": {"kg": 1},
     "kg.m2": {"kg": 1, "m": 2},
     "N": {"kg": 1, "m": 1, "s": -2},
@@ -40,7 +42,9 @@ class Variable:
     """One scalar Float64 variable of an FMU model.
 
     ``causality`` is one of ``state`` (a continuous state, exposed as an
-    output), ``input``, ``output`` (an algebraic output) or ``parameter``.
+    output), ``discrete`` (the state of a sampled-data model, exposed as a
+    local variable), ``input``, ``output`` (an algebraic output) or
+    ``parameter``.
     ``min``/``max`` are enforced by the FMU on every set and written into
     the modelDescription. Both are inclusive, as FMI's are: a quantity that
     must be positive gets a stated positive floor, never an implied open
@@ -56,7 +60,7 @@ class Variable:
     max: float = math.inf
 
     def __post_init__(self) -> None:
-        if self.causality not in ("state", "input", "output", "parameter"):
+        if self.causality not in ("state", "discrete", "input", "output", "parameter"):
             raise ValueError(f"variable {self.name!r}: unknown causality {self.causality!r}")
         if self.unit not in UNITS:
             raise ValueError(f"variable {self.name!r}: unit {self.unit!r} is not in UNITS")
@@ -96,3 +100,7 @@ def output(name, unit, description):
 
 def parameter(name, unit, description, start, **bounds):
     return Variable(name, "parameter", unit, description, start, **bounds)
+
+
+def discrete(name, unit, description):
+    return Variable(name, "discrete", unit, description)

@@ -7,6 +7,7 @@
 
 #include "fmu_core.h"
 #include "model_generated.h"
+#include "numpy_random.h"
 
 #define STATE_MAGIC 0x464E4E43UL /* "FNNC" */
 /* Room for the longest message, the failed-step report with every input and
@@ -82,6 +83,7 @@ static void set_defaults(Instance *inst) {
     inst->s.mode = MODE_INSTANTIATED;
     for (size_t i = 0; i < N_VARIABLES; i++) inst->s.v[i] = VAR_START[i];
     inst->derived_valid = 0;
+    inst->z_pending = 0;
 }
 
 Instance *core_instantiate(const char *instance_name, CoreKind kind, void *environment,
@@ -116,12 +118,52 @@ void core_reset(Instance *inst) { set_defaults(inst); }
 #define Y_ (inst->s.v + VR_Y)
 #define U_ (inst->s.v + VR_U)
 #define P_ (inst->s.v + VR_P)
+#define Z_ (inst->s.v + VR_Z)
 
-static void initial_state(Instance *inst) {
+#if NZ > 0
+/* z0 from the parameters and NR uniform numbers of numpy's default_rng(seed). */
+static CoreStatus initial_state(Instance *inst) {
+    double r[NR + 1];
+    const double seed = P_[VR_SEED - VR_P];
+    NpPcg64 rng;
+    if (!(seed >= 0 && seed <= 9007199254740992.0 && seed == floor(seed))) {
+        core_log(inst, CORE_ERROR, "%s = %g refused: a seed is a whole number in [0, 2^53]", VAR_NAME[VR_SEED], seed);
+        return CORE_ERROR;
+    }
+    np_default_rng(&rng, (uint64_t)seed);
+    for (size_t i = 0; i < NR; i++) r[i] = np_random(&rng);
+    inst->arg[0] = P_; inst->arg[1] = r;
+    inst->res[0] = Z_;
+    model_dinit(inst->arg, inst->res, inst->iw, inst->w, 0);
+    inst->z_pending = 0;
+    inst->derived_valid = 0;
+    return CORE_OK;
+}
+
+/* g and f at the current z and u: the outputs a get returns, the state doStep takes. */
+static void update_pending(Instance *inst) {
+    inst->arg[0] = &T_; inst->arg[1] = U_; inst->arg[2] = P_; inst->arg[3] = Z_;
+    inst->res[0] = inst->y_next; inst->res[1] = inst->z_next;
+    model_dstep(inst->arg, inst->res, inst->iw, inst->w, 0);
+    inst->z_pending = 1;
+}
+
+static void update_derived(Instance *inst) {
+    if (inst->derived_valid) return;
+    if (inst->s.mode == MODE_INSTANTIATED || inst->s.mode == MODE_INITIALIZATION) initial_state(inst);
+    if (!inst->s.held) {  /* sample: outputs follow the inputs just set */
+        update_pending(inst);
+        memcpy(Y_, inst->y_next, NY * sizeof(double));
+    }
+    inst->derived_valid = 1;
+}
+#else
+static CoreStatus initial_state(Instance *inst) {
     inst->arg[0] = P_;
     inst->res[0] = X_;
     model_init(inst->arg, inst->res, inst->iw, inst->w, 0);
     inst->derived_valid = 0;
+    return CORE_OK;
 }
 
 static void update_derived(Instance *inst) {
@@ -135,6 +177,7 @@ static void update_derived(Instance *inst) {
     model_out(inst->arg, inst->res, inst->iw, inst->w, 0);
     inst->derived_valid = 1;
 }
+#endif
 
 /* ---- initialization ------------------------------------------------------- */
 
@@ -150,13 +193,20 @@ CoreStatus core_enter_initialization(Instance *inst, double start_time) {
 }
 
 CoreStatus core_exit_initialization(Instance *inst) {
-    initial_state(inst);
+    if (initial_state(inst) != CORE_OK) return CORE_ERROR;
     for (size_t i = 0; i < NX; i++) {
         if (!isfinite(X_[i])) {
             core_log(inst, CORE_ERROR, "initial value of %s = %g is not finite", VAR_NAME[VR_X + i], X_[i]);
             return CORE_ERROR;
         }
     }
+    for (size_t i = 0; i < NZ; i++) {
+        if (!isfinite(Z_[i])) {
+            core_log(inst, CORE_ERROR, "initial value of %s = %g is not finite", VAR_NAME[VR_Z + i], Z_[i]);
+            return CORE_ERROR;
+        }
+    }
+    inst->s.held = 0;
     inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE : MODE_EVENT;
     update_derived(inst);
     return CORE_OK;
@@ -190,7 +240,11 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
             core_log(inst, CORE_ERROR, "set: unknown value reference %u", vr[i]);
             return CORE_ERROR;
         }
-        if (vr[i] >= VR_P) {
+        if (vr[i] >= VR_Z) {
+            core_log(inst, CORE_ERROR, "%s is a discrete state and cannot be set (restore an FMU state instead)",
+                     VAR_NAME[vr[i]]);
+            return CORE_ERROR;
+        } else if (vr[i] >= VR_P) {
             if (inst->s.mode != MODE_INSTANTIATED && inst->s.mode != MODE_INITIALIZATION &&
                 inst->s.mode != MODE_CONFIGURATION) {
                 core_log(inst, CORE_ERROR, "parameter %s can only be set before initialization ends (now in %s)",
@@ -209,7 +263,11 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
         if (check_value(inst, vr[i], value[i]) != CORE_OK) return CORE_ERROR;
     }
     for (size_t i = 0; i < n; i++) inst->s.v[vr[i]] = value[i];
-    if (n > 0) inst->derived_valid = 0;
+    if (n > 0) {
+        inst->derived_valid = 0;
+        inst->s.held = 0;
+        inst->z_pending = 0;
+    }
     return CORE_OK;
 }
 
@@ -258,6 +316,48 @@ static void report_non_finite_state(Instance *inst, int bad, double value, doubl
     core_log(inst, CORE_ERROR, "%s", msg.text);
 }
 
+#if NZ > 0
+/* One sample of a sampled-data model: z <- f(z, u), outputs held at g(z, u),
+ * both at the inputs in effect. Its laws do not depend on time, so a step
+ * from another time than the FMU's (after restoring a state saved in another
+ * run) re-bases the clock instead of refusing. */
+static CoreStatus sampled_step(Instance *inst, double current_time, double step_size) {
+    const double period = inst->s.v[VR_SAMPLE_PERIOD];
+    if (!isfinite(current_time)) {
+        core_log(inst, CORE_ERROR, "doStep at t = %g refused: not finite", current_time);
+        return CORE_ERROR;
+    }
+    if (fabs(step_size - period) > 1e-9 * period) {
+        core_log(inst, CORE_ERROR, "communication step size = %.17g s refused: this sampled-data model steps "
+                 "exactly its %s = %.17g s", step_size, VAR_NAME[VR_SAMPLE_PERIOD], period);
+        return CORE_ERROR;
+    }
+    if (fabs(current_time - T_) > 1e-9 * fmax(1.0, fabs(T_)))
+        core_log(inst, CORE_OK, "doStep at t = %.17g: clock re-based from t = %.17g", current_time, T_);
+    if (!inst->z_pending) update_pending(inst);
+    for (size_t i = 0; i < NZ; i++) {
+        if (!isfinite(inst->z_next[i])) {
+            Message msg = {{0}, 0, 0};
+            char v[NUMBER_SIZE], from[NUMBER_SIZE];
+            message_append(&msg, "discrete state %s became %s in the step from t = %s", VAR_NAME[VR_Z + i],
+                           exact(v, inst->z_next[i]), exact(from, current_time));
+            append_values(&msg, inst, "inputs", VR_U, NU);
+            append_values(&msg, inst, "parameters", VR_P, NP);
+            core_log(inst, CORE_ERROR, "%s", msg.text);
+            inst->s.failed = 1;
+            return CORE_ERROR;
+        }
+    }
+    memcpy(Z_, inst->z_next, NZ * sizeof(double));
+    memcpy(Y_, inst->y_next, NY * sizeof(double));
+    inst->z_pending = 0;
+    inst->s.held = 1;
+    inst->derived_valid = 1;
+    T_ = current_time + step_size;
+    return CORE_OK;
+}
+#endif
+
 CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
     if (inst->s.failed) {
         core_log(inst, CORE_ERROR, "doStep refused: an earlier step failed; reset or restore a saved state");
@@ -267,6 +367,9 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
         core_log(inst, CORE_ERROR, "communication step size = %g refused: it must be positive and finite", step_size);
         return CORE_ERROR;
     }
+#if NZ > 0
+    return sampled_step(inst, current_time, step_size);
+#else
     if (!isfinite(current_time) || fabs(current_time - T_) > 1e-9 * fmax(1.0, fabs(T_))) {
         core_log(inst, CORE_ERROR, "doStep at t = %.17g refused: the FMU is at t = %.17g", current_time, T_);
         return CORE_ERROR;
@@ -303,6 +406,7 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
     }
     T_ = current_time + step_size;
     return CORE_OK;
+#endif
 }
 
 /* ---- model exchange --------------------------------------------------------- */
@@ -394,11 +498,16 @@ static CoreStatus evaluate_jacobian(Instance *inst, const char *what,
             return CORE_ERROR;
         }
     }
+#if NZ > 0
+    core_log(inst, CORE_ERROR, "%s: a sampled-data model provides no derivatives", what);
+    return CORE_ERROR;
+#else
     update_derived(inst);
     inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
     inst->res[0] = inst->jac;
     model_jac(inst->arg, inst->res, inst->iw, inst->w, 0);
     return CORE_OK;
+#endif
 }
 
 /* partial(unknown, known) * factor; a state as an output has d x / d x = I */
@@ -458,6 +567,7 @@ CoreStatus core_set_state(Instance *inst, const CoreState *state) {
     }
     inst->s = *state;
     inst->derived_valid = 0;
+    inst->z_pending = 0;
     return CORE_OK;
 }
 

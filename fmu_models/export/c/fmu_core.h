@@ -6,12 +6,22 @@
  * model; the FMI layers know no model either, as in the Reference-FMUs.
  *
  * Value references index one array of doubles laid out as
- *   [ time | x (NX) | der(x) (NX) | y (NY) | u (NU) | p (NP) ]
+ *   [ time | x (NX) | der(x) (NX) | y (NY) | u (NU) | p (NP) | z (NZ) ]
+ *
+ * A model is continuous (NX states integrated by RK4 inside doStep, NZ = 0)
+ * or sampled-data (NX = 0, NZ > 0): its discrete state z (exposed as local
+ * variables) and outputs are updated once per communication step by the
+ * generated model_dstep, z starting from model_dinit(p, r) with r drawn from
+ * numpy's default_rng(seed) (numpy_random.c). Its outputs have direct
+ * feedthrough and are sample-and-hold: after setting inputs, a get returns
+ * y = g(z, u); doStep then makes z its next value and holds that y until the
+ * inputs are set again.
  */
 #ifndef FMU_CORE_H
 #define FMU_CORE_H
 
 #include <stddef.h>
+#include <stdint.h>
 #include "model_config.h"
 
 typedef enum {
@@ -39,11 +49,16 @@ typedef void (*CoreLogger)(void *environment, const char *instance_name,
                            CoreStatus status, const char *category, const char *message);
 
 /* Everything get/set FMU state saves and restores. */
+/* The serialized FMU state is this struct's bytes: fixed-width header, then
+ * v, the N_VARIABLES values in value-reference order (the last 8 N_VARIABLES
+ * bytes), so a learned state can be written into a serialized state. */
 typedef struct {
-    unsigned long magic;
-    unsigned long n_variables;
-    int mode;
-    int failed;              /* a step produced a non-finite state */
+    uint64_t magic;
+    uint64_t n_variables;
+    int32_t mode;
+    int32_t failed;          /* a step produced a non-finite state */
+    int32_t held;            /* sampled-data: outputs held from the last doStep */
+    int32_t reserved;
     double v[N_VARIABLES];   /* v[0] is the time */
 } CoreState;
 
@@ -60,6 +75,8 @@ typedef struct {
     long long iw[MODEL_SZ_IW + 1];
     double w[MODEL_SZ_W + 1];
     double x_start[NX + 1], k_tmp[NX + 1];
+    double z_next[NZ + 1], y_next[NY + 1];  /* sampled-data: the pending update */
+    int z_pending;                           /* z_next, y_next are g, f at the current z and u */
     double jac[(NX + NY) * (NX + NU) + 1];
 } Instance;
 

@@ -1,0 +1,114 @@
+"""The controller as an FMU model: the parametric step of
+:mod:`fnn_controller.parametric`, the very function the co-simulation's fast
+path evaluates, as a sampled-data :class:`~fmu_models.export.model.FmuModel`
+that the project's exporter turns into FMI 2.0 and FMI 3.0 Co-Simulation FMUs.
+
+One FMU per registered variant (``ControllerPD``, ``ControllerPDSMC``,
+``ControllerPDLM``): a variant fixes the laws and the size of the learned
+state, which FMI cannot change after instantiation, so it is the FMU's
+identity rather than a parameter.
+
+=========== ================================================================
+inputs      x_ref y_ref z_ref (m), vx_ref vy_ref vz_ref (m/s), psi_ref (rad),
+            and the 12 plant states x y z u v w phi theta psi p q r (SI)
+outputs     Omega_1..4, v_ref_x..z, tau_c_x..z, tau_n_x..z, T, tau_phi,
+            tau_theta, tau_psi (:data:`fnn_controller.controller.OUTPUTS`)
+parameters  every entry of :func:`~fnn_controller.parametric.parameter_table`
+            (gains, learning rates, bounds, initial values, nominal vehicle)
+            with unit, description and range; ``seed`` (f_ij(0), the draws of
+            numpy's ``default_rng(seed)``)
+locals      the learned state of each axis (``f_12_x``, ``sigma1_2_z``,
+            ``alpha_y``, ...) and the velocity controller's previous R*
+=========== ================================================================
+
+Step semantics (``docs/controller-fmu.md``): the outputs have direct
+feedthrough and are sample-and-hold. After the inputs of ``t_n`` are set,
+a get returns the control at ``t_n`` computed from them; ``doStep(t_n, dt)``
+then advances the learned state and holds that control over the step. The
+communication step must be ``dt``.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+
+from fmu_models.export.model import FmuModel, Sampled
+from fmu_models.export.variables import discrete, input_, output, parameter
+from fmu_models.models.quadrotor import QUADROTOR
+
+from .controller import OUTPUTS
+from .geometric import VEL_STATE_SIZE, GeometricParams
+from .parametric import initial_state_function, parameter_table, parametric_step_function
+from .position import PositionParams
+from .variants import variant as lookup
+
+__all__ = ["controller_model", "fmu_identifier", "REFERENCE_INPUTS", "SEED_MAX"]
+
+SEED_MAX = 2.0 ** 53  # seeds are doubles in FMI: every whole number up to 2^53 is exact
+_AXES = "xyz"
+REFERENCE_INPUTS = (
+    *((f"{a}_ref", "m", f"reference position {a} (world, z down)") for a in _AXES),
+    *((f"v{a}_ref", "m/s", f"reference velocity d{a}*/dt") for a in _AXES),
+    ("psi_ref", "rad", "commanded yaw psi*"),
+)
+
+
+def fmu_identifier(variant: str) -> str:
+    """``ControllerPDLM`` for ``pd+lm``: the FMU's model identifier (a C name)."""
+    return "Controller" + "".join(ch for ch in variant.upper() if ch.isalnum())
+
+
+def _discrete_states(variant: str) -> tuple:
+    v = lookup(variant)
+    learned = tuple(discrete(f"{name}_{axis}", unit, f"learned state of axis {axis} ({v.label})")
+                    for axis in _AXES for name, unit in v.axis_state_ports)
+    previous = tuple(discrete(f"R_ref_prev_{i}", "1", "previous desired attitude R*, column-major")
+                     for i in range(1, 10))
+    assert len(previous) + 1 == VEL_STATE_SIZE
+    return learned + previous + (discrete("R_ref_primed", "1", "1 once R* has been computed since reset"),)
+
+
+@lru_cache(maxsize=None)
+def controller_model(variant: str, position: PositionParams = PositionParams(),
+                     geometric: GeometricParams = GeometricParams()) -> FmuModel:
+    """The FMU model of ``variant``; ``position`` and ``geometric`` give the
+    parameters' start values and the structural choices."""
+    table = parameter_table(variant, position, geometric)
+    step = parametric_step_function(variant, PositionParams(),
+                                    GeometricParams(desired_rate=geometric.desired_rate))
+    init = initial_state_function(variant, PositionParams(), GeometricParams(desired_rate=geometric.desired_rate))
+    states = _discrete_states(variant)
+    plant = QUADROTOR.states
+    variables = (
+        *(input_(name, unit, text) for name, unit, text in REFERENCE_INPUTS),
+        *(input_(v.name, v.unit, f"plant state: {v.description}") for v in plant),
+        *(output(name, unit, text) for name, unit, text in OUTPUTS),
+        *(parameter(p.name, p.unit, p.description, p.default, min=p.min, max=p.max) for p in table),
+        parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
+                  min=0.0, max=SEED_MAX),
+        *states,
+    )
+
+    def parameters(v):
+        return ca.vertcat(*(v[p.name] for p in table))
+
+    def update(t, v):
+        y, state_next, _ = step(ca.vertcat(*(v[f"{a}_ref"] for a in _AXES)),
+                                ca.vertcat(*(v[f"v{a}_ref"] for a in _AXES)),
+                                ca.vertcat(*(v[s.name] for s in plant)), v["psi_ref"],
+                                ca.vertcat(*(v[s.name] for s in states)), parameters(v))
+        return (dict(zip((name for name, _, _ in OUTPUTS), ca.vertsplit(y))),
+                dict(zip((s.name for s in states), ca.vertsplit(state_next))))
+
+    def initial(v, r):
+        return dict(zip((s.name for s in states), ca.vertsplit(init(parameters(v), r))))
+
+    v = lookup(variant)
+    return FmuModel(
+        identifier=fmu_identifier(variant),
+        description=f"{v.label} flight controller of the LM-FNN paper (Fig. 2): {v.description}; "
+                    f"geometric SE(3) velocity control (eqs. 13-18); sampled at dt, z axis down",
+        variables=variables,
+        sampled=Sampled(update=update, initial=initial, n_random=3 * v.n_random, seed="seed", sample_period="dt"),
+    )
