@@ -143,11 +143,18 @@ class FmuComponent:
         Validate the modelDescription against the FMI schema while reading it
         (fmpy's check). Off by default: our FMUs are validated by their own
         tests, and third-party FMUs often carry harmless schema problems.
+    parameters : parameter values set at every start (before run-level ones).
+    seed_parameter : the name of a parameter set to the run's seed at every
+        start (an FMU that draws random numbers, seeded like the Python
+        components).
     """
 
-    def __init__(self, name: str, path: str | Path, validate: bool = False):
+    def __init__(self, name: str, path: str | Path, validate: bool = False,
+                 parameters: Mapping[str, float] | None = None, seed_parameter: str | None = None):
         self.name = name
         self.path = Path(path)
+        self.base_parameters = dict(parameters or {})
+        self.seed_parameter = seed_parameter
         self.model_description = md = self._read_model_description(validate)
         self.fmi_version = int(md.fmiVersion.split(".")[0])
         if self.fmi_version not in (2, 3):
@@ -158,12 +165,25 @@ class FmuComponent:
         groups = fmu_ports(md)
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
         self.variables = {v.name: v for v in md.modelVariables}
+        if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
+            raise FmuLoadError(name, self.path, f"seed parameter {seed_parameter!r} is no parameter of the FMU")
+        self.feedthrough = self._feedthrough(md)
         self.messages: deque[str] = deque(maxlen=20)
         self._slave = None
         self._unzipdir: Path | None = None
         self._owns_unzipdir = False
         self._initialized_once = False
         self.bind((), ())
+
+    def _feedthrough(self, md) -> dict[str, frozenset[str]]:
+        """Output name -> the inputs it depends on directly (ModelStructure;
+        an output without a dependencies list depends on all of them)."""
+        inputs = frozenset(p.name for p in self.inputs)
+        out = {}
+        for unknown in md.outputs:
+            deps = unknown.dependencies
+            out[unknown.variable.name] = inputs if deps is None else frozenset(d.name for d in deps) & inputs
+        return out
 
     def _read_model_description(self, validate: bool):
         """fmpy's reading of the modelDescription, its failures told in one line."""

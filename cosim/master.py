@@ -39,7 +39,9 @@ from .fmu import FmuComponent
 from .guard import Guard
 from .recorder import Recorder
 
-__all__ = ["Master", "RunResult"]
+__all__ = ["Master", "RunResult", "ORDERINGS"]
+
+ORDERINGS = ("feedthrough", "exchange")
 
 
 @dataclass
@@ -93,9 +95,12 @@ class Master:
     def __init__(self, fmus: Sequence[FmuComponent], components: Sequence[PythonComponent],
                  connections: Sequence[str | Connection], step: float, record: Sequence[str] = (),
                  bounds: Mapping[str, tuple[float, float]] | None = None,
-                 fmu_parameters: Mapping[str, Mapping[str, float]] | None = None):
+                 fmu_parameters: Mapping[str, Mapping[str, float]] | None = None, ordering: str = "feedthrough"):
         if not step > 0:
             raise ValueError(f"step = {step!r} s must be positive")
+        if ordering not in ORDERINGS:
+            raise ValueError(f"ordering = {ordering!r}: expected one of {', '.join(ORDERINGS)}")
+        self.ordering = ordering
         self.step = float(step)
         self.fmus = list(fmus)
         self.python = list(components)
@@ -136,13 +141,36 @@ class Master:
         kinds = "output, input or internal signal" if internals else "output or input"
         raise ConnectionCheckError(f"signal {signal!r}: {comp_name} has no {kinds} {var!r}; it has: {known}")
 
-    def _order_python(self) -> list[PythonComponent]:
-        """Topological order of the Python components by their connections."""
-        py = {c.name for c in self.python}
-        deps = {c.name: set() for c in self.python}
+    def _direct_fmus(self, used: set[str]) -> set[str]:
+        """FMUs to evaluate at ``t_n`` (feedthrough ordering): those with a used
+        output that depends directly on a connected input (ModelStructure)."""
+        if self.ordering != "feedthrough":
+            return set()
+        direct = set()
+        for fmu in self.fmus:
+            connected = {c.destination.variable for c in self.connections if c.destination.component == fmu.name}
+            if any(fmu.feedthrough.get(p.name, frozenset()) & connected
+                   for p in fmu.outputs if f"{fmu.name}.{p.name}" in used):
+                direct.add(fmu.name)
+        return direct
+
+    def _order(self, direct: set[str]) -> list:
+        """The blocks evaluated at ``t_n``, in topological order of their
+        connections: the Python components (and, in the feedthrough ordering,
+        the FMUs with direct feedthrough). Only a connection whose source
+        depends on its block's inputs at ``t_n`` orders two blocks, so a
+        plant's states feeding a controller that feeds the plant is no loop.
+        In the exchange ordering nothing is ordered: every block reads the
+        values of the previous exchange."""
+        blocks = [c.name for c in self.python] + [f.name for f in self.fmus if f.name in direct]
+        deps: dict[str, set[str]] = {name: set() for name in blocks}
         for c in self.connections:
-            if c.source.component in py and c.destination.component in py:
-                deps[c.destination.component].add(c.source.component)
+            src, dst = c.source.component, c.destination.component
+            if src not in deps or dst not in deps or self.ordering != "feedthrough":
+                continue
+            fmu = self.components[src] if src in direct else None
+            if fmu is None or fmu.feedthrough.get(c.source.variable):
+                deps[dst].add(src)
         order: list[str] = []
         state: dict[str, int] = {}
 
@@ -152,16 +180,16 @@ class Master:
             if state.get(name) == 1:
                 cycle = path[path.index(name):] + [name]
                 raise ConnectionCheckError(
-                    f"algebraic loop among Python components: {' -> '.join(cycle)}; "
-                    f"break it with an FMU or a delay")
+                    f"algebraic loop: {' -> '.join(cycle)}; each block needs the one before it at the same "
+                    f"instant: break it with a delay, or use the 'exchange' ordering")
             state[name] = 1
             for d in sorted(deps[name]):
                 visit(d, path + [name])
             state[name] = 2
             order.append(name)
 
-        for c in self.python:  # declared order breaks ties
-            visit(c.name, [])
+        for name in blocks:  # declared order breaks ties
+            visit(name, [])
         return [self.components[n] for n in order]
 
     def _plan(self, record: list[str]) -> None:
@@ -201,25 +229,32 @@ class Master:
         self.slots = slots
         self.signals = np.zeros(len(slots))
 
-        self._fmu_in: list[tuple[FmuComponent, np.ndarray]] = []
+        direct = self._direct_fmus(used)
+        fmu_in: dict[str, np.ndarray] = {}
+        self._fmu_in: list[tuple[FmuComponent, np.ndarray]] = []  # written at the exchange
         self._fmu_out: list[FmuComponent] = []
         for fmu in self.fmus:
             ins = [c for c in self.connections if c.destination.component == fmu.name]
             block = blocks[fmu.name]
             outs = [s.partition(".")[2] for s, i in slots.items() if block.start <= i < block.stop]
             fmu.bind([c.destination.variable for c in ins], outs, self.signals[block] if outs else None)
-            if ins:
-                self._fmu_in.append((fmu, np.array([slots[str(c.source)] for c in ins], dtype=np.intp)))
+            fmu_in[fmu.name] = np.array([slots[str(c.source)] for c in ins], dtype=np.intp)
+            if ins and fmu.name not in direct:
+                self._fmu_in.append((fmu, fmu_in[fmu.name]))
             if outs:
                 self._fmu_out.append(fmu)
 
-        self._py: list[tuple[PythonComponent, np.ndarray, slice, tuple[np.ndarray, np.ndarray] | None]] = []
-        for comp in self._order_python():
+        # the blocks evaluated at t_n: ("python", comp, in_idx, out_block, published) or ("fmu", fmu, in_idx)
+        self._blocks: list[tuple] = []
+        for comp in self._order(direct):
+            if comp.name in direct:
+                self._blocks.append(("fmu", comp, fmu_in[comp.name]))
+                continue
             missing = [p.name for p in comp.inputs if f"{comp.name}.{p.name}" not in source_of]
             if missing:
                 raise ConnectionCheckError(f"inputs of {comp.name} not connected: {', '.join(missing)}")
             in_idx = np.array([slots[source_of[f"{comp.name}.{p.name}"]] for p in comp.inputs], dtype=np.intp)
-            self._py.append((comp, in_idx, blocks[comp.name], published.get(comp.name)))
+            self._blocks.append(("python", comp, in_idx, blocks[comp.name], published.get(comp.name)))
 
         self.record_columns = ("time",) + tuple(record)
         self.record_units = ("s",) + tuple(self._signal_port(s).unit for s in record)
@@ -272,7 +307,9 @@ class Master:
                 comp.set_parameters(split[comp.name])
                 comp.start(t0, h, n_steps, seed)
             for fmu in self.fmus:  # reads the outputs at t0 into the signal array
-                fmu.start(t0, {**self.fmu_parameters.get(fmu.name, {}), **split[fmu.name]})
+                seeded = {fmu.seed_parameter: seed} if fmu.seed_parameter else {}
+                fmu.start(t0, {**fmu.base_parameters, **self.fmu_parameters.get(fmu.name, {}), **seeded,
+                               **split[fmu.name]})
         except BaseException as exc:  # nothing ran: a refused start is raised, never a run's status
             recorder.close("failed", f"could not start: {exc}")
             raise
@@ -331,6 +368,18 @@ class Master:
                 signals[slots] = internal_values()[which]
         return phase
 
+    def _fmu_eval_phase(self, fmu: FmuComponent, in_idx: np.ndarray) -> Callable[[int, float], None]:
+        """An FMU with direct feedthrough at ``t_n`` (feedthrough ordering): its
+        inputs at ``t_n`` set, its outputs at ``t_n`` read (it steps at the exchange)."""
+        signals, take, u = self.signals, np.take, fmu.u[:len(in_idx)]
+        write, read = fmu.write_inputs, fmu.read_outputs
+
+        def phase(n: int, t: float) -> None:
+            take(signals, in_idx, out=u)
+            write(t)
+            read(t)
+        return phase
+
     def _fmu_phase(self, t0: float) -> Callable[[int, float], None]:
         """Every FMU from ``t_n`` to ``t_{n+1}``: set all its connected inputs
         (taken at ``t_n``), doStep, read its outputs at ``t_{n+1}``."""
@@ -370,7 +419,8 @@ class Master:
             if not guard_ok(values):
                 guard.raise_violation(t, values)
 
-        python = [(f"python:{comp.name}", self._py_phase(comp, *rest)) for comp, *rest in self._py]
+        python = [(f"python:{comp.name}", self._py_phase(comp, *rest)) if kind == "python"
+                  else (f"fmu:{comp.name}", self._fmu_eval_phase(comp, *rest)) for kind, comp, *rest in self._blocks]
         exchange = self._fmu_phase(t0)
         if phase_times is not None:  # timed from outside: the loop below is the same either way
             python = [(name, _timed(phase, phase_times, name)) for name, phase in python]

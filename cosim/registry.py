@@ -19,13 +19,14 @@ scenario file finds its kinds without the caller importing anything.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 __all__ = ["ComponentKind", "Section", "FmuModel", "BuildContext", "register_component_kind", "register_section",
            "register_fmu_model", "register_scenarios", "component_kinds", "sections", "fmu_models",
-           "aliases", "scenario_folders", "PLUGIN_GROUP"]
+           "aliases", "scenario_folders", "scoped", "PLUGIN_GROUP"]
 
 PLUGIN_GROUP = "cosim.plugins"
 
@@ -167,3 +168,18 @@ def fmu_models() -> dict[str, FmuModel]:
 def scenario_folders() -> list[Path]:
     _load_plugins()
     return list(_SCENARIO_FOLDERS)
+
+
+@contextmanager
+def scoped():
+    """Registrations made inside the ``with`` block are undone at its end
+    (tests that register toys leave the process's registry as they found it)."""
+    _load_plugins()
+    saved = (dict(_KINDS), dict(_SECTIONS), dict(_MODELS), list(_SCENARIO_FOLDERS))
+    try:
+        yield
+    finally:
+        for table, before in zip((_KINDS, _SECTIONS, _MODELS), saved[:3]):
+            table.clear()
+            table.update(before)
+        _SCENARIO_FOLDERS[:] = saved[3]

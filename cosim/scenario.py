@@ -12,8 +12,9 @@ see ``docs/cosim.md``)::
     [simulation]
     duration = 50.0                      # s, > 0, a whole number of steps
     step = 0.01                          # s, > 0
-    seed = 0                             # int >= 0: passed to every component's start()
+    seed = 0                             # int >= 0: every component's start(), every FMU's seed_parameter
     start_time = 0.0                     # s
+    ordering = "feedthrough"             # or "exchange": see cosim.master and docs/cosim.md
 
     [fmus.<Name>]                        # one table per FMU instance, at least one
     model = "Plant"                      # a registered model (built on demand), or
@@ -21,6 +22,7 @@ see ``docs/cosim.md``)::
     fmi_version = 2                      # 2 or 3: the version built (models, default 2) or the
                                          #   version the file must have (FMU files, default: any)
     parameters = { x_0 = 1.0 }           # checked against the model's variables and ranges
+    seed_parameter = "seed"              # a parameter set to the run's seed at every start
 
     [components.<name>]                  # a Python component
     kind = "step_source"                 # a registered component kind, or
@@ -61,8 +63,8 @@ __all__ = ["Scenario", "load_scenario", "parse_scenario", "shipped_scenarios", "
            "table", "string", "strings", "refuse_unknown"]
 
 GENERIC = ("name", "description", "connections", "simulation", "fmus", "components", "record", "envelope")
-_SIMULATION = {"duration", "step", "seed", "start_time"}
-_FMU = {"model", "path", "fmi_version", "parameters"}
+_SIMULATION = {"duration", "step", "seed", "start_time", "ordering"}
+_FMU = {"model", "path", "fmi_version", "parameters", "seed_parameter"}
 _RECORD = {"signals", "block_rows"}
 
 
@@ -81,6 +83,7 @@ class Scenario:
     step: float
     seed: int
     start_time: float
+    ordering: str
     fmus: dict[str, dict[str, Any]]
     components: dict[str, dict[str, Any]]
     connections: list[str]
@@ -165,9 +168,15 @@ def _parse_simulation(raw: Mapping[str, Any]) -> dict[str, Any]:
     n = round(duration / step)
     if n < 1 or abs(n * step - duration) > 1e-9 * max(1.0, duration):
         raise ScenarioError(f"simulation.duration = {duration!r}: not a whole number of steps of {step!r} s")
+    from .master import ORDERINGS
+
+    ordering = string("simulation.ordering", sim.get("ordering", "feedthrough"))
+    if ordering not in ORDERINGS:
+        raise ScenarioError(f"simulation.ordering = {ordering!r}: expected one of {', '.join(ORDERINGS)}")
     return {"duration": duration, "step": step,
             "seed": check_number("simulation.seed", sim.get("seed", 0), integer=True, nonnegative=True),
-            "start_time": float(check_number("simulation.start_time", sim.get("start_time", 0.0)))}
+            "start_time": float(check_number("simulation.start_time", sim.get("start_time", 0.0))),
+            "ordering": ordering}
 
 
 def _parse_fmu(where: str, spec: Any, source: Path | None) -> dict[str, Any]:
@@ -185,6 +194,8 @@ def _parse_fmu(where: str, spec: Any, source: Path | None) -> dict[str, Any]:
             raise ScenarioError(f"{where}.fmi_version = {version!r}: expected 2 or 3")
     entry: dict[str, Any] = {"fmi_version": version, "parameters": table(f"{where}.parameters",
                                                                          spec.get("parameters", {}))}
+    if "seed_parameter" in spec:
+        entry["seed_parameter"] = string(f"{where}.seed_parameter", spec["seed_parameter"])
     if "model" in spec:
         entry["model"] = string(f"{where}.model", spec["model"])
         models = registry.fmu_models()
@@ -383,7 +394,7 @@ def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
     fmus = []
     try:
         for name, spec in scenario.fmus.items():
-            fmu = FmuComponent(name, fmu_files.get(name) or fmu_file(spec))
+            fmu = FmuComponent(name, fmu_files.get(name) or fmu_file(spec), seed_parameter=spec.get("seed_parameter"))
             fmus.append(fmu)
             fmu.instantiate()  # a file that cannot run is refused now, before anything is written
             _check_fmu_file(scenario, fmu)
@@ -411,19 +422,29 @@ def _make_component(name: str, spec: Mapping[str, Any], context: registry.BuildC
 
 def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None):
     """A :class:`~cosim.master.Master` for ``scenario`` (FMUs built on demand
-    and instantiated at once, so a file that cannot run is refused here).
+    and instantiated at once, so a file that cannot run is refused here). A
+    component kind may build an :class:`~cosim.fmu.FmuComponent` (with its
+    ``parameters`` and ``seed_parameter``); it then runs as an FMU.
 
     ``fmu_files`` may give, per instance, an FMU file or an extracted FMU
     directory to use instead (sweeps extract once and share it).
     """
     from .master import Master
 
+    from .fmu import FmuComponent
+
     fmus = _make_fmus(scenario, dict(fmu_files or {}))
     try:
         context = registry.BuildContext(scenario, {f.name: f for f in fmus})
-        python = [_make_component(name, spec, context) for name, spec in scenario.components.items()]
+        built = [_make_component(name, spec, context) for name, spec in scenario.components.items()]
+        # a kind may build its component as an FMU (e.g. a controller in FMU form)
+        python = [c for c in built if not isinstance(c, FmuComponent)]
+        for fmu in (c for c in built if isinstance(c, FmuComponent)):
+            fmus.append(fmu)
+            fmu.instantiate()
         return Master(fmus, python, scenario.connections, scenario.step, scenario.record, scenario.envelope,
-                      {name: spec["parameters"] for name, spec in scenario.fmus.items()})
+                      {name: spec["parameters"] for name, spec in scenario.fmus.items()},
+                      ordering=scenario.ordering)
     except BaseException:
         for fmu in fmus:
             fmu.close()

@@ -147,14 +147,20 @@ def _cmd_scenarios(args) -> int:
 # ---- build-fmu (FMU export; owned with fmu_models) ---------------------------------------
 
 def _cmd_build_fmu(args) -> int:
-    """Build every model of the catalog in every FMI version the exporter
-    supports; print the path of each FMU written, one per line."""
-    from fmu_models.export.build import FMI_VERSIONS, build_fmu
-    from fmu_models.catalog import MODELS
+    """Build every registered model (the plant, the wind, the references, the
+    controller of every variant) in every FMI version the exporter supports;
+    print the path of each FMU written, one per line."""
+    import shutil
 
-    for model in MODELS.values():
+    from cosim import registry
+    from fmu_models.export.build import FMI_VERSIONS
+
+    for name, model in registry.fmu_models().items():
         for version in sorted(FMI_VERSIONS):
-            print(build_fmu(model, Path(args.out), version))
+            target = Path(args.out) / f"fmi{version}" / f"{name}.fmu"
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(model.build(version), target)
+            print(target)
     return 0
 
 

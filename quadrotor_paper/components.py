@@ -10,6 +10,7 @@ Nothing heavy is imported here: the builders import what they build.
 from __future__ import annotations
 
 from dataclasses import fields
+from functools import partial
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -24,18 +25,18 @@ TRAJECTORY_INSTANCE = "reference"
 CONTROLLER_INSTANCE = "controller"
 
 
-def _fmu_model(identifier: str) -> registry.FmuModel:
-    """The catalog's model ``identifier``, imported (and built) only when a
-    scenario checks one of its parameters or needs its FMU."""
-    from fmu_models.catalog import model as catalog_model
+def _fmu_model(identifier: str, load) -> registry.FmuModel:
+    """The model ``load()`` returns, registered as ``identifier``; imported
+    (and built) only when a scenario checks one of its parameters or needs
+    its FMU."""
 
     def build(version: int):
         from fmu_models.export.build import cached_fmu
 
-        return cached_fmu(catalog_model(identifier), version)
+        return cached_fmu(load(), version)
 
     def check_parameter(name: str, value: float) -> None:
-        model = catalog_model(identifier)
+        model = load()
         try:
             var = model.variable(name)
         except KeyError:
@@ -96,13 +97,18 @@ def register() -> None:
     if _registered:
         return
     _registered = True
-    from fmu_models.catalog import MODEL_NAMES
+    from fmu_models.catalog import MODEL_NAMES, model as catalog_model
+    from fnn_controller.variants import variant_names
+
+    from fnn_controller.fmu import controller_model, fmu_identifier
 
     from .missions import parse_metrics, parse_wind
     from .trajectories import TRAJECTORIES
 
     for identifier in MODEL_NAMES:
-        registry.register_fmu_model(_fmu_model(identifier))
+        registry.register_fmu_model(_fmu_model(identifier, partial(catalog_model, identifier)))
+    for name in variant_names():  # the controller of each variant as an FMU
+        registry.register_fmu_model(_fmu_model(fmu_identifier(name), partial(controller_model, name)))
     for name in TRAJECTORIES:
         registry.register_component_kind(_trajectory_kind(name))
     registry.register_component_kind(_controller_kind())

@@ -17,6 +17,7 @@ import pytest
 
 import cosim
 import toy_models
+from cosim import registry
 from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError, ScenarioError
 from cosim.scenario import build_master, fmu_error_in_scenario, load_scenario, parse_scenario
 from toy_models import BUILDS, Constant, Gain, PController, Step, lag_fmu2, lag_step  # noqa: F401
@@ -61,7 +62,9 @@ block_rows = 5
 
 @pytest.fixture(scope="module", autouse=True)
 def toys():
-    toy_models.register_toys()
+    with registry.scoped():
+        toy_models.register_toys()
+        yield
 
 
 @pytest.fixture

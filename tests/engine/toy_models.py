@@ -260,7 +260,6 @@ def _parse_toy_lag(where: str, table: Mapping[str, Any], fmus: dict[str, dict[st
     return {"fmu": fmu, **params}
 
 
-_registered = False
 
 
 def register_toys() -> None:
@@ -272,10 +271,6 @@ def register_toys() -> None:
     Section ``[toy_lag]`` sets the lag's parameters; model
     ``toy_FirstOrderLag`` builds the toy FMU on demand.
     """
-    global _registered
-    if _registered:
-        return
-    _registered = True
     registry.register_component_kind(registry.ComponentKind(
         "toy_constant", _builder(Constant), _numbers_only(Constant), "toy constant source",
         alias="toy_source", instance="source"))

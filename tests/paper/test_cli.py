@@ -55,14 +55,20 @@ def test_scenarios_lists_the_shipped_missions(capsys):
     assert "circles" in out and "figure8" in out
 
 
-def test_build_fmu_prints_one_path_per_fmu(tmp_path, capsys):
+def test_build_fmu_writes_the_plant_wind_references_and_every_controller(tmp_path, capsys):
+    from fmpy.validation import validate_fmu
+
+    from fmu_models.catalog import MODEL_NAMES
     from fmu_models.export.build import FMI_VERSIONS
-    from fmu_models.catalog import MODELS
+    from fnn_controller.fmu import fmu_identifier
+    from fnn_controller.variants import variant_names
 
     assert main(["build-fmu", "--out", str(tmp_path)]) == 0
-    paths = capsys.readouterr().out.split()
-    assert len(paths) == len(MODELS) * len(FMI_VERSIONS)
-    assert all(p.endswith(".fmu") and (tmp_path / p).exists() for p in paths)
+    paths = [Path(p) for p in capsys.readouterr().out.split()]
+    names = set(MODEL_NAMES) | {fmu_identifier(v) for v in variant_names()}
+    assert {"Quadrotor", "WindGust", "ReferenceTwoCircles", "ControllerPDLM"} <= names
+    assert sorted(p.stem for p in paths) == sorted(n for n in names for _ in FMI_VERSIONS)
+    assert all(p.suffix == ".fmu" and p.exists() and validate_fmu(str(p)) == [] for p in paths)
 
 
 HEAVY_MODULES = ("control", "scipy.signal", "matplotlib")

@@ -40,7 +40,8 @@ def test_paper_values_in_the_shipped_missions():
 
 
 @pytest.mark.parametrize("overrides, message", [
-    ({"simulation.durration": 5.0}, "simulation.durration: unknown key; known keys: duration, seed, start_time, step"),
+    ({"simulation.durration": 5.0},
+     "simulation.durration: unknown key; known keys: duration, ordering, seed, start_time, step"),
     ({"simulation.duration": "long"}, "simulation.duration = 'long': expected a number"),
     ({"simulation.duration": -5.0}, "simulation.duration = -5.0: must be positive"),
     ({"simulation.step": 0.0}, "simulation.step = 0.0: must be positive"),
@@ -51,7 +52,8 @@ def test_paper_values_in_the_shipped_missions():
     ({"fmus.Quadrotor.parameters.mass": 1.0}, "fmus.Quadrotor.parameters.mass: Quadrotor has no parameter 'mass'"),
     ({"fmus.Quadrotor.parameters.x": 1.0}, "fmus.Quadrotor.parameters.x: 'x' is a state of Quadrotor, not a parameter"),
     ({"fmus.Quadrotor.parameters.Ix": float("nan")}, "fmus.Quadrotor.parameters.Ix = nan: expected a finite number"),
-    ({"fmus.Quadrotor.model": "Hexacopter"}, "fmus.Quadrotor.model = 'Hexacopter': unknown model; known: Quadrotor, ReferenceFigureEight, "
+    ({"fmus.Quadrotor.model": "Hexacopter"}, "fmus.Quadrotor.model = 'Hexacopter': unknown model; known: ControllerPD, "
+                                         "ControllerPDLM, ControllerPDSMC, Quadrotor, ReferenceFigureEight, "
                                          "ReferenceHover, ReferenceTwoCircles, WindGust"),
     ({"fmus.Quadrotor.fmi_version": 1}, "fmus.Quadrotor.fmi_version = 1: expected 2 or 3"),
     ({"fmus.Quadrotor.path": "x.fmu"}, "fmus.Quadrotor: give exactly one of 'model'"),
