@@ -377,6 +377,20 @@ class FmuComponent:
                 values = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.input_names, self.u))
                 raise self._fail(f"setting inputs ({values})", exc, t) from None
 
+    def set_inputs(self, values: Mapping[str, float], t: float) -> None:
+        """Set some inputs by name (the slow path, outside the step loop)."""
+        if not values:
+            return
+        vrs = [self.variables[name].valueReference for name in values]
+        try:
+            if self.fmi_version == 2:
+                self._slave.setReal(vrs, [float(v) for v in values.values()])
+            else:
+                self._slave.setFloat64(vrs, [float(v) for v in values.values()])
+        except FMICallException as exc:
+            shown = ", ".join(f"{n} = {float(v)!r}" for n, v in values.items())
+            raise self._fail(f"setting inputs ({shown})", exc, t) from None
+
     def do_step(self, t: float, h: float) -> None:
         """Advance the FMU from ``t`` to ``t + h``."""
         try:

@@ -331,13 +331,31 @@ class Master:
             raise failure
         return result
 
+    def _initial_transfer(self, n: int, t0: float) -> None:
+        """Exchange ordering, at t0 only: as libcosim does before its first
+        step, every FMU gets the values its inputs are connected to at t0 (the
+        FMUs' outputs after initialization, the Python components' first
+        outputs) and its outputs are read again, once per FMU, so a chain of
+        direct feedthroughs is consistent at t0."""
+        if n:
+            return
+        feeds = {f.name: [c for c in self.connections if c.destination.component == f.name] for f in self.fmus}
+        for _ in self.fmus:
+            for fmu in self.fmus:
+                fmu.set_inputs({c.destination.variable: self.signals[self.slots[str(c.source)]]
+                                for c in feeds[fmu.name]}, t0)
+                fmu.read_outputs(t0)
+
     # ---- the loop and its phases -------------------------------------------------
 
     def _py_phase(self, comp: PythonComponent, in_idx: np.ndarray, out_block: slice,
-                  published: tuple[np.ndarray, np.ndarray] | None) -> Callable[[int, float], None]:
+                  published: tuple[np.ndarray, np.ndarray] | None,
+                  held: np.ndarray | None = None) -> Callable[[int, float], None]:
         """One Python component's step at ``t_n``: gather its inputs (straight
         into its :meth:`~cosim.component.PythonComponent.input_buffers`, if it
-        offers them), step it, store its outputs and published internals."""
+        offers them), step it, store its outputs and published internals --
+        into ``held`` instead of the signal array when the outputs are
+        delayed (exchange ordering)."""
         signals, take, step = self.signals, np.take, comp.step
         buffers = comp.input_buffers()
         if buffers is None:
@@ -352,7 +370,16 @@ class Master:
             targets = [(in_idx[a:b], buf) for a, b, buf in zip(edges[:-1], edges[1:], buffers)]
             u = None
 
-        if published is None:
+        if held is not None:
+            def phase(n: int, t: float) -> None:
+                for idx, buf in targets:
+                    take(signals, idx, out=buf)
+                held[:] = step(n, t, u)
+                if published is not None:
+                    signals[published[1]] = comp.internal_values()[published[0]]
+                if n == 0:  # its first sample is also its output over the first step, as after
+                    signals[out_block] = held  # libcosim's initial transfer
+        elif published is None:
             def phase(n: int, t: float) -> None:
                 for idx, buf in targets:
                     take(signals, idx, out=buf)
@@ -380,9 +407,10 @@ class Master:
             read(t)
         return phase
 
-    def _fmu_phase(self, t0: float) -> Callable[[int, float], None]:
+    def _fmu_phase(self, t0: float, holds=()) -> Callable[[int, float], None]:
         """Every FMU from ``t_n`` to ``t_{n+1}``: set all its connected inputs
-        (taken at ``t_n``), doStep, read its outputs at ``t_{n+1}``."""
+        (taken at ``t_n``), doStep, read its outputs at ``t_{n+1}``; then the
+        held outputs of delayed Python components become the values at ``t_{n+1}``."""
         signals, take, h = self.signals, np.take, self.step
         writes = [(f.write_inputs, in_idx, f.u[:len(in_idx)]) for f, in_idx in self._fmu_in]
         do_steps = [f.do_step for f in self.fmus]
@@ -397,6 +425,8 @@ class Master:
             t_next = t0 + (n + 1) * h  # from the step counter, never accumulated
             for read in reads:
                 read(t_next)
+            for held, out_block in holds:
+                signals[out_block] = held
         return phase
 
     def _loop(self, t0: float, n_steps: int, recorder: Recorder, progress: Callable[[int, int], None] | None,
@@ -419,14 +449,26 @@ class Master:
             if not guard_ok(values):
                 guard.raise_violation(t, values)
 
-        python = [(f"python:{comp.name}", self._py_phase(comp, *rest)) if kind == "python"
-                  else (f"fmu:{comp.name}", self._fmu_eval_phase(comp, *rest)) for kind, comp, *rest in self._blocks]
-        exchange = self._fmu_phase(t0)
+        # exchange ordering: a Python component with inputs is sampled at t_n and
+        # its outputs held from t_{n+1}, like an FMU whose outputs follow its inputs
+        python, holds = [], []
+        for kind, comp, *rest in self._blocks:
+            if kind == "fmu":
+                python.append((f"fmu:{comp.name}", self._fmu_eval_phase(comp, *rest)))
+                continue
+            in_idx, out_block, published = rest
+            held = np.zeros(out_block.stop - out_block.start) if self.ordering == "exchange" and len(in_idx) else None
+            if held is not None:
+                holds.append((held, out_block))
+            python.append((f"python:{comp.name}", self._py_phase(comp, in_idx, out_block, published, held)))
+        exchange = self._fmu_phase(t0, holds)
         if phase_times is not None:  # timed from outside: the loop below is the same either way
             python = [(name, _timed(phase, phase_times, name)) for name, phase in python]
             record, check = _timed(record, phase_times, "record"), _timed(check, phase_times, "guard")
             exchange = _timed(exchange, phase_times, "fmu")
         steps = [phase for _, phase in python]
+        if self.ordering == "exchange":
+            steps.append(self._initial_transfer)
         for n in range(n_steps + 1):
             t = t0 + n * h  # time from the step counter, never accumulated
             signals[0] = t

@@ -14,8 +14,10 @@ Open Simulation Platform's libcosim runs it (``docs/ssp.md``).
   every parameter value (an inline ``ssv:ParameterSet`` per component), the
   default experiment (start, stop = start + duration) with the OSP annotation
   libcosim takes its step size from, and this engine's own annotation (seed,
-  recorded signals, envelope). Python components cannot go into an archive:
-  such a scenario is refused, naming them.
+  ordering, seed parameters, recorded signals, envelope; an FMU's seed
+  parameter also gets the scenario's seed in its parameter set, for other
+  tools). Python components cannot go into an archive: such a scenario is
+  refused, naming them.
 * :func:`load_ssp` reads an archive (or its extracted folder, or the ``.ssd``
   file) back into a :class:`~cosim.scenario.Scenario` (FMUs by path), checked
   by :func:`~cosim.scenario.parse_scenario` like any TOML scenario; a bad
@@ -50,6 +52,7 @@ from lxml import etree
 from .connection import check_connections, parse_connections
 from .errors import CosimError, FmuError, ScenarioError, one_line
 from .scenario import Scenario, apply_overrides, fmu_error_in_scenario, fmu_file, parse_scenario
+from .scenario import _check_fmu_file  # build_master's check of an FMU file against the scenario
 
 __all__ = ["export_ssp", "load_ssp", "is_ssp", "run_libcosim", "ssd_schema_errors", "SSD_NAME", "FMU_TYPE",
            "OSP_NAMESPACE", "OSP_ANNOTATION", "COSIM_NAMESPACE", "COSIM_ANNOTATION"]
@@ -69,7 +72,8 @@ NS = {
 OSP_NAMESPACE = "http://opensimulationplatform.com/SSP/OSPAnnotations"
 OSP_ANNOTATION = "com.opensimulationplatform"
 # This engine's own annotation on the ssd:System: what an SSD has no place for
-# (the seed, the recorded signals, the envelope). Other tools ignore it.
+# (the seed, the ordering, the seed parameters, the recorded signals, the
+# envelope). Other tools ignore it.
 COSIM_NAMESPACE = "urn:fnn-cosim:ssp-scenario:1"
 COSIM_ANNOTATION = "fnn-cosim.scenario"
 
@@ -121,17 +125,18 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
         raise fmu_error_in_scenario(scenario, exc) from None
     parts = []
     for name, fmu in components.items():
-        spec = scenario.fmus[name]
-        if spec.get("fmi_version") is not None and fmu.fmi_version != spec["fmi_version"]:
-            raise ScenarioError(f"fmus.{name}.fmi_version = {spec['fmi_version']}: the FMU file {fmu.path} is FMI "
-                                f"{fmu.model_description.fmiVersion}")
+        # the FMI version, the parameters' names and declared ranges: build_master's own check
+        _check_fmu_file(scenario, fmu)
         part = _Part(name, _fmu_bytes(fmu.path))
         defined = {u.name: u.baseUnit for u in fmu.model_description.unitDefinitions}
-        params = spec["parameters"]
-        for key in params:
-            var = fmu.variables.get(key)
-            if var is None or var.causality not in ("parameter", "input"):
-                raise ScenarioError(f"fmus.{name}.parameters.{key}: the FMU file {fmu.path} has no parameter {key!r}")
+        params = dict(scenario.fmus[name]["parameters"])
+        seed_parameter = scenario.fmus[name].get("seed_parameter")
+        if seed_parameter is not None:
+            if getattr(fmu.variables.get(seed_parameter), "causality", None) != "parameter":
+                raise ScenarioError(f"fmus.{name}.seed_parameter = {seed_parameter!r}: no parameter of the FMU file "
+                                    f"{fmu.path}")
+            # the scenario's seed, so that another SSP tool runs with it; our master sets the run's
+            params[seed_parameter] = scenario.seed
         for var in fmu.model_description.modelVariables:
             kind = var.causality
             if kind not in _KINDS or (kind == "parameter" and var.name not in params):
@@ -170,6 +175,11 @@ def _cosim_annotation(scenario: Scenario) -> etree._Element:
     q = lambda tag: f"{{{COSIM_NAMESPACE}}}{tag}"  # noqa: E731
     root = etree.Element(q("Scenario"), nsmap={"cosim": COSIM_NAMESPACE}, seed=str(scenario.seed),
                          blockRows=str(scenario.block_rows))
+    if getattr(scenario, "ordering", None) is not None:
+        root.set("ordering", scenario.ordering)
+    for name, spec in scenario.fmus.items():
+        if spec.get("seed_parameter") is not None:
+            etree.SubElement(root, q("SeedParameter"), component=name, parameter=spec["seed_parameter"])
     for signal in scenario.record:
         etree.SubElement(root, q("Record"), signal=signal)
     for signal, (low, high) in scenario.envelope.items():
@@ -348,6 +358,8 @@ class _System:
     connections: list[str]
     seed: int | None = None
     block_rows: int | None = None
+    ordering: str | None = None
+    seed_parameters: dict[str, str] = field(default_factory=dict)  # component -> parameter
     record: list[str] = field(default_factory=list)
     envelope: dict[str, list[float]] = field(default_factory=dict)
 
@@ -546,10 +558,17 @@ def _read_ssd(ssd_path: Path) -> _System:
             out.seed = int(_number(where, scenario.get("seed"), "seed"))
         if scenario.get("blockRows") is not None:
             out.block_rows = int(_number(where, scenario.get("blockRows"), "blockRows"))
+        out.ordering = scenario.get("ordering")
         for item in scenario:
             tag = etree.QName(item).localname if isinstance(item.tag, str) else None
             if tag == "Record":
                 out.record.append(item.get("signal", ""))
+            elif tag == "SeedParameter":
+                component, name = item.get("component"), item.get("parameter")
+                if component not in components or not name:
+                    raise ScenarioError(f"{where}: SeedParameter: component {component!r} is no component, or "
+                                        f"no parameter is named")
+                out.seed_parameters[component] = name
             elif tag == "Envelope":
                 signal = item.get("signal", "")
                 out.envelope[signal] = [_number(f"{where}: Envelope {signal!r}", item.get(k), k)
@@ -610,9 +629,11 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
     The communication step comes from the OSP annotation
     (``osp:FixedStepAlgorithm baseStepSize``), else from ``step``; the
     duration from the default experiment (stop - start), else from
-    ``duration``; the seed, recorded signals and envelope from this engine's
-    annotation if the archive has it (else seed 0, every output connector of
-    every component recorded, no envelope). ``overrides`` sets dotted keys
+    ``duration``; the seed, ordering, seed parameters, recorded signals and
+    envelope from this engine's annotation if the archive has it (else seed
+    0, the default ordering, every output connector of every component
+    recorded, no envelope). A seed parameter's bound value is dropped: the
+    master sets it to the run's seed. ``overrides`` sets dotted keys
     (``{"simulation.duration": 5.0}``) as for a TOML scenario; the result is
     checked by :func:`~cosim.scenario.parse_scenario`.
 
@@ -647,8 +668,13 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
             "description": system.description,
             "connections": system.connections,
             "simulation": {"duration": length, "step": system.step if system.step is not None else step,
-                           "seed": system.seed or 0, "start_time": start},
-            "fmus": {c: {"path": str(entry["path"]), "parameters": dict(entry["parameters"])}
+                           "seed": system.seed or 0, "start_time": start,
+                           **({"ordering": system.ordering} if system.ordering else {})},
+            "fmus": {c: {"path": str(entry["path"]),
+                         # a seed parameter is set by the master to the run's seed: not a fixed value
+                         "parameters": {k: v for k, v in entry["parameters"].items()
+                                        if k != system.seed_parameters.get(c)},
+                         **({"seed_parameter": system.seed_parameters[c]} if c in system.seed_parameters else {})}
                      for c, entry in system.components.items()},
             "record": {"signals": record, **({"block_rows": system.block_rows} if system.block_rows else {})},
             "envelope": dict(system.envelope),

@@ -25,6 +25,9 @@ rotor limit) is the plant's: ``plant`` names the FMU instance it is taken
 from (default ``Quadrotor``; its scenario parameters over the FMU's start
 values), and ``nominal = { m = 1.2 }`` is a deliberate, named mismatch.
 
+``form = "fmu"`` runs the controller as its FMU (the same function compiled,
+:mod:`fnn_controller.fmu`) instead of the Python fast path.
+
 The run's seed draws f_ij(0) (§5.1) at every start.
 """
 from __future__ import annotations
@@ -44,7 +47,8 @@ from cosim.scenario import refuse_unknown, string, table
 __all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT", "internal_ports"]
 
 DEFAULT_PLANT = "Quadrotor"
-_PARAMETERS = ("variant", "psi_ref", "position", "geometric", "plant", "nominal")
+_PARAMETERS = ("variant", "psi_ref", "position", "geometric", "plant", "nominal", "form", "fmi_version")
+FORMS = ("python", "fmu")
 _AXES = "xyz"
 
 
@@ -156,11 +160,32 @@ class ControllerComponent(PythonComponent):
         if context is not None and plant not in context.fmus and "plant" not in parameters:
             plant = ""  # no FMU of the default name: the controller keeps its own defaults
         vehicle = _nominal_vehicle(name, plant, nominal, context)
+        form = string(f"{name}.form", parameters.get("form", "python"))
+        if form not in FORMS:
+            raise ScenarioError(f"{name}.form = {form!r}: expected one of {', '.join(FORMS)}")
+        version = parameters.get("fmi_version", 2)
+        if version not in (2, 3):
+            raise ScenarioError(f"{name}.fmi_version = {version!r}: expected 2 or 3")
         try:
-            return cls(parameters.get("variant", "pd+lm"), parameters.get("position"), parameters.get("geometric"),
-                       psi_ref, name=name, vehicle=vehicle)
+            component = cls(parameters.get("variant", "pd+lm"), parameters.get("position"),
+                            parameters.get("geometric"), psi_ref, name=name, vehicle=vehicle)
         except ValueError as exc:  # a parameter dataclass refused a combination of values
             raise ScenarioError(f"{name}: {exc}") from None
+        return component.as_fmu(version) if form == "fmu" and context is not None else component
+
+    def as_fmu(self, fmi_version: int = 2):
+        """This controller as its FMU (:mod:`fnn_controller.fmu`): the same
+        parametric step compiled, its parameters set to this component's, its
+        ``seed`` to the run's seed; ``psi_ref`` is then an input, held at this
+        component's value unless connected."""
+        from cosim.fmu import FmuComponent
+        from fmu_models.export.build import cached_fmu
+        from fnn_controller.fmu import controller_model
+        from fnn_controller.parametric import parameter_table
+
+        values = {p.name: p.default for p in parameter_table(self.default_variant, self.position, self.geometric)}
+        path = cached_fmu(controller_model(self.default_variant), fmi_version)
+        return FmuComponent(self.name, path, parameters={**values, "psi_ref": self.psi_ref}, seed_parameter="seed")
 
     def _check_variant(self, variant: Any) -> str:
         names = self._fc.variant_names()

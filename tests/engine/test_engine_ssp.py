@@ -5,6 +5,7 @@ answers are derived by hand. ``docs/ssp.md`` quotes what these tests find."""
 from __future__ import annotations
 
 import gc
+import importlib.util
 import re
 import subprocess
 import sys
@@ -18,8 +19,11 @@ from lxml import etree
 
 import cosim
 import toy_models
+from cosim import registry
 from cosim.connection import parse_connections
 from cosim.errors import ConnectionCheckError, ScenarioError
+from cosim.fmu import FmuComponent
+from cosim.master import Master
 from cosim.scenario import build_master, parse_scenario
 from cosim.ssp import (COSIM_ANNOTATION, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, export_ssp, load_ssp,
                        ssd_schema_errors)
@@ -37,6 +41,7 @@ duration = 2.0
 step = 0.1
 seed = 7
 start_time = 0.5
+ordering = "exchange"
 
 [fmus.A]
 model = "toy_FirstOrderLag"
@@ -61,7 +66,9 @@ block_rows = 4
 
 @pytest.fixture(scope="module", autouse=True)
 def toys():
-    toy_models.register_toys()
+    with registry.scoped():
+        toy_models.register_toys()
+        yield
 
 
 @pytest.fixture
@@ -93,8 +100,8 @@ def test_round_trip_gives_the_same_scenario(scenario, archive):
         assert loaded.fmus[name]["path"].read_bytes() == toy_models.lag_fmu_path(2).read_bytes()
     assert expanded(loaded.connections) == expanded(scenario.connections) == [("A.y", "B.u"), ("B.y", "C.u")]
     assert loaded.components == {}
-    for key in ("name", "description", "duration", "step", "seed", "start_time", "record", "block_rows",
-                "envelope"):
+    for key in ("name", "description", "duration", "step", "seed", "start_time", "ordering", "record",
+                "block_rows", "envelope"):
         assert getattr(loaded, key) == getattr(scenario, key), key
     assert loaded.source.name == SSD_NAME and loaded.source.parent.is_dir()
 
@@ -257,6 +264,9 @@ def test_export_refuses_python_components_naming_them(tmp_path):
     (lambda raw, bad: raw["fmus"]["A"].update(path=str(toy_models.lag_fmu_path(2)), parameters={"nope": 1.0})
      or raw["fmus"]["A"].pop("model"),
      ScenarioError, r"^fmus\.A\.parameters\.nope: the FMU file .* has no parameter 'nope'$"),
+    (lambda raw, bad: raw["fmus"]["A"].update(path=str(toy_models.lag_fmu_path(2)), parameters={"tau": 0.0})
+     or raw["fmus"]["A"].pop("model"),
+     ScenarioError, r"^fmus\.A\.parameters\.tau = 0\.0: outside the range \[0\.001, inf\] the FMU file .* declares$"),
     (lambda raw, bad: raw.update(connections=["A.y -> B.rate"]),
      ConnectionCheckError, r"^connection A\.y -> B\.rate: destination B\.rate is an output, not an input$"),
     (lambda raw, bad: raw.update(record={"signals": ["A.nope"]}),
@@ -433,32 +443,42 @@ def probe_fmu():
     return cached_fmu(PROBE, 2)
 
 
-def probe_archive(probe_fmu, tmp_path, fmus, connections, signals, duration=1.0):
-    raw = {"name": "probes", "connections": connections, "simulation": {"duration": duration, "step": H},
-           "fmus": {name: {"path": str(probe_fmu), "parameters": p} for name, p in fmus.items()},
+def probe_archive(probe_fmu, tmp_path, fmus, connections, signals, duration=1.0, seed=0):
+    raw = {"name": "probes", "connections": connections,
+           "simulation": {"duration": duration, "step": H, "seed": seed},
+           "fmus": {name: {"path": str(probe_fmu), **spec} for name, spec in fmus.items()},
            "record": {"signals": signals}}
     return export_ssp(parse_scenario(raw), tmp_path / "probes.ssp")
 
 
-def both(path, signals):
-    """The archive run by libcosim and by our master."""
+def both(path, signals, ordering="exchange"):
+    """The archive run by libcosim and by our master in ``ordering``."""
     from cosim.ssp import run_libcosim
 
-    loaded = load_ssp(path)
+    loaded = load_ssp(path, overrides={"simulation.ordering": ordering})
     with build_master(loaded) as master:
-        ours = master.run(loaded.duration)
+        ours = master.run(loaded.duration, seed=loaded.seed)
     return run_libcosim(path, signals), ours
+
+
+def needs_libcosim():
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
 
 
 CHAIN = ["A.c -> B.u", "B.echo -> C.u"]
 CHAIN_SIGNALS = ["A.c", "A.echo", "B.u", "B.s", "B.echo", "C.u", "C.s", "C.echo"]
+CHAIN_FMUS = {"A": {"parameters": {"c_0": 100.0}}, "B": {}, "C": {}}
 
 
 @pytest.fixture
-def chain(probe_fmu, tmp_path):
-    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
-    path = probe_archive(probe_fmu, tmp_path, {"A": {"c_0": 100.0}, "B": {}, "C": {}}, CHAIN, CHAIN_SIGNALS)
-    return both(path, CHAIN_SIGNALS)
+def chain_archive(probe_fmu, tmp_path):
+    needs_libcosim()
+    return probe_archive(probe_fmu, tmp_path, CHAIN_FMUS, CHAIN, CHAIN_SIGNALS)
+
+
+@pytest.fixture
+def chain(chain_archive):
+    return both(chain_archive, CHAIN_SIGNALS)
 
 
 def test_libcosim_transfers_connected_values_at_initialization(chain):
@@ -487,52 +507,95 @@ def test_libcosim_is_jacobi_and_reads_outputs_right_after_do_step(chain):
     assert np.allclose(np.diff(lc["C.s"])[1:], H * a_c[:-2], atol=1e-12)
 
 
-def test_our_master_differs_from_libcosim_at_initialization_only(chain):
-    """Our master orders each step as libcosim does (Jacobi among FMUs,
-    outputs read right after doStep) but transfers nothing before the first
-    step: outputs at t0 are read after each FMU's initialization with its
-    inputs at their start values (-7), and that is what a second hop gets
-    over the first step. docs/ssp.md relies on this; update both if the
-    master's initialization changes."""
+def test_the_exchange_ordering_is_libcosims(chain):
+    """Our master's 'exchange' ordering is libcosim's fixed-step algorithm:
+    connected values transferred before the first step (once per FMU, so two
+    direct-feedthrough hops are consistent at t0), then Jacobi among FMUs with
+    outputs read right after doStep (docs/ssp.md)."""
     lc, ours = chain
-    assert ours["B.echo"][0] == -7.0 and lc["B.echo"][0] == 100.0  # ours: B's input start value at t0
-    assert ours["C.s"][1] == pytest.approx(H * -7.0) and lc["C.s"][1] == pytest.approx(H * 100.0)
-    for name in ("A.c", "B.s"):  # A's clock and B's integral agree all along
+    assert ours["B.echo"][0] == lc["B.echo"][0] == 100.0  # transferred at initialization
+    assert ours["C.s"][1] == pytest.approx(H * 100.0) and lc["C.s"][1] == pytest.approx(H * 100.0)
+    for name in ("A.c", "B.s", "B.echo", "C.s", "C.echo"):
         assert np.allclose(ours[name], lc[name], rtol=0, atol=1e-12), name
-    assert np.array_equal(ours["B.echo"][1:], lc["B.echo"][1:])
-    # C, one hop further, differs by what it integrated over the first step only
-    assert np.allclose(ours["C.s"] - lc["C.s"], np.r_[0.0, np.full(len(lc["C.s"]) - 1, H * (-7.0 - 100.0))],
-                       atol=1e-12)
 
 
-def test_a_loop_through_a_direct_feedthrough_fmu_lags_one_step(probe_fmu, tmp_path):
+def test_the_feedthrough_ordering_has_no_delay_per_hop(chain_archive):
+    """Our master's default 'feedthrough' ordering evaluates an FMU whose used
+    output depends directly on a connected input at t_n (inputs set, outputs
+    read, no step): B.echo(t_n) = A.c(t_n), and C integrates A.c(t_n), where
+    libcosim's C integrates A.c(t_n-1). At t0 it agrees with libcosim's
+    initialization."""
+    lc, ours = both(chain_archive, CHAIN_SIGNALS, ordering="feedthrough")
+    a_c = ours["A.c"]
+    assert np.array_equal(ours["B.echo"], a_c) and np.array_equal(ours["C.echo"], a_c)
+    assert np.allclose(np.diff(ours["C.s"]), H * a_c[:-1], atol=1e-12)
+    assert ours["B.echo"][0] == lc["B.echo"][0] and ours["C.s"][1] == pytest.approx(lc["C.s"][1])
+    assert np.allclose(ours["B.s"], lc["B.s"], rtol=0, atol=1e-12)  # one hop from a state: no difference
+    assert not np.allclose(ours["C.s"], lc["C.s"], rtol=0, atol=1e-3)
+
+
+def test_a_loop_through_a_direct_feedthrough_fmu(probe_fmu, tmp_path):
     """Plant P (s integrates u) and an FMU 'controller' K (echo = u) in a loop,
-    P.s -> K.u, K.echo -> P.u: P receives K's output read after K's previous
-    step, i.e. K's answer to P.s(t_{n-1}): s_{n+1} = s_n + h s_{n-1}, in
-    libcosim and in our master; only the first step differs (libcosim: K
-    answered P.s(t0) at initialization; ours: K's start value)."""
-    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
+    P.s -> K.u, K.echo -> P.u, s(0) = 1, h = 0.1. In libcosim and in our
+    'exchange' ordering, P receives K's output read after K's previous step,
+    i.e. K's answer to P.s(t_{n-1}): s_{n+1} = s_n + h s_{n-1}, K having
+    answered P.s(t0) at initialization. Our 'feedthrough' ordering evaluates K
+    at t_n, as a Python K would be: s_{n+1} = (1 + h) s_n. A Python K in the
+    exchange ordering is sampled at t_n and held from t_{n+1}: the FMU's delay."""
+    needs_libcosim()
     signals = ["P.s", "P.u", "K.echo"]
-    path = probe_archive(probe_fmu, tmp_path, {"P": {"s_0": 1.0}, "K": {}}, ["P.s -> K.u", "K.echo -> P.u"],
-                         signals, duration=0.5)
-    lc, ours = both(path, signals)
-    for s, first in ((lc["P.s"], 1.0), (ours["P.s"], -7.0)):
-        assert s[1] == pytest.approx(1.0 + H * first, abs=1e-12)
+    path = probe_archive(probe_fmu, tmp_path, {"P": {"parameters": {"s_0": 1.0}}, "K": {}},
+                         ["P.s -> K.u", "K.echo -> P.u"], signals, duration=0.5)
+    lc, exchange = both(path, signals, ordering="exchange")
+    _, feedthrough = both(path, signals, ordering="feedthrough")
+    for s in (lc["P.s"], exchange["P.s"]):
+        assert s[1] == pytest.approx(1.0 + H * 1.0, abs=1e-12)
         assert np.allclose(s[2:], s[1:-1] + H * s[:-2], atol=1e-12)
-    # a Python controller in our master would give s_{n+1} = s_n + h s_n (no delay): 1.1, 1.21, ...
-    assert lc["P.s"][2] == pytest.approx(1.2) and not lc["P.s"][2] == pytest.approx(1.21)
+    assert lc["P.s"][:4] == pytest.approx([1.0, 1.1, 1.2, 1.31])
+    assert np.allclose(exchange["P.s"], lc["P.s"], rtol=0, atol=1e-12)
+    assert feedthrough["P.s"] == pytest.approx(1.1 ** np.arange(6), abs=1e-12)
+    # the same 'controller' as a Python component of our master, in either ordering
+    for ordering, expected in (("feedthrough", feedthrough), ("exchange", exchange)):
+        master = Master([FmuComponent("P", probe_fmu)], [toy_models.Gain("K")], ["P.s -> K.u", "K.y -> P.u"], H,
+                        ["P.s"], fmu_parameters={"P": {"s_0": 1.0}}, ordering=ordering)
+        with master:
+            python = master.run(0.5)
+        assert np.allclose(python["P.s"], expected["P.s"], rtol=0, atol=1e-12), ordering
+
+
+def test_a_seed_parameter_travels_in_the_parameter_set(probe_fmu, tmp_path):
+    """An FMU's seed parameter: the archive binds it to the scenario's seed
+    (so libcosim starts the same way), the loaded scenario names it again and
+    drops the fixed value (our master sets the run's seed)."""
+    path = probe_archive(probe_fmu, tmp_path, {"A": {"seed_parameter": "c_0"}}, [], ["A.c"], seed=42)
+    values = {p.get("name"): p[0].get("value") for p in ssd_of(path).iterfind(".//ssv:Parameter", NS)}
+    assert values == {"c_0": "42.0"}
+    loaded = load_ssp(path)
+    assert loaded.fmus["A"]["seed_parameter"] == "c_0" and loaded.fmus["A"]["parameters"] == {}
+    assert loaded.seed == 42
+    with build_master(loaded) as master:
+        assert master.run(loaded.duration, seed=loaded.seed)["A.c"][0] == 42.0
+        assert master.run(loaded.duration, seed=5)["A.c"][0] == 5.0
+    if importlib.util.find_spec("libcosimpy") is not None:
+        from cosim.ssp import run_libcosim
+
+        assert run_libcosim(path, ["A.c"])["A.c"][0] == 42.0
+    with pytest.raises(ScenarioError, match=r"^fmus\.A\.seed_parameter = 'u': no parameter of the FMU file "):
+        probe_archive(probe_fmu, tmp_path, {"A": {"seed_parameter": "u"}}, [], ["A.c"])
 
 
 def test_libcosim_runs_the_exported_toy_chain_as_our_master(archive):
-    """The lag chain: every state agrees; a direct-feedthrough output (rate)
-    differs only at t0, where libcosim has already transferred A.y to B.u.
-    A recorded input differs by one row: our master records the value its
-    source gives it at t_n (what the FMU gets for [t_n, t_n+1]); libcosim
-    reads the FMU's input after the step, i.e. what it held over [t_n-1, t_n]."""
-    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
+    """The lag chain in the 'exchange' ordering: every state and every
+    direct-feedthrough output (rate) agrees, t0 included (both transfer A.y to
+    B.u at initialization). A recorded input differs by one row: our
+    master records the value its source gives it at t_n (what the FMU gets
+    for [t_n, t_n+1]); libcosim reads the FMU's input after the step, i.e.
+    what it held over [t_n-1, t_n]."""
+    needs_libcosim()
     from cosim.ssp import run_libcosim
 
     loaded = load_ssp(archive)
+    assert loaded.ordering == "exchange"
     with build_master(loaded) as master:
         ours = master.run(loaded.duration, t0=loaded.start_time)
     lc = run_libcosim(archive, loaded.record)
@@ -542,6 +605,5 @@ def test_libcosim_runs_the_exported_toy_chain_as_our_master(archive):
     assert np.array_equal(ours["C.u"], ours["B.y"])
     assert lc["C.u"][0] == ours["C.u"][0] and np.allclose(lc["C.u"][1:], ours["C.u"][:-1], rtol=0, atol=1e-12)
     for name in ("B.rate", "C.rate"):
-        assert np.allclose(lc[name][1:], ours[name][1:], rtol=0, atol=1e-12), name
-    assert ours["B.rate"][0] == pytest.approx((0.0 - 0.0) / 0.25)  # B.u still at its start value 0
-    assert lc["B.rate"][0] == pytest.approx((2.0 * 1.5 - 0.0) / 0.25)  # B.u = A.y(t0) = 1.5 already
+        assert np.allclose(lc[name], ours[name], rtol=0, atol=1e-12), name
+    assert ours["B.rate"][0] == pytest.approx((2.0 * 1.5 - 0.0) / 0.25)  # B.u = A.y(t0) = 1.5: transferred at t0
