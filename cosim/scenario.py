@@ -59,7 +59,7 @@ from .config import check_number
 from .errors import FmuError, ScenarioError
 
 __all__ = ["Scenario", "load_scenario", "parse_scenario", "shipped_scenarios", "scenario_path",
-           "apply_overrides", "build_master", "fmu_file", "fmu_error_in_scenario", "check_fmu_parameters",
+           "apply_overrides", "build_master", "fmu_file", "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file",
            "table", "string", "strings", "refuse_unknown"]
 
 GENERIC = ("name", "description", "connections", "simulation", "fmus", "components", "record", "envelope")
@@ -354,7 +354,7 @@ def fmu_file(spec: Mapping[str, Any]) -> Path:
     return registry.fmu_models()[spec["model"]].build(spec["fmi_version"])
 
 
-def _check_fmu_file(scenario: Scenario, fmu) -> None:
+def check_fmu_file(scenario: Scenario, fmu) -> None:
     """What the scenario says of an FMU file (its FMI version, its
     parameters and their declared ranges) against what the file declares; a
     value the FMU refuses although its description allows it is refused at
@@ -397,7 +397,7 @@ def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
             fmu = FmuComponent(name, fmu_files.get(name) or fmu_file(spec), seed_parameter=spec.get("seed_parameter"))
             fmus.append(fmu)
             fmu.instantiate()  # a file that cannot run is refused now, before anything is written
-            _check_fmu_file(scenario, fmu)
+            check_fmu_file(scenario, fmu)
     except FmuError as exc:
         for fmu in fmus:
             fmu.close()

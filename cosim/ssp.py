@@ -33,6 +33,7 @@ name the element it comes from.
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import shutil
@@ -49,10 +50,11 @@ from typing import Any, Mapping, Sequence
 
 from lxml import etree
 
+from . import registry
 from .connection import check_connections, parse_connections
 from .errors import CosimError, FmuError, ScenarioError, one_line
 from .scenario import Scenario, apply_overrides, fmu_error_in_scenario, fmu_file, parse_scenario
-from .scenario import _check_fmu_file  # build_master's check of an FMU file against the scenario
+from .scenario import check_fmu_file
 
 __all__ = ["export_ssp", "load_ssp", "is_ssp", "run_libcosim", "ssd_schema_errors", "SSD_NAME", "FMU_TYPE",
            "OSP_NAMESPACE", "OSP_ANNOTATION", "COSIM_NAMESPACE", "COSIM_ANNOTATION"]
@@ -126,7 +128,7 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     parts = []
     for name, fmu in components.items():
         # the FMI version, the parameters' names and declared ranges: build_master's own check
-        _check_fmu_file(scenario, fmu)
+        check_fmu_file(scenario, fmu)
         part = _Part(name, _fmu_bytes(fmu.path))
         defined = {u.name: u.baseUnit for u in fmu.model_description.unitDefinitions}
         params = dict(scenario.fmus[name]["parameters"])
@@ -184,6 +186,9 @@ def _cosim_annotation(scenario: Scenario) -> etree._Element:
         etree.SubElement(root, q("Record"), signal=signal)
     for signal, (low, high) in scenario.envelope.items():
         etree.SubElement(root, q("Envelope"), signal=signal, low=_num(low), high=_num(high))
+    for name in registry.sections():  # an application's own tables (e.g. which signals a metric compares)
+        if name in scenario.raw:
+            etree.SubElement(root, q("Section"), name=name).text = json.dumps(scenario.raw[name])
     return root
 
 
@@ -362,6 +367,7 @@ class _System:
     seed_parameters: dict[str, str] = field(default_factory=dict)  # component -> parameter
     record: list[str] = field(default_factory=list)
     envelope: dict[str, list[float]] = field(default_factory=dict)
+    sections: dict[str, Any] = field(default_factory=dict)  # an application's own tables, by name
 
 
 def _q(prefix: str, tag: str) -> str:
@@ -573,6 +579,11 @@ def _read_ssd(ssd_path: Path) -> _System:
                 signal = item.get("signal", "")
                 out.envelope[signal] = [_number(f"{where}: Envelope {signal!r}", item.get(k), k)
                                         for k in ("low", "high")]
+            elif tag == "Section":
+                try:
+                    out.sections[item.get("name", "")] = json.loads(item.text or "")
+                except json.JSONDecodeError as exc:
+                    raise ScenarioError(f"{where}: Section {item.get('name')!r}: not JSON ({exc})") from None
     return out
 
 
@@ -678,6 +689,7 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
                      for c, entry in system.components.items()},
             "record": {"signals": record, **({"block_rows": system.block_rows} if system.block_rows else {})},
             "envelope": dict(system.envelope),
+            **system.sections,
         }
         try:
             scenario = parse_scenario(apply_overrides(raw, overrides or {}), source=ssd_path)

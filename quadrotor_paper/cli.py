@@ -2,7 +2,9 @@
 
 Subcommands::
 
-    fnn-cosim run SCENARIO [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots] [--profile]
+    fnn-cosim run SCENARIO|FILE.ssp [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots]
+                 [--profile] [--save-learned FILE] [--load-learned FILE]
+    fnn-cosim export-ssp SCENARIO --out FILE.ssp [--set KEY=VALUE ...]
     fnn-cosim table2 [--out DIR] [--seeds 10] [--winds 1,3,5] [--duration S] [--workers 2]
     fnn-cosim table3 [--out DIR] [--seeds 10] [--duration S] [--workers 2]
     fnn-cosim reproduce [--out DIR] [--seeds 10] [--duration S] [--workers 2]
@@ -62,12 +64,21 @@ def _cmd_run(args) -> int:
     from cosim.progress import Progress
     from cosim.scenario import load_scenario
 
+    from cosim.errors import ScenarioError
+    from cosim.ssp import is_ssp, load_ssp
+
     overrides = _overrides(args.set)
-    if args.variant:
-        overrides["controller.variant"] = args.variant
     if args.seed is not None:
         overrides["simulation.seed"] = args.seed
-    scenario = load_scenario(args.scenario, overrides)
+    if is_ssp(args.scenario):
+        if args.variant:
+            raise ScenarioError(f"{args.scenario}: --variant names a Python controller; an SSP archive's "
+                                f"controller is the FMU it holds")
+        scenario = load_ssp(args.scenario, overrides=overrides)
+    else:
+        if args.variant:
+            overrides["controller.variant"] = args.variant
+        scenario = load_scenario(args.scenario, overrides)
     out = Path(args.out) if args.out else DEFAULT_OUT / f"run-{scenario.name}"
     bar = Progress(int(round(scenario.duration / scenario.step)), f"run {scenario.name}", enabled=not args.quiet)
     try:
@@ -136,6 +147,17 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
+def _cmd_export_ssp(args) -> int:
+    """Write the scenario, every component as an FMU, as an SSP archive."""
+    from cosim.scenario import load_scenario
+    from cosim.ssp import export_ssp
+
+    from .portable import all_fmu
+
+    print(export_ssp(all_fmu(load_scenario(args.scenario, _overrides(args.set))), args.out))
+    return 0
+
+
 def _cmd_scenarios(args) -> int:
     from cosim.scenario import load_scenario, shipped_scenarios
 
@@ -182,7 +204,7 @@ def _parser() -> argparse.ArgumentParser:
             sp.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
 
     r = sub.add_parser("run", help="run one scenario: results CSV, plots, summary")
-    r.add_argument("scenario", help="TOML file or shipped scenario name (circles, figure8)")
+    r.add_argument("scenario", help="TOML file, shipped scenario name (circles, figure8), or SSP archive (.ssp)")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario value, e.g. --set wind.speed=5 (repeatable)")
     r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
@@ -204,6 +226,12 @@ def _parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("reproduce", help="Tables 2 and 3 and the figures into results/report.md")
     common(rp)
     rp.set_defaults(func=_cmd_reproduce)
+
+    e = sub.add_parser("export-ssp", help="write a scenario as an SSP 1.0 archive, every component an FMU")
+    e.add_argument("scenario", help="TOML file or shipped scenario name (circles, figure8)")
+    e.add_argument("--out", required=True, help="the .ssp file to write")
+    e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
+    e.set_defaults(func=_cmd_export_ssp)
 
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
     sc.set_defaults(func=_cmd_scenarios)
