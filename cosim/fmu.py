@@ -377,6 +377,30 @@ class FmuComponent:
                 values = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.input_names, self.u))
                 raise self._fail(f"setting inputs ({values})", exc, t) from None
 
+    def serialize_state(self) -> bytes:
+        """The FMU's state, serialized (FMI getFMUState + serializeFMUState)."""
+        s = self._slave
+        try:
+            state = s.getFMUState()
+            try:
+                return bytes(s.serializeFMUState(state))
+            finally:
+                s.freeFMUState(state)
+        except FMICallException as exc:
+            raise self._fail("serializing the FMU state", exc) from None
+
+    def restore_state(self, blob: bytes) -> None:
+        """Restore a serialized FMU state (deserializeFMUState + setFMUState)."""
+        s = self._slave
+        try:
+            state = s.deserializeFMUState(blob)
+            try:
+                s.setFMUState(state)
+            finally:
+                s.freeFMUState(state)
+        except FMICallException as exc:
+            raise self._fail("restoring a serialized FMU state", exc) from None
+
     def set_inputs(self, values: Mapping[str, float], t: float) -> None:
         """Set some inputs by name (the slow path, outside the step loop)."""
         if not values:

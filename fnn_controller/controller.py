@@ -51,7 +51,7 @@ from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, 
 from .position import FNN_STATE_SIZE, PositionParams, fnn_state_size, initial_fnn_state, position_controller
 
 __all__ = [
-    "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES", "OUTPUTS", "state_size",
+    "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES", "OUTPUTS", "state_size", "state_ports",
     "controller_step_function", "flat_step_function", "initial_state", "raise_non_finite", "FastFunction",
     "QuadrotorController",
 ]
@@ -59,6 +59,23 @@ __all__ = [
 STATE_SIZE = FNN_STATE_SIZE + VEL_STATE_SIZE  # the paper's variants
 FNN_STATE = slice(0, FNN_STATE_SIZE)
 VEL_STATE = slice(FNN_STATE_SIZE, STATE_SIZE)
+
+
+def state_ports(variant: str) -> tuple[tuple[str, str, str], ...]:
+    """Name, unit and meaning of every element of ``variant``'s controller
+    state, in state order: the learned state of each axis (``f_12_x``, the
+    variant's axis state ports per axis), then the velocity controller's
+    previous R* and its flag. The one naming of the state: the controller
+    FMU's locals, the component's published signals, learned-state files."""
+    from .variants import variant as lookup
+
+    v = lookup(variant)
+    learned = tuple((f"{name}_{axis}", unit, f"learned state of axis {axis} ({v.label})")
+                    for axis in "xyz" for name, unit in v.axis_state_ports)
+    previous = tuple((f"R_ref_prev_{i}", "1", "previous desired attitude R*, column-major") for i in range(1, 10))
+    ports = learned + previous + (("R_ref_primed", "1", "1 once R* has been computed since reset"),)
+    assert len(ports) == state_size(variant)
+    return ports
 
 
 def state_size(variant: str) -> int:

@@ -37,8 +37,8 @@ from fmu_models.export.model import FmuModel, Sampled
 from fmu_models.export.variables import discrete, input_, output, parameter
 from fmu_models.models.quadrotor import QUADROTOR
 
-from .controller import OUTPUTS
-from .geometric import VEL_STATE_SIZE, GeometricParams
+from .controller import OUTPUTS, state_ports
+from .geometric import GeometricParams
 from .parametric import initial_state_function, parameter_table, parametric_step_function
 from .position import PositionParams
 from .variants import variant as lookup
@@ -60,13 +60,7 @@ def fmu_identifier(variant: str) -> str:
 
 
 def _discrete_states(variant: str) -> tuple:
-    v = lookup(variant)
-    learned = tuple(discrete(f"{name}_{axis}", unit, f"learned state of axis {axis} ({v.label})")
-                    for axis in _AXES for name, unit in v.axis_state_ports)
-    previous = tuple(discrete(f"R_ref_prev_{i}", "1", "previous desired attitude R*, column-major")
-                     for i in range(1, 10))
-    assert len(previous) + 1 == VEL_STATE_SIZE
-    return learned + previous + (discrete("R_ref_primed", "1", "1 once R* has been computed since reset"),)
+    return tuple(discrete(name, unit, text) for name, unit, text in state_ports(variant))
 
 
 @lru_cache(maxsize=None)

@@ -70,6 +70,8 @@ def _cmd_run(args) -> int:
     overrides = _overrides(args.set)
     if args.seed is not None:
         overrides["simulation.seed"] = args.seed
+    if args.load_learned:
+        overrides["controller.learned"] = str(args.load_learned)
     if is_ssp(args.scenario):
         if args.variant:
             raise ScenarioError(f"{args.scenario}: --variant names a Python controller; an SSP archive's "
@@ -81,10 +83,22 @@ def _cmd_run(args) -> int:
         scenario = load_scenario(args.scenario, overrides)
     out = Path(args.out) if args.out else DEFAULT_OUT / f"run-{scenario.name}"
     bar = Progress(int(round(scenario.duration / scenario.step)), f"run {scenario.name}", enabled=not args.quiet)
-    try:
-        result, summary = run_once(scenario, out, progress=lambda n, total: bar.update(n), profile=args.profile)
-    finally:
-        bar.close()
+    from cosim.scenario import build_master
+
+    with build_master(scenario) as master:
+        try:
+            result, summary = run_once(scenario, out, progress=lambda n, total: bar.update(n), master=master,
+                                       profile=args.profile)
+        finally:
+            bar.close()
+        if args.save_learned:
+            from .learned import save_learned
+
+            if "controller" not in master.components:
+                raise ScenarioError(f"--save-learned {args.save_learned}: the scenario has no controller")
+            summary["learned_state"] = str(save_learned(master.components["controller"], args.save_learned))
+    if args.load_learned:
+        summary["resumed_from"] = str(args.load_learned)
     figures = []
     if not args.no_plots and summary["rows"] > 1:
         from .plots import run_figures  # matplotlib only when there is something to draw
@@ -211,6 +225,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--variant", choices=variant_names(), help="controller variant")
     r.add_argument("--no-plots", action="store_true")
     r.add_argument("--profile", action="store_true", help="time each phase of the loop (summary.json: cost_per_step_us)")
+    r.add_argument("--save-learned", metavar="FILE", help="write the controller's learned state after the run")
+    r.add_argument("--load-learned", metavar="FILE",
+                   help="start the controller from a saved learned state (resume learning)")
     common(r, seeds=False)
     r.set_defaults(func=_cmd_run)
 

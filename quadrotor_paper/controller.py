@@ -47,7 +47,7 @@ from cosim.scenario import refuse_unknown, string, table
 __all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT", "internal_ports"]
 
 DEFAULT_PLANT = "Quadrotor"
-_PARAMETERS = ("variant", "psi_ref", "position", "geometric", "plant", "nominal", "form", "fmi_version")
+_PARAMETERS = ("variant", "psi_ref", "position", "geometric", "plant", "nominal", "form", "fmi_version", "learned")
 FORMS = ("python", "fmu")
 _AXES = "xyz"
 
@@ -70,11 +70,11 @@ CONTROLLER_INPUTS, CONTROLLER_OUTPUTS = _ports()
 def internal_ports(variant_name: str) -> tuple[Port, ...]:
     """The learned state the component publishes for ``variant_name``: each
     axis state port of the variant, per axis (``f_12_x``)."""
+    from fnn_controller.controller import state_ports
     from fnn_controller.variants import variant
 
-    v = variant(variant_name)
-    return tuple(Port(f"{name}_{axis}", unit, description=f"learned state of axis {axis} ({v.label})")
-                 for axis in _AXES for name, unit in v.axis_state_ports)
+    n = 3 * variant(variant_name).axis_state_size
+    return tuple(Port(name, unit, description=text) for name, unit, text in state_ports(variant_name)[:n])
 
 
 def _nominal_vehicle(name: str, plant: str, nominal: Mapping[str, Any], context) -> dict[str, float]:
@@ -134,6 +134,7 @@ class ControllerComponent(PythonComponent):
         self.variant = self.default_variant
         self.internals = internal_ports(self.default_variant)
         self._functions: dict[str, Any] = {}
+        self.learned: np.ndarray | None = None  # a saved state to start from instead of the seed's
 
     @classmethod
     def from_parameters(cls, name: str, parameters: Mapping[str, Any], context=None) -> "ControllerComponent":
@@ -171,6 +172,11 @@ class ControllerComponent(PythonComponent):
                             parameters.get("geometric"), psi_ref, name=name, vehicle=vehicle)
         except ValueError as exc:  # a parameter dataclass refused a combination of values
             raise ScenarioError(f"{name}: {exc}") from None
+        if "learned" in parameters:  # resume learning from a saved state
+            from .learned import load_learned
+
+            component.learned = load_learned(string(f"{name}.learned", parameters["learned"]),
+                                             component.default_variant)
         return component.as_fmu(version) if form == "fmu" and context is not None else component
 
     def as_fmu(self, fmi_version: int = 2):
@@ -183,9 +189,12 @@ class ControllerComponent(PythonComponent):
         from fnn_controller.fmu import controller_model
         from fnn_controller.parametric import parameter_table
 
+        from .learned import LearnedControllerFmu
+
         values = {p.name: p.default for p in parameter_table(self.default_variant, self.position, self.geometric)}
         path = cached_fmu(controller_model(self.default_variant), fmi_version)
-        return FmuComponent(self.name, path, parameters={**values, "psi_ref": self.psi_ref}, seed_parameter="seed")
+        return LearnedControllerFmu(self.name, path, parameters={**values, "psi_ref": self.psi_ref},
+                                    seed_parameter="seed", variant=self.default_variant, state=self.learned)
 
     def _check_variant(self, variant: Any) -> str:
         names = self._fc.variant_names()
@@ -222,10 +231,14 @@ class ControllerComponent(PythonComponent):
         if not hasattr(self, "_psi"):
             self._psi = self.psi_ref
         fast = self.function(self.variant)
-        fast.state[:] = self._fc.initial_state(seed, self.position, self.variant)
+        if self.learned is not None and self.variant == self.default_variant:
+            fast.state[:] = self.learned  # resume learning
+        else:
+            fast.state[:] = self._fc.initial_state(seed, self.position, self.variant)
         fast.inputs["psi_ref"][0] = self._psi
         self._fast = fast
         self._n_internal = len(self.internals)
+        self._last = n_steps
         self._same_layout = internal_ports(self.variant) == self.internals
 
     def input_buffers(self) -> list[np.ndarray]:
@@ -245,8 +258,14 @@ class ControllerComponent(PythonComponent):
                 self._fc.controller.raise_non_finite(fast.inputs)
             except (ValueError, FloatingPointError) as exc:
                 raise DivergenceError(t, f"{self.name} ({exc})", float("nan"), None) from None
-        fast.commit()
+        if n < self._last:  # at the last point no step follows: the control is output, nothing learned
+            fast.commit()
         return pending["y"]
+
+    @property
+    def state(self) -> np.ndarray:
+        """A copy of the whole controller state now (after the last step)."""
+        return self._fast.state.copy()
 
     def internal_values(self) -> np.ndarray:
         """The learned state of the three axes (the position part of the state)."""
