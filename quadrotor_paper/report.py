@@ -14,7 +14,7 @@ import platform
 import sys
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -39,14 +39,16 @@ def _sweep_with_progress(scenario: Scenario, jobs: Sequence[Job], workers: int, 
     return results, time.perf_counter() - t
 
 
-def _overrides(duration: float | None) -> dict[str, Any]:
-    return {"simulation.duration": duration} if duration else {}
+def _overrides(duration: float | None, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    return {**(overrides or {}), **({"simulation.duration": duration} if duration else {})}
 
 
 def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5.0), duration: float | None = None,
-           workers: int = 2, scenario: str = "circles", show_progress: bool = True) -> dict[str, Any]:
-    """Table 2: every variant at every wind speed, ``seeds`` runs each."""
-    sc = load_scenario(scenario, _overrides(duration))
+           workers: int = 2, scenario: str = "circles", show_progress: bool = True,
+           overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Table 2: every variant at every wind speed, ``seeds`` runs each
+    (``overrides``: dotted scenario keys, e.g. the master's ordering)."""
+    sc = load_scenario(scenario, _overrides(duration, overrides))
     jobs = [Job(v, float(w), s) for s in range(seeds) for w in winds for v in variant_names()]
     results, wall = _sweep_with_progress(sc, jobs, workers, "table2", show_progress)
     table = cells(results)
@@ -62,9 +64,10 @@ def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5
 
 
 def table3(out_dir: Path, seeds: int = 10, duration: float | None = None, workers: int = 2,
-           scenario: str = "figure8", show_progress: bool = True) -> dict[str, Any]:
+           scenario: str = "figure8", show_progress: bool = True,
+           overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Table 3: every variant on the figure-8, ``seeds`` runs each."""
-    sc = load_scenario(scenario, _overrides(duration))
+    sc = load_scenario(scenario, _overrides(duration, overrides))
     jobs = [Job(v, None, s) for s in range(seeds) for v in variant_names()]
     results, wall = _sweep_with_progress(sc, jobs, workers, "table3", show_progress)
     table = cells(results)
