@@ -60,11 +60,7 @@ block_rows = 5
 """
 
 
-@pytest.fixture(scope="module", autouse=True)
-def toys():
-    with registry.scoped():
-        toy_models.register_toys()
-        yield
+pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
 
 
 @pytest.fixture

@@ -19,7 +19,6 @@ from lxml import etree
 
 import cosim
 import toy_models
-from cosim import registry
 from cosim.connection import parse_connections
 from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.fmu import FmuComponent
@@ -64,11 +63,7 @@ block_rows = 4
 """
 
 
-@pytest.fixture(scope="module", autouse=True)
-def toys():
-    with registry.scoped():
-        toy_models.register_toys()
-        yield
+pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
 
 
 @pytest.fixture
