@@ -17,7 +17,6 @@ import pytest
 
 import cosim
 import toy_models
-from cosim import registry
 from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError, ScenarioError
 from cosim.scenario import build_master, fmu_error_in_scenario, load_scenario, parse_scenario
 from toy_models import BUILDS, Constant, Gain, PController, Step, lag_fmu2, lag_step  # noqa: F401
