@@ -25,6 +25,7 @@ benchmark: $(VENV)/.installed
 	$(BIN)/python benchmarks/cli_startup.py
 	$(BIN)/python benchmarks/controller_speed.py
 	$(BIN)/python benchmarks/cosim_speed.py
+	$(BIN)/python benchmarks/loop_speed.py
 
 clean:
 	rm -rf build results
