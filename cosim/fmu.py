@@ -100,35 +100,51 @@ def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
     return {k: tuple(v) for k, v in groups.items()}
 
 
+def _bare(slave, name: str):
+    """The FMI function ``name`` of ``slave``'s library without fmpy's Python
+    wrapper and without ctypes argument types: called with ctypes objects
+    prepared once, it costs about half as much per call (measured 1.0 against
+    2.1 us); the status is checked by the caller."""
+    address = ctypes.cast(slave._functions[name], ctypes.c_void_p).value
+    return ctypes.CFUNCTYPE(ctypes.c_int)(address)
+
+
 class _Api:
-    """The four calls of the fast path for one FMI version (set, get, step, reset)."""
+    """The three calls of the per-step fast path for one FMI version (set,
+    get, step), each raising fmpy's ``FMICallException`` on an error status
+    as fmpy's own wrappers do."""
 
     def __init__(self, slave, version: int):
         self.slave, self.version = slave, version
+        self._component = ctypes.c_void_p(slave.component)
+        names = ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep") if version == 2 else \
+            ("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep")
+        self._names = names
+        self._set, self._get, self._step = (_bare(slave, n) for n in names)
         if version == 2:
-            self._set, self._get, self._step = slave.fmi2SetReal, slave.fmi2GetReal, slave.fmi2DoStep
+            self._step_tail = (ctypes.c_int(1),)  # noSetFMUStatePriorToCurrentPoint
         else:
-            self._set, self._get, self._step = slave.fmi3SetFloat64, slave.fmi3GetFloat64, slave.fmi3DoStep
-            self._flags = [ctypes.byref(ctypes.c_bool()) for _ in range(3)]
-            self._last = ctypes.byref(ctypes.c_double())
+            self._step_tail = (ctypes.c_bool(True), *(ctypes.byref(ctypes.c_bool()) for _ in range(3)),
+                               ctypes.byref(ctypes.c_double()))
 
-    def set(self, vrs, n: int, values_ptr) -> None:
-        if self.version == 2:
-            self._set(self.slave.component, vrs, n, values_ptr)
-        else:
-            self._set(self.slave.component, vrs, n, values_ptr, n)
+    def _check(self, status: int, which: int) -> None:
+        if status > 1:  # fmiWarning is fine; discard, error, fatal are not
+            raise FMICallException(function=self._names[which], status=status)
 
-    def get(self, vrs, n: int, values_ptr) -> None:
+    def set(self, vrs, n: ctypes.c_size_t, values_ptr) -> None:
         if self.version == 2:
-            self._get(self.slave.component, vrs, n, values_ptr)
+            self._check(self._set(self._component, vrs, n, values_ptr), 0)
         else:
-            self._get(self.slave.component, vrs, n, values_ptr, n)
+            self._check(self._set(self._component, vrs, n, values_ptr, n), 0)
+
+    def get(self, vrs, n: ctypes.c_size_t, values_ptr) -> None:
+        if self.version == 2:
+            self._check(self._get(self._component, vrs, n, values_ptr), 1)
+        else:
+            self._check(self._get(self._component, vrs, n, values_ptr, n), 1)
 
     def do_step(self, t: float, h: float) -> None:
-        if self.version == 2:
-            self._step(self.slave.component, t, h, 1)
-        else:
-            self._step(self.slave.component, t, h, True, *self._flags, self._last)
+        self._check(self._step(self._component, ctypes.c_double(t), ctypes.c_double(h), *self._step_tail), 2)
 
 
 class FmuComponent:
@@ -358,6 +374,7 @@ class FmuComponent:
         self.input_names, self.output_names = tuple(input_names), tuple(output_names)
         self._in_vr, self._out_vr = vrs(self.input_names), vrs(self.output_names)
         self._n_in, self._n_out = len(self.input_names), len(self.output_names)
+        self._c_in, self._c_out = ctypes.c_size_t(self._n_in), ctypes.c_size_t(self._n_out)
         self.u = np.zeros(max(self._n_in, 1))
         if y is not None:
             if y.dtype != np.float64 or not y.flags.c_contiguous or y.size != self._n_out:
@@ -372,7 +389,7 @@ class FmuComponent:
         """Set all bound inputs from :attr:`u` in one call."""
         if self._n_in:
             try:
-                self._api.set(self._in_vr, self._n_in, self._u_ptr)
+                self._api.set(self._in_vr, self._c_in, self._u_ptr)
             except FMICallException as exc:
                 values = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.input_names, self.u))
                 raise self._fail(f"setting inputs ({values})", exc, t) from None
@@ -426,6 +443,6 @@ class FmuComponent:
         """Get all bound outputs into :attr:`y` in one call."""
         if self._n_out:
             try:
-                self._api.get(self._out_vr, self._n_out, self._y_ptr)
+                self._api.get(self._out_vr, self._c_out, self._y_ptr)
             except FMICallException as exc:
                 raise self._fail("getting outputs", exc, t) from None
