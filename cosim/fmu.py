@@ -385,6 +385,30 @@ class FmuComponent:
         self._u_ptr = self.u.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         self._y_ptr = self.y.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
+    def kernel_entry(self, direct: bool, in_idx: np.ndarray):
+        """This FMU as the compiled loop sees it (:mod:`cosim.kernel`):
+        function pointers, value references and buffers as :meth:`bind` set them."""
+        from .kernel import KernelFmu
+
+        api = self._api
+        address = lambda f: ctypes.cast(f, ctypes.c_void_p).value  # noqa: E731
+        self._kernel_in_idx = np.ascontiguousarray(in_idx, dtype=np.int64)  # kept alive with the entry
+        return KernelFmu(self.fmi_version, api._component.value, address(api._set), address(api._get),
+                         address(api._step), ctypes.addressof(self._in_vr), self._n_in,
+                         self._kernel_in_idx.ctypes.data, self.u.ctypes.data, ctypes.addressof(self._out_vr),
+                         self._n_out, self.y.ctypes.data, int(direct))
+
+    def kernel_failure(self, call: int, status: int, t: float, h: float) -> FmuCallError:
+        """The error the Python path raises for the same failed call."""
+        function = self._api._names[call]
+        exc = FMICallException(function=function, status=status)
+        if call == 0:
+            values = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.input_names, self.u))
+            return self._fail(f"setting inputs ({values})", exc, t)
+        if call == 1:
+            return self._fail("getting outputs", exc, t)
+        return self._fail(f"doStep from t = {t!r} by {h!r} s", exc, t)
+
     def write_inputs(self, t: float) -> None:
         """Set all bound inputs from :attr:`u` in one call."""
         if self._n_in:

@@ -48,6 +48,11 @@ class Guard:
             self.bounds[name] = (low, high)
         self._lo, self._hi = lo, hi
 
+    @property
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """The inclusive bounds ``(low, high)`` of the watched signals, in order (finite)."""
+        return self._lo, self._hi
+
     def ok(self, values: np.ndarray) -> bool:
         return bool(((values >= self._lo) & (values <= self._hi)).all())
 

@@ -230,7 +230,9 @@ class Master:
         self.signals = np.zeros(len(slots))
 
         direct = self._direct_fmus(used)
+        self._direct = direct
         fmu_in: dict[str, np.ndarray] = {}
+        self._fmu_in_idx = fmu_in
         self._fmu_in: list[tuple[FmuComponent, np.ndarray]] = []  # written at the exchange
         self._fmu_out: list[FmuComponent] = []
         for fmu in self.fmus:
@@ -431,6 +433,59 @@ class Master:
 
     def _loop(self, t0: float, n_steps: int, recorder: Recorder, progress: Callable[[int, int], None] | None,
               phase_times: dict[str, float] | None) -> None:
+        if phase_times is None and all(kind == "fmu" for kind, *_ in self._blocks):
+            from . import kernel
+
+            run = kernel.load()
+            if run is not None:
+                return self._loop_compiled(run, t0, n_steps, recorder, progress)
+        self._loop_python(t0, n_steps, recorder, progress, phase_times)
+
+    def _loop_compiled(self, run, t0: float, n_steps: int, recorder: Recorder,
+                       progress: Callable[[int, int], None] | None) -> None:
+        """The loop of :meth:`_loop_python`, for FMUs only, compiled
+        (:mod:`cosim.kernel`): one call per block of recorded rows."""
+        import ctypes
+
+        from . import kernel
+
+        h, signals, block = self.step, self.signals, recorder.block_rows
+        entries = (kernel.KernelFmu * len(self.fmus))(
+            *(f.kernel_entry(f.name in self._direct, self._fmu_in_idx[f.name]) for f in self.fmus))
+        order = np.array([self.fmus.index(comp) for _, comp, _ in self._blocks], dtype=np.int64)
+        rec_idx = np.ascontiguousarray(self._rec_idx, dtype=np.int64)
+        guard_idx = np.ascontiguousarray(self._guard_idx, dtype=np.int64)
+        low, high = self.guard.limits
+        stop = kernel.KernelStop()
+        if self.ordering == "exchange":
+            self._initial_transfer(0, t0)
+        i64, dbl, ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
+        fixed = (ptr(ctypes.addressof(entries)), i64(len(self.fmus)), ptr(order.ctypes.data), i64(len(order)),
+                 ptr(signals.ctypes.data), dbl(t0), dbl(h))
+        tail = (i64(n_steps), ptr(recorder.data.ctypes.data), i64(len(rec_idx)), ptr(rec_idx.ctypes.data),
+                i64(len(guard_idx)), ptr(guard_idx.ctypes.data), ptr(low.ctypes.data), ptr(high.ctypes.data),
+                ctypes.byref(stop))
+        n = 0
+        while n <= n_steps:
+            last = min((n // block + 1) * block - 1, n_steps)  # the Python loop flushes at the same rows
+            code = run(*fixed, i64(n), i64(last), *tail)
+            if code != kernel.KERNEL_OK:
+                recorder.n_rows = int(stop.n) + int(stop.recorded)
+                t = t0 + int(stop.n) * h
+                if code == kernel.KERNEL_GUARD:
+                    self.guard.raise_violation(t, signals[self._guard_idx])
+                raise self.fmus[int(stop.fmu)].kernel_failure(int(stop.call), int(stop.status), t, h)
+            recorder.n_rows = last + 1
+            if (last + 1) % block == 0:
+                recorder.commit(last + 1)
+                if progress is not None:
+                    progress(last, n_steps)
+            n = last + 1
+        if progress is not None:
+            progress(n_steps, n_steps)
+
+    def _loop_python(self, t0: float, n_steps: int, recorder: Recorder,
+                     progress: Callable[[int, int], None] | None, phase_times: dict[str, float] | None) -> None:
         h, signals, take = self.step, self.signals, np.take
         data, rec_idx = recorder.data, self._rec_idx
         guard_ok, guard_idx, guard = self.guard.ok, self._guard_idx, self.guard
