@@ -59,3 +59,19 @@ def test_the_learned_state_records_like_an_output():
     assert not np.allclose(learned[-1, f_x], start[f_x])  # the FNN of x has learned in 1 s
     assert result.units[result.columns.index("controller.f_11_x")] == "m/s"
     assert np.all(np.isfinite(learned))
+
+
+@pytest.mark.parametrize("ordering", ["feedthrough", "exchange"])
+def test_the_controller_as_its_fmu_flies_as_the_python_path(ordering):
+    """A scenario chooses the controller's form; under the same step semantics
+    both give the same trajectory (bit for bit here; 1e-9 m is the promise)."""
+    runs = {}
+    for form in ("python", "fmu"):
+        sc = load_scenario("circles", {"controller.form": form, "simulation.ordering": ordering,
+                                       "simulation.duration": 10.0})
+        with build_master(sc) as master:
+            kinds = {type(c).__name__ for c in master.fmus}
+            runs[form] = master.run(sc.duration, seed=4)
+        assert ("LearnedControllerFmu" in kinds) == (form == "fmu")
+    for name in ("Quadrotor.x", "Quadrotor.y", "Quadrotor.z", "controller.tau_n_x", "controller.Omega_1"):
+        assert np.max(np.abs(runs["python"][name] - runs["fmu"][name])) <= 1e-9, name
