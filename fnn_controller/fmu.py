@@ -35,7 +35,7 @@ import casadi as ca
 
 from fmu_models.export.model import FmuModel, Sampled
 from fmu_models.export.variables import discrete, input_, output, parameter
-from fmu_models.models.quadrotor import QUADROTOR
+from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
 from .controller import OUTPUTS, state_ports
 from .geometric import GeometricParams
@@ -73,7 +73,7 @@ def controller_model(variant: str, position: PositionParams = PositionParams(),
                                     GeometricParams(desired_rate=geometric.desired_rate))
     init = initial_state_function(variant, PositionParams(), GeometricParams(desired_rate=geometric.desired_rate))
     states = _discrete_states(variant)
-    plant = QUADROTOR.states
+    plant = [QUADROTOR.variable(name) for name in STATE_NAMES]  # the rigid body's 12
     variables = (
         *(input_(name, unit, text) for name, unit, text in REFERENCE_INPUTS),
         *(input_(v.name, v.unit, f"plant state: {v.description}") for v in plant),

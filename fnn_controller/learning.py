@@ -42,7 +42,7 @@ from .fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_P
 from .parameters import check_ranges, param
 
 __all__ = [
-    "LearningBounds", "sgn", "sigma_rate", "smc_f_rate", "alpha_rate", "lm_delta",
+    "LearningBounds", "sgn", "switching", "sigma_rate", "smc_f_rate", "alpha_rate", "lm_delta",
     "lm_f_rate", "learning_step", "clip_inputs", "RULES",
 ]
 
@@ -79,7 +79,24 @@ def sgn(x):
     return ca.sign(x)
 
 
-def sigma_rate(x, c, sigma, alpha, tau_c, a_min):
+def switching(tau_c, phi=0.0):
+    """The switching term of every law: the paper's ``sgn(tau_c)`` or, with a
+    boundary layer of width ``phi`` > 0 (m/s), ``sat(tau_c / phi)``, linear
+    inside the layer and ``sgn`` outside it (not in the paper: an option).
+
+    .. math:: s(\\tau_c) = \\begin{cases} \\mathrm{sgn}(\\tau_c) & \\phi = 0 \\\\
+              \\max(-1, \\min(1, \\tau_c / \\phi)) & \\phi > 0 \\end{cases}
+
+    ``phi`` may be a number (0 gives the paper's law exactly) or a symbol
+    (the controller FMU's parameter).
+    """
+    if isinstance(phi, (int, float)) and phi == 0:
+        return sgn(tau_c)
+    saturated = ca.fmin(ca.fmax(tau_c / ca.fmax(phi, 1e-300), -1.0), 1.0)
+    return saturated if isinstance(phi, (int, float)) else ca.if_else(phi > 0, saturated, sgn(tau_c))
+
+
+def sigma_rate(x, c, sigma, alpha, tau_c, a_min, phi=0.0):
     """Width adaptation of eqs. (35)-(36) (SMC) and (59)-(60) (LM), floored.
 
     .. math:: \\dot\\sigma_i = -\\frac{\\sigma_i^3}{\\max[(x - c_i)^2,
@@ -105,10 +122,10 @@ def sigma_rate(x, c, sigma, alpha, tau_c, a_min):
         Floor of ``|x - c| / sigma`` (1).
     """
     denominator = ca.fmax((x - c) ** 2, (a_min * sigma) ** 2)
-    return -(sigma**3) / denominator * alpha * sgn(tau_c)
+    return -(sigma**3) / denominator * alpha * switching(tau_c, phi)
 
 
-def smc_f_rate(w_bar, alpha, tau_c):
+def smc_f_rate(w_bar, alpha, tau_c, phi=0.0):
     """Consequent adaptation of the SMC law, eq. (37).
 
     .. math:: \\dot f_{ij} = -\\frac{\\overline{W}_{ij}}{\\overline{W}^T
@@ -116,7 +133,7 @@ def smc_f_rate(w_bar, alpha, tau_c):
 
     so that ``sum_ij f_dot_ij W_bar_ij = -alpha sgn(tau_c)`` (eq. 48).
     """
-    return -w_bar / ca.dot(w_bar, w_bar) * alpha * sgn(tau_c)
+    return -w_bar / ca.dot(w_bar, w_bar) * alpha * switching(tau_c, phi)
 
 
 def alpha_rate(tau_c, alpha, gamma, nu):
@@ -132,7 +149,7 @@ def lm_delta(w_bar, alpha_bar):
     return ca.fmax(ca.dot(w_bar, w_bar), alpha_bar)
 
 
-def lm_f_rate(w_bar, tau_c, gamma, alpha_bar):
+def lm_f_rate(w_bar, tau_c, gamma, alpha_bar, phi=0.0):
     """Consequent adaptation of the LM law, eq. (61), by the rank-one identity.
 
     .. math:: \\dot f = -\\gamma (\\overline{W}\\,\\overline{W}^T + \\delta I)^{-1}
@@ -144,7 +161,7 @@ def lm_f_rate(w_bar, tau_c, gamma, alpha_bar):
     eigenvector of ``W_bar W_bar^T + delta I`` with eigenvalue
     ``delta + W_bar^T W_bar``.
     """
-    return -gamma * w_bar / (lm_delta(w_bar, alpha_bar) + ca.dot(w_bar, w_bar)) * sgn(tau_c)
+    return -gamma * w_bar / (lm_delta(w_bar, alpha_bar) + ca.dot(w_bar, w_bar)) * switching(tau_c, phi)
 
 
 def clip_inputs(x1, x2, bounds: LearningBounds):
@@ -158,7 +175,7 @@ def _clip(value, low, high):
 
 
 def learning_step(rule: str, state, x1, x2, tau_c, w_bar, dt: float, gamma: float,
-                  nu: float, alpha_bar: float, bounds: LearningBounds = LearningBounds()):
+                  nu: float, alpha_bar: float, bounds: LearningBounds = LearningBounds(), phi=0.0):
     """One forward-Euler step of the SMC or LM learning laws for one axis.
 
     Parameters
@@ -181,6 +198,9 @@ def learning_step(rule: str, state, x1, x2, tau_c, w_bar, dt: float, gamma: floa
         LM constant of eq. (62) (unused by SMC).
     bounds : LearningBounds
         Floor and projection box.
+    phi : float
+        Boundary layer of the switching term (m/s, :func:`switching`); 0 is
+        the paper's ``sgn(tau_c)``.
 
     Returns
     -------
@@ -197,15 +217,15 @@ def learning_step(rule: str, state, x1, x2, tau_c, w_bar, dt: float, gamma: floa
     c1_next = _clip(c1 + primed * (x1 - state[X1_PREV]), -bounds.c1_max, bounds.c1_max)
     c2_next = _clip(c2 + primed * (x2 - state[X2_PREV]), -bounds.c2_max, bounds.c2_max)
     # eqs. 35-36 / 59-60
-    sigma1_next = _clip(sigma1 + dt * sigma_rate(x1, c1, sigma1, alpha, tau_c, bounds.a_min),
+    sigma1_next = _clip(sigma1 + dt * sigma_rate(x1, c1, sigma1, alpha, tau_c, bounds.a_min, phi),
                         bounds.sigma1_min, bounds.sigma1_max)
-    sigma2_next = _clip(sigma2 + dt * sigma_rate(x2, c2, sigma2, alpha, tau_c, bounds.a_min),
+    sigma2_next = _clip(sigma2 + dt * sigma_rate(x2, c2, sigma2, alpha, tau_c, bounds.a_min, phi),
                         bounds.sigma2_min, bounds.sigma2_max)
     if rule == "smc":
-        f_dot = smc_f_rate(w_bar, alpha, tau_c)  # eq. 37
+        f_dot = smc_f_rate(w_bar, alpha, tau_c, phi)  # eq. 37
         alpha_next = _clip(alpha + dt * alpha_rate(tau_c, alpha, gamma, nu), 0.0, bounds.alpha_max)  # eq. 38
     else:
-        f_dot = lm_f_rate(w_bar, tau_c, gamma, alpha_bar)  # eqs. 61-62
+        f_dot = lm_f_rate(w_bar, tau_c, gamma, alpha_bar, phi)  # eqs. 61-62
         alpha_next = alpha
     f_next = _clip(f + dt * f_dot, -bounds.f_max, bounds.f_max)
 

@@ -35,7 +35,7 @@ __all__ = ["Parameter", "parameter_table", "parametric_step_function", "paramete
            "initial_state_function", "PER_AXIS"]
 
 # Tuple fields that hold one value per axis x, y, z (the others are numbered 1, 2, 3).
-PER_AXIS = {"gamma_smc", "nu", "gamma_lm", "alpha_bar", "k_R", "k_omega"}
+PER_AXIS = {"gamma_smc", "nu", "gamma_lm", "alpha_bar", "phi", "k_R", "k_omega"}
 
 
 @dataclass(frozen=True)

@@ -46,6 +46,9 @@ class PositionParams:
     gamma_lm: tuple[float, float, float] = param((1.5, 1.5, 1.5), "m/s2", "gamma of eq. 61 for x, y, z", min=0.0)
     alpha_bar: tuple[float, float, float] = param((1.1, 1.1, 0.9), "1", "alpha_bar of eq. 62 for x, y, z",
                                                   min=0.0)
+    phi: tuple[float, float, float] = param((0.0, 0.0, 0.0), "m/s",
+                                            "boundary layer of the learning laws' sgn(tau_c) for x, y, z: "
+                                            "sat(tau_c / phi) in its place (0: the paper's sgn)", min=0.0)
     init: FnnInit = field(default_factory=FnnInit)  # initial FNN values (section 5.1)
     bounds: LearningBounds = field(default_factory=LearningBounds)  # eqs. 27-29 and floors
 

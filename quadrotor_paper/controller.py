@@ -53,13 +53,14 @@ _AXES = "xyz"
 
 
 def _ports() -> tuple[tuple[Port, ...], tuple[Port, ...]]:
-    from fmu_models.models.quadrotor import QUADROTOR
+    from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
     from fnn_controller.controller import OUTPUTS
 
     inputs = (
         *(Port(f"{a}_ref", "m", description=f"reference position {a}") for a in _AXES),
         *(Port(f"v{a}_ref", "m/s", description=f"reference velocity d{a}*/dt") for a in _AXES),
-        *(Port(v.name, v.unit, description=f"plant state: {v.description}") for v in QUADROTOR.states),
+        *(Port(v.name, v.unit, description=f"plant state: {v.description}")
+          for v in (QUADROTOR.variable(name) for name in STATE_NAMES)),
     )
     return inputs, tuple(Port(name, unit, description=text) for name, unit, text in OUTPUTS)
 

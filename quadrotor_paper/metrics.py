@@ -11,7 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["position_error", "euclidean_error", "rmse", "pd_share"]
+__all__ = ["position_error", "euclidean_error", "rmse", "pd_share", "oscillation_period"]
 
 
 def position_error(result, position: Sequence[str], reference: Sequence[str]) -> np.ndarray:
@@ -35,3 +35,17 @@ def pd_share(tau_c: np.ndarray, tau_n: np.ndarray) -> np.ndarray:
     (1 while the FNN has learned nothing, toward 0 once it has taken over)."""
     total = np.abs(tau_c) + np.abs(tau_n)
     return np.divide(np.abs(tau_c), total, out=np.ones_like(total), where=total > 0)
+
+
+def oscillation_period(x: np.ndarray, step: float, longest: float = 5.0) -> tuple[float, float]:
+    """Period (s) of the dominant oscillation of ``x``: the lag of the first
+    peak of its autocorrelation after the first zero crossing, with that
+    peak's height (1 for a pure oscillation, near 0 when there is none)."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    ac = np.correlate(x, x, "full")[len(x) - 1:]
+    if ac[0] == 0:
+        return float("nan"), 0.0
+    ac = ac / ac[0]
+    first_zero = int(np.argmax(ac < 0))
+    k = first_zero + int(np.argmax(ac[first_zero:first_zero + int(longest / step)]))
+    return k * step, float(ac[k])

@@ -11,5 +11,5 @@ PD_LM = register_variant(Variant(
     axis_law=type1_axis_law("lm", "gamma_lm"),
     initial_axis=type1_initial_axis, n_random=TYPE1_RANDOM,
     axis_state_size=AXIS_STATE_SIZE, axis_state_bounds=type1_axis_state_bounds,
-    axis_state_ports=AXIS_STATE_PORTS, parameters=("gamma_lm", "alpha_bar", "init", "bounds"),
+    axis_state_ports=AXIS_STATE_PORTS, parameters=("gamma_lm", "alpha_bar", "init", "bounds", "phi"),
 ))

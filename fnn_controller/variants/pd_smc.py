@@ -11,5 +11,5 @@ PD_SMC = register_variant(Variant(
     axis_law=type1_axis_law("smc", "gamma_smc"),
     initial_axis=type1_initial_axis, n_random=TYPE1_RANDOM,
     axis_state_size=AXIS_STATE_SIZE, axis_state_bounds=type1_axis_state_bounds,
-    axis_state_ports=AXIS_STATE_PORTS, parameters=("gamma_smc", "nu", "init", "bounds"),
+    axis_state_ports=AXIS_STATE_PORTS, parameters=("gamma_smc", "nu", "init", "bounds", "phi"),
 ))

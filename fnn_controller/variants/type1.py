@@ -42,7 +42,7 @@ def type1_axis_law(rule: str, gamma_field: str):
         tau_n = fnn_output(axis_state[F], w_bar)
         state_next = learning_step(rule, axis_state, x1, x2, tau_c, w_bar, params.dt,
                                    gamma=getattr(params, gamma_field)[axis], nu=params.nu[axis],
-                                   alpha_bar=params.alpha_bar[axis], bounds=params.bounds)
+                                   alpha_bar=params.alpha_bar[axis], bounds=params.bounds, phi=params.phi[axis])
         return tau_n, state_next
 
     return axis_law

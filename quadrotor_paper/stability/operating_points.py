@@ -37,6 +37,7 @@ import casadi as ca
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR, hover_rotor_speed
+from fmu_models.models.quadrotor import STATE_NAMES as PLANT_STATE_NAMES
 from fnn_controller import GeometricParams, PositionParams, position_controller_function, velocity_controller_function
 from fnn_controller.geometric import initial_velocity_state
 
@@ -45,7 +46,7 @@ __all__ = [
     "operating_point", "hover", "forward_flight", "default_operating_points", "PAPER_WIND_DIRECTION",
 ]
 
-STATE_NAMES = tuple(v.name for v in QUADROTOR.states)  # x y z u v w phi theta psi p q r
+STATE_NAMES = PLANT_STATE_NAMES  # x y z u v w phi theta psi p q r: the rigid body's, from the plant's table
 _VEL = slice(3, 6)
 _EULER = slice(6, 9)
 _RATES = slice(9, 12)

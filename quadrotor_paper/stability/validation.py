@@ -90,7 +90,8 @@ class VelocityCommandComponent(PythonComponent):
     velocity: plant state in, rotor speeds out (eqs. 13-18, evaluated by
     ``velocity_controller_function`` through its fast buffer path)."""
 
-    inputs = tuple(Port(v.name, v.unit, description="plant state") for v in QUADROTOR.states)
+    inputs = tuple(Port(v.name, v.unit, description="plant state")
+                   for v in (QUADROTOR.variable(name) for name in STATE_NAMES))
     outputs = tuple(Port(f"Omega_{i}", "rad/s", description=f"rotor {i} speed command") for i in range(1, 5))
 
     def __init__(self, v_ref=(0.0, 0.0, 0.0), geometric: GeometricParams = GeometricParams(),

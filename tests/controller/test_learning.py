@@ -295,3 +295,15 @@ def test_bounds_are_validated():
         LearningBounds(a_min=0.0)
     with pytest.raises(ValueError, match="sigma1_min"):
         LearningBounds(sigma1_min=20.0)
+
+
+def test_the_boundary_layer_saturates_and_zero_is_the_papers_sgn():
+    from fnn_controller.learning import switching
+
+    tau_c = ca.SX.sym("tau_c")
+    phi = ca.SX.sym("phi")
+    f = ca.Function("s", [tau_c, phi], [switching(tau_c, phi)])
+    for value in (-3.0, -0.2, -0.05, 0.0, 0.05, 0.2, 3.0):
+        assert float(f(value, 0.0)) == np.sign(value)  # phi = 0: sgn, exactly
+        assert float(f(value, 0.1)) == pytest.approx(np.clip(value / 0.1, -1, 1), abs=1e-15)
+        assert float(switching(value, 0.0)) == np.sign(value)  # a number phi builds sgn itself
