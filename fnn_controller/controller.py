@@ -113,7 +113,7 @@ def controller_step(variant: str, position: PositionParams, geometric: Geometric
         raise ValueError(f"position.dt = {position.dt} s and geometric.dt = {geometric.dt} s must agree: "
                          "outer and inner loop run in the same step")
     pos, vel = x[0:3], x[3:6]
-    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position)
+    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position, p_ref_dot)
     inner = velocity_controller(outer["v_ref"], vel, x[6:9], x[9:12], psi_ref, state[n_fnn:], geometric)
     return {"Omega": inner["Omega"], "state_next": ca.vertcat(outer["fnn_state_next"], inner["vel_state_next"]),
             "v_ref": outer["v_ref"], "tau_c": outer["tau_c"], "tau_n": outer["tau_n"], "wrench": inner["wrench"]}

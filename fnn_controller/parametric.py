@@ -79,7 +79,7 @@ def parameter_table(variant: str, position: PositionParams = PositionParams(),
     ``position`` and ``geometric``: the PD's ``kp``, ``kd``, ``dt``, the
     fields the variant reads (:attr:`Variant.parameters`), and every field of
     the geometric controller and its nominal vehicle."""
-    own = {"kp", "kd", "dt", *lookup(variant).parameters}
+    own = {"kp", "kd", "dt", "feedforward", *lookup(variant).parameters}
     table = [Parameter(name, ("position",) + path, value, info.unit, info.description, info.min, info.max)
              for name, path, value, info in _scalars(position, "", (), own)]
     table += [Parameter(name, ("geometric",) + path, value, info.unit, info.description, info.min, info.max)

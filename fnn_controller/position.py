@@ -46,6 +46,8 @@ class PositionParams:
     gamma_lm: tuple[float, float, float] = param((1.5, 1.5, 1.5), "m/s2", "gamma of eq. 61 for x, y, z", min=0.0)
     alpha_bar: tuple[float, float, float] = param((1.1, 1.1, 0.9), "1", "alpha_bar of eq. 62 for x, y, z",
                                                   min=0.0)
+    feedforward: float = param(0.0, "1", "gain of the reference velocity fed forward around the PD: "
+                               "v* = tau_c - tau_n + feedforward dp*/dt (0: the paper's law)", min=0.0, max=1.0)
     phi: tuple[float, float, float] = param((0.0, 0.0, 0.0), "m/s",
                                             "boundary layer of the learning laws' sgn(tau_c) for x, y, z: "
                                             "sat(tau_c / phi) in its place (0: the paper's sgn)", min=0.0)
@@ -73,7 +75,8 @@ def pd_law(e, e_dot, kp, kd):
     return kp * e + kd * e_dot
 
 
-def position_axis(variant: str, e, e_dot, axis_state, axis: int, params: PositionParams = PositionParams()):
+def position_axis(variant: str, e, e_dot, axis_state, axis: int, params: PositionParams = PositionParams(),
+                  p_ref_dot=None):
     """One step of the position controller of one axis, eqs. (19), (24)-(26).
 
     Parameters
@@ -100,10 +103,14 @@ def position_axis(variant: str, e, e_dot, axis_state, axis: int, params: Positio
     law = lookup(variant).axis_law
     tau_c = pd_law(e, e_dot, params.kp, params.kd)
     tau_n, state_next = law(e, e_dot, tau_c, axis_state, axis, params)
-    return {"tau": tau_c - tau_n, "tau_c": tau_c, "tau_n": tau_n, "state_next": state_next}
+    tau = tau_c - tau_n
+    if p_ref_dot is not None and not (isinstance(params.feedforward, (int, float)) and params.feedforward == 0):
+        tau = tau + params.feedforward * p_ref_dot  # the option; 0 keeps the paper's law bit for bit
+    return {"tau": tau, "tau_c": tau_c, "tau_n": tau_n, "state_next": state_next}
 
 
-def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParams = PositionParams()):
+def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParams = PositionParams(),
+                        p_ref_dot=None):
     """The three-axis position controller as CasADi expressions (section 3.1).
 
     Parameters
@@ -114,15 +121,18 @@ def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParam
     fnn_state : vector of length ``fnn_state_size(variant)``
         Stacked axis states (x, y, z).
     params : PositionParams
+    p_ref_dot : 3-vector, optional
+        The reference velocity (m/s), fed forward with ``params.feedforward``.
 
     Returns
     -------
     dict
-        ``v_ref`` (3, m/s, eq. 26), ``tau_c`` (3), ``tau_n`` (3),
+        ``v_ref`` (3, m/s, eq. 26 plus the feed-forward), ``tau_c`` (3), ``tau_n`` (3),
         ``fnn_state_next`` (``fnn_state_size(variant)``).
     """
     size = fnn_state_size(variant) // 3
-    axes = [position_axis(variant, e[a], e_dot[a], fnn_state[axis_slice(a, size)], a, params) for a in range(3)]
+    axes = [position_axis(variant, e[a], e_dot[a], fnn_state[axis_slice(a, size)], a, params,
+                          None if p_ref_dot is None else p_ref_dot[a]) for a in range(3)]
     return {
         "v_ref": ca.vertcat(*[ax["tau"] for ax in axes]),
         "tau_c": ca.vertcat(*[ax["tau_c"] for ax in axes]),

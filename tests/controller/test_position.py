@@ -16,6 +16,7 @@ from fnn_controller import (STATE_SIZE, GeometricParams, PositionParams, Quadrot
 from fnn_controller.controller import FastFunction
 from fnn_controller.geometric import initial_velocity_state
 from fnn_controller.position import initial_fnn_state
+from fnn_controller import initial_state as fc_initial_state
 from fnn_controller.variants import variant_names
 from test_geometric import H, PlantFmu, plant_fmu  # noqa: F401  (fixture)
 
@@ -153,10 +154,14 @@ def test_fast_function_refuses_a_state_pair_of_different_sizes():
 # --------------------------------------------------- closed loop with the FMU
 
 def fly(plant_fmu, variant, p_ref, p_ref_dot, t_end, seed=0, wind=(0, 0, 0), **start):
+    return fly_with(plant_fmu, variant, PositionParams(), p_ref, p_ref_dot, t_end, seed, wind, **start)
+
+
+def fly_with(plant_fmu, variant, position, p_ref, p_ref_dot, t_end, seed=0, wind=(0, 0, 0), **start):
     start.setdefault("z", -15.0)
     plant = PlantFmu(plant_fmu, **start)
     plant.set_wind(wind)
-    ctrl = QuadrotorController(variant)
+    ctrl = QuadrotorController(variant, position)
     ctrl.reset(seed)
     n = int(round(t_end / H))
     xs, tau_c, tau_n = np.zeros((n + 1, 12)), np.zeros((n, 3)), np.zeros((n, 3))
@@ -229,3 +234,28 @@ def test_mission_length_closed_loop_with_the_fmu_holds_hover(plant_fmu):
     plant.close()
     assert np.all(np.isfinite(x))
     assert np.linalg.norm(np.array(x[0:3]) - p_ref) < 0.2  # m; LM holds a small oscillation at hover
+
+
+def test_velocity_feed_forward_removes_the_ramp_lag_of_the_pd(plant_fmu):
+    """With the reference velocity fed forward (gain 1) the P loop need not
+    lag V/kp behind a ramp (1.056 m for the PD alone). What is left is the
+    velocity loop's steady error against the drag, D(V) / (m k_v), turned into
+    position by kp: (0.2 V + 0.04 V^2) / (1.07 * 5 * 2.5) = 0.056 m at 2.5 m/s."""
+    position = PositionParams(feedforward=1.0)
+    log = fly_with(plant_fmu, "pd", position, *_ramp(2.5), 12.0)
+    e_x = 2.5 * log["t"] - log["x"][:, 0]
+    drag = DEFAULTS["k_drag_lin"] * 2.5 + DEFAULTS["k_drag_quad"] * 2.5 ** 2
+    assert e_x[-1] == pytest.approx(drag / (DEFAULTS["m"] * GeometricParams().k_v * KP), rel=0.02)
+
+
+def test_feed_forward_zero_is_the_papers_law_bit_for_bit():
+    from fnn_controller.controller import controller_step_function
+
+    rng = np.random.default_rng(5)
+    args = (rng.normal(size=3), rng.normal(size=3), rng.normal(size=12), 0.3,
+            fc_initial_state(0, PositionParams(), "pd+lm"))
+    with_zero = controller_step_function("pd+lm", PositionParams(feedforward=0.0))(*args)
+    paper = controller_step_function("pd+lm")(*args)
+    assert all(np.array_equal(np.array(a), np.array(b)) for a, b in zip(with_zero, paper))
+    with_ff = controller_step_function("pd+lm", PositionParams(feedforward=1.0))(*args)
+    assert not np.array_equal(np.array(with_ff[2]), np.array(paper[2]))  # v_ref moved by dp*/dt
