@@ -12,6 +12,16 @@ Inputs  Omega_1..4 [rad/s] rotor speeds, saturated to [0, Omega_max] (section
         velocity in the world frame.
 Outputs the 12 states and the thrust and torques actually applied.
 
+Motor dynamics (not in the paper): with tau_m > 0 each rotor speed Omega_r_i
+follows its saturated command through a first-order lag,
+d Omega_r_i/dt = (clip(Omega_i, 0, Omega_max) - Omega_r_i) / tau_m, and the
+thrust and torques come from Omega_r; tau_m = 0 (the default) is the
+instantaneous rotor of the paper, bit for bit: the rotor states are then
+frozen and unused. The rotor states follow the 12 rigid-body states in the
+state vector; STATE_NAMES stays the 12 rigid-body states (the plant state the
+controller and the stability analysis use), ROTOR_STATE_NAMES names the four
+others. See docs/plant-model.md, "Motor dynamics".
+
 Aerodynamic drag (not in the paper, which adds wind in Gazebo) acts on the
 air-relative velocity v_rel = v - v_wind through a linear (rotor drag) and a
 quadratic (body drag) term, see ``docs/plant-model.md``.
@@ -26,7 +36,8 @@ from ..export.model import FmuModel
 from .rotor import thrust_and_torques
 from ..export.variables import input_, output, parameter, state
 
-__all__ = ["QUADROTOR", "STATE_NAMES", "rotation_matrix", "euler_rate_matrix", "hover_rotor_speed", "DEFAULTS"]
+__all__ = ["QUADROTOR", "STATE_NAMES", "BODY_STATES", "ROTOR_STATE_NAMES", "rotation_matrix", "euler_rate_matrix",
+           "hover_rotor_speed", "DEFAULTS"]
 
 # Keeps d|v_rel|/dv_rel finite at v_rel = 0 (the Jacobian at hover would be
 # NaN otherwise); changes the drag force by k_drag_quad * 1e-6 * |v_rel|.
@@ -49,6 +60,11 @@ _FLOOR = {
     "I": 1e-9,  # kg m^2: 1 g at 1 mm, the floors of m and l together
     "Omega_max": 1.0,  # rad/s: about 10 rpm
 }
+# Inclusive upper bound of the motor time constant tau_m: small quadrotor
+# motors are 10-50 ms, heavy-lift multirotor motors with large propellers
+# about 0.1-0.2 s; beyond 1 s the rotors are slower than any attitude loop
+# can tolerate. Reasons in docs/plant-model.md, "Motor dynamics".
+_TAU_M_MAX = 1.0  # s
 
 _STATES = (
     state("x", "m", "position north (world frame)"),
@@ -64,8 +80,18 @@ _STATES = (
     state("q", "rad/s", "body pitch rate (eq. 2)"),
     state("r", "rad/s", "body yaw rate (eq. 2)"),
 )
-# The 12 states in table order: the one list of the plant's state names.
+# The 12 rigid-body states in table order: the one list of the plant state's
+# names (what the controller reads and the stability analysis linearizes).
 STATE_NAMES: tuple[str, ...] = tuple(v.name for v in _STATES)
+BODY_STATES = _STATES  # their Variables (QUADROTOR.states also holds the rotor states)
+# Motor dynamics: the four rotor speeds, states of the FMU after the 12 above.
+_ROTOR_STATES = tuple(
+    state(f"Omega_r_{i}", "rad/s",
+          f"speed of rotor {i}: first-order lag (tau_m) of the saturated command Omega_{i}; "
+          f"frozen at its initial value and unused when tau_m = 0")
+    for i in range(1, 5)
+)
+ROTOR_STATE_NAMES: tuple[str, ...] = tuple(v.name for v in _ROTOR_STATES)
 # Euler kinematics (eq. 3) are singular at theta = +-pi/2.
 _INITIAL_BOUNDS = {"theta": {"min": -1.55, "max": 1.55}}
 
@@ -100,6 +126,17 @@ _VARIABLES = (
               min=_FLOOR["Omega_max"]),
     *(parameter(f"{v.name}_0", v.unit, f"initial value of {v.name}", 0.0, **_INITIAL_BOUNDS.get(v.name, {}))
       for v in _STATES),
+    # Motor dynamics, last: the parameter vector keeps the order of the
+    # instantaneous-rotor plant's parameters and appends these (before
+    # internal_step); the rotor states come after the 12 rigid-body states.
+    parameter("tau_m", "s",
+              "motor time constant: first-order lag of each rotor speed behind its saturated command; "
+              "0 = instantaneous rotors (the paper's model)", 0.0, min=0.0, max=_TAU_M_MAX),
+    *(parameter(f"{v.name}_0", "rad/s",
+                f"initial speed of rotor {i} (clipped to [0, Omega_max]; used only when tau_m > 0); "
+                f"starts at hover, as the command Omega_{i}", _HOVER_SPEED, min=0.0)
+      for i, v in enumerate(_ROTOR_STATES, start=1)),
+    *_ROTOR_STATES,
 )
 
 
@@ -124,8 +161,23 @@ def euler_rate_matrix(phi, theta):
     )
 
 
+def _clip(omega, omega_max):
+    return ca.fmin(ca.fmax(omega, 0), omega_max)
+
+
 def _equations(t, s):
-    omega_sq = [ca.fmin(ca.fmax(s[f"Omega_{i}"], 0), s["Omega_max"]) ** 2 for i in range(1, 5)]
+    commanded = [_clip(s[f"Omega_{i}"], s["Omega_max"]) for i in range(1, 5)]
+    # Motor dynamics. casadi.if_else on SX evaluates both branches and keeps
+    # one by multiplication-free selection (a + 0 or 0 + b), so tau_m = 0
+    # gives exactly the instantaneous rotor of before, and the lag divides by
+    # 1 instead of 0 there, which keeps the derivative and its Jacobian finite.
+    instant = s["tau_m"] == 0
+    tau_m = ca.if_else(instant, 1.0, s["tau_m"])
+    rotor_rates = [ca.if_else(instant, 0.0, (cmd - s[name]) / tau_m)
+                   for cmd, name in zip(commanded, ROTOR_STATE_NAMES)]
+    applied = [ca.if_else(instant, cmd, _clip(s[name], s["Omega_max"]))
+               for cmd, name in zip(commanded, ROTOR_STATE_NAMES)]
+    omega_sq = [omega**2 for omega in applied]
     thrust, tau_phi, tau_theta, tau_psi = thrust_and_torques(omega_sq, s["b"], s["d"], s["l"])
 
     R = rotation_matrix(s["phi"], s["theta"], s["psi"])
@@ -145,17 +197,19 @@ def _equations(t, s):
 
     derivatives = dict(zip(STATE_NAMES, ca.vertsplit(ca.vertcat(velocity, acceleration, euler_rates,
                                                                   angular_acceleration))))
+    derivatives.update(zip(ROTOR_STATE_NAMES, rotor_rates))
     outputs = {"T": thrust, "tau_phi": tau_phi, "tau_theta": tau_theta, "tau_psi": tau_psi}
     return derivatives, outputs
 
 
 QUADROTOR = FmuModel(
     identifier="Quadrotor",
-    description="Quadrotor UAV (Sarabakha/Kayacan LM-FNN paper, section 2) with rotor saturation "
-                "and aerodynamic drag in wind; z axis down",
+    description="Quadrotor UAV (Sarabakha/Kayacan LM-FNN paper, section 2) with rotor saturation, "
+                "optional first-order motor dynamics and aerodynamic drag in wind; z axis down",
     variables=_VARIABLES,
     equations=_equations,
-    initial_state=lambda s: {name: s[f"{name}_0"] for name in STATE_NAMES},
+    initial_state=lambda s: {**{name: s[f"{name}_0"] for name in STATE_NAMES},
+                             **{name: _clip(s[f"{name}_0"], s["Omega_max"]) for name in ROTOR_STATE_NAMES}},
 )
 
 DEFAULTS: dict[str, float] = {v.name: v.start for v in QUADROTOR.parameters}

@@ -82,8 +82,9 @@ class ControllerLinearization:
 def linearize_plant(op: OperatingPoint) -> PlantLinearization:
     """A and B of the plant at ``op`` from the CasADi Jacobian
     ``QUADROTOR.functions["jac"]`` (= d[xdot; y]/d[x; u])."""
-    J = np.array(QUADROTOR.functions["jac"](0.0, op.x, op.plant_u, op.plant_p))
-    return PlantLinearization(A=J[:_N_X, :_N_X].copy(), B=J[:_N_X, _N_X:].copy())
+    J = np.array(QUADROTOR.functions["jac"](0.0, np.concatenate([op.x, op.omega]), op.plant_u, op.plant_p))
+    n_all = len(QUADROTOR.states)  # 12 rigid-body states, then the 4 rotor speeds (unused at tau_m = 0)
+    return PlantLinearization(A=J[:_N_X, :_N_X].copy(), B=J[:_N_X, n_all:].copy())
 
 
 def linearize_plant_fmu(fmu_path: str | Path, op: OperatingPoint) -> PlantLinearization:
@@ -113,7 +114,7 @@ def linearize_plant_fmu(fmu_path: str | Path, op: OperatingPoint) -> PlantLinear
         fmu.enterInitializationMode()
         fmu.exitInitializationMode()
         fmu.enterContinuousTimeMode()
-        x = np.ascontiguousarray(op.x, dtype=float)
+        x = np.ascontiguousarray(np.concatenate([op.x, op.omega]), dtype=float)
         fmu.setContinuousStates(x.ctypes.data_as(POINTER(c_double)), len(x))
         fmu.setReal([vr[n] for n in INPUT_NAMES], [float(v) for v in op.plant_u])
         unknowns = [vr[f"der({n})"] for n in STATE_NAMES]

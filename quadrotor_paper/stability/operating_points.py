@@ -116,7 +116,7 @@ def _check_geometric(geometric: GeometricParams) -> None:
 
 
 def _ode_residual(x, u, p):
-    xdot = QUADROTOR.functions["ode"](0.0, x, u, p)
+    xdot = QUADROTOR.functions["ode"](0.0, ca.vertcat(x, u[0:4]), u, p)  # rotor speeds at their commands
     return ca.vertcat(*[xdot[i] for i in _RESIDUAL_ROWS])
 
 
