@@ -5,15 +5,20 @@ Subcommands::
     fnn-cosim run SCENARIO|FILE.ssp [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots]
                  [--profile] [--save-learned FILE] [--load-learned FILE]
     fnn-cosim export-ssp SCENARIO --out FILE.ssp [--set KEY=VALUE ...]
-    fnn-cosim table2 [--out DIR] [--seeds 10] [--winds 1,3,5] [--duration S] [--workers 2]
-    fnn-cosim table3 [--out DIR] [--seeds 10] [--duration S] [--workers 2]
-    fnn-cosim reproduce [--out DIR] [--seeds 10] [--duration S] [--workers 2]
+    fnn-cosim table2 [--out DIR] [--seeds 10] [--winds 1,3,5] [--duration S] [--workers 2] [--scheduler ADDRESS]
+    fnn-cosim table3 [--out DIR] [--seeds 10] [--duration S] [--workers 2] [--scheduler ADDRESS]
+    fnn-cosim reproduce [--out DIR] [--seeds 10] [--duration S] [--workers 2] [--scheduler ADDRESS]
+    fnn-cosim sweep STUDY.toml|NAME [--out DIR] [--workers N] [--scheduler ADDRESS] [--no-plots]
     fnn-cosim scenarios
     fnn-cosim build-fmu [--out DIR]
     fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim]
 
 SCENARIO is a TOML file or the name of a shipped scenario (``circles``,
-``figure8``). Results go under ``results/`` unless ``--out`` says otherwise.
+``figure8``); STUDY a study file (``docs/studies.md``) or the name of a
+shipped one (``quadrotor_paper/studies/``). The sweeps run on Dask: a local
+cluster of ``--workers`` processes (``--workers 1``: in this process), or
+the running cluster at ``--scheduler``. Results go under ``results/`` unless
+``--out`` says otherwise.
 Errors print one line on stderr (``--debug`` adds the traceback): a bad
 scenario, connection or FMU file (a broken archive, no binary for this
 platform, a parameter the FMU refuses) exits with status 2 before anything
@@ -132,7 +137,7 @@ def _cmd_table2(args) -> int:
     winds = [float(w) for w in args.winds.split(",")]
     out = Path(args.out) if args.out else DEFAULT_OUT / "table2"
     summary = table2(out, seeds=args.seeds, winds=winds, duration=args.duration, workers=_workers(args.workers),
-                     show_progress=not args.quiet, overrides=_overrides(args.set))
+                     show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler)
     return _print_table(summary, out / "table2.md", out / "summary.json")
 
 
@@ -141,7 +146,7 @@ def _cmd_table3(args) -> int:
 
     out = Path(args.out) if args.out else DEFAULT_OUT / "table3"
     summary = table3(out, seeds=args.seeds, duration=args.duration, workers=_workers(args.workers),
-                     show_progress=not args.quiet, overrides=_overrides(args.set))
+                     show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler)
     return _print_table(summary, out / "table3.md", out / "summary.json")
 
 
@@ -156,8 +161,49 @@ def _cmd_reproduce(args) -> int:
 
     out = Path(args.out) if args.out else DEFAULT_OUT
     path = reproduce(out, seeds=args.seeds, workers=_workers(args.workers), duration=args.duration,
-                     show_progress=not args.quiet)
+                     show_progress=not args.quiet, scheduler=args.scheduler)
     print(f"report: {path}")
+    return 0
+
+
+STUDIES = Path(__file__).parent / "studies"
+
+
+def _study_path(name_or_path: str) -> Path:
+    path = Path(name_or_path)
+    if path.exists() or path.suffix == ".toml":
+        return path
+    shipped = STUDIES / f"{name_or_path}.toml"
+    return shipped if shipped.exists() else path
+
+
+def _cmd_sweep(args) -> int:
+    """A study: the base scenario over its [sweep], one row per run in runs.csv."""
+    from cosim.progress import Progress
+    from cosim.study import load_study, plan, run_study
+
+    from .experiments import STUDY_METRICS, lean_signals, study_metrics
+
+    study = load_study(_study_path(args.study))
+    out = Path(args.out) if args.out else DEFAULT_OUT / f"study-{study.name}"
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    bar = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        bar = bar or Progress(total, f"sweep {study.name}", enabled=not args.quiet)
+        bar.update(done)
+
+    try:
+        result = run_study(study, out, workers=max(1, workers), scheduler=args.scheduler, metrics=study_metrics,
+                           metric_names=STUDY_METRICS, record=lean_signals(study.scenario) or None,
+                           progress=progress, plots=not args.no_plots)
+    finally:
+        if bar is not None:
+            bar.close()
+    counts = ", ".join(f"{n} {status}" for status, n in sorted(result.counts.items())) or "nothing to run"
+    print(f"{study.name}: {len(plan(study))} runs ({result.skipped} already done); this time: {counts}")
+    print(f"results: {out} (runs.csv, runs.parquet, summary.csv" + ", plots" * (not args.no_plots) + ")")
     return 0
 
 
@@ -215,7 +261,8 @@ def _parser() -> argparse.ArgumentParser:
         if seeds:
             sp.add_argument("--seeds", type=int, default=10, help="runs per cell, seeds 0..N-1 (default 10)")
             sp.add_argument("--duration", type=float, help="override the missions' duration (s)")
-            sp.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+            sp.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 1: in this process)")
+            sp.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS instead")
 
     r = sub.add_parser("run", help="run one scenario: results CSV, plots, summary")
     r.add_argument("scenario", help="TOML file, shipped scenario name (circles, figure8), or SSP archive (.ssp)")
@@ -246,6 +293,14 @@ def _parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("reproduce", help="Tables 2 and 3 and the figures into results/report.md")
     common(rp)
     rp.set_defaults(func=_cmd_reproduce)
+
+    sw = sub.add_parser("sweep", help="a study: a scenario over a grid and/or random samples of its keys")
+    sw.add_argument("study", help="study TOML file (docs/studies.md) or a shipped study's name")
+    sw.add_argument("--workers", type=int, help="local worker processes (default: one per core; 1: in this process)")
+    sw.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (e.g. tcp://host:8786)")
+    sw.add_argument("--no-plots", action="store_true")
+    common(sw, seeds=False)
+    sw.set_defaults(func=_cmd_sweep)
 
     e = sub.add_parser("export-ssp", help="write a scenario as an SSP 1.0 archive, every component an FMU")
     e.add_argument("scenario", help="TOML file or shipped scenario name (circles, figure8)")

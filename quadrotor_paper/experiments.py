@@ -1,18 +1,16 @@
-"""Runs and sweeps: one scenario run with its files, and the parallel sweeps
-behind Table 2 and Table 3.
+"""Runs and sweeps: one scenario run with its files, the sweeps behind
+Table 2 and Table 3, and the metrics of a study's rows.
 
-A sweep extracts each FMU once, then starts ``workers`` processes; each
-builds one master (instantiating its FMUs and controllers once) and runs its
-share of the jobs, resetting between runs. A job is (variant, wind speed,
-seed); its result is the RMSE, the status and the wall time.
+A sweep is a list of jobs run through the engine's runner
+(:mod:`cosim.dask_runner`: in this process for one worker, else on Dask);
+each worker builds one master (extracting and instantiating its FMUs and
+controllers once) and runs its share of the jobs, resetting between runs. A
+job is (variant, wind speed, seed); its result is the RMSE, the status and
+the wall time.
 """
 from __future__ import annotations
 
 import json
-import multiprocessing
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
@@ -20,12 +18,13 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from cosim.errors import FmuError
-from cosim.scenario import Scenario, apply_overrides, build_master, fmu_error_in_scenario, fmu_file, parse_scenario
+from cosim.scenario import Scenario, apply_overrides, build_master, fmu_error_in_scenario, parse_scenario
 
 from .metrics import euclidean_error, rmse
 from .missions import controller_variant, metric_signals, wind_parameter
 
-__all__ = ["Job", "run_once", "sweep", "cells"]
+__all__ = ["Job", "run_once", "sweep", "cells", "table_metrics", "study_metrics", "STUDY_METRICS",
+           "lean_signals"]
 
 
 @dataclass(frozen=True)
@@ -89,77 +88,56 @@ def summarize(scenario: Scenario, result, variant: str | None = None) -> dict[st
     return summary
 
 
-# ---- parallel sweeps ---------------------------------------------------------------
+# ---- sweeps -------------------------------------------------------------------------
 
-_WORKER: dict[str, Any] = {}
-
-
-def _init_worker(scenario: Scenario, fmu_dirs: dict[str, str]) -> None:
-    _WORKER["scenario"] = scenario
-    _WORKER["master"] = build_master(scenario, {k: Path(v) for k, v in fmu_dirs.items()})
+def table_metrics(scenario: Scenario, result) -> dict[str, Any]:
+    """A table's cell value: the RMSE between the ``[metrics]`` signals (on
+    the workers; ``None`` unless the run finished ``ok``)."""
+    return {"rmse_m": rmse(result, *metric_signals(scenario)) if result.status == "ok" else None}
 
 
-def _run_job(job: Job) -> dict[str, Any]:
-    scenario, master = _WORKER["scenario"], _WORKER["master"]
-    result = master.run(scenario.duration, seed=job.seed, parameters=_parameters(scenario, job),
-                        t0=scenario.start_time, raise_on_error=False)
-    value = rmse(result, *metric_signals(scenario))
-    return {"variant": job.variant, "wind_m_s": job.wind, "seed": job.seed, "status": result.status,
-            "error": result.error, "rmse_m": value if result.status == "ok" else None,
-            "wall_time_s": result.wall_time, "pid": os.getpid()}
+STUDY_METRICS = ("rmse_m", "max_error_m", "final_error_m")
 
 
-def _extract_fmus(scenario: Scenario, into: Path) -> dict[str, str]:
-    from fmpy import extract
+def study_metrics(scenario: Scenario, result) -> dict[str, Any]:
+    """A study row's metrics: those of :func:`summarize` (RMSE, max and final
+    error, m), on whatever part of the run was recorded."""
+    summary = summarize(scenario, result)
+    return {k: summary.get(k) for k in STUDY_METRICS}
 
-    dirs = {}
-    for name, spec in scenario.fmus.items():
-        target = into / name
-        extract(str(fmu_file(spec)), str(target))
-        dirs[name] = str(target)
-    return dirs
+
+def lean_signals(scenario: Scenario) -> list[str]:
+    """What the metrics read: only these are recorded in sweeps and studies."""
+    return list(dict.fromkeys(sum(metric_signals(scenario), [])))
 
 
 def sweep(scenario: Scenario, jobs: Sequence[Job], workers: int = 2,
-          progress: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
+          progress: Callable[[dict[str, Any]], None] | None = None, scheduler: str | None = None
+          ) -> list[dict[str, Any]]:
     """Run every job; results in the order of ``jobs``.
 
-    Only the metric signals are recorded (no CSV). ``workers = 1`` runs in
-    this process (no multiprocessing).
+    Only the metric signals are recorded (no CSV). The runs go through
+    :func:`cosim.dask_runner.run_tasks`: ``workers = 1`` (and no
+    ``scheduler``) runs in this process, else a Dask ``LocalCluster`` of
+    ``workers`` processes (or the cluster at ``scheduler``); each worker
+    builds one master and reuses it for every job, the job's variant and
+    wind speed being run-level parameters.
     """
-    lean = parse_scenario(apply_overrides(scenario.raw, {
-        "record.signals": list(dict.fromkeys(sum(metric_signals(scenario), [])))}),
-        source=scenario.source)
+    from cosim.dask_runner import Task, run_tasks
+
+    lean = parse_scenario(apply_overrides(scenario.raw, {"record.signals": lean_signals(scenario)}),
+                          source=scenario.source)
+    tasks = (Task(i, {}, _parameters(lean, job), job.seed) for i, job in enumerate(jobs))
     results: list[dict[str, Any] | None] = [None] * len(jobs)
-    tmp = Path(tempfile.mkdtemp(prefix="fnn-cosim-fmus-"))
-    try:
-        dirs = _extract_fmus(lean, tmp)
-        if workers <= 1:
-            _init_worker(lean, dirs)
-            try:
-                for i, job in enumerate(jobs):
-                    results[i] = _run_job(job)
-                    if progress:
-                        progress(results[i])
-            finally:
-                _WORKER.pop("master").close()
-        else:
-            method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-            ctx = multiprocessing.get_context(method)
-            with ctx.Pool(workers, initializer=_init_worker, initargs=(lean, dirs)) as pool:
-                indexed = list(enumerate(jobs))
-                for i, res in pool.imap_unordered(_indexed_job, indexed, chunksize=1):
-                    results[i] = res
-                    if progress:
-                        progress(res)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    for rec in run_tasks(lean, tasks, workers=workers, scheduler=scheduler, metrics=table_metrics):
+        job = jobs[rec["key"]]
+        results[rec["key"]] = res = {
+            "variant": job.variant, "wind_m_s": job.wind, "seed": job.seed, "status": rec["status"],
+            "error": rec["error"], "rmse_m": rec["metrics"].get("rmse_m"), "wall_time_s": rec["wall_time_s"],
+            "pid": rec["pid"]}
+        if progress:
+            progress(res)
     return results  # type: ignore[return-value]
-
-
-def _indexed_job(item: tuple[int, Job]) -> tuple[int, dict[str, Any]]:
-    i, job = item
-    return i, _run_job(job)
 
 
 def cells(results: Iterable[dict[str, Any]], key: str = "wind_m_s") -> dict[str, dict[Any, dict[str, Any]]]:

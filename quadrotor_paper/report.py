@@ -1,6 +1,8 @@
 """The reproduction: Table 2, Table 3 and the figures, into one report.
 
-:func:`table2` and :func:`table3` run the sweeps and write ``table2.md`` /
+:func:`table2` and :func:`table3` run the sweeps (through the engine's
+runner, :mod:`cosim.dask_runner`: in this process for one worker, else on
+Dask) and write ``table2.md`` /
 ``table3.md`` and a ``summary.json`` (every cell's mean, std and runs, every
 run's RMSE and wall time). :func:`figures` runs the single missions the
 figures need (with their CSV) and draws them. :func:`reproduce` does all three
@@ -31,10 +33,11 @@ from .tables import DEVIATION_LIMIT, PAPER_TABLE2, PAPER_TABLE3, deviations, tab
 __all__ = ["table2", "table3", "figures", "reproduce"]
 
 
-def _sweep_with_progress(scenario: Scenario, jobs: Sequence[Job], workers: int, label: str, show: bool):
+def _sweep_with_progress(scenario: Scenario, jobs: Sequence[Job], workers: int, label: str, show: bool,
+                         scheduler: str | None = None):
     bar = Progress(len(jobs), label, enabled=show)
     t = time.perf_counter()
-    results = sweep(scenario, jobs, workers, progress=lambda r: bar.update())
+    results = sweep(scenario, jobs, workers, progress=lambda r: bar.update(), scheduler=scheduler)
     bar.close()
     return results, time.perf_counter() - t
 
@@ -45,12 +48,14 @@ def _overrides(duration: float | None, overrides: Mapping[str, Any] | None = Non
 
 def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5.0), duration: float | None = None,
            workers: int = 2, scenario: str = "circles", show_progress: bool = True,
-           overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+           overrides: Mapping[str, Any] | None = None, scheduler: str | None = None) -> dict[str, Any]:
     """Table 2: every variant at every wind speed, ``seeds`` runs each
-    (``overrides``: dotted scenario keys, e.g. the master's ordering)."""
+    (``overrides``: dotted scenario keys, e.g. the master's ordering; the
+    runs on ``workers`` local processes, or on the Dask cluster at
+    ``scheduler``)."""
     sc = load_scenario(scenario, _overrides(duration, overrides))
     jobs = [Job(v, float(w), s) for s in range(seeds) for w in winds for v in variant_names()]
-    results, wall = _sweep_with_progress(sc, jobs, workers, "table2", show_progress)
+    results, wall = _sweep_with_progress(sc, jobs, workers, "table2", show_progress, scheduler)
     table = cells(results)
     md = table2_markdown(table, tuple(float(w) for w in winds))
     summary = {
@@ -65,11 +70,11 @@ def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5
 
 def table3(out_dir: Path, seeds: int = 10, duration: float | None = None, workers: int = 2,
            scenario: str = "figure8", show_progress: bool = True,
-           overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+           overrides: Mapping[str, Any] | None = None, scheduler: str | None = None) -> dict[str, Any]:
     """Table 3: every variant on the figure-8, ``seeds`` runs each."""
     sc = load_scenario(scenario, _overrides(duration, overrides))
     jobs = [Job(v, None, s) for s in range(seeds) for v in variant_names()]
-    results, wall = _sweep_with_progress(sc, jobs, workers, "table3", show_progress)
+    results, wall = _sweep_with_progress(sc, jobs, workers, "table3", show_progress, scheduler)
     table = cells(results)
     md = table3_markdown(table)
     summary = {
@@ -162,12 +167,14 @@ def _share_table(fig_info: dict[str, Any]) -> str:
 
 
 def reproduce(out_dir: Path, seeds: int = 10, workers: int = 2, duration: float | None = None,
-              show_progress: bool = True) -> Path:
+              show_progress: bool = True, scheduler: str | None = None) -> Path:
     """Table 2, Table 3 and the figures; returns the path of ``report.md``."""
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
-    t2 = table2(out_dir / "table2", seeds=seeds, duration=duration, workers=workers, show_progress=show_progress)
-    t3 = table3(out_dir / "table3", seeds=seeds, duration=duration, workers=workers, show_progress=show_progress)
+    t2 = table2(out_dir / "table2", seeds=seeds, duration=duration, workers=workers, show_progress=show_progress,
+                scheduler=scheduler)
+    t3 = table3(out_dir / "table3", seeds=seeds, duration=duration, workers=workers, show_progress=show_progress,
+                scheduler=scheduler)
     figs = figures(out_dir / "figures", duration=duration, show_progress=show_progress)
     devs = deviations(t2["cells_by_float"], t3["cells_by_float"])
     wall = time.perf_counter() - t0

@@ -1,0 +1,245 @@
+"""Many runs of one scenario, in this process or on a Dask cluster.
+
+A :class:`Task` is one run: dotted scenario overrides (applied to the base
+scenario's TOML document and validated, as ``--set`` does), run-level
+parameters (``component.name`` / ``Fmu.variable``, passed to
+:meth:`~cosim.master.Master.run`) and a seed. :func:`run_tasks` yields one
+small record (a dict) per task, in the order the runs finish:
+
+    {"key": task.key, "status": "ok" | "diverged" | "failed", "error": str | None,
+     "seed": int, "wall_time_s": float, "metrics": {...}, "pid": int}
+
+A run that diverges, fails, or cannot even be built (a sampled value the
+scenario refuses, an FMU that refuses a parameter, a worker that died) is a
+record with its status and message, never an exception.
+
+Engines: ``workers = 1`` and no ``scheduler`` runs every task in this
+process, one after the other (no Dask at all). Otherwise a
+``dask.distributed`` client: a ``LocalCluster`` of ``workers`` processes
+with one thread each, or the running cluster at ``scheduler`` (an address
+such as ``tcp://127.0.0.1:8786``). Tasks are submitted in a bounded window
+(a few per worker thread) and collected with ``as_completed``, so memory
+stays flat however many runs a study has.
+
+Each worker process keeps a small cache of built masters (:class:`MasterCache`),
+keyed by everything in the scenario a build depends on (FMUs and their
+parameters, components, connections, record, envelope, step, ordering), i.e.
+all but the seed, the duration and the start time, which are run-level. A
+run whose scenario differs from a cached one only in those reuses its master
+(FMUs extracted and instantiated once); any other difference builds a new
+master (the components may read FMU parameters when built, e.g. a
+controller's nominal model from the plant's). FMU archives are extracted
+once per worker process and shared by its masters.
+"""
+from __future__ import annotations
+
+import atexit
+import json
+import os
+import shutil
+import tempfile
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Mapping
+
+from .errors import CosimError, one_line
+from .scenario import Scenario, apply_overrides, build_master, fmu_file, parse_scenario
+
+__all__ = ["Task", "MasterCache", "run_tasks", "execute", "structure_key"]
+
+Metrics = Callable[[Scenario, Any], Mapping[str, Any]]
+
+
+@dataclass(frozen=True)
+class Task:
+    """One run: ``key`` is the caller's (returned with the record)."""
+
+    key: Any
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    seed: int | None = None  # None: the scenario's [simulation] seed
+
+
+def structure_key(scenario: Scenario) -> str:
+    """What a built master depends on: the scenario but its seed, duration and start time."""
+    fmus = {name: {k: (str(v) if isinstance(v, Path) else v) for k, v in spec.items()}
+            for name, spec in scenario.fmus.items()}
+    return json.dumps({"fmus": fmus, "components": scenario.components, "connections": scenario.connections,
+                       "record": scenario.record, "envelope": scenario.envelope, "step": scenario.step,
+                       "ordering": scenario.ordering, "source": str(scenario.source)},
+                      sort_keys=True, default=repr)
+
+
+class MasterCache:
+    """Built masters by :func:`structure_key` (least recently used dropped
+    beyond ``size``), with FMU archives extracted once."""
+
+    def __init__(self, size: int = 8):
+        self.size = size
+        self.masters: OrderedDict[str, Any] = OrderedDict()
+        self._extracted: dict[str, Path] = {}
+        self._tmp: Path | None = None
+
+    def _fmu_dirs(self, scenario: Scenario) -> dict[str, Path]:
+        from fmpy import extract
+
+        dirs = {}
+        for name, spec in scenario.fmus.items():
+            archive = str(fmu_file(spec))
+            if archive not in self._extracted:
+                if Path(archive).is_dir():
+                    self._extracted[archive] = Path(archive)
+                else:
+                    if self._tmp is None:
+                        self._tmp = Path(tempfile.mkdtemp(prefix="cosim-worker-fmus-"))
+                    target = self._tmp / str(len(self._extracted))
+                    extract(archive, str(target))
+                    self._extracted[archive] = target
+            dirs[name] = self._extracted[archive]
+        return dirs
+
+    def get(self, scenario: Scenario):
+        key = structure_key(scenario)
+        master = self.masters.get(key)
+        if master is None:
+            master = build_master(scenario, self._fmu_dirs(scenario))
+            self.masters[key] = master
+            while len(self.masters) > self.size:
+                self.masters.popitem(last=False)[1].close()
+        self.masters.move_to_end(key)
+        return master
+
+    def drop(self, scenario: Scenario) -> None:
+        master = self.masters.pop(structure_key(scenario), None)
+        if master is not None:
+            master.close()
+
+    def close(self) -> None:
+        while self.masters:
+            self.masters.popitem()[1].close()
+        if self._tmp is not None:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            self._tmp = None
+        self._extracted.clear()
+
+
+_LOCAL = threading.local()  # a worker's cache, one per thread (a master is not thread-safe)
+
+
+def _worker_cache() -> MasterCache:
+    cache = getattr(_LOCAL, "cache", None)
+    if cache is None:
+        cache = _LOCAL.cache = MasterCache()
+        atexit.register(cache.close)
+    return cache
+
+
+def _message(exc: BaseException) -> str:
+    text = str(exc) if isinstance(exc, CosimError) else f"{type(exc).__name__}: {exc}"
+    return one_line(text)
+
+
+def execute(raw: Mapping[str, Any], source: str | None, task: Task, metrics: Metrics | None = None,
+            cache: MasterCache | None = None) -> dict[str, Any]:
+    """Run one task (in a worker, or here); always returns its record."""
+    record: dict[str, Any] = {"key": task.key, "status": "failed", "error": None, "seed": task.seed,
+                              "wall_time_s": None, "metrics": {}, "pid": os.getpid()}
+    cache = cache or _worker_cache()
+    try:
+        scenario = parse_scenario(apply_overrides(dict(raw), task.overrides),
+                                  source=Path(source) if source else None)
+    except Exception as exc:  # a value the scenario refuses: this run's failure, not the study's
+        record["error"] = f"invalid scenario: {_message(exc)}"
+        return record
+    seed = scenario.seed if task.seed is None else int(task.seed)
+    record["seed"] = seed
+    try:
+        master = cache.get(scenario)
+    except Exception as exc:
+        record["error"] = f"could not build: {_message(exc)}"
+        return record
+    try:
+        result = master.run(scenario.duration, seed=seed, parameters=dict(task.parameters), t0=scenario.start_time,
+                            raise_on_error=False)
+    except Exception as exc:  # could not start, or a component raised mid-run
+        cache.drop(scenario)
+        record["error"] = _message(exc)
+        return record
+    record.update(status=result.status, error=result.error, wall_time_s=result.wall_time)
+    if metrics is not None:
+        try:
+            record["metrics"] = dict(metrics(scenario, result))
+        except Exception as exc:
+            record.update(status="failed", error=f"metrics: {_message(exc)}")
+    return record
+
+
+def _failed(task: Task, exc: BaseException) -> dict[str, Any]:
+    return {"key": task.key, "status": "failed", "error": f"worker: {_message(exc)}", "seed": task.seed,
+            "wall_time_s": None, "metrics": {}, "pid": None}
+
+
+def run_tasks(scenario: Scenario, tasks: Iterable[Task], workers: int = 1, scheduler: str | None = None,
+              metrics: Metrics | None = None, window: int = 4) -> Iterator[dict[str, Any]]:
+    """Run every task of ``scenario`` (its TOML document and file); yield each
+    record as its run finishes. ``workers = 1`` without ``scheduler``: in
+    this process; else on Dask (see the module's docstring)."""
+    raw, source = scenario.raw, str(scenario.source) if scenario.source else None
+    if scheduler is None and workers <= 1:
+        cache = MasterCache()
+        try:
+            for task in tasks:
+                yield execute(raw, source, task, metrics, cache)
+        finally:
+            cache.close()
+        return
+    yield from _run_dask(raw, source, tasks, workers, scheduler, metrics, window)
+
+
+def _client(workers: int, scheduler: str | None):
+    import logging
+
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        return Client(scheduler), None
+    cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.ERROR)
+    return Client(cluster), cluster
+
+
+def _run_dask(raw, source, tasks, workers, scheduler, metrics, window) -> Iterator[dict[str, Any]]:
+    from dask.distributed import as_completed
+
+    client, cluster = _client(workers, scheduler)
+    try:
+        slots = max(1, sum(client.nthreads().values())) * max(1, window)
+        pending = iter(tasks)
+        raw = dict(raw)
+        submitted: dict[Any, Task] = {}
+
+        def submit(task: Task):
+            # pure=False: two runs are never the same task to Dask, even if equal
+            fut = client.submit(execute, raw, source, task, metrics, pure=False)
+            submitted[fut.key] = task
+            return fut
+
+        first = [submit(t) for _, t in zip(range(slots), pending)]
+        flow = as_completed(first)
+        for fut in flow:
+            task = submitted.pop(fut.key)
+            try:
+                record = fut.result()
+            except Exception as exc:  # the worker died (e.g. a crash inside an FMU) or the task was lost
+                record = _failed(task, exc)
+            fut.release()
+            yield record
+            nxt = next(pending, None)
+            if nxt is not None:
+                flow.add(submit(nxt))
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
