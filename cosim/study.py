@@ -403,6 +403,17 @@ def _t975(dof: int) -> float:
     return float(t.ppf(0.975, dof))
 
 
+def interval95(values: Sequence[float]) -> tuple[float, float] | None:
+    """The 95 % Student t interval of the mean of ``values`` (None below 2 values)."""
+    x = [float(v) for v in values]
+    if len(x) < 2:
+        return None
+    mean = sum(x) / len(x)
+    std = math.sqrt(sum((v - mean) ** 2 for v in x) / (len(x) - 1))
+    half = _t975(len(x) - 1) * std / math.sqrt(len(x))
+    return mean - half, mean + half
+
+
 def summarize_runs(rows: Iterable[Mapping[str, str]], group_keys: Sequence[str],
                    metric_names: Sequence[str]) -> list[dict[str, Any]]:
     """One record per group (the values of ``group_keys``, first-seen order):

@@ -48,6 +48,7 @@ import numpy as np
 from fmu_models.models.quadrotor import STATE_NAMES
 
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
+from .variants.registry import identifier
 from .position import FNN_STATE_SIZE, PositionParams, fnn_state_size, initial_fnn_state, position_controller
 
 __all__ = [
@@ -138,7 +139,7 @@ def controller_step_function(variant: str = "pd+lm", position: PositionParams = 
     names = ["Omega", "state_next", "v_ref", "tau_c", "tau_n", "wrench"]
     outputs = [res[k] for k in names]
     check = sum(ca.sum1(v) for v in args + outputs)
-    return ca.Function(f"controller_step_{variant.replace('+', '_')}", args, outputs + [check],
+    return ca.Function(f"controller_step_{identifier(variant)}", args, outputs + [check],
                        list(_INPUTS) + ["state"], names + ["check"])
 
 

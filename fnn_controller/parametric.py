@@ -30,6 +30,7 @@ from .geometric import GeometricParams, initial_velocity_state
 from .parameters import parameter_info
 from .position import PositionParams, fnn_state_size
 from .variants import variant as lookup
+from .variants.registry import identifier
 
 __all__ = ["Parameter", "parameter_table", "parametric_step_function", "parameter_vector",
            "initial_state_function", "PER_AXIS"]
@@ -136,7 +137,7 @@ def parametric_step_function(variant: str, position: PositionParams = PositionPa
     y = ca.vertcat(*(res[k] for k in Y_PARTS))
     # finite exactly when every input, parameter and output is
     check = sum(ca.sum1(v) for v in args + [p, y, res["state_next"]])
-    return ca.Function(f"controller_step_{variant.replace('+', '_')}_parametric", args + [p],
+    return ca.Function(f"controller_step_{identifier(variant)}_parametric", args + [p],
                        [y, res["state_next"], check], list(_INPUTS) + ["state", "p"], ["y", "state_next", "check"])
 
 
@@ -160,4 +161,4 @@ def initial_state_function(variant: str, position: PositionParams = PositionPara
     axes = [v.initial_axis(sym_position, r[a * v.n_random:(a + 1) * v.n_random]) for a in range(3)]
     state0 = ca.vertcat(*axes, ca.DM(initial_velocity_state()))
     assert state0.shape[0] == fnn_state_size(variant) + len(initial_velocity_state())
-    return ca.Function(f"initial_state_{variant.replace('+', '_')}", [p, r], [state0], ["p", "r"], ["state0"])
+    return ca.Function(f"initial_state_{identifier(variant)}", [p, r], [state0], ["p", "r"], ["state0"])

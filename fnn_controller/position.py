@@ -23,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from .fnn import AXIS_STATE_SIZE, FnnInit
+from .it2 import IT2Params
 from .learning import LearningBounds
 from .parameters import check_ranges, param
 
@@ -52,6 +53,7 @@ class PositionParams:
                                             "boundary layer of the learning laws' sgn(tau_c) for x, y, z: "
                                             "sat(tau_c / phi) in its place (0: the paper's sgn)", min=0.0)
     init: FnnInit = field(default_factory=FnnInit)  # initial FNN values (section 5.1)
+    it2: IT2Params = field(default_factory=IT2Params)  # the interval type-2 FNN's own (variants pd+it2-*)
     bounds: LearningBounds = field(default_factory=LearningBounds)  # eqs. 27-29 and floors
 
     def __post_init__(self) -> None:
@@ -141,6 +143,12 @@ def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParam
     }
 
 
+def _identifier(variant: str) -> str:
+    from .variants.registry import identifier
+
+    return identifier(variant)
+
+
 def position_controller_function(variant: str, params: PositionParams = PositionParams()) -> ca.Function:
     """The position controller as one CasADi function.
 
@@ -154,7 +162,7 @@ def position_controller_function(variant: str, params: PositionParams = Position
     fnn_state = ca.SX.sym("fnn_state", fnn_state_size(variant))
     out = position_controller(variant, e, e_dot, fnn_state, params)
     return ca.Function(
-        f"position_controller_{variant.replace('+', '_')}",
+        f"position_controller_{_identifier(variant)}",
         [e, e_dot, fnn_state],
         [out["v_ref"], out["fnn_state_next"], out["tau_c"], out["tau_n"]],
         ["e", "e_dot", "fnn_state"],

@@ -137,7 +137,8 @@ def _cmd_table2(args) -> int:
     winds = [float(w) for w in args.winds.split(",")]
     out = Path(args.out) if args.out else DEFAULT_OUT / "table2"
     summary = table2(out, seeds=args.seeds, winds=winds, duration=args.duration, workers=_workers(args.workers),
-                     show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler)
+                     show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler,
+                     variants=args.variants)
     return _print_table(summary, out / "table2.md", out / "summary.json")
 
 
@@ -146,7 +147,8 @@ def _cmd_table3(args) -> int:
 
     out = Path(args.out) if args.out else DEFAULT_OUT / "table3"
     summary = table3(out, seeds=args.seeds, duration=args.duration, workers=_workers(args.workers),
-                     show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler)
+                     show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler,
+                     variants=args.variants)
     return _print_table(summary, out / "table3.md", out / "summary.json")
 
 
@@ -161,7 +163,7 @@ def _cmd_reproduce(args) -> int:
 
     out = Path(args.out) if args.out else DEFAULT_OUT
     path = reproduce(out, seeds=args.seeds, workers=_workers(args.workers), duration=args.duration,
-                     show_progress=not args.quiet, scheduler=args.scheduler)
+                     show_progress=not args.quiet, scheduler=args.scheduler, variants=args.variants)
     print(f"report: {path}")
     return 0
 
@@ -248,6 +250,18 @@ def _cmd_build_fmu(args) -> int:
 
 # ---- entry point ------------------------------------------------------------------------
 
+def _variant_list(text: str) -> list[str]:
+    """``--variants a,b``: every name a registered variant, checked before any run."""
+    from fnn_controller.variants import variant_names
+
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    unknown = [v for v in names if v not in variant_names()]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: unknown variant {', '.join(map(repr, unknown)) or '(none given)'}; "
+                                         f"known: {', '.join(variant_names())}")
+    return names
+
+
 def _parser() -> argparse.ArgumentParser:
     from fnn_controller.variants import variant_names
 
@@ -263,6 +277,9 @@ def _parser() -> argparse.ArgumentParser:
             sp.add_argument("--duration", type=float, help="override the missions' duration (s)")
             sp.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 1: in this process)")
             sp.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS instead")
+            sp.add_argument("--variants", type=_variant_list,
+                            metavar="A,B", help="rows to run, e.g. pd,pd+smc,pd+lm (default: every registered variant: "
+                                                + ", ".join(variant_names()) + ")")
 
     r = sub.add_parser("run", help="run one scenario: results CSV, plots, summary")
     r.add_argument("scenario", help="TOML file, shipped scenario name (circles, figure8), or SSP archive (.ssp)")
@@ -278,7 +295,7 @@ def _parser() -> argparse.ArgumentParser:
     common(r, seeds=False)
     r.set_defaults(func=_cmd_run)
 
-    t2 = sub.add_parser("table2", help="Table 2: PD, PD+SMC, PD+LM at 1, 3, 5 m/s")
+    t2 = sub.add_parser("table2", help="Table 2: every controller variant at 1, 3, 5 m/s wind")
     t2.add_argument("--winds", default="1,3,5", help="wind speeds in m/s (default 1,3,5)")
     t2.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help='override a scenario value, e.g. --set simulation.ordering=\'"exchange"\'')

@@ -18,6 +18,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from cosim.errors import FmuError
+from cosim.study import interval95
 from cosim.scenario import Scenario, apply_overrides, build_master, fmu_error_in_scenario, parse_scenario
 
 from .metrics import euclidean_error, rmse
@@ -142,7 +143,8 @@ def sweep(scenario: Scenario, jobs: Sequence[Job], workers: int = 2,
 
 def cells(results: Iterable[dict[str, Any]], key: str = "wind_m_s") -> dict[str, dict[Any, dict[str, Any]]]:
     """Group job results by variant and ``key``: mean, sample std (ddof = 1),
-    number of runs, number failed, and every run's RMSE."""
+    the 95 % t interval of the mean (``ci95``, from 2 runs), number of runs,
+    number failed, and every run's RMSE."""
     grouped: dict[str, dict[Any, list[dict[str, Any]]]] = {}
     for r in results:
         grouped.setdefault(r["variant"], {}).setdefault(r[key], []).append(r)
@@ -154,6 +156,7 @@ def cells(results: Iterable[dict[str, Any]], key: str = "wind_m_s") -> dict[str,
             out[variant][k] = {
                 "mean": float(values.mean()) if values.size else None,
                 "std": float(values.std(ddof=1)) if values.size > 1 else 0.0 if values.size else None,
+                "ci95": interval95(values),
                 "runs": len(runs), "failed": sum(r["status"] != "ok" for r in runs),
                 "rmse": [r["rmse_m"] for r in sorted(runs, key=lambda r: r["seed"])],
                 "seeds": sorted(r["seed"] for r in runs),

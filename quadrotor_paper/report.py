@@ -21,7 +21,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from . import plots
-from fnn_controller.variants import variant_names
+from fnn_controller.variants import variant, variant_names
 
 from .experiments import Job, cells, run_once, sweep, write_json
 from .metrics import pd_share, rmse
@@ -46,15 +46,28 @@ def _overrides(duration: float | None, overrides: Mapping[str, Any] | None = Non
     return {**(overrides or {}), **({"simulation.duration": duration} if duration else {})}
 
 
+def _variants(names: Sequence[str] | None) -> tuple[str, ...]:
+    """The variants to run, checked before any run starts (a ``ValueError``
+    naming an unknown one)."""
+    if names is None:
+        return variant_names()
+    for name in names:
+        variant(name)
+    if not names:
+        raise ValueError("variants: empty list; give at least one of " + ", ".join(variant_names()))
+    return tuple(dict.fromkeys(names))
+
+
 def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5.0), duration: float | None = None,
            workers: int = 2, scenario: str = "circles", show_progress: bool = True,
-           overrides: Mapping[str, Any] | None = None, scheduler: str | None = None) -> dict[str, Any]:
-    """Table 2: every variant at every wind speed, ``seeds`` runs each
-    (``overrides``: dotted scenario keys, e.g. the master's ordering; the
-    runs on ``workers`` local processes, or on the Dask cluster at
-    ``scheduler``)."""
+           overrides: Mapping[str, Any] | None = None, scheduler: str | None = None,
+           variants: Sequence[str] | None = None) -> dict[str, Any]:
+    """Table 2: each of ``variants`` (default: every registered one) at every
+    wind speed, ``seeds`` runs each (``overrides``: dotted scenario keys, e.g.
+    the master's ordering; the runs on ``workers`` local processes, or on the
+    Dask cluster at ``scheduler``)."""
     sc = load_scenario(scenario, _overrides(duration, overrides))
-    jobs = [Job(v, float(w), s) for s in range(seeds) for w in winds for v in variant_names()]
+    jobs = [Job(v, float(w), s) for s in range(seeds) for w in winds for v in _variants(variants)]
     results, wall = _sweep_with_progress(sc, jobs, workers, "table2", show_progress, scheduler)
     table = cells(results)
     md = table2_markdown(table, tuple(float(w) for w in winds))
@@ -70,10 +83,12 @@ def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5
 
 def table3(out_dir: Path, seeds: int = 10, duration: float | None = None, workers: int = 2,
            scenario: str = "figure8", show_progress: bool = True,
-           overrides: Mapping[str, Any] | None = None, scheduler: str | None = None) -> dict[str, Any]:
-    """Table 3: every variant on the figure-8, ``seeds`` runs each."""
+           overrides: Mapping[str, Any] | None = None, scheduler: str | None = None,
+           variants: Sequence[str] | None = None) -> dict[str, Any]:
+    """Table 3: each of ``variants`` (default: every registered one) on the
+    figure-8, ``seeds`` runs each."""
     sc = load_scenario(scenario, _overrides(duration, overrides))
-    jobs = [Job(v, None, s) for s in range(seeds) for v in variant_names()]
+    jobs = [Job(v, None, s) for s in range(seeds) for v in _variants(variants)]
     results, wall = _sweep_with_progress(sc, jobs, workers, "table3", show_progress, scheduler)
     table = cells(results)
     md = table3_markdown(table)
@@ -167,14 +182,16 @@ def _share_table(fig_info: dict[str, Any]) -> str:
 
 
 def reproduce(out_dir: Path, seeds: int = 10, workers: int = 2, duration: float | None = None,
-              show_progress: bool = True, scheduler: str | None = None) -> Path:
-    """Table 2, Table 3 and the figures; returns the path of ``report.md``."""
+              show_progress: bool = True, scheduler: str | None = None,
+              variants: Sequence[str] | None = None) -> Path:
+    """Table 2, Table 3 (rows: ``variants``, default every registered one) and
+    the figures; returns the path of ``report.md``."""
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
     t2 = table2(out_dir / "table2", seeds=seeds, duration=duration, workers=workers, show_progress=show_progress,
-                scheduler=scheduler)
+                scheduler=scheduler, variants=variants)
     t3 = table3(out_dir / "table3", seeds=seeds, duration=duration, workers=workers, show_progress=show_progress,
-                scheduler=scheduler)
+                scheduler=scheduler, variants=variants)
     figs = figures(out_dir / "figures", duration=duration, show_progress=show_progress)
     devs = deviations(t2["cells_by_float"], t3["cells_by_float"])
     wall = time.perf_counter() - t0

@@ -28,6 +28,8 @@ def _fmt(cell: Mapping[str, Any] | None) -> str:
     if not cell or cell.get("mean") is None:
         return "diverged" if cell and cell.get("failed") else "–"
     text = f"{cell['mean']:.3f} ± {cell['std']:.3f}"
+    if cell.get("ci95"):
+        text += f" [{cell['ci95'][0]:.3f}, {cell['ci95'][1]:.3f}]"
     if cell.get("failed"):
         text += f" ({cell['failed']}/{cell['runs']} diverged)"
     return text

@@ -7,7 +7,7 @@ Adding a variant: a module here (or anywhere) that calls
 from .registry import (Variant, initial_axis_state, register_variant, unregister_variant, variant, variant_names,
                        variants)
 
-from . import pd, pd_smc, pd_lm  # noqa: E402,F401  (the paper's three, in the paper's order)
+from . import pd, pd_smc, pd_lm, pd_it2_smc, pd_it2_lm  # noqa: E402,F401  (the paper's three first, in its order)
 
 __all__ = ["Variant", "initial_axis_state", "register_variant", "unregister_variant", "variant", "variant_names",
            "variants"]

@@ -29,7 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable
 
-__all__ = ["Variant", "register_variant", "variants", "variant", "variant_names", "initial_axis_state"]
+__all__ = ["Variant", "register_variant", "variants", "variant", "variant_names", "initial_axis_state", "identifier"]
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,10 @@ def initial_axis_state(v: Variant, rng, params):
         raise ValueError(f"variant {v.name!r}: initial axis state of shape {state.shape}, "
                          f"expected ({v.axis_state_size},)")
     return state
+
+
+def identifier(name: str) -> str:
+    """``pd_it2_lm`` for ``pd+it2-lm``: a variant name as a C / CasADi name part."""
+    import re
+
+    return re.sub(r"\W", "_", name)

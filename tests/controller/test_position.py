@@ -85,7 +85,7 @@ def test_fast_buffer_path_gives_identical_results_to_a_plain_casadi_call(variant
     ctrl = QuadrotorController(variant)
     ctrl.reset(seed=5)
     f = controller_step_function(variant)
-    state = initial_state(5)
+    state = initial_state(5, PositionParams(), variant)
     for _ in range(300):
         p_ref, p_ref_dot, x, psi_ref = _random_inputs(rng)
         omega = ctrl.step(p_ref, p_ref_dot, x, psi_ref).copy()

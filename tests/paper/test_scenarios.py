@@ -6,6 +6,7 @@ import tomllib
 
 import pytest
 
+from cosim import registry
 from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.scenario import apply_overrides, build_master, load_scenario, parse_scenario, shipped_scenarios
 from quadrotor_paper.missions import wind_parameter
@@ -52,9 +53,8 @@ def test_paper_values_in_the_shipped_missions():
     ({"fmus.Quadrotor.parameters.mass": 1.0}, "fmus.Quadrotor.parameters.mass: Quadrotor has no parameter 'mass'"),
     ({"fmus.Quadrotor.parameters.x": 1.0}, "fmus.Quadrotor.parameters.x: 'x' is a state of Quadrotor, not a parameter"),
     ({"fmus.Quadrotor.parameters.Ix": float("nan")}, "fmus.Quadrotor.parameters.Ix = nan: expected a finite number"),
-    ({"fmus.Quadrotor.model": "Hexacopter"}, "fmus.Quadrotor.model = 'Hexacopter': unknown model; known: ControllerPD, "
-                                         "ControllerPDLM, ControllerPDSMC, Quadrotor, ReferenceFigureEight, "
-                                         "ReferenceHover, ReferenceTwoCircles, WindGust"),
+    ({"fmus.Quadrotor.model": "Hexacopter"}, "fmus.Quadrotor.model = 'Hexacopter': unknown model; known: "
+                                         + ", ".join(sorted(registry.fmu_models()))),
     ({"fmus.Quadrotor.fmi_version": 1}, "fmus.Quadrotor.fmi_version = 1: expected 2 or 3"),
     ({"fmus.Quadrotor.path": "x.fmu"}, "fmus.Quadrotor: give exactly one of 'model'"),
     ({"wind.speed": -3.0}, "wind.speed = -3.0: must not be negative"),

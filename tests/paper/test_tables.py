@@ -13,7 +13,7 @@ from quadrotor_paper.tables import PAPER_TABLE2, deviations, table2_markdown, ta
 def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):
     out = tmp_path / "t2"
     assert main(["table2", "--seeds", "2", "--winds", "1,5", "--duration", "15", "--workers", "2",
-                 "--out", str(out), "--quiet"]) == 0
+                 "--variants", "pd,pd+smc,pd+lm", "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["runs"]) == 2 * 2 * 3 and all(r["status"] == "ok" for r in summary["runs"])
     cells = summary["cells"]
@@ -62,3 +62,11 @@ def test_full_reproduction(tmp_path):
     assert len(summary["table2"]["runs"]) == 90 and len(summary["table3"]["runs"]) == 30
     for f in summary["figures"]["files"]:
         assert (tmp_path / "figures").joinpath(f).exists()
+
+
+def test_an_unknown_variant_is_refused_before_any_run(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["table2", "--variants", "pd,pd+fuzzy", "--out", str(tmp_path / "t"), "--quiet"])
+    assert exc.value.code == 2
+    assert "unknown variant 'pd+fuzzy'; known: pd, pd+smc, pd+lm" in capsys.readouterr().err
+    assert not (tmp_path / "t").exists()
