@@ -21,6 +21,8 @@ _WHERE: dict[str, tuple[str, str]] = {
     "ReferenceHover": ("fmu_models.models.reference", "REFERENCE_HOVER"),
     "ReferenceTwoCircles": ("fmu_models.models.reference", "REFERENCE_TWO_CIRCLES"),
     "ReferenceFigureEight": ("fmu_models.models.reference", "REFERENCE_FIGURE_EIGHT"),
+    "Measurement12": ("fmu_models.models.sensors", "MEASUREMENT_12"),
+    "CommandLink4": ("fmu_models.models.sensors", "COMMAND_LINK_4"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 

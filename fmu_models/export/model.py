@@ -22,7 +22,15 @@ states) is made of two others instead:
                                            the parameters and ``n_random``
                                            uniform numbers in [0, 1)
 ``dstep``      (t, u, p, z) -> (y, z+)     outputs and next discrete state
+               (t, u, p, z, rs) -> (y, z+) the same, with ``n_random_step > 0``
+                                           fresh uniform numbers ``rs`` in [0, 1)
+                                           for the sample being computed
 =============  ==========================  =====================================
+
+The uniform numbers come from one stream, numpy's ``default_rng(seed)``: the
+first ``n_random`` go to ``dinit``, then ``n_random_step`` per communication
+step to ``dstep`` (step 0 first). The generic C core keeps the generator inside
+the FMU state, so restoring a state continues the same stream.
 """
 from __future__ import annotations
 
@@ -61,13 +69,22 @@ class Sampled:
     vector of ``n_random`` uniform numbers, which the FMU draws from numpy's
     ``default_rng(seed)`` with ``seed`` a parameter's name, and returns the
     discrete state by name.
+
+    With ``n_random_step > 0`` the update is ``update(t, v, rs)``: ``rs`` is a
+    vector of ``n_random_step`` uniform numbers in [0, 1), the next ones of
+    the same stream, fresh at every communication step and the same for every
+    evaluation of one step's sample (a get before doStep and the doStep).
+    ``integers`` names parameters that must be whole numbers (the FMU refuses
+    any other value, as it does a value outside the range).
     """
 
-    update: Callable[[ca.SX, Mapping[str, ca.SX]], tuple[Mapping[str, ca.SX], Mapping[str, ca.SX]]]
+    update: Callable[..., tuple[Mapping[str, ca.SX], Mapping[str, ca.SX]]]
     initial: Callable[[Mapping[str, ca.SX], ca.SX], Mapping[str, ca.SX]]
     n_random: int
     seed: str
     sample_period: str
+    n_random_step: int = 0
+    integers: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -97,9 +114,13 @@ class FmuModel:
         if self.sampled is not None:
             if self.states:
                 raise ValueError(f"model {self.identifier}: a sampled-data model has no continuous states")
-            for role, name in (("seed", self.sampled.seed), ("sample_period", self.sampled.sample_period)):
+            roles = [("seed", self.sampled.seed), ("sample_period", self.sampled.sample_period)]
+            roles += [("integer parameter", name) for name in self.sampled.integers]
+            for role, name in roles:
                 if name not in {v.name for v in self.parameters}:
                     raise ValueError(f"model {self.identifier}: its {role} {name!r} is not a parameter")
+            if self.sampled.n_random < 0 or self.sampled.n_random_step < 0:
+                raise ValueError(f"model {self.identifier}: negative count of random numbers")
 
     @property
     def all_variables(self) -> tuple[Variable, ...]:
@@ -144,6 +165,8 @@ class FmuModel:
             if var.causality != "parameter":
                 raise KeyError(f"{name!r} is a {var.causality} of {self.identifier}, not a parameter")
             var.check(value)
+            if self.sampled is not None and name in self.sampled.integers and value != int(value):
+                raise ValueError(f"{name} = {value!r} is not a whole number")
         return [overrides.get(v.name, v.start) for v in self.parameters]
 
     def input_values(self, **overrides: float) -> list[float]:
@@ -160,6 +183,7 @@ class FmuModel:
             "h": ca.SX.sym("h"),
             "z": ca.SX.sym("z", len(self.discrete_states)),
             "r": ca.SX.sym("r", self.sampled.n_random if self.sampled else 0),
+            "rs": ca.SX.sym("rs", self.sampled.n_random_step if self.sampled else 0),
         }
 
     @cached_property
@@ -205,8 +229,9 @@ class FmuModel:
     def _sampled_functions(self, named: dict[str, ca.SX]) -> dict[str, ca.Function]:
         """``dinit`` and ``dstep`` of a sampled-data model."""
         s = self.symbols
-        t, u, p, z, r = s["t"], s["u"], s["p"], s["z"], s["r"]
-        outputs, z_next = self.sampled.update(t, named)
+        t, u, p, z, r, rs = s["t"], s["u"], s["p"], s["z"], s["r"], s["rs"]
+        stochastic = self.sampled.n_random_step > 0
+        outputs, z_next = self.sampled.update(t, named, rs) if stochastic else self.sampled.update(t, named)
         params = {v.name: named[v.name] for v in self.parameters}
         z0 = self.sampled.initial(params, r)
         missing = ({v.name for v in self.outputs} - set(outputs)) | ({v.name for v in self.discrete_states} - set(z_next))
@@ -218,5 +243,8 @@ class FmuModel:
         z_init = ca.vertcat(*[z0[v.name] for v in self.discrete_states])
         return {
             "dinit": ca.Function("model_dinit", [p, r], [z_init], ["p", "r"], ["z0"]),
-            "dstep": ca.Function("model_dstep", [t, u, p, z], [y, z_plus], ["t", "u", "p", "z"], ["y", "z_next"]),
+            # rs only where the model asks for it: the others' generated code stays as it was
+            "dstep": (ca.Function("model_dstep", [t, u, p, z, rs], [y, z_plus], ["t", "u", "p", "z", "rs"],
+                                  ["y", "z_next"]) if stochastic else
+                      ca.Function("model_dstep", [t, u, p, z], [y, z_plus], ["t", "u", "p", "z"], ["y", "z_next"])),
         }

@@ -47,8 +47,9 @@ def dependency_kinds(model: FmuModel) -> dict[str, list[tuple[str, str]]]:
     f = model.functions
     t, x, u, p, z = s["t"], s["x"], s["u"], s["p"], s["z"]
     if model.sampled is not None:
-        unknowns = f["dstep"](t, u, p, z)[0]
-        variable_part = ca.vertcat(t, u, z)
+        rs = s["rs"]
+        unknowns = (f["dstep"](t, u, p, z, rs) if model.sampled.n_random_step else f["dstep"](t, u, p, z))[0]
+        variable_part = ca.vertcat(t, u, z, rs)
     else:
         unknowns = ca.vertcat(f["ode"](t, x, u, p), f["out"](t, x, u, p))
         variable_part = ca.vertcat(t, x, u)

@@ -135,6 +135,11 @@ static CoreStatus initial_state(Instance *inst) {
     inst->arg[0] = P_; inst->arg[1] = r;
     inst->res[0] = Z_;
     model_dinit(inst->arg, inst->res, inst->iw, inst->w, 0);
+#if NRS > 0
+    /* the stream goes on: step 0's numbers, then NRS more at each committed step */
+    for (size_t i = 0; i < NRS; i++) inst->s.r_step[i] = np_random(&rng);
+    inst->s.rng = rng;
+#endif
     inst->z_pending = 0;
     inst->derived_valid = 0;
     return CORE_OK;
@@ -143,6 +148,9 @@ static CoreStatus initial_state(Instance *inst) {
 /* g and f at the current z and u: the outputs a get returns, the state doStep takes. */
 static void update_pending(Instance *inst) {
     inst->arg[0] = &T_; inst->arg[1] = U_; inst->arg[2] = P_; inst->arg[3] = Z_;
+#if NRS > 0
+    inst->arg[4] = inst->s.r_step;  /* this step's draws: the same for every evaluation of it */
+#endif
     inst->res[0] = inst->y_next; inst->res[1] = inst->z_next;
     model_dstep(inst->arg, inst->res, inst->iw, inst->w, 0);
     inst->z_pending = 1;
@@ -226,6 +234,18 @@ static CoreStatus check_value(Instance *inst, unsigned vr, double value) {
                  exact(lo, VAR_MIN[vr]), exact(hi, VAR_MAX[vr]));
         return CORE_ERROR;
     }
+#if N_INTEGER_VRS > 0
+    {
+        static const unsigned INTEGER_VR[] = {INTEGER_VR_LIST 0};
+        for (size_t i = 0; i < N_INTEGER_VRS; i++) {
+            if (vr == INTEGER_VR[i] && value != floor(value)) {
+                char v[NUMBER_SIZE];
+                core_log(inst, CORE_ERROR, "%s = %s refused: not a whole number", VAR_NAME[vr], exact(v, value));
+                return CORE_ERROR;
+            }
+        }
+    }
+#endif
     return CORE_OK;
 }
 
@@ -350,6 +370,9 @@ static CoreStatus sampled_step(Instance *inst, double current_time, double step_
     }
     memcpy(Z_, inst->z_next, NZ * sizeof(double));
     memcpy(Y_, inst->y_next, NY * sizeof(double));
+#if NRS > 0
+    for (size_t i = 0; i < NRS; i++) inst->s.r_step[i] = np_random(&inst->s.rng);  /* the next step's */
+#endif
     inst->z_pending = 0;
     inst->s.held = 1;
     inst->derived_valid = 1;

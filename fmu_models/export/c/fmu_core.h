@@ -16,6 +16,14 @@
  * feedthrough and are sample-and-hold: after setting inputs, a get returns
  * y = g(z, u); doStep then makes z its next value and holds that y until the
  * inputs are set again.
+ *
+ * A stochastic sampled-data model (NRS > 0) has model_dstep(t, u, p, z, rs)
+ * with NRS fresh uniform numbers rs per communication step, drawn from the
+ * same stream, after dinit's NR: step n's rs are drawn when step n-1 is
+ * committed (at initialization for step 0), kept in the FMU state, and reused
+ * by every evaluation of step n's sample (a get, then doStep). The generator
+ * and the pending draws are part of CoreState, so get/set/serialize FMU state
+ * reproduce the stream.
  */
 #ifndef FMU_CORE_H
 #define FMU_CORE_H
@@ -23,6 +31,7 @@
 #include <stddef.h>
 #include <stdint.h>
 #include "model_config.h"
+#include "numpy_random.h"
 
 typedef enum {
     CORE_OK = 0, CORE_WARNING = 1, CORE_DISCARD = 2, CORE_ERROR = 3, CORE_FATAL = 4
@@ -49,7 +58,8 @@ typedef void (*CoreLogger)(void *environment, const char *instance_name,
                            CoreStatus status, const char *category, const char *message);
 
 /* Everything get/set FMU state saves and restores. */
-/* The serialized FMU state is this struct's bytes: fixed-width header, then
+/* The serialized FMU state is this struct's bytes: fixed-width header (with
+ * the random stream of a stochastic model, NRS > 0), then
  * v, the N_VARIABLES values in value-reference order (the last 8 N_VARIABLES
  * bytes), so a learned state can be written into a serialized state. */
 typedef struct {
@@ -59,6 +69,10 @@ typedef struct {
     int32_t failed;          /* a step produced a non-finite state */
     int32_t held;            /* sampled-data: outputs held from the last doStep */
     int32_t reserved;
+#if NRS > 0
+    NpPcg64 rng;             /* stochastic sampled-data: the stream after the draws so far */
+    double r_step[NRS];      /* the uniform numbers of the step to come (its sample's rs) */
+#endif
     double v[N_VARIABLES];   /* v[0] is the time */
 } CoreState;
 

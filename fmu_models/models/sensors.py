@@ -1,0 +1,146 @@
+"""Sensors and links as FMUs: noise, bias, sample-and-hold and transport delay.
+
+One generic sampled-data model family, :func:`sensors_model`, with N
+channels; two members are shipped (``docs/sensors.md``):
+
+* ``Measurement12``: the measurement path, plant -> controller. Inputs the 12
+  rigid-body states ``x y z u v w phi theta psi p q r``, outputs the measured
+  ``x_m ... r_m`` (an OptiTrack-like pose/velocity feed);
+* ``CommandLink4``: the command path, controller -> plant (the paper's Wi-Fi
+  link). Inputs ``Omega_1..4``, outputs the received ``Omega_1_rx..4_rx``.
+
+Per communication step n (``t_n = n dt``), channel i, with ``u`` the input::
+
+    w_n     = sqrt(-2 ln(1 - r1)) cos(2 pi r2)                 Box-Muller, r1, r2 ~ U[0, 1)
+    m_n     = u_n + sigma_i w_n + bias_i                       noise, then bias
+    s_n     = m_n if c_n = 0 else s_{n-1}                      sample-and-hold
+    y_n     = s_{n - delay_steps}                              transport delay
+    c_{n+1} = (c_n + 1) mod N_hold,  c_0 = 0
+    N_hold  = max(1, floor(1 / (sample_rate dt) + 1/2))        (1 if sample_rate = 0)
+
+``r1, r2`` are channel i's two of the ``2 N`` uniform numbers the FMU draws
+per step from numpy's ``default_rng(seed)`` (channel order, r1 first); they are
+drawn every step, sampled or not, so the stream never depends on the
+parameters. Before the first ``delay_steps`` samples exist, the delay line
+holds the first sample ``s_0`` (so ``y_n = s_0`` for ``n < delay_steps``).
+Outputs have direct feedthrough: with ``delay_steps = 0`` and a sample due,
+a get after setting the inputs of ``t_n`` returns ``y_n`` computed from them.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import casadi as ca
+
+from ..export.model import FmuModel, Sampled
+from ..export.variables import discrete, input_, output, parameter
+from .quadrotor import QUADROTOR, STATE_NAMES
+
+__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "DELAY_MAX", "SAMPLE_RATE_MAX",
+           "SEED_MAX", "hold_steps", "gaussian"]
+
+DELAY_MAX = 20            # samples: the length of the delay line, fixed at build
+SAMPLE_RATE_MAX = 1.0e6   # Hz
+SEED_MAX = 2.0 ** 53      # every whole number up to 2^53 is exact in a double
+DT_DEFAULT = 0.01         # s: the project's communication step
+
+
+def hold_steps(sample_rate: float, dt: float) -> int:
+    """Communication steps per sample: ``max(1, floor(1 / (sample_rate dt) + 1/2))``,
+    1 for ``sample_rate = 0``; the FMU's formula, evaluated the same way."""
+    if sample_rate <= 0:
+        return 1
+    return max(1, math.floor(1.0 / (sample_rate * dt) + 0.5))
+
+
+def gaussian(r1, r2):
+    """Box-Muller: a standard normal number from two uniform ones in [0, 1).
+    ``1 - r1`` is in (0, 1], so the logarithm is finite (guards r1 = 0)."""
+    return ca.sqrt(-2.0 * ca.log(1.0 - r1)) * ca.cos(2.0 * math.pi * r2)
+
+
+def sensors_model(identifier: str, description: str, channels: Sequence[tuple[str, str, str, float]],
+                  suffix: str, delay_max: int = DELAY_MAX) -> FmuModel:
+    """A sensor/link model with one channel per ``(name, unit, description,
+    input start)``: input ``name``, output ``name + suffix``, parameters
+    ``sigma_<name>``, ``bias_<name>`` and the shared ``sample_rate``,
+    ``delay_steps`` (0..``delay_max``), ``seed``, ``dt``."""
+    names = [c[0] for c in channels]
+    units = {c[0]: c[1] for c in channels}
+    variables = [
+        *(input_(name, unit, f"true value: {text}", start) for name, unit, text, start in channels),
+        *(output(name + suffix, unit, f"as delivered (noise, bias, hold, delay): {text}")
+          for name, unit, text, _ in channels),
+        *(parameter(f"sigma_{name}", units[name], f"standard deviation of the Gaussian noise on {name}",
+                    0.0, min=0.0) for name in names),
+        *(parameter(f"bias_{name}", units[name], f"constant bias added to {name} (after the noise)", 0.0)
+          for name in names),
+        parameter("sample_rate", "1/s",
+                  "sample rate (Hz); a new sample every max(1, round(1 / (sample_rate dt))) steps, "
+                  "held in between; 0: a sample every step", 0.0, min=0.0, max=SAMPLE_RATE_MAX),
+        parameter("delay_steps", "1",
+                  f"transport delay in whole communication steps (an integer 0..{delay_max})",
+                  0.0, min=0.0, max=float(delay_max)),
+        parameter("seed", "1", "seed of numpy's default_rng that draws the noise (2 numbers per channel "
+                  "and step)", 0.0, min=0.0, max=SEED_MAX),
+        parameter("dt", "s", "communication step = sample period of the FMU (every doStep must be dt)",
+                  DT_DEFAULT, min=1e-6, max=10.0),
+        discrete("sample_counter", "1", "steps since the last sample (0: a sample is taken this step)"),
+        discrete("started", "1", "0 before the first step, 1 after (the delay line is filled)"),
+        *(discrete(f"held_{name}", units[name], f"last sample of {name} (noise and bias included)")
+          for name in names),
+        *(discrete(f"{name}_delay_{j}", units[name], f"sample of {name} {j} step(s) ago")
+          for j in range(1, delay_max + 1) for name in names),
+    ]
+
+    def update(t, v, rs):
+        n_hold = ca.if_else(v["sample_rate"] > 0,
+                            ca.fmax(1.0, ca.floor(1.0 / (v["sample_rate"] * v["dt"]) + 0.5)), 1.0)
+        counter, started, delay = v["sample_counter"], v["started"], v["delay_steps"]
+        sample = counter == 0
+        out, nxt = {}, {"sample_counter": ca.if_else(counter + 1 >= n_hold, 0.0, counter + 1), "started": 1.0}
+        for i, name in enumerate(names):
+            measured = v[name] + v[f"sigma_{name}"] * gaussian(rs[2 * i], rs[2 * i + 1]) + v[f"bias_{name}"]
+            s = ca.if_else(sample, measured, v[f"held_{name}"])
+            line = [s] + [ca.if_else(started > 0, v[f"{name}_delay_{j}"], s) for j in range(1, delay_max + 1)]
+            y = line[0]  # one tap selected by the integer delay_steps
+            for j in range(1, delay_max + 1):
+                y = ca.if_else(delay == j, line[j], y)
+            out[name + suffix] = y
+            nxt[f"held_{name}"] = s
+            for j in range(1, delay_max + 1):
+                nxt[f"{name}_delay_{j}"] = line[j - 1]
+        return out, nxt
+
+    def initial(v, r):
+        z0 = {"sample_counter": 0.0, "started": 0.0}
+        z0.update({f"held_{name}": 0.0 for name in names})
+        z0.update({f"{name}_delay_{j}": 0.0 for j in range(1, delay_max + 1) for name in names})
+        return z0
+
+    return FmuModel(
+        identifier=identifier,
+        description=description,
+        variables=tuple(variables),
+        sampled=Sampled(update=update, initial=initial, n_random=0, seed="seed", sample_period="dt",
+                        n_random_step=2 * len(names), integers=("delay_steps",)),
+    )
+
+
+MEASUREMENT_12 = sensors_model(
+    "Measurement12",
+    "measurement path (plant states -> controller): per-state Gaussian noise, bias, sample-and-hold at "
+    "sample_rate and a transport delay of delay_steps communication steps; seeded; z axis down",
+    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES],
+    suffix="_m",
+)
+
+COMMAND_LINK_4 = sensors_model(
+    "CommandLink4",
+    "command path (controller -> plant rotor speeds, a radio link): per-rotor Gaussian noise, bias, "
+    "sample-and-hold at sample_rate and a transport delay of delay_steps communication steps; seeded",
+    [(f"Omega_{i}", "rad/s", f"commanded speed of rotor {i}", QUADROTOR.variable(f"Omega_{i}").start)
+     for i in range(1, 5)],
+    suffix="_rx",
+)

@@ -1,0 +1,296 @@
+"""The sensor/link FMUs (``fmu_models/models/sensors.py``, docs/sensors.md):
+noise, bias, sample-and-hold and delay, seeded, in FMI 2.0 and 3.0; FMU state
+save/restore continues the same noise."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
+from fmpy.validation import validate_fmu
+
+from cosim.fmu import fmi2_callbacks
+from fmu_models.catalog import model as catalog_model
+from fmu_models.export.build import cached_fmu
+from fmu_models.models.quadrotor import STATE_NAMES
+from fmu_models.models.sensors import COMMAND_LINK_4, DELAY_MAX, MEASUREMENT_12, hold_steps
+
+DT = 0.01
+IN12 = list(STATE_NAMES)
+OUT12 = [n + "_m" for n in IN12]
+
+
+class Sensor:
+    """One initialized instance of a sensor FMU through fmpy."""
+
+    def __init__(self, model=MEASUREMENT_12, version=2, parameters=None, initialize=True):
+        path = cached_fmu(model, version)
+        self.md = read_model_description(str(path))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.messages = []
+        self.inputs = [v.name for v in model.inputs]
+        self.outputs = [v.name for v in model.outputs]
+        common = dict(guid=self.md.guid, unzipDirectory=extract(str(path)),
+                      modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="sensor")
+        if version == 2:
+            self.fmu = FMU2Slave(**common)
+            self._callbacks = fmi2_callbacks(self._receive)
+            self.fmu.instantiate(callbacks=self._callbacks)
+            self.set, self.get = self.fmu.setReal, self.fmu.getReal
+        else:
+            self.fmu = FMU3Slave(**common)
+            self.fmu.instantiate(logMessage=lambda env, status, cat, msg: self.messages.append(msg.decode()))
+            self.set, self.get = self.fmu.setFloat64, self.fmu.getFloat64
+        self.version = version
+        self.n = 0
+        if initialize:
+            self.initialize(parameters or {})
+
+    def _receive(self, status, message):
+        self.messages.append(message.decode())
+
+    def initialize(self, parameters):
+        for name, value in parameters.items():
+            self.set([self.vr[name]], [float(value)])
+        if self.version == 2:
+            self.fmu.setupExperiment(startTime=0.0)
+            self.fmu.enterInitializationMode()
+        else:
+            self.fmu.enterInitializationMode(startTime=0.0)
+        self.fmu.exitInitializationMode()
+
+    def sample(self, u, read_before=True) -> np.ndarray:
+        """Set the inputs of t_n, (read the outputs,) step, read the held outputs."""
+        self.set([self.vr[n] for n in self.inputs], [float(x) for x in u])
+        before = np.array(self.get([self.vr[n] for n in self.outputs])) if read_before else None
+        self.fmu.doStep(self.n * DT, DT)
+        self.n += 1
+        after = np.array(self.get([self.vr[n] for n in self.outputs]))
+        if before is not None:
+            np.testing.assert_array_equal(before, after)  # sample and hold, same draws
+        return after
+
+    def run(self, inputs, read_before=True) -> np.ndarray:
+        return np.array([self.sample(u, read_before) for u in inputs])
+
+
+def _inputs(n, seed=1, k=12):
+    return np.random.default_rng(seed).normal(size=(n, k)) * 3.0
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("model", [MEASUREMENT_12, COMMAND_LINK_4], ids=lambda m: m.identifier)
+def test_builds_and_validates(model, version):
+    path = cached_fmu(model, version)
+    assert validate_fmu(str(path)) == []
+    assert catalog_model(model.identifier) is model
+    md = read_model_description(str(path))
+    by_name = {v.name: v for v in md.modelVariables}
+    for v in md.modelVariables:
+        assert v.description
+    assert float(by_name["delay_steps"].max) == DELAY_MAX and float(by_name["delay_steps"].min) == 0.0
+    assert float(by_name["sigma_" + model.inputs[0].name].min) == 0.0
+    assert by_name["sample_rate"].unit == "1/s" and by_name["dt"].unit == "s"
+    # direct feedthrough declared: each output depends on its own input
+    outputs = {u.variable.name: [d.name for d in u.dependencies] for u in md.outputs}
+    for v, y in zip(model.inputs, model.outputs):
+        assert outputs[y.name] == [v.name]
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_all_off_outputs_equal_inputs_exactly(version):
+    u = _inputs(200)
+    np.testing.assert_array_equal(Sensor(version=version).run(u), u)
+
+
+def test_command_link_all_off_and_start_values():
+    link = Sensor(COMMAND_LINK_4)
+    assert all(v.start > 0 for v in COMMAND_LINK_4.inputs)  # the plant's hover speed
+    u = 400.0 + _inputs(50, k=4)
+    np.testing.assert_array_equal(link.run(u), u)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_bias_adds_exactly(version):
+    bias = np.linspace(-0.5, 0.6, 12)
+    u = _inputs(100)
+    out = Sensor(version=version, parameters={f"bias_{n}": b for n, b in zip(IN12, bias)}).run(u)
+    np.testing.assert_array_equal(out, u + bias)
+
+
+def test_noise_is_gaussian_with_the_given_sigma():
+    sigma = np.array([1e-3] * 3 + [0.02] * 3 + [1e-3] * 3 + [0.05] * 3)
+    params = {f"sigma_{n}": s for n, s in zip(IN12, sigma)}
+    n = 20000
+    u = np.tile(np.arange(12.0), (n, 1))
+    noise = (Sensor(parameters={**params, "seed": 3}).run(u, read_before=False) - u) / sigma
+    assert np.all(np.abs(noise.mean(axis=0)) < 4.5 / math.sqrt(n))
+    assert np.all(np.abs(noise.std(axis=0) - 1.0) < 0.03)
+    assert np.all(np.abs(np.corrcoef(noise.T) - np.eye(12)) < 0.04)  # channels independent
+    lag = np.array([np.corrcoef(noise[1:, i], noise[:-1, i])[0, 1] for i in range(12)])
+    assert np.all(np.abs(lag) < 0.04)  # fresh every step
+    # tails: |z| > 2 about 4.55 % of the time, |z| > 3 about 0.27 %
+    assert abs(np.mean(np.abs(noise) > 2) - 0.0455) < 0.006
+    assert abs(np.mean(np.abs(noise) > 3) - 0.0027) < 0.0015
+
+
+def test_noise_is_box_muller_of_numpys_stream():
+    """default_rng(seed): 2 numbers per channel and step, channel order, r1 first."""
+    sensor = Sensor(parameters={**{f"sigma_{n}": 1.0 for n in IN12}, "seed": 42})
+    out = sensor.run(np.zeros((30, 12)))
+    r = np.random.default_rng(42).random((30, 24))
+    z = np.sqrt(-2.0 * np.log(1.0 - r[:, 0::2])) * np.cos(2.0 * math.pi * r[:, 1::2])
+    np.testing.assert_allclose(out, z, rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_same_seed_same_noise_other_seed_other_noise(version):
+    params = {f"sigma_{n}": 0.01 for n in IN12}
+    u = _inputs(100)
+    a = Sensor(version=version, parameters={**params, "seed": 5}).run(u)
+    b = Sensor(version=version, parameters={**params, "seed": 5}).run(u, read_before=False)
+    c = Sensor(version=version, parameters={**params, "seed": 6}).run(u)
+    np.testing.assert_array_equal(a, b)  # reading before doStep draws nothing extra
+    assert np.all(a != c)
+
+
+def test_fmi2_and_fmi3_give_the_same_noise():
+    params = {f"sigma_{n}": 0.01 for n in IN12} | {"seed": 9, "delay_steps": 2, "sample_rate": 40.0}
+    u = _inputs(60)
+    np.testing.assert_array_equal(Sensor(version=2, parameters=params).run(u),
+                                  Sensor(version=3, parameters=params).run(u))
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("k", [1, 3, DELAY_MAX])
+def test_delay_shifts_by_exactly_k_steps(version, k):
+    u = _inputs(80)
+    out = Sensor(version=version, parameters={"delay_steps": k}).run(u)
+    np.testing.assert_array_equal(out[k:], u[:-k])
+    np.testing.assert_array_equal(out[:k], np.tile(u[0], (k, 1)))  # the line starts filled with u_0
+
+
+def test_delay_of_the_noisy_signal_keeps_its_noise():
+    params = {f"sigma_{n}": 0.1 for n in IN12} | {"seed": 11}
+    u = _inputs(50)
+    plain = Sensor(parameters=params).run(u)
+    delayed = Sensor(parameters=params | {"delay_steps": 4}).run(u)
+    np.testing.assert_array_equal(delayed[4:], plain[:-4])
+
+
+@pytest.mark.parametrize("rate, steps", [(120.0, 1), (100.0, 1), (50.0, 2), (40.0, 3), (30.0, 3), (25.0, 4),
+                                         (1.0, 100), (0.0, 1)])
+def test_sample_and_hold_at_the_documented_rounding(rate, steps):
+    assert hold_steps(rate, DT) == steps
+    u = _inputs(240)
+    out = Sensor(parameters={"sample_rate": rate}).run(u)
+    held = u[(np.arange(240) // steps) * steps]
+    np.testing.assert_array_equal(out, held)
+
+
+def test_the_optitrack_rate_at_dt_0_01_samples_every_step():
+    """120 Hz is faster than the 100 Hz loop: every communication step gets a
+    fresh sample (docs/sensors.md), with the noise of that step."""
+    params = {"sample_rate": 120.0, "sigma_x": 1e-3, "seed": 1}
+    u = _inputs(50)
+    np.testing.assert_array_equal(Sensor(parameters=params).run(u), Sensor(parameters={**params, "sample_rate": 0}).run(u))
+
+
+def test_hold_then_delay():
+    u = _inputs(100)
+    out = Sensor(parameters={"sample_rate": 25.0, "delay_steps": 2}).run(u)
+    held = u[(np.arange(100) // 4) * 4]
+    np.testing.assert_array_equal(out[2:], held[:-2])
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_fmu_state_and_serialization_continue_the_same_noise(version):
+    params = {f"sigma_{n}": 0.01 for n in IN12} | {"seed": 21, "delay_steps": 3, "sample_rate": 30.0}
+    u = _inputs(60)
+    sensor = Sensor(version=version, parameters=params)
+    sensor.run(u[:20])
+    if version == 2:
+        state = sensor.fmu.getFMUstate()
+        blob = sensor.fmu.serializeFMUstate(state)
+    else:
+        state = sensor.fmu.getFMUState()
+        blob = sensor.fmu.serializeFMUState(state)
+    first = sensor.run(u[20:])
+    (sensor.fmu.setFMUstate if version == 2 else sensor.fmu.setFMUState)(state)
+    sensor.n = 20
+    np.testing.assert_array_equal(sensor.run(u[20:]), first)
+    other = Sensor(version=version, parameters={"seed": 0})  # other seed, no noise: all comes from the state
+    if version == 2:
+        other.fmu.setFMUstate(other.fmu.deSerializeFMUstate(blob))
+    else:
+        other.fmu.setFMUState(other.fmu.deserializeFMUState(blob))
+    other.n = 20
+    np.testing.assert_array_equal(other.run(u[20:]), first)
+    whole = Sensor(version=version, parameters=params).run(u)
+    np.testing.assert_array_equal(whole[20:], first)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("name, value", [("delay_steps", 1.5), ("delay_steps", DELAY_MAX + 1),
+                                         ("delay_steps", -1.0), ("sigma_x", -0.1), ("seed", 0.5),
+                                         ("sample_rate", -1.0)])
+def test_bad_parameters_are_refused_with_a_message(version, name, value):
+    sensor = Sensor(version=version, initialize=False)
+    with pytest.raises(FMICallException):
+        sensor.initialize({name: value})
+    assert any(name in m and "refused" in m for m in sensor.messages)
+
+
+def test_python_side_checks_whole_numbers():
+    with pytest.raises(ValueError, match="whole number"):
+        MEASUREMENT_12.parameter_values(delay_steps=2.5)
+    assert MEASUREMENT_12.parameter_values(delay_steps=2.0)
+
+
+def test_a_step_other_than_dt_is_refused():
+    sensor = Sensor()
+    with pytest.raises(FMICallException):
+        sensor.fmu.doStep(0.0, 0.02)
+    assert any("dt" in m for m in sensor.messages)
+
+
+def _noisy_circles(sigma: float, seed: int, duration: float = 5.0):
+    """The circles mission with Measurement12 between the plant and the
+    controller (built in the test only; no shipped scenario changes)."""
+    import tomllib
+
+    from cosim.scenario import build_master, parse_scenario, scenario_path
+
+    raw = tomllib.loads(scenario_path("circles").read_text(encoding="utf-8"))
+    states = ",".join(IN12)
+    raw["connections"] = [c for c in raw["connections"] if not c.startswith("Quadrotor.{x,")] + [
+        f"Quadrotor.{{{states}}} -> Sensors.{{{states}}}",
+        f"Sensors.{{{','.join(OUT12)}}} -> controller.{{{states}}}",
+    ]
+    raw["fmus"]["Sensors"] = {"model": "Measurement12", "fmi_version": 2, "seed_parameter": "seed",
+                              "parameters": {f"sigma_{a}": sigma for a in "xyz"}}
+    raw["simulation"] = {**raw["simulation"], "duration": duration, "seed": seed}
+    raw["record"] = {"signals": ["Quadrotor.x", "Quadrotor.y", "Quadrotor.z", "Sensors.x_m"]}
+    with build_master(parse_scenario(raw, source=scenario_path("circles"))) as master:
+        result = master.run(duration, seed=seed)
+    assert result.status == "ok"
+    return np.asarray(result.data)
+
+
+def test_in_the_loop_noise_moves_the_flight_a_little_and_the_seed_reproduces_it():
+    clean = _noisy_circles(0.0, 0)
+    noisy = _noisy_circles(1e-3, 0)
+    again = _noisy_circles(1e-3, 0)
+    other = _noisy_circles(1e-3, 1)
+    np.testing.assert_array_equal(noisy, again)
+    xyz = slice(1, 4)  # after time
+    change = np.abs(noisy[:, xyz] - clean[:, xyz]).max()
+    assert 1e-6 < change < 0.05  # a little: mm noise, a cm-scale flight difference at most
+    assert np.abs(other[:, xyz] - noisy[:, xyz]).max() > 1e-6
+    # the measured x is the plant's x plus 1 mm noise
+    err = noisy[:, 4] - noisy[:, 1]
+    assert 0.7e-3 < err.std() < 1.3e-3
