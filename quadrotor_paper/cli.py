@@ -13,7 +13,7 @@ Subcommands::
     fnn-cosim build-fmu [--out DIR]
     fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim]
 
-SCENARIO is a TOML file or the name of a shipped scenario (``circles``,
+SCENARIO is a TOML file or the name of a shipped scenario (``circles``, ``circles_sensors``,
 ``figure8``); STUDY a study file (``docs/studies.md``) or the name of a
 shipped one (``quadrotor_paper/studies/``). The sweeps run on Dask: a local
 cluster of ``--workers`` processes (``--workers 1``: in this process), or
@@ -223,8 +223,10 @@ def _cmd_export_ssp(args) -> int:
 def _cmd_scenarios(args) -> int:
     from cosim.scenario import load_scenario, shipped_scenarios
 
-    for name, path in sorted(shipped_scenarios().items()):
-        print(f"{name:10s} {load_scenario(path).description}  ({path})")
+    shipped = sorted(shipped_scenarios().items())
+    width = max(len(name) for name, _ in shipped)
+    for name, path in shipped:
+        print(f"{name:{width}s}  {load_scenario(path).description}  ({path})")
     return 0
 
 
@@ -282,7 +284,7 @@ def _parser() -> argparse.ArgumentParser:
                                                 + ", ".join(variant_names()) + ")")
 
     r = sub.add_parser("run", help="run one scenario: results CSV, plots, summary")
-    r.add_argument("scenario", help="TOML file, shipped scenario name (circles, figure8), or SSP archive (.ssp)")
+    r.add_argument("scenario", help="TOML file, shipped scenario name (see fnn-cosim scenarios), or SSP archive (.ssp)")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario value, e.g. --set wind.speed=5 (repeatable)")
     r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
@@ -320,7 +322,7 @@ def _parser() -> argparse.ArgumentParser:
     sw.set_defaults(func=_cmd_sweep)
 
     e = sub.add_parser("export-ssp", help="write a scenario as an SSP 1.0 archive, every component an FMU")
-    e.add_argument("scenario", help="TOML file or shipped scenario name (circles, figure8)")
+    e.add_argument("scenario", help="TOML file or shipped scenario name (see fnn-cosim scenarios)")
     e.add_argument("--out", required=True, help="the .ssp file to write")
     e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
     e.set_defaults(func=_cmd_export_ssp)

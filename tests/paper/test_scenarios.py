@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import tomllib
 
+import numpy as np
 import pytest
 
 from cosim import registry
@@ -125,3 +126,24 @@ def test_custom_python_component_from_a_factory(tmp_path):
     raw["components"] = {"probe": {"factory": "no_such_module:Thing"}}
     with pytest.raises(ScenarioError, match="components.probe.factory = 'no_such_module:Thing'"):
         build_master(parse_scenario(raw))
+
+
+def test_the_sensors_scenario_puts_the_sensor_and_link_fmus_in_both_paths():
+    sc = load_scenario("circles_sensors")
+    with build_master(sc) as master:
+        assert set(master.components) == {"Quadrotor", "WindGust", "reference", "controller", "Sensors", "Link"}
+        assert len(master.connections) == 3 + 6 + 12 + 12 + 4 + 4
+    assert sc.fmus["Sensors"]["seed_parameter"] == "seed"
+    assert sc.fmus["Link"]["parameters"]["delay_steps"] == 1
+
+
+def test_the_sensors_scenario_is_reproducible_by_its_seed():
+    def fly(seed):
+        with build_master(load_scenario("circles_sensors", {"simulation.duration": 2.0})) as master:
+            result = master.run(2.0, seed=seed)
+        assert result.status == "ok"
+        return np.asarray(result.data)
+
+    first, again, other = fly(0), fly(0), fly(1)
+    np.testing.assert_array_equal(first, again)
+    assert np.abs(first - other).max() > 1e-6

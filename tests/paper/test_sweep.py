@@ -161,3 +161,13 @@ def test_a_running_scheduler_and_two_workers_by_address(in_process, study, tmp_p
                 p.kill()
                 p.wait()
         logs.close()
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).parents[2] / "quadrotor_paper" / "studies").glob("*.toml")),
+                         ids=lambda p: p.stem)
+def test_every_shipped_study_loads_and_plans(path):
+    """A shipped study names only keys and values its scenario takes (checked
+    by load_study against the scenario and its FMUs' variables)."""
+    study = load_study(path)
+    runs = plan(study)
+    assert runs and len({(tuple(sorted(r.values.items())), r.seed) for r in runs}) == len(runs)
