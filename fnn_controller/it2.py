@@ -48,7 +48,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .fnn import N_MF, N_RULES, FnnInit, firing_strength, normalized_firing_strength
+from .fnn import (ALPHA, AXIS_STATE_PORTS, AXIS_STATE_SIZE, C1, C2, F, N_MF, N_RULES, SIGMA1, SIGMA2, FnnInit,
+                  firing_strength, normalized_firing_strength)
 from .learning import LearningBounds, alpha_rate, lm_f_rate, sigma_rate, smc_f_rate, switching
 from .parameters import check_ranges, param
 
@@ -59,25 +60,13 @@ __all__ = [
     "it2_regressor", "q_rate", "it2_learning_step", "it2_initial_axis_expression", "it2_axis_state_bounds",
 ]
 
-C1 = slice(0, 3)
-C2 = slice(3, 6)
-SIGMA1 = slice(6, 9)
-SIGMA2 = slice(9, 12)
-F = slice(12, 21)
-ALPHA = 21
-Q = 22
-X1_PREV = 23
-X2_PREV = 24
-PRIMED = 25
-IT2_AXIS_STATE_SIZE = 26
+# The type-1 layout (fnn.py) with q inserted after alpha.
+Q = ALPHA + 1
+X1_PREV, X2_PREV, PRIMED = Q + 1, Q + 2, Q + 3
+IT2_AXIS_STATE_SIZE = AXIS_STATE_SIZE + 1
 
 IT2_AXIS_STATE_PORTS: tuple[tuple[str, str], ...] = (
-    *((f"c1_{i}", "m") for i in range(1, N_MF + 1)),
-    *((f"c2_{j}", "m/s") for j in range(1, N_MF + 1)),
-    *((f"sigma1_{i}", "m") for i in range(1, N_MF + 1)),
-    *((f"sigma2_{j}", "m/s") for j in range(1, N_MF + 1)),
-    *((f"f_{i}{j}", "m/s") for j in range(1, N_MF + 1) for i in range(1, N_MF + 1)),  # k = j * I + i
-    ("alpha", "m/s2"), ("q", "1"), ("x1_prev", "m"), ("x2_prev", "m/s"), ("primed", "1"),
+    *AXIS_STATE_PORTS[:Q], ("q", "1"), *AXIS_STATE_PORTS[Q:],
 )
 assert len(IT2_AXIS_STATE_PORTS) == IT2_AXIS_STATE_SIZE
 
