@@ -60,8 +60,8 @@ def table2_markdown(cells: Mapping[str, Mapping[float, Mapping[str, Any]]], wind
     """Table 2 (ours vs paper) and the reduction over PD, in markdown; a
     variant the paper has not flown gets "–" in the paper's columns."""
     head = "| Controller | " + " | ".join(f"{w:g} m/s ours | {w:g} m/s paper" for w in winds) + " |"
-    lines = ["Average Euclidean RMSE (m), mean ± std over the seeds; † = differs from the paper by more "
-             f"than {DEVIATION_LIMIT:.0%}.", "", head, "|" + "---|" * (1 + 2 * len(winds))]
+    lines = ["Average Euclidean RMSE (m), mean ± std [95 % confidence interval of the mean] over the seeds; "
+             f"† = differs from the paper by more than {DEVIATION_LIMIT:.0%}.", "", head, "|" + "---|" * (1 + 2 * len(winds))]
     for v in _rows(cells):
         row = [_label(v)]
         for w in winds:
@@ -87,8 +87,8 @@ def table2_markdown(cells: Mapping[str, Mapping[float, Mapping[str, Any]]], wind
 
 def table3_markdown(cells: Mapping[str, Mapping[Any, Mapping[str, Any]]]) -> str:
     """Table 3 (ours in simulation vs the paper's flight experiment), in markdown."""
-    lines = ["Average Euclidean RMSE (m), mean ± std over the seeds (ours: simulation; paper: flights); "
-             f"† = differs from the paper by more than {DEVIATION_LIMIT:.0%}.", "",
+    lines = ["Average Euclidean RMSE (m), mean ± std [95 % confidence interval of the mean] over the seeds "
+             "(ours: simulation; paper: flights); † = differs from the paper by more than {DEVIATION_LIMIT:.0%}.", "",
              "| Controller | ours | paper | reduction over PD, ours | paper |", "|---|---|---|---|---|"]
     pd = next(iter(cells[BASELINE].values()), {}).get("mean") if BASELINE in cells else None
     for v in _rows(cells):
