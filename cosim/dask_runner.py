@@ -125,6 +125,8 @@ class MasterCache:
         self._extracted.clear()
 
 
+LOG_LENGTH = 100  # entries of the local scheduler's diagnostic logs (see _client)
+
 _LOCAL = threading.local()  # a worker's cache, one per thread (a master is not thread-safe)
 
 
@@ -201,13 +203,20 @@ def run_tasks(scenario: Scenario, tasks: Iterable[Task], workers: int = 1, sched
 def _client(workers: int, scheduler: str | None):
     import logging
 
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler is not None:
         return Client(scheduler), None
-    cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=logging.ERROR)
-    return Client(cluster), cluster
+    # The local scheduler lives in this process. Its diagnostic logs keep
+    # about 19 kB per task up to 10 000 entries (measured by
+    # benchmarks/study_efficiency.py): short logs keep the driver's memory
+    # flat as a study grows. A cluster given by address keeps its own settings.
+    with dask.config.set({"distributed.admin.log-length": LOG_LENGTH,
+                          "distributed.admin.low-level-log-length": LOG_LENGTH}):
+        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR)
+        return Client(cluster), cluster
 
 
 def _run_dask(raw, source, tasks, workers, scheduler, metrics, window) -> Iterator[dict[str, Any]]:
