@@ -405,12 +405,10 @@ def _t975(dof: int) -> float:
 
 def interval95(values: Sequence[float]) -> tuple[float, float] | None:
     """The 95 % Student t interval of the mean of ``values`` (None below 2 values)."""
-    x = [float(v) for v in values]
-    if len(x) < 2:
+    x = np.asarray(values, dtype=float)
+    if x.size < 2:
         return None
-    mean = sum(x) / len(x)
-    std = math.sqrt(sum((v - mean) ** 2 for v in x) / (len(x) - 1))
-    half = _t975(len(x) - 1) * std / math.sqrt(len(x))
+    mean, half = float(x.mean()), _t975(x.size - 1) * float(x.std(ddof=1)) / math.sqrt(x.size)
     return mean - half, mean + half
 
 
@@ -435,10 +433,9 @@ def summarize_runs(rows: Iterable[Mapping[str, str]], group_keys: Sequence[str],
             n = len(x)
             mean = float(x.mean()) if n else None
             std = float(x.std(ddof=1)) if n > 1 else None
-            half = _t975(n - 1) * std / math.sqrt(n) if n > 1 else None
-            rec.update({f"{m}_n": n, f"{m}_mean": mean, f"{m}_std": std,
-                        f"{m}_ci95_low": mean - half if half is not None else None,
-                        f"{m}_ci95_high": mean + half if half is not None else None})
+            low, high = interval95(x) or (None, None)
+            rec.update({f"{m}_n": n, f"{m}_mean": mean, f"{m}_std": std, f"{m}_ci95_low": low,
+                        f"{m}_ci95_high": high})
         out.append(rec)
     return out
 
