@@ -333,14 +333,12 @@ class Master:
             raise failure
         return result
 
-    def _initial_transfer(self, n: int, t0: float) -> None:
+    def _initial_transfer(self, t0: float) -> None:
         """Exchange ordering, at t0 only: as libcosim does before its first
         step, every FMU gets the values its inputs are connected to at t0 (the
         FMUs' outputs after initialization, the Python components' first
         outputs) and its outputs are read again, once per FMU, so a chain of
         direct feedthroughs is consistent at t0."""
-        if n:
-            return
         feeds = {f.name: [c for c in self.connections if c.destination.component == f.name] for f in self.fmus}
         for _ in self.fmus:
             for fmu in self.fmus:
@@ -458,7 +456,7 @@ class Master:
         low, high = self.guard.limits
         stop = kernel.KernelStop()
         if self.ordering == "exchange":
-            self._initial_transfer(0, t0)
+            self._initial_transfer(t0)
         i64, dbl, ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
         fixed = (ptr(ctypes.addressof(entries)), i64(len(self.fmus)), ptr(order.ctypes.data), i64(len(order)),
                  ptr(signals.ctypes.data), dbl(t0), dbl(h))
@@ -522,13 +520,13 @@ class Master:
             record, check = _timed(record, phase_times, "record"), _timed(check, phase_times, "guard")
             exchange = _timed(exchange, phase_times, "fmu")
         steps = [phase for _, phase in python]
-        if self.ordering == "exchange":
-            steps.append(self._initial_transfer)
         for n in range(n_steps + 1):
             t = t0 + n * h  # time from the step counter, never accumulated
             signals[0] = t
             for phase in steps:
                 phase(n, t)
+            if n == 0 and self.ordering == "exchange":
+                self._initial_transfer(t0)
             record(n, t)
             check(n, t)
             if n < n_steps:

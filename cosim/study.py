@@ -340,7 +340,8 @@ def run_study(study: Study, out_dir: str | Path, workers: int = 1, scheduler: st
     keys = study.keys
     existing = _prepare(runs_csv, header)
     done = {_match(row, row["seed"], keys) for row in existing}
-    todo = [r for r in plan(study) if _match(r.values, r.seed, keys) not in done]
+    planned = plan(study)
+    todo = [r for r in planned if _match(r.values, r.seed, keys) not in done]
     total = len(todo)
 
     base = study.scenario
@@ -370,10 +371,11 @@ def run_study(study: Study, out_dir: str | Path, workers: int = 1, scheduler: st
     files = [runs_csv]
     files.append(write_parquet(runs_csv, out / "runs.parquet"))
     rows = read_runs(runs_csv)
-    files.append(write_summary(out / "summary.csv", summarize_runs(rows, list(study.grid), metric_names)))
+    summary = summarize_runs(rows, list(study.grid), metric_names)
+    files.append(write_summary(out / "summary.csv", summary))
     if plots and rows:
-        files += plot_study(out, rows, list(study.grid), metric_names)
-    return StudyResult(out, total, len(plan(study)) - total, counts, files)
+        files += plot_study(out, rows, list(study.grid), metric_names, summary)
+    return StudyResult(out, total, len(planned) - total, counts, files)
 
 
 def write_parquet(csv_path: Path, path: Path) -> Path:
@@ -453,22 +455,23 @@ def write_summary(path: Path, records: list[dict[str, Any]]) -> Path:
 # ---- plots ----------------------------------------------------------------------------------
 
 def plot_study(out: Path, rows: list[Mapping[str, str]], group_keys: Sequence[str],
-               metric_names: Sequence[str]) -> list[Path]:
+               metric_names: Sequence[str], summary: list[dict[str, Any]] | None = None) -> list[Path]:
     """Per metric: ``box_<metric>.png`` (the ok runs of each grid point) and,
     when a grid key is numeric, ``line_<metric>.png`` (mean and 95 % CI
-    against it, one line per combination of the other grid keys)."""
+    against it, one line per combination of the other grid keys). ``summary``:
+    the records of :func:`summarize_runs` on ``rows``, when the caller has them."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     files = []
-    groups: dict[tuple, list[float]] = {}
     ok = [r for r in rows if r["status"] == "ok"]
     numeric = [k for k in group_keys if all(_float(r[k]) is not None for r in rows)]
-    summary = summarize_runs(rows, group_keys, metric_names)
+    if summary is None:
+        summary = summarize_runs(rows, group_keys, metric_names)
     for m in metric_names:
-        groups = {}
+        groups: dict[tuple, list[float]] = {}
         for r in ok:
             v = _float(r.get(m))
             if v is not None:
