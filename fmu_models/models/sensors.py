@@ -38,7 +38,7 @@ from ..export.variables import discrete, input_, output, parameter
 from .quadrotor import QUADROTOR, STATE_NAMES
 
 __all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "DELAY_MAX", "SAMPLE_RATE_MAX",
-           "SEED_MAX", "hold_steps", "gaussian"]
+           "SEED_MAX", "hold_period", "hold_steps", "gaussian"]
 
 DELAY_MAX = 20            # samples: the length of the delay line, fixed at build
 SAMPLE_RATE_MAX = 1.0e6   # Hz
@@ -46,12 +46,15 @@ SEED_MAX = 2.0 ** 53      # every whole number up to 2^53 is exact in a double
 DT_DEFAULT = 0.01         # s: the project's communication step
 
 
-def hold_steps(sample_rate: float, dt: float) -> int:
+def hold_period(sample_rate, dt):
     """Communication steps per sample: ``max(1, floor(1 / (sample_rate dt) + 1/2))``,
-    1 for ``sample_rate = 0``; the FMU's formula, evaluated the same way."""
-    if sample_rate <= 0:
-        return 1
-    return max(1, math.floor(1.0 / (sample_rate * dt) + 0.5))
+    1 for ``sample_rate = 0``; numbers or CasADi expressions (the FMU's law)."""
+    return ca.if_else(sample_rate > 0, ca.fmax(1.0, ca.floor(1.0 / (sample_rate * dt) + 0.5)), 1.0)
+
+
+def hold_steps(sample_rate: float, dt: float) -> int:
+    """:func:`hold_period` as a Python integer."""
+    return int(hold_period(ca.DM(sample_rate), ca.DM(dt)))
 
 
 def gaussian(r1, r2):
@@ -95,8 +98,7 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
     ]
 
     def update(t, v, rs):
-        n_hold = ca.if_else(v["sample_rate"] > 0,
-                            ca.fmax(1.0, ca.floor(1.0 / (v["sample_rate"] * v["dt"]) + 0.5)), 1.0)
+        n_hold = hold_period(v["sample_rate"], v["dt"])
         counter, started, delay = v["sample_counter"], v["started"], v["delay_steps"]
         sample = counter == 0
         out, nxt = {}, {"sample_counter": ca.if_else(counter + 1 >= n_hold, 0.0, counter + 1), "started": 1.0}
