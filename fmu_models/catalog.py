@@ -23,6 +23,7 @@ _WHERE: dict[str, tuple[str, str]] = {
     "ReferenceFigureEight": ("fmu_models.models.reference", "REFERENCE_FIGURE_EIGHT"),
     "Measurement12": ("fmu_models.models.sensors", "MEASUREMENT_12"),
     "CommandLink4": ("fmu_models.models.sensors", "COMMAND_LINK_4"),
+    "VelocityLink3": ("fmu_models.models.sensors", "VELOCITY_LINK_3"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 

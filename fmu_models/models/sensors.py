@@ -1,13 +1,18 @@
 """Sensors and links as FMUs: noise, bias, sample-and-hold and transport delay.
 
 One generic sampled-data model family, :func:`sensors_model`, with N
-channels; two members are shipped (``docs/sensors.md``):
+channels; three members are shipped (``docs/sensors.md``):
 
 * ``Measurement12``: the measurement path, plant -> controller. Inputs the 12
   rigid-body states ``x y z u v w phi theta psi p q r``, outputs the measured
   ``x_m ... r_m`` (an OptiTrack-like pose/velocity feed);
 * ``CommandLink4``: the command path, controller -> plant (the paper's Wi-Fi
-  link). Inputs ``Omega_1..4``, outputs the received ``Omega_1_rx..4_rx``.
+  link). Inputs ``Omega_1..4``, outputs the received ``Omega_1_rx..4_rx``;
+  a link: packets can be lost;
+* ``VelocityLink3``: the velocity-command path, outer loop -> on-board
+  velocity controller (the AR.Drone's Wi-Fi). Inputs ``v_ref_x, v_ref_y,
+  v_ref_z``, the desired velocity v* of eq. 26 (m/s, world frame, z down),
+  outputs ``v_ref_x_rx ..``; a link: packets can be lost.
 
 Per communication step n (``t_n = n dt``), channel i, with ``u`` the input::
 
@@ -25,6 +30,23 @@ parameters. Before the first ``delay_steps`` samples exist, the delay line
 holds the first sample ``s_0`` (so ``y_n = s_0`` for ``n < delay_steps``).
 Outputs have direct feedthrough: with ``delay_steps = 0`` and a sample due,
 a get after setting the inputs of ``t_n`` returns ``y_n`` computed from them.
+
+A link (``loss=True``: ``CommandLink4``, ``VelocityLink3``) also loses
+packets. One packet per step carries all channels; with ``p_loss`` the
+parameter ``loss_probability`` and ``y'_n`` the output above::
+
+    L_n     = 1 if r_L < p_loss else 0                         packet lost, r_L ~ U[0, 1)
+    y_n     = y_{n-1} if L_n = 1 else y'_n                     a lost packet never arrives
+    y_{-1}  = s_0                                              the receiver starts with the first sample
+
+``r_L`` is one more uniform number per step, drawn after the channels' 2N
+(2N + 1 per step in all). A loss is decided at arrival and touches only the
+receiver: the sampler and the delay line go on as without loss (the packet
+that would have arrived at step n carried ``s_{n - delay_steps}``), so the
+next delivered packet is the one sent ``delay_steps`` steps before it, not a
+stale one. ``packets_lost`` counts the losses. A model without loss
+(``Measurement12``) has neither the parameter nor the draw: its stream and
+its FMU are those of a build before links could lose packets.
 """
 from __future__ import annotations
 
@@ -37,7 +59,7 @@ from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter
 from .quadrotor import QUADROTOR, STATE_NAMES
 
-__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "DELAY_MAX", "SAMPLE_RATE_MAX",
+__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "VELOCITY_LINK_3", "DELAY_MAX", "SAMPLE_RATE_MAX",
            "SEED_MAX", "hold_period", "hold_steps", "gaussian"]
 
 DELAY_MAX = 20            # samples: the length of the delay line, fixed at build
@@ -64,16 +86,23 @@ def gaussian(r1, r2):
 
 
 def sensors_model(identifier: str, description: str, channels: Sequence[tuple[str, str, str, float]],
-                  suffix: str, delay_max: int = DELAY_MAX) -> FmuModel:
+                  suffix: str, delay_max: int = DELAY_MAX, loss: bool = False) -> FmuModel:
     """A sensor/link model with one channel per ``(name, unit, description,
     input start)``: input ``name``, output ``name + suffix``, parameters
     ``sigma_<name>``, ``bias_<name>`` and the shared ``sample_rate``,
-    ``delay_steps`` (0..``delay_max``), ``seed``, ``dt``."""
+    ``delay_steps`` (0..``delay_max``), ``seed``, ``dt``.
+
+    ``loss=True`` makes it a link that loses packets (the module docstring's
+    law): the parameter ``loss_probability`` (1, in [0, 1]), one more uniform
+    number per step after the channels' 2N, and the discrete states
+    ``delivered_<name>`` (the receiver's last value) and ``packets_lost``.
+    ``loss=False`` builds exactly the model it built before links existed."""
     names = [c[0] for c in channels]
     units = {c[0]: c[1] for c in channels}
+    delivered = "noise, bias, hold, delay, loss" if loss else "noise, bias, hold, delay"
     variables = [
         *(input_(name, unit, f"true value: {text}", start) for name, unit, text, start in channels),
-        *(output(name + suffix, unit, f"as delivered (noise, bias, hold, delay): {text}")
+        *(output(name + suffix, unit, f"as delivered ({delivered}): {text}")
           for name, unit, text, _ in channels),
         *(parameter(f"sigma_{name}", units[name], f"standard deviation of the Gaussian noise on {name}",
                     0.0, min=0.0) for name in names),
@@ -86,7 +115,8 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
                   f"transport delay in whole communication steps (an integer 0..{delay_max})",
                   0.0, min=0.0, max=float(delay_max)),
         parameter("seed", "1", "seed of numpy's default_rng that draws the noise (2 numbers per channel "
-                  "and step)", 0.0, min=0.0, max=SEED_MAX),
+                  "and step)" + (", then the packet loss (1 number per step)" if loss else ""),
+                  0.0, min=0.0, max=SEED_MAX),
         parameter("dt", "s", "communication step = sample period of the FMU (every doStep must be dt)",
                   DT_DEFAULT, min=1e-6, max=10.0),
         discrete("sample_counter", "1", "steps since the last sample (0: a sample is taken this step)"),
@@ -96,12 +126,25 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         *(discrete(f"{name}_delay_{j}", units[name], f"sample of {name} {j} step(s) ago")
           for j in range(1, delay_max + 1) for name in names),
     ]
+    if loss:  # appended, so that the variables above keep their value references
+        variables += [
+            parameter("loss_probability", "1",
+                      "probability that a step's packet (all channels) is lost; the receiver then holds "
+                      "the last delivered value", 0.0, min=0.0, max=1.0),
+            *(discrete(f"delivered_{name}", units[name], f"last value of {name} the receiver got")
+              for name in names),
+            discrete("packets_lost", "1", "packets lost since the start"),
+        ]
+    n_channel_random = 2 * len(names)  # the noise's numbers per step; the loss draw, if any, comes after
 
     def update(t, v, rs):
         n_hold = hold_period(v["sample_rate"], v["dt"])
         counter, started, delay = v["sample_counter"], v["started"], v["delay_steps"]
         sample = counter == 0
         out, nxt = {}, {"sample_counter": ca.if_else(counter + 1 >= n_hold, 0.0, counter + 1), "started": 1.0}
+        if loss:
+            lost = rs[n_channel_random] < v["loss_probability"]  # r_L < p_loss: p_loss = 0 never, 1 always
+            nxt["packets_lost"] = v["packets_lost"] + ca.if_else(lost, 1.0, 0.0)
         for i, name in enumerate(names):
             measured = v[name] + v[f"sigma_{name}"] * gaussian(rs[2 * i], rs[2 * i + 1]) + v[f"bias_{name}"]
             s = ca.if_else(sample, measured, v[f"held_{name}"])
@@ -109,6 +152,11 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
             y = line[0]  # one tap selected by the integer delay_steps
             for j in range(1, delay_max + 1):
                 y = ca.if_else(delay == j, line[j], y)
+            if loss:
+                # before the first step the receiver holds s_0, as the delay line does: y_{-1} = s_0
+                previous = ca.if_else(started > 0, v[f"delivered_{name}"], s)
+                y = ca.if_else(lost, previous, y)
+                nxt[f"delivered_{name}"] = y
             out[name + suffix] = y
             nxt[f"held_{name}"] = s
             for j in range(1, delay_max + 1):
@@ -119,6 +167,9 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         z0 = {"sample_counter": 0.0, "started": 0.0}
         z0.update({f"held_{name}": 0.0 for name in names})
         z0.update({f"{name}_delay_{j}": 0.0 for j in range(1, delay_max + 1) for name in names})
+        if loss:
+            z0.update({f"delivered_{name}": 0.0 for name in names})
+            z0["packets_lost"] = 0.0
         return z0
 
     return FmuModel(
@@ -126,7 +177,7 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         description=description,
         variables=tuple(variables),
         sampled=Sampled(update=update, initial=initial, n_random=0, seed="seed", sample_period="dt",
-                        n_random_step=2 * len(names), integers=("delay_steps",)),
+                        n_random_step=n_channel_random + (1 if loss else 0), integers=("delay_steps",)),
     )
 
 
@@ -141,8 +192,20 @@ MEASUREMENT_12 = sensors_model(
 COMMAND_LINK_4 = sensors_model(
     "CommandLink4",
     "command path (controller -> plant rotor speeds, a radio link): per-rotor Gaussian noise, bias, "
-    "sample-and-hold at sample_rate and a transport delay of delay_steps communication steps; seeded",
+    "sample-and-hold at sample_rate, a transport delay of delay_steps communication steps and packet loss "
+    "with loss_probability per step (the last delivered command held); seeded",
     [(f"Omega_{i}", "rad/s", f"commanded speed of rotor {i}", QUADROTOR.variable(f"Omega_{i}").start)
      for i in range(1, 5)],
     suffix="_rx",
+    loss=True,
+)
+
+VELOCITY_LINK_3 = sensors_model(
+    "VelocityLink3",
+    "velocity-command path (outer loop -> on-board velocity controller, the AR.Drone's Wi-Fi): per-axis "
+    "Gaussian noise, bias, sample-and-hold at sample_rate, a transport delay of delay_steps communication "
+    "steps and packet loss with loss_probability per step (the last delivered command held); seeded",
+    [(f"v_ref_{a}", "m/s", f"desired velocity v* along {a} (eq. 26; world frame, z down)", 0.0) for a in "xyz"],
+    suffix="_rx",
+    loss=True,
 )
