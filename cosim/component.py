@@ -39,13 +39,17 @@ class Port:
 
     ``type`` follows the FMI 3.0 names (``Float64``, ``Int32``, ``Boolean``);
     FMI 2.0 ``Real`` is read as ``Float64``. ``unit`` is ``None`` when the
-    component declares none (the unit check is then skipped).
+    component declares none (the unit check is then skipped). An input with
+    a ``start`` value may be left unconnected: it then holds that value, as
+    an FMU's input holds its start value; an input without one must be
+    connected.
     """
 
     name: str
     unit: str | None = None
     type: str = "Float64"
     description: str = ""
+    start: float | None = None
 
 
 def ports(*spec: tuple[str, str | None] | str) -> tuple[Port, ...]:

@@ -226,8 +226,19 @@ class Master:
             if picked:
                 published[comp.name] = (np.array([i for i, _ in picked], dtype=np.intp),
                                         np.array([slots[name] for _, name in picked], dtype=np.intp))
+        # Unconnected Python inputs that declare a start value: one slot each,
+        # written once here and by nothing after, so they hold that value.
+        held_inputs: dict[str, float] = {}
+        for comp in self.python:
+            for p in comp.inputs:
+                name = f"{comp.name}.{p.name}"
+                if name not in source_of and p.start is not None:
+                    held_inputs[name] = float(p.start)
+                    slots[name] = len(slots)
         self.slots = slots
         self.signals = np.zeros(len(slots))
+        for name, value in held_inputs.items():
+            self.signals[slots[name]] = value
 
         direct = self._direct_fmus(used)
         self._direct = direct
@@ -252,10 +263,12 @@ class Master:
             if comp.name in direct:
                 self._blocks.append(("fmu", comp, fmu_in[comp.name]))
                 continue
-            missing = [p.name for p in comp.inputs if f"{comp.name}.{p.name}" not in source_of]
+            missing = [p.name for p in comp.inputs
+                       if f"{comp.name}.{p.name}" not in source_of and f"{comp.name}.{p.name}" not in held_inputs]
             if missing:
                 raise ConnectionCheckError(f"inputs of {comp.name} not connected: {', '.join(missing)}")
-            in_idx = np.array([slots[source_of[f"{comp.name}.{p.name}"]] for p in comp.inputs], dtype=np.intp)
+            in_idx = np.array([slots[source_of.get(name, name)] for name in (f"{comp.name}.{p.name}"
+                                                                              for p in comp.inputs)], dtype=np.intp)
             self._blocks.append(("python", comp, in_idx, blocks[comp.name], published.get(comp.name)))
 
         self.record_columns = ("time",) + tuple(record)

@@ -6,7 +6,7 @@ and the geometric velocity controller of :mod:`fnn_controller.geometric`
 (inner loop, rotor-speed inversion) into one function evaluated once per
 controller step (dt = 0.01 s; outer and inner loop run at the same rate):
 
-``controller_step_<variant>(p_ref[3], p_ref_dot[3], x[12], psi_ref, state[85])
+``controller_step_<variant>(p_ref[3], p_ref_dot[3], x[12], psi_ref, state[85], p_ref_ddot[3])
 -> (Omega[4], state_next[85], v_ref[3], tau_c[3], tau_n[3], wrench[4], check)``
 
 ========== ====== ==========================================================
@@ -18,6 +18,9 @@ x          SI     plant state x y z u v w phi theta psi p q r
 psi_ref    rad    commanded yaw (desired heading)
 state      --     controller state: FNN (75, :mod:`~fnn_controller.position`)
                   then velocity controller (10, :mod:`~fnn_controller.geometric`)
+p_ref_ddot m/s2   d²p*/dt² (from the trajectory), read only with the option
+                  ``PositionParams.accel_feedforward`` > 0; last, so every
+                  earlier input keeps its index
 ========== ====== ==========================================================
 
 ========== ====== ==========================================================
@@ -99,31 +102,38 @@ OUTPUTS: tuple[tuple[str, str, str], ...] = (
 )
 Y_PARTS = ("Omega", "v_ref", "tau_c", "tau_n", "wrench")  # in the order of OUTPUTS
 
-_INPUTS = ("p_ref", "p_ref_dot", "x", "psi_ref")
+_INPUTS = ("p_ref", "p_ref_dot", "x", "psi_ref", "p_ref_ddot")  # the checked inputs; state is the function's own
 
 
 def controller_step(variant: str, position: PositionParams, geometric: GeometricParams,
-                    p_ref, p_ref_dot, x, psi_ref, state) -> dict[str, ca.SX]:
+                    p_ref, p_ref_dot, x, psi_ref, state, p_ref_ddot=None) -> dict[str, ca.SX]:
     """The step as CasADi expressions of the given inputs (the body of
     :func:`controller_step_function`): ``Omega``, ``state_next``, ``v_ref``,
     ``tau_c``, ``tau_n``, ``wrench``. The parameters may be numbers or
-    symbols (:mod:`fnn_controller.parametric`)."""
+    symbols (:mod:`fnn_controller.parametric`). The one place the outer and
+    the inner loop are composed: v* and the fed-forward acceleration a_ref of
+    the position controller drive the velocity controller."""
     n_fnn = fnn_state_size(variant)  # refuses an unknown variant, naming the known ones
     numeric = not isinstance(position.dt, ca.SX)  # a parametric build shares one dt symbol
     if numeric and abs(position.dt - geometric.dt) > 1e-15:
         raise ValueError(f"position.dt = {position.dt} s and geometric.dt = {geometric.dt} s must agree: "
                          "outer and inner loop run in the same step")
     pos, vel = x[0:3], x[3:6]
-    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position, p_ref_dot)
-    inner = velocity_controller(outer["v_ref"], vel, x[6:9], x[9:12], psi_ref, state[n_fnn:], geometric)
+    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position, p_ref_dot,
+                                p_ref_ddot=p_ref_ddot)
+    inner = velocity_controller(outer["v_ref"], vel, x[6:9], x[9:12], psi_ref, state[n_fnn:], geometric,
+                                a_ref=outer["a_ref"])
     return {"Omega": inner["Omega"], "state_next": ca.vertcat(outer["fnn_state_next"], inner["vel_state_next"]),
             "v_ref": outer["v_ref"], "tau_c": outer["tau_c"], "tau_n": outer["tau_n"], "wrench": inner["wrench"]}
 
 
 def step_symbols(variant: str) -> list[ca.SX]:
-    """The input symbols ``p_ref, p_ref_dot, x, psi_ref, state`` of ``variant``'s step."""
+    """The input symbols ``p_ref, p_ref_dot, x, psi_ref, state, p_ref_ddot`` of ``variant``'s step."""
     return [ca.SX.sym("p_ref", 3), ca.SX.sym("p_ref_dot", 3), ca.SX.sym("x", 12), ca.SX.sym("psi_ref"),
-            ca.SX.sym("state", fnn_state_size(variant) + VEL_STATE_SIZE)]
+            ca.SX.sym("state", fnn_state_size(variant) + VEL_STATE_SIZE), ca.SX.sym("p_ref_ddot", 3)]
+
+
+STEP_INPUT_NAMES = ("p_ref", "p_ref_dot", "x", "psi_ref", "state", "p_ref_ddot")  # in the order of step_symbols
 
 
 def controller_step_function(variant: str = "pd+lm", position: PositionParams = PositionParams(),
@@ -140,13 +150,13 @@ def controller_step_function(variant: str = "pd+lm", position: PositionParams = 
     outputs = [res[k] for k in names]
     check = sum(ca.sum1(v) for v in args + outputs)
     return ca.Function(f"controller_step_{identifier(variant)}", args, outputs + [check],
-                       list(_INPUTS) + ["state"], names + ["check"])
+                       list(STEP_INPUT_NAMES), names + ["check"])
 
 
 def flat_step_function(variant: str = "pd+lm", position: PositionParams = PositionParams(),
                        geometric: GeometricParams = GeometricParams()) -> ca.Function:
     """:func:`controller_step_function` with its outputs in one vector:
-    ``(p_ref, p_ref_dot, x, psi_ref, state) -> (y[17], state_next, check)``,
+    ``(p_ref, p_ref_dot, x, psi_ref, state, p_ref_ddot) -> (y[17], state_next, check)``,
     ``y`` laid out as :data:`OUTPUTS` (what a component returns in one piece)."""
     f = controller_step_function(variant, position, geometric)
     args = f.sx_in()
@@ -286,6 +296,7 @@ class QuadrotorController:
         self._p_ref_dot = self.inputs["p_ref_dot"]
         self._x = self.inputs["x"]
         self._psi_ref = self.inputs["psi_ref"]
+        self._p_ref_ddot = self.inputs["p_ref_ddot"]
         self._has_state = False
 
     def reset(self, seed: int | np.random.Generator) -> None:
@@ -312,7 +323,7 @@ class QuadrotorController:
         """Outputs of the last accepted step: Omega, v_ref, tau_c, tau_n, wrench, check."""
         return self._fast.outputs
 
-    def step(self, p_ref, p_ref_dot, x, psi_ref: float = 0.0) -> np.ndarray:
+    def step(self, p_ref, p_ref_dot, x, psi_ref: float = 0.0, p_ref_ddot=(0.0, 0.0, 0.0)) -> np.ndarray:
         """One controller step: rotor speeds for the plant state ``x``.
 
         Parameters
@@ -325,6 +336,8 @@ class QuadrotorController:
             Plant state x y z u v w phi theta psi p q r (SI).
         psi_ref : float
             Commanded yaw (rad).
+        p_ref_ddot : 3 floats
+            d²p*/dt² (m/s²); read only with ``position.accel_feedforward`` > 0.
 
         Returns
         -------
@@ -343,6 +356,7 @@ class QuadrotorController:
         self._p_ref_dot[:] = p_ref_dot
         self._x[:] = x
         self._psi_ref[0] = psi_ref
+        self._p_ref_ddot[:] = p_ref_ddot
         return self.advance()
 
     def advance(self) -> np.ndarray:

@@ -10,7 +10,9 @@ identity rather than a parameter.
 
 =========== ================================================================
 inputs      x_ref y_ref z_ref (m), vx_ref vy_ref vz_ref (m/s), psi_ref (rad),
-            and the 12 plant states x y z u v w phi theta psi p q r (SI)
+            the 12 plant states x y z u v w phi theta psi p q r (SI), and
+            ax_ref ay_ref az_ref (m/s², start 0: read only with the
+            parameter ``accel_feedforward`` > 0)
 outputs     Omega_1..4, v_ref_x..z, tau_c_x..z, tau_n_x..z, T, tau_phi,
             tau_theta, tau_psi (:data:`fnn_controller.controller.OUTPUTS`)
 parameters  every entry of :func:`~fnn_controller.parametric.parameter_table`
@@ -43,7 +45,7 @@ from .parametric import initial_state_function, parameter_table, parametric_step
 from .position import PositionParams
 from .variants import variant as lookup
 
-__all__ = ["controller_model", "fmu_identifier", "REFERENCE_INPUTS", "SEED_MAX"]
+__all__ = ["controller_model", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "SEED_MAX"]
 
 SEED_MAX = 2.0 ** 53  # seeds are doubles in FMI: every whole number up to 2^53 is exact
 _AXES = "xyz"
@@ -52,6 +54,9 @@ REFERENCE_INPUTS = (
     *((f"v{a}_ref", "m/s", f"reference velocity d{a}*/dt") for a in _AXES),
     ("psi_ref", "rad", "commanded yaw psi*"),
 )
+# After the plant states, start 0: unconnected they leave the paper's law as it is.
+ACCELERATION_INPUTS = tuple((f"a{a}_ref", "m/s2", f"reference acceleration d2{a}*/dt2 "
+                             "(fed forward with accel_feedforward)") for a in _AXES)
 
 
 def fmu_identifier(variant: str) -> str:
@@ -77,6 +82,7 @@ def controller_model(variant: str, position: PositionParams = PositionParams(),
     variables = (
         *(input_(name, unit, text) for name, unit, text in REFERENCE_INPUTS),
         *(input_(v.name, v.unit, f"plant state: {v.description}") for v in plant),
+        *(input_(name, unit, text) for name, unit, text in ACCELERATION_INPUTS),
         *(output(name, unit, text) for name, unit, text in OUTPUTS),
         *(parameter(p.name, p.unit, p.description, p.default, min=p.min, max=p.max) for p in table),
         parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
@@ -91,7 +97,8 @@ def controller_model(variant: str, position: PositionParams = PositionParams(),
         y, state_next, _ = step(ca.vertcat(*(v[f"{a}_ref"] for a in _AXES)),
                                 ca.vertcat(*(v[f"v{a}_ref"] for a in _AXES)),
                                 ca.vertcat(*(v[s.name] for s in plant)), v["psi_ref"],
-                                ca.vertcat(*(v[s.name] for s in states)), parameters(v))
+                                ca.vertcat(*(v[s.name] for s in states)), parameters(v),
+                                ca.vertcat(*(v[name] for name, _, _ in ACCELERATION_INPUTS)))
         return (dict(zip((name for name, _, _ in OUTPUTS), ca.vertsplit(y))),
                 dict(zip((s.name for s in states), ca.vertsplit(state_next))))
 

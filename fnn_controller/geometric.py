@@ -124,19 +124,26 @@ def vee(S):
     return 0.5 * ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
 
 
-def desired_force(v_ref, v, params: GeometricParams = GeometricParams()):
+def desired_force(v_ref, v, params: GeometricParams = GeometricParams(), a_ref=None):
     """Desired force along ``+z_B*`` (N), the numerator of eq. (13) with the
     sign fixed for z down, tilt-limited.
 
-    .. math:: F = m k_v (v - v^*) + m g e_3
+    .. math:: F = m k_v (v - v^*) + m g e_3 - m a^*
 
-    then ``F_z <- max(F_z, fz_min m g)`` and the horizontal part scaled by
+    ``a_ref`` (a*, m/s², world, z down; ``None``: no term, the paper's law
+    bit for bit) is the acceleration feed-forward, an addition beyond the
+    paper (Lee et al.'s tracking controller has it): with ``m v_dot = -T R e3
+    + m g e3`` and ``T R e3 = F``, the closed velocity loop is then
+    ``v_dot = a* - k_v (v - v*)``, so a curved reference no longer needs a
+    velocity error to turn. Then ``F_z <- max(F_z, fz_min m g)`` and the horizontal part scaled by
     ``min(1, F_z tan(tilt_max) / |F_h|)``. Written without ``|F_h|`` itself
     so the function stays differentiable at hover (F_h = 0).
     """
     veh = params.vehicle
     e3 = ca.DM([0.0, 0.0, 1.0])
     force = veh.m * params.k_v * (v - v_ref) + veh.m * veh.g * e3
+    if a_ref is not None:
+        force = force - veh.m * a_ref
     fz = ca.fmax(force[2], params.fz_min * veh.m * veh.g)
     horizontal_sq = force[0] ** 2 + force[1] ** 2
     allowed_sq = (fz * ca.tan(params.tilt_max)) ** 2
@@ -195,7 +202,8 @@ def rotor_speeds(thrust, tau, vehicle: VehicleParams = VehicleParams()):
     return ca.vertcat(*[ca.sqrt(ca.fmin(ca.fmax(s, 0.0), vehicle.Omega_max**2)) for s in squares])
 
 
-def velocity_controller(v_ref, v, euler, omega_b, psi_ref, vel_state, params: GeometricParams = GeometricParams()):
+def velocity_controller(v_ref, v, euler, omega_b, psi_ref, vel_state, params: GeometricParams = GeometricParams(),
+                        a_ref=None):
     """The geometric velocity controller as CasADi expressions.
 
     Parameters
@@ -213,6 +221,9 @@ def velocity_controller(v_ref, v, euler, omega_b, psi_ref, vel_state, params: Ge
     vel_state : vector of length VEL_STATE_SIZE
         Previous R* (column-major) and the primed flag.
     params : GeometricParams
+    a_ref : 3-vector or None
+        Acceleration fed forward into the desired force (m/s², world, z
+        down; :func:`desired_force`); ``None`` (default): none, the paper's law.
 
     Returns
     -------
@@ -222,7 +233,7 @@ def velocity_controller(v_ref, v, euler, omega_b, psi_ref, vel_state, params: Ge
         ``vel_state_next``.
     """
     R = rotation_matrix(euler[0], euler[1], euler[2])
-    force = desired_force(v_ref, v, params)
+    force = desired_force(v_ref, v, params, a_ref)
     R_ref = desired_attitude(force, psi_ref)
     e_R = attitude_error(R_ref, R)
     if params.desired_rate == "finite_difference":

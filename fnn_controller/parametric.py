@@ -25,7 +25,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .controller import _INPUTS, Y_PARTS, controller_step, step_symbols
+from .controller import STEP_INPUT_NAMES, Y_PARTS, controller_step, step_symbols
 from .geometric import GeometricParams, initial_velocity_state
 from .parameters import parameter_info
 from .position import PositionParams, fnn_state_size
@@ -33,7 +33,7 @@ from .variants import variant as lookup
 from .variants.registry import identifier
 
 __all__ = ["Parameter", "parameter_table", "parametric_step_function", "parameter_vector",
-           "initial_state_function", "PER_AXIS"]
+           "initial_state_function", "initial_fnn_expression", "PER_AXIS"]
 
 # Tuple fields that hold one value per axis x, y, z (the others are numbered 1, 2, 3).
 PER_AXIS = {"gamma_smc", "nu", "gamma_lm", "alpha_bar", "phi", "k_R", "k_omega"}
@@ -80,7 +80,7 @@ def parameter_table(variant: str, position: PositionParams = PositionParams(),
     ``position`` and ``geometric``: the PD's ``kp``, ``kd``, ``dt``, the
     fields the variant reads (:attr:`Variant.parameters`), and every field of
     the geometric controller and its nominal vehicle."""
-    own = {"kp", "kd", "dt", "feedforward", *lookup(variant).parameters}
+    own = {"kp", "kd", "dt", "feedforward", "accel_feedforward", *lookup(variant).parameters}
     table = [Parameter(name, ("position",) + path, value, info.unit, info.description, info.min, info.max)
              for name, path, value, info in _scalars(position, "", (), own)]
     table += [Parameter(name, ("geometric",) + path, value, info.unit, info.description, info.min, info.max)
@@ -124,7 +124,7 @@ def _symbolic(table: tuple[Parameter, ...], position: PositionParams, geometric:
 def parametric_step_function(variant: str, position: PositionParams = PositionParams(),
                              geometric: GeometricParams = GeometricParams()) -> ca.Function:
     """``controller_step_<variant>_parametric(p_ref[3], p_ref_dot[3], x[12],
-    psi_ref, state[n], p[m]) -> (y[17], state_next[n], check)``: the flat step
+    psi_ref, state[n], p[m], p_ref_ddot[3]) -> (y[17], state_next[n], check)``: the flat step
     of :func:`~fnn_controller.controller.flat_step_function` with the
     parameters of :func:`parameter_table` as the input ``p``. ``position``
     and ``geometric`` give the structural choices (``desired_rate``) and the
@@ -137,14 +137,23 @@ def parametric_step_function(variant: str, position: PositionParams = PositionPa
     y = ca.vertcat(*(res[k] for k in Y_PARTS))
     # finite exactly when every input, parameter and output is
     check = sum(ca.sum1(v) for v in args + [p, y, res["state_next"]])
-    return ca.Function(f"controller_step_{identifier(variant)}_parametric", args + [p],
-                       [y, res["state_next"], check], list(_INPUTS) + ["state", "p"], ["y", "state_next", "check"])
+    # p after the state, the newer p_ref_ddot last: every earlier input keeps its index
+    return ca.Function(f"controller_step_{identifier(variant)}_parametric", args[:5] + [p] + args[5:],
+                       [y, res["state_next"], check], [*STEP_INPUT_NAMES[:5], "p", *STEP_INPUT_NAMES[5:]],
+                       ["y", "state_next", "check"])
 
 
 def parameter_vector(variant: str, position: PositionParams = PositionParams(),
                      geometric: GeometricParams = GeometricParams()) -> np.ndarray:
     """The values of :func:`parameter_table` for these parameters, in table order."""
     return np.array([p.default for p in parameter_table(variant, position, geometric)])
+
+
+def initial_fnn_expression(variant: str, position: PositionParams, r: ca.SX) -> ca.SX:
+    """The learned state of the three axes after reset (section 5.1) from the
+    uniform numbers ``r`` of the x, y and z axes, in that order."""
+    v = lookup(variant)
+    return ca.vertcat(*(v.initial_axis(position, r[a * v.n_random:(a + 1) * v.n_random]) for a in range(3)))
 
 
 @lru_cache(maxsize=None)
@@ -158,7 +167,6 @@ def initial_state_function(variant: str, position: PositionParams = PositionPara
     p = ca.SX.sym("p", len(table))
     r = ca.SX.sym("r", 3 * v.n_random)
     sym_position, _ = _symbolic(table, position, geometric, p)
-    axes = [v.initial_axis(sym_position, r[a * v.n_random:(a + 1) * v.n_random]) for a in range(3)]
-    state0 = ca.vertcat(*axes, ca.DM(initial_velocity_state()))
+    state0 = ca.vertcat(initial_fnn_expression(variant, sym_position, r), ca.DM(initial_velocity_state()))
     assert state0.shape[0] == fnn_state_size(variant) + len(initial_velocity_state())
     return ca.Function(f"initial_state_{identifier(variant)}", [p, r], [state0], ["p", "r"], ["state0"])

@@ -5,7 +5,10 @@ The output of each axis is the desired velocity of that axis,
 ``v*_axis = tau = tau_c - tau_n`` (m/s). The caller supplies the position
 error ``e = p* - p`` (eq. 12) and its derivative ``de/dt = p*_dot - v``
 (from the reference derivative and the measured velocity; no finite
-differences). There is no velocity feed-forward: the paper has none.
+differences). The paper has no feed-forward; two options add it (0, the
+default, is the paper's law bit for bit): the reference velocity around the
+PD (``feedforward``) and the reference acceleration d²p*/dt², passed on to
+the velocity controller's desired force (``accel_feedforward``).
 
 The learning part is the variant's (:mod:`fnn_controller.variants`: ``"pd"``,
 FNN off, tau_n = 0, state passed through unchanged; ``"pd+smc"``;
@@ -49,6 +52,9 @@ class PositionParams:
                                                   min=0.0)
     feedforward: float = param(0.0, "1", "gain of the reference velocity fed forward around the PD: "
                                "v* = tau_c - tau_n + feedforward dp*/dt (0: the paper's law)", min=0.0, max=1.0)
+    accel_feedforward: float = param(0.0, "1", "gain of the reference acceleration d2p*/dt2 passed to the velocity "
+                                     "controller: a_ref = accel_feedforward d2p*/dt2 (0: the paper's law)",
+                                     min=0.0, max=1.0)
     phi: tuple[float, float, float] = param((0.0, 0.0, 0.0), "m/s",
                                             "boundary layer of the learning laws' sgn(tau_c) for x, y, z: "
                                             "sat(tau_c / phi) in its place (0: the paper's sgn)", min=0.0)
@@ -106,13 +112,20 @@ def position_axis(variant: str, e, e_dot, axis_state, axis: int, params: Positio
     tau_c = pd_law(e, e_dot, params.kp, params.kd)
     tau_n, state_next = law(e, e_dot, tau_c, axis_state, axis, params)
     tau = tau_c - tau_n
-    if p_ref_dot is not None and not (isinstance(params.feedforward, (int, float)) and params.feedforward == 0):
+    if p_ref_dot is not None and not is_zero(params.feedforward):
         tau = tau + params.feedforward * p_ref_dot  # the option; 0 keeps the paper's law bit for bit
     return {"tau": tau, "tau_c": tau_c, "tau_n": tau_n, "state_next": state_next}
 
 
+def is_zero(gain) -> bool:
+    """True for a gain that is the number 0 (an option switched off, whose term
+    is then left out of the expressions: the paper's law bit for bit); False
+    for any other number and for a symbol (a parametric build keeps the term)."""
+    return isinstance(gain, (int, float)) and gain == 0
+
+
 def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParams = PositionParams(),
-                        p_ref_dot=None):
+                        p_ref_dot=None, p_ref_ddot=None):
     """The three-axis position controller as CasADi expressions (section 3.1).
 
     Parameters
@@ -125,21 +138,29 @@ def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParam
     params : PositionParams
     p_ref_dot : 3-vector, optional
         The reference velocity (m/s), fed forward with ``params.feedforward``.
+    p_ref_ddot : 3-vector, optional
+        The reference acceleration d²p*/dt² (m/s², world, z down), passed on
+        scaled by ``params.accel_feedforward``.
 
     Returns
     -------
     dict
         ``v_ref`` (3, m/s, eq. 26 plus the feed-forward), ``tau_c`` (3), ``tau_n`` (3),
-        ``fnn_state_next`` (``fnn_state_size(variant)``).
+        ``fnn_state_next`` (``fnn_state_size(variant)``), ``a_ref`` (3, m/s²: the
+        acceleration for the velocity controller's desired force,
+        ``accel_feedforward d²p*/dt²``; ``None`` when the option is off or
+        no acceleration is given, which the velocity controller reads as none).
     """
     size = fnn_state_size(variant) // 3
     axes = [position_axis(variant, e[a], e_dot[a], fnn_state[axis_slice(a, size)], a, params,
                           None if p_ref_dot is None else p_ref_dot[a]) for a in range(3)]
+    off = p_ref_ddot is None or is_zero(params.accel_feedforward)
     return {
         "v_ref": ca.vertcat(*[ax["tau"] for ax in axes]),
         "tau_c": ca.vertcat(*[ax["tau_c"] for ax in axes]),
         "tau_n": ca.vertcat(*[ax["tau_n"] for ax in axes]),
         "fnn_state_next": ca.vertcat(*[ax["state_next"] for ax in axes]),
+        "a_ref": None if off else params.accel_feedforward * p_ref_ddot,
     }
 
 

@@ -101,14 +101,17 @@ def register() -> None:
     from fnn_controller.variants import variant_names
 
     from fnn_controller.fmu import controller_model, fmu_identifier
+    from fnn_controller.split import INNER_IDENTIFIER, inner_model, outer_identifier, outer_model
 
     from .missions import parse_metrics, parse_wind
     from .trajectories import TRAJECTORIES
 
     for identifier in MODEL_NAMES:
         registry.register_fmu_model(_fmu_model(identifier, partial(catalog_model, identifier)))
-    for name in variant_names():  # the controller of each variant as an FMU
+    for name in variant_names():  # the controller of each variant as an FMU, whole and as its outer loop
         registry.register_fmu_model(_fmu_model(fmu_identifier(name), partial(controller_model, name)))
+        registry.register_fmu_model(_fmu_model(outer_identifier(name), partial(outer_model, name)))
+    registry.register_fmu_model(_fmu_model(INNER_IDENTIFIER, inner_model))  # its inner loop, for every variant
     for name in TRAJECTORIES:
         registry.register_component_kind(_trajectory_kind(name))
     registry.register_component_kind(_controller_kind())

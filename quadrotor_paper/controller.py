@@ -4,7 +4,7 @@ One adapter, no layer between it and CasADi: per variant used it holds the
 flat step function (:func:`fnn_controller.controller.flat_step_function`)
 behind a :class:`~fnn_controller.FastFunction` (built on first use, so a
 worker of ``table2`` switches between variants without rebuilding); the
-master gathers the 18 inputs straight into the function's input arrays
+master gathers the 21 inputs straight into the function's input arrays
 (``input_buffers``) and takes the 17 outputs from its output vector.
 
 Ports (NED world frame, SI units):
@@ -12,6 +12,8 @@ Ports (NED world frame, SI units):
 ========= ========================================================== =====
 inputs    x_ref y_ref z_ref (p*), vx_ref vy_ref vz_ref (dp*/dt)       m, m/s
           x y z u v w phi theta psi p q r (plant state)               SI
+          ax_ref ay_ref az_ref (d²p*/dt², start 0: may stay          m/s2
+          unconnected; read with position.accel_feedforward > 0)
 outputs   Omega_1..Omega_4 (rotor speeds, to the plant)               rad/s
           v_ref_x/y/z (v* = tau_c - tau_n, eq. 26)                    m/s
           tau_c_x/y/z (PD part, eq. 19), tau_n_x/y/z (FNN part, eq. 24) m/s
@@ -55,12 +57,14 @@ _AXES = "xyz"
 def _ports() -> tuple[tuple[Port, ...], tuple[Port, ...]]:
     from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
     from fnn_controller.controller import OUTPUTS
+    from fnn_controller.fmu import ACCELERATION_INPUTS
 
     inputs = (
         *(Port(f"{a}_ref", "m", description=f"reference position {a}") for a in _AXES),
         *(Port(f"v{a}_ref", "m/s", description=f"reference velocity d{a}*/dt") for a in _AXES),
         *(Port(v.name, v.unit, description=f"plant state: {v.description}")
           for v in (QUADROTOR.variable(name) for name in STATE_NAMES)),
+        *(Port(name, unit, description=text, start=0.0) for name, unit, text in ACCELERATION_INPUTS),
     )
     return inputs, tuple(Port(name, unit, description=text) for name, unit, text in OUTPUTS)
 
@@ -243,15 +247,16 @@ class ControllerComponent(PythonComponent):
         self._same_layout = internal_ports(self.variant) == self.internals
 
     def input_buffers(self) -> list[np.ndarray]:
-        """The step function's own input arrays (p*, dp*/dt, plant state)."""
+        """The step function's own input arrays (p*, dp*/dt, plant state, d²p*/dt²), in port order."""
         ins = self._fast.inputs
-        return [ins["p_ref"], ins["p_ref_dot"], ins["x"]]
+        return [ins["p_ref"], ins["p_ref_dot"], ins["x"], ins["p_ref_ddot"]]
 
     def step(self, n: int, t: float, u: np.ndarray | None) -> np.ndarray:
         fast = self._fast
         if u is not None:  # called without input_buffers(): copy the inputs in
             ins = fast.inputs
             ins["p_ref"][:], ins["p_ref_dot"][:], ins["x"][:] = u[0:3], u[3:6], u[6:18]
+            ins["p_ref_ddot"][:] = u[18:21]
         fast.evaluate()
         pending = fast.pending
         if not math.isfinite(pending["check"][0]):

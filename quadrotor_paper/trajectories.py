@@ -4,9 +4,11 @@ The contract (checked for every entry of :data:`TRAJECTORIES` by a test):
 a trajectory is a frozen dataclass with parameters in SI units and a method
 ``reference(t) -> (p, v)`` taking an array of times (s) of shape (n,) and
 returning positions p* (m) and their time derivatives v* = dp*/dt (m/s), both
-of shape (n, 3), world frame NED (z down: altitude is -z). It is pure and
+of shape (n, 3), world frame NED (z down: altitude is -z), and a method
+``acceleration(t)`` giving d²p*/dt² (m/s², shape (n, 3)). It is pure and
 vectorized, so the master evaluates it once for the whole time grid of a run.
-The controller needs v* for de/dt = v* - v (eq. 12 differentiated).
+The controller needs v* for de/dt = v* - v (eq. 12 differentiated), and a*
+for its acceleration feed-forward option (``docs/controller.md``).
 
 The three trajectories here are written once, in CasADi, in
 :mod:`fmu_models.models.reference`, which also exports each as a stateless
@@ -47,9 +49,20 @@ class _CasadiReference:
             variable = self._model.variable(self._renamed.get(f.name, f.name))
             _reference.check_parameter(variable, getattr(self, f.name), name=f.name)
 
+    def _values(self) -> dict[str, float]:
+        return {self._renamed.get(f.name, f.name): getattr(self, f.name) for f in fields(self)}
+
     def reference(self, t):
-        values = {self._renamed.get(f.name, f.name): getattr(self, f.name) for f in fields(self)}
-        return _reference.evaluate(self._model, t, values)
+        return _reference.evaluate(self._model, t, self._values())
+
+    def acceleration(self, t) -> np.ndarray:
+        """d²p*/dt² (m/s², shape (n, 3)) at the times ``t``: the symbolic
+        derivative of the same CasADi v* (``fmu_models.models.reference``)."""
+        return np.ascontiguousarray(self.outputs(t)[:, 6:9])
+
+    def outputs(self, t) -> np.ndarray:
+        """p*, v*, a* side by side, shape (n, 9), as :data:`REFERENCE_OUTPUTS`."""
+        return _reference.evaluate_outputs(self._model, t, self._values())
 
 
 @dataclass(frozen=True)
@@ -157,6 +170,9 @@ REFERENCE_OUTPUTS = (
     Port("vx", "m/s", description="reference velocity north, dx*/dt"),
     Port("vy", "m/s", description="reference velocity east, dy*/dt"),
     Port("vz", "m/s", description="reference velocity down, dz*/dt"),
+    Port("ax", "m/s2", description="reference acceleration north, d2x*/dt2"),
+    Port("ay", "m/s2", description="reference acceleration east, d2y*/dt2"),
+    Port("az", "m/s2", description="reference acceleration down, d2z*/dt2"),
 )
 
 
@@ -169,7 +185,7 @@ class ReferenceComponent(PythonComponent):
     def __init__(self, trajectory, name: str = "reference"):
         super().__init__(name)
         self.trajectory = trajectory
-        self._table = np.zeros((1, 6))
+        self._table = np.zeros((1, len(REFERENCE_OUTPUTS)))
 
     def set_parameters(self, values: Mapping[str, Any]) -> None:
         if values:
@@ -180,8 +196,7 @@ class ReferenceComponent(PythonComponent):
             self.trajectory = type(self.trajectory)(**{**params, **values})
 
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
-        p, v = self.trajectory.reference(t0 + h * np.arange(n_steps + 1))
-        self._table = np.ascontiguousarray(np.hstack([p, v]))
+        self._table = self.trajectory.outputs(t0 + h * np.arange(n_steps + 1))
 
     def step(self, n: int, t: float, u: np.ndarray) -> np.ndarray:
         return self._table[n]

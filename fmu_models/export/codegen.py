@@ -69,8 +69,8 @@ def _config_header(model: FmuModel, guid: str, work: dict[str, int]) -> str:
     nx, ny, nu, np_ = len(model.states), len(model.outputs), len(model.inputs), len(model.parameters)
     nz = len(model.discrete_states)
     if model.sampled is not None:
-        roles = (f"#define NR {model.sampled.n_random}\n#define NRS {model.sampled.n_random_step}\n"
-                 f"#define VR_SEED {refs[model.sampled.seed]}\n"
+        seed = f"#define VR_SEED {refs[model.sampled.seed]}\n" if model.sampled.seed is not None else ""
+        roles = (f"#define NR {model.sampled.n_random}\n#define NRS {model.sampled.n_random_step}\n{seed}"
                  f"#define VR_SAMPLE_PERIOD {refs[model.sampled.sample_period]}")
         integers = [refs[name] for name in model.sampled.integers]
     else:

@@ -68,7 +68,8 @@ class Sampled:
     both by name. ``initial(v, r)`` receives the parameters by name and a
     vector of ``n_random`` uniform numbers, which the FMU draws from numpy's
     ``default_rng(seed)`` with ``seed`` a parameter's name, and returns the
-    discrete state by name.
+    discrete state by name. A model that draws nothing (``n_random =
+    n_random_step = 0``) may have no seed (``seed=None``).
 
     With ``n_random_step > 0`` the update is ``update(t, v, rs)``: ``rs`` is a
     vector of ``n_random_step`` uniform numbers in [0, 1), the next ones of
@@ -81,7 +82,7 @@ class Sampled:
     update: Callable[..., tuple[Mapping[str, ca.SX], Mapping[str, ca.SX]]]
     initial: Callable[[Mapping[str, ca.SX], ca.SX], Mapping[str, ca.SX]]
     n_random: int
-    seed: str
+    seed: str | None
     sample_period: str
     n_random_step: int = 0
     integers: tuple[str, ...] = ()
@@ -114,7 +115,11 @@ class FmuModel:
         if self.sampled is not None:
             if self.states:
                 raise ValueError(f"model {self.identifier}: a sampled-data model has no continuous states")
-            roles = [("seed", self.sampled.seed), ("sample_period", self.sampled.sample_period)]
+            draws = self.sampled.n_random > 0 or self.sampled.n_random_step > 0
+            if self.sampled.seed is None and draws:
+                raise ValueError(f"model {self.identifier}: it draws random numbers, so it needs a seed parameter")
+            roles = [("seed", self.sampled.seed)] if self.sampled.seed is not None else []
+            roles.append(("sample_period", self.sampled.sample_period))
             roles += [("integer parameter", name) for name in self.sampled.integers]
             for role, name in roles:
                 if name not in {v.name for v in self.parameters}:

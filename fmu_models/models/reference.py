@@ -1,17 +1,24 @@
 """The reference trajectories of the paper's missions, written once in CasADi.
 
 Each trajectory is a pure function of time and parameters giving the
-reference position p*(t) (m) and its time derivative v*(t) = dp*/dt (m/s),
-world frame NED (x north, y east, z down: altitude is -z). The same CasADi
-expressions are
+reference position p*(t) (m), its time derivative v*(t) = dp*/dt (m/s) and
+its second derivative a*(t) = d²p*/dt² (m/s²), world frame NED (x north,
+y east, z down: altitude is -z). Only p* and v* are written by hand; a* is
+CasADi's symbolic derivative of v* with respect to t (:func:`_with_acceleration`),
+so it cannot disagree with them. The same CasADi expressions are
 
 * exported as a stateless FMU (:data:`REFERENCE_HOVER`,
   :data:`REFERENCE_TWO_CIRCLES`, :data:`REFERENCE_FIGURE_EIGHT`: outputs
-  ``x, y, z, vx, vy, vz``, the trajectory's settings as parameters), built and
+  ``x, y, z, vx, vy, vz, ax, ay, az``, the trajectory's settings as parameters), built and
   validated by exactly the same code as the plant, like the ``WindGust``;
 * evaluated in Python by :func:`evaluate`, which calls the model's own
   ``out`` function (the one the FMU's C code is generated from) on a whole
   time grid at once; ``quadrotor_paper.trajectories`` is built on it.
+
+Where the path changes curvature at once (the two circles' tangent point,
+their start and end) a* jumps: the derivative of an ``if_else`` is the
+derivative of the branch taken, so a* is the one-sided value, never an
+impulse.
 
 The parameter declarations (units, start values = the missions' defaults,
 inclusive ranges) are the one place the admissible values are stated: the
@@ -52,7 +59,7 @@ from ..export.variables import Variable, output, parameter
 
 __all__ = ["REFERENCE_HOVER", "REFERENCE_TWO_CIRCLES", "REFERENCE_FIGURE_EIGHT", "REFERENCE_MODELS",
            "OUTPUT_NAMES", "LENGTH_RANGE", "POSITION_RANGE", "SPEED_RANGE",
-           "two_circles_timing", "figure_eight_timing", "evaluate", "check_parameter", "reference_function"]
+           "two_circles_timing", "figure_eight_timing", "evaluate", "evaluate_outputs", "check_parameter", "reference_function"]
 
 LENGTH_RANGE = (1e-3, 1e4)  # m: sizes of a path
 POSITION_RANGE = (-1e4, 1e4)  # m: points and altitude changes in the world frame
@@ -65,6 +72,9 @@ _OUTPUTS = (
     output("vx", "m/s", "reference velocity north, dx/dt"),
     output("vy", "m/s", "reference velocity east, dy/dt"),
     output("vz", "m/s", "reference velocity down, dz/dt"),
+    output("ax", "m/s2", "reference acceleration north, d2x/dt2"),
+    output("ay", "m/s2", "reference acceleration east, d2y/dt2"),
+    output("az", "m/s2", "reference acceleration down, d2z/dt2"),
 )
 OUTPUT_NAMES: tuple[str, ...] = tuple(v.name for v in _OUTPUTS)
 
@@ -85,6 +95,20 @@ def _outputs(p, v) -> dict[str, ca.SX]:
     return dict(zip(OUTPUT_NAMES, (*p, *v)))
 
 
+def _with_acceleration(law):
+    """``law(t, s)`` (giving p* and v*) with a* = dv*/dt added: the symbolic
+    derivative of the written v*, so the acceleration is never a second copy
+    of the path."""
+
+    def equations(t, s):
+        out = law(t, s)
+        v = ca.vertcat(out["vx"], out["vy"], out["vz"])
+        a = ca.jacobian(v, t)
+        return {}, {**out, "ax": a[0], "ay": a[1], "az": a[2]}
+
+    return equations
+
+
 # ---- Hover ----------------------------------------------------------------------
 
 
@@ -102,7 +126,7 @@ REFERENCE_HOVER = FmuModel(
         _position("y0", "held position east", 0.0),
         _position("z0", "held position down (NED: -15 m is 15 m altitude)", -15.0),
     ),
-    equations=lambda t, s: ({}, _hover(t, s)),
+    equations=_with_acceleration(_hover),
     initial_state=lambda s: {},
 )
 
@@ -166,7 +190,7 @@ REFERENCE_TWO_CIRCLES = FmuModel(
         _position("y0", "start point east", 0.0),
         _position("z0", "start point down (NED: -15 m is 15 m altitude)", -15.0),
     ),
-    equations=lambda t, s: ({}, _two_circles(t, s)),
+    equations=_with_acceleration(_two_circles),
     initial_state=lambda s: {},
 )
 
@@ -208,7 +232,7 @@ REFERENCE_FIGURE_EIGHT = FmuModel(
         _position("y0", "crossing point east", 0.0),
         _position("z0", "crossing point down (NED: -1.5 m is 1.5 m altitude)", -1.5),
     ),
-    equations=lambda t, s: ({}, _figure_eight(t, s)),
+    equations=_with_acceleration(_figure_eight),
     initial_state=lambda s: {},
 )
 
@@ -224,7 +248,7 @@ _FUNCTIONS: dict[str, ca.Function] = {}
 
 def reference_function(model: FmuModel) -> ca.Function:
     """``(t, p) -> y``: the model's ``out`` function (the one compiled into
-    the FMU) without its empty state and input; y = (x, y, z, vx, vy, vz),
+    the FMU) without its empty state and input; y = (x, y, z, vx, vy, vz, ax, ay, az),
     p the parameter vector in table order (``model.parameter_values()``).
     Called with a 1 x n row of times it evaluates all n at once (CasADi maps
     it over the columns)."""
@@ -238,16 +262,22 @@ def reference_function(model: FmuModel) -> ca.Function:
     return _FUNCTIONS[model.identifier]
 
 
-def evaluate(model: FmuModel, t, parameters: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
-    """(p*, v*) of shape (n, 3) each at the times ``t`` (s, shape (n,)), for
-    the parameter values ``parameters`` (by name; the others at their start
-    values). The values are not checked here: see :func:`check_parameter`."""
+def evaluate_outputs(model: FmuModel, t, parameters: Mapping[str, float]) -> np.ndarray:
+    """Every output (:data:`OUTPUT_NAMES`: p* in m, v* in m/s, a* in m/s²)
+    at the times ``t`` (s, shape (n,)), shape (n, 9), for the parameter
+    values ``parameters`` (by name; the others at their start values). The
+    values are not checked here: see :func:`check_parameter`."""
     t = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
     if t.size == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3))
+        return np.zeros((0, len(OUTPUT_NAMES)))
     p = [float(parameters.get(v.name, v.start)) for v in model.parameters]
-    y = reference_function(model)(ca.DM(t[None, :]), ca.DM(p)).full()  # (6, n)
-    return np.ascontiguousarray(y[:3].T), np.ascontiguousarray(y[3:].T)
+    return np.ascontiguousarray(reference_function(model)(ca.DM(t[None, :]), ca.DM(p)).full().T)
+
+
+def evaluate(model: FmuModel, t, parameters: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(p*, v*) of shape (n, 3) each: the first six columns of :func:`evaluate_outputs`."""
+    y = evaluate_outputs(model, t, parameters)
+    return np.ascontiguousarray(y[:, 0:3]), np.ascontiguousarray(y[:, 3:6])
 
 
 def check_parameter(variable: Variable, value: float, name: str | None = None) -> None:

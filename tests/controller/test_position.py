@@ -157,7 +157,8 @@ def fly(plant_fmu, variant, p_ref, p_ref_dot, t_end, seed=0, wind=(0, 0, 0), **s
     return fly_with(plant_fmu, variant, PositionParams(), p_ref, p_ref_dot, t_end, seed, wind, **start)
 
 
-def fly_with(plant_fmu, variant, position, p_ref, p_ref_dot, t_end, seed=0, wind=(0, 0, 0), **start):
+def fly_with(plant_fmu, variant, position, p_ref, p_ref_dot, t_end, seed=0, wind=(0, 0, 0), p_ref_ddot=None,
+             **start):
     start.setdefault("z", -15.0)
     plant = PlantFmu(plant_fmu, **start)
     plant.set_wind(wind)
@@ -169,7 +170,7 @@ def fly_with(plant_fmu, variant, position, p_ref, p_ref_dot, t_end, seed=0, wind
     xs[0] = x
     for k in range(n):
         t = k * H  # time from the step counter
-        omega = ctrl.step(p_ref(t), p_ref_dot(t), x)
+        omega = ctrl.step(p_ref(t), p_ref_dot(t), x, 0.0, (0.0, 0.0, 0.0) if p_ref_ddot is None else p_ref_ddot(t))
         tau_c[k], tau_n[k] = ctrl.outputs["tau_c"], ctrl.outputs["tau_n"]
         plant.step(omega)
         x = plant.state()
@@ -253,9 +254,64 @@ def test_feed_forward_zero_is_the_papers_law_bit_for_bit():
 
     rng = np.random.default_rng(5)
     args = (rng.normal(size=3), rng.normal(size=3), rng.normal(size=12), 0.3,
-            fc_initial_state(0, PositionParams(), "pd+lm"))
+            fc_initial_state(0, PositionParams(), "pd+lm"), rng.normal(size=3))
     with_zero = controller_step_function("pd+lm", PositionParams(feedforward=0.0))(*args)
     paper = controller_step_function("pd+lm")(*args)
     assert all(np.array_equal(np.array(a), np.array(b)) for a, b in zip(with_zero, paper))
     with_ff = controller_step_function("pd+lm", PositionParams(feedforward=1.0))(*args)
     assert not np.array_equal(np.array(with_ff[2]), np.array(paper[2]))  # v_ref moved by dp*/dt
+
+
+def test_acceleration_feed_forward_zero_is_the_papers_law_bit_for_bit():
+    from fnn_controller.controller import controller_step_function
+
+    rng = np.random.default_rng(6)
+    args = (rng.normal(size=3), rng.normal(size=3), rng.normal(size=12), 0.3,
+            fc_initial_state(0, PositionParams(), "pd+lm"), rng.normal(size=3))
+    with_zero = controller_step_function("pd+lm", PositionParams(accel_feedforward=0.0))(*args)
+    paper = controller_step_function("pd+lm")(*args[:5], np.zeros(3))
+    # every output but check (the sum of the inputs too, so of p_ref_ddot)
+    assert all(np.array_equal(np.array(a), np.array(b)) for a, b in zip(with_zero[:-1], paper[:-1]))
+    with_aff = controller_step_function("pd+lm", PositionParams(accel_feedforward=1.0))(*args)
+    assert np.array_equal(np.array(with_aff[2]), np.array(paper[2]))  # v* is the position loop's, unchanged
+    assert not np.array_equal(np.array(with_aff[5]), np.array(paper[5]))  # the wrench follows the force
+
+
+def test_acceleration_feed_forward_tilts_the_desired_force_toward_a_ref():
+    """At hover (v = v* = 0), a* = (1, 0, 0) m/s^2 asks for F = (-m, 0, m g):
+    the thrust -F points north, so m v_dot = -F + m g e3 = m a*."""
+    from fnn_controller.geometric import desired_force
+
+    m, g = DEFAULTS["m"], DEFAULTS["g"]
+    force = np.array(desired_force(ca.DM.zeros(3), ca.DM.zeros(3), GeometricParams(), ca.DM([1.0, 0.0, 0.0])))
+    np.testing.assert_allclose(force.ravel(), [-m, 0.0, m * g], rtol=1e-15)
+
+
+def _circle(radius, speed):
+    w = speed / radius
+    return ((lambda t: (radius * np.sin(w * t), radius - radius * np.cos(w * t), -15.0)),
+            (lambda t: (speed * np.cos(w * t), speed * np.sin(w * t), 0.0)),
+            (lambda t: (-speed * w * np.sin(w * t), speed * w * np.cos(w * t), 0.0)))
+
+
+def test_acceleration_feed_forward_removes_the_centripetal_lag_on_a_circle(plant_fmu):
+    """PD with velocity feed-forward on a 10 m circle at 2.5 m/s: without the
+    acceleration the velocity loop needs e_v = a / k_v to turn, which the P
+    position loop turns into a radial error a / (k_v kp) = 0.625 / 12.5 =
+    0.05 m (linear loop: e'' + k_v e' + k_v kp e = a*, the circle's 0.25
+    rad/s far below the loop's 3.5 rad/s): the error p* - p points inward
+    with a*, the vehicle flies outside. Fed forward, the radial error falls
+    below 1 cm; the along-track error against the drag (0.056 m) stays."""
+    p_ref, p_ref_dot, p_ref_ddot = _circle(10.0, 2.5)
+
+    def radial_error(accel):
+        position = PositionParams(feedforward=1.0, accel_feedforward=accel)
+        log = fly_with(plant_fmu, "pd", position, p_ref, p_ref_dot, 20.0, p_ref_ddot=p_ref_ddot,
+                       x=0.0, y=0.0, u=2.5)
+        last = log["t"] >= 10.0
+        distance = np.hypot(log["x"][last, 0], log["x"][last, 1] - 10.0)
+        return np.mean(distance - 10.0)  # > 0: outside the circle
+
+    without, with_accel = radial_error(0.0), radial_error(1.0)
+    assert without == pytest.approx(0.625 / (GeometricParams().k_v * KP), rel=0.15)
+    assert abs(with_accel) < 0.01, with_accel

@@ -425,3 +425,25 @@ def test_internal_step_is_a_parameter_like_any_other(lag):
     g = 1 + z + z ** 2 / 2 + z ** 3 / 6 + z ** 4 / 24
     np.testing.assert_allclose(result["lag.y"], g ** np.arange(11), rtol=1e-13, atol=0)
     assert abs(result["lag.y"][-1] - math.exp(-1.0 / LAG_TAU)) > 1e-6  # not the exact answer
+
+
+def test_an_unconnected_input_with_a_start_value_holds_it(lag):
+    """Port.start: an input left unconnected holds its start value (as an
+    FMU's input does); connected, it reads its source; without a start value
+    it must be connected."""
+    from cosim.component import Port
+
+    class Held(Probe):
+        inputs = (Port("y", "m"), Port("bias", "m", start=0.25))
+
+    held = Held("probe")
+    with Master([lag], [held, Constant("src", value=1.0)], ["src.out -> lag.u", "lag.y -> probe.y"], H) as master:
+        master.run(0.1)
+    assert len(held.calls) > 1 and all(c[2][1] == 0.25 for c in held.calls)
+    fed = Held("probe")
+    with Master([lag], [fed, Constant("src", value=1.0)],
+                ["src.out -> lag.u", "lag.y -> probe.y", "src.out -> probe.bias"], H) as master:
+        master.run(0.1)
+    assert len(fed.calls) > 1 and all(c[2][1] == 1.0 for c in fed.calls)
+    with pytest.raises(ConnectionCheckError, match="inputs of probe not connected: y"):
+        Master([lag], [Held("probe"), Constant("src", value=1.0)], ["src.out -> lag.u"], H)

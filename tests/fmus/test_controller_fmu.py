@@ -17,10 +17,10 @@ from cosim.fmu import fmi2_callbacks
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import STATE_NAMES
 from fnn_controller.controller import OUTPUTS
-from fnn_controller.fmu import REFERENCE_INPUTS, controller_model, fmu_identifier
+from fnn_controller.fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS, controller_model, fmu_identifier
 from fnn_controller.parametric import parameter_table, parameter_vector, parametric_step_function
 
-INPUTS = [name for name, _, _ in REFERENCE_INPUTS] + list(STATE_NAMES)
+INPUTS = [name for name, _, _ in REFERENCE_INPUTS] + list(STATE_NAMES) + [name for name, _, _ in ACCELERATION_INPUTS]
 OUTS = [name for name, _, _ in OUTPUTS]
 
 
@@ -73,8 +73,9 @@ class Controller:
 
 
 def _inputs(rng) -> np.ndarray:
+    """x_ref..vz_ref, psi_ref, the 12 plant states, ax_ref..az_ref (INPUTS' order)."""
     return np.r_[rng.normal(size=3), rng.normal(size=3), rng.uniform(-1, 1), rng.normal(size=6),
-                 rng.normal(size=3) * 0.3, rng.normal(size=3)]
+                 rng.normal(size=3) * 0.3, rng.normal(size=3), rng.normal(size=3)]
 
 
 @pytest.mark.parametrize("version", [2, 3])
@@ -96,7 +97,7 @@ def test_the_fmu_is_the_python_fast_path_bit_for_bit(variant, version):
     rng = np.random.default_rng(0)
     for k in range(300):
         u = _inputs(rng)
-        y, state_next, _ = f(u[0:3], u[3:6], u[7:19], u[6], state, p)
+        y, state_next, _ = f(u[0:3], u[3:6], u[7:19], u[6], state, p, u[19:22])
         y = np.array(y).ravel()
         np.testing.assert_array_equal(ctrl.outputs(u), y)
         ctrl.step(k * 0.01)
@@ -104,6 +105,29 @@ def test_the_fmu_is_the_python_fast_path_bit_for_bit(variant, version):
         state = np.array(state_next).ravel()
     names = [f"{n}_{a}" for a in "xyz" for n, _ in fc.variant(variant).axis_state_ports]
     np.testing.assert_array_equal(ctrl.values(names), state[:len(names)])
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_the_acceleration_feed_forward_is_the_python_fast_path_bit_for_bit(version):
+    """With accel_feedforward = 1 the FMU's inputs ax_ref..az_ref reach the
+    desired force exactly as in Python; with 0 (the default) they change nothing."""
+    ctrl = Controller("pd+lm", version, {"seed": 3, "accel_feedforward": 1.0})
+    paper = Controller("pd+lm", version, {"seed": 3})
+    position = fc.PositionParams(accel_feedforward=1.0)
+    f, p = parametric_step_function("pd+lm"), parameter_vector("pd+lm", position)
+    state = fc.initial_state(3, position, "pd+lm")
+    rng = np.random.default_rng(4)
+    for k in range(50):
+        u = _inputs(rng)
+        y, state_next, _ = f(u[0:3], u[3:6], u[7:19], u[6], state, p, u[19:22])
+        np.testing.assert_array_equal(ctrl.outputs(u), np.array(y).ravel())
+        without = u.copy()
+        without[19:22] = 0.0
+        assert not np.array_equal(ctrl.outputs(u), paper.outputs(u))  # the acceleration acts
+        np.testing.assert_array_equal(paper.outputs(u), paper.outputs(without))  # ... only with the option
+        ctrl.step(k * 0.01)
+        paper.step(k * 0.01)
+        state = np.array(state_next).ravel()
 
 
 def test_the_seed_draws_f_ij_0_as_numpy_does():
@@ -133,7 +157,8 @@ def test_a_changed_gain_changes_the_control_as_in_python(version):
     f = parametric_step_function("pd+lm")
     u = _inputs(np.random.default_rng(3))
     state = fc.initial_state(0, position, "pd+lm")
-    y = np.array(f(u[0:3], u[3:6], u[7:19], u[6], state, parameter_vector("pd+lm", position, geometric))[0]).ravel()
+    y = np.array(f(u[0:3], u[3:6], u[7:19], u[6], state, parameter_vector("pd+lm", position, geometric),
+                   u[19:22])[0]).ravel()
     np.testing.assert_array_equal(ctrl.outputs(u), y)
 
 

@@ -16,7 +16,7 @@ from cosim.fmu import FmuComponent
 from fmu_models.catalog import MODELS
 from fmu_models.export.build import FMI_VERSIONS, cached_fmu
 from fmu_models.models.reference import (OUTPUT_NAMES, REFERENCE_FIGURE_EIGHT, REFERENCE_HOVER, REFERENCE_MODELS,
-                                         REFERENCE_TWO_CIRCLES, check_parameter, evaluate)
+                                         REFERENCE_TWO_CIRCLES, check_parameter, evaluate, evaluate_outputs)
 
 VERSIONS = sorted(FMI_VERSIONS)
 IDENTIFIERS = sorted(REFERENCE_MODELS)
@@ -60,7 +60,7 @@ def test_model_description_declares_units_descriptions_and_ranges(identifier):
     declared = {v.name: v for v in md.modelVariables}
     for name in OUTPUT_NAMES:
         v = declared[name]
-        assert v.causality == "output" and v.unit == ("m" if name in ("x", "y", "z") else "m/s") and v.description
+        assert v.causality == "output" and v.unit == {"x": "m", "v": "m/s", "a": "m/s2"}[name[0] if len(name) > 1 else "x"] and v.description
     for p in model.parameters:
         v = declared[p.name]
         assert v.causality == "parameter" and v.unit == p.unit and v.description == p.description
@@ -80,9 +80,8 @@ def test_fmu_outputs_equal_the_python_path_over_the_mission(case, version):
     r = fmpy.simulate_fmu(str(cached_fmu(model, version)), stop_time=duration, output_interval=0.01,
                           start_values=params, validate=False, output=list(OUTPUT_NAMES))
     assert len(r) == round(duration / 0.01) + 1
-    p, v = evaluate(model, r["time"], params)
     fmu = np.column_stack([r[name] for name in OUTPUT_NAMES])
-    np.testing.assert_allclose(fmu, np.hstack([p, v]), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fmu, evaluate_outputs(model, r["time"], params), rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("identifier", IDENTIFIERS)
@@ -90,8 +89,8 @@ def test_model_exchange_gives_the_same_outputs(identifier):
     model = REFERENCE_MODELS[identifier]
     r = fmpy.simulate_fmu(str(cached_fmu(model, 2)), stop_time=30.0, output_interval=0.25,
                           fmi_type="ModelExchange", validate=False, output=list(OUTPUT_NAMES))
-    p, v = evaluate(model, r["time"], {})
-    np.testing.assert_allclose(np.column_stack([r[n] for n in OUTPUT_NAMES]), np.hstack([p, v]), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.column_stack([r[n] for n in OUTPUT_NAMES]), evaluate_outputs(model, r["time"], {}),
+                               rtol=0, atol=1e-12)
 
 
 def test_two_circles_known_points():
@@ -144,5 +143,28 @@ def test_the_bounds_themselves_are_admitted_and_fly(model, name):
                               start_values={name: bound}, validate=False, output=list(OUTPUT_NAMES))
         fmu = np.column_stack([r[n] for n in OUTPUT_NAMES])
         assert np.all(np.isfinite(fmu))
-        p, v = evaluate(model, r["time"], {name: bound})
-        np.testing.assert_allclose(fmu, np.hstack([p, v]), rtol=0, atol=1e-12 * max(1.0, abs(bound)))
+        np.testing.assert_allclose(fmu, evaluate_outputs(model, r["time"], {name: bound}), rtol=0,
+                                   atol=1e-12 * max(1.0, abs(bound)))
+
+
+@pytest.mark.parametrize("case", CASES, ids=_case_id)
+def test_the_acceleration_is_the_derivative_of_the_velocity(case):
+    """a* (the symbolic derivative) equals the central difference of v*
+    wherever the path is smooth over the difference's 2 ms (not at the jumps
+    of the curvature: the start, the tangent point, the end)."""
+    model, params, duration = case
+    h = 1e-3
+    t = np.linspace(0.0, duration, 4001)
+    y = evaluate_outputs(model, t, params)
+    ahead, behind = evaluate_outputs(model, t + h, params), evaluate_outputs(model, t - h, params)
+    difference = (ahead[:, 3:6] - behind[:, 3:6]) / (2 * h)
+    curvature_same = np.all(np.abs(ahead[:, 6:9] - behind[:, 6:9]) < 0.05, axis=1)  # no jump in between
+    assert curvature_same.mean() > 0.95
+    np.testing.assert_allclose(y[curvature_same, 6:9], difference[curvature_same], rtol=0, atol=1e-5)
+    if model is REFERENCE_TWO_CIRCLES:  # centripetal: v_h^2 / R while the circles are flown
+        from fmu_models.models.reference import two_circles_timing
+
+        radius = params.get("radius", 10.0)
+        _, vh, path_time = two_circles_timing(radius, params.get("speed", 2.5), params.get("climb", 5.0))
+        flying = curvature_same & (t > 0) & (t < path_time)
+        np.testing.assert_allclose(np.hypot(y[flying, 6], y[flying, 7]), vh ** 2 / radius, rtol=1e-9)

@@ -81,7 +81,9 @@ def test_reference_component_reads_the_precomputed_grid():
     ref.set_parameters({"speed": 1.0})
     ref.start(0.0, 0.01, 100, seed=0)
     p, v = TwoCircles(speed=1.0).reference(np.array([0.37]))
-    np.testing.assert_allclose(ref.step(37, 0.37, None), np.concatenate([p[0], v[0]]))
+    a = TwoCircles(speed=1.0).acceleration(np.array([0.37]))
+    np.testing.assert_allclose(ref.step(37, 0.37, None), np.concatenate([p[0], v[0], a[0]]))
+    assert np.hypot(a[0, 0], a[0, 1]) > 0.09  # the turn: about v_h^2 / R = 0.1 m/s^2
     with pytest.raises(KeyError, match="no parameter"):
         ref.set_parameters({"radius_m": 1.0})
 
@@ -180,9 +182,10 @@ def test_vectorized_equals_one_time_at_a_time(kind):
     out = model.functions["out"]
     values = {RENAMED.get(kind, {}).get(f.name, f.name): getattr(traj, f.name) for f in dataclasses.fields(traj)}
     parameters = model.parameter_values(**values)
+    a = traj.acceleration(t)
     for i, ti in enumerate(t):
         y = np.array(out(ti, [], [], parameters)).ravel()
-        np.testing.assert_array_equal(np.concatenate([p[i], v[i]]), y)
+        np.testing.assert_array_equal(np.concatenate([p[i], v[i], a[i]]), y)
     ps, vs = traj.reference(0.37)  # a scalar time is a grid of one
     assert ps.shape == vs.shape == (1, 3)
     pe, ve = traj.reference(np.array([]))

@@ -124,6 +124,7 @@ void core_reset(Instance *inst) { set_defaults(inst); }
 /* z0 from the parameters and NR uniform numbers of numpy's default_rng(seed). */
 static CoreStatus initial_state(Instance *inst) {
     double r[NR + 1];
+#ifdef VR_SEED
     const double seed = P_[VR_SEED - VR_P];
     NpPcg64 rng;
     if (!(seed >= 0 && seed <= 9007199254740992.0 && seed == floor(seed))) {
@@ -132,6 +133,7 @@ static CoreStatus initial_state(Instance *inst) {
     }
     np_default_rng(&rng, (uint64_t)seed);
     for (size_t i = 0; i < NR; i++) r[i] = np_random(&rng);
+#endif  /* a model without a seed draws nothing (model.py checks it) */
     inst->arg[0] = P_; inst->arg[1] = r;
     inst->res[0] = Z_;
     model_dinit(inst->arg, inst->res, inst->iw, inst->w, 0);

@@ -1,0 +1,212 @@
+"""The controller of Fig. 2 cut at the velocity command v* (eq. 26): the
+outer loop and the inner loop as two functions, and two FMUs.
+
+Why cut there: in the paper's laboratory the position controller with its
+learning FNN runs on a ground computer, and the AR.Drone 2.0 closes its own
+velocity and attitude loops on board; the velocity command travels over
+Wi-Fi. A link's delay, loss or noise then belongs between the two loops,
+where one FMU holding both (:mod:`fnn_controller.fmu`) cannot place it.
+
+* ``outer`` (ground): eqs. 12, 19, 24-26 and the learning laws of the
+  variant; ``(p_ref[3], p_ref_dot[3], x[6], state[n], p[m]) -> (y[9],
+  state_next, check)``, ``x`` the measured position and velocity
+  (x y z u v w), ``y = (v_ref, tau_c, tau_n)`` laid out as
+  :data:`OUTER_OUTPUTS`;
+* ``inner`` (on board): eqs. 13-18 and the rotor inversion;
+  ``(v_ref[3], x[9], psi_ref, state[10], p[k]) -> (y[8], state_next,
+  check)``, ``x`` the vehicle's u v w phi theta psi p q r, ``y = (Omega,
+  wrench)`` laid out as :data:`INNER_OUTPUTS`.
+
+Both are built from the same law functions (:func:`position_controller`,
+:func:`velocity_controller`) as the whole step, with the parameters as an
+input (:mod:`fnn_controller.parametric`): connected directly, outer then
+inner, they give the whole controller's outputs exactly (tested).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+
+from fmu_models.export.model import FmuModel, Sampled
+from fmu_models.export.variables import discrete, input_, output, parameter
+from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
+
+from .controller import OUTPUTS, state_ports
+from .fmu import REFERENCE_INPUTS, SEED_MAX
+from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
+from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table
+from .position import PositionParams, fnn_state_size, position_controller
+from .variants import variant as lookup
+from .variants.registry import identifier
+
+__all__ = ["OUTER_OUTPUTS", "INNER_OUTPUTS", "OUTER_MEASURED", "INNER_MEASURED", "outer_parameter_table",
+           "inner_parameter_table", "outer_step_function", "inner_step_function", "outer_initial_function",
+           "outer_model", "inner_model", "outer_identifier", "INNER_IDENTIFIER"]
+
+OUTER_MEASURED = STATE_NAMES[0:6]   # x y z u v w: the motion-capture feed
+INNER_MEASURED = STATE_NAMES[3:12]  # u v w phi theta psi p q r: the vehicle's own estimate
+OUTER_OUTPUTS = tuple(o for o in OUTPUTS if o[0].startswith(("v_ref_", "tau_c_", "tau_n_")))
+INNER_OUTPUTS = tuple(o for o in OUTPUTS if o not in OUTER_OUTPUTS)
+INNER_IDENTIFIER = "VelocityController"
+_AXES = "xyz"
+
+
+def outer_identifier(variant: str) -> str:
+    """``PositionControllerPDLM`` for ``pd+lm``: the outer FMU's model identifier."""
+    return "PositionController" + "".join(ch for ch in variant.upper() if ch.isalnum())
+
+
+def outer_parameter_table(variant: str, position: PositionParams = PositionParams()) -> tuple[Parameter, ...]:
+    """The whole step's parameters that the outer loop reads: the PD's, ``dt``
+    and the variant's learning parameters."""
+    return tuple(p for p in parameter_table(variant, position) if p.path[0] == "position")
+
+
+def inner_parameter_table(geometric: GeometricParams = GeometricParams()) -> tuple[Parameter, ...]:
+    """The whole step's parameters that the inner loop reads: the geometric
+    gains, the nominal vehicle and ``dt`` (its sample period)."""
+    any_variant = lookup("pd").name
+    return tuple(p for p in parameter_table(any_variant, PositionParams(), geometric)
+                 if p.path[0] == "geometric" or p.name == "dt")
+
+
+def _check(*parts) -> ca.SX:
+    """Finite exactly when every input, parameter and output is."""
+    return sum(ca.sum1(v) for v in parts)
+
+
+@lru_cache(maxsize=None)
+def outer_step_function(variant: str, position: PositionParams = PositionParams()) -> ca.Function:
+    """The outer loop of ``variant`` with its parameters as the input ``p``
+    (module docstring); ``position`` gives the constants of the fields that
+    are no parameter of ``variant``."""
+    table = outer_parameter_table(variant, position)
+    p = ca.SX.sym("p", len(table))
+    sym_position, _ = _symbolic(table, position, GeometricParams(), p)
+    p_ref, p_ref_dot = ca.SX.sym("p_ref", 3), ca.SX.sym("p_ref_dot", 3)
+    x, state = ca.SX.sym("x", 6), ca.SX.sym("state", fnn_state_size(variant))
+    out = position_controller(variant, p_ref - x[0:3], p_ref_dot - x[3:6], state, sym_position, p_ref_dot)
+    y = ca.vertcat(out["v_ref"], out["tau_c"], out["tau_n"])
+    args = [p_ref, p_ref_dot, x, state, p]
+    return ca.Function(f"outer_step_{identifier(variant)}_parametric", args,
+                       [y, out["fnn_state_next"], _check(*args, y, out["fnn_state_next"])],
+                       ["p_ref", "p_ref_dot", "x", "state", "p"], ["y", "state_next", "check"])
+
+
+@lru_cache(maxsize=None)
+def outer_initial_function(variant: str, position: PositionParams = PositionParams()) -> ca.Function:
+    """``(p[m], r[3 n_random]) -> state0``: the outer state after reset, the
+    whole controller's learned part (:func:`initial_fnn_expression`)."""
+    table = outer_parameter_table(variant, position)
+    p = ca.SX.sym("p", len(table))
+    r = ca.SX.sym("r", 3 * lookup(variant).n_random)
+    sym_position, _ = _symbolic(table, position, GeometricParams(), p)
+    return ca.Function(f"outer_initial_{identifier(variant)}", [p, r],
+                       [initial_fnn_expression(variant, sym_position, r)], ["p", "r"], ["state0"])
+
+
+@lru_cache(maxsize=None)
+def inner_step_function(geometric: GeometricParams = GeometricParams()) -> ca.Function:
+    """The inner loop with its parameters as the input ``p`` (module
+    docstring); ``geometric`` gives the structural choice ``desired_rate``."""
+    table = inner_parameter_table(geometric)
+    p = ca.SX.sym("p", len(table))
+    _, sym_geometric = _symbolic(table, PositionParams(), geometric, p)
+    v_ref, x, psi_ref = ca.SX.sym("v_ref", 3), ca.SX.sym("x", 9), ca.SX.sym("psi_ref")
+    state = ca.SX.sym("state", VEL_STATE_SIZE)
+    out = velocity_controller(v_ref, x[0:3], x[3:6], x[6:9], psi_ref, state, sym_geometric)
+    y = ca.vertcat(out["Omega"], out["wrench"])
+    args = [v_ref, x, psi_ref, state, p]
+    return ca.Function("inner_step_parametric", args, [y, out["vel_state_next"],
+                                                       _check(*args, y, out["vel_state_next"])],
+                       ["v_ref", "x", "psi_ref", "state", "p"], ["y", "state_next", "check"])
+
+
+def _plant_inputs(names) -> tuple:
+    return tuple(input_(v.name, v.unit, f"measured plant state: {v.description}")
+                 for v in (QUADROTOR.variable(n) for n in names))
+
+
+def _parameters(table) -> tuple:
+    return tuple(parameter(p.name, p.unit, p.description, p.default, min=p.min, max=p.max) for p in table)
+
+
+@lru_cache(maxsize=None)
+def outer_model(variant: str, position: PositionParams = PositionParams()) -> FmuModel:
+    """The outer loop of ``variant`` as an FMU model (ground station):
+    inputs the reference and the measured x y z u v w, outputs v*, tau_c,
+    tau_n; parameters its table and ``seed`` (f_ij(0)); locals the learned
+    state of each axis."""
+    table = outer_parameter_table(variant, position)
+    step, init = outer_step_function(variant), outer_initial_function(variant)
+    states = tuple(discrete(n, u, t) for n, u, t in state_ports(variant)[:fnn_state_size(variant)])
+    variables = (
+        *(input_(n, u, t) for n, u, t in REFERENCE_INPUTS if n != "psi_ref"),
+        *_plant_inputs(OUTER_MEASURED),
+        *(output(n, u, t) for n, u, t in OUTER_OUTPUTS),
+        *_parameters(table),
+        parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
+                  min=0.0, max=SEED_MAX),
+        *states,
+    )
+
+    def p_of(v):
+        return ca.vertcat(*(v[p.name] for p in table))
+
+    def update(t, v):
+        y, state_next, _ = step(ca.vertcat(*(v[f"{a}_ref"] for a in _AXES)),
+                                ca.vertcat(*(v[f"v{a}_ref"] for a in _AXES)),
+                                ca.vertcat(*(v[n] for n in OUTER_MEASURED)),
+                                ca.vertcat(*(v[s.name] for s in states)), p_of(v))
+        return (dict(zip((n for n, _, _ in OUTER_OUTPUTS), ca.vertsplit(y))),
+                dict(zip((s.name for s in states), ca.vertsplit(state_next))))
+
+    def initial(v, r):
+        return dict(zip((s.name for s in states), ca.vertsplit(init(p_of(v), r))))
+
+    label = lookup(variant).label
+    return FmuModel(
+        identifier=outer_identifier(variant),
+        description=f"{label} position controller of the LM-FNN paper (eqs. 12, 19, 24-26 and its learning "
+                    f"laws), the outer loop alone: v* to an on-board velocity controller; sampled at dt, z down",
+        variables=variables,
+        sampled=Sampled(update=update, initial=initial, n_random=3 * lookup(variant).n_random, seed="seed",
+                        sample_period="dt"),
+    )
+
+
+@lru_cache(maxsize=None)
+def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
+    """The inner loop as an FMU model (on board): inputs v*, psi* and the
+    vehicle's u v w phi theta psi p q r, outputs the rotor speeds and the
+    wrench of eq. 18; parameters the geometric gains and nominal vehicle."""
+    table = inner_parameter_table(geometric)
+    step = inner_step_function(GeometricParams(desired_rate=geometric.desired_rate))
+    states = tuple(discrete(n, u, t) for n, u, t in state_ports("pd")[-VEL_STATE_SIZE:])
+    variables = (
+        *(input_(n, u, t) for n, u, t in OUTER_OUTPUTS[:3]),
+        input_("psi_ref", "rad", "commanded yaw psi*"),
+        *_plant_inputs(INNER_MEASURED),
+        *(output(n, u, t) for n, u, t in INNER_OUTPUTS),
+        *_parameters(table),
+        *states,
+    )
+
+    def update(t, v):
+        y, state_next, _ = step(ca.vertcat(*(v[n] for n, _, _ in OUTER_OUTPUTS[:3])),
+                                ca.vertcat(*(v[n] for n in INNER_MEASURED)), v["psi_ref"],
+                                ca.vertcat(*(v[s.name] for s in states)), ca.vertcat(*(v[p.name] for p in table)))
+        return (dict(zip((n for n, _, _ in INNER_OUTPUTS), ca.vertsplit(y))),
+                dict(zip((s.name for s in states), ca.vertsplit(state_next))))
+
+    def initial(v, r):  # R*_prev = identity, not primed: no randomness, no seed
+        return dict(zip((s.name for s in states), (float(x) for x in initial_velocity_state())))
+
+    return FmuModel(
+        identifier=INNER_IDENTIFIER,
+        description="geometric SE(3) velocity controller of the LM-FNN paper (eqs. 13-18) with rotor-speed "
+                    "inversion, the inner loop alone (on board): tracks v*; sampled at dt, z axis down",
+        variables=variables,
+        sampled=Sampled(update=update, initial=initial, n_random=0, seed=None, sample_period="dt"),
+    )
