@@ -61,12 +61,15 @@ def test_build_fmu_writes_the_plant_wind_references_and_every_controller(tmp_pat
     from fmu_models.catalog import MODEL_NAMES
     from fmu_models.export.build import FMI_VERSIONS
     from fnn_controller.fmu import fmu_identifier
+    from fnn_controller.split import INNER_IDENTIFIER, outer_identifier
     from fnn_controller.variants import variant_names
 
     assert main(["build-fmu", "--out", str(tmp_path)]) == 0
     paths = [Path(p) for p in capsys.readouterr().out.split()]
-    names = set(MODEL_NAMES) | {fmu_identifier(v) for v in variant_names()}
-    assert {"Quadrotor", "WindGust", "ReferenceTwoCircles", "ControllerPDLM"} <= names
+    names = (set(MODEL_NAMES) | {fmu_identifier(v) for v in variant_names()}
+             | {outer_identifier(v) for v in variant_names()} | {INNER_IDENTIFIER})
+    assert {"Quadrotor", "WindGust", "ReferenceTwoCircles", "ControllerPDLM", "PositionControllerPDLM",
+            "VelocityController", "VelocityLink3"} <= names
     assert sorted(p.stem for p in paths) == sorted(n for n in names for _ in FMI_VERSIONS)
     assert all(p.suffix == ".fmu" and p.exists() and validate_fmu(str(p)) == [] for p in paths)
 
