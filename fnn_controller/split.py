@@ -8,14 +8,15 @@ Wi-Fi. A link's delay, loss or noise then belongs between the two loops,
 where one FMU holding both (:mod:`fnn_controller.fmu`) cannot place it.
 
 * ``outer`` (ground): eqs. 12, 19, 24-26 and the learning laws of the
-  variant; ``(p_ref[3], p_ref_dot[3], x[6], state[n], p[m]) -> (y[9],
-  state_next, check)``, ``x`` the measured position and velocity
-  (x y z u v w), ``y = (v_ref, tau_c, tau_n)`` laid out as
-  :data:`OUTER_OUTPUTS`;
+  variant; ``(p_ref[3], p_ref_dot[3], x[6], state[n], p[m], p_ref_ddot[3])
+  -> (y[12], state_next, check)``, ``x`` the measured position and velocity
+  (x y z u v w), ``y = (v_ref, tau_c, tau_n, a_ref)`` laid out as
+  :data:`OUTER_OUTPUTS` (``a_ref``: the acceleration feed-forward option's
+  output, 0 unless ``accel_feedforward`` > 0);
 * ``inner`` (on board): eqs. 13-18 and the rotor inversion;
-  ``(v_ref[3], x[9], psi_ref, state[10], p[k]) -> (y[8], state_next,
-  check)``, ``x`` the vehicle's u v w phi theta psi p q r, ``y = (Omega,
-  wrench)`` laid out as :data:`INNER_OUTPUTS`.
+  ``(v_ref[3], x[9], psi_ref, state[10], p[k], a_ref[3]) -> (y[8],
+  state_next, check)``, ``x`` the vehicle's u v w phi theta psi p q r,
+  ``y = (Omega, wrench)`` laid out as :data:`INNER_OUTPUTS`.
 
 Both are built from the same law functions (:func:`position_controller`,
 :func:`velocity_controller`) as the whole step, with the parameters as an
@@ -33,20 +34,22 @@ from fmu_models.export.variables import discrete, input_, output, parameter
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
 from .controller import OUTPUTS, state_ports
-from .fmu import REFERENCE_INPUTS, SEED_MAX
+from .fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS, SEED_MAX
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
 from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table
 from .position import PositionParams, fnn_state_size, position_controller
 from .variants import variant as lookup
 from .variants.registry import identifier
 
-__all__ = ["OUTER_OUTPUTS", "INNER_OUTPUTS", "OUTER_MEASURED", "INNER_MEASURED", "outer_parameter_table",
+__all__ = ["A_REF_PORTS", "OUTER_OUTPUTS", "INNER_OUTPUTS", "OUTER_MEASURED", "INNER_MEASURED", "outer_parameter_table",
            "inner_parameter_table", "outer_step_function", "inner_step_function", "outer_initial_function",
            "outer_model", "inner_model", "outer_identifier", "INNER_IDENTIFIER"]
 
 OUTER_MEASURED = STATE_NAMES[0:6]   # x y z u v w: the motion-capture feed
 INNER_MEASURED = STATE_NAMES[3:12]  # u v w phi theta psi p q r: the vehicle's own estimate
-OUTER_OUTPUTS = tuple(o for o in OUTPUTS if o[0].startswith(("v_ref_", "tau_c_", "tau_n_")))
+A_REF_PORTS = tuple((f"a_ref_{a}", "m/s2", f"acceleration fed forward to the velocity loop along {a}: "
+                     "accel_feedforward d2p*/dt2 (0 with the option off)") for a in "xyz")
+OUTER_OUTPUTS = tuple(o for o in OUTPUTS if o[0].startswith(("v_ref_", "tau_c_", "tau_n_"))) + A_REF_PORTS
 INNER_OUTPUTS = tuple(o for o in OUTPUTS if o not in OUTER_OUTPUTS)
 INNER_IDENTIFIER = "VelocityController"
 _AXES = "xyz"
@@ -86,12 +89,15 @@ def outer_step_function(variant: str, position: PositionParams = PositionParams(
     sym_position, _ = _symbolic(table, position, GeometricParams(), p)
     p_ref, p_ref_dot = ca.SX.sym("p_ref", 3), ca.SX.sym("p_ref_dot", 3)
     x, state = ca.SX.sym("x", 6), ca.SX.sym("state", fnn_state_size(variant))
-    out = position_controller(variant, p_ref - x[0:3], p_ref_dot - x[3:6], state, sym_position, p_ref_dot)
-    y = ca.vertcat(out["v_ref"], out["tau_c"], out["tau_n"])
-    args = [p_ref, p_ref_dot, x, state, p]
+    p_ref_ddot = ca.SX.sym("p_ref_ddot", 3)
+    out = position_controller(variant, p_ref - x[0:3], p_ref_dot - x[3:6], state, sym_position, p_ref_dot,
+                              p_ref_ddot=p_ref_ddot)
+    a_ref = out["a_ref"] if out["a_ref"] is not None else ca.SX.zeros(3)  # a constant gain of 0: no term
+    y = ca.vertcat(out["v_ref"], out["tau_c"], out["tau_n"], a_ref)
+    args = [p_ref, p_ref_dot, x, state, p, p_ref_ddot]
     return ca.Function(f"outer_step_{identifier(variant)}_parametric", args,
                        [y, out["fnn_state_next"], _check(*args, y, out["fnn_state_next"])],
-                       ["p_ref", "p_ref_dot", "x", "state", "p"], ["y", "state_next", "check"])
+                       ["p_ref", "p_ref_dot", "x", "state", "p", "p_ref_ddot"], ["y", "state_next", "check"])
 
 
 @lru_cache(maxsize=None)
@@ -114,13 +120,13 @@ def inner_step_function(geometric: GeometricParams = GeometricParams()) -> ca.Fu
     p = ca.SX.sym("p", len(table))
     _, sym_geometric = _symbolic(table, PositionParams(), geometric, p)
     v_ref, x, psi_ref = ca.SX.sym("v_ref", 3), ca.SX.sym("x", 9), ca.SX.sym("psi_ref")
-    state = ca.SX.sym("state", VEL_STATE_SIZE)
-    out = velocity_controller(v_ref, x[0:3], x[3:6], x[6:9], psi_ref, state, sym_geometric)
+    state, a_ref = ca.SX.sym("state", VEL_STATE_SIZE), ca.SX.sym("a_ref", 3)
+    out = velocity_controller(v_ref, x[0:3], x[3:6], x[6:9], psi_ref, state, sym_geometric, a_ref=a_ref)
     y = ca.vertcat(out["Omega"], out["wrench"])
-    args = [v_ref, x, psi_ref, state, p]
+    args = [v_ref, x, psi_ref, state, p, a_ref]
     return ca.Function("inner_step_parametric", args, [y, out["vel_state_next"],
                                                        _check(*args, y, out["vel_state_next"])],
-                       ["v_ref", "x", "psi_ref", "state", "p"], ["y", "state_next", "check"])
+                       ["v_ref", "x", "psi_ref", "state", "p", "a_ref"], ["y", "state_next", "check"])
 
 
 def _plant_inputs(names) -> tuple:
@@ -135,8 +141,8 @@ def _parameters(table) -> tuple:
 @lru_cache(maxsize=None)
 def outer_model(variant: str, position: PositionParams = PositionParams()) -> FmuModel:
     """The outer loop of ``variant`` as an FMU model (ground station):
-    inputs the reference and the measured x y z u v w, outputs v*, tau_c,
-    tau_n; parameters its table and ``seed`` (f_ij(0)); locals the learned
+    inputs the reference (and its acceleration, start 0) and the measured
+    x y z u v w, outputs v*, tau_c, tau_n, a_ref; parameters its table and ``seed`` (f_ij(0)); locals the learned
     state of each axis."""
     table = outer_parameter_table(variant, position)
     step, init = outer_step_function(variant), outer_initial_function(variant)
@@ -144,6 +150,7 @@ def outer_model(variant: str, position: PositionParams = PositionParams()) -> Fm
     variables = (
         *(input_(n, u, t) for n, u, t in REFERENCE_INPUTS if n != "psi_ref"),
         *_plant_inputs(OUTER_MEASURED),
+        *(input_(n, u, t) for n, u, t in ACCELERATION_INPUTS),
         *(output(n, u, t) for n, u, t in OUTER_OUTPUTS),
         *_parameters(table),
         parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
@@ -158,7 +165,8 @@ def outer_model(variant: str, position: PositionParams = PositionParams()) -> Fm
         y, state_next, _ = step(ca.vertcat(*(v[f"{a}_ref"] for a in _AXES)),
                                 ca.vertcat(*(v[f"v{a}_ref"] for a in _AXES)),
                                 ca.vertcat(*(v[n] for n in OUTER_MEASURED)),
-                                ca.vertcat(*(v[s.name] for s in states)), p_of(v))
+                                ca.vertcat(*(v[s.name] for s in states)), p_of(v),
+                                ca.vertcat(*(v[n] for n, _, _ in ACCELERATION_INPUTS)))
         return (dict(zip((n for n, _, _ in OUTER_OUTPUTS), ca.vertsplit(y))),
                 dict(zip((s.name for s in states), ca.vertsplit(state_next))))
 
@@ -178,8 +186,8 @@ def outer_model(variant: str, position: PositionParams = PositionParams()) -> Fm
 
 @lru_cache(maxsize=None)
 def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
-    """The inner loop as an FMU model (on board): inputs v*, psi* and the
-    vehicle's u v w phi theta psi p q r, outputs the rotor speeds and the
+    """The inner loop as an FMU model (on board): inputs v*, psi*, the
+    vehicle's u v w phi theta psi p q r and a_ref (start 0), outputs the rotor speeds and the
     wrench of eq. 18; parameters the geometric gains and nominal vehicle."""
     table = inner_parameter_table(geometric)
     step = inner_step_function(GeometricParams(desired_rate=geometric.desired_rate))
@@ -188,6 +196,7 @@ def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
         *(input_(n, u, t) for n, u, t in OUTER_OUTPUTS[:3]),
         input_("psi_ref", "rad", "commanded yaw psi*"),
         *_plant_inputs(INNER_MEASURED),
+        *(input_(n, u, t + "; start 0: none") for n, u, t in A_REF_PORTS),
         *(output(n, u, t) for n, u, t in INNER_OUTPUTS),
         *_parameters(table),
         *states,
@@ -196,7 +205,8 @@ def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
     def update(t, v):
         y, state_next, _ = step(ca.vertcat(*(v[n] for n, _, _ in OUTER_OUTPUTS[:3])),
                                 ca.vertcat(*(v[n] for n in INNER_MEASURED)), v["psi_ref"],
-                                ca.vertcat(*(v[s.name] for s in states)), ca.vertcat(*(v[p.name] for p in table)))
+                                ca.vertcat(*(v[s.name] for s in states)), ca.vertcat(*(v[p.name] for p in table)),
+                                ca.vertcat(*(v[n] for n, _, _ in A_REF_PORTS)))
         return (dict(zip((n for n, _, _ in INNER_OUTPUTS), ca.vertsplit(y))),
                 dict(zip((s.name for s in states), ca.vertsplit(state_next))))
 

@@ -12,8 +12,8 @@ from fmpy.validation import validate_fmu
 import fnn_controller as fc
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel, Sampled
-from fnn_controller.fmu import REFERENCE_INPUTS
-from fnn_controller.split import (INNER_MEASURED, INNER_OUTPUTS, OUTER_MEASURED, OUTER_OUTPUTS,
+from fnn_controller.fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS
+from fnn_controller.split import (A_REF_PORTS, INNER_MEASURED, INNER_OUTPUTS, OUTER_MEASURED, OUTER_OUTPUTS,
                                   inner_model, inner_parameter_table, inner_step_function, outer_initial_function,
                                   outer_model, outer_parameter_table, outer_step_function)
 
@@ -43,10 +43,11 @@ def test_a_model_that_draws_needs_a_seed():
 
 @pytest.mark.parametrize("variant", ["pd+smc", "pd+lm"])
 def test_outer_and_inner_fmus_step_as_their_functions_bit_for_bit(variant):
-    outer = Fmi2Instance(str(cached_fmu(outer_model(variant), 2)), parameters={"seed": 5})
+    options = {"feedforward": 1.0, "accel_feedforward": 0.5}  # every input and output in use
+    outer = Fmi2Instance(str(cached_fmu(outer_model(variant), 2)), parameters={"seed": 5, **options})
     inner = Fmi2Instance(str(cached_fmu(inner_model(), 2)))
     f_outer, f_inner = outer_step_function(variant), inner_step_function()
-    p_outer = np.array([p.default for p in outer_parameter_table(variant)])
+    p_outer = np.array([options.get(p.name, p.default) for p in outer_parameter_table(variant)])
     p_inner = np.array([p.default for p in inner_parameter_table()])
     v = fc.variant(variant)
     state = np.array(outer_initial_function(variant)(p_outer, np.random.default_rng(5).random(3 * v.n_random))).ravel()
@@ -55,16 +56,18 @@ def test_outer_and_inner_fmus_step_as_their_functions_bit_for_bit(variant):
     rng = np.random.default_rng(11)
     try:
         for _ in range(100):
-            ref, x = rng.normal(size=6), np.r_[rng.normal(size=6), rng.normal(size=3) * 0.3, rng.normal(size=3)]
+            ref, x = rng.normal(size=9), np.r_[rng.normal(size=6), rng.normal(size=3) * 0.3, rng.normal(size=3)]
             psi_ref = rng.uniform(-1, 1)
-            outer.set(**dict(zip(references, ref)), **dict(zip(OUTER_MEASURED, x[0:6])))
+            outer.set(**dict(zip(references, ref)), **dict(zip(OUTER_MEASURED, x[0:6])),
+                      **dict(zip((n for n, _, _ in ACCELERATION_INPUTS), ref[6:9])))
             got_outer = outer.get(*(n for n, _, _ in OUTER_OUTPUTS))
-            y, state, _ = f_outer(ref[0:3], ref[3:6], x[0:6], state, p_outer)
+            y, state, _ = f_outer(ref[0:3], ref[3:6], x[0:6], state, p_outer, ref[6:9])
             assert np.array_equal(got_outer, np.array(y).ravel())
+            a_ref = got_outer[-3:]
             inner.set(**dict(zip(("v_ref_x", "v_ref_y", "v_ref_z"), got_outer[0:3])), psi_ref=psi_ref,
-                      **dict(zip(INNER_MEASURED, x[3:12])))
+                      **dict(zip(INNER_MEASURED, x[3:12])), **dict(zip((n for n, _, _ in A_REF_PORTS), a_ref)))
             got_inner = inner.get(*(n for n, _, _ in INNER_OUTPUTS))
-            y, vel_state, _ = f_inner(got_outer[0:3], x[3:12], psi_ref, vel_state, p_inner)
+            y, vel_state, _ = f_inner(got_outer[0:3], x[3:12], psi_ref, vel_state, p_inner, a_ref)
             assert np.array_equal(got_inner, np.array(y).ravel())
             state, vel_state = np.array(state).ravel(), np.array(vel_state).ravel()
             outer.step()
