@@ -346,13 +346,19 @@ class Master:
             raise failure
         return result
 
-    def _initial_transfer(self, t0: float) -> None:
+    def _initial_transfer(self, t0: float, fmu_sources_only: bool = False) -> None:
         """Exchange ordering, at t0 only: as libcosim does before its first
         step, every FMU gets the values its inputs are connected to at t0 (the
         FMUs' outputs after initialization, the Python components' first
         outputs) and its outputs are read again, once per FMU, so a chain of
-        direct feedthroughs is consistent at t0."""
-        feeds = {f.name: [c for c in self.connections if c.destination.component == f.name] for f in self.fmus}
+        direct feedthroughs is consistent at t0. ``fmu_sources_only``: only
+        the connections from FMUs, the transfer that runs before the Python
+        components' first step (their outputs do not exist yet), so that
+        they read FMU outputs consistent at t0 too (an FMU with feedthrough
+        between the plant and a Python controller, such as a sensor)."""
+        fmu_names = {f.name for f in self.fmus}
+        feeds = {f.name: [c for c in self.connections if c.destination.component == f.name
+                          and (not fmu_sources_only or c.source.component in fmu_names)] for f in self.fmus}
         for _ in self.fmus:
             for fmu in self.fmus:
                 fmu.set_inputs({c.destination.variable: self.signals[self.slots[str(c.source)]]
@@ -536,6 +542,8 @@ class Master:
         for n in range(n_steps + 1):
             t = t0 + n * h  # time from the step counter, never accumulated
             signals[0] = t
+            if n == 0 and self.ordering == "exchange" and steps:
+                self._initial_transfer(t0, fmu_sources_only=True)
             for phase in steps:
                 phase(n, t)
             if n == 0 and self.ordering == "exchange":

@@ -75,3 +75,20 @@ def test_the_controller_as_its_fmu_flies_as_the_python_path(ordering):
         assert ("LearnedControllerFmu" in kinds) == (form == "fmu")
     for name in ("Quadrotor.x", "Quadrotor.y", "Quadrotor.z", "controller.tau_n_x", "controller.Omega_1"):
         assert np.max(np.abs(runs["python"][name] - runs["fmu"][name])) <= 1e-9, name
+
+
+def test_in_the_exchange_ordering_a_python_controller_behind_a_sensor_fmu_starts_from_the_plant():
+    """At t0 the sensor FMU (direct feedthrough) must pass the plant's initial
+    state on before the Python controller's first step, as libcosim's initial
+    transfer does for the controller FMU: both forms then fly alike (before
+    the fix the Python form read the sensor's zero start inputs, commanded
+    full rotor speed and ended 0.27 m apart in z)."""
+    runs = {}
+    for form in ("python", "fmu"):
+        sc = load_scenario("circles_sensors", {"controller.form": form, "simulation.ordering": "exchange",
+                                               "simulation.duration": 2.0,
+                                               "record.signals": ["Quadrotor.z", "controller.Omega_1"]})
+        with build_master(sc) as master:
+            runs[form] = master.run(sc.duration, seed=1)
+    assert runs["python"]["controller.Omega_1"][0] == runs["fmu"]["controller.Omega_1"][0]
+    assert np.max(np.abs(runs["python"]["Quadrotor.z"] - runs["fmu"]["Quadrotor.z"])) <= 1e-9
