@@ -45,3 +45,24 @@ def test_a_seed_reproduces_a_lab_flight_and_another_seed_is_another_flight():
     a, b, c = (_fly("figure8_lab", {}, seed=s) for s in (1, 1, 2))
     assert np.array_equal(a["Quadrotor.x"], b["Quadrotor.x"])
     assert not np.array_equal(a["Quadrotor.x"], c["Quadrotor.x"])
+
+
+def test_the_lab_loop_as_an_ssp_archive_flies_in_libcosim_as_in_our_master(tmp_path):
+    """Ground, link and on-board FMUs (with the mocap, plant, wind and
+    reference) in an independent master: libcosim flies the archive as our
+    master does in its ordering, the Wi-Fi delay and the noise included."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
+    from cosim.ssp import load_ssp, run_libcosim
+    from quadrotor_paper.cli import main
+
+    path = tmp_path / "lab.ssp"
+    assert main(["export-ssp", "figure8_lab", "--set", "simulation.duration=3.0", "--out", str(path)]) == 0
+    signals = list(POSITION) + ["WiFi.v_ref_x_rx", "Onboard.Omega_1"]
+    lc = run_libcosim(path, signals)
+    scenario = load_ssp(path, overrides={"simulation.ordering": "exchange", "record.signals": signals})
+    with build_master(scenario) as master:
+        ours = master.run(scenario.duration, seed=scenario.seed)
+    assert ours.status == "ok" and lc.data.shape == ours.data.shape
+    for name in POSITION + ("WiFi.v_ref_x_rx",):
+        assert np.max(np.abs(lc[name] - ours[name])) <= 1e-9, name
+    assert np.max(np.abs(lc["Onboard.Omega_1"] - ours["Onboard.Omega_1"])) <= 1e-6  # rad/s, of ~500
