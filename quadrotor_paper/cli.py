@@ -138,7 +138,7 @@ def _cmd_table2(args) -> int:
     out = Path(args.out) if args.out else DEFAULT_OUT / "table2"
     summary = table2(out, seeds=args.seeds, winds=winds, duration=args.duration, workers=_workers(args.workers),
                      show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler,
-                     variants=args.variants)
+                     variants=args.variants, options=args.options, option_seeds=args.option_seeds)
     return _print_table(summary, out / "table2.md", out / "summary.json")
 
 
@@ -148,7 +148,7 @@ def _cmd_table3(args) -> int:
     out = Path(args.out) if args.out else DEFAULT_OUT / "table3"
     summary = table3(out, seeds=args.seeds, duration=args.duration, workers=_workers(args.workers),
                      show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler,
-                     variants=args.variants)
+                     variants=args.variants, options=args.options, option_seeds=args.option_seeds)
     return _print_table(summary, out / "table3.md", out / "summary.json")
 
 
@@ -163,7 +163,8 @@ def _cmd_reproduce(args) -> int:
 
     out = Path(args.out) if args.out else DEFAULT_OUT
     path = reproduce(out, seeds=args.seeds, workers=_workers(args.workers), duration=args.duration,
-                     show_progress=not args.quiet, scheduler=args.scheduler, variants=args.variants)
+                     show_progress=not args.quiet, scheduler=args.scheduler, variants=args.variants,
+                     options=args.options, option_seeds=args.option_seeds)
     print(f"report: {path}")
     return 0
 
@@ -264,8 +265,24 @@ def _variant_list(text: str) -> list[str]:
     return names
 
 
+def _option_list(text: str) -> list[str]:
+    """``--options a,b``: every name a known option row; ``none``: no option rows."""
+    from .options import option_names
+
+    if text.strip() == "none":
+        return []
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    unknown = [v for v in names if v not in option_names()]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: unknown option {', '.join(map(repr, unknown)) or '(none given)'}; "
+                                         f"known: {', '.join(option_names())}, or none")
+    return names
+
+
 def _parser() -> argparse.ArgumentParser:
     from fnn_controller.variants import variant_names
+
+    from .options import DEFAULT_OPTIONS, OPTION_SEEDS, option_names
 
     p = argparse.ArgumentParser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
@@ -282,6 +299,12 @@ def _parser() -> argparse.ArgumentParser:
             sp.add_argument("--variants", type=_variant_list,
                             metavar="A,B", help="rows to run, e.g. pd,pd+smc,pd+lm (default: every registered variant: "
                                                 + ", ".join(variant_names()) + ")")
+            sp.add_argument("--options", type=_option_list, default=list(DEFAULT_OPTIONS), metavar="A,B",
+                            help="option rows below the paper's (settings beyond the paper, "
+                                 "quadrotor_paper/options.py): " + ", ".join(option_names())
+                                 + "; none for none (default: " + ",".join(DEFAULT_OPTIONS) + ")")
+            sp.add_argument("--option-seeds", type=int, metavar="N",
+                            help=f"runs per option cell (default: the smaller of --seeds and {OPTION_SEEDS})")
 
     r = sub.add_parser("run", help="run one scenario: results CSV, plots, summary")
     r.add_argument("scenario", help="TOML file, shipped scenario name (see fnn-cosim scenarios), or SSP archive (.ssp)")

@@ -5,8 +5,9 @@ A sweep is a list of jobs run through the engine's runner
 (:mod:`cosim.dask_runner`: in this process for one worker, else on Dask);
 each worker builds one master (extracting and instantiating its FMUs and
 controllers once) and runs its share of the jobs, resetting between runs. A
-job is (variant, wind speed, seed); its result is the RMSE, the status and
-the wall time.
+job is (variant, wind speed, seed) and optionally an option row
+(:mod:`quadrotor_paper.options`: the variant with scenario overrides); its
+result is the RMSE, the status and the wall time.
 """
 from __future__ import annotations
 
@@ -33,6 +34,27 @@ class Job:
     variant: str
     wind: float | None  # m/s; None keeps the scenario's
     seed: int
+    option: str | None = None  # an option row (its variant is ``variant``); None: the variant's own row
+
+    @classmethod
+    def of_option(cls, name: str, wind: float | None, seed: int) -> "Job":
+        from .options import option
+
+        return cls(option(name).variant, wind, seed, name)
+
+    @property
+    def row(self) -> str:
+        """The table row: the option's name, else the variant's."""
+        return self.option or self.variant
+
+
+def _task_overrides(scenario: Scenario, job: Job) -> dict[str, Any]:
+    """The scenario overrides of ``job``: none for a variant's row, the option's for an option row."""
+    if job.option is None:
+        return {}
+    from .options import option, scenario_overrides
+
+    return scenario_overrides(option(job.option), scenario)
 
 
 def _parameters(scenario: Scenario, job: Job) -> dict[str, Any]:
@@ -128,12 +150,12 @@ def sweep(scenario: Scenario, jobs: Sequence[Job], workers: int = 2,
 
     lean = parse_scenario(apply_overrides(scenario.raw, {"record.signals": lean_signals(scenario)}),
                           source=scenario.source)
-    tasks = (Task(i, {}, _parameters(lean, job), job.seed) for i, job in enumerate(jobs))
+    tasks = (Task(i, _task_overrides(lean, job), _parameters(lean, job), job.seed) for i, job in enumerate(jobs))
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     for rec in run_tasks(lean, tasks, workers=workers, scheduler=scheduler, metrics=table_metrics):
         job = jobs[rec["key"]]
         results[rec["key"]] = res = {
-            "variant": job.variant, "wind_m_s": job.wind, "seed": job.seed, "status": rec["status"],
+            "variant": job.variant, "row": job.row, "wind_m_s": job.wind, "seed": job.seed, "status": rec["status"],
             "error": rec["error"], "rmse_m": rec["metrics"].get("rmse_m"), "wall_time_s": rec["wall_time_s"],
             "pid": rec["pid"]}
         if progress:
@@ -142,12 +164,12 @@ def sweep(scenario: Scenario, jobs: Sequence[Job], workers: int = 2,
 
 
 def cells(results: Iterable[dict[str, Any]], key: str = "wind_m_s") -> dict[str, dict[Any, dict[str, Any]]]:
-    """Group job results by variant and ``key``: mean, sample std (ddof = 1),
+    """Group job results by row (the variant, or the option row) and ``key``: mean, sample std (ddof = 1),
     the 95 % t interval of the mean (``ci95``, from 2 runs), number of runs,
     number failed, and every run's RMSE."""
     grouped: dict[str, dict[Any, list[dict[str, Any]]]] = {}
     for r in results:
-        grouped.setdefault(r["variant"], {}).setdefault(r[key], []).append(r)
+        grouped.setdefault(r.get("row", r["variant"]), {}).setdefault(r[key], []).append(r)
     out: dict[str, dict[Any, dict[str, Any]]] = {}
     for variant, by in grouped.items():
         out[variant] = {}

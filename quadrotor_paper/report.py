@@ -24,6 +24,7 @@ from . import plots
 from fnn_controller.variants import variant, variant_names
 
 from .experiments import Job, cells, run_once, sweep, write_json
+from .options import DEFAULT_OPTIONS, OPTION_SEEDS, check_options
 from .metrics import pd_share, rmse
 from .missions import metric_signals
 from cosim.progress import Progress
@@ -58,16 +59,29 @@ def _variants(names: Sequence[str] | None) -> tuple[str, ...]:
     return tuple(dict.fromkeys(names))
 
 
+def _option_jobs(options: Sequence[str], option_seeds: int | None, seeds: int, winds) -> list[Job]:
+    """The jobs of the option rows: each option at each wind, ``option_seeds``
+    seeds (default: ``seeds``, at most :data:`OPTION_SEEDS`), after the paper's."""
+    n = min(seeds, OPTION_SEEDS) if option_seeds is None else option_seeds
+    if n < 1 and options:
+        raise ValueError(f"option_seeds = {n}: at least 1 run per option cell")
+    return [Job.of_option(o, w, s) for s in range(n) for w in winds for o in check_options(options)]
+
+
 def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5.0), duration: float | None = None,
            workers: int = 2, scenario: str = "circles", show_progress: bool = True,
            overrides: Mapping[str, Any] | None = None, scheduler: str | None = None,
-           variants: Sequence[str] | None = None) -> dict[str, Any]:
+           variants: Sequence[str] | None = None, options: Sequence[str] = DEFAULT_OPTIONS,
+           option_seeds: int | None = None) -> dict[str, Any]:
     """Table 2: each of ``variants`` (default: every registered one) at every
     wind speed, ``seeds`` runs each (``overrides``: dotted scenario keys, e.g.
     the master's ordering; the runs on ``workers`` local processes, or on the
-    Dask cluster at ``scheduler``)."""
+    Dask cluster at ``scheduler``); then the option rows ``options``
+    (:mod:`quadrotor_paper.options`), ``option_seeds`` runs each (default
+    ``min(seeds, OPTION_SEEDS)``)."""
     sc = load_scenario(scenario, _overrides(duration, overrides))
     jobs = [Job(v, float(w), s) for s in range(seeds) for w in winds for v in _variants(variants)]
+    jobs += _option_jobs(options, option_seeds, seeds, [float(w) for w in winds])
     results, wall = _sweep_with_progress(sc, jobs, workers, "table2", show_progress, scheduler)
     table = cells(results)
     md = table2_markdown(table, tuple(float(w) for w in winds))
@@ -76,6 +90,7 @@ def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5
         "winds_m_s": [float(w) for w in winds], "workers": workers, "wall_time_s": wall,
         "cells": {v: {f"{w:g}": c for w, c in by.items()} for v, by in table.items()},
         "paper": {v: {f"{w:g}": x for w, x in by.items()} for v, by in PAPER_TABLE2.items()},
+        "options": {o: job_option_summary(o) for o in dict.fromkeys(j.option for j in jobs if j.option)},
         "runs": results,
     }
     return _write_table(out_dir, 2, sc.description, md, table, summary)
@@ -84,20 +99,32 @@ def table2(out_dir: Path, seeds: int = 10, winds: Sequence[float] = (1.0, 3.0, 5
 def table3(out_dir: Path, seeds: int = 10, duration: float | None = None, workers: int = 2,
            scenario: str = "figure8", show_progress: bool = True,
            overrides: Mapping[str, Any] | None = None, scheduler: str | None = None,
-           variants: Sequence[str] | None = None) -> dict[str, Any]:
+           variants: Sequence[str] | None = None, options: Sequence[str] = DEFAULT_OPTIONS,
+           option_seeds: int | None = None) -> dict[str, Any]:
     """Table 3: each of ``variants`` (default: every registered one) on the
-    figure-8, ``seeds`` runs each."""
+    figure-8, ``seeds`` runs each; then the option rows as in :func:`table2`."""
     sc = load_scenario(scenario, _overrides(duration, overrides))
     jobs = [Job(v, None, s) for s in range(seeds) for v in _variants(variants)]
+    jobs += _option_jobs(options, option_seeds, seeds, [None])
     results, wall = _sweep_with_progress(sc, jobs, workers, "table3", show_progress, scheduler)
     table = cells(results)
     md = table3_markdown(table)
     summary = {
         "table": 3, "scenario": sc.name, "duration_s": sc.duration, "seeds": list(range(seeds)),
         "workers": workers, "wall_time_s": wall,
-        "cells": {v: next(iter(by.values())) for v, by in table.items()}, "paper": PAPER_TABLE3, "runs": results,
+        "cells": {v: next(iter(by.values())) for v, by in table.items()}, "paper": PAPER_TABLE3,
+        "options": {o: job_option_summary(o) for o in dict.fromkeys(j.option for j in jobs if j.option)},
+        "runs": results,
     }
     return _write_table(out_dir, 3, sc.description, md, table, summary)
+
+
+def job_option_summary(name: str) -> dict[str, Any]:
+    """What an option row flew, for ``summary.json``: label, variant, overrides, connections."""
+    from .options import option
+
+    o = option(name)
+    return {"label": o.label, "variant": o.variant, "overrides": dict(o.overrides), "connections": list(o.connections)}
 
 
 def _write_table(out_dir, number: int, description: str, md: str, table, summary: dict[str, Any]) -> dict[str, Any]:
@@ -181,17 +208,29 @@ def _share_table(fig_info: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _option_note(options: Sequence[str], option_seeds: int | None, seeds: int) -> str:
+    if not options:
+        return ""
+    n = min(seeds, OPTION_SEEDS) if option_seeds is None else option_seeds
+    return (f"; {n} per cell of the option rows ({', '.join(options)}: settings beyond the paper, "
+            "quadrotor_paper/options.py, docs/results.md)")
+
+
 def reproduce(out_dir: Path, seeds: int = 10, workers: int = 2, duration: float | None = None,
               show_progress: bool = True, scheduler: str | None = None,
-              variants: Sequence[str] | None = None) -> Path:
-    """Table 2, Table 3 (rows: ``variants``, default every registered one) and
-    the figures; returns the path of ``report.md``."""
+              variants: Sequence[str] | None = None, options: Sequence[str] = DEFAULT_OPTIONS,
+              option_seeds: int | None = None) -> Path:
+    """Table 2, Table 3 (rows: ``variants``, default every registered one,
+    then the option rows ``options``, default :data:`DEFAULT_OPTIONS` with
+    ``min(seeds, OPTION_SEEDS)`` seeds each) and the figures; returns the
+    path of ``report.md``."""
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
+    options = check_options(options)  # before any run
     t2 = table2(out_dir / "table2", seeds=seeds, duration=duration, workers=workers, show_progress=show_progress,
-                scheduler=scheduler, variants=variants)
+                scheduler=scheduler, variants=variants, options=options, option_seeds=option_seeds)
     t3 = table3(out_dir / "table3", seeds=seeds, duration=duration, workers=workers, show_progress=show_progress,
-                scheduler=scheduler, variants=variants)
+                scheduler=scheduler, variants=variants, options=options, option_seeds=option_seeds)
     figs = figures(out_dir / "figures", duration=duration, show_progress=show_progress)
     devs = deviations(t2["cells_by_float"], t3["cells_by_float"])
     wall = time.perf_counter() - t0
@@ -206,7 +245,8 @@ def reproduce(out_dir: Path, seeds: int = 10, workers: int = 2, duration: float 
     report = f"""# Reproduction of Tables 2 and 3 (Sarabakha & Kayacan, LM-FNN)
 
 Generated {_dt.datetime.now().isoformat(timespec='seconds')} by `fnn-cosim reproduce` in {wall:.1f} s
-(Python {platform.python_version()}, {os.cpu_count()} cores, {workers} worker processes; {seeds} seeds per cell).
+(Python {platform.python_version()}, {os.cpu_count()} cores, {workers} worker processes; {seeds} seeds per cell
+of the paper's rows{_option_note(options, option_seeds, seeds)}).
 The plant is the Quadrotor FMU, the wind the WindGust FMU, co-simulated with the controller of
 `fnn_controller` by the `cosim` master (docs/cosim.md). Machine-readable: `summary.json` here,
 `table2/summary.json`, `table3/summary.json`, `figures/runs/*/summary.json`. Discussion of every

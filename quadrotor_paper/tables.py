@@ -3,7 +3,9 @@
 Cells are the Euclidean RMSE (m), mean ± sample standard deviation over the
 runs (seeds of f_ij(0)). The reduction over PD is 100 (1 - RMSE / RMSE_PD) %.
 A cell of ours that differs from the paper's by more than 30 % is marked
-with a dagger; the report lists them for explanation.
+with a dagger; the report lists them for explanation. Option rows
+(:mod:`quadrotor_paper.options`, settings beyond the paper) follow the
+paper's rows, with "–" in the paper's columns.
 """
 from __future__ import annotations
 
@@ -47,13 +49,19 @@ def _reduction(value: float | None, pd: float | None) -> str:
     return f"{100 * (1 - value / pd):.0f} %"
 
 
-def _label(v: str) -> str:
-    return variant(v).label
+def _label(row: str) -> str:
+    """A variant's label, or an option row's."""
+    from .options import OPTIONS
+
+    return OPTIONS[row].label if row in OPTIONS else variant(row).label
 
 
 def _rows(cells: Mapping[str, Any]) -> list[str]:
-    """The registered variants that have cells, the paper's first (registration order)."""
-    return [v for v in variant_names() if v in cells]
+    """The rows that have cells: the registered variants (the paper's first,
+    registration order), then the option rows (in the order of ``OPTIONS``)."""
+    from .options import OPTIONS
+
+    return [v for v in variant_names() if v in cells] + [o for o in OPTIONS if o in cells]
 
 
 def table2_markdown(cells: Mapping[str, Mapping[float, Mapping[str, Any]]], winds=(1.0, 3.0, 5.0)) -> str:

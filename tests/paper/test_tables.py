@@ -13,7 +13,7 @@ from quadrotor_paper.tables import PAPER_TABLE2, deviations, table2_markdown, ta
 def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):
     out = tmp_path / "t2"
     assert main(["table2", "--seeds", "2", "--winds", "1,5", "--duration", "15", "--workers", "2",
-                 "--variants", "pd,pd+smc,pd+lm", "--out", str(out), "--quiet"]) == 0
+                 "--variants", "pd,pd+smc,pd+lm", "--options", "none", "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["runs"]) == 2 * 2 * 3 and all(r["status"] == "ok" for r in summary["runs"])
     cells = summary["cells"]
@@ -29,8 +29,8 @@ def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):
 
 def test_table3_reduced(tmp_path):
     out = tmp_path / "t3"
-    assert main(["table3", "--seeds", "1", "--duration", "20", "--workers", "1", "--out", str(out),
-                 "--quiet"]) == 0
+    assert main(["table3", "--seeds", "1", "--duration", "20", "--workers", "1", "--options", "none",
+                 "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["cells"]["pd+lm"]["mean"] < summary["cells"]["pd"]["mean"]
     assert "0.327" in (out / "table3.md").read_text()
@@ -70,3 +70,42 @@ def test_an_unknown_variant_is_refused_before_any_run(tmp_path, capsys):
     assert exc.value.code == 2
     assert "unknown variant 'pd+fuzzy'; known: pd, pd+smc, pd+lm" in capsys.readouterr().err
     assert not (tmp_path / "t").exists()
+
+
+def test_option_rows_follow_the_papers_rows_which_stay_bit_identical(tmp_path):
+    """Option rows (quadrotor_paper/options.py) below the paper's, "–" in the
+    paper's columns; the paper's rows give the very same numbers with and
+    without them; feed-forward takes the PD's lag away (figure-8: 0.3 m)."""
+    common = ["table3", "--seeds", "1", "--duration", "12", "--workers", "1", "--variants", "pd", "--quiet"]
+    assert main(common + ["--options", "none", "--out", str(tmp_path / "paper")]) == 0
+    assert main(common + ["--options", "pd-ff,pd-ff-acc", "--out", str(tmp_path / "opt")]) == 0
+    paper = json.loads((tmp_path / "paper" / "summary.json").read_text())
+    opt = json.loads((tmp_path / "opt" / "summary.json").read_text())
+    assert opt["cells"]["pd"]["rmse"] == paper["cells"]["pd"]["rmse"]
+    assert opt["cells"]["pd-ff"]["mean"] < 0.5 * opt["cells"]["pd"]["mean"]
+    assert opt["cells"]["pd-ff-acc"]["mean"] != opt["cells"]["pd-ff"]["mean"]  # the acceleration arrives
+    assert opt["options"]["pd-ff-acc"]["connections"] and opt["options"]["pd-ff"]["overrides"] == {
+        "controller.position.feedforward": 1.0}
+    lines = (tmp_path / "opt" / "table3.md").read_text().splitlines()
+    rows = [line for line in lines if line.startswith("| PD")]
+    assert [r.split(" | ")[0] for r in rows] == ["| PD", "| PD + feed-forward",
+                                                 "| PD + velocity and acceleration feed-forward"]
+    assert rows[1].split(" | ")[2] == "–" and rows[0].split(" | ")[2] == "0.327"
+
+
+def test_unknown_option_is_refused_naming_it(capsys):
+    with pytest.raises(SystemExit):
+        main(["table2", "--options", "pd-ff,warp-drive", "--quiet"])
+    err = capsys.readouterr().err
+    assert "'warp-drive'" in err and "pd-ff" in err
+
+
+def test_options_are_data_with_names_apart_from_the_variants():
+    from fnn_controller.variants import variant_names
+    from quadrotor_paper.options import DEFAULT_OPTIONS, OPTIONS, check_options
+
+    assert not set(OPTIONS) & set(variant_names())
+    assert set(DEFAULT_OPTIONS) <= set(OPTIONS)
+    assert all(o.variant in variant_names() for o in OPTIONS.values())
+    with pytest.raises(ValueError, match="'nope'"):
+        check_options(["pd-ff", "nope"])
