@@ -39,7 +39,9 @@ from fmpy.fmi1 import FMICallException
 from .component import Port
 from .errors import FmuCallError, FmuLoadError
 
-__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks"]
+__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "SEED_LIMIT"]
+
+SEED_LIMIT = 2 ** 53  # a seed parameter is a double: every whole number up to 2^53 is exact
 
 _TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit float
 
@@ -81,6 +83,19 @@ def fmi2_callbacks(receive_log):
     callbacks.componentEnvironment = key
     addLoggerProxy(ctypes.byref(callbacks))
     return callbacks
+
+
+def stream_seed(seed: int, stream: int) -> int:
+    """The seed of random stream ``stream`` of a run seeded ``seed``: the run's
+    seed itself for stream 0 (what the Python components draw from), for
+    stream k > 0 a 53-bit number from numpy's ``SeedSequence(seed,
+    spawn_key=(k,))``, the child stream numpy spawns for independent
+    generators. Two FMUs of one run on different streams draw independent
+    numbers; on the same stream, the same numbers."""
+    if stream == 0:
+        return int(seed)
+    state = np.random.SeedSequence(int(seed), spawn_key=(int(stream),)).generate_state(1, np.uint64)[0]
+    return int(state) >> 11  # 64 - 11 = 53 bits: exact as a double parameter
 
 
 def _port(variable) -> Port:
@@ -163,14 +178,18 @@ class FmuComponent:
     seed_parameter : the name of a parameter set to the run's seed at every
         start (an FMU that draws random numbers, seeded like the Python
         components).
+    seed_stream : which of the run's random streams seeds it
+        (:func:`stream_seed`; 0: the run's seed itself).
     """
 
     def __init__(self, name: str, path: str | Path, validate: bool = False,
-                 parameters: Mapping[str, float] | None = None, seed_parameter: str | None = None):
+                 parameters: Mapping[str, float] | None = None, seed_parameter: str | None = None,
+                 seed_stream: int = 0):
         self.name = name
         self.path = Path(path)
         self.base_parameters = dict(parameters or {})
         self.seed_parameter = seed_parameter
+        self.seed_stream = seed_stream
         self.model_description = md = self._read_model_description(validate)
         self.fmi_version = int(md.fmiVersion.split(".")[0])
         if self.fmi_version not in (2, 3):

@@ -35,7 +35,7 @@ import numpy as np
 from .component import Port, PythonComponent
 from .connection import Connection, check_connections, parse_connections
 from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError
-from .fmu import FmuComponent
+from .fmu import FmuComponent, stream_seed
 from .guard import Guard
 from .recorder import Recorder
 
@@ -322,7 +322,7 @@ class Master:
                 comp.set_parameters(split[comp.name])
                 comp.start(t0, h, n_steps, seed)
             for fmu in self.fmus:  # reads the outputs at t0 into the signal array
-                seeded = {fmu.seed_parameter: seed} if fmu.seed_parameter else {}
+                seeded = {fmu.seed_parameter: stream_seed(seed, fmu.seed_stream)} if fmu.seed_parameter else {}
                 fmu.start(t0, {**fmu.base_parameters, **self.fmu_parameters.get(fmu.name, {}), **seeded,
                                **split[fmu.name]})
         except BaseException as exc:  # nothing ran: a refused start is raised, never a run's status

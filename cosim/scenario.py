@@ -23,6 +23,9 @@ see ``docs/cosim.md``)::
                                          #   version the file must have (FMU files, default: any)
     parameters = { x_0 = 1.0 }           # checked against the model's variables and ranges
     seed_parameter = "seed"              # a parameter set to the run's seed at every start
+    seed_stream = 1                      # int >= 0, with seed_parameter: the run's random stream k
+                                         #   (cosim.fmu.stream_seed; default 0, the run's seed itself):
+                                         #   FMUs on different streams draw independent numbers
 
     [components.<name>]                  # a Python component
     kind = "step_source"                 # a registered component kind, or
@@ -64,7 +67,7 @@ __all__ = ["Scenario", "load_scenario", "parse_scenario", "shipped_scenarios", "
 
 GENERIC = ("name", "description", "connections", "simulation", "fmus", "components", "record", "envelope")
 _SIMULATION = {"duration", "step", "seed", "start_time", "ordering"}
-_FMU = {"model", "path", "fmi_version", "parameters", "seed_parameter"}
+_FMU = {"model", "path", "fmi_version", "parameters", "seed_parameter", "seed_stream"}
 _RECORD = {"signals", "block_rows"}
 
 
@@ -196,6 +199,12 @@ def _parse_fmu(where: str, spec: Any, source: Path | None) -> dict[str, Any]:
                                                                          spec.get("parameters", {}))}
     if "seed_parameter" in spec:
         entry["seed_parameter"] = string(f"{where}.seed_parameter", spec["seed_parameter"])
+    if "seed_stream" in spec:
+        stream = spec["seed_stream"]
+        check_number(f"{where}.seed_stream", stream, integer=True, nonnegative=True)
+        if "seed_parameter" not in spec:
+            raise ScenarioError(f"{where}.seed_stream = {stream!r}: only an FMU with a seed_parameter is seeded")
+        entry["seed_stream"] = int(stream)
     if "model" in spec:
         entry["model"] = string(f"{where}.model", spec["model"])
         models = registry.fmu_models()
@@ -394,7 +403,8 @@ def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
     fmus = []
     try:
         for name, spec in scenario.fmus.items():
-            fmu = FmuComponent(name, fmu_files.get(name) or fmu_file(spec), seed_parameter=spec.get("seed_parameter"))
+            fmu = FmuComponent(name, fmu_files.get(name) or fmu_file(spec), seed_parameter=spec.get("seed_parameter"),
+                               seed_stream=spec.get("seed_stream", 0))
             fmus.append(fmu)
             fmu.instantiate()  # a file that cannot run is refused now, before anything is written
             check_fmu_file(scenario, fmu)

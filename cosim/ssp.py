@@ -117,7 +117,7 @@ def _fmu_bytes(path: Path) -> bytes:
 def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     """Every FMU's file, connectors, parameter values and units, checked as
     :func:`~cosim.scenario.build_master` would (without instantiating)."""
-    from .fmu import FmuComponent
+    from .fmu import FmuComponent, stream_seed
 
     components: dict[str, FmuComponent] = {}
     try:
@@ -137,8 +137,9 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
             if getattr(fmu.variables.get(seed_parameter), "causality", None) != "parameter":
                 raise ScenarioError(f"fmus.{name}.seed_parameter = {seed_parameter!r}: no parameter of the FMU file "
                                     f"{fmu.path}")
-            # the scenario's seed, so that another SSP tool runs with it; our master sets the run's
-            params[seed_parameter] = scenario.seed
+            # the scenario's seed (of the FMU's stream), so that another SSP tool runs with it; our
+            # master sets the run's
+            params[seed_parameter] = stream_seed(scenario.seed, scenario.fmus[name].get("seed_stream", 0))
         for var in fmu.model_description.modelVariables:
             kind = var.causality
             if kind not in _KINDS or (kind == "parameter" and var.name not in params):
@@ -181,7 +182,9 @@ def _cosim_annotation(scenario: Scenario) -> etree._Element:
         root.set("ordering", scenario.ordering)
     for name, spec in scenario.fmus.items():
         if spec.get("seed_parameter") is not None:
-            etree.SubElement(root, q("SeedParameter"), component=name, parameter=spec["seed_parameter"])
+            element = etree.SubElement(root, q("SeedParameter"), component=name, parameter=spec["seed_parameter"])
+            if spec.get("seed_stream"):
+                element.set("stream", str(spec["seed_stream"]))
     for signal in scenario.record:
         etree.SubElement(root, q("Record"), signal=signal)
     for signal, (low, high) in scenario.envelope.items():
@@ -365,6 +368,7 @@ class _System:
     block_rows: int | None = None
     ordering: str | None = None
     seed_parameters: dict[str, str] = field(default_factory=dict)  # component -> parameter
+    seed_streams: dict[str, int] = field(default_factory=dict)  # component -> its stream, where not 0
     record: list[str] = field(default_factory=list)
     envelope: dict[str, list[float]] = field(default_factory=dict)
     sections: dict[str, Any] = field(default_factory=dict)  # an application's own tables, by name
@@ -575,6 +579,10 @@ def _read_ssd(ssd_path: Path) -> _System:
                     raise ScenarioError(f"{where}: SeedParameter: component {component!r} is no component, or "
                                         f"no parameter is named")
                 out.seed_parameters[component] = name
+                if item.get("stream") is not None:
+                    stream = _number(f"{where}: SeedParameter {component!r}", item.get("stream"), "stream")
+                    out.seed_streams[component] = int(stream) if stream == int(stream) else stream  # the scenario
+                    # parser refuses a fraction, naming the key
             elif tag == "Envelope":
                 signal = item.get("signal", "")
                 out.envelope[signal] = [_number(f"{where}: Envelope {signal!r}", item.get(k), k)
@@ -685,7 +693,8 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
                          # a seed parameter is set by the master to the run's seed: not a fixed value
                          "parameters": {k: v for k, v in entry["parameters"].items()
                                         if k != system.seed_parameters.get(c)},
-                         **({"seed_parameter": system.seed_parameters[c]} if c in system.seed_parameters else {})}
+                         **({"seed_parameter": system.seed_parameters[c]} if c in system.seed_parameters else {}),
+                         **({"seed_stream": system.seed_streams[c]} if c in system.seed_streams else {})}
                      for c, entry in system.components.items()},
             "record": {"signals": record, **({"block_rows": system.block_rows} if system.block_rows else {})},
             "envelope": dict(system.envelope),

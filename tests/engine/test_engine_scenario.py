@@ -383,3 +383,38 @@ def test_cosim_imports_nothing_of_the_application():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("spec, message", [
+    ({"seed_stream": 1}, "fmus.Lag.seed_stream = 1: only an FMU with a seed_parameter is seeded"),
+    ({"seed_parameter": "y_0", "seed_stream": -1}, "fmus.Lag.seed_stream = -1: must not be negative"),
+    ({"seed_parameter": "y_0", "seed_stream": 1.5}, "fmus.Lag.seed_stream = 1.5: expected an integer"),
+])
+def test_a_bad_seed_stream_is_refused_naming_the_key(raw, spec, message):
+    raw["fmus"]["Lag"].update(spec)
+    with pytest.raises(ScenarioError, match=re.escape(message)):
+        parse_scenario(raw)
+
+
+def test_stream_seeds_are_the_run_seed_for_stream_0_and_numpys_spawned_children_otherwise():
+    from cosim.fmu import SEED_LIMIT, stream_seed
+
+    assert [stream_seed(s, 0) for s in (0, 7, 2 ** 40)] == [0, 7, 2 ** 40]
+    seeds = {stream_seed(s, k) for s in range(20) for k in range(1, 6)}
+    assert len(seeds) == 100 and all(0 <= x < SEED_LIMIT for x in seeds)  # distinct, exact as doubles
+    assert stream_seed(3, 2) == stream_seed(3, 2)
+    child = np.random.SeedSequence(3, spawn_key=(2,)).generate_state(1, np.uint64)[0]
+    assert stream_seed(3, 2) == int(child) >> 11
+
+
+def test_an_fmu_on_a_seed_stream_gets_that_streams_seed_at_start(raw):
+    """The master sets the seed parameter to the stream's seed of the run's
+    seed (the toy lag's y_0 plays the seed parameter: its first output shows it)."""
+    from cosim.fmu import stream_seed
+
+    raw["fmus"]["Lag"].update({"seed_parameter": "y_0", "seed_stream": 3})
+    raw["fmus"]["Lag"]["parameters"] = {}
+    raw.pop("envelope")  # y_0 is now a 53-bit number
+    with build_master(parse_scenario(raw)) as master:
+        result = master.run(0.1, seed=5)
+    assert result["Lag.y"][0] == float(stream_seed(5, 3))

@@ -12,6 +12,7 @@ import pytest
 from fmpy.validation import validate_fmu
 from lxml import etree
 
+from cosim.fmu import stream_seed
 from cosim.scenario import build_master, load_scenario
 from cosim.ssp import COSIM_NAMESPACE, SSD_NAME, load_ssp, ssd_schema_errors
 
@@ -74,7 +75,7 @@ def test_circles_sensors_flies_in_libcosim_as_in_our_master_noise_and_seed_inclu
     # the seed travels twice: bound to the seed parameter (for libcosim) and in our annotation
     seeded = etree.fromstring(ssd).xpath("//cosim:SeedParameter", namespaces={"cosim": COSIM_NAMESPACE})
     assert {(e.get("component"), e.get("parameter")) for e in seeded} == {("Sensors", "seed"), ("controller", "seed")}
-    assert _bound(ssd, "Sensors", "seed") == 0.0
+    assert _bound(ssd, "Sensors", "seed") == stream_seed(0, 1)  # the noise's own stream of seed 0
 
     lc, ours = _fly_both(plain)
     # the measurement noise did act in libcosim: the scenario's 2 mm
@@ -84,7 +85,7 @@ def test_circles_sensors_flies_in_libcosim_as_in_our_master_noise_and_seed_inclu
     # another seed, and the link losing 20 % of its packets, seeded by the run too
     other = _export(tmp_path, "other", "simulation.seed=7", "fmus.Link.parameters.loss_probability=0.2",
                     'fmus.Link.seed_parameter="seed"')
-    assert _bound(zipfile.ZipFile(other).read(SSD_NAME), "Link", "seed") == 7.0
+    assert _bound(zipfile.ZipFile(other).read(SSD_NAME), "Link", "seed") == 7.0  # stream 0: the seed itself
     lc7, ours7 = _fly_both(other)
     assert np.max(np.abs(lc7["Quadrotor.x"] - lc["Quadrotor.x"])) > 1e-4  # another noise, other losses
     assert np.max(np.abs(_noise(lc7) - noise)) > 1e-3
