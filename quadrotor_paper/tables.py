@@ -96,7 +96,7 @@ def table2_markdown(cells: Mapping[str, Mapping[float, Mapping[str, Any]]], wind
 def table3_markdown(cells: Mapping[str, Mapping[Any, Mapping[str, Any]]]) -> str:
     """Table 3 (ours in simulation vs the paper's flight experiment), in markdown."""
     lines = ["Average Euclidean RMSE (m), mean ± std [95 % confidence interval of the mean] over the seeds "
-             "(ours: simulation; paper: flights); † = differs from the paper by more than {DEVIATION_LIMIT:.0%}.", "",
+             f"(ours: simulation; paper: flights); † = differs from the paper by more than {DEVIATION_LIMIT:.0%}.", "",
              "| Controller | ours | paper | reduction over PD, ours | paper |", "|---|---|---|---|---|"]
     pd = next(iter(cells[BASELINE].values()), {}).get("mean") if BASELINE in cells else None
     for v in _rows(cells):

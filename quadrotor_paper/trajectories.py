@@ -58,11 +58,7 @@ class _CasadiReference:
     def acceleration(self, t) -> np.ndarray:
         """d²p*/dt² (m/s², shape (n, 3)) at the times ``t``: the symbolic
         derivative of the same CasADi v* (``fmu_models.models.reference``)."""
-        return np.ascontiguousarray(self.outputs(t)[:, 6:9])
-
-    def outputs(self, t) -> np.ndarray:
-        """p*, v*, a* side by side, shape (n, 9), as :data:`REFERENCE_OUTPUTS`."""
-        return _reference.evaluate_outputs(self._model, t, self._values())
+        return np.ascontiguousarray(_reference.evaluate_outputs(self._model, t, self._values())[:, 6:9])
 
 
 @dataclass(frozen=True)
@@ -196,7 +192,9 @@ class ReferenceComponent(PythonComponent):
             self.trajectory = type(self.trajectory)(**{**params, **values})
 
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
-        self._table = self.trajectory.outputs(t0 + h * np.arange(n_steps + 1))
+        t = t0 + h * np.arange(n_steps + 1)
+        p, v = self.trajectory.reference(t)
+        self._table = np.ascontiguousarray(np.hstack([p, v, self.trajectory.acceleration(t)]))
 
     def step(self, n: int, t: float, u: np.ndarray) -> np.ndarray:
         return self._table[n]

@@ -25,9 +25,9 @@ from importlib import import_module
 
 _EXPORTS = {
     "analysis": ("GainSweep", "LoopMargins", "PoleReport", "analyze", "circle_error", "closed_loop_poles",
-                 "critical_gain_factor", "gain_sweep", "loop_margins", "ramp_error"),
+                 "critical_gain_factor", "gain_sweep", "loop_margins", "ramp_error", "feedforward_comparison"),
     "linearize": ("linearize_controller", "linearize_controller_step", "linearize_plant", "linearize_plant_fmu",
-                  "linearize_position_controller", "linearize_velocity_controller"),
+                  "linearize_position_controller", "linearize_velocity_controller", "linearize_feedforward"),
     "loops": ("LoopModel",),
     "operating_points": ("OperatingPoint", "default_operating_points", "forward_flight", "hover", "operating_point",
                          "trim_closed_loop", "trim_plant"),

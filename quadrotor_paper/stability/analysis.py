@@ -28,6 +28,7 @@ __all__ = [
     "PoleReport", "LoopMargins", "GainSweep", "RampError", "CircleError",
     "closed_loop_poles", "loop_margins", "affine_closed_loop", "gain_sweep", "critical_gain_factor",
     "ramp_error", "circle_error", "analyze", "OperatingPointAnalysis", "TIME_BASES",
+    "FeedForwardCase", "feedforward_comparison",
 ]
 
 
@@ -234,7 +235,8 @@ def critical_gain_factor(op: OperatingPoint, dt: float | None = None, delay_step
 class RampError:
     """Steady lag of the PD loop behind a ramp reference at ``speed`` (m/s).
 
-    ``ideal``: V/kp, the type-1 loop with a perfect velocity loop (m);
+    ``ideal``: (1 - feedforward) V/kp, the type-1 loop with a perfect velocity
+    loop (m; V/kp without the feed-forward, the paper's law);
     ``linear``: the linear loop at hover, simulated on the ramp
     (``control.forced_response``), continuous and discrete (m);
     ``trim``: e* of the steady-flight operating point at ``speed`` (m), the
@@ -247,6 +249,7 @@ class RampError:
     linear_continuous: float
     linear_discrete: float
     trim: float
+    feedforward: float = 0.0
 
 
 def _ramp_lag(model: LoopModel, speed: float, duration: float, axis: int = 0) -> float:
@@ -270,9 +273,9 @@ def ramp_error(hover_op: OperatingPoint, forward_op: OperatingPoint | None = Non
     if forward_op is None:
         forward_op = forward_flight(speed, position=hover_op.position, geometric=hover_op.geometric,
                                     plant_parameters=hover_op.plant_parameters)
-    kp = hover_op.position.kp
-    return RampError(speed, kp, speed / kp, _ramp_lag(LoopModel(hover_op), speed, duration),
-                     _ramp_lag(LoopModel(hover_op, dt), speed, duration), float(forward_op.position_error[0]))
+    kp, ff = hover_op.position.kp, hover_op.position.feedforward
+    return RampError(speed, kp, (1.0 - ff) * speed / kp, _ramp_lag(LoopModel(hover_op), speed, duration),
+                     _ramp_lag(LoopModel(hover_op, dt), speed, duration), float(forward_op.position_error[0]), ff)
 
 
 @dataclass(frozen=True)
@@ -345,3 +348,45 @@ def analyze(op: OperatingPoint, dt: float = 0.01, time_bases=TIME_BASES) -> Oper
         result.margins[key] = [loop_margins(L, name) for name, L in model.loops().items()]
     return result
 
+
+
+# ---- the velocity feed-forward option ------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class FeedForwardCase:
+    """The PD baseline with velocity feed-forward gain ``feedforward``:
+    closed-loop poles and the outer loops' smallest gain and phase margins
+    at each operating point (sampled loop), the ramp error and the circle
+    error of the linear loop."""
+
+    feedforward: float
+    stable: dict[str, bool]
+    spectral_radius: dict[str, float]
+    outer_gain_margin: dict[str, float]
+    outer_phase_margin: dict[str, float]
+    ramp: RampError
+    circle: CircleError
+
+
+def feedforward_comparison(ops: list[OperatingPoint], dt: float = 0.01, speed: float = 2.5,
+                           gains=(0.0, 1.0)) -> list[FeedForwardCase]:
+    """The PD baseline at each velocity feed-forward gain of ``gains``, at the
+    operating points ``ops`` (the first is hover, the second forward flight
+    at ``speed``, as :func:`~quadrotor_paper.stability.operating_points.default_operating_points`
+    gives them). The feed-forward path ``v* += ff dp*/dt`` reads the
+    reference only, so the poles and margins come out the same for every
+    gain; what changes is the ramp and circle error (V/kp of lag gone)."""
+    cases = []
+    for ff in gains:
+        points = [op.with_feedforward(ff) for op in ops]
+        stable, radius, gm, pm = {}, {}, {}, {}
+        for op in points:
+            model = LoopModel(op, dt)
+            poles = closed_loop_poles(model.closed_loop())
+            outer = [loop_margins(model.outer_loop(a), f"outer {a}") for a in ("x", "y", "z")]
+            stable[op.name], radius[op.name] = poles.stable, poles.stability_measure
+            gm[op.name] = min(m.gain_margin for m in outer)
+            pm[op.name] = min(m.phase_margin for m in outer)
+        cases.append(FeedForwardCase(float(ff), stable, radius, gm, pm,
+                                     ramp_error(points[0], points[1], speed, dt), circle_error(points[0], dt=dt)))
+    return cases

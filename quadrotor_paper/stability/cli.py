@@ -20,6 +20,9 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default: {DEFAULT_OUT})")
     parser.add_argument("--kp", type=float, default=None, help="PD proportional gain (default: the paper's 2.5)")
     parser.add_argument("--kd", type=float, default=None, help="PD derivative gain (default: the paper's 0.005)")
+    parser.add_argument("--feedforward", type=float, default=0.0,
+                        help="velocity feed-forward gain of the analysed PD, in [0, 1] (default 0: the paper's law); "
+                             "the report compares 0 and 1 either way")
     parser.add_argument("--speed", type=float, default=2.5, help="forward-flight and ramp speed, m/s (default 2.5)")
     parser.add_argument("--wind", type=float, default=3.0,
                         help="steady wind of the third operating point, m/s, along [-1, -1, 0] (default 3)")
@@ -44,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from .study import run_stability_analysis
 
     study = run_stability_analysis(args.out, speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
-                                   cosim=not args.no_cosim)
+                                   cosim=not args.no_cosim, feedforward=args.feedforward)
     for a in study.analyses:
         p = a.poles["discrete"]
         outer = min(m.gain_margin for m in a.margins["discrete"] if m.loop.startswith("outer"))
@@ -54,6 +57,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"ramp lag at {study.ramp.speed:g} m/s: V/kp = {study.ramp.ideal:.3f} m, linear {study.ramp.linear_discrete:.3f} m, "
           f"trim {study.ramp.trim:.3f} m"
           + (f", co-simulation {study.ramp_nonlinear:.3f} m" if study.ramp_nonlinear is not None else ""))
+    for case in study.feedforward_cases:
+        cosim = study.feedforward_ramp_nonlinear.get(case.feedforward)
+        print(f"feed-forward {case.feedforward:g}: ramp lag linear {case.ramp.linear_discrete:.4f} m, "
+              f"trim {case.ramp.trim:.4f} m" + (f", co-simulation {cosim:.4f} m" if cosim is not None else "")
+              + f"; circle RMS {case.circle.rms:.4f} m; outer GM >= {min(case.outer_gain_margin.values()):.3g}")
     print(f"report: {study.report_path}")
     return 0
 

@@ -14,7 +14,9 @@ the one source of truth.
   a static map ``delta Omega = K_r delta v* + K_x delta x``.
 * PD position controller (eq. 19): ``casadi.jacobian`` of
   ``position_controller_function("pd", position)``: ``delta v* = K_e delta e
-  + K_edot delta e_dot`` (``K_e = kp I``, ``K_edot = kd I``).
+  + K_edot delta e_dot`` (``K_e = kp I``, ``K_edot = kd I``), plus the
+  velocity feed-forward option, ``K_ff delta dp*/dt`` (``K_ff = feedforward
+  I``, the Jacobian of the position controller's own expression).
 
 The master runs ``controller_step_function("pd", ...)``, which composes the
 same two laws (``fnn_controller.controller``); :func:`linearize_controller_step`
@@ -24,7 +26,7 @@ from __future__ import annotations
 
 import shutil
 from ctypes import POINTER, c_double
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import casadi as ca
@@ -33,13 +35,14 @@ import numpy as np
 from fmu_models.models.quadrotor import QUADROTOR
 from fnn_controller import controller_step_function, position_controller_function, velocity_controller_function
 from fnn_controller.geometric import initial_velocity_state
+from fnn_controller.position import fnn_state_size, position_controller
 
 from .operating_points import STATE_NAMES, OperatingPoint, _check_geometric
 
 __all__ = [
     "INPUT_NAMES", "PlantLinearization", "ControllerLinearization",
     "linearize_plant", "linearize_plant_fmu", "linearize_velocity_controller",
-    "linearize_position_controller", "linearize_controller", "linearize_controller_step",
+    "linearize_position_controller", "linearize_feedforward", "linearize_controller", "linearize_controller_step",
 ]
 
 INPUT_NAMES = tuple(v.name for v in QUADROTOR.inputs)  # Omega_1..4, wind_x, wind_y, wind_z
@@ -70,13 +73,15 @@ class ControllerLinearization:
     ``K_r`` (4 x 3): d Omega / d v*;  ``K_x`` (4 x 12): d Omega / d x (the
     velocity controller reads v, the Euler angles and the body rates; the
     position columns are zero);  ``K_e``, ``K_edot`` (3 x 3): d v* / d e and
-    d v* / d(de/dt) of the PD law.
+    d v* / d(de/dt) of the PD law;  ``K_ff`` (3 x 3): d v* / d(dp*/dt) of the
+    velocity feed-forward option (zero: the paper's law).
     """
 
     K_r: np.ndarray
     K_x: np.ndarray
     K_e: np.ndarray
     K_edot: np.ndarray
+    K_ff: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
 
 
 def linearize_plant(op: OperatingPoint) -> PlantLinearization:
@@ -161,11 +166,22 @@ def linearize_position_controller(op: OperatingPoint) -> tuple[np.ndarray, np.nd
     return K_e, K_edot
 
 
+def linearize_feedforward(op: OperatingPoint) -> np.ndarray:
+    """``K_ff = d v*/d(dp*/dt)`` (3 x 3) at fixed e and de/dt: the velocity
+    feed-forward of ``op.position`` (``feedforward I``; zero for the paper's
+    law), from the position controller's own CasADi expression."""
+    p_ref_dot = ca.SX.sym("p_ref_dot", 3)
+    out = position_controller("pd", ca.DM(op.position_error), ca.DM(op.p_ref_dot - op.x[3:6]),
+                              ca.DM.zeros(fnn_state_size("pd")), op.position, p_ref_dot)
+    jac = ca.Function("feedforward_jacobian", [p_ref_dot], [ca.densify(ca.jacobian(out["v_ref"], p_ref_dot))])
+    return np.array(jac(op.p_ref_dot))
+
+
 def linearize_controller(op: OperatingPoint) -> ControllerLinearization:
     """All static gains of the linearized controller at ``op``."""
     K_r, K_x = linearize_velocity_controller(op)
     K_e, K_edot = linearize_position_controller(op)
-    return ControllerLinearization(K_r=K_r, K_x=K_x, K_e=K_e, K_edot=K_edot)
+    return ControllerLinearization(K_r=K_r, K_x=K_x, K_e=K_e, K_edot=K_edot, K_ff=linearize_feedforward(op))
 
 
 def linearize_controller_step(op: OperatingPoint) -> dict[str, np.ndarray]:
@@ -175,7 +191,8 @@ def linearize_controller_step(op: OperatingPoint) -> dict[str, np.ndarray]:
     f = controller_step_function("pd", op.position, op.geometric)
     p_ref = op.x[0:3] + op.position_error
     values = {"p_ref": p_ref, "p_ref_dot": op.p_ref_dot, "x": op.x, "psi_ref": op.psi_ref,
-              "state": np.concatenate([np.zeros(f.numel_in(4) - 10), initial_velocity_state()])}
+              "state": np.concatenate([np.zeros(f.numel_in(4) - 10), initial_velocity_state()]),
+              "p_ref_ddot": np.zeros(3)}
     names = ["p_ref", "p_ref_dot", "x"]
     return dict(zip(names, _jacobian(f, "Omega", names, values)))
 

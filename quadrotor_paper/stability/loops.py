@@ -5,7 +5,8 @@ deviations from it)::
 
     plant       Omega_1..4, wind_x..z      -> x y z u v w phi theta psi p q r
     velocity    v_ref_x..z, u..r           -> Omega_cmd_1..4       (static, eqs. 13-18)
-    pd          x_ref..z_ref, vx_ref..vz_ref, x..z, u..w -> tau_c_x..z   (static, eq. 19)
+    pd          x_ref..z_ref, vx_ref..vz_ref, x..z, u..w -> tau_c_x..z   (static, eq. 19 plus the
+                                                                velocity feed-forward option)
     hold        Omega_cmd_i -> Omega_i     (identity, or n unit delays)
 
 and the connections ``velocity.v_ref_a <- pd.tau_c_a`` (the PD output is the
@@ -75,12 +76,18 @@ class LoopModel:
     kp, kd : float, optional
         PD gains (eq. 19) replacing ``op.position``'s; the PD gains are then
         linearized from ``position_controller_function("pd")`` with them.
+    feedforward : float, optional
+        Velocity feed-forward gain (``PositionParams.feedforward``, [0, 1])
+        replacing ``op.position``'s: ``v* = PD + feedforward dp*/dt``. It acts
+        on the reference only, outside every loop: poles and margins do not
+        depend on it, the tracking of a moving reference does.
     plant, controller : optional precomputed linearizations (for sweeps).
     """
 
     def __init__(self, op: OperatingPoint, dt: float | None = None, delay_steps: int = 0,
                  kp: float | None = None, kd: float | None = None,
-                 plant: PlantLinearization | None = None, controller: ControllerLinearization | None = None):
+                 plant: PlantLinearization | None = None, controller: ControllerLinearization | None = None,
+                 feedforward: float | None = None):
         if delay_steps < 0 or int(delay_steps) != delay_steps:
             raise ValueError(f"delay_steps = {delay_steps!r} must be a non-negative integer")
         if delay_steps and dt is None:
@@ -89,6 +96,9 @@ class LoopModel:
             raise ValueError(f"dt = {dt!r} s must be positive (or None for continuous time)")
         if kp is not None or kd is not None:
             op = op.with_gains(op.position.kp if kp is None else kp, op.position.kd if kd is None else kd)
+            controller = None
+        if feedforward is not None:
+            op = op.with_feedforward(feedforward)
             controller = None
         self.op = op
         self.dt = dt
@@ -122,9 +132,10 @@ class LoopModel:
 
     @cached_property
     def position_controller(self) -> ct.StateSpace:
-        """Static PD gain ``tau_c = K_e (p* - p) + K_edot (dp*/dt - v)`` (eq. 19)."""
-        K_e, K_edot = self.gains.K_e, self.gains.K_edot
-        D = np.hstack([K_e, K_edot, -K_e, -K_edot])
+        """Static PD gain ``tau_c = K_e (p* - p) + K_edot (dp*/dt - v) + K_ff dp*/dt``
+        (eq. 19 and the velocity feed-forward; the output is v*)."""
+        K_e, K_edot, K_ff = self.gains.K_e, self.gains.K_edot, self.gains.K_ff
+        D = np.hstack([K_e, K_edot + K_ff, -K_e, -K_edot])
         return _static(D, _P_REF + _P_REF_DOT + _PD_STATES, _TAU_C, "pd", self.dt)
 
     @cached_property

@@ -38,8 +38,9 @@ import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR, hover_rotor_speed
 from fmu_models.models.quadrotor import STATE_NAMES as PLANT_STATE_NAMES
-from fnn_controller import GeometricParams, PositionParams, position_controller_function, velocity_controller_function
+from fnn_controller import GeometricParams, PositionParams, velocity_controller_function
 from fnn_controller.geometric import initial_velocity_state
+from fnn_controller.position import fnn_state_size, position_controller
 
 __all__ = [
     "STATE_NAMES", "OperatingPoint", "trim_plant", "trim_closed_loop", "position_error_at",
@@ -102,11 +103,21 @@ class OperatingPoint:
         return np.concatenate([self.omega, self.wind])
 
     def with_gains(self, kp: float, kd: float) -> "OperatingPoint":
-        """The same flight under other PD gains (only e* changes: e* = v*/kp)."""
+        """The same flight under other PD gains (only e* changes: e* = (v* - ff dp*/dt)/kp)."""
         if kp == 0:
             raise ValueError("kp = 0: the PD then has no equilibrium position error (e* = v*/kp)")
         position = replace(self.position, kp=float(kp), kd=float(kd))
-        return replace(self, position=position, position_error=position_error_at(self.v_ref, position))
+        return replace(self, position=position,
+                       position_error=position_error_at(self.v_ref, position, self.p_ref_dot))
+
+    def with_feedforward(self, feedforward: float) -> "OperatingPoint":
+        """The same flight with the velocity feed-forward gain ``feedforward``
+        (``PositionParams.feedforward``, in [0, 1]): the plant and the
+        velocity loop are unchanged, only e* changes, e* = (v* - feedforward
+        dp*/dt)/kp."""
+        position = replace(self.position, feedforward=float(feedforward))  # its range is checked here
+        return replace(self, position=position,
+                       position_error=position_error_at(self.v_ref, position, self.p_ref_dot))
 
 
 def _check_geometric(geometric: GeometricParams) -> None:
@@ -190,13 +201,17 @@ def trim_closed_loop(velocity=(0.0, 0.0, 0.0), wind=(0.0, 0.0, 0.0), psi_ref: fl
     return x_num, omega_num, sol[3:6]
 
 
-def position_error_at(v_ref, position: PositionParams = PositionParams()) -> np.ndarray:
-    """The position error e* (m) at which the PD (eq. 19) outputs ``v_ref``
-    with ``de/dt = 0``: the root of ``PD(e, 0) - v* = 0``, solved on
-    ``position_controller_function("pd")`` (so e* = v*/kp per axis)."""
-    pd = position_controller_function("pd", position)
+def position_error_at(v_ref, position: PositionParams = PositionParams(), p_ref_dot=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The position error e* (m) at which the PD (eq. 19), with its velocity
+    feed-forward ``position.feedforward`` of ``p_ref_dot`` (m/s), outputs
+    ``v_ref`` with ``de/dt = 0``: the root of ``PD(e, 0) + ff dp*/dt - v* = 0``,
+    solved on the position controller's own expressions
+    (``fnn_controller.position.position_controller``, variant "pd"; so
+    e* = (v* - ff dp*/dt)/kp per axis)."""
     e = ca.SX.sym("e", 3)
-    residual = pd(e, ca.DM.zeros(3), ca.DM.zeros(pd.numel_in(2)))[0] - ca.DM(np.asarray(v_ref, float))
+    out = position_controller("pd", e, ca.DM.zeros(3), ca.DM.zeros(fnn_state_size("pd")), position,
+                              ca.DM(np.asarray(p_ref_dot, float)))
+    residual = out["v_ref"] - ca.DM(np.asarray(v_ref, float))
     return _solve("trim_pd", e, residual, np.zeros(3))
 
 
@@ -210,7 +225,7 @@ def operating_point(name: str, velocity=(0.0, 0.0, 0.0), wind=(0.0, 0.0, 0.0), d
     return OperatingPoint(
         name=name, description=description or name, x=x, omega=omega, wind=np.asarray(wind, float).copy(),
         v_ref=v_ref, p_ref_dot=np.asarray(velocity, float).copy(),
-        position_error=position_error_at(v_ref, position), psi_ref=float(psi_ref),
+        position_error=position_error_at(v_ref, position, velocity), psi_ref=float(psi_ref),
         plant_parameters=dict(plant_parameters or {}), position=position, geometric=geometric)
 
 

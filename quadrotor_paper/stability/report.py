@@ -347,6 +347,30 @@ def _section_ramp(study) -> list[str]:
     return md + [""]
 
 
+def _section_feedforward(study) -> list[str]:
+    """The PD baseline with and without the velocity feed-forward option:
+    poles, margins, ramp and circle error side by side."""
+    if not study.feedforward_cases:
+        return []
+    names = list(study.feedforward_cases[0].stable)
+    rows = []
+    for c in study.feedforward_cases:
+        cosim = study.feedforward_ramp_nonlinear.get(c.feedforward)
+        rows.append([f"{c.feedforward:g}", "yes" if all(c.stable.values()) else "NO",
+                     ", ".join(f"{c.spectral_radius[n]:.5f}" for n in names),
+                     ", ".join(f"{c.outer_gain_margin[n]:.3f} / {c.outer_phase_margin[n]:.1f}°" for n in names),
+                     f"{c.ramp.ideal:.4f}", f"{c.ramp.linear_discrete:.4f}", f"{c.ramp.trim:.4f}", _f(cosim, 5),
+                     f"{c.circle.rms:.4f}"])
+    return ["## Velocity feed-forward (an option beyond the paper)", "",
+            "v* = PD + feedforward dp*/dt (`PositionParams.feedforward`). The feed-forward reads the reference "
+            "only, so it sits outside every loop: poles and margins are those of the paper's PD; the ramp lag "
+            "V/kp of the type-1 loop goes, what is left is the velocity loop's error against the drag.", "",
+            _table(["feed-forward", "stable", f"max abs z ({', '.join(names)})",
+                    f"outer GM / PM, smallest axis ({', '.join(names)})", "ramp lag, ideal (m)",
+                    "ramp lag, linear at hover (m)", "ramp lag, trim (m)", "ramp lag, co-simulation (m)",
+                    "circle RMS, linear (m)"], rows), ""]
+
+
 def _section_cosim_steps(study) -> list[str]:
     """Small steps from hover: largest difference of linear loop and co-simulation."""
     if not study.step_checks:
@@ -413,7 +437,7 @@ def _section_figures(figures: dict[str, Path]) -> list[str]:
 
 
 _SECTIONS = (_section_title, _section_loop_structure, _section_operating_points, _section_poles,
-             _section_margins, _section_gain_sweep, _section_ramp, _section_cosim_steps, _section_cosim_gains,
+             _section_margins, _section_gain_sweep, _section_ramp, _section_feedforward, _section_cosim_steps, _section_cosim_gains,
              _section_finite_time)
 
 

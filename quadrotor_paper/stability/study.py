@@ -21,8 +21,8 @@ import numpy as np
 
 from fnn_controller import GeometricParams, PositionParams
 
-from .analysis import (CircleError, GainSweep, OperatingPointAnalysis, RampError, analyze, circle_error,
-                       critical_gain_factor, gain_sweep, ramp_error)
+from .analysis import (CircleError, FeedForwardCase, GainSweep, OperatingPointAnalysis, RampError, analyze,
+                       circle_error, critical_gain_factor, feedforward_comparison, gain_sweep, ramp_error)
 from ..learning_claims import AxisClaims, Run, default_runs, evaluate_claims
 from .operating_points import OperatingPoint, default_operating_points
 from .validation import GainCheck, StepCheck, check_gains, check_step, pd_mission_rmse, ramp_lag
@@ -52,6 +52,8 @@ class StabilityStudy:
     ramp: RampError
     circle: CircleError
     ramp_nonlinear: float | None = None
+    feedforward_cases: list[FeedForwardCase] = field(default_factory=list)
+    feedforward_ramp_nonlinear: dict[float, float] = field(default_factory=dict)  # gain -> co-simulated lag (m)
     mission_rmse: dict[float, float] | None = None
     step_checks: list[StepCheck] = field(default_factory=list)
     gain_checks: list[GainCheck] = field(default_factory=list)
@@ -69,7 +71,8 @@ class StabilityStudy:
 
 def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.01, kp: float | None = None,
                     kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
-                    geometric: GeometricParams = GeometricParams()) -> StabilityStudy:
+                    geometric: GeometricParams = GeometricParams(), feedforward: float = 0.0,
+                    feedforward_gains=(0.0, 1.0)) -> StabilityStudy:
     """Run every analysis.
 
     Parameters
@@ -79,12 +82,17 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
         paper's gust direction [-1, -1, 0].
     dt : controller and communication step (s) of the discrete loops.
     kp, kd : PD gains (default: the paper's 2.5, 0.005).
+    feedforward : velocity feed-forward gain of the analysed PD (default 0,
+        the paper's law; ``PositionParams.feedforward``).
+    feedforward_gains : the gains compared side by side (poles, margins,
+        ramp and circle error; with ``cosim`` the co-simulated ramp lag too).
     cosim : also run the co-simulation checks (steps, gains, ramp, mission)
         and the finite-time runs of :mod:`quadrotor_paper.learning_claims`.
     sweep_kp, sweep_kd : the grid of the gain sweep.
     """
     position = PositionParams()
-    position = replace(position, kp=position.kp if kp is None else kp, kd=position.kd if kd is None else kd, dt=dt)
+    position = replace(position, kp=position.kp if kp is None else kp, kd=position.kd if kd is None else kd, dt=dt,
+                       feedforward=feedforward)
     geometric = replace(geometric, dt=dt)
     ops = default_operating_points(speed, wind_speed, position=position, geometric=geometric)
     analyses = [analyze(op, dt) for op in ops]
@@ -94,7 +102,10 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
     critical = {op.name: {k: critical_gain_factor(op, s, d) for k, (s, d) in bases.items()} for op in ops}
     study = StabilityStudy(dt, position, ops, analyses, sweeps, critical,
                            ramp_error(ops[0], ops[1], speed, dt), circle_error(ops[0], dt=dt))
+    study.feedforward_cases = feedforward_comparison(ops, dt, speed, feedforward_gains)
     if cosim:
+        study.feedforward_ramp_nonlinear = {float(g): ramp_lag(ops[0].with_feedforward(g), speed, dt=dt)[0]
+                                            for g in feedforward_gains}
         hover = ops[0]
         study.step_checks = [check_step(hover, kind, axis, size) for kind, axis, size in STEP_CHECKS]
         c = critical[hover.name]["discrete"]

@@ -84,6 +84,10 @@ class Ramp:
         v = np.column_stack([np.where(t >= self.t_start, self.speed, 0.0), np.zeros_like(t), np.zeros_like(t)])
         return p, v
 
+    def acceleration(self, t):
+        """d²p*/dt² = 0 (m/s²): constant speed; the step at ``t_start`` is no sample."""
+        return np.zeros((np.atleast_1d(np.asarray(t, dtype=float)).size, 3))
+
 
 class VelocityCommandComponent(PythonComponent):
     """The geometric velocity controller alone, at a constant desired

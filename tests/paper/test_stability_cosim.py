@@ -221,3 +221,16 @@ def test_command_writes_the_report_and_figures(tmp_path, capsys):
         assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     out = capsys.readouterr().out
     assert "hover: stable" in out and "report:" in out
+
+
+def test_feed_forward_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fmu):
+    """With the velocity feed-forward the co-simulated lag behind the 2.5 m/s
+    ramp is e* of the forward-flight trim with the same gain (the drag's
+    share, 0.056 m), a twentieth of the paper's PD's 1.056 m."""
+    from quadrotor_paper.stability import forward_flight
+
+    lag, run = ramp_lag(op.with_feedforward(1.0), 2.5, duration=15.0, fmu=fmu)
+    assert run.status == "ok"
+    trim = forward_flight(2.5, position=PositionParams(feedforward=1.0)).position_error[0]
+    assert lag == pytest.approx(trim, abs=1e-4)
+    assert lag < 0.06 * ramp_lag(op, 2.5, duration=15.0, fmu=fmu)[0]

@@ -292,3 +292,28 @@ def test_discrete_gain_margin_at_the_nyquist_frequency_is_confirmed_by_the_poles
     assert 5.0 < m.gain_margin < 10.0
     assert np.abs(ct.feedback(0.98 * m.gain_margin * L, 1).poles()).max() <= 1.0 + 1e-9
     assert np.abs(ct.feedback(1.02 * m.gain_margin * L, 1).poles()).max() > 1.001
+
+
+def test_feed_forward_leaves_poles_and_margins_and_removes_the_v_over_kp_ramp_lag(ops):
+    """v* = PD + ff dp*/dt reads the reference only: the closed-loop A and the
+    broken loops are the paper's PD's for every ff; the linear ramp lag falls
+    from V/kp (1 + k_lin/(m k_v)) to the drag's share alone, V k_lin/(m k_v kp)
+    (no drag: exactly 0); the circle error to the centripetal and drag part."""
+    from quadrotor_paper.stability import feedforward_comparison, linearize_controller
+
+    assert np.array_equal(linearize_controller(ops["forward"].with_feedforward(0.7)).K_ff, 0.7 * np.eye(3))
+    for name, op in ops.items():
+        A = {ff: LoopModel(op, H, feedforward=ff).closed_loop().A for ff in (0.0, 1.0)}
+        np.testing.assert_array_equal(A[0.0], A[1.0])
+    paper, ff = feedforward_comparison(list(ops.values()), H, 2.5)
+    assert paper.outer_gain_margin == ff.outer_gain_margin and paper.outer_phase_margin == ff.outer_phase_margin
+    drag_share = 2.5 * DEFAULTS["k_drag_lin"] / (DEFAULTS["m"] * GeometricParams().k_v * 2.5)
+    assert ff.ramp.ideal == 0.0 and paper.ramp.ideal == pytest.approx(1.0)
+    assert ff.ramp.linear_discrete == pytest.approx(drag_share, abs=1e-5)
+    assert ff.ramp.linear_discrete < 0.05 * paper.ramp.linear_discrete
+    assert ff.ramp.trim == pytest.approx(0.0561, abs=1e-4)  # the quadratic drag too: D(V)/(m k_v kp)
+    assert ff.circle.rms < 0.1 * paper.circle.rms
+    no_drag = ramp_error(hover(plant_parameters=NO_DRAG, position=PositionParams(feedforward=1.0)), speed=2.5, dt=H)
+    assert abs(no_drag.linear_discrete) < 1e-9 and abs(no_drag.trim) < 1e-9
+    with pytest.raises(ValueError, match="feedforward"):
+        ops["hover"].with_feedforward(1.5)
