@@ -253,30 +253,29 @@ def _cmd_build_fmu(args) -> int:
 
 # ---- entry point ------------------------------------------------------------------------
 
+def _names(text: str, known: Sequence[str], kind: str, extra: str = "") -> list[str]:
+    """The comma-separated names of ``text``, each one of ``known`` (an
+    ``ArgumentTypeError`` naming the unknown ones and the known, before any run)."""
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    unknown = [v for v in names if v not in known]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: unknown {kind} {', '.join(map(repr, unknown)) or '(none given)'}; "
+                                         f"known: {', '.join(known)}{extra}")
+    return names
+
+
 def _variant_list(text: str) -> list[str]:
-    """``--variants a,b``: every name a registered variant, checked before any run."""
+    """``--variants a,b``: every name a registered variant."""
     from fnn_controller.variants import variant_names
 
-    names = [v.strip() for v in text.split(",") if v.strip()]
-    unknown = [v for v in names if v not in variant_names()]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"{text!r}: unknown variant {', '.join(map(repr, unknown)) or '(none given)'}; "
-                                         f"known: {', '.join(variant_names())}")
-    return names
+    return _names(text, variant_names(), "variant")
 
 
 def _option_list(text: str) -> list[str]:
     """``--options a,b``: every name a known option row; ``none``: no option rows."""
     from .options import option_names
 
-    if text.strip() == "none":
-        return []
-    names = [v.strip() for v in text.split(",") if v.strip()]
-    unknown = [v for v in names if v not in option_names()]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"{text!r}: unknown option {', '.join(map(repr, unknown)) or '(none given)'}; "
-                                         f"known: {', '.join(option_names())}, or none")
-    return names
+    return [] if text.strip() == "none" else _names(text, option_names(), "option", ", or none")
 
 
 def _parser() -> argparse.ArgumentParser:
