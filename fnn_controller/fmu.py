@@ -45,7 +45,7 @@ from .parametric import initial_state_function, parameter_table, parametric_step
 from .position import PositionParams
 from .variants import variant as lookup
 
-__all__ = ["controller_model", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "SEED_MAX"]
+__all__ = ["controller_model", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "SEED_MAX", "FNN_SEED"]
 
 SEED_MAX = 2.0 ** 53  # seeds are doubles in FMI: every whole number up to 2^53 is exact
 _AXES = "xyz"
@@ -57,6 +57,11 @@ REFERENCE_INPUTS = (
 # After the plant states, start 0: unconnected they leave the paper's law as it is.
 ACCELERATION_INPUTS = tuple((f"a{a}_ref", "m/s2", f"reference acceleration d2{a}*/dt2 "
                              "(fed forward with accel_feedforward)") for a in _AXES)
+
+
+# numpy's default_rng(seed) draws f_ij(0) in the FMU as in the Python path
+FNN_SEED = parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
+                     min=0.0, max=SEED_MAX, integer=True)
 
 
 def fmu_identifier(variant: str) -> str:
@@ -85,8 +90,7 @@ def controller_model(variant: str, position: PositionParams = PositionParams(),
         *(input_(name, unit, text) for name, unit, text in ACCELERATION_INPUTS),
         *(output(name, unit, text) for name, unit, text in OUTPUTS),
         *(parameter(p.name, p.unit, p.description, p.default, min=p.min, max=p.max) for p in table),
-        parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
-                  min=0.0, max=SEED_MAX),
+        FNN_SEED,
         *states,
     )
 

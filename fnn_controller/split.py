@@ -34,7 +34,7 @@ from fmu_models.export.variables import discrete, input_, output, parameter
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
 from .controller import OUTPUTS, state_ports
-from .fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS, SEED_MAX
+from .fmu import ACCELERATION_INPUTS, FNN_SEED, REFERENCE_INPUTS
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
 from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table
 from .position import PositionParams, fnn_state_size, position_controller
@@ -153,8 +153,7 @@ def outer_model(variant: str, position: PositionParams = PositionParams()) -> Fm
         *(input_(n, u, t) for n, u, t in ACCELERATION_INPUTS),
         *(output(n, u, t) for n, u, t in OUTER_OUTPUTS),
         *_parameters(table),
-        parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
-                  min=0.0, max=SEED_MAX),
+        FNN_SEED,
         *states,
     )
 

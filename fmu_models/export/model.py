@@ -75,8 +75,6 @@ class Sampled:
     vector of ``n_random_step`` uniform numbers in [0, 1), the next ones of
     the same stream, fresh at every communication step and the same for every
     evaluation of one step's sample (a get before doStep and the doStep).
-    ``integers`` names parameters that must be whole numbers (the FMU refuses
-    any other value, as it does a value outside the range).
     """
 
     update: Callable[..., tuple[Mapping[str, ca.SX], Mapping[str, ca.SX]]]
@@ -85,7 +83,6 @@ class Sampled:
     seed: str | None
     sample_period: str
     n_random_step: int = 0
-    integers: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -120,12 +117,17 @@ class FmuModel:
                 raise ValueError(f"model {self.identifier}: it draws random numbers, so it needs a seed parameter")
             roles = [("seed", self.sampled.seed)] if self.sampled.seed is not None else []
             roles.append(("sample_period", self.sampled.sample_period))
-            roles += [("integer parameter", name) for name in self.sampled.integers]
             for role, name in roles:
                 if name not in {v.name for v in self.parameters}:
                     raise ValueError(f"model {self.identifier}: its {role} {name!r} is not a parameter")
             if self.sampled.n_random < 0 or self.sampled.n_random_step < 0:
                 raise ValueError(f"model {self.identifier}: negative count of random numbers")
+            seed = next((v for v in self.parameters if v.name == self.sampled.seed), None)
+            if seed is not None and not (seed.integer and seed.min >= 0 and seed.max <= 2.0 ** 53):
+                # the FMU seeds numpy's generator with it as set: its table must make it a whole
+                # number a double holds exactly
+                raise ValueError(f"model {self.identifier}: its seed {seed.name!r} must be an integer "
+                                 "parameter within [0, 2^53]")
 
     @property
     def all_variables(self) -> tuple[Variable, ...]:
@@ -170,8 +172,6 @@ class FmuModel:
             if var.causality != "parameter":
                 raise KeyError(f"{name!r} is a {var.causality} of {self.identifier}, not a parameter")
             var.check(value)
-            if self.sampled is not None and name in self.sampled.integers and value != int(value):
-                raise ValueError(f"{name} = {value!r} is not a whole number")
         return [overrides.get(v.name, v.start) for v in self.parameters]
 
     def input_values(self, **overrides: float) -> list[float]:

@@ -49,7 +49,9 @@ class Variable:
     ``min``/``max`` are enforced by the FMU on every set and written into
     the modelDescription. Both are inclusive, as FMI's are: a quantity that
     must be positive gets a stated positive floor, never an implied open
-    bound the modelDescription could not express.
+    bound the modelDescription could not express. ``integer``: a count kept
+    as a Float64 (a number of steps), refused by the FMU and by
+    :meth:`check` unless whole.
     """
 
     name: str
@@ -59,6 +61,7 @@ class Variable:
     start: float | None = None
     min: float = -math.inf
     max: float = math.inf
+    integer: bool = False
 
     def __post_init__(self) -> None:
         if self.causality not in ("state", "discrete", "input", "output", "parameter"):
@@ -76,15 +79,18 @@ class Variable:
         """Raise ``ValueError`` naming the variable if ``value`` is not admissible.
 
         The same test as the FMU's (``check_value`` in ``fmu_models/export/c/fmu_core.c``):
-        finite and within ``[min, max]``.
+        finite, within ``[min, max]`` and, for an ``integer`` variable, whole.
         """
         if not math.isfinite(value):
             raise ValueError(f"{self.name} = {value!r} is not a finite number")
+        unit = "" if self.unit == "1" else f" {self.unit}"
         if not self.min <= value <= self.max:
             raise ValueError(
-                f"{self.name} = {value!r} {self.unit} is outside its range "
+                f"{self.name} = {value!r}{unit} is outside its range "
                 f"[{self.min!r}, {self.max!r}]"
             )
+        if self.integer and value != math.floor(value):
+            raise ValueError(f"{self.name} = {value!r} is not a whole number")
 
 
 def state(name, unit, description):

@@ -113,10 +113,10 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
                   "held in between; 0: a sample every step", 0.0, min=0.0, max=SAMPLE_RATE_MAX),
         parameter("delay_steps", "1",
                   f"transport delay in whole communication steps (an integer 0..{delay_max})",
-                  0.0, min=0.0, max=float(delay_max)),
+                  0.0, min=0.0, max=float(delay_max), integer=True),
         parameter("seed", "1", "seed of numpy's default_rng that draws the noise (2 numbers per channel "
                   "and step)" + (", then the packet loss (1 number per step)" if loss else ""),
-                  0.0, min=0.0, max=SEED_MAX),
+                  0.0, min=0.0, max=SEED_MAX, integer=True),
         parameter("dt", "s", "communication step = sample period of the FMU (every doStep must be dt)",
                   DT_DEFAULT, min=1e-6, max=10.0),
         discrete("sample_counter", "1", "steps since the last sample (0: a sample is taken this step)"),
@@ -177,7 +177,7 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         description=description,
         variables=tuple(variables),
         sampled=Sampled(update=update, initial=initial, n_random=0, seed="seed", sample_period="dt",
-                        n_random_step=n_channel_random + (1 if loss else 0), integers=("delay_steps",)),
+                        n_random_step=n_channel_random + (1 if loss else 0)),
     )
 
 

@@ -147,3 +147,16 @@ def test_the_sensors_scenario_is_reproducible_by_its_seed():
     first, again, other = fly(0), fly(0), fly(1)
     np.testing.assert_array_equal(first, again)
     assert np.abs(first - other).max() > 1e-6
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("fmus.Link.parameters.delay_steps", 1.5, "fmus.Link.parameters.delay_steps: delay_steps = 1.5 is not a whole number"),
+    ("fmus.Sensors.parameters.sample_rate", -1.0, "sample_rate = -1.0 1/s is outside its range"),
+    ("fmus.Link.parameters.loss_probability", 1.5, "loss_probability = 1.5 is outside its range [0.0, 1.0]"),
+])
+def test_a_count_or_probability_the_sensors_would_refuse_is_refused_by_the_scenario(key, value, message):
+    """Whole numbers (Variable.integer) and dimensionless ranges are checked
+    when the scenario is read, as the FMU would check them at start."""
+    with pytest.raises(ScenarioError) as info:
+        load_scenario("circles_sensors", {key: value})
+    assert message in str(info.value)

@@ -125,13 +125,9 @@ void core_reset(Instance *inst) { set_defaults(inst); }
 static CoreStatus initial_state(Instance *inst) {
     double r[NR + 1];
 #ifdef VR_SEED
-    const double seed = P_[VR_SEED - VR_P];
+    /* a whole number in [0, 2^53]: its variable's range and integer flag, checked when it was set */
     NpPcg64 rng;
-    if (!(seed >= 0 && seed <= 9007199254740992.0 && seed == floor(seed))) {
-        core_log(inst, CORE_ERROR, "%s = %g refused: a seed is a whole number in [0, 2^53]", VAR_NAME[VR_SEED], seed);
-        return CORE_ERROR;
-    }
-    np_default_rng(&rng, (uint64_t)seed);
+    np_default_rng(&rng, (uint64_t)P_[VR_SEED - VR_P]);
     for (size_t i = 0; i < NR; i++) r[i] = np_random(&rng);
 #endif  /* a model without a seed draws nothing (model.py checks it) */
     inst->arg[0] = P_; inst->arg[1] = r;
@@ -236,18 +232,11 @@ static CoreStatus check_value(Instance *inst, unsigned vr, double value) {
                  exact(lo, VAR_MIN[vr]), exact(hi, VAR_MAX[vr]));
         return CORE_ERROR;
     }
-#if N_INTEGER_VRS > 0
-    {
-        static const unsigned INTEGER_VR[] = {INTEGER_VR_LIST 0};
-        for (size_t i = 0; i < N_INTEGER_VRS; i++) {
-            if (vr == INTEGER_VR[i] && value != floor(value)) {
-                char v[NUMBER_SIZE];
-                core_log(inst, CORE_ERROR, "%s = %s refused: not a whole number", VAR_NAME[vr], exact(v, value));
-                return CORE_ERROR;
-            }
-        }
+    if (VAR_INTEGER[vr] && value != floor(value)) {  /* a count (Variable.integer) */
+        char v[NUMBER_SIZE];
+        core_log(inst, CORE_ERROR, "%s = %s refused: not a whole number", VAR_NAME[vr], exact(v, value));
+        return CORE_ERROR;
     }
-#endif
     return CORE_OK;
 }
 
