@@ -32,6 +32,7 @@ communication step must be ``dt``.
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any, Callable, Sequence
 
 import casadi as ca
 
@@ -45,7 +46,7 @@ from .parametric import initial_state_function, parameter_table, parametric_step
 from .position import PositionParams
 from .variants import variant as lookup
 
-__all__ = ["controller_model", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "SEED_MAX", "FNN_SEED"]
+__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "SEED_MAX", "FNN_SEED"]
 
 SEED_MAX = 2.0 ** 53  # seeds are doubles in FMI: every whole number up to 2^53 is exact
 _AXES = "xyz"
@@ -73,47 +74,66 @@ def _discrete_states(variant: str) -> tuple:
     return tuple(discrete(name, unit, text) for name, unit, text in state_ports(variant))
 
 
+STATE, PARAMETERS = "state", "parameters"  # step arguments that are no inputs (see step_model)
+
+
+def step_model(identifier: str, description: str, inputs: Sequence, arguments: Sequence, step: ca.Function,
+               outputs: Sequence[tuple[str, str, str]], table: Sequence, states: Sequence,
+               initial: Callable[[ca.SX, ca.SX], Any], n_random: int = 0) -> FmuModel:
+    """A sampled-data FMU model around a controller step ``step(*args) ->
+    (y, state_next, check)``: ``arguments`` says what each argument of
+    ``step`` is, a tuple of input names stacked into a vector, :data:`STATE`
+    (the discrete ``states``) or :data:`PARAMETERS` (the parameters of
+    ``table``, :mod:`fnn_controller.parametric`); ``y`` is laid out as
+    ``outputs``; ``initial(p, r)`` gives the state after reset from the
+    parameter vector and ``n_random`` uniform numbers drawn from
+    :data:`FNN_SEED` (no seed when ``n_random`` is 0)."""
+    variables = (
+        *inputs,
+        *(output(name, unit, text) for name, unit, text in outputs),
+        *(parameter(p.name, p.unit, p.description, p.default, min=p.min, max=p.max) for p in table),
+        *((FNN_SEED,) if n_random else ()),
+        *states,
+    )
+
+    def vector(v, what):
+        names = ([s.name for s in states] if what == STATE else [p.name for p in table] if what == PARAMETERS
+                 else what)
+        return ca.vertcat(*(v[name] for name in names))
+
+    def update(t, v):
+        y, state_next, _ = step(*(vector(v, what) for what in arguments))
+        return (dict(zip((name for name, _, _ in outputs), ca.vertsplit(y))),
+                dict(zip((s.name for s in states), ca.vertsplit(ca.vertcat(state_next)))))
+
+    def initial_states(v, r):
+        return dict(zip((s.name for s in states), ca.vertsplit(ca.vertcat(initial(vector(v, PARAMETERS), r)))))
+
+    return FmuModel(identifier=identifier, description=description, variables=variables,
+                    sampled=Sampled(update=update, initial=initial_states, n_random=n_random,
+                                    seed="seed" if n_random else None, sample_period="dt"))
+
+
 @lru_cache(maxsize=None)
 def controller_model(variant: str, position: PositionParams = PositionParams(),
                      geometric: GeometricParams = GeometricParams()) -> FmuModel:
     """The FMU model of ``variant``; ``position`` and ``geometric`` give the
     parameters' start values and the structural choices."""
-    table = parameter_table(variant, position, geometric)
-    step = parametric_step_function(variant, PositionParams(),
-                                    GeometricParams(desired_rate=geometric.desired_rate))
-    init = initial_state_function(variant, PositionParams(), GeometricParams(desired_rate=geometric.desired_rate))
-    states = _discrete_states(variant)
+    structure = GeometricParams(desired_rate=geometric.desired_rate)
+    step = parametric_step_function(variant, PositionParams(), structure)
+    init = initial_state_function(variant, PositionParams(), structure)
     plant = [QUADROTOR.variable(name) for name in STATE_NAMES]  # the rigid body's 12
-    variables = (
+    inputs = (
         *(input_(name, unit, text) for name, unit, text in REFERENCE_INPUTS),
         *(input_(v.name, v.unit, f"plant state: {v.description}") for v in plant),
         *(input_(name, unit, text) for name, unit, text in ACCELERATION_INPUTS),
-        *(output(name, unit, text) for name, unit, text in OUTPUTS),
-        *(parameter(p.name, p.unit, p.description, p.default, min=p.min, max=p.max) for p in table),
-        FNN_SEED,
-        *states,
     )
-
-    def parameters(v):
-        return ca.vertcat(*(v[p.name] for p in table))
-
-    def update(t, v):
-        y, state_next, _ = step(ca.vertcat(*(v[f"{a}_ref"] for a in _AXES)),
-                                ca.vertcat(*(v[f"v{a}_ref"] for a in _AXES)),
-                                ca.vertcat(*(v[s.name] for s in plant)), v["psi_ref"],
-                                ca.vertcat(*(v[s.name] for s in states)), parameters(v),
-                                ca.vertcat(*(v[name] for name, _, _ in ACCELERATION_INPUTS)))
-        return (dict(zip((name for name, _, _ in OUTPUTS), ca.vertsplit(y))),
-                dict(zip((s.name for s in states), ca.vertsplit(state_next))))
-
-    def initial(v, r):
-        return dict(zip((s.name for s in states), ca.vertsplit(init(parameters(v), r))))
-
+    arguments = (tuple(f"{a}_ref" for a in _AXES), tuple(f"v{a}_ref" for a in _AXES), STATE_NAMES, ("psi_ref",),
+                 STATE, PARAMETERS, tuple(name for name, _, _ in ACCELERATION_INPUTS))
     v = lookup(variant)
-    return FmuModel(
-        identifier=fmu_identifier(variant),
-        description=f"{v.label} flight controller of the LM-FNN paper (Fig. 2): {v.description}; "
-                    f"geometric SE(3) velocity control (eqs. 13-18); sampled at dt, z axis down",
-        variables=variables,
-        sampled=Sampled(update=update, initial=initial, n_random=3 * v.n_random, seed="seed", sample_period="dt"),
-    )
+    return step_model(
+        fmu_identifier(variant),
+        f"{v.label} flight controller of the LM-FNN paper (Fig. 2): {v.description}; "
+        f"geometric SE(3) velocity control (eqs. 13-18); sampled at dt, z axis down",
+        inputs, arguments, step, OUTPUTS, parameter_table(variant, position, geometric), _discrete_states(variant),
+        init, n_random=3 * v.n_random)

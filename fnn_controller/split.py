@@ -29,12 +29,12 @@ from functools import lru_cache
 
 import casadi as ca
 
-from fmu_models.export.model import FmuModel, Sampled
-from fmu_models.export.variables import discrete, input_, output, parameter
+from fmu_models.export.model import FmuModel
+from fmu_models.export.variables import discrete, input_
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
 from .controller import OUTPUTS, state_ports
-from .fmu import ACCELERATION_INPUTS, FNN_SEED, REFERENCE_INPUTS
+from .fmu import ACCELERATION_INPUTS, PARAMETERS, REFERENCE_INPUTS, STATE, step_model
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
 from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table
 from .position import PositionParams, fnn_state_size, position_controller
@@ -134,88 +134,41 @@ def _plant_inputs(names) -> tuple:
                  for v in (QUADROTOR.variable(n) for n in names))
 
 
-def _parameters(table) -> tuple:
-    return tuple(parameter(p.name, p.unit, p.description, p.default, min=p.min, max=p.max) for p in table)
-
-
 @lru_cache(maxsize=None)
 def outer_model(variant: str, position: PositionParams = PositionParams()) -> FmuModel:
     """The outer loop of ``variant`` as an FMU model (ground station):
     inputs the reference (and its acceleration, start 0) and the measured
-    x y z u v w, outputs v*, tau_c, tau_n, a_ref; parameters its table and ``seed`` (f_ij(0)); locals the learned
-    state of each axis."""
-    table = outer_parameter_table(variant, position)
-    step, init = outer_step_function(variant), outer_initial_function(variant)
+    x y z u v w, outputs v*, tau_c, tau_n, a_ref; parameters its table and
+    ``seed`` (f_ij(0)); locals the learned state of each axis."""
+    inputs = (*(input_(n, u, t) for n, u, t in REFERENCE_INPUTS if n != "psi_ref"), *_plant_inputs(OUTER_MEASURED),
+              *(input_(n, u, t) for n, u, t in ACCELERATION_INPUTS))
+    arguments = (tuple(f"{a}_ref" for a in _AXES), tuple(f"v{a}_ref" for a in _AXES), OUTER_MEASURED, STATE,
+                 PARAMETERS, tuple(n for n, _, _ in ACCELERATION_INPUTS))
     states = tuple(discrete(n, u, t) for n, u, t in state_ports(variant)[:fnn_state_size(variant)])
-    variables = (
-        *(input_(n, u, t) for n, u, t in REFERENCE_INPUTS if n != "psi_ref"),
-        *_plant_inputs(OUTER_MEASURED),
-        *(input_(n, u, t) for n, u, t in ACCELERATION_INPUTS),
-        *(output(n, u, t) for n, u, t in OUTER_OUTPUTS),
-        *_parameters(table),
-        FNN_SEED,
-        *states,
-    )
-
-    def p_of(v):
-        return ca.vertcat(*(v[p.name] for p in table))
-
-    def update(t, v):
-        y, state_next, _ = step(ca.vertcat(*(v[f"{a}_ref"] for a in _AXES)),
-                                ca.vertcat(*(v[f"v{a}_ref"] for a in _AXES)),
-                                ca.vertcat(*(v[n] for n in OUTER_MEASURED)),
-                                ca.vertcat(*(v[s.name] for s in states)), p_of(v),
-                                ca.vertcat(*(v[n] for n, _, _ in ACCELERATION_INPUTS)))
-        return (dict(zip((n for n, _, _ in OUTER_OUTPUTS), ca.vertsplit(y))),
-                dict(zip((s.name for s in states), ca.vertsplit(state_next))))
-
-    def initial(v, r):
-        return dict(zip((s.name for s in states), ca.vertsplit(init(p_of(v), r))))
-
-    label = lookup(variant).label
-    return FmuModel(
-        identifier=outer_identifier(variant),
-        description=f"{label} position controller of the LM-FNN paper (eqs. 12, 19, 24-26 and its learning "
-                    f"laws), the outer loop alone: v* to an on-board velocity controller; sampled at dt, z down",
-        variables=variables,
-        sampled=Sampled(update=update, initial=initial, n_random=3 * lookup(variant).n_random, seed="seed",
-                        sample_period="dt"),
-    )
+    v = lookup(variant)
+    return step_model(
+        outer_identifier(variant),
+        f"{v.label} position controller of the LM-FNN paper (eqs. 12, 19, 24-26 and its learning laws), the "
+        f"outer loop alone: v* to an on-board velocity controller; sampled at dt, z down",
+        inputs, arguments, outer_step_function(variant), OUTER_OUTPUTS, outer_parameter_table(variant, position),
+        states, outer_initial_function(variant), n_random=3 * v.n_random)
 
 
 @lru_cache(maxsize=None)
 def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
     """The inner loop as an FMU model (on board): inputs v*, psi*, the
-    vehicle's u v w phi theta psi p q r and a_ref (start 0), outputs the rotor speeds and the
-    wrench of eq. 18; parameters the geometric gains and nominal vehicle."""
-    table = inner_parameter_table(geometric)
-    step = inner_step_function(GeometricParams(desired_rate=geometric.desired_rate))
+    vehicle's u v w phi theta psi p q r and a_ref (start 0), outputs the
+    rotor speeds and the wrench of eq. 18; parameters the geometric gains and
+    the nominal vehicle; it draws nothing, so it has no seed."""
+    v_ref = tuple(n for n, _, _ in OUTER_OUTPUTS[:3])
+    inputs = (*(input_(n, u, t) for n, u, t in OUTER_OUTPUTS[:3]), input_("psi_ref", "rad", "commanded yaw psi*"),
+              *_plant_inputs(INNER_MEASURED), *(input_(n, u, t + "; start 0: none") for n, u, t in A_REF_PORTS))
+    arguments = (v_ref, INNER_MEASURED, ("psi_ref",), STATE, PARAMETERS, tuple(n for n, _, _ in A_REF_PORTS))
     states = tuple(discrete(n, u, t) for n, u, t in state_ports("pd")[-VEL_STATE_SIZE:])
-    variables = (
-        *(input_(n, u, t) for n, u, t in OUTER_OUTPUTS[:3]),
-        input_("psi_ref", "rad", "commanded yaw psi*"),
-        *_plant_inputs(INNER_MEASURED),
-        *(input_(n, u, t + "; start 0: none") for n, u, t in A_REF_PORTS),
-        *(output(n, u, t) for n, u, t in INNER_OUTPUTS),
-        *_parameters(table),
-        *states,
-    )
-
-    def update(t, v):
-        y, state_next, _ = step(ca.vertcat(*(v[n] for n, _, _ in OUTER_OUTPUTS[:3])),
-                                ca.vertcat(*(v[n] for n in INNER_MEASURED)), v["psi_ref"],
-                                ca.vertcat(*(v[s.name] for s in states)), ca.vertcat(*(v[p.name] for p in table)),
-                                ca.vertcat(*(v[n] for n, _, _ in A_REF_PORTS)))
-        return (dict(zip((n for n, _, _ in INNER_OUTPUTS), ca.vertsplit(y))),
-                dict(zip((s.name for s in states), ca.vertsplit(state_next))))
-
-    def initial(v, r):  # R*_prev = identity, not primed: no randomness, no seed
-        return dict(zip((s.name for s in states), (float(x) for x in initial_velocity_state())))
-
-    return FmuModel(
-        identifier=INNER_IDENTIFIER,
-        description="geometric SE(3) velocity controller of the LM-FNN paper (eqs. 13-18) with rotor-speed "
-                    "inversion, the inner loop alone (on board): tracks v*; sampled at dt, z axis down",
-        variables=variables,
-        sampled=Sampled(update=update, initial=initial, n_random=0, seed=None, sample_period="dt"),
-    )
+    return step_model(
+        INNER_IDENTIFIER,
+        "geometric SE(3) velocity controller of the LM-FNN paper (eqs. 13-18) with rotor-speed inversion, the "
+        "inner loop alone (on board): tracks v*; sampled at dt, z axis down",
+        inputs, arguments, inner_step_function(GeometricParams(desired_rate=geometric.desired_rate)),
+        INNER_OUTPUTS, inner_parameter_table(geometric), states,
+        lambda p, r: ca.DM(initial_velocity_state()))  # R*_prev = identity, not primed
