@@ -23,7 +23,7 @@ def test_shipped_scenarios_load_and_build(name):
     assert sc.name == name and sc.step == 0.01
     with build_master(sc) as master:
         assert set(master.components) == {"Quadrotor", "WindGust", "reference", "controller"}
-        assert len(master.connections) == 3 + 6 + 12 + 4
+        assert len(master.connections) == 3 + 6 + 3 + 12 + 4  # wind, reference (p*, dp*/dt, d2p*/dt2), state, rotors
 
 
 def test_paper_values_in_the_shipped_missions():
@@ -132,7 +132,7 @@ def test_the_sensors_scenario_puts_the_sensor_and_link_fmus_in_both_paths():
     sc = load_scenario("circles_sensors")
     with build_master(sc) as master:
         assert set(master.components) == {"Quadrotor", "WindGust", "reference", "controller", "Sensors", "Link"}
-        assert len(master.connections) == 3 + 6 + 12 + 12 + 4 + 4
+        assert len(master.connections) == 3 + 6 + 3 + 12 + 12 + 4 + 4
     assert sc.fmus["Sensors"]["seed_parameter"] == "seed"
     assert sc.fmus["Link"]["parameters"]["delay_steps"] == 1
 
