@@ -137,6 +137,7 @@ def _cmd_table2(args) -> int:
     winds = [float(w) for w in args.winds.split(",")]
     out = Path(args.out) if args.out else DEFAULT_OUT / "table2"
     summary = table2(out, seeds=args.seeds, winds=winds, duration=args.duration, workers=_workers(args.workers),
+                     scenario=args.scenario,
                      show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler,
                      variants=args.variants, options=args.options, option_seeds=args.option_seeds)
     return _print_table(summary, out / "table2.md", out / "summary.json")
@@ -147,6 +148,7 @@ def _cmd_table3(args) -> int:
 
     out = Path(args.out) if args.out else DEFAULT_OUT / "table3"
     summary = table3(out, seeds=args.seeds, duration=args.duration, workers=_workers(args.workers),
+                     scenario=args.scenario,
                      show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler,
                      variants=args.variants, options=args.options, option_seeds=args.option_seeds)
     return _print_table(summary, out / "table3.md", out / "summary.json")
@@ -321,6 +323,8 @@ def _parser() -> argparse.ArgumentParser:
 
     t2 = sub.add_parser("table2", help="Table 2: every controller variant at 1, 3, 5 m/s wind")
     t2.add_argument("--winds", default="1,3,5", help="wind speeds in m/s (default 1,3,5)")
+    t2.add_argument("--scenario", default="circles",
+                    help="the mission (default circles; e.g. circles_sensors: the same with measurement noise)")
     t2.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help='override a scenario value, e.g. --set simulation.ordering=\'"exchange"\'')
     common(t2)
@@ -328,6 +332,7 @@ def _parser() -> argparse.ArgumentParser:
 
     t3 = sub.add_parser("table3", help="Table 3: the figure-8")
     t3.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
+    t3.add_argument("--scenario", default="figure8", help="the mission (default figure8)")
     common(t3)
     t3.set_defaults(func=_cmd_table3)
 

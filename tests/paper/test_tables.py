@@ -109,3 +109,22 @@ def test_options_are_data_with_names_apart_from_the_variants():
     assert all(o.variant in variant_names() for o in OPTIONS.values())
     with pytest.raises(ValueError, match="'nope'"):
         check_options(["pd-ff", "nope"])
+
+
+def test_table2_with_noise_on_has_spread_over_the_seeds_and_with_it_off_none(tmp_path):
+    """The seed draws f_ij(0) and, on circles_sensors, the noise: the cells
+    then spread and their intervals open; on the clean circles the LM cell's
+    spread is f_ij(0)'s alone, far smaller."""
+    spread = {}
+    for scenario in ("circles", "circles_sensors"):
+        out = tmp_path / scenario
+        assert main(["table2", "--scenario", scenario, "--seeds", "3", "--winds", "3", "--duration", "4",
+                     "--workers", "1", "--variants", "pd+lm", "--options", "none", "--out", str(out),
+                     "--quiet"]) == 0
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["scenario"] == scenario
+        cell = summary["cells"]["pd+lm"]["3"]
+        spread[scenario] = cell["std"]
+        assert cell["ci95"][0] < cell["mean"] < cell["ci95"][1] or cell["std"] == 0
+    assert spread["circles_sensors"] > 10 * spread["circles"]
+    assert spread["circles_sensors"] > 1e-4  # m
