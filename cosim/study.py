@@ -416,10 +416,14 @@ def interval95(values: Sequence[float]) -> tuple[float, float] | None:
 
 def summarize_runs(rows: Iterable[Mapping[str, str]], group_keys: Sequence[str],
                    metric_names: Sequence[str]) -> list[dict[str, Any]]:
-    """One record per group (the values of ``group_keys``, first-seen order):
+    """One record per group (the values of ``group_keys``, in the plan's
+    order where the rows carry their ``run`` index, else first-seen order):
     ``runs``, ``ok``, ``diverged``, ``failed``; per metric, over the ``ok``
     runs: ``<m>_n``, ``_mean``, ``_std`` (ddof 1), ``_ci95_low``,
     ``_ci95_high`` (Student t interval of the mean; empty below 2 runs)."""
+    rows = list(rows)
+    if all(str(r.get("run", "")).isdigit() for r in rows):  # rows finish in any order, a resumed study's later
+        rows.sort(key=lambda r: int(r["run"]))
     groups: dict[tuple, list[Mapping[str, str]]] = {}
     for row in rows:
         groups.setdefault(tuple(row[k] for k in group_keys), []).append(row)
