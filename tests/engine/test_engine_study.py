@@ -233,8 +233,6 @@ def test_resuming_into_the_folder_of_another_study_is_refused(folder, tmp_path):
 def test_the_summary_follows_the_plan_whatever_order_the_runs_finished_in():
     """A resumed study appends a grid point's rows after later ones: the
     summary is still in plan order."""
-    from cosim.study import summarize_runs
-
     rows = [{"run": str(i), "k": str(k), "status": "ok", "m": str(float(i))} for i, k in ((2, 3), (0, 1), (3, 3), (1, 1))]
     records = summarize_runs(rows, ["k"], ["m"])
     assert [r["k"] for r in records] == ["1", "3"]
