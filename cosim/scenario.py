@@ -63,7 +63,7 @@ from .errors import FmuError, ScenarioError
 
 __all__ = ["Scenario", "load_scenario", "parse_scenario", "shipped_scenarios", "scenario_path",
            "apply_overrides", "build_master", "fmu_file", "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file",
-           "table", "string", "strings", "refuse_unknown"]
+           "table", "string", "strings", "refuse_unknown", "read_toml"]
 
 GENERIC = ("name", "description", "connections", "simulation", "fmus", "components", "record", "envelope")
 _SIMULATION = {"duration", "step", "seed", "start_time", "ordering"}
@@ -347,11 +347,15 @@ def scenario_path(name_or_path: str | Path) -> Path:
 def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None = None) -> Scenario:
     """Read, override (dotted keys) and validate a scenario file."""
     path = scenario_path(name_or_path)
+    return parse_scenario(apply_overrides(read_toml(path), overrides or {}), source=path)
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """A TOML file as a mapping, or a :class:`ScenarioError` naming the file and the fault."""
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
-    return parse_scenario(apply_overrides(raw, overrides or {}), source=path)
 
 
 # ---- from scenario to master ---------------------------------------------------------------

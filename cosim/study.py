@@ -48,7 +48,6 @@ import csv
 import itertools
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
@@ -56,7 +55,9 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from .errors import CosimError, ScenarioError
-from .scenario import Scenario, apply_overrides, load_scenario, parse_scenario, scenario_path
+from .config import check_number
+from .scenario import (Scenario, apply_overrides, load_scenario, parse_scenario, read_toml, refuse_unknown,
+                       scenario_path, string, table)
 
 __all__ = ["Study", "parse_study", "load_study", "plan", "run_study", "summarize_runs", "read_runs",
            "DISTRIBUTIONS", "FIXED_COLUMNS"]
@@ -100,16 +101,9 @@ def _q(key: str) -> str:
     return f'"{key}"' if "." in key else key
 
 
-def _int(where: str, value: Any, minimum: int = 0) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise ScenarioError(f"{where} = {value!r}: expected an integer >= {minimum}")
-    return value
-
-
-def _number(where: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ScenarioError(f"{where} = {value!r}: expected a finite number")
-    return float(value)
+def _count(where: str, value: Any, positive: bool = False) -> int:
+    """A whole number >= 0 (``positive``: >= 1), or the scenario's error naming ``where``."""
+    return int(check_number(where, value, integer=True, positive=positive, nonnegative=not positive))
 
 
 def _distribution(where: str, spec: Any) -> tuple[str, list[Any]]:
@@ -124,7 +118,7 @@ def _distribution(where: str, spec: Any) -> tuple[str, list[Any]]:
         return kind, list(args)
     if not isinstance(args, list) or len(args) != 2:
         raise ScenarioError(f"{where} = {args!r}: expected [{'low, high' if kind == 'uniform' else 'mean, std'}]")
-    a, b = (_number(f"{where}[{i}]", v) for i, v in enumerate(args))
+    a, b = (float(check_number(f"{where}[{i}]", v)) for i, v in enumerate(args))
     if kind == "uniform" and not a < b:
         raise ScenarioError(f"{where} = {args!r}: expected [low, high] with low < high")
     if kind == "normal" and b < 0:
@@ -143,17 +137,13 @@ def _check_key(where: str, base_raw: Mapping[str, Any], source: Path | None, key
 def parse_study(raw: Mapping[str, Any], source: Path | None = None) -> Study:
     """Validate a study given as a mapping (a parsed TOML document)."""
     raw = dict(raw)
-    extra = sorted(set(raw) - _TOP)
-    if extra:
-        raise ScenarioError(f"{extra[0]}: unknown key; known keys: {', '.join(sorted(_TOP))}")
+    refuse_unknown("", raw, _TOP)
     if "scenario" not in raw or not isinstance(raw["scenario"], str):
         raise ScenarioError(f"scenario = {raw.get('scenario')!r}: required, a shipped scenario name or a file path")
-    name = raw.get("name", source.stem if source else "study")
-    if not isinstance(name, str) or not name:
-        raise ScenarioError(f"name = {name!r}: expected a non-empty string")
-    description = raw.get("description", "")
-    if not isinstance(description, str):
-        raise ScenarioError(f"description = {description!r}: expected a string")
+    name = string("name", raw.get("name", source.stem if source else "study"))
+    if not name:
+        raise ScenarioError("name = '': expected a non-empty string")
+    description = string("description", raw.get("description", ""))
     path = Path(raw["scenario"])
     if not path.is_absolute() and source is not None and (source.parent / path).exists():
         path = source.parent / path
@@ -161,35 +151,27 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None) -> Study:
         scenario_file = scenario_path(path if path.exists() else raw["scenario"])
     except ScenarioError as exc:
         raise ScenarioError(f"scenario = {raw['scenario']!r}: {exc}") from None
-    fixed = raw.get("set", {})
-    if not isinstance(fixed, Mapping):
-        raise ScenarioError(f"set = {fixed!r}: expected a table of dotted scenario keys")
+    fixed = table("set", raw.get("set", {}))
     try:
         base = load_scenario(scenario_file, dict(fixed))
     except ScenarioError as exc:
         raise ScenarioError(f"set: {exc}") from None
 
-    sweep = raw.get("sweep", {})
-    if not isinstance(sweep, Mapping):
-        raise ScenarioError(f"sweep = {sweep!r}: expected a table")
-    extra = sorted(set(sweep) - _SWEEP)
-    if extra:
-        raise ScenarioError(f"sweep.{_q(extra[0])}: unknown key; known keys: {', '.join(sorted(_SWEEP))}")
+    sweep = table("sweep", raw.get("sweep", {}))
+    refuse_unknown("sweep.", sweep, _SWEEP)
     study = Study(name=name, description=description, scenario=base, source=source)
 
     seeds = sweep.get("seeds")
     if seeds is not None:
         if isinstance(seeds, list):
-            study.seeds = [_int(f"sweep.seeds[{i}]", s) for i, s in enumerate(seeds)]
+            study.seeds = [_count(f"sweep.seeds[{i}]", s) for i, s in enumerate(seeds)]
             if not study.seeds or len(set(study.seeds)) != len(study.seeds):
                 raise ScenarioError(f"sweep.seeds = {seeds!r}: expected distinct seeds, at least one")
         else:
-            study.seeds = list(range(_int("sweep.seeds", seeds, 1)))
+            study.seeds = list(range(_count("sweep.seeds", seeds, positive=True)))
         _check_key("sweep.seeds", base.raw, base.source, "simulation.seed", study.seeds[0])
 
-    grid = sweep.get("grid", {})
-    if not isinstance(grid, Mapping):
-        raise ScenarioError(f"sweep.grid = {grid!r}: expected a table of dotted keys -> lists of values")
+    grid = table("sweep.grid", sweep.get("grid", {}))
     for key, values in grid.items():
         where = f"sweep.grid.{_q(key)}"
         if key == "simulation.seed":
@@ -202,12 +184,11 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None) -> Study:
 
     rand = sweep.get("random")
     if rand is not None:
-        if not isinstance(rand, Mapping):
-            raise ScenarioError(f"sweep.random = {rand!r}: expected a table")
+        rand = table("sweep.random", rand)
         if "samples" not in rand:
             raise ScenarioError("sweep.random.samples: required, the number of draws")
-        study.samples = _int("sweep.random.samples", rand["samples"], 1)
-        study.random_seed = _int("sweep.random.seed", rand.get("seed", 0))
+        study.samples = _count("sweep.random.samples", rand["samples"], positive=True)
+        study.random_seed = _count("sweep.random.seed", rand.get("seed", 0))
         for key, spec in rand.items():
             if key in ("samples", "seed"):
                 continue
@@ -229,11 +210,7 @@ def load_study(path: str | Path) -> Study:
     path = Path(path)
     if not path.exists():
         raise ScenarioError(f"study {str(path)!r}: no such file")
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
-    return parse_study(raw, source=path)
+    return parse_study(read_toml(path), source=path)
 
 
 # ---- the plan -----------------------------------------------------------------------------

@@ -107,7 +107,7 @@ def test_without_seeds_every_point_runs_the_scenarios_seed(folder):
 @pytest.mark.parametrize("body, message", [
     ("bogus = 1\n", "bogus: unknown key"),
     ("[sweep]\nrepeats = 2\n", "sweep.repeats: unknown key"),
-    ("[sweep]\nseeds = 0\n", "sweep.seeds = 0: expected an integer >= 1"),
+    ("[sweep]\nseeds = 0\n", "sweep.seeds = 0: must be positive"),
     ('[sweep.grid]\n"toy_controller.kp" = 2.0\n', 'sweep.grid."toy_controller.kp" = 2.0: expected a non-empty list'),
     ('[sweep.grid]\n"toy_controller.kq" = [1.0]\n', 'sweep.grid."toy_controller.kq": toy_controller.kq: unknown key'),
     ('[sweep.grid]\n"toy_controller.kp" = [1.0, "x"]\n', 'sweep.grid."toy_controller.kp": toy_controller.kp'),
