@@ -417,16 +417,20 @@ class FmuComponent:
                          self._kernel_in_idx.ctypes.data, self.u.ctypes.data, ctypes.addressof(self._out_vr),
                          self._n_out, self.y.ctypes.data, int(direct))
 
-    def kernel_failure(self, call: int, status: int, t: float, h: float) -> FmuCallError:
-        """The error the Python path raises for the same failed call."""
-        function = self._api._names[call]
-        exc = FMICallException(function=function, status=status)
-        if call == 0:
+    _SET, _GET, _DO_STEP = 0, 1, 2  # the loop's three calls, as cosim/kernel.c numbers them
+
+    def _call_failure(self, call: int, exc: FMICallException, t: float, h: float = 0.0) -> FmuCallError:
+        """The error of a failed loop call: what was asked, with the inputs' values when setting them."""
+        if call == self._SET:
             values = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.input_names, self.u))
             return self._fail(f"setting inputs ({values})", exc, t)
-        if call == 1:
+        if call == self._GET:
             return self._fail("getting outputs", exc, t)
         return self._fail(f"doStep from t = {t!r} by {h!r} s", exc, t)
+
+    def kernel_failure(self, call: int, status: int, t: float, h: float) -> FmuCallError:
+        """The error the Python path raises for the same failed call."""
+        return self._call_failure(call, FMICallException(function=self._api._names[call], status=status), t, h)
 
     def write_inputs(self, t: float) -> None:
         """Set all bound inputs from :attr:`u` in one call."""
@@ -434,8 +438,7 @@ class FmuComponent:
             try:
                 self._api.set(self._in_vr, self._c_in, self._u_ptr)
             except FMICallException as exc:
-                values = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.input_names, self.u))
-                raise self._fail(f"setting inputs ({values})", exc, t) from None
+                raise self._call_failure(self._SET, exc, t) from None
 
     def serialize_state(self) -> bytes:
         """The FMU's state, serialized (FMI getFMUState + serializeFMUState)."""
@@ -480,7 +483,7 @@ class FmuComponent:
         try:
             self._api.do_step(t, h)
         except FMICallException as exc:
-            raise self._fail(f"doStep from t = {t!r} by {h!r} s", exc, t) from None
+            raise self._call_failure(self._DO_STEP, exc, t, h) from None
 
     def read_outputs(self, t: float) -> None:
         """Get all bound outputs into :attr:`y` in one call."""
@@ -488,4 +491,4 @@ class FmuComponent:
             try:
                 self._api.get(self._out_vr, self._c_out, self._y_ptr)
             except FMICallException as exc:
-                raise self._fail("getting outputs", exc, t) from None
+                raise self._call_failure(self._GET, exc, t) from None
