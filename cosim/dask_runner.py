@@ -146,8 +146,7 @@ def _message(exc: BaseException) -> str:
 def execute(raw: Mapping[str, Any], source: str | None, task: Task, metrics: Metrics | None = None,
             cache: MasterCache | None = None) -> dict[str, Any]:
     """Run one task (in a worker, or here); always returns its record."""
-    record: dict[str, Any] = {"key": task.key, "status": "failed", "error": None, "seed": task.seed,
-                              "wall_time_s": None, "metrics": {}, "pid": os.getpid()}
+    record = _failed(task, None, os.getpid())
     cache = cache or _worker_cache()
     try:
         scenario = parse_scenario(apply_overrides(dict(raw), task.overrides),
@@ -178,9 +177,10 @@ def execute(raw: Mapping[str, Any], source: str | None, task: Task, metrics: Met
     return record
 
 
-def _failed(task: Task, exc: BaseException) -> dict[str, Any]:
-    return {"key": task.key, "status": "failed", "error": f"worker: {_message(exc)}", "seed": task.seed,
-            "wall_time_s": None, "metrics": {}, "pid": None}
+def _failed(task: Task, error: str | None, pid: int | None = None) -> dict[str, Any]:
+    """A task's record as it stands when the run failed (or before it ran): the one record layout."""
+    return {"key": task.key, "status": "failed", "error": error, "seed": task.seed, "wall_time_s": None,
+            "metrics": {}, "pid": pid}
 
 
 def run_tasks(scenario: Scenario, tasks: Iterable[Task], workers: int = 1, scheduler: str | None = None,
@@ -242,7 +242,7 @@ def _run_dask(raw, source, tasks, workers, scheduler, metrics, window) -> Iterat
             try:
                 record = fut.result()
             except Exception as exc:  # the worker died (e.g. a crash inside an FMU) or the task was lost
-                record = _failed(task, exc)
+                record = _failed(task, f"worker: {_message(exc)}")
             fut.release()
             yield record
             nxt = next(pending, None)
