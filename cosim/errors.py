@@ -61,7 +61,14 @@ class FmuError(CosimError):
 
 class FmuLoadError(FmuError):
     """The FMU file cannot be used: not a zip archive, a broken
-    modelDescription.xml, no binary for this platform, refused instantiation."""
+    modelDescription.xml, no binary for this platform, refused instantiation;
+    or a setting of the instance does not fit the file (``setting``: its key
+    and value, e.g. ``("seed_parameter", "u")``; ``cause``: why, without them)."""
+
+    def __init__(self, instance: str, path: str | Path | None, reason: str,
+                 setting: tuple[str, object] | None = None):
+        self.setting, self.cause = setting, one_line(reason)
+        super().__init__(instance, path, reason if setting is None else f"{setting[0]} = {setting[1]!r}: {reason}")
 
 
 class FmuCallError(FmuError):

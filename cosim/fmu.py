@@ -201,7 +201,7 @@ class FmuComponent:
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
         self.variables = {v.name: v for v in md.modelVariables}
         if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
-            raise FmuLoadError(name, self.path, f"seed parameter {seed_parameter!r} is no parameter of the FMU")
+            raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
         self.feedthrough = self._feedthrough(md)
         self.messages: deque[str] = deque(maxlen=20)
         self._slave = None

@@ -392,6 +392,9 @@ def fmu_error_in_scenario(scenario: Scenario, exc: FmuError) -> ScenarioError:
     """An :class:`~cosim.errors.FmuError` told in the scenario's words: the
     key that brought the FMU (or the parameter it refused), the file, the cause."""
     spec = scenario.fmus.get(exc.instance, {})
+    if getattr(exc, "setting", None) is not None:  # the scenario's own setting does not fit the file
+        key, value = exc.setting
+        return ScenarioError(f"fmus.{exc.instance}.{key} = {value!r}: {exc.cause} file {exc.path}")
     if getattr(exc, "variable", None) is not None:
         said = exc.log or exc.reason
         return ScenarioError(f"fmus.{exc.instance}.parameters.{exc.variable} = {exc.value!r}: refused by the FMU "

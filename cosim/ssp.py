@@ -122,7 +122,8 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     components: dict[str, FmuComponent] = {}
     try:
         for name, spec in scenario.fmus.items():
-            components[name] = FmuComponent(name, fmu_files.get(name) or fmu_file(spec))
+            components[name] = FmuComponent(name, fmu_files.get(name) or fmu_file(spec),
+                                            seed_parameter=spec.get("seed_parameter"))
     except FmuError as exc:
         raise fmu_error_in_scenario(scenario, exc) from None
     parts = []
@@ -132,14 +133,10 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
         part = _Part(name, _fmu_bytes(fmu.path))
         defined = {u.name: u.baseUnit for u in fmu.model_description.unitDefinitions}
         params = dict(scenario.fmus[name]["parameters"])
-        seed_parameter = scenario.fmus[name].get("seed_parameter")
-        if seed_parameter is not None:
-            if getattr(fmu.variables.get(seed_parameter), "causality", None) != "parameter":
-                raise ScenarioError(f"fmus.{name}.seed_parameter = {seed_parameter!r}: no parameter of the FMU file "
-                                    f"{fmu.path}")
+        if fmu.seed_parameter is not None:  # a parameter of the file: FmuComponent checked it
             # the scenario's seed (of the FMU's stream), so that another SSP tool runs with it; our
             # master sets the run's
-            params[seed_parameter] = stream_seed(scenario.seed, scenario.fmus[name].get("seed_stream", 0))
+            params[fmu.seed_parameter] = stream_seed(scenario.seed, scenario.fmus[name].get("seed_stream", 0))
         for var in fmu.model_description.modelVariables:
             kind = var.causality
             if kind not in _KINDS or (kind == "parameter" and var.name not in params):

@@ -418,3 +418,9 @@ def test_an_fmu_on_a_seed_stream_gets_that_streams_seed_at_start(raw):
     with build_master(parse_scenario(raw)) as master:
         result = master.run(0.1, seed=5)
     assert result["Lag.y"][0] == float(stream_seed(5, 3))
+
+
+def test_a_seed_parameter_the_fmu_file_lacks_is_refused_naming_the_key(raw):
+    raw["fmus"]["Lag"]["seed_parameter"] = "nope"
+    with pytest.raises(ScenarioError, match=r"^fmus\.Lag\.seed_parameter = 'nope': no parameter of the FMU file "):
+        build_master(parse_scenario(raw))
