@@ -109,6 +109,13 @@ def _with_acceleration(law):
     return equations
 
 
+def _reference_model(identifier: str, description: str, parameters: tuple, law) -> FmuModel:
+    """A reference trajectory as a stateless FMU model: the outputs p*, v*,
+    a* of ``law`` (a* derived), its ``parameters``."""
+    return FmuModel(identifier=identifier, description=description, variables=_OUTPUTS + parameters,
+                    equations=_with_acceleration(law), initial_state=lambda s: {})
+
+
 # ---- Hover ----------------------------------------------------------------------
 
 
@@ -118,16 +125,15 @@ def _hover(t, s):
     return _outputs((s["x0"], s["y0"], s["z0"]), (zero, zero, zero))
 
 
-REFERENCE_HOVER = FmuModel(
-    identifier="ReferenceHover",
-    description="Reference trajectory: hold a fixed position (world frame NED)",
-    variables=_OUTPUTS + (
+REFERENCE_HOVER = _reference_model(
+    "ReferenceHover",
+    "Reference trajectory: hold a fixed position (world frame NED)",
+    (
         _position("x0", "held position north", 0.0),
         _position("y0", "held position east", 0.0),
         _position("z0", "held position down (NED: -15 m is 15 m altitude)", -15.0),
     ),
-    equations=_with_acceleration(_hover),
-    initial_state=lambda s: {},
+    _hover,
 )
 
 
@@ -177,11 +183,11 @@ def _two_circles(t, s):
     return _outputs(p, v)
 
 
-REFERENCE_TWO_CIRCLES = FmuModel(
-    identifier="ReferenceTwoCircles",
-    description="Reference trajectory of the LM-FNN paper's simulation mission (section 5.2): two circles, "
-                "clockwise climbing then counter-clockwise descending, at a constant speed; world frame NED",
-    variables=_OUTPUTS + (
+REFERENCE_TWO_CIRCLES = _reference_model(
+    "ReferenceTwoCircles",
+    "Reference trajectory of the LM-FNN paper's simulation mission (section 5.2): two circles, "
+    "clockwise climbing then counter-clockwise descending, at a constant speed; world frame NED",
+    (
         _length("radius", "radius of both circles (section 5.2: 20 m diameter)", 10.0),
         _speed("speed", "constant 3-D speed along the path", 2.5),
         _position("climb", "altitude gained over the first circle and lost over the second "
@@ -190,8 +196,7 @@ REFERENCE_TWO_CIRCLES = FmuModel(
         _position("y0", "start point east", 0.0),
         _position("z0", "start point down (NED: -15 m is 15 m altitude)", -15.0),
     ),
-    equations=_with_acceleration(_two_circles),
-    initial_state=lambda s: {},
+    _two_circles,
 )
 
 
@@ -220,11 +225,11 @@ def _figure_eight(t, s):
     return _outputs(p, v)
 
 
-REFERENCE_FIGURE_EIGHT = FmuModel(
-    identifier="ReferenceFigureEight",
-    description="Reference trajectory of the LM-FNN paper's experiment (section 6.1): a figure-8 "
-                "(lemniscate of Gerono) at constant altitude; world frame NED",
-    variables=_OUTPUTS + (
+REFERENCE_FIGURE_EIGHT = _reference_model(
+    "ReferenceFigureEight",
+    "Reference trajectory of the LM-FNN paper's experiment (section 6.1): a figure-8 "
+    "(lemniscate of Gerono) at constant altitude; world frame NED",
+    (
         _speed("max_speed", "largest speed along the figure-8, reached at the crossing", 1.0),
         _length("half_length", "half length a of the figure-8 along north", 2.0),
         _length("half_width", "half width c of the figure-8 along east", 1.0),
@@ -232,8 +237,7 @@ REFERENCE_FIGURE_EIGHT = FmuModel(
         _position("y0", "crossing point east", 0.0),
         _position("z0", "crossing point down (NED: -1.5 m is 1.5 m altitude)", -1.5),
     ),
-    equations=_with_acceleration(_figure_eight),
-    initial_state=lambda s: {},
+    _figure_eight,
 )
 
 REFERENCE_MODELS: dict[str, FmuModel] = {
