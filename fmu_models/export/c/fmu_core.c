@@ -83,7 +83,6 @@ static void set_defaults(Instance *inst) {
     inst->s.mode = MODE_INSTANTIATED;
     for (size_t i = 0; i < N_VARIABLES; i++) inst->s.v[i] = VAR_START[i];
     inst->derived_valid = 0;
-    inst->z_pending = 0;
 }
 
 Instance *core_instantiate(const char *instance_name, CoreKind kind, void *environment,
@@ -138,7 +137,6 @@ static CoreStatus initial_state(Instance *inst) {
     for (size_t i = 0; i < NRS; i++) inst->s.r_step[i] = np_random(&rng);
     inst->s.rng = rng;
 #endif
-    inst->z_pending = 0;
     inst->derived_valid = 0;
     return CORE_OK;
 }
@@ -151,7 +149,6 @@ static void update_pending(Instance *inst) {
 #endif
     inst->res[0] = inst->y_next; inst->res[1] = inst->z_next;
     model_dstep(inst->arg, inst->res, inst->iw, inst->w, 0);
-    inst->z_pending = 1;
 }
 
 static void update_derived(Instance *inst) {
@@ -198,20 +195,26 @@ CoreStatus core_enter_initialization(Instance *inst, double start_time) {
     return CORE_OK;
 }
 
+/* The index of the first non-finite of n values, or -1. */
+static int first_non_finite(const double *values, size_t n) {
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(values[i])) return (int)i;
+    return -1;
+}
+
+/* Refuse a non-finite initial value among the n variables from value reference first. */
+static CoreStatus check_initial_values(Instance *inst, size_t first, size_t n) {
+    int bad = first_non_finite(inst->s.v + first, n);
+    if (bad < 0) return CORE_OK;
+    core_log(inst, CORE_ERROR, "initial value of %s = %g is not finite", VAR_NAME[first + bad],
+             inst->s.v[first + bad]);
+    return CORE_ERROR;
+}
+
 CoreStatus core_exit_initialization(Instance *inst) {
     if (initial_state(inst) != CORE_OK) return CORE_ERROR;
-    for (size_t i = 0; i < NX; i++) {
-        if (!isfinite(X_[i])) {
-            core_log(inst, CORE_ERROR, "initial value of %s = %g is not finite", VAR_NAME[VR_X + i], X_[i]);
-            return CORE_ERROR;
-        }
-    }
-    for (size_t i = 0; i < NZ; i++) {
-        if (!isfinite(Z_[i])) {
-            core_log(inst, CORE_ERROR, "initial value of %s = %g is not finite", VAR_NAME[VR_Z + i], Z_[i]);
-            return CORE_ERROR;
-        }
-    }
+    if (check_initial_values(inst, VR_X, NX) != CORE_OK || check_initial_values(inst, VR_Z, NZ) != CORE_OK)
+        return CORE_ERROR;
     inst->s.held = 0;
     inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE : MODE_EVENT;
     update_derived(inst);
@@ -277,7 +280,6 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
     if (n > 0) {
         inst->derived_valid = 0;
         inst->s.held = 0;
-        inst->z_pending = 0;
     }
     return CORE_OK;
 }
@@ -300,12 +302,6 @@ CoreStatus core_get_float64(Instance *inst, const unsigned vr[], size_t n, doubl
 
 /* ---- co-simulation --------------------------------------------------------- */
 
-static int first_non_finite_state(Instance *inst) {
-    for (size_t i = 0; i < NX; i++)
-        if (!isfinite(X_[i])) return (int)i;
-    return -1;
-}
-
 /* Append "label: name = value, ..." for the n variables from value reference first. */
 static void append_values(Message *msg, const Instance *inst, const char *label, size_t first, size_t n) {
     char number[NUMBER_SIZE];
@@ -315,12 +311,13 @@ static void append_values(Message *msg, const Instance *inst, const char *label,
         message_append(msg, "%s %s = %s", i ? "," : "", VAR_NAME[first + i], exact(number, inst->s.v[first + i]));
 }
 
-/* Everything needed to reproduce a failed step from the log alone: which state,
- * when, and every input and parameter in effect. */
-static void report_non_finite_state(Instance *inst, int bad, double value, double t0, double t1) {
+/* Everything needed to reproduce a failed step from the log alone: which state
+ * (value reference vr: a continuous or a discrete one), when, and every input
+ * and parameter in effect. */
+static void report_non_finite_state(Instance *inst, size_t vr, double value, double t0, double t1) {
     Message msg = {{0}, 0, 0};
     char v[NUMBER_SIZE], from[NUMBER_SIZE], to[NUMBER_SIZE];
-    message_append(&msg, "state %s became %s during the step from t = %s to t = %s", VAR_NAME[VR_X + bad],
+    message_append(&msg, "state %s became %s during the step from t = %s to t = %s", VAR_NAME[vr],
                    exact(v, value), exact(from, t0), exact(to, t1));
     append_values(&msg, inst, "inputs", VR_U, NU);
     append_values(&msg, inst, "parameters", VR_P, NP);
@@ -345,26 +342,18 @@ static CoreStatus sampled_step(Instance *inst, double current_time, double step_
     }
     if (fabs(current_time - T_) > 1e-9 * fmax(1.0, fabs(T_)))
         core_log(inst, CORE_OK, "doStep at t = %.17g: clock re-based from t = %.17g", current_time, T_);
-    if (!inst->z_pending) update_pending(inst);
-    for (size_t i = 0; i < NZ; i++) {
-        if (!isfinite(inst->z_next[i])) {
-            Message msg = {{0}, 0, 0};
-            char v[NUMBER_SIZE], from[NUMBER_SIZE];
-            message_append(&msg, "discrete state %s became %s in the step from t = %s", VAR_NAME[VR_Z + i],
-                           exact(v, inst->z_next[i]), exact(from, current_time));
-            append_values(&msg, inst, "inputs", VR_U, NU);
-            append_values(&msg, inst, "parameters", VR_P, NP);
-            core_log(inst, CORE_ERROR, "%s", msg.text);
-            inst->s.failed = 1;
-            return CORE_ERROR;
-        }
+    if (!inst->derived_valid || inst->s.held) update_pending(inst);  /* else g, f of this z and u are pending */
+    int bad = first_non_finite(inst->z_next, NZ);
+    if (bad >= 0) {
+        report_non_finite_state(inst, VR_Z + (size_t)bad, inst->z_next[bad], current_time, current_time + step_size);
+        inst->s.failed = 1;
+        return CORE_ERROR;
     }
     memcpy(Z_, inst->z_next, NZ * sizeof(double));
     memcpy(Y_, inst->y_next, NY * sizeof(double));
 #if NRS > 0
     for (size_t i = 0; i < NRS; i++) inst->s.r_step[i] = np_random(&inst->s.rng);  /* the next step's */
 #endif
-    inst->z_pending = 0;
     inst->s.held = 1;
     inst->derived_valid = 1;
     T_ = current_time + step_size;
@@ -409,13 +398,13 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
         model_step(inst->arg, inst->res, inst->iw, inst->w, 0);
     }
     inst->derived_valid = 0;
-    int bad = first_non_finite_state(inst);
+    int bad = first_non_finite(X_, NX);
     if (bad >= 0) {
         double value = X_[bad];
         memcpy(X_, inst->x_start, NX * sizeof(double));
         T_ = current_time;
         inst->s.failed = 1;
-        report_non_finite_state(inst, bad, value, current_time, current_time + step_size);
+        report_non_finite_state(inst, VR_X + (size_t)bad, value, current_time, current_time + step_size);
         return CORE_ERROR;
     }
     T_ = current_time + step_size;
@@ -581,7 +570,6 @@ CoreStatus core_set_state(Instance *inst, const CoreState *state) {
     }
     inst->s = *state;
     inst->derived_valid = 0;
-    inst->z_pending = 0;
     return CORE_OK;
 }
 

@@ -90,7 +90,6 @@ typedef struct {
     double w[MODEL_SZ_W + 1];
     double x_start[NX + 1], k_tmp[NX + 1];
     double z_next[NZ + 1], y_next[NY + 1];  /* sampled-data: the pending update */
-    int z_pending;                           /* z_next, y_next are g, f at the current z and u */
     double jac[(NX + NY) * (NX + NU) + 1];
 } Instance;
 
