@@ -160,3 +160,21 @@ def test_a_count_or_probability_the_sensors_would_refuse_is_refused_by_the_scena
     with pytest.raises(ScenarioError) as info:
         load_scenario("circles_sensors", {key: value})
     assert message in str(info.value)
+
+
+def test_with_every_realism_off_the_sensors_scenario_flies_the_clean_circles_bit_for_bit():
+    """No noise, a sample every step, no delay, no motor lag: the sensor and
+    link FMUs pass the values through exactly, so the flight is the clean
+    one (Table 2's numbers stay what they were)."""
+    off = {f"fmus.Sensors.parameters.sigma_{n}": 0.0 for n in ("x", "y", "z", "u", "v", "w", "phi", "theta",
+                                                                  "psi", "p", "q", "r")}
+    off.update({"fmus.Sensors.parameters.sample_rate": 0.0, "fmus.Link.parameters.delay_steps": 0,
+                "fmus.Quadrotor.parameters.tau_m": 0.0})
+    runs = {}
+    for name, overrides in (("circles", {}), ("circles_sensors", off)):
+        sc = load_scenario(name, {"simulation.duration": 5.0, "record.signals": ["Quadrotor.x", "Quadrotor.z",
+                                                                                "controller.Omega_1"], **overrides})
+        with build_master(sc) as master:
+            runs[name] = master.run(sc.duration, seed=3)
+    for signal in ("Quadrotor.x", "Quadrotor.z", "controller.Omega_1"):
+        assert np.array_equal(runs["circles"][signal], runs["circles_sensors"][signal]), signal
