@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     from fnn_controller import QuadrotorController
     from fnn_controller.variants import variant_names
 
-    p_ref, p_ref_dot = np.array([1.0, 0.0, -15.0]), np.array([0.5, 0.0, 0.0])
+    p_ref, p_ref_dot, p_ref_ddot = np.array([1.0, 0.0, -15.0]), np.array([0.5, 0.0, 0.0]), np.zeros(3)
     x = np.zeros(12)
     x[2] = -15.0
     print(f"controller step, best of {args.repeats} x {args.steps} calls:")
@@ -54,7 +54,8 @@ def main(argv=None) -> int:
         ctrl.reset(0)
         fast = _best_per_call(lambda: ctrl.step(p_ref, p_ref_dot, x), args.steps, args.repeats)
         f, state = ctrl.function, ctrl.state
-        plain = _best_per_call(lambda: f(p_ref, p_ref_dot, x, 0.0, state), max(args.steps // 10, 1), args.repeats)
+        plain = _best_per_call(lambda: f(p_ref, p_ref_dot, x, 0.0, state, p_ref_ddot), max(args.steps // 10, 1),
+                               args.repeats)
         print(f"  {variant:8s} {fast * 1e6:9.2f} us {plain * 1e6:9.2f} us {plain / fast:7.1f}x")
     return 0
 
