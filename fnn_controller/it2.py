@@ -50,7 +50,7 @@ import numpy as np
 
 from .fnn import (ALPHA, AXIS_STATE_PORTS, AXIS_STATE_SIZE, C1, C2, F, N_MF, N_RULES, SIGMA1, SIGMA2, FnnInit,
                   firing_strength, normalized_firing_strength)
-from .learning import LearningBounds, alpha_rate, lm_f_rate, sigma_rate, smc_f_rate, switching
+from .learning import RULES, LearningBounds, parameters_step, project, switching
 from .parameters import check_ranges, param
 
 __all__ = [
@@ -139,10 +139,6 @@ def q_rate(y_lower, y_upper, tau_c, gamma_q, phi=0.0):
     return -gamma_q * (y_lower - y_upper) * switching(tau_c, phi)
 
 
-def _clip(value, low, high):
-    return ca.fmin(ca.fmax(value, low), high)
-
-
 def it2_learning_step(rule: str, state, x1, x2, tau_c, w_bar_lower, w_bar_upper, dt, gamma, nu, alpha_bar,
                       gamma_q, bounds: LearningBounds = LearningBounds(), phi=0.0):
     """One forward-Euler step of the IT2 SMC or LM laws for one axis.
@@ -171,33 +167,17 @@ def it2_learning_step(rule: str, state, x1, x2, tau_c, w_bar_lower, w_bar_upper,
     -------
     vector of length IT2_AXIS_STATE_SIZE, the axis state at step k + 1.
     """
-    if rule not in ("smc", "lm"):
+    if rule not in RULES:
         raise ValueError(f"unknown learning rule {rule!r}; expected 'smc' or 'lm'")
-    c1, c2 = state[C1], state[C2]
-    sigma1, sigma2 = state[SIGMA1], state[SIGMA2]
-    f, alpha, q, primed = state[F], state[ALPHA], state[Q], state[PRIMED]
-
-    # eqs. 33-34 / 57-58 (IT-6): the centres follow the inputs' increments
-    c1_next = _clip(c1 + primed * (x1 - state[X1_PREV]), -bounds.c1_max, bounds.c1_max)
-    c2_next = _clip(c2 + primed * (x2 - state[X2_PREV]), -bounds.c2_max, bounds.c2_max)
-    # eqs. 35-36 / 59-60 (IT-7) on the lower (nominal) width; the upper width (1 + d) sigma follows
-    sigma1_next = _clip(sigma1 + dt * sigma_rate(x1, c1, sigma1, alpha, tau_c, bounds.a_min, phi),
-                        bounds.sigma1_min, bounds.sigma1_max)
-    sigma2_next = _clip(sigma2 + dt * sigma_rate(x2, c2, sigma2, alpha, tau_c, bounds.a_min, phi),
-                        bounds.sigma2_min, bounds.sigma2_max)
-    w_bar_q = it2_regressor(w_bar_lower, w_bar_upper, q)
-    if rule == "smc":
-        f_dot = smc_f_rate(w_bar_q, alpha, tau_c, phi)  # IT-8 (eq. 37 with W_bar_q)
-        alpha_next = _clip(alpha + dt * alpha_rate(tau_c, alpha, gamma, nu), 0.0, bounds.alpha_max)  # eq. 38
-    else:
-        f_dot = lm_f_rate(w_bar_q, tau_c, gamma, alpha_bar, phi)  # IT-10, IT-11 (eqs. 61-62 with W_bar_q)
-        alpha_next = alpha
-    f_next = _clip(f + dt * f_dot, -bounds.f_max, bounds.f_max)
+    f, q = state[F], state[Q]
+    # IT-6 ... IT-8, IT-10, IT-11: eqs. 33-38 / 57-62 with the regressor W_bar_q, on the lower
+    # (nominal) widths (the upper width (1 + d) sigma follows)
+    parameters = parameters_step(rule, state, (state[X1_PREV], state[X2_PREV]), state[PRIMED], x1, x2, tau_c,
+                                 it2_regressor(w_bar_lower, w_bar_upper, q), dt, gamma, nu, alpha_bar, bounds, phi)
     y_lower, y_upper = ca.dot(f, w_bar_lower), ca.dot(f, w_bar_upper)
-    q_next = _clip(q + dt * q_rate(y_lower, y_upper, tau_c, gamma_q, phi), 0.0, 1.0)  # IT-9
+    q_next = project(q + dt * q_rate(y_lower, y_upper, tau_c, gamma_q, phi), 0.0, 1.0)  # IT-9
 
-    next_state = ca.vertcat(c1_next, c2_next, sigma1_next, sigma2_next, f_next, alpha_next, q_next,
-                            x1, x2, ca.DM(1.0))
+    next_state = ca.vertcat(*parameters, q_next, x1, x2, ca.DM(1.0))
     assert next_state.shape[0] == IT2_AXIS_STATE_SIZE
     return next_state
 

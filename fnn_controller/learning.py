@@ -43,7 +43,7 @@ from .parameters import check_ranges, param
 
 __all__ = [
     "LearningBounds", "sgn", "switching", "sigma_rate", "smc_f_rate", "alpha_rate", "lm_delta",
-    "lm_f_rate", "learning_step", "clip_inputs", "RULES",
+    "lm_f_rate", "learning_step", "parameters_step", "project", "clip_inputs", "RULES",
 ]
 
 RULES = ("smc", "lm")
@@ -170,8 +170,41 @@ def clip_inputs(x1, x2, bounds: LearningBounds):
             ca.fmin(ca.fmax(x2, -bounds.x2_max), bounds.x2_max))
 
 
-def _clip(value, low, high):
+def project(value, low, high):
+    """``value`` projected onto ``[low, high]`` (the projections of eqs. 28-29)."""
     return ca.fmin(ca.fmax(value, low), high)
+
+
+def parameters_step(rule: str, state, previous_inputs, primed, x1, x2, tau_c, w_bar, dt, gamma, nu, alpha_bar,
+                    bounds: LearningBounds = LearningBounds(), phi=0.0):
+    """The centres, widths, consequents and alpha of one axis at step k + 1,
+    eqs. (33)-(38) (``"smc"``) or (57)-(62) (``"lm"``, alpha held), from the
+    elements C1 ... ALPHA of ``state`` (the layout of :mod:`fnn_controller.fnn`,
+    which the interval type-2 state shares), the previous inputs
+    ``(x1, x2)`` and the ``primed`` flag: the part of the learning step the
+    type-1 and the interval type-2 FNN have in common (the latter passes its
+    regressor W_bar_q as ``w_bar``). Returns ``(c1, c2, sigma1, sigma2, f, alpha)``."""
+    c1, c2 = state[C1], state[C2]
+    sigma1, sigma2 = state[SIGMA1], state[SIGMA2]
+    f, alpha = state[F], state[ALPHA]
+    x1_prev, x2_prev = previous_inputs
+
+    # eqs. 33-34 / 57-58 discretized with the inputs' increments
+    c1_next = project(c1 + primed * (x1 - x1_prev), -bounds.c1_max, bounds.c1_max)
+    c2_next = project(c2 + primed * (x2 - x2_prev), -bounds.c2_max, bounds.c2_max)
+    # eqs. 35-36 / 59-60
+    sigma1_next = project(sigma1 + dt * sigma_rate(x1, c1, sigma1, alpha, tau_c, bounds.a_min, phi),
+                          bounds.sigma1_min, bounds.sigma1_max)
+    sigma2_next = project(sigma2 + dt * sigma_rate(x2, c2, sigma2, alpha, tau_c, bounds.a_min, phi),
+                          bounds.sigma2_min, bounds.sigma2_max)
+    if rule == "smc":
+        f_dot = smc_f_rate(w_bar, alpha, tau_c, phi)  # eq. 37
+        alpha_next = project(alpha + dt * alpha_rate(tau_c, alpha, gamma, nu), 0.0, bounds.alpha_max)  # eq. 38
+    else:
+        f_dot = lm_f_rate(w_bar, tau_c, gamma, alpha_bar, phi)  # eqs. 61-62
+        alpha_next = alpha
+    f_next = project(f + dt * f_dot, -bounds.f_max, bounds.f_max)
+    return c1_next, c2_next, sigma1_next, sigma2_next, f_next, alpha_next
 
 
 def learning_step(rule: str, state, x1, x2, tau_c, w_bar, dt: float, gamma: float,
@@ -209,27 +242,8 @@ def learning_step(rule: str, state, x1, x2, tau_c, w_bar, dt: float, gamma: floa
     """
     if rule not in RULES:
         raise ValueError(f"unknown learning rule {rule!r}; expected one of {RULES}")
-    c1, c2 = state[C1], state[C2]
-    sigma1, sigma2 = state[SIGMA1], state[SIGMA2]
-    f, alpha, primed = state[F], state[ALPHA], state[PRIMED]
-
-    # eqs. 33-34 / 57-58 discretized with the inputs' increments
-    c1_next = _clip(c1 + primed * (x1 - state[X1_PREV]), -bounds.c1_max, bounds.c1_max)
-    c2_next = _clip(c2 + primed * (x2 - state[X2_PREV]), -bounds.c2_max, bounds.c2_max)
-    # eqs. 35-36 / 59-60
-    sigma1_next = _clip(sigma1 + dt * sigma_rate(x1, c1, sigma1, alpha, tau_c, bounds.a_min, phi),
-                        bounds.sigma1_min, bounds.sigma1_max)
-    sigma2_next = _clip(sigma2 + dt * sigma_rate(x2, c2, sigma2, alpha, tau_c, bounds.a_min, phi),
-                        bounds.sigma2_min, bounds.sigma2_max)
-    if rule == "smc":
-        f_dot = smc_f_rate(w_bar, alpha, tau_c, phi)  # eq. 37
-        alpha_next = _clip(alpha + dt * alpha_rate(tau_c, alpha, gamma, nu), 0.0, bounds.alpha_max)  # eq. 38
-    else:
-        f_dot = lm_f_rate(w_bar, tau_c, gamma, alpha_bar, phi)  # eqs. 61-62
-        alpha_next = alpha
-    f_next = _clip(f + dt * f_dot, -bounds.f_max, bounds.f_max)
-
-    next_state = ca.vertcat(c1_next, c2_next, sigma1_next, sigma2_next, f_next, alpha_next,
-                            x1, x2, ca.DM(1.0))
+    parameters = parameters_step(rule, state, (state[X1_PREV], state[X2_PREV]), state[PRIMED], x1, x2, tau_c,
+                                 w_bar, dt, gamma, nu, alpha_bar, bounds, phi)
+    next_state = ca.vertcat(*parameters, x1, x2, ca.DM(1.0))
     assert next_state.shape[0] == AXIS_STATE_SIZE
     return next_state
