@@ -166,8 +166,7 @@ def lm_f_rate(w_bar, tau_c, gamma, alpha_bar, phi=0.0):
 
 def clip_inputs(x1, x2, bounds: LearningBounds):
     """FNN inputs clipped to the box of eq. (27)."""
-    return (ca.fmin(ca.fmax(x1, -bounds.x1_max), bounds.x1_max),
-            ca.fmin(ca.fmax(x2, -bounds.x2_max), bounds.x2_max))
+    return project(x1, -bounds.x1_max, bounds.x1_max), project(x2, -bounds.x2_max, bounds.x2_max)
 
 
 def project(value, low, high):
