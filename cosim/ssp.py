@@ -386,20 +386,23 @@ def _number(where: str, text: str | None, what: str) -> float:
 
 
 def _source_path(where: str, source: str, folder: Path) -> Path:
-    """A component's or parameter set's ``source`` URI as a file: relative
-    references resolve against the SSD's folder; ``file:`` URIs are taken as
-    they are; other schemes are refused."""
+    """A component's or parameter set's ``source`` URI as a file inside the
+    archive: a relative reference, resolved against the SSD's folder, that
+    stays inside it (symbolic links followed). An archive is data
+    (``docs/security.md``): a ``file:`` URI, an absolute path or a ``..``
+    that leaves the folder would load an FMU, that is native code, from
+    anywhere, and is refused like any other scheme."""
     parsed = urllib.parse.urlparse(source)
-    if parsed.scheme in ("", "file") or (len(parsed.scheme) == 1 and os.name == "nt"):
-        if parsed.scheme == "file":
-            path = Path(urllib.parse.unquote(parsed.path))
-        else:
-            path = folder / urllib.parse.unquote(source)
-        if not path.is_file():
-            raise ScenarioError(f"{where}: source {source!r}: no such file in the archive ({path})")
-        return path
-    raise ScenarioError(f"{where}: source {source!r}: only files inside the archive (relative URIs) or file: "
-                        f"URIs are supported, not {parsed.scheme}:")
+    if parsed.scheme or parsed.netloc or source.startswith(("/", "\\")):
+        raise ScenarioError(f"{where}: source {source!r}: only files inside the archive (relative URIs) are "
+                            f"supported")
+    inside = folder.resolve()
+    path = (inside / urllib.parse.unquote(parsed.path)).resolve()
+    if not path.is_relative_to(inside):
+        raise ScenarioError(f"{where}: source {source!r}: leaves the archive; only files inside it are supported")
+    if not path.is_file():
+        raise ScenarioError(f"{where}: source {source!r}: no such file in the archive ({path})")
+    return path
 
 
 def _parameter_set(where: str, node: etree._Element) -> dict[str, float]:
@@ -585,10 +588,17 @@ def _read_ssd(ssd_path: Path) -> _System:
                 out.envelope[signal] = [_number(f"{where}: Envelope {signal!r}", item.get(k), k)
                                         for k in ("low", "high")]
             elif tag == "Section":
+                # An archive is data: only an application's registered sections (tables of values
+                # its own code checks), never a component table, a short component section or a
+                # generic key, which could name Python code to run (a factory).
+                name = item.get("name", "")
+                if name not in registry.sections():
+                    raise ScenarioError(f"{where}: Section {name!r}: not a section an archive may carry; known: "
+                                        f"{', '.join(sorted(registry.sections())) or '(none registered)'}")
                 try:
-                    out.sections[item.get("name", "")] = json.loads(item.text or "")
+                    out.sections[name] = json.loads(item.text or "")
                 except json.JSONDecodeError as exc:
-                    raise ScenarioError(f"{where}: Section {item.get('name')!r}: not JSON ({exc})") from None
+                    raise ScenarioError(f"{where}: Section {name!r}: not JSON ({exc})") from None
     return out
 
 
@@ -701,6 +711,9 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
             scenario = parse_scenario(apply_overrides(raw, overrides or {}), source=ssd_path)
         except ScenarioError as exc:
             raise ScenarioError(f"{label}: {exc}") from None
+        if scenario.components:  # an archive holds FMUs only: it never names Python code to run
+            raise ScenarioError(f"{label}: Python component(s) {', '.join(sorted(scenario.components))}: an "
+                                f"SSP archive holds FMUs only")
     except BaseException:
         if temporary is not None:
             shutil.rmtree(temporary, ignore_errors=True)

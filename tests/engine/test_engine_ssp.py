@@ -5,6 +5,7 @@ answers are derived by hand. ``docs/ssp.md`` quotes what these tests find."""
 from __future__ import annotations
 
 import gc
+import json
 import importlib.util
 import re
 import subprocess
@@ -24,7 +25,7 @@ from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.fmu import FmuComponent
 from cosim.master import Master
 from cosim.scenario import build_master, parse_scenario
-from cosim.ssp import (COSIM_ANNOTATION, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, export_ssp, load_ssp,
+from cosim.ssp import (COSIM_ANNOTATION, COSIM_NAMESPACE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, export_ssp, load_ssp,
                        ssd_schema_errors)
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel
@@ -324,6 +325,16 @@ BAD_SSDS = [
      "ssd:Component 'B': source 'resources/Missing.fmu': no such file in the archive"),
     (lambda r: _component(r, "B").set("source", "https://example.org/B.fmu"),
      "ssd:Component 'B': source 'https://example.org/B.fmu': only files inside the archive"),
+    (lambda r: _component(r, "B").set("source", "../../B.fmu"),
+     "ssd:Component 'B': source '../../B.fmu': leaves the archive; only files inside it are supported"),
+    (lambda r: _component(r, "B").set("source", "resources/../../x/B.fmu"),
+     "ssd:Component 'B': source 'resources/../../x/B.fmu': leaves the archive"),
+    (lambda r: _component(r, "B").set("source", "file:///tmp/B.fmu"),
+     "ssd:Component 'B': source 'file:///tmp/B.fmu': only files inside the archive (relative URIs) are supported"),
+    (lambda r: _component(r, "B").set("source", "/tmp/B.fmu"),
+     "ssd:Component 'B': source '/tmp/B.fmu': only files inside the archive (relative URIs) are supported"),
+    (lambda r: _component(r, "C").find(".//ssd:ParameterBinding", NS).set("source", "../C.ssv"),
+     "ssd:Component 'C': ssd:ParameterBinding 1: source '../C.ssv': leaves the archive"),
     (lambda r: _component(r, "B").set("type", "application/x-ssp-definition"),
      "ssd:Component 'B': type 'application/x-ssp-definition' is not supported (application/x-fmu-sharedlibrary "
      "only)"),
@@ -362,6 +373,37 @@ def test_a_bad_ssd_is_refused_naming_the_element(archive, tmp_path, edit, messag
     assert text.startswith(f"{folder}: {SSD_NAME}: ")
     assert message in text
     assert "\n" not in text
+
+
+def _section(name: str, value) -> callable:
+    """An edit adding ``<cosim:Section name=...>`` (JSON) to the engine's annotation."""
+    def edit(root):
+        scenario = root.find(f"ssd:System/ssd:Annotations/ssc:Annotation[@type='{COSIM_ANNOTATION}']", NS)[0]
+        etree.SubElement(scenario, f"{{{COSIM_NAMESPACE}}}Section", name=name).text = json.dumps(value)
+    return edit
+
+
+@pytest.mark.parametrize("name, value", [
+    ("components", {"evil": {"factory": "os:makedirs"}}),  # would call os.makedirs(name="evil")
+    ("toy_source", {"kind": "toy_constant", "value": 1.0}),  # a registered kind's short section
+    ("connections", ["A.y -> B.u"]),  # a generic key
+    ("fmus", {"D": {"path": "/etc/passwd"}}),
+])
+def test_an_archive_runs_no_code_of_its_own_choosing(archive, tmp_path, monkeypatch, name, value):
+    """An archive is data (docs/security.md): its annotation may carry an
+    application's registered sections only, never a component (a factory
+    would run any callable) nor a generic key; refused before anything runs."""
+    folder = _edited(archive, tmp_path, _section(name, value))
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ScenarioError) as info:
+        build_master(load_ssp(folder))
+    assert re.search(rf"Section {name!r}: not a section an archive may carry; known: .*toy_lag", str(info.value))
+    assert not (tmp_path / "evil").exists()
+
+
+def test_an_archive_carries_a_registered_section(archive, tmp_path):
+    folder = _edited(archive, tmp_path, _section("toy_lag", {"fmu": "B", "time_constant": 0.5}))
+    assert load_ssp(folder).fmus["B"]["parameters"]["tau"] == 0.5
 
 
 def test_bad_files_are_refused(archive, tmp_path):
