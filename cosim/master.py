@@ -35,7 +35,7 @@ import numpy as np
 from .component import Port, PythonComponent
 from .connection import Connection, check_connections, parse_connections
 from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError
-from .fmu import FmuComponent, stream_seed
+from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
 from .recorder import Recorder
 

@@ -8,7 +8,7 @@ register:
   section (an *alias*: ``[trajectory]`` for ``[components.reference]``);
 * :class:`Section` -- a top-level table that is no component (e.g. a
   shorthand that sets FMU parameters, or the signals a metric compares);
-* :class:`FmuModel` -- a model the engine builds into an FMU on demand, named
+* :class:`RegisteredModel` -- a model the engine builds into an FMU on demand, named
   by ``[fmus.NAME] model = "..."``;
 * folders of shipped scenario files, loadable by name.
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-__all__ = ["ComponentKind", "Section", "FmuModel", "BuildContext", "register_component_kind", "register_section",
+__all__ = ["ComponentKind", "Section", "RegisteredModel", "BuildContext", "register_component_kind", "register_section",
            "register_fmu_model", "register_scenarios", "component_kinds", "sections", "fmu_models",
            "aliases", "scenario_folders", "scoped", "PLUGIN_GROUP"]
 
@@ -77,7 +77,7 @@ class Section:
 
 
 @dataclass(frozen=True)
-class FmuModel:
+class RegisteredModel:
     """A model built into an FMU on demand.
 
     ``build(fmi_version)`` returns the path of the FMU (cached by the
@@ -93,7 +93,7 @@ class FmuModel:
 
 _KINDS: dict[str, ComponentKind] = {}
 _SECTIONS: dict[str, Section] = {}
-_MODELS: dict[str, FmuModel] = {}
+_MODELS: dict[str, RegisteredModel] = {}
 _SCENARIO_FOLDERS: list[Path] = []
 _plugins_loaded = False
 
@@ -118,7 +118,7 @@ def register_section(section: Section) -> Section:
     return section
 
 
-def register_fmu_model(model: FmuModel) -> FmuModel:
+def register_fmu_model(model: RegisteredModel) -> RegisteredModel:
     _register(_MODELS, model.name, model, "FMU model")
     return model
 
@@ -160,7 +160,7 @@ def sections() -> dict[str, Section]:
     return dict(_SECTIONS)
 
 
-def fmu_models() -> dict[str, FmuModel]:
+def fmu_models() -> dict[str, RegisteredModel]:
     _load_plugins()
     return dict(_MODELS)
 

@@ -24,7 +24,7 @@ see ``docs/cosim.md``)::
     parameters = { x_0 = 1.0 }           # checked against the model's variables and ranges
     seed_parameter = "seed"              # a parameter set to the run's seed at every start
     seed_stream = 1                      # int >= 0, with seed_parameter: the run's random stream k
-                                         #   (cosim.fmu.stream_seed; default 0, the run's seed itself):
+                                         #   (cosim.fmu_component.stream_seed; default 0, the run's seed itself):
                                          #   FMUs on different streams draw independent numbers
 
     [components.<name>]                  # a Python component
@@ -405,7 +405,7 @@ def fmu_error_in_scenario(scenario: Scenario, exc: FmuError) -> ScenarioError:
 
 
 def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
-    from .fmu import FmuComponent
+    from .fmu_component import FmuComponent
 
     fmus = []
     try:
@@ -440,7 +440,7 @@ def _make_component(name: str, spec: Mapping[str, Any], context: registry.BuildC
 def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None):
     """A :class:`~cosim.master.Master` for ``scenario`` (FMUs built on demand
     and instantiated at once, so a file that cannot run is refused here). A
-    component kind may build an :class:`~cosim.fmu.FmuComponent` (with its
+    component kind may build an :class:`~cosim.fmu_component.FmuComponent` (with its
     ``parameters`` and ``seed_parameter``); it then runs as an FMU.
 
     ``fmu_files`` may give, per instance, an FMU file or an extracted FMU
@@ -448,7 +448,7 @@ def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None
     """
     from .master import Master
 
-    from .fmu import FmuComponent
+    from .fmu_component import FmuComponent
 
     fmus = _make_fmus(scenario, dict(fmu_files or {}))
     try:

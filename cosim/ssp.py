@@ -117,7 +117,7 @@ def _fmu_bytes(path: Path) -> bytes:
 def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     """Every FMU's file, connectors, parameter values and units, checked as
     :func:`~cosim.scenario.build_master` would (without instantiating)."""
-    from .fmu import FmuComponent, stream_seed
+    from .fmu_component import FmuComponent, stream_seed
 
     components: dict[str, FmuComponent] = {}
     try:

@@ -13,7 +13,7 @@ co-simulation, C code generation and linearization):
 
 Values the paper leaves open are documented in ``docs/controller.md``.
 """
-from .controller import (STATE_SIZE, FastFunction, QuadrotorController, controller_step_function,
+from .step import (STATE_SIZE, FastFunction, QuadrotorController, controller_step_function,
                          initial_state, state_size)
 from .fnn import FnnInit, fnn_output, firing_strength, membership, normalized_firing_strength
 from .geometric import (GeometricParams, VehicleParams, initial_velocity_state, velocity_controller,

@@ -25,7 +25,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .controller import STEP_INPUT_NAMES, Y_PARTS, controller_step, step_symbols
+from .step import STEP_INPUT_NAMES, Y_PARTS, controller_step, step_symbols
 from .geometric import GeometricParams, initial_velocity_state
 from .parameters import parameter_info
 from .position import PositionParams, fnn_state_size
@@ -125,7 +125,7 @@ def parametric_step_function(variant: str, position: PositionParams = PositionPa
                              geometric: GeometricParams = GeometricParams()) -> ca.Function:
     """``controller_step_<variant>_parametric(p_ref[3], p_ref_dot[3], x[12],
     psi_ref, state[n], p[m], p_ref_ddot[3]) -> (y[17], state_next[n], check)``: the flat step
-    of :func:`~fnn_controller.controller.flat_step_function` with the
+    of :func:`~fnn_controller.step.flat_step_function` with the
     parameters of :func:`parameter_table` as the input ``p``. ``position``
     and ``geometric`` give the structural choices (``desired_rate``) and the
     constants of the fields that are no parameter of ``variant``."""

@@ -5,7 +5,7 @@ Why cut there: in the paper's laboratory the position controller with its
 learning FNN runs on a ground computer, and the AR.Drone 2.0 closes its own
 velocity and attitude loops on board; the velocity command travels over
 Wi-Fi. A link's delay, loss or noise then belongs between the two loops,
-where one FMU holding both (:mod:`fnn_controller.fmu`) cannot place it.
+where one FMU holding both (:mod:`fnn_controller.controller_fmu`) cannot place it.
 
 * ``outer`` (ground): eqs. 12, 19, 24-26 and the learning laws of the
   variant; ``(p_ref[3], p_ref_dot[3], x[6], state[n], p[m], p_ref_ddot[3])
@@ -33,8 +33,8 @@ from fmu_models.export.model import FmuModel
 from fmu_models.export.variables import discrete, input_
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
-from .controller import OUTPUTS, state_ports
-from .fmu import ACCELERATION_INPUTS, PARAMETERS, REFERENCE_INPUTS, STATE, step_model
+from .step import OUTPUTS, state_ports
+from .controller_fmu import ACCELERATION_INPUTS, PARAMETERS, REFERENCE_INPUTS, STATE, step_model
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
 from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table
 from .position import PositionParams, fnn_state_size, position_controller

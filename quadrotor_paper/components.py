@@ -25,7 +25,7 @@ TRAJECTORY_INSTANCE = "reference"
 CONTROLLER_INSTANCE = "controller"
 
 
-def _fmu_model(identifier: str, load) -> registry.FmuModel:
+def _fmu_model(identifier: str, load) -> registry.RegisteredModel:
     """The model ``load()`` returns, registered as ``identifier``; imported
     (and built) only when a scenario checks one of its parameters or needs
     its FMU."""
@@ -47,7 +47,7 @@ def _fmu_model(identifier: str, load) -> registry.FmuModel:
             raise KeyError(f"{name!r} is {article} {var.causality} of {model.identifier}, not a parameter")
         var.check(value)
 
-    return registry.FmuModel(identifier, build, check_parameter)
+    return registry.RegisteredModel(identifier, build, check_parameter)
 
 
 def _trajectory_kind(name: str) -> registry.ComponentKind:
@@ -74,12 +74,12 @@ def _trajectory_kind(name: str) -> registry.ComponentKind:
 
 def _controller_kind() -> registry.ComponentKind:
     def check(where: str, params: Mapping[str, Any]) -> None:
-        from .controller import ControllerComponent
+        from .controller_component import ControllerComponent
 
         ControllerComponent.from_parameters(where, params)
 
     def build(instance: str, params: Mapping[str, Any], context) -> Any:
-        from .controller import ControllerComponent
+        from .controller_component import ControllerComponent
 
         return ControllerComponent.from_parameters(instance, params, context)
 
@@ -100,7 +100,7 @@ def register() -> None:
     from fmu_models.catalog import MODEL_NAMES, model as catalog_model
     from fnn_controller.variants import variant_names
 
-    from fnn_controller.fmu import controller_model, fmu_identifier
+    from fnn_controller.controller_fmu import controller_model, fmu_identifier
     from fnn_controller.split import INNER_IDENTIFIER, inner_model, outer_identifier, outer_model
 
     from .missions import parse_metrics, parse_wind

@@ -7,7 +7,7 @@ One file format for both forms of the controller, a JSON document::
      "names": ["c1_1_x", ..., "R_ref_primed"], "state": [...]}
 
 ``names`` and ``state`` are the whole controller state in state order
-(:func:`fnn_controller.controller.state_ports`: the learned parameters of
+(:func:`fnn_controller.step.state_ports`: the learned parameters of
 each axis, then the velocity controller's previous R*). The Python fast path
 reads and writes the state directly. The controller FMU is read and written
 **through FMU state serialization**: after initialization its serialized
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.errors import ScenarioError
-from cosim.fmu import FmuComponent
+from cosim.fmu_component import FmuComponent
 
 __all__ = ["FORMAT", "save_learned", "load_learned", "LearnedControllerFmu", "state_of", "write_learned"]
 
@@ -35,7 +35,7 @@ VERSION = 1
 
 
 def _names(variant: str) -> list[str]:
-    from fnn_controller.controller import state_ports
+    from fnn_controller.step import state_ports
 
     return [name for name, _, _ in state_ports(variant)]
 

@@ -55,7 +55,7 @@ from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2, n
 from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
 from fnn_controller.position import axis_slice, initial_fnn_state
 
-from .controller import internal_ports
+from .controller_component import internal_ports
 
 __all__ = ["Run", "AxisClaims", "record_run", "evaluate_claims", "default_runs",
            "finite_time_report"]

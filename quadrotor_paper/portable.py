@@ -30,11 +30,11 @@ def _reference(spec: dict) -> dict:
 
 
 def _controller(name: str, spec: dict, scenario: Scenario) -> dict:
-    from cosim.fmu import FmuComponent
-    from fnn_controller.fmu import fmu_identifier
+    from cosim.fmu_component import FmuComponent
+    from fnn_controller.controller_fmu import fmu_identifier
     from fnn_controller.parametric import parameter_table
 
-    from .controller import ControllerComponent
+    from .controller_component import ControllerComponent
 
     # the controller's nominal vehicle reads the plant's parameters, as when it is built for a run
     fmus = {n: FmuComponent(n, fmu_file(s)) for n, s in scenario.fmus.items()}

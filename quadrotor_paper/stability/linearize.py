@@ -19,7 +19,7 @@ the one source of truth.
   I``, the Jacobian of the position controller's own expression).
 
 The master runs ``controller_step_function("pd", ...)``, which composes the
-same two laws (``fnn_controller.controller``); :func:`linearize_controller_step`
+same two laws (``fnn_controller.step``); :func:`linearize_controller_step`
 differentiates that function so a test can check the composition.
 """
 from __future__ import annotations

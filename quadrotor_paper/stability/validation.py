@@ -9,7 +9,7 @@ point and see the same reference from t = 0, so their samples at t_n can be
 compared one to one.
 
 * :func:`position_step` -- the PD + velocity controller + plant after a step
-  of the position reference (master with :class:`~quadrotor_paper.controller.ControllerComponent`);
+  of the position reference (master with :class:`~quadrotor_paper.controller_component.ControllerComponent`);
 * :func:`velocity_step` -- the inner loop alone after a step of the desired
   velocity (master with :class:`VelocityCommandComponent`, which runs
   ``velocity_controller_function`` -- the law inside the full controller);
@@ -29,12 +29,12 @@ import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR
 from fnn_controller import GeometricParams, velocity_controller_function
-from fnn_controller.controller import FastFunction
+from fnn_controller.step import FastFunction
 from fnn_controller.geometric import initial_velocity_state
 
 from cosim.component import Port, PythonComponent
-from ..controller import ControllerComponent
-from cosim.fmu import FmuComponent
+from ..controller_component import ControllerComponent
+from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from ..trajectories import Hover, ReferenceComponent
 from .loops import LoopModel

@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from fnn_controller.controller import FastFunction
+from fnn_controller.step import FastFunction
 from fnn_controller.fnn import fnn_output, normalized_firing_strength
 from fnn_controller.it2 import (ALPHA, C1, C2, F, IT2_AXIS_STATE_SIZE, IT2_DEFAULTS, PRIMED, Q, SIGMA1, SIGMA2,
                                 X1_PREV, X2_PREV, IT2Params, it2_firing_strengths, it2_learning_step,

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnn_controller.controller import FastFunction
+from fnn_controller.step import FastFunction
 from fnn_controller.fnn import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV,
                                 normalized_firing_strength)
 from fnn_controller.learning import (LearningBounds, learning_step, lm_delta, lm_f_rate, sigma_rate,

@@ -13,7 +13,7 @@ from fmu_models.models.quadrotor import DEFAULTS, hover_rotor_speed
 from fnn_controller import (STATE_SIZE, GeometricParams, PositionParams, QuadrotorController,
                             controller_step_function, initial_state, position_controller_function,
                             velocity_controller_function)
-from fnn_controller.controller import FastFunction
+from fnn_controller.step import FastFunction
 from fnn_controller.geometric import initial_velocity_state
 from fnn_controller.position import initial_fnn_state
 from fnn_controller import initial_state as fc_initial_state
@@ -250,7 +250,7 @@ def test_velocity_feed_forward_removes_the_ramp_lag_of_the_pd(plant_fmu):
 
 
 def test_feed_forward_zero_is_the_papers_law_bit_for_bit():
-    from fnn_controller.controller import controller_step_function
+    from fnn_controller.step import controller_step_function
 
     rng = np.random.default_rng(5)
     args = (rng.normal(size=3), rng.normal(size=3), rng.normal(size=12), 0.3,
@@ -263,7 +263,7 @@ def test_feed_forward_zero_is_the_papers_law_bit_for_bit():
 
 
 def test_acceleration_feed_forward_zero_is_the_papers_law_bit_for_bit():
-    from fnn_controller.controller import controller_step_function
+    from fnn_controller.step import controller_step_function
 
     rng = np.random.default_rng(6)
     args = (rng.normal(size=3), rng.normal(size=3), rng.normal(size=12), 0.3,

@@ -8,7 +8,7 @@ import pytest
 
 from cosim import kernel
 from cosim.errors import DivergenceError, FmuCallError
-from cosim.fmu import FmuComponent
+from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.recorder import read_results
 from toy_models import lag_fmu_path

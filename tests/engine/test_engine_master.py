@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError
-from cosim.fmu import FmuComponent
+from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.recorder import read_results, sidecar_path
 from toy_models import (LAG_K, LAG_TAU, Constant, Failing, Gain, PController, Probe, Step, lag_fmu2,  # noqa: F401

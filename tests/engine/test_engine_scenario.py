@@ -375,7 +375,7 @@ def test_a_value_refused_by_an_fmu_file_is_told_in_the_scenario_words(file_scena
 def test_cosim_imports_nothing_of_the_application():
     """Importing the engine (without reading a registry, which would load the
     cosim.plugins entry points) pulls in no application package."""
-    code = ("import cosim.master, cosim.scenario, cosim.registry, cosim.fmu, cosim.recorder, cosim.guard, "
+    code = ("import cosim.master, cosim.scenario, cosim.registry, cosim.fmu_component, cosim.recorder, cosim.guard, "
             "cosim.connection, cosim.config, cosim.progress, sys; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in "
             "('quadrotor_paper', 'fnn_controller', 'fmu_models')))")
@@ -397,7 +397,7 @@ def test_a_bad_seed_stream_is_refused_naming_the_key(raw, spec, message):
 
 
 def test_stream_seeds_are_the_run_seed_for_stream_0_and_numpys_spawned_children_otherwise():
-    from cosim.fmu import SEED_LIMIT, stream_seed
+    from cosim.fmu_component import SEED_LIMIT, stream_seed
 
     assert [stream_seed(s, 0) for s in (0, 7, 2 ** 40)] == [0, 7, 2 ** 40]
     seeds = {stream_seed(s, k) for s in range(20) for k in range(1, 6)}
@@ -410,7 +410,7 @@ def test_stream_seeds_are_the_run_seed_for_stream_0_and_numpys_spawned_children_
 def test_an_fmu_on_a_seed_stream_gets_that_streams_seed_at_start(raw):
     """The master sets the seed parameter to the stream's seed of the run's
     seed (the toy lag's y_0 plays the seed parameter: its first output shows it)."""
-    from cosim.fmu import stream_seed
+    from cosim.fmu_component import stream_seed
 
     raw["fmus"]["Lag"].update({"seed_parameter": "y_0", "seed_stream": 3})
     raw["fmus"]["Lag"]["parameters"] = {}

@@ -22,7 +22,7 @@ import cosim
 import toy_models
 from cosim.connection import parse_connections
 from cosim.errors import ConnectionCheckError, ScenarioError
-from cosim.fmu import FmuComponent
+from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.scenario import build_master, parse_scenario
 from cosim.ssp import (COSIM_ANNOTATION, COSIM_NAMESPACE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, export_ssp, load_ssp,

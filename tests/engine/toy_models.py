@@ -282,4 +282,4 @@ def register_toys() -> None:
     registry.register_component_kind(registry.ComponentKind(
         "toy_gain", _builder(Gain), _numbers_only(Gain), "toy gain"))
     registry.register_section(registry.Section("toy_lag", _parse_toy_lag, "toy shorthand for the lag's parameters"))
-    registry.register_fmu_model(registry.FmuModel("toy_FirstOrderLag", _build_lag, _check_lag_parameter))
+    registry.register_fmu_model(registry.RegisteredModel("toy_FirstOrderLag", _build_lag, _check_lag_parameter))

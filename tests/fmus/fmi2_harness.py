@@ -8,7 +8,7 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
-from cosim.fmu import fmi2_callbacks
+from cosim.fmu_component import fmi2_callbacks
 from fmu_models.models.quadrotor import STATE_NAMES
 
 
@@ -25,7 +25,7 @@ def logged(value: float) -> str:
 
 class LogCollector:
     """Receives the log messages of one FMI 2.0 instance (see
-    :func:`cosim.fmu.fmi2_callbacks`, which holds ``receive`` weakly: keep the
+    :func:`cosim.fmu_component.fmi2_callbacks`, which holds ``receive`` weakly: keep the
     collector alive as long as the instance)."""
 
     def __init__(self) -> None:

@@ -13,11 +13,11 @@ from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
 import fnn_controller as fc
-from cosim.fmu import fmi2_callbacks
+from cosim.fmu_component import fmi2_callbacks
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import STATE_NAMES
-from fnn_controller.controller import OUTPUTS
-from fnn_controller.fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS, controller_model, fmu_identifier
+from fnn_controller.step import OUTPUTS
+from fnn_controller.controller_fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS, controller_model, fmu_identifier
 from fnn_controller.parametric import parameter_table, parameter_vector, parametric_step_function
 
 INPUTS = [name for name, _, _ in REFERENCE_INPUTS] + list(STATE_NAMES) + [name for name, _, _ in ACCELERATION_INPUTS]

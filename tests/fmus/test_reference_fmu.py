@@ -12,7 +12,7 @@ from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
 from cosim.errors import FmuCallError
-from cosim.fmu import FmuComponent
+from cosim.fmu_component import FmuComponent
 from fmu_models.catalog import MODELS
 from fmu_models.export.build import FMI_VERSIONS, cached_fmu
 from fmu_models.models.reference import (OUTPUT_NAMES, REFERENCE_FIGURE_EIGHT, REFERENCE_HOVER, REFERENCE_MODELS,

@@ -13,7 +13,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
-from cosim.fmu import fmi2_callbacks
+from cosim.fmu_component import fmi2_callbacks
 from fmu_models.catalog import model as catalog_model
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import STATE_NAMES

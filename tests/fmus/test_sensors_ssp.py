@@ -12,7 +12,7 @@ import pytest
 from fmpy.validation import validate_fmu
 from lxml import etree
 
-from cosim.fmu import stream_seed
+from cosim.fmu_component import stream_seed
 from cosim.scenario import build_master, load_scenario
 from cosim.ssp import COSIM_NAMESPACE, SSD_NAME, load_ssp, ssd_schema_errors
 

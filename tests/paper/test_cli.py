@@ -60,7 +60,7 @@ def test_build_fmu_writes_the_plant_wind_references_and_every_controller(tmp_pat
 
     from fmu_models.catalog import MODEL_NAMES
     from fmu_models.export.build import FMI_VERSIONS
-    from fnn_controller.fmu import fmu_identifier
+    from fnn_controller.controller_fmu import fmu_identifier
     from fnn_controller.split import INNER_IDENTIFIER, outer_identifier
     from fnn_controller.variants import variant_names
 

@@ -15,7 +15,7 @@ import pytest
 
 from cosim.component import Port, PythonComponent, ports
 from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError
-from cosim.fmu import FmuComponent
+from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.recorder import read_results, sidecar_path
 from cosim.scenario import build_master, load_scenario
@@ -252,7 +252,7 @@ def test_killed_run_leaves_a_readable_partial_result(tmp_path, fmu_paths):
         import sys
         sys.path.insert(0, {str(Path(__file__).parent)!r})
         from test_master_with_the_plant import ConstantRotors, _master
-        from cosim.fmu import FmuComponent
+        from cosim.fmu_component import FmuComponent
 
         class WaitsToBeKilled(ConstantRotors):
             def step(self, n, t, u):

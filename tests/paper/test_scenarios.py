@@ -119,7 +119,7 @@ def test_overrides_and_wind_shorthand():
 
 def test_custom_python_component_from_a_factory(tmp_path):
     raw = _raw()
-    raw["components"] = {"probe": {"factory": "quadrotor_paper.controller:ControllerComponent", "variant": "pd"}}
+    raw["components"] = {"probe": {"factory": "quadrotor_paper.controller_component:ControllerComponent", "variant": "pd"}}
     # the factory is called with name= and the parameters; its inputs are then unconnected
     with pytest.raises(ConnectionCheckError, match="inputs of probe not connected: x_ref"):
         build_master(parse_scenario(raw))

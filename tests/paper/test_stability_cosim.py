@@ -14,7 +14,7 @@ from quadrotor_paper.learning_claims import AxisClaims, Run, evaluate_claims, re
 from quadrotor_paper.stability.loops import LoopModel
 from quadrotor_paper.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
 from fnn_controller import FNN_STATE_SIZE, PositionParams
-from fnn_controller.controller import initial_state
+from fnn_controller.step import initial_state
 
 H = 0.01
 TOLERANCE = 0.01  # of the step: the stated agreement of linear model and co-simulation

@@ -14,7 +14,7 @@ inputs      x_ref y_ref z_ref (m), vx_ref vy_ref vz_ref (m/s), psi_ref (rad),
             ax_ref ay_ref az_ref (m/s², start 0: read only with the
             parameter ``accel_feedforward`` > 0)
 outputs     Omega_1..4, v_ref_x..z, tau_c_x..z, tau_n_x..z, T, tau_phi,
-            tau_theta, tau_psi (:data:`fnn_controller.controller.OUTPUTS`)
+            tau_theta, tau_psi (:data:`fnn_controller.step.OUTPUTS`)
 parameters  every entry of :func:`~fnn_controller.parametric.parameter_table`
             (gains, learning rates, bounds, initial values, nominal vehicle)
             with unit, description and range; ``seed`` (f_ij(0), the draws of
@@ -40,7 +40,7 @@ from fmu_models.export.model import FmuModel, Sampled
 from fmu_models.export.variables import discrete, input_, output, parameter
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
-from .controller import OUTPUTS, state_ports
+from .step import OUTPUTS, state_ports
 from .geometric import GeometricParams
 from .parametric import initial_state_function, parameter_table, parametric_step_function
 from .position import PositionParams

@@ -1,7 +1,7 @@
 """The flight controller of ``fnn_controller`` as a component of the master.
 
 One adapter, no layer between it and CasADi: per variant used it holds the
-flat step function (:func:`fnn_controller.controller.flat_step_function`)
+flat step function (:func:`fnn_controller.step.flat_step_function`)
 behind a :class:`~fnn_controller.FastFunction` (built on first use, so a
 worker of ``table2`` switches between variants without rebuilding); the
 master gathers the 21 inputs straight into the function's input arrays
@@ -28,7 +28,7 @@ from (default ``Quadrotor``; its scenario parameters over the FMU's start
 values), and ``nominal = { m = 1.2 }`` is a deliberate, named mismatch.
 
 ``form = "fmu"`` runs the controller as its FMU (the same function compiled,
-:mod:`fnn_controller.fmu`) instead of the Python fast path.
+:mod:`fnn_controller.controller_fmu`) instead of the Python fast path.
 
 The run's seed draws f_ij(0) (§5.1) at every start.
 """
@@ -56,8 +56,8 @@ _AXES = "xyz"
 
 def _ports() -> tuple[tuple[Port, ...], tuple[Port, ...]]:
     from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
-    from fnn_controller.controller import OUTPUTS
-    from fnn_controller.fmu import ACCELERATION_INPUTS
+    from fnn_controller.step import OUTPUTS
+    from fnn_controller.controller_fmu import ACCELERATION_INPUTS
 
     inputs = (
         *(Port(f"{a}_ref", "m", description=f"reference position {a}") for a in _AXES),
@@ -75,7 +75,7 @@ CONTROLLER_INPUTS, CONTROLLER_OUTPUTS = _ports()
 def internal_ports(variant_name: str) -> tuple[Port, ...]:
     """The learned state the component publishes for ``variant_name``: each
     axis state port of the variant, per axis (``f_12_x``)."""
-    from fnn_controller.controller import state_ports
+    from fnn_controller.step import state_ports
     from fnn_controller.variants import variant
 
     n = 3 * variant(variant_name).axis_state_size
@@ -185,13 +185,13 @@ class ControllerComponent(PythonComponent):
         return component.as_fmu(version) if form == "fmu" and context is not None else component
 
     def as_fmu(self, fmi_version: int = 2):
-        """This controller as its FMU (:mod:`fnn_controller.fmu`): the same
+        """This controller as its FMU (:mod:`fnn_controller.controller_fmu`): the same
         parametric step compiled, its parameters set to this component's, its
         ``seed`` to the run's seed; ``psi_ref`` is then an input, held at this
         component's value unless connected."""
-        from cosim.fmu import FmuComponent
+        from cosim.fmu_component import FmuComponent
         from fmu_models.export.build import cached_fmu
-        from fnn_controller.fmu import controller_model
+        from fnn_controller.controller_fmu import controller_model
         from fnn_controller.parametric import parameter_table
 
         from .learned import LearnedControllerFmu
@@ -212,7 +212,7 @@ class ControllerComponent(PythonComponent):
         step (built once; the same function the controller FMU is generated
         from), its parameter input filled from this component's parameters."""
         if variant not in self._functions:
-            from fnn_controller.controller import FastFunction
+            from fnn_controller.step import FastFunction
             from fnn_controller.parametric import parameter_vector, parametric_step_function
 
             structure = dataclasses.replace(self._fc.GeometricParams(), desired_rate=self.geometric.desired_rate)
@@ -261,7 +261,7 @@ class ControllerComponent(PythonComponent):
         pending = fast.pending
         if not math.isfinite(pending["check"][0]):
             try:
-                self._fc.controller.raise_non_finite(fast.inputs)
+                self._fc.step.raise_non_finite(fast.inputs)
             except (ValueError, FloatingPointError) as exc:
                 raise DivergenceError(t, f"{self.name} ({exc})", float("nan"), None) from None
         if n < self._last:  # at the last point no step follows: the control is output, nothing learned
