@@ -10,7 +10,8 @@ PD+LM-FNN at dt = 0.01 s (5000 steps):
   both FMUs), controller, reference, recording and the divergence guard;
 * ``fmpy.simulate_fmu`` of the plant FMU alone over the same 50 s with the
   same output interval, as a reference;
-* ``table2``: the 90 runs on --workers processes (skip with --no-table2).
+* ``table2``: the shipped study (every variant and option row, 186 runs) on
+  --workers processes (skip with --no-table2).
 
 Targets, as ratios measured in this run: the whole mission (two FMUs, the
 controller, recording, the guard) at most 3x fmpy's own loop over the plant
@@ -53,8 +54,8 @@ def main(argv=None) -> int:
     import fmpy
 
     import quadrotor_paper  # noqa: F401  (registers the paper's scenarios)
-    from fnn_controller.variants import variant_names
-    from quadrotor_paper.experiments import Job, sweep
+    from quadrotor_paper.report import table_study
+    from quadrotor_paper.experiments import measure
     from cosim.scenario import build_master, fmu_file, load_scenario
 
     scenario = load_scenario("circles", {"controller.variant": "pd+lm", "wind.speed": 3.0})
@@ -102,15 +103,15 @@ def main(argv=None) -> int:
           f"{figures['ratio_mission_to_fmpy_plant_alone']:.2f}  (target <= 3)")
 
     if not args.no_table2:
-        jobs = [Job(v, w, s) for s in range(10) for w in (1.0, 3.0, 5.0) for v in variant_names()]
+        study = table_study(2)  # what `fnn-cosim table2` runs: every variant and the option rows
         t = time.perf_counter()
-        res = sweep(scenario, jobs, workers=args.workers)
+        result = measure(study, workers=args.workers)
         wall = time.perf_counter() - t
-        assert all(r["status"] == "ok" for r in res)
+        assert result.counts == {"ok": result.total}, result.counts
         figures["table2_wall_s"] = wall
         figures["table2_workers"] = args.workers
-        print(f"table2: {len(jobs)} runs of 50 s on {args.workers} workers: {wall:.1f} s "
-              f"({wall / len(jobs) * 1e3:.0f} ms a run, including worker start-up)")
+        print(f"table2: {result.total} runs of 50 s on {args.workers} workers: {wall:.1f} s "
+              f"({wall / result.total * 1e3:.0f} ms a run, including worker start-up)")
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=1))
     return 0

@@ -45,12 +45,11 @@ def _study(seeds: int, duration: float | None = None, winds=WINDS):
 
 
 def _run(study, out: Path, workers: int):
-    from cosim.study import read_runs, run_study
-    from quadrotor_paper.experiments import STUDY_METRICS, lean_signals, study_metrics
+    from cosim.study_run import read_runs
+    from quadrotor_paper.experiments import measure
 
     t = time.perf_counter()
-    run_study(study, out, workers=workers, metrics=study_metrics, metric_names=STUDY_METRICS,
-              record=lean_signals(study.scenario) or None, plots=False)
+    measure(study, out, workers=workers)
     wall = time.perf_counter() - t
     return wall, read_runs(out / "runs.csv")
 

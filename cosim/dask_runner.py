@@ -1,9 +1,8 @@
 """Many runs of one scenario, in this process or on a Dask cluster.
 
 A :class:`Task` is one run: dotted scenario overrides (applied to the base
-scenario's TOML document and validated, as ``--set`` does), run-level
-parameters (``component.name`` / ``Fmu.variable``, passed to
-:meth:`~cosim.master.Master.run`) and a seed. :func:`run_tasks` yields one
+scenario's TOML document and validated, as ``--set`` does) and a seed
+(:func:`cosim.study_run.run_study` makes them from a study's plan). :func:`run_tasks` yields one
 small record (a dict) per task, in the order the runs finish:
 
     {"key": task.key, "status": "ok" | "diverged" | "failed", "error": str | None,
@@ -58,7 +57,6 @@ class Task:
 
     key: Any
     overrides: Mapping[str, Any] = field(default_factory=dict)
-    parameters: Mapping[str, Any] = field(default_factory=dict)
     seed: int | None = None  # None: the scenario's [simulation] seed
 
 
@@ -162,8 +160,7 @@ def execute(raw: Mapping[str, Any], source: str | None, task: Task, metrics: Met
         record["error"] = f"could not build: {_message(exc)}"
         return record
     try:
-        result = master.run(scenario.duration, seed=seed, parameters=dict(task.parameters), t0=scenario.start_time,
-                            raise_on_error=False)
+        result = master.run(scenario.duration, seed=seed, t0=scenario.start_time, raise_on_error=False)
     except Exception as exc:  # could not start, or a component raised mid-run
         cache.drop(scenario)
         record["error"] = _message(exc)

@@ -10,7 +10,9 @@ register:
   shorthand that sets FMU parameters, or the signals a metric compares);
 * :class:`RegisteredModel` -- a model the engine builds into an FMU on demand, named
   by ``[fmus.NAME] model = "..."``;
-* folders of shipped scenario files, loadable by name.
+* folders of shipped scenario files, loadable by name;
+* :class:`Case` -- a named set of scenario overrides a study may name
+  (``[cases.NAME]``): e.g. a controller variant, an option row.
 
 Registration happens when the providing package is imported, and packages
 installed with an entry point in the group ``cosim.plugins`` (a callable
@@ -20,13 +22,14 @@ scenario file finds its kinds without the caller importing anything.
 from __future__ import annotations
 
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
-__all__ = ["ComponentKind", "Section", "RegisteredModel", "BuildContext", "register_component_kind", "register_section",
-           "register_fmu_model", "register_scenarios", "component_kinds", "sections", "fmu_models",
-           "aliases", "scenario_folders", "scoped", "PLUGIN_GROUP"]
+__all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind",
+           "register_section", "register_fmu_model", "register_scenarios", "register_case", "component_kinds",
+           "sections", "fmu_models", "cases", "aliases", "scenario_folders", "scoped", "with_connections",
+           "PLUGIN_GROUP"]
 
 PLUGIN_GROUP = "cosim.plugins"
 
@@ -91,9 +94,41 @@ class RegisteredModel:
     check_parameter: Callable[[str, float], None] | None = None
 
 
+@dataclass(frozen=True)
+class Case:
+    """A named set of scenario overrides: a row of a table, a variant, an option.
+
+    ``overrides`` are dotted keys as ``--set`` takes them; ``connect`` are
+    connections added to the scenario's (those it already has are kept
+    once); ``seeds`` the case's own seeds (``None``: the study's)."""
+
+    name: str
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+    connect: tuple[str, ...] = ()
+    label: str = ""
+    seeds: tuple[int, ...] | None = None
+
+    def applied_to(self, raw: Mapping[str, Any]) -> dict[str, Any]:
+        """The dotted overrides that fly this case on the scenario document ``raw``."""
+        out = dict(self.overrides)
+        if self.connect:
+            out["connections"] = with_connections(raw.get("connections", []), self.connect)
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        return {"name": self.name, "label": self.label, "overrides": dict(self.overrides),
+                "connect": list(self.connect), "seeds": None if self.seeds is None else list(self.seeds)}
+
+
+def with_connections(existing: Sequence[str], added: Sequence[str]) -> list[str]:
+    """``existing`` and then those of ``added`` it lacks."""
+    return list(existing) + [c for c in added if c not in existing]
+
+
 _KINDS: dict[str, ComponentKind] = {}
 _SECTIONS: dict[str, Section] = {}
 _MODELS: dict[str, RegisteredModel] = {}
+_CASES: dict[str, Case] = {}
 _SCENARIO_FOLDERS: list[Path] = []
 _plugins_loaded = False
 
@@ -121,6 +156,11 @@ def register_section(section: Section) -> Section:
 def register_fmu_model(model: RegisteredModel) -> RegisteredModel:
     _register(_MODELS, model.name, model, "FMU model")
     return model
+
+
+def register_case(case: Case) -> Case:
+    _register(_CASES, case.name, case, "case")
+    return case
 
 
 def register_scenarios(folder: str | Path) -> None:
@@ -165,6 +205,12 @@ def fmu_models() -> dict[str, RegisteredModel]:
     return dict(_MODELS)
 
 
+def cases() -> dict[str, Case]:
+    """The registered cases, in registration order."""
+    _load_plugins()
+    return dict(_CASES)
+
+
 def scenario_folders() -> list[Path]:
     _load_plugins()
     return list(_SCENARIO_FOLDERS)
@@ -175,11 +221,11 @@ def scoped():
     """Registrations made inside the ``with`` block are undone at its end
     (tests that register toys leave the process's registry as they found it)."""
     _load_plugins()
-    saved = (dict(_KINDS), dict(_SECTIONS), dict(_MODELS), list(_SCENARIO_FOLDERS))
+    saved = (dict(_KINDS), dict(_SECTIONS), dict(_MODELS), dict(_CASES), list(_SCENARIO_FOLDERS))
     try:
         yield
     finally:
-        for table, before in zip((_KINDS, _SECTIONS, _MODELS), saved[:3]):
+        for table, before in zip((_KINDS, _SECTIONS, _MODELS, _CASES), saved[:4]):
             table.clear()
             table.update(before)
-        _SCENARIO_FOLDERS[:] = saved[3]
+        _SCENARIO_FOLDERS[:] = saved[4]

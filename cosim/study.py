@@ -1,6 +1,6 @@
-"""Studies: one base scenario run over a sweep of its keys, into one tidy table.
+"""Studies: one base scenario run over named cases, a grid, random draws and seeds.
 
-A study file (TOML; full description in ``docs/studies.md``)::
+A study is the one way this engine runs many simulations (``docs/studies.md``)::
 
     scenario = "circles"                  # required: a shipped scenario name or a path
                                           #   (relative to the study file)
@@ -10,11 +10,18 @@ A study file (TOML; full description in ``docs/studies.md``)::
     [set]                                 # dotted scenario keys set for every run
     "simulation.duration" = 20.0
 
+    [cases."pd+lm"]                       # a registered case (cosim.registry.register_case), as is;
+    [cases.lm-bl]                         #   e.g. an application's controller variants and option rows
+    seeds = 3                             # this case's seeds (else the study's)
+    [cases.stiff]                         # an inline case: its own overrides and added connections
+    label = "PD+LM, kp 4"
+    set = { "controller.variant" = "pd+lm", "controller.position.kp" = 4.0 }
+    connect = ["reference.{ax,ay,az} -> controller.{ax_ref,ay_ref,az_ref}"]
+
     [sweep]
-    seeds = 10                            # simulation.seed 0..9 for each point, or a list [0, 4, 7];
+    seeds = 10                            # simulation seeds 0..9 for each run, or a list [0, 4, 7];
                                           #   default: the scenario's seed only
     [sweep.grid]                          # the cartesian product of the lists
-    "controller.variant" = ["pd", "pd+smc", "pd+lm"]
     "wind.speed" = [1.0, 3.0, 5.0]
 
     [sweep.random]                        # `samples` draws of every key, crossed with the grid
@@ -24,19 +31,11 @@ A study file (TOML; full description in ``docs/studies.md``)::
     "wind.turbulence" = { normal = [0.5, 0.1] }                      # [mean, std]
     "trajectory.speed" = { choice = [2.0, 2.5] }                     # [values...]
 
-A run is (grid point, random sample, seed): the plan is ordered grid point,
-then sample, then seed. Every run is one row of ``runs.csv``: ``run`` (its
-index in the plan), ``sample`` (the random draw's index, empty without
-``[sweep.random]``), ``seed``, one column per swept key (its value),
-``status``, ``error``, one column per metric, ``wall_time_s``. Rows are
-appended (and flushed) as runs finish, in any order. At the end
-``runs.parquet`` is written from the CSV (pyarrow), ``summary.csv`` (one row
-per grid point: runs, ok, failed; per metric over the runs that finished
-``ok``: mean, std, the 95 % t-interval of the mean), and box and line plots.
-
-Resume: a row already in ``runs.csv`` of the same output folder (matched by
-its swept values and seed, as written) is not run again; a half-written last
-line (a killed study) is dropped first.
+A :class:`Run` is (case, grid point, random sample, seed); the plan is
+ordered case, grid point, sample, seed and is generated lazily
+(:func:`runs`), run by run, so a study of any size is planned in constant
+memory and resumed by index. The same draws are crossed with every case and
+grid point (common random numbers).
 
 Errors in the study file are :class:`~cosim.errors.ScenarioError` naming the
 key, e.g. ``sweep.random."wind.speed".uniform = [3, 1]: expected [low, high]
@@ -44,40 +43,46 @@ with low < high``.
 """
 from __future__ import annotations
 
-import csv
+import hashlib
 import itertools
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .errors import CosimError, ScenarioError
+from . import registry
+from .registry import Case, with_connections
 from .config import check_number
+from .errors import CosimError, ScenarioError
 from .scenario import (Scenario, apply_overrides, load_scenario, parse_scenario, read_toml, refuse_unknown,
-                       scenario_path, string, table)
+                       scenario_path, string, strings, table)
 
-__all__ = ["Study", "parse_study", "load_study", "plan", "run_study", "summarize_runs", "read_runs",
-           "DISTRIBUTIONS", "FIXED_COLUMNS"]
+__all__ = ["Case", "Study", "Run", "parse_study", "load_study", "runs", "plan", "count", "cells", "cell_of",
+           "with_connections", "DISTRIBUTIONS", "MAX_RUNS"]
 
 DISTRIBUTIONS = ("uniform", "normal", "choice")
-_TOP = {"scenario", "name", "description", "set", "sweep"}
+MAX_RUNS = 1_000_000  # a study's runs: its runs.csv and its summary grow with them (docs/studies.md)
+_TOP = {"scenario", "name", "description", "set", "sweep", "cases"}
 _SWEEP = {"grid", "random", "seeds"}
-FIXED_COLUMNS = ("run", "sample", "seed")
+_CASE = {"label", "set", "connect", "seeds"}
 
 
-@dataclass
+@dataclass(frozen=True)
 class Study:
+    """A validated study: the base scenario (``[set]`` applied) and its sweep."""
+
     name: str
     description: str
-    scenario: Scenario  # the base scenario with [set] applied
-    grid: dict[str, list[Any]] = field(default_factory=dict)
-    random: dict[str, tuple[str, list[Any]]] = field(default_factory=dict)
+    scenario: Scenario
+    cases: tuple[Case, ...] = ()
+    grid: Mapping[str, tuple[Any, ...]] = field(default_factory=dict)
+    random: Mapping[str, tuple[str, tuple[Any, ...]]] = field(default_factory=dict)
     samples: int = 0
     random_seed: int = 0
-    seeds: list[int] | None = None  # None: the scenario's own seed
+    seeds: tuple[int, ...] | None = None  # None: the scenario's own seed
     source: Path | None = None
 
     @property
@@ -85,14 +90,48 @@ class Study:
         """The swept keys, grid first, in file order."""
         return list(self.grid) + [k for k in self.random if k not in self.grid]
 
+    def case_seeds(self, case: Case | None) -> tuple[int, ...]:
+        if case is not None and case.seeds is not None:
+            return case.seeds
+        return self.seeds if self.seeds is not None else (self.scenario.seed,)
+
+    def definition(self) -> dict[str, Any]:
+        """Everything the plan and the runs depend on, as JSON-ready data."""
+        return {"scenario": self.scenario.raw, "scenario_file": str(self.scenario.source or ""),
+                "cases": [c.describe() for c in self.cases], "grid": {k: list(v) for k, v in self.grid.items()},
+                "random": {k: [kind, list(args)] for k, (kind, args) in self.random.items()},
+                "samples": self.samples, "random_seed": self.random_seed,
+                "seeds": None if self.seeds is None else list(self.seeds)}
+
+    @property
+    def fingerprint(self) -> str:
+        """A hash of :meth:`definition`: a results folder holds the runs of one fingerprint."""
+        text = json.dumps(self.definition(), sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def replace(self, **changes) -> "Study":
+        return replace(self, **changes)
+
 
 @dataclass(frozen=True)
 class Run:
+    """One run of a study: ``index`` in the plan, its case (``None`` for a
+    study without cases), grid ``point`` (values in key order), random
+    ``sample`` (``None`` without draws), ``seed`` and the swept ``values``
+    (grid and drawn keys)."""
+
     index: int
+    case: str | None
+    point: tuple
     sample: int | None
     seed: int
-    values: dict[str, Any]  # swept key -> value
-    grid_point: tuple
+    values: Mapping[str, Any]
+    overrides: Mapping[str, Any]  # every dotted key this run sets on the base scenario: the case's, then values
+
+    @property
+    def cell(self) -> tuple:
+        """What the summary groups by: the case and the grid point."""
+        return (self.case,) + self.point
 
 
 # ---- reading ------------------------------------------------------------------------------
@@ -106,7 +145,25 @@ def _count(where: str, value: Any, positive: bool = False) -> int:
     return int(check_number(where, value, integer=True, positive=positive, nonnegative=not positive))
 
 
-def _distribution(where: str, spec: Any) -> tuple[str, list[Any]]:
+def _seeds(where: str, value: Any) -> tuple[int, ...]:
+    """``N`` (seeds 0..N-1) or a list of distinct seeds."""
+    from .fmu_component import SEED_LIMIT
+
+    if isinstance(value, list):
+        seeds = tuple(_count(f"{where}[{i}]", s) for i, s in enumerate(value))
+        if not seeds or len(set(seeds)) != len(seeds):
+            raise ScenarioError(f"{where} = {value!r}: expected distinct seeds, at least one")
+    else:
+        n = _count(where, value, positive=True)
+        if n > MAX_RUNS:
+            raise ScenarioError(f"{where} = {value!r}: at most {MAX_RUNS} runs a study")
+        seeds = tuple(range(n))
+    if max(seeds) > SEED_LIMIT:
+        raise ScenarioError(f"{where} = {value!r}: a seed is at most 2^53 = {SEED_LIMIT}")
+    return seeds
+
+
+def _distribution(where: str, spec: Any) -> tuple[str, tuple[Any, ...]]:
     if not isinstance(spec, Mapping) or len(spec) != 1 or next(iter(spec)) not in DISTRIBUTIONS:
         raise ScenarioError(f"{where} = {spec!r}: expected one of {{ uniform = [low, high] }}, "
                             f"{{ normal = [mean, std] }}, {{ choice = [values...] }}")
@@ -115,7 +172,7 @@ def _distribution(where: str, spec: Any) -> tuple[str, list[Any]]:
     if kind == "choice":
         if not isinstance(args, list) or not args:
             raise ScenarioError(f"{where} = {args!r}: expected a non-empty list of values")
-        return kind, list(args)
+        return kind, tuple(args)
     if not isinstance(args, list) or len(args) != 2:
         raise ScenarioError(f"{where} = {args!r}: expected [{'low, high' if kind == 'uniform' else 'mean, std'}]")
     a, b = (float(check_number(f"{where}[{i}]", v)) for i, v in enumerate(args))
@@ -123,101 +180,142 @@ def _distribution(where: str, spec: Any) -> tuple[str, list[Any]]:
         raise ScenarioError(f"{where} = {args!r}: expected [low, high] with low < high")
     if kind == "normal" and b < 0:
         raise ScenarioError(f"{where} = {args!r}: expected [mean, std] with std >= 0")
-    return kind, [a, b]
+    return kind, (a, b)
 
 
-def _check_key(where: str, base_raw: Mapping[str, Any], source: Path | None, key: str, value: Any) -> None:
-    """Refuse a swept key the scenario does not take, naming the study key."""
+def _check(where: str, base: Scenario, overrides: Mapping[str, Any]) -> None:
+    """Refuse overrides the scenario does not take, naming the study key."""
     try:
-        parse_scenario(apply_overrides(dict(base_raw), {key: value}), source=source)
+        parse_scenario(apply_overrides(dict(base.raw), overrides), source=base.source)
     except CosimError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
 
 
-def parse_study(raw: Mapping[str, Any], source: Path | None = None) -> Study:
-    """Validate a study given as a mapping (a parsed TOML document)."""
-    raw = dict(raw)
-    refuse_unknown("", raw, _TOP)
+def _case(where: str, name: str, spec: Any) -> Case:
+    """A ``[cases.NAME]`` table: a registered case (its ``seeds`` may be
+    given) or an inline one (``set`` and/or ``connect``)."""
+    spec = table(where, spec)
+    refuse_unknown(f"{where}.", spec, _CASE)
+    known = registry.cases().get(name)
+    seeds = _seeds(f"{where}.seeds", spec["seeds"]) if "seeds" in spec else None
+    if known is not None:
+        for key in ("set", "connect", "label"):
+            if key in spec:
+                raise ScenarioError(f"{where}.{key}: {name!r} is a registered case (its own settings); "
+                                    f"give an inline case another name")
+        return replace(known, seeds=seeds if seeds is not None else known.seeds)
+    if "set" not in spec and "connect" not in spec:
+        cases = ", ".join(registry.cases()) or "(none registered)"
+        raise ScenarioError(f"{where}: not a registered case ({cases}); an inline case gives 'set' or 'connect'")
+    return Case(name, table(f"{where}.set", spec.get("set", {})),
+                tuple(strings(f"{where}.connect", spec.get("connect", []))),
+                string(f"{where}.label", spec.get("label", name)), seeds)
+
+
+def _scenario_file(raw: Mapping[str, Any], source: Path | None) -> Path:
     if "scenario" not in raw or not isinstance(raw["scenario"], str):
         raise ScenarioError(f"scenario = {raw.get('scenario')!r}: required, a shipped scenario name or a file path")
-    name = string("name", raw.get("name", source.stem if source else "study"))
-    if not name:
-        raise ScenarioError("name = '': expected a non-empty string")
-    description = string("description", raw.get("description", ""))
     path = Path(raw["scenario"])
     if not path.is_absolute() and source is not None and (source.parent / path).exists():
         path = source.parent / path
     try:
-        scenario_file = scenario_path(path if path.exists() else raw["scenario"])
+        return scenario_path(path if path.exists() else raw["scenario"])
     except ScenarioError as exc:
         raise ScenarioError(f"scenario = {raw['scenario']!r}: {exc}") from None
+
+
+def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenario | None = None) -> Study:
+    """Validate a study given as a mapping (a parsed TOML document).
+
+    ``base`` replaces the scenario the study names (``scenario`` may then be
+    left out), e.g. to fly a shipped study on another mission."""
+    raw = dict(raw)
+    refuse_unknown("", raw, _TOP)
+    name = string("name", raw.get("name", source.stem if source else "study"))
+    if not name:
+        raise ScenarioError("name = '': expected a non-empty string")
+    description = string("description", raw.get("description", ""))
     fixed = table("set", raw.get("set", {}))
+    scenario_file = _scenario_file(raw, source) if base is None else None
     try:
-        base = load_scenario(scenario_file, dict(fixed))
+        if scenario_file is not None:
+            base = load_scenario(scenario_file, dict(fixed))
+        elif fixed:
+            base = parse_scenario(apply_overrides(base.raw, dict(fixed)), source=base.source)
     except ScenarioError as exc:
         raise ScenarioError(f"set: {exc}") from None
 
+    cases = tuple(_case(f"cases.{_q(n)}", n, spec) for n, spec in table("cases", raw.get("cases", {})).items())
+    for case in cases:
+        _check(f"cases.{_q(case.name)}", base, case.applied_to(base.raw))
+
     sweep = table("sweep", raw.get("sweep", {}))
     refuse_unknown("sweep.", sweep, _SWEEP)
-    study = Study(name=name, description=description, scenario=base, source=source)
-
-    seeds = sweep.get("seeds")
+    seeds = _seeds("sweep.seeds", sweep["seeds"]) if "seeds" in sweep else None
     if seeds is not None:
-        if isinstance(seeds, list):
-            study.seeds = [_count(f"sweep.seeds[{i}]", s) for i, s in enumerate(seeds)]
-            if not study.seeds or len(set(study.seeds)) != len(study.seeds):
-                raise ScenarioError(f"sweep.seeds = {seeds!r}: expected distinct seeds, at least one")
-        else:
-            study.seeds = list(range(_count("sweep.seeds", seeds, positive=True)))
-        _check_key("sweep.seeds", base.raw, base.source, "simulation.seed", study.seeds[0])
+        _check("sweep.seeds", base, {"simulation.seed": seeds[0]})
 
-    grid = table("sweep.grid", sweep.get("grid", {}))
-    for key, values in grid.items():
+    grid: dict[str, tuple[Any, ...]] = {}
+    case_keys = {k: c.name for c in cases for k in c.overrides}
+    for key, values in table("sweep.grid", sweep.get("grid", {})).items():
         where = f"sweep.grid.{_q(key)}"
         if key == "simulation.seed":
             raise ScenarioError(f"{where}: sweep seeds with sweep.seeds")
+        if key in case_keys:
+            raise ScenarioError(f"{where}: also set by case {case_keys[key]!r}; a key is set in one place")
         if not isinstance(values, list) or not values:
             raise ScenarioError(f"{where} = {values!r}: expected a non-empty list of values")
         for value in values:
-            _check_key(where, base.raw, base.source, key, value)
-        study.grid[key] = list(values)
+            _check(where, base, {key: value})
+        grid[key] = tuple(values)
 
+    random: dict[str, tuple[str, tuple[Any, ...]]] = {}
+    samples = random_seed = 0
     rand = sweep.get("random")
     if rand is not None:
         rand = table("sweep.random", rand)
         if "samples" not in rand:
             raise ScenarioError("sweep.random.samples: required, the number of draws")
-        study.samples = _count("sweep.random.samples", rand["samples"], positive=True)
-        study.random_seed = _count("sweep.random.seed", rand.get("seed", 0))
+        samples = _count("sweep.random.samples", rand["samples"], positive=True)
+        random_seed = _count("sweep.random.seed", rand.get("seed", 0))
         for key, spec in rand.items():
             if key in ("samples", "seed"):
                 continue
             where = f"sweep.random.{_q(key)}"
-            if key in study.grid:
+            if key in grid:
                 raise ScenarioError(f"{where}: already swept in sweep.grid")
             if key == "simulation.seed":
                 raise ScenarioError(f"{where}: sweep seeds with sweep.seeds")
-            study.random[key] = _distribution(where, spec)
-            kind, args = study.random[key]
-            for value in (args if kind == "choice" else [args[0]]):
-                _check_key(where, base.raw, base.source, key, value)
-        if not study.random:
+            if key in case_keys:
+                raise ScenarioError(f"{where}: also set by case {case_keys[key]!r}; a key is set in one place")
+            random[key] = _distribution(where, spec)
+            kind, args = random[key]
+            for value in (args if kind == "choice" else args[:1]):
+                _check(where, base, {key: value})
+        if not random:
             raise ScenarioError("sweep.random: no key to draw (add e.g. \"wind.speed\" = { uniform = [1.0, 5.0] })")
+    study = Study(name=name, description=description, scenario=base, cases=cases, grid=grid, random=random,
+                  samples=samples, random_seed=random_seed, seeds=seeds, source=source)
+    total = count(study)
+    if total > MAX_RUNS:
+        raise ScenarioError(f"study {name!r}: {total} runs; at most {MAX_RUNS} a study (split it, or sweep "
+                            f"fewer values)")
     return study
 
 
-def load_study(path: str | Path) -> Study:
+def load_study(path: str | Path, base: Scenario | None = None) -> Study:
     path = Path(path)
     if not path.exists():
         raise ScenarioError(f"study {str(path)!r}: no such file")
-    return parse_study(read_toml(path), source=path)
+    return parse_study(read_toml(path), source=path, base=base)
 
 
 # ---- the plan -----------------------------------------------------------------------------
 
-def _draws(study: Study) -> list[dict[str, Any]]:
+def _draws(study: Study) -> Iterator[dict[str, Any]]:
+    """The random draws, one per sample, from a fresh generator: the same
+    numbers every time, in constant memory (keys in file order)."""
     rng = np.random.default_rng(study.random_seed)
-    out = []
     for _ in range(study.samples):
         draw = {}
         for key, (kind, args) in study.random.items():
@@ -227,271 +325,56 @@ def _draws(study: Study) -> list[dict[str, Any]]:
                 draw[key] = float(rng.normal(args[0], args[1]))
             else:
                 draw[key] = args[int(rng.integers(len(args)))]
-        out.append(draw)
-    return out
+        yield draw
+
+
+def count(study: Study) -> int:
+    """The number of runs of the study, without planning them."""
+    points = math.prod(len(v) for v in study.grid.values())
+    samples = study.samples or 1
+    cases = study.cases or (None,)
+    return sum(points * samples * len(study.case_seeds(c)) for c in cases)
+
+
+def runs(study: Study, start: int = 0) -> Iterator[Run]:
+    """Every run of the study from index ``start`` on, ordered case, grid
+    point, sample, seed; generated one at a time."""
+    index = 0
+    for case in study.cases or (None,):
+        fixed = case.applied_to(study.scenario.raw) if case is not None else {}
+        seeds = study.case_seeds(case)
+        for point in itertools.product(*study.grid.values()):
+            values = dict(zip(study.grid, point))
+            draws = enumerate(_draws(study)) if study.random else [(None, {})]
+            for sample, draw in draws:
+                swept = {**values, **draw}
+                for seed in seeds:
+                    if index >= start:
+                        yield Run(index, case.name if case is not None else None, point, sample, seed, swept,
+                                  {**fixed, **swept})
+                    index += 1
 
 
 def plan(study: Study) -> list[Run]:
-    """Every run of the study, ordered grid point, sample, seed."""
-    points = [dict(zip(study.grid, combo)) for combo in itertools.product(*study.grid.values())]
-    draws: list[tuple[int | None, dict[str, Any]]] = list(enumerate(_draws(study))) if study.random else [(None, {})]
-    seeds = study.seeds if study.seeds is not None else [study.scenario.seed]
-    runs = []
-    for point in points:
-        for sample, draw in draws:
-            for seed in seeds:
-                runs.append(Run(len(runs), sample, seed, {**point, **draw}, tuple(point.values())))
-    return runs
+    """The whole plan as a list (for small studies and tests; :func:`runs` streams it)."""
+    return list(runs(study))
 
 
-# ---- the table ------------------------------------------------------------------------------
-
-def _cell(value: Any) -> str:
-    """A value as written in runs.csv (and compared on resume)."""
-    if value is None:
-        return ""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, (list, dict)):
-        return json.dumps(value, sort_keys=True)
-    return str(value)
+def cells(study: Study) -> list[tuple[Case | None, dict[str, Any]]]:
+    """Every cell of the study (what the summary groups by: a case and a grid
+    point), in plan order: ``(case, {grid key: value})``."""
+    points = [dict(zip(study.grid, p)) for p in itertools.product(*study.grid.values())]
+    return [(case, point) for case in study.cases or (None,) for point in points]
 
 
-def columns(study: Study, metric_names: Sequence[str]) -> list[str]:
-    return [*FIXED_COLUMNS, *study.keys, "status", "error", *metric_names, "wall_time_s"]
-
-
-def _match(values: Mapping[str, Any], seed: Any, keys: Sequence[str]) -> tuple[str, ...]:
-    return tuple(_cell(values.get(k)) for k in keys) + (_cell(seed),)
-
-
-def read_runs(path: Path) -> list[dict[str, str]]:
-    with open(path, newline="", encoding="utf-8") as f:
-        return list(csv.DictReader(f))
-
-
-def _prepare(path: Path, header: list[str]) -> list[dict[str, str]]:
-    """The rows already in ``path`` (a half-written last line dropped);
-    refuses a file of another study (other columns)."""
-    if not path.exists() or path.stat().st_size == 0:
-        return []
-    data = path.read_bytes()
-    if not data.endswith(b"\n"):  # killed while writing a row
-        data = data[: data.rfind(b"\n") + 1]
-        path.write_bytes(data)
-    with open(path, newline="", encoding="utf-8") as f:
-        reader = csv.DictReader(f)
-        if reader.fieldnames != header:
-            raise ScenarioError(f"{path}: holds the runs of another study (columns {reader.fieldnames}); "
-                                f"choose another --out")
-        return list(reader)
-
-
-@dataclass
-class StudyResult:
-    out_dir: Path
-    total: int
-    skipped: int
-    counts: dict[str, int]
-    files: list[Path]
-
-
-def run_study(study: Study, out_dir: str | Path, workers: int = 1, scheduler: str | None = None,
-              metrics: Callable[[Scenario, Any], Mapping[str, Any]] | None = None,
-              metric_names: Sequence[str] = (), record: Sequence[str] | None = None,
-              progress: Callable[[int, int], None] | None = None, plots: bool = True) -> StudyResult:
-    """Run the runs of ``study`` not yet in ``out_dir/runs.csv``, appending
-    a row as each finishes; then write ``runs.parquet``, ``summary.csv`` and
-    the plots. ``metrics(scenario, result)`` gives the metric columns
-    ``metric_names`` of a row (runs on the workers: a module-level function);
-    ``record`` replaces the recorded signals (e.g. only what the metrics
-    read). ``progress(done, total)`` before the first run, then after each row."""
-    from .dask_runner import Task, run_tasks
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    header = columns(study, metric_names)
-    runs_csv = out / "runs.csv"
-    keys = study.keys
-    existing = _prepare(runs_csv, header)
-    done = {_match(row, row["seed"], keys) for row in existing}
-    planned = plan(study)
-    todo = [r for r in planned if _match(r.values, r.seed, keys) not in done]
-    total = len(todo)
-
-    base = study.scenario
-    if record is not None:
-        base = parse_scenario(apply_overrides(base.raw, {"record.signals": list(record)}), source=base.source)
-    by_index = {r.index: r for r in todo}
-    tasks = (Task(r.index, r.values, {}, r.seed) for r in todo)
-    counts: dict[str, int] = {}
-    new = not runs_csv.exists() or runs_csv.stat().st_size == 0
-    with open(runs_csv, "a", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        if new:
-            writer.writerow(header)
-            f.flush()
-        if progress is not None:
-            progress(0, total)
-        for n, rec in enumerate(run_tasks(base, tasks, workers=workers, scheduler=scheduler, metrics=metrics), 1):
-            run = by_index[rec["key"]]
-            row = {"run": run.index, "sample": run.sample, "seed": run.seed, **run.values,
-                   "status": rec["status"], "error": rec["error"], "wall_time_s": rec["wall_time_s"],
-                   **{m: rec["metrics"].get(m) for m in metric_names}}
-            writer.writerow([_cell(row.get(c)) for c in header])
-            f.flush()
-            counts[rec["status"]] = counts.get(rec["status"], 0) + 1
-            if progress is not None:
-                progress(n, total)
-    files = [runs_csv]
-    files.append(write_parquet(runs_csv, out / "runs.parquet"))
-    rows = read_runs(runs_csv)
-    summary = summarize_runs(rows, list(study.grid), metric_names)
-    files.append(write_summary(out / "summary.csv", summary))
-    if plots and rows:
-        files += plot_study(out, rows, list(study.grid), metric_names, summary)
-    return StudyResult(out, total, len(planned) - total, counts, files)
-
-
-def write_parquet(csv_path: Path, path: Path) -> Path:
-    """``runs.parquet`` from ``runs.csv`` (types inferred by pyarrow; an empty
-    cell is null)."""
-    import pyarrow.csv as pcsv
-    import pyarrow.parquet as pq
-
-    table = pcsv.read_csv(csv_path, convert_options=pcsv.ConvertOptions(strings_can_be_null=True))
-    pq.write_table(table, path)
-    return path
-
-
-# ---- the summary --------------------------------------------------------------------------
-
-def _float(text: str) -> float | None:
-    try:
-        v = float(text)
-    except (TypeError, ValueError):
-        return None
-    return v if math.isfinite(v) else None
-
-
-def _t975(dof: int) -> float:
-    from scipy.stats import t
-
-    return float(t.ppf(0.975, dof))
-
-
-def interval95(values: Sequence[float]) -> tuple[float, float] | None:
-    """The 95 % Student t interval of the mean of ``values`` (None below 2 values)."""
-    x = np.asarray(values, dtype=float)
-    if x.size < 2:
-        return None
-    mean, half = float(x.mean()), _t975(x.size - 1) * float(x.std(ddof=1)) / math.sqrt(x.size)
-    return mean - half, mean + half
-
-
-def summarize_runs(rows: Iterable[Mapping[str, str]], group_keys: Sequence[str],
-                   metric_names: Sequence[str]) -> list[dict[str, Any]]:
-    """One record per group (the values of ``group_keys``, in the plan's
-    order where the rows carry their ``run`` index, else first-seen order):
-    ``runs``, ``ok``, ``diverged``, ``failed``; per metric, over the ``ok``
-    runs: ``<m>_n``, ``_mean``, ``_std`` (ddof 1), ``_ci95_low``,
-    ``_ci95_high`` (Student t interval of the mean; empty below 2 runs)."""
-    rows = list(rows)
-    if all(str(r.get("run", "")).isdigit() for r in rows):  # rows finish in any order, a resumed study's later
-        rows.sort(key=lambda r: int(r["run"]))
-    groups: dict[tuple, list[Mapping[str, str]]] = {}
-    for row in rows:
-        groups.setdefault(tuple(row[k] for k in group_keys), []).append(row)
-    out = []
-    for values, members in groups.items():
-        rec: dict[str, Any] = dict(zip(group_keys, values))
-        rec["runs"] = len(members)
-        for status in ("ok", "diverged", "failed"):
-            rec[status] = sum(r["status"] == status for r in members)
-        ok = [r for r in members if r["status"] == "ok"]
-        for m in metric_names:
-            x = np.array([v for v in (_float(r.get(m)) for r in ok) if v is not None])
-            n = len(x)
-            mean = float(x.mean()) if n else None
-            std = float(x.std(ddof=1)) if n > 1 else None
-            low, high = interval95(x) or (None, None)
-            rec.update({f"{m}_n": n, f"{m}_mean": mean, f"{m}_std": std, f"{m}_ci95_low": low,
-                        f"{m}_ci95_high": high})
-        out.append(rec)
-    return out
-
-
-def write_summary(path: Path, records: list[dict[str, Any]]) -> Path:
-    fields = list(dict.fromkeys(k for r in records for k in r))
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        writer.writerow(fields)
-        for r in records:
-            writer.writerow([_cell(r.get(k)) for k in fields])
-    return path
-
-
-# ---- plots ----------------------------------------------------------------------------------
-
-def plot_study(out: Path, rows: list[Mapping[str, str]], group_keys: Sequence[str],
-               metric_names: Sequence[str], summary: list[dict[str, Any]] | None = None) -> list[Path]:
-    """Per metric: ``box_<metric>.png`` (the ok runs of each grid point) and,
-    when a grid key is numeric, ``line_<metric>.png`` (mean and 95 % CI
-    against it, one line per combination of the other grid keys). ``summary``:
-    the records of :func:`summarize_runs` on ``rows``, when the caller has them."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    files = []
-    ok = [r for r in rows if r["status"] == "ok"]
-    numeric = [k for k in group_keys if all(_float(r[k]) is not None for r in rows)]
-    if summary is None:
-        summary = summarize_runs(rows, group_keys, metric_names)
-    for m in metric_names:
-        groups: dict[tuple, list[float]] = {}
-        for r in ok:
-            v = _float(r.get(m))
-            if v is not None:
-                groups.setdefault(tuple(r[k] for k in group_keys), []).append(v)
-        if not groups:
-            continue
-        fig, ax = plt.subplots(figsize=(max(4.0, 0.6 * len(groups) + 2), 4))
-        labels = [", ".join(g) or "all" for g in groups]
-        ax.boxplot(list(groups.values()))
-        ax.set_xticks(range(1, len(labels) + 1), labels, rotation=45 if len(groups) > 4 else 0, ha="right"
-                      if len(groups) > 4 else "center", fontsize=8)
-        ax.set_xlabel(", ".join(group_keys) or "all runs")
-        ax.set_ylabel(m)
-        fig.tight_layout()
-        files.append(out / f"box_{m}.png")
-        fig.savefig(files[-1], dpi=100)
-        plt.close(fig)
-        if numeric:
-            x_key = numeric[-1]
-            others = [k for k in group_keys if k != x_key]
-            fig, ax = plt.subplots(figsize=(5, 4))
-            lines: dict[tuple, list[tuple[float, float, float, float]]] = {}
-            for rec in summary:
-                if rec[f"{m}_mean"] is None:
-                    continue
-                lo, hi = rec[f"{m}_ci95_low"], rec[f"{m}_ci95_high"]
-                mean = rec[f"{m}_mean"]
-                lines.setdefault(tuple(rec[k] for k in others), []).append(
-                    (float(rec[x_key]), mean, mean - lo if lo is not None else 0.0, hi - mean if hi is not None else 0.0))
-            for label, pts in lines.items():
-                pts.sort()
-                xs, ys, lo, hi = zip(*pts)
-                ax.errorbar(xs, ys, yerr=[lo, hi], marker="o", capsize=3, label=", ".join(label) or None)
-            ax.set_xlabel(x_key)
-            ax.set_ylabel(f"{m} (mean, 95 % CI)")
-            if others:
-                ax.legend(title=", ".join(others), fontsize=8)
-            fig.tight_layout()
-            files.append(out / f"line_{m}.png")
-            fig.savefig(files[-1], dpi=100)
-            plt.close(fig)
-    return files
+def cell_of(study: Study, index: int) -> int:
+    """The number of the cell (in :func:`cells`' order) of run ``index``,
+    computed from the plan's shape, without generating it."""
+    n_points = math.prod(len(v) for v in study.grid.values())
+    offset = index
+    for c, case in enumerate(study.cases or (None,)):
+        per_point = (study.samples or 1) * len(study.case_seeds(case))
+        if offset < n_points * per_point:
+            return c * n_points + offset // per_point
+        offset -= n_points * per_point
+    raise IndexError(f"run {index}: the study {study.name!r} has {count(study)} runs")

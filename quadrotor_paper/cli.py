@@ -65,9 +65,11 @@ def _workers(n: int | None) -> int:
 # ---- run ------------------------------------------------------------------------------
 
 def _cmd_run(args) -> int:
-    from .experiments import run_once, write_json
-    from cosim.progress import Progress
     from cosim.scenario import load_scenario
+    from cosim.study_run import write_json
+
+    from .experiments import run_once
+    from .progress import progress_bar
 
     from cosim.errors import ScenarioError
     from cosim.ssp import is_ssp, load_ssp
@@ -87,15 +89,11 @@ def _cmd_run(args) -> int:
             overrides["controller.variant"] = args.variant
         scenario = load_scenario(args.scenario, overrides)
     out = Path(args.out) if args.out else DEFAULT_OUT / f"run-{scenario.name}"
-    bar = Progress(int(round(scenario.duration / scenario.step)), f"run {scenario.name}", enabled=not args.quiet)
     from cosim.scenario import build_master
 
     with build_master(scenario) as master:
-        try:
-            result, summary = run_once(scenario, out, progress=lambda n, total: bar.update(n), master=master,
-                                       profile=args.profile)
-        finally:
-            bar.close()
+        with progress_bar(f"run {scenario.name}", enabled=not args.quiet, unit="step") as bar:
+            result, summary = run_once(scenario, out, progress=bar, master=master, profile=args.profile)
         if args.save_learned:
             from .learned import save_learned
 
@@ -131,32 +129,40 @@ def _cmd_run(args) -> int:
 
 # ---- tables and reproduction ------------------------------------------------------------
 
+def _table_changes(args) -> dict[str, Any]:
+    """What the command line changes in a table's study (None: as the study file says)."""
+    changes = {"seeds": args.seeds, "duration": args.duration, "variants": args.variants, "options": args.options,
+               "option_seeds": args.option_seeds}
+    for key in ("scenario", "winds"):  # the commands that have them
+        if getattr(args, key, None) is not None:
+            changes[key] = getattr(args, key)
+    if getattr(args, "set", None):
+        changes["overrides"] = _overrides(args.set)
+    return changes
+
+
 def _cmd_table2(args) -> int:
     from .report import table2
 
-    winds = [float(w) for w in args.winds.split(",")]
     out = Path(args.out) if args.out else DEFAULT_OUT / "table2"
-    summary = table2(out, seeds=args.seeds, winds=winds, duration=args.duration, workers=_workers(args.workers),
-                     scenario=args.scenario,
-                     show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler,
-                     variants=args.variants, options=args.options, option_seeds=args.option_seeds)
-    return _print_table(summary, out / "table2.md", out / "summary.json")
+    summary = table2(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+                     **_table_changes(args))
+    return _print_table(summary, out / "table2.md", out)
 
 
 def _cmd_table3(args) -> int:
     from .report import table3
 
     out = Path(args.out) if args.out else DEFAULT_OUT / "table3"
-    summary = table3(out, seeds=args.seeds, duration=args.duration, workers=_workers(args.workers),
-                     scenario=args.scenario,
-                     show_progress=not args.quiet, overrides=_overrides(args.set), scheduler=args.scheduler,
-                     variants=args.variants, options=args.options, option_seeds=args.option_seeds)
-    return _print_table(summary, out / "table3.md", out / "summary.json")
+    summary = table3(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+                     **_table_changes(args))
+    return _print_table(summary, out / "table3.md", out)
 
 
-def _print_table(summary, table_path: Path, data_path: Path) -> int:
+def _print_table(summary, table_path: Path, out: Path) -> int:
     print(summary["markdown"])
-    print(f"{len(summary['runs'])} runs in {summary['wall_time_s']:.1f} s; table: {table_path}, data: {data_path}")
+    print(f"{summary['rows']} runs in {summary['wall_time_s']:.1f} s; table: {table_path}, "
+          f"data: {out} (runs.csv, runs.parquet, summary.json)")
     return 0
 
 
@@ -164,9 +170,8 @@ def _cmd_reproduce(args) -> int:
     from .report import reproduce
 
     out = Path(args.out) if args.out else DEFAULT_OUT
-    path = reproduce(out, seeds=args.seeds, workers=_workers(args.workers), duration=args.duration,
-                     show_progress=not args.quiet, scheduler=args.scheduler, variants=args.variants,
-                     options=args.options, option_seeds=args.option_seeds)
+    path = reproduce(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+                     **_table_changes(args))
     print(f"report: {path}")
     return 0
 
@@ -183,32 +188,21 @@ def _study_path(name_or_path: str) -> Path:
 
 
 def _cmd_sweep(args) -> int:
-    """A study: the base scenario over its [sweep], one row per run in runs.csv."""
-    from cosim.progress import Progress
-    from cosim.study import load_study, plan, run_study
+    """A study: the base scenario over its cases and sweep, one row per run in runs.csv."""
+    from cosim.study import load_study
 
-    from .experiments import STUDY_METRICS, lean_signals, study_metrics
+    from .experiments import measure
+    from .progress import progress_bar
 
     study = load_study(_study_path(args.study))
     out = Path(args.out) if args.out else DEFAULT_OUT / f"study-{study.name}"
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    bar = None
-
-    def progress(done: int, total: int) -> None:
-        nonlocal bar
-        bar = bar or Progress(total, f"sweep {study.name}", enabled=not args.quiet)
-        bar.update(done)
-
-    try:
-        result = run_study(study, out, workers=max(1, workers), scheduler=args.scheduler, metrics=study_metrics,
-                           metric_names=STUDY_METRICS, record=lean_signals(study.scenario) or None,
-                           progress=progress, plots=not args.no_plots)
-    finally:
-        if bar is not None:
-            bar.close()
+    with progress_bar(f"sweep {study.name}", enabled=not args.quiet) as bar:
+        result = measure(study, out, workers=max(1, workers), scheduler=args.scheduler, progress=bar,
+                         plots=not args.no_plots)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(result.counts.items())) or "nothing to run"
-    print(f"{study.name}: {len(plan(study))} runs ({result.skipped} already done); this time: {counts}")
-    print(f"results: {out} (runs.csv, runs.parquet, summary.csv" + ", plots" * (not args.no_plots) + ")")
+    print(f"{study.name}: {result.total} runs ({result.skipped} already done); this time: {counts}")
+    print(f"results: {out} (runs.csv, runs.parquet, summary.json" + ", plots" * (not args.no_plots) + ")")
     return 0
 
 
@@ -266,6 +260,17 @@ def _names(text: str, known: Sequence[str], kind: str, extra: str = "") -> list[
     return names
 
 
+def _wind_list(text: str) -> list[float]:
+    """``--winds 1,3,5``: numbers (each then checked by the study, as its grid values are)."""
+    try:
+        winds = [float(w) for w in text.split(",") if w.strip()]
+    except ValueError:
+        winds = []
+    if not winds:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected wind speeds in m/s, e.g. 1,3,5")
+    return winds
+
+
 def _variant_list(text: str) -> list[str]:
     """``--variants a,b``: every name a registered variant."""
     from fnn_controller.variants import variant_names
@@ -293,19 +298,21 @@ def _parser() -> argparse.ArgumentParser:
         sp.add_argument("--out", help="output directory (default: under results/)")
         sp.add_argument("--quiet", action="store_true", help="no progress bar")
         if seeds:
-            sp.add_argument("--seeds", type=int, default=10, help="runs per cell, seeds 0..N-1 (default 10)")
+            sp.add_argument("--seeds", type=int, help="runs per cell of the variants' rows, seeds 0..N-1 "
+                                                      "(default: the study's, 10)")
             sp.add_argument("--duration", type=float, help="override the missions' duration (s)")
             sp.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 1: in this process)")
             sp.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS instead")
             sp.add_argument("--variants", type=_variant_list,
-                            metavar="A,B", help="rows to run, e.g. pd,pd+smc,pd+lm (default: every registered variant: "
+                            metavar="A,B", help="the variants' rows, e.g. pd,pd+smc,pd+lm (default: the study's: "
                                                 + ", ".join(variant_names()) + ")")
-            sp.add_argument("--options", type=_option_list, default=list(DEFAULT_OPTIONS), metavar="A,B",
+            sp.add_argument("--options", type=_option_list, metavar="A,B",
                             help="option rows below the paper's (settings beyond the paper, "
                                  "quadrotor_paper/options.py): " + ", ".join(option_names())
-                                 + "; none for none (default: " + ",".join(DEFAULT_OPTIONS) + ")")
+                                 + "; none for none (default: the study's, " + ",".join(DEFAULT_OPTIONS) + ")")
             sp.add_argument("--option-seeds", type=int, metavar="N",
-                            help=f"runs per option cell (default: the smaller of --seeds and {OPTION_SEEDS})")
+                            help=f"runs per option cell (default: the smaller of --seeds and {OPTION_SEEDS}; "
+                                 f"without --seeds the study's, {OPTION_SEEDS})")
 
     r = sub.add_parser("run", help="run one scenario: results CSV, plots, summary")
     r.add_argument("scenario", help="TOML file, shipped scenario name (see fnn-cosim scenarios), or SSP archive (.ssp)")
@@ -322,8 +329,8 @@ def _parser() -> argparse.ArgumentParser:
     r.set_defaults(func=_cmd_run)
 
     t2 = sub.add_parser("table2", help="Table 2: every controller variant at 1, 3, 5 m/s wind")
-    t2.add_argument("--winds", default="1,3,5", help="wind speeds in m/s (default 1,3,5)")
-    t2.add_argument("--scenario", default="circles",
+    t2.add_argument("--winds", type=_wind_list, help="wind speeds in m/s (default: the study's, 1,3,5)")
+    t2.add_argument("--scenario",
                     help="the mission (default circles; e.g. circles_sensors: the same with measurement noise)")
     t2.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help='override a scenario value, e.g. --set simulation.ordering=\'"exchange"\'')
@@ -332,7 +339,7 @@ def _parser() -> argparse.ArgumentParser:
 
     t3 = sub.add_parser("table3", help="Table 3: the figure-8")
     t3.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
-    t3.add_argument("--scenario", default="figure8", help="the mission (default figure8)")
+    t3.add_argument("--scenario", help="the mission (default: the study's, figure8)")
     common(t3)
     t3.set_defaults(func=_cmd_table3)
 

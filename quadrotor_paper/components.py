@@ -1,7 +1,8 @@
 """What the paper's application adds to the engine's registry: the FMU models
 of ``fmu_models``, the trajectories and the flight controller as component
 kinds (with their short sections ``[trajectory]`` and ``[controller]``), the
-``[wind]`` and ``[metrics]`` sections, and the shipped scenarios.
+``[wind]`` and ``[metrics]`` sections, the cases studies name (a case per
+controller variant, the option rows) and the shipped scenarios.
 
 :func:`register` runs when :mod:`quadrotor_paper` is imported, and through
 the ``cosim.plugins`` entry point whenever the engine reads a scenario.
@@ -115,6 +116,12 @@ def register() -> None:
     for name in TRAJECTORIES:
         registry.register_component_kind(_trajectory_kind(name))
     registry.register_component_kind(_controller_kind())
+    from .options import OPTIONS, variant_case
+
+    for name in variant_names():  # a case per variant (a table's row), then the option rows
+        registry.register_case(variant_case(name))
+    for case in OPTIONS.values():
+        registry.register_case(case)
     registry.register_section(registry.Section("wind", parse_wind, "shorthand for the WindGust FMU's parameters"))
     registry.register_section(registry.Section("metrics", parse_metrics, "signals of the tracking error"))
     registry.register_scenarios(Path(__file__).parent / "scenarios")

@@ -42,9 +42,8 @@ paper's mission (shipped scenario ``circles``, 3 m/s gust).
 """
 from __future__ import annotations
 
-import copy
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import casadi as ca
@@ -56,15 +55,16 @@ from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_
 from fnn_controller.position import axis_slice, initial_fnn_state
 
 from .controller_component import internal_ports
+from .missions import controller_variant
 
-__all__ = ["Run", "AxisClaims", "record_run", "evaluate_claims", "default_runs",
-           "finite_time_report"]
+__all__ = ["Recording", "AxisClaims", "record_run", "recorded", "evaluate_claims", "default_runs",
+           "finite_time_report", "CLAIM_MISSIONS"]
 
 _AXES = ("x", "y", "z")
 
 
 @dataclass(frozen=True, eq=False)
-class Run:
+class Recording:
     """One recorded co-simulation: time (n,), per axis (n, 3) the position
     error e, its derivative e_dot, tau_c, tau_n and tau = v*; the controller
     position-controller states *before* each step (n, 3 x axis state); its
@@ -83,32 +83,30 @@ class Run:
     status: str = "ok"
 
 
-def _scenario(base: str, variant: str, overrides: dict):
-    from cosim.scenario import load_scenario, parse_scenario
-
-    sc = load_scenario(base, {**overrides, "controller.variant": variant})
-    raw = copy.deepcopy(sc.raw)
+def _signals(variant: str) -> list[str]:
+    """What the claims read: the reference and the vehicle's position and
+    velocity, the controller's tau_c, tau_n, v* and its learned state."""
     signals = [f"reference.{s}" for s in ("x", "y", "z", "vx", "vy", "vz")]
     signals += [f"Quadrotor.{s}" for s in ("x", "y", "z", "u", "v", "w")]
     signals += [f"controller.{k}_{a}" for k in ("tau_c", "tau_n", "v_ref") for a in _AXES]
-    signals += [f"controller.{port.name}" for port in internal_ports(variant)]
-    raw["record"] = {"signals": signals}
-    return parse_scenario(raw, source=sc.source, name=sc.name)
+    return signals + [f"controller.{port.name}" for port in internal_ports(variant)]
 
 
-def record_run(name: str, variant: str, scenario: str = "circles", overrides: dict | None = None) -> Run:
-    """Run ``scenario`` (shipped name or path, with dotted ``overrides``) with
-    the controller ``variant`` and record what the claims need."""
-    from cosim.scenario import build_master
+def _position(scenario) -> PositionParams:
+    """The position controller's parameters of ``scenario``'s controller."""
+    from .controller_component import ControllerComponent
 
-    sc = _scenario(scenario, variant, overrides or {})
-    with build_master(sc) as master:
-        result = master.run(sc.duration, seed=sc.seed, raise_on_error=False)
-        position = master.components["controller"].position
+    return ControllerComponent.from_parameters("controller", scenario.components["controller"]["parameters"]).position
+
+
+def recorded(scenario, result) -> dict[str, Recording]:
+    """A study's metric (module level: it may run on a Dask worker): the
+    run as the claims read it, ``{"recorded": Recording}``."""
+    variant = controller_variant(scenario)
+    position = _position(scenario)
     # the published state is the one after each step: the state before step n is the one after n - 1
     after = np.column_stack([result[f"controller.{port.name}"] for port in internal_ports(variant)])
-    initial = initial_fnn_state(sc.seed, position, variant)
-    states = np.vstack([initial, after[:-1]])
+    states = np.vstack([initial_fnn_state(result.seed, position, variant), after[:-1]])
 
     def cols(fmt):
         return np.column_stack([result[fmt.format(a=a)] for a in _AXES])
@@ -116,8 +114,22 @@ def record_run(name: str, variant: str, scenario: str = "circles", overrides: di
     e = cols("reference.{a}") - cols("Quadrotor.{a}")
     vel = np.column_stack([result[f"Quadrotor.{s}"] for s in ("u", "v", "w")])
     e_dot = np.column_stack([result[f"reference.v{a}"] for a in _AXES]) - vel
-    return Run(name, variant, result.time.copy(), e, e_dot, cols("controller.tau_c_{a}"),
-               cols("controller.tau_n_{a}"), cols("controller.v_ref_{a}"), states, position, result.status)
+    return {"recorded": Recording(scenario.name, variant, result.time.copy(), e, e_dot, cols("controller.tau_c_{a}"),
+                            cols("controller.tau_n_{a}"), cols("controller.v_ref_{a}"), states, position,
+                            result.status)}
+
+
+def record_run(name: str, variant: str, scenario: str = "circles", overrides: dict | None = None) -> Recording:
+    """Run ``scenario`` (shipped name or path, with dotted ``overrides``) with
+    the controller ``variant`` and record what the claims need."""
+    from cosim.scenario import load_scenario
+
+    from .experiments import run_once
+
+    sc = load_scenario(scenario, {**(overrides or {}), "controller.variant": variant,
+                                  "record.signals": _signals(variant)})
+    result, _ = run_once(sc)
+    return replace(recorded(sc, result)["recorded"], name=name)
 
 
 @lru_cache(maxsize=None)
@@ -140,7 +152,7 @@ def _lm_function(bounds: LearningBounds) -> ca.Function:
                        ["x1", "x2", "axis_state", "gamma", "alpha_bar"], ["w_bar_squared", "delta", "rate"])
 
 
-def _lm_terms(run: Run, axis: int, gamma: float, alpha_bar: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _lm_terms(run: Recording, axis: int, gamma: float, alpha_bar: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """W_bar^T W_bar, delta (eq. 62) and the decrease rate at every sample of
     ``axis`` of ``run``: :func:`_lm_function` mapped over the samples."""
     f = _lm_function(run.position.bounds).map(len(run.t))
@@ -190,7 +202,7 @@ def _enter_for_good(t: np.ndarray, inside: np.ndarray) -> float:
     return float(t[np.flatnonzero(~inside)[-1] + 1])
 
 
-def evaluate_claims(run: Run, axis: int) -> AxisClaims:
+def evaluate_claims(run: Recording, axis: int) -> AxisClaims:
     """:class:`AxisClaims` of ``axis`` (0, 1, 2) of ``run``."""
     t, tc, tau = run.t, run.tau_c[:, axis], run.tau[:, axis]
     h = float(t[1] - t[0])
@@ -224,21 +236,35 @@ def evaluate_claims(run: Run, axis: int) -> AxisClaims:
     raise ValueError(f"run {run.name!r}: variant {run.variant!r} has no learning law (pd+smc or pd+lm)")
 
 
-def default_runs(variants=("pd+smc", "pd+lm"), kp: float | None = None, kd: float | None = None) -> list[Run]:
-    """The two recorded runs per variant: a 1 m step of the x reference from
-    hover (20 s, no wind), and the paper's mission (50 s, 3 m/s gust); PD
-    gains of the ``circles`` scenario (the paper's) unless given."""
+# the two missions of the claims: (name, dotted overrides of the circles scenario)
+CLAIM_MISSIONS = (
+    ("step 1 m", {"trajectory": {"kind": "hover", "x": 1.0, "y": 0.0, "z": -15.0}, "wind.speed": 0.0,
+                  "simulation.duration": 20.0}),
+    ("circles, 3 m/s gust", {"wind.speed": 3.0}),
+)
+
+
+def default_runs(variants=("pd+smc", "pd+lm"), kp: float | None = None, kd: float | None = None,
+                 workers: int = 1) -> list[Recording]:
+    """The two recorded runs per variant, a study on ``circles`` (one case
+    per mission and variant): a 1 m step of the x reference from hover (20 s,
+    no wind), and the paper's mission (50 s, 3 m/s gust); PD gains of the
+    ``circles`` scenario (the paper's) unless given."""
+    from cosim.study import parse_study
+
+    from .experiments import measure
+
     gains = {f"controller.position.{k}": float(v) for k, v in (("kp", kp), ("kd", kd)) if v is not None}
-    runs = []
-    for variant in variants:
-        runs.append(record_run("step 1 m", variant, "circles", {
-            "trajectory": {"kind": "hover", "x": 1.0, "y": 0.0, "z": -15.0},
-            "wind.speed": 0.0, "simulation.duration": 20.0, **gains}))
-        runs.append(record_run("circles, 3 m/s gust", variant, "circles", {"wind.speed": 3.0, **gains}))
-    return runs
+    cases = {f"{name} / {variant}": {"label": name, "set": {**overrides, **gains, "controller.variant": variant,
+                                                            "record.signals": _signals(variant)}}
+             for variant in variants for name, overrides in CLAIM_MISSIONS}
+    study = parse_study({"scenario": "circles", "name": "learning_claims", "cases": cases})
+    labels = {c.name: c.label for c in study.cases}
+    rows = measure(study, workers=workers, metrics=recorded, metric_names=()).rows  # each case records its own signals
+    return [replace(row["recorded"], name=labels[row["case"]]) for row in rows]
 
 
-def finite_time_report(runs: list[Run] | None = None) -> list[AxisClaims]:
+def finite_time_report(runs: list[Recording] | None = None) -> list[AxisClaims]:
     """:func:`evaluate_claims` for every axis of every run (default:
     :func:`default_runs`)."""
     runs = default_runs() if runs is None else runs

@@ -135,9 +135,18 @@ def cache_root() -> Path:
     return Path.home() / ".cache" / "fnn-cosim"
 
 
+_KNOWN: dict[tuple[int, int], tuple[FmuModel, Path]] = {}  # (id(model), version) -> (model, its FMU)
+
+
 def cached_fmu(model: FmuModel, fmi_version: int = 2) -> Path:
     """Path of the FMU of ``model``, built on first use and whenever the
-    model, its variable table or the C layer changes (content-addressed)."""
+    model, its variable table or the C layer changes (content-addressed).
+    Within a process a model object's FMU is found once (generating its
+    sources to hash them costs tens of milliseconds): a study builds a
+    master per case and grid point."""
+    known = _KNOWN.get((id(model), fmi_version))
+    if known is not None and known[0] is model and known[1].exists():
+        return known[1]
     with tempfile.TemporaryDirectory() as tmp:
         root = _stage(model, fmi_version, Path(tmp))
         digest = hashlib.sha256(" ".join(CFLAGS).encode())
@@ -148,4 +157,5 @@ def cached_fmu(model: FmuModel, fmi_version: int = 2) -> Path:
     target = cache_root() / digest.hexdigest()[:16] / f"fmi{fmi_version}" / f"{model.identifier}.fmu"
     if not target.exists():
         build_fmu(model, target.parent.parent, fmi_version)
+    _KNOWN[(id(model), fmi_version)] = (model, target)  # the model held: its id is never reused
     return target

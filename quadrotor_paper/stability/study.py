@@ -23,7 +23,7 @@ from fnn_controller import GeometricParams, PositionParams
 
 from .analysis import (CircleError, FeedForwardCase, GainSweep, OperatingPointAnalysis, RampError, analyze,
                        circle_error, critical_gain_factor, feedforward_comparison, gain_sweep, ramp_error)
-from ..learning_claims import AxisClaims, Run, default_runs, evaluate_claims
+from ..learning_claims import AxisClaims, Recording, default_runs, evaluate_claims
 from .operating_points import OperatingPoint, default_operating_points
 from .validation import GainCheck, StepCheck, check_gains, check_step, pd_mission_rmse, ramp_lag
 
@@ -57,7 +57,7 @@ class StabilityStudy:
     mission_rmse: dict[float, float] | None = None
     step_checks: list[StepCheck] = field(default_factory=list)
     gain_checks: list[GainCheck] = field(default_factory=list)
-    runs: list[Run] = field(default_factory=list)
+    runs: list[Recording] = field(default_factory=list)
     finite_time: list[AxisClaims] = field(default_factory=list)
     report_path: Path | None = None
     figures: dict[str, Path] = field(default_factory=dict)

@@ -376,7 +376,7 @@ def test_cosim_imports_nothing_of_the_application():
     """Importing the engine (without reading a registry, which would load the
     cosim.plugins entry points) pulls in no application package."""
     code = ("import cosim.master, cosim.scenario, cosim.registry, cosim.fmu_component, cosim.recorder, cosim.guard, "
-            "cosim.connection, cosim.config, cosim.progress, sys; "
+            "cosim.connection, cosim.config, cosim.study, cosim.study_run, cosim.summary, cosim.dask_runner, sys; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in "
             "('quadrotor_paper', 'fnn_controller', 'fmu_models')))")
     root = Path(cosim.__file__).resolve().parents[1]

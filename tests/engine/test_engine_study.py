@@ -1,16 +1,23 @@
-"""Studies (cosim.study) on the toy loop, in this process: the plan (grid,
-random draws, seeds), refusals naming the study key, failed runs as rows,
-and resuming a killed study."""
+"""Studies (cosim.study, cosim.study_run) on the toy loop: the plan (cases,
+grid, random draws, seeds; generated lazily), refusals naming the study key,
+failed runs as rows, the one summary, resuming a killed study, the folder's
+lock, and the same rows from a local Dask cluster as in this process."""
 from __future__ import annotations
 
-import csv
+import json
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import toy_models
+from cosim import registry
 from cosim.errors import ScenarioError
-from cosim.study import load_study, parse_study, plan, read_runs, run_study, summarize_runs
+from cosim.study import MAX_RUNS, count, load_study, parse_study, plan, runs
+from cosim.study_run import LOCK, read_runs, run_study
+from cosim.summary import summarize
 
 pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
 
@@ -78,7 +85,7 @@ seed = 7
 def test_plan_is_grid_x_samples_x_seeds_with_draws_from_the_base_seed(folder):
     study = load_study(study_file(folder, GRID_AND_RANDOM))
     runs = plan(study)
-    assert len(runs) == 2 * 3 * 4 * 2
+    assert len(runs) == 2 * 3 * 4 * 2 == count(study)
     assert study.keys == ["toy_controller.kp", "toy_source.value", "toy_lag.time_constant", "toy_lag.gain"]
     assert [r.index for r in runs] == list(range(len(runs)))
     assert {(r.values["toy_controller.kp"], r.values["toy_source.value"]) for r in runs} == \
@@ -91,7 +98,7 @@ def test_plan_is_grid_x_samples_x_seeds_with_draws_from_the_base_seed(folder):
         tau = float(rng.uniform(0.2, 0.4))
         gain = [1.0, 2.0][int(rng.integers(2))]
         expected.append((tau, gain))
-    first_point = [r for r in runs if r.grid_point == (0.5, 1.0) and r.seed == 3]
+    first_point = [r for r in runs if r.point == (0.5, 1.0) and r.seed == 3]
     assert [(r.values["toy_lag.time_constant"], r.values["toy_lag.gain"]) for r in first_point] == expected
     assert [r.sample for r in first_point] == [0, 1, 2, 3]
     assert plan(load_study(study_file(folder, GRID_AND_RANDOM, "again.toml"))) == runs  # reproducible
@@ -166,27 +173,41 @@ def test_failed_and_diverged_runs_are_rows_and_the_summary_counts_them(folder, t
     assert by_status["diverged"] and all(r["toy_controller.kp"] == "60.0" and "Lag.y" in r["error"]
                                          for r in by_status["diverged"])
     assert by_status["ok"] and all(r["error"] == "" and math.isfinite(float(r["final_y"])) for r in by_status["ok"])
-    summary = {r["toy_controller.kp"]: r for r in csv.DictReader(open(out / "summary.csv"))}
-    assert set(summary) == {"1.0", "60.0"}
-    good = summary["1.0"]
-    assert int(good["runs"]) == 6 and int(good["ok"]) + int(good["failed"]) == 6
-    assert int(summary["60.0"]["ok"]) == 0 and summary["60.0"]["final_y_mean"] == ""
+    cells = {c["values"]["toy_controller.kp"]: c for c in json.loads((out / "summary.json").read_text())["cells"]}
+    assert set(cells) == {1.0, 60.0}
+    good = cells[1.0]
+    assert good["runs"] == 6 and good["ok"] + good["failed"] == 6 and good["ok"] > 0
+    assert good["metrics"]["final_y"]["n"] == good["ok"]
+    assert cells[60.0]["ok"] == 0 and cells[60.0]["metrics"]["final_y"]["mean"] is None
+    assert result.summary["cells"] == json.loads((out / "summary.json").read_text())["cells"]
     import pyarrow.parquet as pq
 
     table = pq.read_table(out / "runs.parquet")
     assert table.num_rows == len(rows) and "final_y" in table.column_names
 
 
-def test_the_summary_is_a_t_interval_over_the_ok_runs():
-    rows = [{"g": "a", "status": "ok", "m": str(v)} for v in (1.0, 2.0, 4.0)] + \
-           [{"g": "a", "status": "diverged", "m": "100.0"}, {"g": "b", "status": "ok", "m": "3.0"}]
-    a, b = summarize_runs(rows, ["g"], ["m"])
+TWO_CASES = """
+[cases.a]
+set = { "toy_controller.kp" = 1.0 }
+seeds = 4
+[cases.b]
+set = { "toy_controller.kp" = 2.0 }
+seeds = 1
+"""
+
+
+def test_the_summary_is_a_t_interval_over_the_ok_runs(folder):
+    study = load_study(study_file(folder, TWO_CASES))
+    rows = [{"run": str(i), "status": s, "m": str(v)} for i, (s, v) in enumerate(
+        [("ok", 1.0), ("ok", 2.0), ("ok", 4.0), ("diverged", 100.0), ("ok", 3.0)])]
+    a, b = summarize(study, rows, ["m"])
     x = np.array([1.0, 2.0, 4.0])
     half = 4.302652729911275 * x.std(ddof=1) / math.sqrt(3)  # t(0.975, 2)
-    assert (a["runs"], a["ok"], a["diverged"], a["m_n"]) == (4, 3, 1, 3)
-    assert a["m_mean"] == pytest.approx(x.mean()) and a["m_std"] == pytest.approx(x.std(ddof=1))
-    assert (a["m_ci95_low"], a["m_ci95_high"]) == pytest.approx((x.mean() - half, x.mean() + half))
-    assert (b["m_n"], b["m_mean"], b["m_std"], b["m_ci95_low"]) == (1, 3.0, None, None)
+    assert (a["case"], a["runs"], a["ok"], a["diverged"], a["metrics"]["m"]["n"]) == ("a", 4, 3, 1, 3)
+    assert a["metrics"]["m"]["mean"] == pytest.approx(x.mean()) and a["metrics"]["m"]["std"] == pytest.approx(x.std(ddof=1))
+    assert a["metrics"]["m"]["ci95"] == pytest.approx([x.mean() - half, x.mean() + half])
+    assert (b["metrics"]["m"]["n"], b["metrics"]["m"]["mean"], b["metrics"]["m"]["std"], b["metrics"]["m"]["ci95"]) \
+        == (1, 3.0, None, None)
 
 
 RESUME = """
@@ -211,14 +232,14 @@ def test_a_killed_study_keeps_its_rows_and_runs_only_the_missing_ones(folder, tm
     lines = (out / "runs.csv").read_text().splitlines(keepends=True)
     (out / "runs.csv").write_text("".join(lines[:8]) + lines[8][:12])
     again = run_study(study, out, metrics=final_y, metric_names=["final_y"], plots=False)
-    assert (again.total, again.skipped) == (11, 7)
+    assert (again.total, again.skipped, sum(again.counts.values())) == (18, 7, 11)
     rows = read_runs(out / "runs.csv")
     assert sorted(int(r["run"]) for r in rows) == list(range(18))  # each run once
     for r in rows:
         assert r == {**reference[r["run"]], "wall_time_s": r["wall_time_s"]}
 
     done = run_study(study, out, metrics=final_y, metric_names=["final_y"], plots=False)
-    assert (done.total, done.skipped) == (0, 18)
+    assert (done.total, done.skipped, done.counts) == (18, 18, {})
     assert len(read_runs(out / "runs.csv")) == 18
 
 
@@ -230,10 +251,157 @@ def test_resuming_into_the_folder_of_another_study_is_refused(folder, tmp_path):
         run_study(other, out, plots=False)
 
 
-def test_the_summary_follows_the_plan_whatever_order_the_runs_finished_in():
-    """A resumed study appends a grid point's rows after later ones: the
-    summary is still in plan order."""
-    rows = [{"run": str(i), "k": str(k), "status": "ok", "m": str(float(i))} for i, k in ((2, 3), (0, 1), (3, 3), (1, 1))]
-    records = summarize_runs(rows, ["k"], ["m"])
-    assert [r["k"] for r in records] == ["1", "3"]
-    assert [r["m_mean"] for r in records] == [0.5, 2.5]
+def test_the_summary_follows_the_plan_whatever_order_the_runs_finished_in(folder):
+    """A resumed study's rows come in any order: the summary is in plan order,
+    each cell's values in plan order too (the mean of floats depends on it),
+    and its errors the first ones of the plan."""
+    study = load_study(study_file(folder, '[sweep]\nseeds = 3\n[sweep.grid]\n"toy_controller.kp" = [1.0, 3.0]\n'))
+    values = [1e16, 1.0, -1e16, 0.5, 0.25, 0.125]  # the first cell's sum is 0 in plan order, 1 in arrival order
+    arrival = (4, 0, 2, 5, 1, 3)
+    assert sum(values[i] for i in (0, 2, 1)) == 1.0 and sum(values[:3]) == 0.0
+    rows = [{"run": i, "status": "ok", "m": values[i], "error": f"note {i}"} for i in arrival]
+    records = summarize(study, rows, ["m"])
+    assert [r["values"] for r in records] == [{"toy_controller.kp": 1.0}, {"toy_controller.kp": 3.0}]
+    assert [r["metrics"]["m"]["mean"] for r in records] == [0.0, np.mean([0.5, 0.25, 0.125])]
+    assert [r["errors"] for r in records] == [["note 0", "note 1", "note 2"], ["note 3", "note 4", "note 5"]]
+
+
+# ---- cases -----------------------------------------------------------------------------------------
+
+CASES = """
+[cases.soft]
+label = "soft controller"
+set = { "toy_controller.kp" = 0.5 }
+[cases.stiff]
+set = { "toy_controller.kp" = 1.0 }
+seeds = [7]
+[sweep]
+seeds = 2
+[sweep.grid]
+"toy_source.value" = [1.0, 2.0]
+"""
+
+
+def test_cases_are_rows_with_their_own_overrides_and_seeds(folder):
+    study = load_study(study_file(folder, CASES))
+    runs_ = plan(study)
+    assert [(r.case, r.point, r.seed) for r in runs_] == [
+        ("soft", (1.0,), 0), ("soft", (1.0,), 1), ("soft", (2.0,), 0), ("soft", (2.0,), 1),
+        ("stiff", (1.0,), 7), ("stiff", (2.0,), 7)]
+    assert runs_[0].overrides == {"toy_controller.kp": 0.5, "toy_source.value": 1.0}
+    assert runs_[5].overrides == {"toy_controller.kp": 1.0, "toy_source.value": 2.0}
+    result = run_study(study, metrics=final_y, metric_names=["final_y"], plots=False)
+    assert [r["case"] for r in result.rows] == [r.case for r in runs_] and result.out_dir is None
+    by_case = {(c["case"], c["values"]["toy_source.value"]): c for c in result.summary["cells"]}
+    assert by_case[("soft", 1.0)]["label"] == "soft controller" and by_case[("stiff", 2.0)]["runs"] == 1
+    # a stiffer proportional loop settles nearer its setpoint; the loop is linear in it
+    y = {key: c["metrics"]["final_y"]["mean"] for key, c in by_case.items()}
+    assert y[("stiff", 1.0)] > y[("soft", 1.0)] and y[("soft", 2.0)] == pytest.approx(2 * y[("soft", 1.0)])
+
+
+def test_a_registered_case_is_named_and_may_take_seeds(folder):
+    with registry.scoped():
+        registry.register_case(registry.Case("gentle", {"toy_controller.kp": 0.25}, label="gentle"))
+        study = load_study(study_file(folder, "[cases.gentle]\nseeds = 2\n"))
+        assert study.cases == (registry.Case("gentle", {"toy_controller.kp": 0.25}, label="gentle", seeds=(0, 1)),)
+        with pytest.raises(ScenarioError, match=r"cases.gentle.set: 'gentle' is a registered case"):
+            load_study(study_file(folder, '[cases.gentle]\nset = { "toy_controller.kp" = 1.0 }\n'))
+
+
+@pytest.mark.parametrize("body, message", [
+    ("[cases.nope]\n", "cases.nope: not a registered case"),
+    ("[cases.a]\nset = { \"toy_controller.kq\" = 1.0 }\n", "cases.a: toy_controller.kq: unknown key"),
+    ("[cases.a]\nset = { \"toy_controller.kp\" = 1.0 }\ncolour = 1\n", "cases.a.colour: unknown key"),
+    ("[cases.a]\nset = { \"toy_controller.kp\" = 1.0 }\n[sweep.grid]\n\"toy_controller.kp\" = [1.0]\n",
+     'sweep.grid."toy_controller.kp": also set by case \'a\''),
+    ("[sweep]\nseeds = 100000000\n", f"sweep.seeds = 100000000: at most {MAX_RUNS} runs a study"),
+    ("[sweep.grid]\n\"toy_source.value\" = [1.0, 2.0, 3.0, 4.0]\n[sweep.random]\nsamples = 500000\n"
+     "\"toy_controller.kp\" = { uniform = [1.0, 2.0] }\n", f"2000000 runs; at most {MAX_RUNS} a study"),
+])
+def test_bad_cases_and_oversized_studies_are_refused_in_one_line(folder, body, message):
+    with pytest.raises(ScenarioError) as info:
+        load_study(study_file(folder, body))
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_plan_is_generated_lazily_and_resumes_from_any_index(folder):
+    study = load_study(study_file(folder, GRID_AND_RANDOM))
+    whole = plan(study)
+    assert list(runs(study, start=17)) == whole[17:]
+    big = load_study(study_file(folder, "[sweep]\nseeds = 1000000\n", "big.toml"))
+    assert count(big) == 1_000_000
+    it = runs(big, start=999_998)  # skipping through the plan builds no list
+    assert [r.index for r in it] == [999_998, 999_999]
+
+
+# ---- the folder ---------------------------------------------------------------------------------
+
+def test_a_folder_being_written_by_another_driver_is_refused(folder, tmp_path):
+    import fcntl
+
+    out = tmp_path / "out"
+    out.mkdir()
+    with open(out / LOCK, "a") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        with pytest.raises(ScenarioError, match="another study is being written into this folder now"):
+            run_study(load_study(study_file(folder, "[sweep]\nseeds = 1\n")), out, plots=False)
+    assert not (out / "runs.csv").exists()
+
+
+def test_the_sidecar_says_what_the_folder_holds(folder, tmp_path):
+    study = load_study(study_file(folder, RESUME))
+    out = tmp_path / "out"
+    run_study(study, out, metrics=final_y, metric_names=["final_y"], plots=False)
+    sidecar = json.loads((out / "study.json").read_text())
+    assert (sidecar["study"], sidecar["fingerprint"], sidecar["runs"], sidecar["rows"], sidecar["status"]) == \
+        ("study", study.fingerprint, 18, 18, "done")
+
+
+def test_an_unwritable_or_file_out_is_refused_before_any_run(folder, tmp_path):
+    study = load_study(study_file(folder, "[sweep]\nseeds = 1\n"))
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(ScenarioError, match=r"--out .*f: not a folder"):
+        run_study(study, tmp_path / "f", plots=False)
+
+
+# ---- Dask ---------------------------------------------------------------------------------------
+
+DASK_SCENARIO = """
+name = "toy_loop_by_path"
+connections = ["source.out -> ctrl.r", "Lag.y -> ctrl.y", "ctrl.u -> Lag.u"]
+[simulation]
+duration = 1.0
+step = 0.1
+[fmus.Lag]
+path = "{lag}"
+parameters = {{ tau = 0.25 }}
+[components.source]
+factory = "toy_models:Constant"
+[components.ctrl]
+factory = "toy_models:PController"
+kp = 1.5
+[record]
+signals = ["Lag.y"]
+"""
+
+
+def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, monkeypatch):
+    """The engine's Dask path on toy models: the workers (separate processes)
+    find the toy components by their factory on PYTHONPATH and the FMU by path."""
+    (folder / "toy_by_path.toml").write_text(DASK_SCENARIO.format(lag=toy_models.lag_fmu_path(2)))
+    body = ('scenario = "toy_by_path.toml"\n[sweep]\nseeds = 2\n[sweep.grid]\n"components.ctrl.kp" = [0.5, 1.5]\n'
+            '[sweep.random]\nsamples = 2\n"fmus.Lag.parameters.tau" = { uniform = [0.2, 0.4] }\n')
+    (folder / "dask.toml").write_text(body)
+    study = load_study(folder / "dask.toml")
+    here = run_study(study, tmp_path / "here", metrics=final_y, metric_names=["final_y"], plots=False)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(Path(toy_models.__file__).parent),
+                                                      os.environ.get("PYTHONPATH", "")]))
+    there = run_study(study, tmp_path / "dask", workers=2, metrics=final_y, metric_names=["final_y"], plots=False)
+    assert (here.total, there.total, there.counts) == (8, 8, {"ok": 8})
+    a = {r["run"]: r for r in read_runs(tmp_path / "here" / "runs.csv")}
+    b = {r["run"]: r for r in read_runs(tmp_path / "dask" / "runs.csv")}
+    assert a.keys() == b.keys()
+    for k in a:
+        assert {c: v for c, v in a[k].items() if c != "wall_time_s"} == {c: v for c, v in b[k].items()
+                                                                          if c != "wall_time_s"}
+    assert here.summary["cells"] == there.summary["cells"]

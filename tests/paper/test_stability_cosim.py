@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from quadrotor_paper.stability import critical_gain_factor, hover
-from quadrotor_paper.learning_claims import AxisClaims, Run, evaluate_claims, record_run
+from quadrotor_paper.learning_claims import AxisClaims, Recording, evaluate_claims, record_run
 from quadrotor_paper.stability.loops import LoopModel
 from quadrotor_paper.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
 from fnn_controller import FNN_STATE_SIZE, PositionParams
@@ -128,7 +128,7 @@ def _synthetic_run(variant, tau_c, tau, t):
     n = t.size
     states = np.tile(initial_state(0), (n, 1))
     zeros = np.zeros((n, 3))
-    return Run("synthetic", variant, t, zeros, zeros, tau_c, zeros, tau, states, PositionParams())
+    return Recording("synthetic", variant, t, zeros, zeros, tau_c, zeros, tau, states, PositionParams())
 
 
 def test_claims_of_a_known_learning_error():

@@ -3,7 +3,6 @@ local Dask cluster, and on a scheduler and two workers started as separate
 processes; the rows agree with single runs and with each other."""
 from __future__ import annotations
 
-import csv
 import json
 import os
 import signal
@@ -15,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from cosim.scenario import load_scenario
-from cosim.study import load_study, plan, read_runs
+from cosim.study import load_study, plan
+from cosim.study_run import read_runs
 from quadrotor_paper.cli import main
 from quadrotor_paper.experiments import run_once
 
@@ -75,12 +75,13 @@ def test_every_run_is_a_row_with_the_metrics_of_a_single_run(in_process):
 
 
 def test_the_summary_parquet_and_plots(in_process):
-    summary = list(csv.DictReader(open(in_process / "summary.csv")))
-    assert [(r["controller.variant"], r["wind.speed"]) for r in summary] == \
-        [("pd", "1.0"), ("pd", "5.0"), ("pd+lm", "1.0"), ("pd+lm", "5.0")]
-    for r in summary:
-        assert (r["runs"], r["ok"], r["rmse_m_n"]) == ("4", "4", "4")
-        assert float(r["rmse_m_ci95_low"]) <= float(r["rmse_m_mean"]) <= float(r["rmse_m_ci95_high"])
+    summary = json.loads((in_process / "summary.json").read_text())
+    assert [(c["values"]["controller.variant"], c["values"]["wind.speed"]) for c in summary["cells"]] == \
+        [("pd", 1.0), ("pd", 5.0), ("pd+lm", 1.0), ("pd+lm", 5.0)]
+    for c in summary["cells"]:
+        assert (c["runs"], c["ok"], c["metrics"]["rmse_m"]["n"]) == (4, 4, 4)
+        rmse = c["metrics"]["rmse_m"]
+        assert rmse["ci95"][0] <= rmse["mean"] <= rmse["ci95"][1]
     import pyarrow.parquet as pq
 
     table = pq.read_table(in_process / "runs.parquet")
@@ -170,4 +171,4 @@ def test_every_shipped_study_loads_and_plans(path):
     by load_study against the scenario and its FMUs' variables)."""
     study = load_study(path)
     runs = plan(study)
-    assert runs and len({(tuple(sorted(r.values.items())), r.seed) for r in runs}) == len(runs)
+    assert runs and len({(r.case, tuple(sorted(r.values.items())), r.seed) for r in runs}) == len(runs)

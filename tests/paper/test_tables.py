@@ -1,13 +1,28 @@
 """Table 2 and Table 3 on a reduced setting: the FNN rows beat PD; the
-markdown and summary.json hold every cell."""
+markdown and the study's summary.json hold every cell; ``fnn-cosim table2``
+is the shipped study ``table2``, run for run."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
+from cosim.study import load_study, plan
+from cosim.study_run import read_runs
 from quadrotor_paper.cli import main
-from quadrotor_paper.tables import PAPER_TABLE2, deviations, table2_markdown, table3_markdown
+from quadrotor_paper.report import STUDIES, table_study
+from quadrotor_paper.tables import PAPER_TABLE2, cell, deviations, table2_markdown, table3_markdown
+
+
+def _mean(summary, case, wind=None):
+    return cell(summary, case, wind)["metrics"]["rmse_m"]["mean"]
+
+
+def _rmse(out: Path, case: str) -> list[float]:
+    """A row's RMSE of every run, in plan order."""
+    return [float(r["rmse_m"]) for r in sorted(read_runs(out / "runs.csv"), key=lambda r: int(r["run"]))
+            if r["case"] == case]
 
 
 def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):
@@ -15,13 +30,14 @@ def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):
     assert main(["table2", "--seeds", "2", "--winds", "1,5", "--duration", "15", "--workers", "2",
                  "--variants", "pd,pd+smc,pd+lm", "--options", "none", "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert len(summary["runs"]) == 2 * 2 * 3 and all(r["status"] == "ok" for r in summary["runs"])
-    cells = summary["cells"]
-    for wind in ("1", "5"):
-        pd = cells["pd"][wind]["mean"]
-        assert cells["pd"][wind]["runs"] == 2 and len(cells["pd"][wind]["rmse"]) == 2
+    rows = read_runs(out / "runs.csv")
+    assert len(rows) == summary["rows"] == 2 * 2 * 3 and all(r["status"] == "ok" for r in rows)
+    for wind in (1.0, 5.0):
+        pd = _mean(summary, "pd", wind)
+        assert cell(summary, "pd", wind)["runs"] == 2
+        assert sorted(int(r["seed"]) for r in rows if r["case"] == "pd" and float(r["wind.speed"]) == wind) == [0, 1]
         for fnn in ("pd+smc", "pd+lm"):
-            assert cells[fnn][wind]["mean"] < 0.75 * pd, (fnn, wind, cells[fnn][wind]["mean"], pd)
+            assert _mean(summary, fnn, wind) < 0.75 * pd, (fnn, wind, _mean(summary, fnn, wind), pd)
     md = (out / "table2.md").read_text()
     assert "| PD+LM-FNN |" in md and "0.966" in md and "Reduction of the RMSE over PD" in md
     assert "| PD+LM-FNN |" in capsys.readouterr().out
@@ -32,24 +48,59 @@ def test_table3_reduced(tmp_path):
     assert main(["table3", "--seeds", "1", "--duration", "20", "--workers", "1", "--options", "none",
                  "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["cells"]["pd+lm"]["mean"] < summary["cells"]["pd"]["mean"]
+    assert _mean(summary, "pd+lm") < _mean(summary, "pd")
     assert "0.327" in (out / "table3.md").read_text()
 
 
+def test_the_table_command_is_the_shipped_study_run_for_run(tmp_path):
+    """``fnn-cosim table2`` without arguments plans exactly ``fnn-cosim sweep
+    table2``'s runs (same fingerprint, same plan); with arguments it is the
+    study file that says the same, and both give the same rows."""
+    for number in (2, 3):
+        shipped = load_study(STUDIES / f"table{number}.toml")
+        assert table_study(number).fingerprint == shipped.fingerprint
+        assert plan(table_study(number)) == plan(shipped)
+    (tmp_path / "small.toml").write_text(
+        'scenario = "circles"\nname = "table2"\ndescription = "small"\n[set]\n"simulation.duration" = 2.0\n'
+        '[cases.pd]\n[cases."pd+lm"]\n[cases.lm-bl]\nseeds = 1\n[sweep]\nseeds = 2\n'
+        '[sweep.grid]\n"wind.speed" = [3.0]\n')
+    common = ["--workers", "1", "--quiet"]
+    assert main(["sweep", str(tmp_path / "small.toml"), "--out", str(tmp_path / "sweep"), "--no-plots", *common]) == 0
+    assert main(["table2", "--seeds", "2", "--winds", "3", "--duration", "2", "--variants", "pd,pd+lm",
+                 "--options", "lm-bl", "--option-seeds", "1", "--out", str(tmp_path / "table"), *common]) == 0
+    a, b = (sorted(read_runs(tmp_path / d / "runs.csv"), key=lambda r: int(r["run"])) for d in ("sweep", "table"))
+    assert len(a) == 5
+    assert [{k: v for k, v in r.items() if k != "wall_time_s"} for r in a] == \
+        [{k: v for k, v in r.items() if k != "wall_time_s"} for r in b]
+
+
+def _summary(values: dict, cases: list[str], wind_key: bool = True) -> dict:
+    """A study summary with one cell per (case, wind): ``values[case][wind] = (mean, failed)``."""
+    from quadrotor_paper.options import OPTIONS
+    from fnn_controller.variants import variant
+
+    labels = {c: OPTIONS[c].label if c in OPTIONS else variant(c).label for c in cases}
+    cells = [{"case": c, "label": labels[c], "values": {"wind.speed": w} if wind_key else {}, "runs": 10,
+              "ok": 10 - failed, "diverged": failed, "failed": 0, "seeds": list(range(10)), "errors": [],
+              "metrics": {"rmse_m": {"n": 10 - failed, "mean": mean, "std": 0.01, "ci95": None}}}
+             for c in cases for w, (mean, failed) in values[c].items()]
+    return {"cases": [{"name": c, "label": labels[c]} for c in cases], "cells": cells}
+
+
 def test_markdown_known_answer():
-    cells = {v: {w: {"mean": x, "std": 0.01, "runs": 10, "failed": 0} for w, x in by.items()}
-             for v, by in PAPER_TABLE2.items()}
-    cells["pd+lm"][5.0]["mean"] = 0.3  # more than 30 % below the paper's 0.689
-    md = table2_markdown(cells)
+    values = {v: {w: (x, 0) for w, x in by.items()} for v, by in PAPER_TABLE2.items()}
+    values["pd+lm"][5.0] = (0.3, 0)  # more than 30 % below the paper's 0.689
+    summary = _summary(values, list(values))
+    md = table2_markdown(summary)
     assert "| PD | 0.966 ± 0.010 | 0.966 |" in md
     assert "0.300 ± 0.010 †" in md
     assert "| PD+SMC-FNN | 65 % | 65 % | 55 % | 55 % | 50 % | 50 % |" in md
-    devs = deviations(cells, None)
+    devs = deviations(summary, None)
     assert devs == [{"table": 2, "variant": "pd+lm", "wind_m_s": 5.0, "ours": 0.3, "paper": 0.689,
                      "relative": pytest.approx(0.3 / 0.689 - 1)}]
-    t3 = table3_markdown({"pd": {None: {"mean": 0.327, "std": 0, "runs": 1, "failed": 0}},
-                          "pd+lm": {None: {"mean": 0.2, "std": 0, "runs": 1, "failed": 1}}})
-    assert "| PD+LM-FNN | 0.200 ± 0.000 (1/1 diverged) | 0.228 | 39 % | 30 % |" in t3
+    t3 = table3_markdown(_summary({"pd": {None: (0.327, 0)}, "pd+lm": {None: (0.2, 1)}}, ["pd", "pd+lm"],
+                                  wind_key=False))
+    assert "| PD+LM-FNN | 0.200 ± 0.010 (1/10 diverged) | 0.228 | 39 % | 30 % |" in t3
 
 
 @pytest.mark.slow
@@ -59,7 +110,7 @@ def test_full_reproduction(tmp_path):
     report = (tmp_path / "report.md").read_text()
     assert "## Table 2" in report and "## Table 3" in report
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert len(summary["table2"]["runs"]) == 90 and len(summary["table3"]["runs"]) == 30
+    assert summary["table2"]["rows"] == 186 and summary["table3"]["rows"] == 62
     for f in summary["figures"]["files"]:
         assert (tmp_path / "figures").joinpath(f).exists()
 
@@ -79,13 +130,13 @@ def test_option_rows_follow_the_papers_rows_which_stay_bit_identical(tmp_path):
     common = ["table3", "--seeds", "1", "--duration", "12", "--workers", "1", "--variants", "pd", "--quiet"]
     assert main(common + ["--options", "none", "--out", str(tmp_path / "paper")]) == 0
     assert main(common + ["--options", "pd-ff,pd-ff-acc", "--out", str(tmp_path / "opt")]) == 0
-    paper = json.loads((tmp_path / "paper" / "summary.json").read_text())
     opt = json.loads((tmp_path / "opt" / "summary.json").read_text())
-    assert opt["cells"]["pd"]["rmse"] == paper["cells"]["pd"]["rmse"]
-    assert opt["cells"]["pd-ff"]["mean"] < 0.5 * opt["cells"]["pd"]["mean"]
-    assert opt["cells"]["pd-ff-acc"]["mean"] != opt["cells"]["pd-ff"]["mean"]  # the acceleration arrives
-    assert opt["options"]["pd-ff-acc"]["connections"] and opt["options"]["pd-ff"]["overrides"] == {
-        "controller.position.feedforward": 1.0}
+    assert _rmse(tmp_path / "opt", "pd") == _rmse(tmp_path / "paper", "pd")
+    assert _mean(opt, "pd-ff") < 0.5 * _mean(opt, "pd")
+    assert _mean(opt, "pd-ff-acc") != _mean(opt, "pd-ff")  # the acceleration arrives
+    cases = {c["name"]: c for c in opt["cases"]}
+    assert cases["pd-ff-acc"]["connect"] and cases["pd-ff"]["overrides"] == {
+        "controller.variant": "pd", "controller.position.feedforward": 1.0}
     lines = (tmp_path / "opt" / "table3.md").read_text().splitlines()
     rows = [line for line in lines if line.startswith("| PD")]
     assert [r.split(" | ")[0] for r in rows] == ["| PD", "| PD + feed-forward",
@@ -100,15 +151,15 @@ def test_unknown_option_is_refused_naming_it(capsys):
     assert "'warp-drive'" in err and "pd-ff" in err
 
 
-def test_options_are_data_with_names_apart_from_the_variants():
+def test_options_are_cases_with_names_apart_from_the_variants():
+    from cosim import registry
     from fnn_controller.variants import variant_names
-    from quadrotor_paper.options import DEFAULT_OPTIONS, OPTIONS, check_options
+    from quadrotor_paper.options import DEFAULT_OPTIONS, OPTIONS, VARIANT_KEY
 
     assert not set(OPTIONS) & set(variant_names())
     assert set(DEFAULT_OPTIONS) <= set(OPTIONS)
-    assert all(o.variant in variant_names() for o in OPTIONS.values())
-    with pytest.raises(ValueError, match="'nope'"):
-        check_options(["pd-ff", "nope"])
+    assert all(o.overrides[VARIANT_KEY] in variant_names() for o in OPTIONS.values())
+    assert {**{v: registry.cases()[v] for v in variant_names()}, **OPTIONS}.items() <= registry.cases().items()
 
 
 def test_table2_with_noise_on_has_spread_over_the_seeds_and_with_it_off_none(tmp_path):
@@ -123,8 +174,8 @@ def test_table2_with_noise_on_has_spread_over_the_seeds_and_with_it_off_none(tmp
                      "--quiet"]) == 0
         summary = json.loads((out / "summary.json").read_text())
         assert summary["scenario"] == scenario
-        cell = summary["cells"]["pd+lm"]["3"]
-        spread[scenario] = cell["std"]
-        assert cell["ci95"][0] < cell["mean"] < cell["ci95"][1] or cell["std"] == 0
+        stats = cell(summary, "pd+lm", 3.0)["metrics"]["rmse_m"]
+        spread[scenario] = stats["std"]
+        assert stats["ci95"][0] < stats["mean"] < stats["ci95"][1] or stats["std"] == 0
     assert spread["circles_sensors"] > 10 * spread["circles"]
     assert spread["circles_sensors"] > 1e-4  # m
