@@ -54,6 +54,7 @@ from fnn_controller import PositionParams
 from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2, normalized_firing_strength
 from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
 from fnn_controller.position import axis_slice, initial_fnn_state
+from fnn_controller.variants import variant as lookup
 
 from .controller_component import internal_ports
 
@@ -107,7 +108,7 @@ def record_run(name: str, variant: str, scenario: str = "circles", overrides: di
         position = master.components["controller"].position
     # the published state is the one after each step: the state before step n is the one after n - 1
     after = np.column_stack([result[f"controller.{port.name}"] for port in internal_ports(variant)])
-    initial = initial_fnn_state(sc.seed, position, variant)
+    initial = initial_fnn_state(lookup(variant), sc.seed, position)
     states = np.vstack([initial, after[:-1]])
 
     def cols(fmt):

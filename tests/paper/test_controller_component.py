@@ -11,7 +11,7 @@ import pytest
 from cosim.errors import ScenarioError
 from cosim.scenario import build_master, load_scenario
 from fmu_models.models.quadrotor import DEFAULTS
-from fnn_controller import VehicleParams, initial_state
+from fnn_controller import VehicleParams, initial_state, variant
 from fnn_controller.fnn import AXIS_STATE_PORTS, F
 
 
@@ -54,7 +54,7 @@ def test_the_learned_state_records_like_an_output():
     with build_master(sc) as master:
         result = master.run(sc.duration, seed=3)
     learned = np.column_stack([result[n] for n in names])
-    start = initial_state(3, master.components["controller"].position, "pd+lm")[:len(names)]
+    start = initial_state(variant("pd+lm"), 3, master.components["controller"].position)[:len(names)]
     f_x = slice(F.start, F.stop)
     assert not np.allclose(learned[-1, f_x], start[f_x])  # the FNN of x has learned in 1 s
     assert result.units[result.columns.index("controller.f_11_x")] == "m/s"
