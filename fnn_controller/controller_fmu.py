@@ -37,7 +37,7 @@ from typing import Any, Callable, Sequence
 import casadi as ca
 
 from fmu_models.export.model import FmuModel, Sampled
-from fmu_models.export.variables import discrete, input_, output, parameter
+from fmu_models.export.variables import discrete, input_, output, parameter, seed_parameter
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
 from .step import OUTPUTS, state_ports
@@ -46,9 +46,7 @@ from .parametric import initial_state_function, parameter_table, parametric_step
 from .position_parameters import PositionParams
 from .variants import Variant, variant as lookup
 
-__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "SEED_MAX", "FNN_SEED"]
-
-SEED_MAX = 2.0 ** 53  # seeds are doubles in FMI: every whole number up to 2^53 is exact
+__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "FNN_SEED"]
 
 _AXES = "xyz"
 REFERENCE_INPUTS = (
@@ -62,8 +60,7 @@ ACCELERATION_INPUTS = tuple((f"a{a}_ref", "m/s2", f"reference acceleration d2{a}
 
 
 # numpy's default_rng(seed) draws f_ij(0) in the FMU as in the Python path
-FNN_SEED = parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
-                     min=0.0, max=SEED_MAX, integer=True)
+FNN_SEED = seed_parameter("seed", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)")
 
 
 def fmu_identifier(variant: str) -> str:
