@@ -1,12 +1,15 @@
 """Cost of one controller step, against a reference measured in the same run.
 
-For each variant (pd, pd+smc, pd+lm) it times, on the same inputs:
+For each registered variant it times, on the same inputs:
 
-* the fast path the master uses: ``QuadrotorController.step`` (one
-  ``casadi.Function.buffer()`` evaluation on preallocated arrays);
+* the fast path: ``QuadrotorController.step``, one
+  ``casadi.Function.buffer()`` evaluation of the controller's one step
+  function (the parametric step the co-simulation component and the
+  controller FMU run, its parameter vector filled once) on preallocated
+  arrays;
 * the reference: one plain call of the very same CasADi function with numpy
-  arguments (``f(p_ref, p_ref_dot, x, psi_ref, state)``), what a user gets
-  without the fast path;
+  arguments (``f(p_ref, p_ref_dot, x, psi_ref, state, p, p_ref_ddot)``), what
+  a user gets without the fast path;
 
 and prints both per step (best of --repeats batches of --steps calls) and
 their ratio. Target: the fast path at least 10x cheaper than the plain call.
@@ -48,15 +51,15 @@ def main(argv=None) -> int:
     x = np.zeros(12)
     x[2] = -15.0
     print(f"controller step, best of {args.repeats} x {args.steps} calls:")
-    print(f"  {'variant':8s} {'fast path':>12s} {'plain call':>12s} {'ratio':>8s}")
+    print(f"  {'variant':10s} {'fast path':>12s} {'plain call':>12s} {'ratio':>8s}")
     for variant in variant_names():
         ctrl = QuadrotorController(variant)
         ctrl.reset(0)
         fast = _best_per_call(lambda: ctrl.step(p_ref, p_ref_dot, x), args.steps, args.repeats)
-        f, state = ctrl.function, ctrl.state
-        plain = _best_per_call(lambda: f(p_ref, p_ref_dot, x, 0.0, state, p_ref_ddot), max(args.steps // 10, 1),
+        f, state, p = ctrl.function, ctrl.state, ctrl.inputs["p"].copy()
+        plain = _best_per_call(lambda: f(p_ref, p_ref_dot, x, 0.0, state, p, p_ref_ddot), max(args.steps // 10, 1),
                                args.repeats)
-        print(f"  {variant:8s} {fast * 1e6:9.2f} us {plain * 1e6:9.2f} us {plain / fast:7.1f}x")
+        print(f"  {variant:10s} {fast * 1e6:9.2f} us {plain * 1e6:9.2f} us {plain / fast:7.1f}x")
     return 0
 
 

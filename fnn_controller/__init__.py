@@ -7,25 +7,32 @@ co-simulation, C code generation and linearization):
 
 * :func:`position_controller_function` -- outer loop, 3 axes, with learning;
 * :func:`velocity_controller_function` -- inner loop and rotor inversion;
-* :func:`controller_step_function` -- both in one function, per step;
+* :func:`parametric_step_function` -- both in one function, per step, the
+  parameters an input: the one function the co-simulation, the controller
+  FMUs and the analyses evaluate (:func:`bound_step_function`: with fixed gains);
 * :class:`QuadrotorController` -- the object holding the learned state,
   evaluated through ``casadi.Function.buffer()`` (a few microseconds a step).
 
+The laws take a :class:`Variant`; a variant's name is resolved once, by
+:func:`variant`, where it enters.
+
 Values the paper leaves open are documented in ``docs/controller.md``.
 """
-from .step import (STATE_SIZE, FastFunction, QuadrotorController, controller_step_function,
-                         initial_state, state_size)
+from .fast import FastFunction, QuadrotorController
 from .fnn import FnnInit, fnn_output, firing_strength, membership, normalized_firing_strength
 from .geometric import (GeometricParams, VehicleParams, initial_velocity_state, velocity_controller,
                         velocity_controller_function)
 from .learning import LearningBounds, learning_step, lm_f_rate, smc_f_rate
-from .position import (FNN_STATE_SIZE, PositionParams, initial_fnn_state, pd_law, position_controller,
-                       position_controller_function)
-from .variants import Variant, register_variant, variant, variant_names, variants
+from .parametric import bound_step_function, parametric_step_function
+from .position import FNN_STATE_SIZE, initial_fnn_state, pd_law, position_controller, position_controller_function
+from .position_parameters import PositionParams
+from .step import STATE_SIZE, initial_state, state_size
+from .variants import DEFAULT_VARIANT, Variant, register_variant, variant, variant_names, variants
 
 __all__ = [
-    "STATE_SIZE", "FastFunction", "QuadrotorController", "controller_step_function", "initial_state",
-    "state_size", "Variant", "register_variant", "variant", "variant_names", "variants",
+    "STATE_SIZE", "FastFunction", "QuadrotorController", "parametric_step_function", "bound_step_function",
+    "initial_state", "state_size", "DEFAULT_VARIANT", "Variant", "register_variant", "variant", "variant_names",
+    "variants",
     "FnnInit", "fnn_output", "firing_strength", "membership", "normalized_firing_strength",
     "GeometricParams", "VehicleParams", "initial_velocity_state", "velocity_controller",
     "velocity_controller_function",

@@ -37,18 +37,17 @@ from typing import Any, Callable, Sequence
 import casadi as ca
 
 from fmu_models.export.model import FmuModel, Sampled
-from fmu_models.export.variables import discrete, input_, output, parameter
+from fmu_models.export.variables import discrete, input_, output, parameter, seed_parameter
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
 from .step import OUTPUTS, state_ports
 from .geometric import GeometricParams
-from .parametric import initial_state_function, parameter_table, parametric_step_function
-from .position import PositionParams
-from .variants import variant as lookup
+from .parametric import initial_state_function, parameter_table, parametric_step_function, structure
+from .position_parameters import PositionParams
+from .variants import Variant, variant as lookup
 
-__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "SEED_MAX", "FNN_SEED"]
+__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "FNN_SEED"]
 
-SEED_MAX = 2.0 ** 53  # seeds are doubles in FMI: every whole number up to 2^53 is exact
 _AXES = "xyz"
 REFERENCE_INPUTS = (
     *((f"{a}_ref", "m", f"reference position {a} (world, z down)") for a in _AXES),
@@ -61,8 +60,7 @@ ACCELERATION_INPUTS = tuple((f"a{a}_ref", "m/s2", f"reference acceleration d2{a}
 
 
 # numpy's default_rng(seed) draws f_ij(0) in the FMU as in the Python path
-FNN_SEED = parameter("seed", "1", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)", 0.0,
-                     min=0.0, max=SEED_MAX, integer=True)
+FNN_SEED = seed_parameter("seed", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)")
 
 
 def fmu_identifier(variant: str) -> str:
@@ -70,7 +68,7 @@ def fmu_identifier(variant: str) -> str:
     return "Controller" + "".join(ch for ch in variant.upper() if ch.isalnum())
 
 
-def _discrete_states(variant: str) -> tuple:
+def _discrete_states(variant: Variant) -> tuple:
     return tuple(discrete(name, unit, text) for name, unit, text in state_ports(variant))
 
 
@@ -119,21 +117,20 @@ def controller_model(variant: str, position: PositionParams = PositionParams(),
                      geometric: GeometricParams = GeometricParams()) -> FmuModel:
     """The FMU model of ``variant``; ``position`` and ``geometric`` give the
     parameters' start values and the structural choices."""
-    structure = GeometricParams(desired_rate=geometric.desired_rate)
-    step = parametric_step_function(variant, PositionParams(), structure)
-    init = initial_state_function(variant, PositionParams(), structure)
+    v = lookup(variant)
+    step = parametric_step_function(variant, PositionParams(), structure(geometric))
+    init = initial_state_function(variant, PositionParams(), structure(geometric))
     plant = [QUADROTOR.variable(name) for name in STATE_NAMES]  # the rigid body's 12
     inputs = (
         *(input_(name, unit, text) for name, unit, text in REFERENCE_INPUTS),
-        *(input_(v.name, v.unit, f"plant state: {v.description}") for v in plant),
+        *(input_(var.name, var.unit, f"plant state: {var.description}") for var in plant),
         *(input_(name, unit, text) for name, unit, text in ACCELERATION_INPUTS),
     )
     arguments = (tuple(f"{a}_ref" for a in _AXES), tuple(f"v{a}_ref" for a in _AXES), STATE_NAMES, ("psi_ref",),
                  STATE, PARAMETERS, tuple(name for name, _, _ in ACCELERATION_INPUTS))
-    v = lookup(variant)
     return step_model(
         fmu_identifier(variant),
         f"{v.label} flight controller of the LM-FNN paper (Fig. 2): {v.description}; "
         f"geometric SE(3) velocity control (eqs. 13-18); sampled at dt, z axis down",
-        inputs, arguments, step, OUTPUTS, parameter_table(variant, position, geometric), _discrete_states(variant),
+        inputs, arguments, step, OUTPUTS, parameter_table(variant, position, geometric), _discrete_states(v),
         init, n_random=3 * v.n_random)

@@ -12,7 +12,10 @@ the velocity controller's desired force (``accel_feedforward``).
 
 The learning part is the variant's (:mod:`fnn_controller.variants`: ``"pd"``,
 FNN off, tau_n = 0, state passed through unchanged; ``"pd+smc"``;
-``"pd+lm"``; and whatever else is registered).
+``"pd+lm"``; and whatever else is registered). Every function here takes the
+:class:`~fnn_controller.variants.Variant` itself, not its name: a name is
+resolved once where it enters (``fnn_controller.variants.variant(name)``).
+The parameters are :class:`~fnn_controller.position_parameters.PositionParams`.
 
 The position-controller state ``fnn_state`` is the three axis states
 (x, y, z) stacked; for the paper's variants (layout in
@@ -20,50 +23,19 @@ The position-controller state ``fnn_state`` is the three axis states
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import casadi as ca
 import numpy as np
 
-from .fnn import AXIS_STATE_SIZE, FnnInit
-from .it2 import IT2Params
-from .learning import LearningBounds
-from .parameters import check_ranges, param
+from .fnn import AXIS_STATE_SIZE
+from .position_parameters import PositionParams
+from .variants.registry import Variant, identifier, initial_axis_state
 
 __all__ = [
-    "FNN_STATE_SIZE", "PositionParams", "pd_law", "position_axis", "fnn_state_size",
+    "FNN_STATE_SIZE", "pd_law", "position_axis", "fnn_state_size",
     "position_controller", "position_controller_function", "initial_fnn_state", "axis_slice",
 ]
 
 FNN_STATE_SIZE = 3 * AXIS_STATE_SIZE  # the paper's variants
-
-
-@dataclass(frozen=True)
-class PositionParams:
-    """Gains of the position controller, paper values (section 5.1)."""
-
-    kp: float = param(2.5, "1/s", "proportional gain of eq. 19")  # any sign: the stability analysis sweeps it
-    kd: float = param(0.005, "1", "derivative gain of eq. 19 (s/s)")
-    dt: float = param(0.01, "s", "learning (and controller) step", min=1e-4, max=1.0)
-    gamma_smc: tuple[float, float, float] = param((1.5, 1.5, 1.5), "1/s", "gamma of eq. 38 for x, y, z", min=0.0)
-    nu: tuple[float, float, float] = param((0.85, 0.85, 0.2), "s", "nu of eq. 38 for x, y, z", min=0.0)
-    gamma_lm: tuple[float, float, float] = param((1.5, 1.5, 1.5), "m/s2", "gamma of eq. 61 for x, y, z", min=0.0)
-    alpha_bar: tuple[float, float, float] = param((1.1, 1.1, 0.9), "1", "alpha_bar of eq. 62 for x, y, z",
-                                                  min=0.0)
-    feedforward: float = param(0.0, "1", "gain of the reference velocity fed forward around the PD: "
-                               "v* = tau_c - tau_n + feedforward dp*/dt (0: the paper's law)", min=0.0, max=1.0)
-    accel_feedforward: float = param(0.0, "1", "gain of the reference acceleration d2p*/dt2 passed to the velocity "
-                                     "controller: a_ref = accel_feedforward d2p*/dt2 (0: the paper's law)",
-                                     min=0.0, max=1.0)
-    phi: tuple[float, float, float] = param((0.0, 0.0, 0.0), "m/s",
-                                            "boundary layer of the learning laws' sgn(tau_c) for x, y, z: "
-                                            "sat(tau_c / phi) in its place (0: the paper's sgn)", min=0.0)
-    init: FnnInit = field(default_factory=FnnInit)  # initial FNN values (section 5.1)
-    it2: IT2Params = field(default_factory=IT2Params)  # the interval type-2 FNN's own (variants pd+it2-*)
-    bounds: LearningBounds = field(default_factory=LearningBounds)  # eqs. 27-29 and floors
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
 
 
 def axis_slice(axis: int, axis_state_size: int = AXIS_STATE_SIZE) -> slice:
@@ -71,11 +43,9 @@ def axis_slice(axis: int, axis_state_size: int = AXIS_STATE_SIZE) -> slice:
     return slice(axis * axis_state_size, (axis + 1) * axis_state_size)
 
 
-def fnn_state_size(variant: str) -> int:
+def fnn_state_size(variant: Variant) -> int:
     """Size of the position-controller state of ``variant`` (three axes)."""
-    from .variants import variant as lookup
-
-    return 3 * lookup(variant).axis_state_size
+    return 3 * variant.axis_state_size
 
 
 def pd_law(e, e_dot, kp, kd):
@@ -83,13 +53,14 @@ def pd_law(e, e_dot, kp, kd):
     return kp * e + kd * e_dot
 
 
-def position_axis(variant: str, e, e_dot, axis_state, axis: int, params: PositionParams = PositionParams(),
+def position_axis(variant: Variant, e, e_dot, axis_state, axis: int, params: PositionParams = PositionParams(),
                   p_ref_dot=None):
     """One step of the position controller of one axis, eqs. (19), (24)-(26).
 
     Parameters
     ----------
-    variant : a registered variant name (:func:`fnn_controller.variants.variant_names`)
+    variant : Variant
+        The learning part (:func:`fnn_controller.variants.variant` of a name).
     e : scalar
         Position error p* - p of this axis (m), eq. (12).
     e_dot : scalar
@@ -106,11 +77,8 @@ def position_axis(variant: str, e, e_dot, axis_state, axis: int, params: Positio
         ``tau`` (the desired velocity v*, eq. 26), ``tau_c`` (eq. 19),
         ``tau_n`` (eq. 24) and ``state_next``.
     """
-    from .variants import variant as lookup
-
-    law = lookup(variant).axis_law
     tau_c = pd_law(e, e_dot, params.kp, params.kd)
-    tau_n, state_next = law(e, e_dot, tau_c, axis_state, axis, params)
+    tau_n, state_next = variant.axis_law(e, e_dot, tau_c, axis_state, axis, params)
     tau = tau_c - tau_n
     if p_ref_dot is not None and not is_zero(params.feedforward):
         tau = tau + params.feedforward * p_ref_dot  # the option; 0 keeps the paper's law bit for bit
@@ -124,13 +92,13 @@ def is_zero(gain) -> bool:
     return isinstance(gain, (int, float)) and gain == 0
 
 
-def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParams = PositionParams(),
+def position_controller(variant: Variant, e, e_dot, fnn_state, params: PositionParams = PositionParams(),
                         p_ref_dot=None, p_ref_ddot=None):
     """The three-axis position controller as CasADi expressions (section 3.1).
 
     Parameters
     ----------
-    variant : a registered variant name
+    variant : Variant
     e, e_dot : 3-vectors
         Position error p* - p (m, eq. 12) and its derivative p*_dot - v (m/s).
     fnn_state : vector of length ``fnn_state_size(variant)``
@@ -151,7 +119,7 @@ def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParam
         ``accel_feedforward d²p*/dt²``; ``None`` when the option is off or
         no acceleration is given, which the velocity controller reads as none).
     """
-    size = fnn_state_size(variant) // 3
+    size = variant.axis_state_size
     axes = [position_axis(variant, e[a], e_dot[a], fnn_state[axis_slice(a, size)], a, params,
                           None if p_ref_dot is None else p_ref_dot[a]) for a in range(3)]
     off = p_ref_ddot is None or is_zero(params.accel_feedforward)
@@ -164,13 +132,7 @@ def position_controller(variant: str, e, e_dot, fnn_state, params: PositionParam
     }
 
 
-def _identifier(variant: str) -> str:
-    from .variants.registry import identifier
-
-    return identifier(variant)
-
-
-def position_controller_function(variant: str, params: PositionParams = PositionParams()) -> ca.Function:
+def position_controller_function(variant: Variant, params: PositionParams = PositionParams()) -> ca.Function:
     """The position controller as one CasADi function.
 
     ``position_controller_<variant>(e[3], e_dot[3], fnn_state[n])
@@ -183,7 +145,7 @@ def position_controller_function(variant: str, params: PositionParams = Position
     fnn_state = ca.SX.sym("fnn_state", fnn_state_size(variant))
     out = position_controller(variant, e, e_dot, fnn_state, params)
     return ca.Function(
-        f"position_controller_{_identifier(variant)}",
+        f"position_controller_{identifier(variant.name)}",
         [e, e_dot, fnn_state],
         [out["v_ref"], out["fnn_state_next"], out["tau_c"], out["tau_n"]],
         ["e", "e_dot", "fnn_state"],
@@ -191,19 +153,16 @@ def position_controller_function(variant: str, params: PositionParams = Position
     )
 
 
-def initial_fnn_state(rng: np.random.Generator | int, params: PositionParams = PositionParams(),
-                      variant: str = "pd+lm") -> np.ndarray:
+def initial_fnn_state(variant: Variant, rng: np.random.Generator | int,
+                      params: PositionParams = PositionParams()) -> np.ndarray:
     """Position-controller state of ``variant`` at t = 0 (section 5.1) for the three axes.
 
     ``rng`` is a ``numpy.random.Generator`` or an integer seed (there is no
     default: every run names its randomness); the x, y and z axes draw from
     it in that order (for the paper's variants, their f_ij(0)).
     """
-    from .variants import initial_axis_state, variant as lookup
-
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
         rng = np.random.default_rng(int(rng))
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator or an int seed, not {rng!r}")
-    v = lookup(variant)
-    return np.concatenate([initial_axis_state(v, rng, params) for _ in range(3)])
+    return np.concatenate([initial_axis_state(variant, rng, params) for _ in range(3)])

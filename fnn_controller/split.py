@@ -36,8 +36,9 @@ from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 from .step import OUTPUTS, state_ports
 from .controller_fmu import ACCELERATION_INPUTS, PARAMETERS, REFERENCE_INPUTS, STATE, step_model
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
-from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table
-from .position import PositionParams, fnn_state_size, position_controller
+from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table, structure
+from .position import fnn_state_size, position_controller
+from .position_parameters import PositionParams
 from .variants import variant as lookup
 from .variants.registry import identifier
 
@@ -84,13 +85,14 @@ def outer_step_function(variant: str, position: PositionParams = PositionParams(
     """The outer loop of ``variant`` with its parameters as the input ``p``
     (module docstring); ``position`` gives the constants of the fields that
     are no parameter of ``variant``."""
+    v = lookup(variant)
     table = outer_parameter_table(variant, position)
     p = ca.SX.sym("p", len(table))
     sym_position, _ = _symbolic(table, position, GeometricParams(), p)
     p_ref, p_ref_dot = ca.SX.sym("p_ref", 3), ca.SX.sym("p_ref_dot", 3)
-    x, state = ca.SX.sym("x", 6), ca.SX.sym("state", fnn_state_size(variant))
+    x, state = ca.SX.sym("x", 6), ca.SX.sym("state", fnn_state_size(v))
     p_ref_ddot = ca.SX.sym("p_ref_ddot", 3)
-    out = position_controller(variant, p_ref - x[0:3], p_ref_dot - x[3:6], state, sym_position, p_ref_dot,
+    out = position_controller(v, p_ref - x[0:3], p_ref_dot - x[3:6], state, sym_position, p_ref_dot,
                               p_ref_ddot=p_ref_ddot)
     a_ref = out["a_ref"] if out["a_ref"] is not None else ca.SX.zeros(3)  # a constant gain of 0: no term
     y = ca.vertcat(out["v_ref"], out["tau_c"], out["tau_n"], a_ref)
@@ -104,12 +106,13 @@ def outer_step_function(variant: str, position: PositionParams = PositionParams(
 def outer_initial_function(variant: str, position: PositionParams = PositionParams()) -> ca.Function:
     """``(p[m], r[3 n_random]) -> state0``: the outer state after reset, the
     whole controller's learned part (:func:`initial_fnn_expression`)."""
+    v = lookup(variant)
     table = outer_parameter_table(variant, position)
     p = ca.SX.sym("p", len(table))
-    r = ca.SX.sym("r", 3 * lookup(variant).n_random)
+    r = ca.SX.sym("r", 3 * v.n_random)
     sym_position, _ = _symbolic(table, position, GeometricParams(), p)
     return ca.Function(f"outer_initial_{identifier(variant)}", [p, r],
-                       [initial_fnn_expression(variant, sym_position, r)], ["p", "r"], ["state0"])
+                       [initial_fnn_expression(v, sym_position, r)], ["p", "r"], ["state0"])
 
 
 @lru_cache(maxsize=None)
@@ -144,8 +147,8 @@ def outer_model(variant: str, position: PositionParams = PositionParams()) -> Fm
               *(input_(n, u, t) for n, u, t in ACCELERATION_INPUTS))
     arguments = (tuple(f"{a}_ref" for a in _AXES), tuple(f"v{a}_ref" for a in _AXES), OUTER_MEASURED, STATE,
                  PARAMETERS, tuple(n for n, _, _ in ACCELERATION_INPUTS))
-    states = tuple(discrete(n, u, t) for n, u, t in state_ports(variant)[:fnn_state_size(variant)])
     v = lookup(variant)
+    states = tuple(discrete(n, u, t) for n, u, t in state_ports(v)[:fnn_state_size(v)])
     return step_model(
         outer_identifier(variant),
         f"{v.label} position controller of the LM-FNN paper (eqs. 12, 19, 24-26 and its learning laws), the "
@@ -164,11 +167,11 @@ def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
     inputs = (*(input_(n, u, t) for n, u, t in OUTER_OUTPUTS[:3]), input_("psi_ref", "rad", "commanded yaw psi*"),
               *_plant_inputs(INNER_MEASURED), *(input_(n, u, t + "; start 0: none") for n, u, t in A_REF_PORTS))
     arguments = (v_ref, INNER_MEASURED, ("psi_ref",), STATE, PARAMETERS, tuple(n for n, _, _ in A_REF_PORTS))
-    states = tuple(discrete(n, u, t) for n, u, t in state_ports("pd")[-VEL_STATE_SIZE:])
+    states = tuple(discrete(n, u, t) for n, u, t in state_ports(lookup("pd"))[-VEL_STATE_SIZE:])  # any variant's
     return step_model(
         INNER_IDENTIFIER,
         "geometric SE(3) velocity controller of the LM-FNN paper (eqs. 13-18) with rotor-speed inversion, the "
         "inner loop alone (on board): tracks v*; sampled at dt, z axis down",
-        inputs, arguments, inner_step_function(GeometricParams(desired_rate=geometric.desired_rate)),
+        inputs, arguments, inner_step_function(structure(geometric)),
         INNER_OUTPUTS, inner_parameter_table(geometric), states,
         lambda p, r: ca.DM(initial_velocity_state()))  # R*_prev = identity, not primed

@@ -1,11 +1,14 @@
 """The flight controller of ``fnn_controller`` as a component of the master.
 
 One adapter, no layer between it and CasADi: per variant used it holds the
-flat step function (:func:`fnn_controller.step.flat_step_function`)
-behind a :class:`~fnn_controller.FastFunction` (built on first use, so a
-worker of ``table2`` switches between variants without rebuilding); the
-master gathers the 21 inputs straight into the function's input arrays
-(``input_buffers``) and takes the 17 outputs from its output vector.
+one step function of the controller, the parametric step
+(:func:`fnn_controller.parametric.parametric_step`: the function the
+controller FMU is generated from, its parameter input ``p`` filled from this
+component's parameters) behind a :class:`~fnn_controller.FastFunction`
+(built on first use, so a worker of ``table2`` switches between variants
+without rebuilding); the master gathers the 21 inputs straight into the
+function's input arrays (``input_buffers``) and takes the 17 outputs from
+its output vector.
 
 Ports (NED world frame, SI units):
 
@@ -34,7 +37,6 @@ The run's seed draws f_ij(0) (§5.1) at every start.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import asdict, fields
 from typing import Any, Mapping
@@ -45,6 +47,7 @@ from cosim.component import Port, PythonComponent
 from cosim.config import check_number, dataclass_from_mapping
 from cosim.errors import CosimError, DivergenceError, ScenarioError
 from cosim.scenario import refuse_unknown, string, table
+from fnn_controller.variants import DEFAULT_VARIANT
 
 __all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT", "internal_ports"]
 
@@ -78,8 +81,9 @@ def internal_ports(variant_name: str) -> tuple[Port, ...]:
     from fnn_controller.step import state_ports
     from fnn_controller.variants import variant
 
-    n = 3 * variant(variant_name).axis_state_size
-    return tuple(Port(name, unit, description=text) for name, unit, text in state_ports(variant_name)[:n])
+    v = variant(variant_name)
+    n = 3 * v.axis_state_size
+    return tuple(Port(name, unit, description=text) for name, unit, text in state_ports(v)[:n])
 
 
 def _nominal_vehicle(name: str, plant: str, nominal: Mapping[str, Any], context) -> dict[str, float]:
@@ -122,7 +126,7 @@ class ControllerComponent(PythonComponent):
     inputs = CONTROLLER_INPUTS
     outputs = CONTROLLER_OUTPUTS
 
-    def __init__(self, variant: str = "pd+lm", position: Mapping[str, Any] | None = None,
+    def __init__(self, variant: str = DEFAULT_VARIANT, position: Mapping[str, Any] | None = None,
                  geometric: Mapping[str, Any] | None = None, psi_ref: float = 0.0,
                  name: str = "controller", vehicle: Mapping[str, Any] | None = None):
         super().__init__(name)
@@ -173,7 +177,7 @@ class ControllerComponent(PythonComponent):
         if version not in (2, 3):
             raise ScenarioError(f"{name}.fmi_version = {version!r}: expected 2 or 3")
         try:
-            component = cls(parameters.get("variant", "pd+lm"), parameters.get("position"),
+            component = cls(parameters.get("variant", DEFAULT_VARIANT), parameters.get("position"),
                             parameters.get("geometric"), psi_ref, name=name, vehicle=vehicle)
         except ValueError as exc:  # a parameter dataclass refused a combination of values
             raise ScenarioError(f"{name}: {exc}") from None
@@ -212,13 +216,11 @@ class ControllerComponent(PythonComponent):
         step (built once; the same function the controller FMU is generated
         from), its parameter input filled from this component's parameters."""
         if variant not in self._functions:
-            from fnn_controller.step import FastFunction
-            from fnn_controller.parametric import parameter_vector, parametric_step_function
+            from fnn_controller.parametric import parametric_step
 
-            structure = dataclasses.replace(self._fc.GeometricParams(), desired_rate=self.geometric.desired_rate)
-            fast = FastFunction(parametric_step_function(variant, self._fc.PositionParams(), structure),
-                                state=("state", "state_next"))
-            fast.inputs["p"][:] = parameter_vector(variant, self.position, self.geometric)
+            function, p = parametric_step(variant, self.position, self.geometric)
+            fast = self._fc.FastFunction(function, state=("state", "state_next"))
+            fast.inputs["p"][:] = p
             self._functions[variant] = fast
         return self._functions[variant]
 
@@ -239,7 +241,7 @@ class ControllerComponent(PythonComponent):
         if self.learned is not None and self.variant == self.default_variant:
             fast.state[:] = self.learned  # resume learning
         else:
-            fast.state[:] = self._fc.initial_state(seed, self.position, self.variant)
+            fast.state[:] = self._fc.initial_state(self._fc.variant(self.variant), seed, self.position)
         fast.inputs["psi_ref"][0] = self._psi
         self._fast = fast
         self._n_internal = len(self.internals)

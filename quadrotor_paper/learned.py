@@ -36,8 +36,9 @@ VERSION = 1
 
 def _names(variant: str) -> list[str]:
     from fnn_controller.step import state_ports
+    from fnn_controller.variants import variant as lookup
 
-    return [name for name, _, _ in state_ports(variant)]
+    return [name for name, _, _ in state_ports(lookup(variant))]
 
 
 def write_learned(path: str | Path, variant: str, state: np.ndarray, source: str) -> Path:

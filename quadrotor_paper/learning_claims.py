@@ -53,6 +53,7 @@ from fnn_controller import PositionParams
 from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2, normalized_firing_strength
 from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
 from fnn_controller.position import axis_slice, initial_fnn_state
+from fnn_controller.variants import variant as lookup
 
 from .controller_component import internal_ports
 from .missions import controller_variant
@@ -106,7 +107,7 @@ def recorded(scenario, result) -> dict[str, Recording]:
     position = _position(scenario)
     # the published state is the one after each step: the state before step n is the one after n - 1
     after = np.column_stack([result[f"controller.{port.name}"] for port in internal_ports(variant)])
-    states = np.vstack([initial_fnn_state(result.seed, position, variant), after[:-1]])
+    states = np.vstack([initial_fnn_state(lookup(variant), result.seed, position), after[:-1]])
 
     def cols(fmt):
         return np.column_stack([result[fmt.format(a=a)] for a in _AXES])

@@ -25,6 +25,7 @@ from typing import Any, Mapping
 from cosim.config import check_number
 from cosim.errors import ScenarioError
 from cosim.scenario import Scenario, check_fmu_parameters, refuse_unknown, string, strings
+from fnn_controller.variants import DEFAULT_VARIANT
 
 __all__ = ["WIND_KEYS", "parse_wind", "parse_metrics", "wind_parameter", "metric_signals", "controller_variant"]
 
@@ -99,4 +100,4 @@ def controller_variant(scenario: Scenario, instance: str = "controller") -> str 
     spec = scenario.components.get(instance)
     if spec is None or spec.get("kind") != "fnn_controller":
         return None
-    return spec["parameters"].get("variant", "pd+lm")
+    return spec["parameters"].get("variant", DEFAULT_VARIANT)

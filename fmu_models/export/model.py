@@ -40,7 +40,7 @@ from typing import Callable, Mapping
 
 import casadi as ca
 
-from .variables import Variable, parameter
+from .variables import SEED_MAX, Variable, parameter
 
 __all__ = ["FmuModel", "INTERNAL_STEP"]
 
@@ -123,7 +123,7 @@ class FmuModel:
             if self.sampled.n_random < 0 or self.sampled.n_random_step < 0:
                 raise ValueError(f"model {self.identifier}: negative count of random numbers")
             seed = next((v for v in self.parameters if v.name == self.sampled.seed), None)
-            if seed is not None and not (seed.integer and seed.min >= 0 and seed.max <= 2.0 ** 53):
+            if seed is not None and not (seed.integer and seed.min >= 0 and seed.max <= SEED_MAX):
                 # the FMU seeds numpy's generator with it as set: its table must make it a whole
                 # number a double holds exactly
                 raise ValueError(f"model {self.identifier}: its seed {seed.name!r} must be an integer "

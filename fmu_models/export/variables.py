@@ -10,7 +10,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["Variable", "UNITS", "state", "discrete", "input_", "output", "parameter"]
+__all__ = ["Variable", "UNITS", "SEED_MAX", "state", "discrete", "input_", "output", "parameter", "seed_parameter"]
+
+# A seed is an FMU parameter, a double: every whole number up to 2^53 is exact
+# in it, so a seed in [0, SEED_MAX] reaches the model's generator as it was set.
+SEED_MAX = 2.0 ** 53
 
 
 # SI base-unit exponents of every unit a model may use (FMI <UnitDefinitions>).
@@ -111,3 +115,8 @@ def parameter(name, unit, description, start, **bounds):
 
 def discrete(name, unit, description):
     return Variable(name, "discrete", unit, description)
+
+
+def seed_parameter(name, description, start=0.0):
+    """A model's seed: a whole-number parameter in [0, :data:`SEED_MAX`]."""
+    return parameter(name, "1", description, start, min=0.0, max=SEED_MAX, integer=True)

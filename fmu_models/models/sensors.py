@@ -56,15 +56,14 @@ from typing import Sequence
 import casadi as ca
 
 from ..export.model import FmuModel, Sampled
-from ..export.variables import discrete, input_, output, parameter
+from ..export.variables import discrete, input_, output, parameter, seed_parameter
 from .quadrotor import QUADROTOR, STATE_NAMES
 
 __all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "VELOCITY_LINK_3", "DELAY_MAX", "SAMPLE_RATE_MAX",
-           "SEED_MAX", "hold_period", "hold_steps", "gaussian"]
+           "hold_period", "hold_steps", "gaussian"]
 
 DELAY_MAX = 20            # samples: the length of the delay line, fixed at build
 SAMPLE_RATE_MAX = 1.0e6   # Hz
-SEED_MAX = 2.0 ** 53      # every whole number up to 2^53 is exact in a double
 DT_DEFAULT = 0.01         # s: the project's communication step
 
 
@@ -114,9 +113,8 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         parameter("delay_steps", "1",
                   f"transport delay in whole communication steps (an integer 0..{delay_max})",
                   0.0, min=0.0, max=float(delay_max), integer=True),
-        parameter("seed", "1", "seed of numpy's default_rng that draws the noise (2 numbers per channel "
-                  "and step)" + (", then the packet loss (1 number per step)" if loss else ""),
-                  0.0, min=0.0, max=SEED_MAX, integer=True),
+        seed_parameter("seed", "seed of numpy's default_rng that draws the noise (2 numbers per channel "
+                       "and step)" + (", then the packet loss (1 number per step)" if loss else "")),
         parameter("dt", "s", "communication step = sample period of the FMU (every doStep must be dt)",
                   DT_DEFAULT, min=1e-6, max=10.0),
         discrete("sample_counter", "1", "steps since the last sample (0: a sample is taken this step)"),

@@ -12,7 +12,7 @@ A variant's ``axis_law(e, e_dot, tau_c, axis_state, axis, params)`` returns
 2 = z): ``e = p* - p`` (m, eq. 12), ``e_dot`` (m/s), ``tau_c`` the PD output
 (m/s, eq. 19), ``axis_state`` the variant's learned parameters of that axis
 (``axis_state_size`` numbers) and ``params`` the
-:class:`~fnn_controller.position.PositionParams`. ``initial_axis(params, r)``
+:class:`~fnn_controller.position_parameters.PositionParams`. ``initial_axis(params, r)``
 is the state of one axis at reset (§5.1) from ``n_random`` uniform numbers
 ``r`` in [0, 1), as a CasADi expression (numbers in, numbers out, so the
 Python path and the controller FMU draw the same state from the same seed:
@@ -23,11 +23,22 @@ the fields of ``PositionParams`` the law reads beyond the PD's ``kp``,
 each axis state in (its projections), which the contract test checks;
 ``axis_state_ports`` names each element with its unit (how the learned
 parameters are published and recorded).
+
+The laws take a :class:`Variant`, never a name: a name (from a scenario, the
+command line, a saved state) is resolved once by :func:`variant` where it
+enters, and the object is passed on. The registry reads the parameters
+(:mod:`fnn_controller.position_parameters`), not the laws.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Any, Callable
+
+import casadi as ca
+import numpy as np
+
+from ..position_parameters import PositionParams
 
 __all__ = ["Variant", "register_variant", "variants", "variant", "variant_names", "initial_axis_state", "identifier"]
 
@@ -54,8 +65,6 @@ def register_variant(v: Variant) -> Variant:
     """Add ``v``; a name registered twice differently is refused."""
     if _VARIANTS.get(v.name, v) != v:
         raise ValueError(f"controller variant {v.name!r} is registered twice, differently")
-    from ..position import PositionParams
-
     if len(v.axis_state_ports) != v.axis_state_size:
         raise ValueError(f"variant {v.name!r}: {len(v.axis_state_ports)} axis state ports for a state of "
                          f"{v.axis_state_size}")
@@ -93,9 +102,6 @@ def variant(name: str) -> Variant:
 def initial_axis_state(v: Variant, rng, params):
     """One axis's state at reset, as numbers: ``v.initial_axis(params, r)``
     with ``r = rng.random(v.n_random)``."""
-    import casadi as ca
-    import numpy as np
-
     state = np.array(ca.DM(v.initial_axis(params, rng.random(v.n_random)))).ravel()
     if state.shape != (v.axis_state_size,):
         raise ValueError(f"variant {v.name!r}: initial axis state of shape {state.shape}, "
@@ -105,6 +111,4 @@ def initial_axis_state(v: Variant, rng, params):
 
 def identifier(name: str) -> str:
     """``pd_it2_lm`` for ``pd+it2-lm``: a variant name as a C / CasADi name part."""
-    import re
-
     return re.sub(r"\W", "_", name)

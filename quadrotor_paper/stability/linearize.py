@@ -13,14 +13,18 @@ the one source of truth.
   ``casadi.jacobian`` of ``velocity_controller_function(geometric)``,
   a static map ``delta Omega = K_r delta v* + K_x delta x``.
 * PD position controller (eq. 19): ``casadi.jacobian`` of
-  ``position_controller_function("pd", position)``: ``delta v* = K_e delta e
+  ``position_controller_function(PD, position)``: ``delta v* = K_e delta e
   + K_edot delta e_dot`` (``K_e = kp I``, ``K_edot = kd I``), plus the
   velocity feed-forward option, ``K_ff delta dp*/dt`` (``K_ff = feedforward
   I``, the Jacobian of the position controller's own expression).
 
-The master runs ``controller_step_function("pd", ...)``, which composes the
-same two laws (``fnn_controller.step``); :func:`linearize_controller_step`
-differentiates that function so a test can check the composition.
+The master runs the one step function of the controller,
+``fnn_controller.parametric.parametric_step_function("pd")`` with its
+parameter vector filled from ``op.position`` and ``op.geometric``, which
+composes the same two laws (``fnn_controller.step``);
+:func:`linearize_controller_step` differentiates that function (its
+parameters bound, ``bound_step_function``) so a test can check the
+composition.
 """
 from __future__ import annotations
 
@@ -33,9 +37,11 @@ import casadi as ca
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR
-from fnn_controller import controller_step_function, position_controller_function, velocity_controller_function
+from fnn_controller import bound_step_function, position_controller_function, velocity_controller_function
 from fnn_controller.geometric import initial_velocity_state
 from fnn_controller.position import fnn_state_size, position_controller
+from fnn_controller.step import Y_SLICES
+from fnn_controller.variants.pd import PD
 
 from .operating_points import STATE_NAMES, OperatingPoint, _check_geometric
 
@@ -158,8 +164,8 @@ def linearize_velocity_controller(op: OperatingPoint) -> tuple[np.ndarray, np.nd
 
 def linearize_position_controller(op: OperatingPoint) -> tuple[np.ndarray, np.ndarray]:
     """``K_e = d v*/d e`` and ``K_edot = d v*/d(de/dt)`` (3 x 3 each) of
-    ``position_controller_function("pd", op.position)`` at ``op``."""
-    f = position_controller_function("pd", op.position)
+    ``position_controller_function(PD, op.position)`` at ``op``."""
+    f = position_controller_function(PD, op.position)
     values = {"e": op.position_error, "e_dot": op.p_ref_dot - op.x[3:6],
               "fnn_state": np.zeros(f.numel_in(2))}
     K_e, K_edot = _jacobian(f, "v_ref", ["e", "e_dot"], values)
@@ -171,8 +177,8 @@ def linearize_feedforward(op: OperatingPoint) -> np.ndarray:
     feed-forward of ``op.position`` (``feedforward I``; zero for the paper's
     law), from the position controller's own CasADi expression."""
     p_ref_dot = ca.SX.sym("p_ref_dot", 3)
-    out = position_controller("pd", ca.DM(op.position_error), ca.DM(op.p_ref_dot - op.x[3:6]),
-                              ca.DM.zeros(fnn_state_size("pd")), op.position, p_ref_dot)
+    out = position_controller(PD, ca.DM(op.position_error), ca.DM(op.p_ref_dot - op.x[3:6]),
+                              ca.DM.zeros(fnn_state_size(PD)), op.position, p_ref_dot)
     jac = ca.Function("feedforward_jacobian", [p_ref_dot], [ca.densify(ca.jacobian(out["v_ref"], p_ref_dot))])
     return np.array(jac(op.p_ref_dot))
 
@@ -185,14 +191,15 @@ def linearize_controller(op: OperatingPoint) -> ControllerLinearization:
 
 
 def linearize_controller_step(op: OperatingPoint) -> dict[str, np.ndarray]:
-    """Jacobians of ``controller_step_function("pd", ...)`` -- the function
-    the co-simulation master evaluates -- with respect to ``p_ref``,
-    ``p_ref_dot`` and ``x`` (each 4 x n: d Omega / d input)."""
-    f = controller_step_function("pd", op.position, op.geometric)
+    """Jacobians of the step function the co-simulation master evaluates
+    (``parametric_step_function("pd")``, its parameters those of
+    ``op.position`` and ``op.geometric``: ``bound_step_function``) with
+    respect to ``p_ref``, ``p_ref_dot`` and ``x`` (each 4 x n: d Omega / d input)."""
+    f = bound_step_function(PD.name, op.position, op.geometric)
     p_ref = op.x[0:3] + op.position_error
     values = {"p_ref": p_ref, "p_ref_dot": op.p_ref_dot, "x": op.x, "psi_ref": op.psi_ref,
-              "state": np.concatenate([np.zeros(f.numel_in(4) - 10), initial_velocity_state()]),
+              "state": np.concatenate([np.zeros(fnn_state_size(PD)), initial_velocity_state()]),
               "p_ref_ddot": np.zeros(3)}
     names = ["p_ref", "p_ref_dot", "x"]
-    return dict(zip(names, _jacobian(f, "Omega", names, values)))
+    return dict(zip(names, (d_y[Y_SLICES["Omega"]] for d_y in _jacobian(f, "y", names, values))))
 

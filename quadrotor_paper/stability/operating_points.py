@@ -41,6 +41,7 @@ from fmu_models.models.quadrotor import STATE_NAMES as PLANT_STATE_NAMES
 from fnn_controller import GeometricParams, PositionParams, velocity_controller_function
 from fnn_controller.geometric import initial_velocity_state
 from fnn_controller.position import fnn_state_size, position_controller
+from fnn_controller.variants.pd import PD
 
 __all__ = [
     "STATE_NAMES", "OperatingPoint", "trim_plant", "trim_closed_loop", "position_error_at",
@@ -206,10 +207,10 @@ def position_error_at(v_ref, position: PositionParams = PositionParams(), p_ref_
     feed-forward ``position.feedforward`` of ``p_ref_dot`` (m/s), outputs
     ``v_ref`` with ``de/dt = 0``: the root of ``PD(e, 0) + ff dp*/dt - v* = 0``,
     solved on the position controller's own expressions
-    (``fnn_controller.position.position_controller``, variant "pd"; so
+    (``fnn_controller.position.position_controller``, variant ``PD``; so
     e* = (v* - ff dp*/dt)/kp per axis)."""
     e = ca.SX.sym("e", 3)
-    out = position_controller("pd", e, ca.DM.zeros(3), ca.DM.zeros(fnn_state_size("pd")), position,
+    out = position_controller(PD, e, ca.DM.zeros(3), ca.DM.zeros(fnn_state_size(PD)), position,
                               ca.DM(np.asarray(p_ref_dot, float)))
     residual = out["v_ref"] - ca.DM(np.asarray(v_ref, float))
     return _solve("trim_pd", e, residual, np.zeros(3))

@@ -28,8 +28,7 @@ import control as ct
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR
-from fnn_controller import GeometricParams, velocity_controller_function
-from fnn_controller.step import FastFunction
+from fnn_controller import FastFunction, GeometricParams, velocity_controller_function
 from fnn_controller.geometric import initial_velocity_state
 
 from cosim.component import Port, PythonComponent
@@ -149,8 +148,9 @@ def _run(op: OperatingPoint, python: list[PythonComponent], controller: str, dur
 def position_step(op: OperatingPoint, step=(0.1, 0.0, 0.0), duration: float = 5.0, dt: float = 0.01,
                   kp: float | None = None, kd: float | None = None, fmu: Path | None = None) -> Response:
     """Nonlinear co-simulation from the hover point ``op`` (at rest) after a
-    step of the position reference by ``step`` (m): plant FMU + PD
-    (``controller_step_function("pd")``) run by the master."""
+    step of the position reference by ``step`` (m): plant FMU + PD (the
+    controller component, its one step function ``parametric_step_function("pd")``)
+    run by the master."""
     if op.speed != 0.0:
         raise ValueError(f"position_step starts from rest; {op.name} flies at {op.speed:g} m/s")
     position = replace(op.position, kp=op.position.kp if kp is None else kp,

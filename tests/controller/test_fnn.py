@@ -11,6 +11,7 @@ from fnn_controller.fnn import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, N_MF, N_RULES
                                 X1_PREV, X2_PREV, FnnInit, firing_strength, fnn_output, initial_axis_state,
                                 membership, normalized_firing_strength)
 from fnn_controller.position import FNN_STATE_SIZE, axis_slice, initial_fnn_state
+from fnn_controller.variants.pd_lm import PD_LM
 
 x1, x2 = ca.SX.sym("x1"), ca.SX.sym("x2")
 c1, c2 = ca.SX.sym("c1", 3), ca.SX.sym("c2", 3)
@@ -89,13 +90,13 @@ def test_initial_axis_state_has_the_values_of_section_5_1():
 
 
 def test_initial_weights_are_reproducible_per_seed_and_differ_between_seeds():
-    a, b, c = initial_fnn_state(7), initial_fnn_state(7), initial_fnn_state(8)
+    a, b, c = initial_fnn_state(PD_LM, 7), initial_fnn_state(PD_LM, 7), initial_fnn_state(PD_LM, 8)
     assert a.shape == (FNN_STATE_SIZE,)
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
     # the three axes get different draws from the one generator
     assert not np.array_equal(a[axis_slice(0)][F], a[axis_slice(1)][F])
     # a Generator is accepted as well, and no implicit global randomness
-    np.testing.assert_array_equal(initial_fnn_state(np.random.default_rng(7)), a)
+    np.testing.assert_array_equal(initial_fnn_state(PD_LM, np.random.default_rng(7)), a)
     with pytest.raises(TypeError):
-        initial_fnn_state(None)
+        initial_fnn_state(PD_LM, None)

@@ -15,7 +15,7 @@ from fmpy.fmi2 import FMU2Slave
 
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import DEFAULTS, QUADROTOR, STATE_NAMES, hover_rotor_speed
-from fnn_controller.step import FastFunction
+from fnn_controller.fast import FastFunction
 from fnn_controller.geometric import (GeometricParams, hat, initial_velocity_state, vee, velocity_controller,
                                       velocity_controller_function)
 

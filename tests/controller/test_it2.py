@@ -11,14 +11,15 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from fnn_controller.step import FastFunction
+from fnn_controller.fast import FastFunction
 from fnn_controller.fnn import fnn_output, normalized_firing_strength
 from fnn_controller.it2 import (ALPHA, C1, C2, F, IT2_AXIS_STATE_SIZE, IT2_DEFAULTS, PRIMED, Q, SIGMA1, SIGMA2,
                                 X1_PREV, X2_PREV, IT2Params, it2_firing_strengths, it2_learning_step,
                                 it2_membership, it2_normalized_firing_strengths, it2_regressor, q_rate,
                                 type_reduction)
 from fnn_controller.learning import LearningBounds, learning_step
-from fnn_controller.position import PositionParams, initial_fnn_state, position_controller_function
+from fnn_controller.position import initial_fnn_state, position_controller_function
+from fnn_controller.position_parameters import PositionParams
 from fnn_controller.variants import variant
 from test_geometric import plant_fmu  # noqa: F401  (fixture)
 from test_position import _ramp, fly
@@ -254,14 +255,14 @@ def test_it2_parameters_are_validated_and_nested_in_the_position_parameters():
 @pytest.mark.parametrize("name", IT2_VARIANTS)
 def test_initial_axis_state_has_the_type1_values_and_q0(name):
     v = variant(name)
-    state = initial_fnn_state(3, PARAMS, name).reshape(3, v.axis_state_size)
-    type1 = initial_fnn_state(3, PARAMS, "pd+lm").reshape(3, 25)
+    state = initial_fnn_state(v, 3, PARAMS).reshape(3, v.axis_state_size)
+    type1 = initial_fnn_state(variant("pd+lm"), 3, PARAMS).reshape(3, 25)
     np.testing.assert_array_equal(np.delete(state, Q, axis=1), type1)  # same draws of f_ij(0)
     assert np.all(state[:, Q] == IT2_DEFAULTS.q0)
     assert [p for p, _ in v.axis_state_ports][Q] == "q"
 
 
-FAST = {name: FastFunction(position_controller_function(name), state=("fnn_state", "fnn_state_next"))
+FAST = {name: FastFunction(position_controller_function(variant(name)), state=("fnn_state", "fnn_state_next"))
         for name in IT2_VARIANTS}
 
 
@@ -276,7 +277,7 @@ def test_parameters_stay_in_their_bounds_and_outputs_finite_under_random_inputs(
     zero = rng.random(n) < 0.2
     e[zero], e_dot[zero] = 0.0, 0.0
     ff = FAST[name]
-    ff.state[:] = initial_fnn_state(rng, PARAMS, name)
+    ff.state[:] = initial_fnn_state(variant(name), rng, PARAMS)
     low, high = variant(name).axis_state_bounds(PARAMS)
     for k in range(n):
         ff.inputs["e"][:] = e[k]

@@ -10,13 +10,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fnn_controller.step import FastFunction
+from fnn_controller.fast import FastFunction
 from fnn_controller.fnn import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV,
                                 normalized_firing_strength)
 from fnn_controller.learning import (LearningBounds, learning_step, lm_delta, lm_f_rate, sigma_rate,
                                      smc_f_rate)
-from fnn_controller.position import (PositionParams, axis_slice, initial_fnn_state,
-                                     position_controller_function)
+from fnn_controller.position import axis_slice, initial_fnn_state, position_controller_function
+from fnn_controller.position_parameters import PositionParams
+from fnn_controller.variants import variant as lookup
+from fnn_controller.variants.pd_lm import PD_LM
 
 PARAMS = PositionParams()
 DT = PARAMS.dt
@@ -79,7 +81,7 @@ def _axis_step(rule, state, x1, x2, tau_c, gamma=1.5, nu=0.85, alpha_bar=1.1):
 
 @pytest.mark.parametrize("rule", ["smc", "lm"])
 def test_sgn_of_zero_learns_nothing(rule):
-    state = initial_fnn_state(3)[axis_slice(0)]
+    state = initial_fnn_state(PD_LM, 3)[axis_slice(0)]
     state[PRIMED], state[X1_PREV], state[X2_PREV] = 1.0, 0.2, -1.0
     nxt = _axis_step(rule, state, 0.2, -1.0, 0.0)
     for part in (C1, C2, SIGMA1, SIGMA2, F):
@@ -90,7 +92,7 @@ def test_sgn_of_zero_learns_nothing(rule):
 
 
 def test_lm_holds_alpha_and_smc_adapts_it_by_eq_38():
-    state = initial_fnn_state(3)[axis_slice(0)]
+    state = initial_fnn_state(PD_LM, 3)[axis_slice(0)]
     assert _axis_step("lm", state, 1.0, 0.0, 2.5)[ALPHA] == state[ALPHA]
     expected = state[ALPHA] + DT * (1.5 * 2.5 - 1.5 * 0.85 * state[ALPHA])
     assert _axis_step("smc", state, 1.0, 0.0, 2.5)[ALPHA] == pytest.approx(expected, rel=1e-15)
@@ -98,7 +100,7 @@ def test_lm_holds_alpha_and_smc_adapts_it_by_eq_38():
 
 @pytest.mark.parametrize("rule", ["smc", "lm"])
 def test_centres_follow_the_input_increments_of_eqs_33_34(rule):
-    state = initial_fnn_state(4)[axis_slice(1)]
+    state = initial_fnn_state(PD_LM, 4)[axis_slice(1)]
     first = _axis_step(rule, state, 0.7, -2.0, 1.0)  # no previous input yet: c unchanged
     np.testing.assert_array_equal(first[C1], state[C1])
     np.testing.assert_array_equal(first[C2], state[C2])
@@ -127,8 +129,8 @@ class VelocityLoopPlant:
 
 
 def run_learning(variant, d=(1.0, -0.8, 0.5), t_end=30.0, seed=0, p0=(0.0, 0.0, 0.0), v0=(0.0, 0.0, 0.0)):
-    ff = FastFunction(position_controller_function(variant), state=("fnn_state", "fnn_state_next"))
-    ff.state[:] = initial_fnn_state(seed)
+    ff = FastFunction(position_controller_function(lookup(variant)), state=("fnn_state", "fnn_state_next"))
+    ff.state[:] = initial_fnn_state(lookup(variant), seed)
     plant = VelocityLoopPlant(d, p0=p0, v0=v0)
     n = int(round(t_end / DT))
     log = {k: np.zeros((n, 3)) for k in ("tau_c", "tau_n", "tau")}
@@ -256,7 +258,7 @@ def _check_bounds(states, label):
     assert np.all(np.linalg.norm(s[..., SIGMA1], axis=-1) <= np.sqrt(3) * BOUNDS.sigma1_max * (1 + 1e-12))
 
 
-FAST = {variant: FastFunction(position_controller_function(variant), state=("fnn_state", "fnn_state_next"))
+FAST = {variant: FastFunction(position_controller_function(lookup(variant)), state=("fnn_state", "fnn_state_next"))
         for variant in ("pd+smc", "pd+lm")}
 
 
@@ -274,7 +276,7 @@ def test_parameters_stay_in_their_bounds_and_outputs_finite_under_random_inputs(
     zero = rng.random(n) < zero_fraction
     e[zero], e_dot[zero] = 0.0, 0.0
     ff = FAST[variant]
-    ff.state[:] = initial_fnn_state(rng)
+    ff.state[:] = initial_fnn_state(lookup(variant), rng)
     states = np.zeros((n, ff.state.size))
     outputs = np.zeros((n, 9))
     for k in range(n):

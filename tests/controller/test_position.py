@@ -10,14 +10,16 @@ import numpy as np
 import pytest
 
 from fmu_models.models.quadrotor import DEFAULTS, hover_rotor_speed
-from fnn_controller import (STATE_SIZE, GeometricParams, PositionParams, QuadrotorController,
-                            controller_step_function, initial_state, position_controller_function,
-                            velocity_controller_function)
-from fnn_controller.step import FastFunction
+from fnn_controller import (STATE_SIZE, GeometricParams, PositionParams, QuadrotorController, VehicleParams,
+                            bound_step_function, initial_state, parametric_step_function,
+                            position_controller_function, velocity_controller_function)
+from fnn_controller.fast import FastFunction
 from fnn_controller.geometric import initial_velocity_state
+from fnn_controller.parametric import parameter_vector
 from fnn_controller.position import initial_fnn_state
-from fnn_controller import initial_state as fc_initial_state
-from fnn_controller.variants import variant_names
+from fnn_controller.step import Y_SLICES
+from fnn_controller.variants import variant as lookup, variant_names
+from fnn_controller.variants.pd import PD
 from test_geometric import H, PlantFmu, plant_fmu  # noqa: F401  (fixture)
 
 KP, KD = PositionParams().kp, PositionParams().kd
@@ -25,8 +27,8 @@ HOVER = np.array([0, 0, -15.0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
 
 
 def test_pd_variant_is_eq_19_and_leaves_the_state_alone():
-    f = position_controller_function("pd")
-    state = initial_fnn_state(0)
+    f = position_controller_function(PD)
+    state = initial_fnn_state(PD, 0)
     v_ref, state_next, tau_c, tau_n = (np.array(v).ravel() for v in f([1.0, -2.0, 0.5], [0.3, 4.0, -1.0], state))
     expected = KP * np.array([1.0, -2.0, 0.5]) + KD * np.array([0.3, 4.0, -1.0])
     np.testing.assert_allclose(v_ref, expected, rtol=1e-15)
@@ -37,22 +39,25 @@ def test_pd_variant_is_eq_19_and_leaves_the_state_alone():
 
 @pytest.mark.parametrize("variant", ["pd+smc", "pd+lm"])
 def test_fnn_variants_subtract_tau_n_eq_26(variant):
-    f = position_controller_function(variant)
-    v_ref, _, tau_c, tau_n = (np.array(v).ravel() for v in f([1.0, -2.0, 0.5], [0.3, 4.0, -1.0], initial_fnn_state(0)))
+    f = position_controller_function(lookup(variant))
+    v_ref, _, tau_c, tau_n = (np.array(v).ravel() for v in f([1.0, -2.0, 0.5], [0.3, 4.0, -1.0],
+                                                              initial_fnn_state(lookup(variant), 0)))
     np.testing.assert_allclose(v_ref, tau_c - tau_n, rtol=1e-15)
     assert np.all((tau_n >= 0) & (tau_n <= 1e-3))  # weighted average of f_ij(0) in [0, 0.001]
 
 
-def test_unknown_variant_is_refused():
+def test_unknown_variant_is_refused_where_its_name_enters():
     with pytest.raises(ValueError, match="pd\\+lm"):
-        position_controller_function("lm")
+        lookup("lm")
+    with pytest.raises(ValueError, match="pd\\+lm"):
+        QuadrotorController("lm")
 
 
 def test_linearization_of_the_pd_position_controller_is_kp_kd():
-    f = position_controller_function("pd")
+    f = position_controller_function(PD)
     jac = f.jacobian()
     e, e_dot = ca.DM.zeros(3), ca.DM.zeros(3)
-    out = jac(e=e, e_dot=e_dot, fnn_state=initial_fnn_state(0), out_v_ref=0, out_fnn_state_next=0,
+    out = jac(e=e, e_dot=e_dot, fnn_state=initial_fnn_state(PD, 0), out_v_ref=0, out_fnn_state_next=0,
               out_tau_c=0, out_tau_n=0)
     np.testing.assert_allclose(np.array(out["jac_v_ref_e"]), KP * np.eye(3), rtol=1e-15)
     np.testing.assert_allclose(np.array(out["jac_v_ref_e_dot"]), KD * np.eye(3), rtol=1e-15)
@@ -81,20 +86,52 @@ def _random_inputs(rng):
 
 @pytest.mark.parametrize("variant", variant_names())
 def test_fast_buffer_path_gives_identical_results_to_a_plain_casadi_call(variant):
+    """QuadrotorController (the parametric step through its buffers, p
+    filled once) against plain calls of the fixed-gains function (the same
+    function, p bound by an MX call): bit for bit, 300 steps."""
     rng = np.random.default_rng(11)
     ctrl = QuadrotorController(variant)
     ctrl.reset(seed=5)
-    f = controller_step_function(variant)
-    state = initial_state(5, PositionParams(), variant)
+    f = bound_step_function(variant)
+    state = initial_state(lookup(variant), 5)
     for _ in range(300):
         p_ref, p_ref_dot, x, psi_ref = _random_inputs(rng)
         omega = ctrl.step(p_ref, p_ref_dot, x, psi_ref).copy()
         plain = f(p_ref=p_ref, p_ref_dot=p_ref_dot, x=x, psi_ref=psi_ref, state=state)
-        np.testing.assert_array_equal(omega, np.array(plain["Omega"]).ravel())
+        y = np.array(plain["y"]).ravel()
+        np.testing.assert_array_equal(omega, y[Y_SLICES["Omega"]])
         for name in ("v_ref", "tau_c", "tau_n", "wrench"):
-            np.testing.assert_array_equal(ctrl.outputs[name], np.array(plain[name]).ravel())
+            np.testing.assert_array_equal(ctrl.outputs[name], y[Y_SLICES[name]])
         state = np.array(plain["state_next"]).ravel()
         np.testing.assert_array_equal(ctrl.state, state)
+
+
+NON_DEFAULT = (PositionParams(kp=1.7, kd=0.02, feedforward=0.5, accel_feedforward=0.25, gamma_lm=(1.2, 1.3, 1.4),
+                              gamma_smc=(1.0, 1.1, 1.2), phi=(0.1, 0.1, 0.2)),
+               GeometricParams(k_v=4.0, k_R=(300.0, 310.0, 50.0), desired_rate="finite_difference",
+                               vehicle=VehicleParams(m=1.3, Ix=0.05)))
+
+
+@pytest.mark.parametrize("variant", variant_names())
+def test_fixed_gains_are_the_parametric_function_with_its_parameters_bound(variant):
+    """bound_step_function(variant, position, geometric) is the one
+    parametric function with p = parameter_vector(...) (and the structural
+    choice desired_rate): the same numbers to the bit, which differ from
+    the defaults' (so the values do reach the laws)."""
+    position, geometric = NON_DEFAULT
+    rng = np.random.default_rng(12)
+    state = initial_state(lookup(variant), 2, position)
+    parametric = parametric_step_function(variant, PositionParams(), GeometricParams(desired_rate="finite_difference"))
+    p = parameter_vector(variant, position, geometric)
+    bound, default = bound_step_function(variant, position, geometric), bound_step_function(variant)
+    for _ in range(50):
+        p_ref, p_ref_dot, x, psi_ref = _random_inputs(rng)
+        args = dict(p_ref=p_ref, p_ref_dot=p_ref_dot, x=x, psi_ref=psi_ref, state=state, p_ref_ddot=rng.normal(size=3))
+        mine, reference = bound(**args), parametric(**args, p=p)
+        for name in ("y", "state_next", "check"):
+            np.testing.assert_array_equal(np.array(mine[name]), np.array(reference[name]), err_msg=name)
+        assert not np.array_equal(np.array(mine["y"]), np.array(default(**args)["y"]))
+        state = np.array(mine["state_next"]).ravel()
 
 
 def test_reset_reproduces_a_run_and_seeds_differ():
@@ -148,7 +185,7 @@ def test_step_before_reset_and_bad_state_are_refused():
 
 def test_fast_function_refuses_a_state_pair_of_different_sizes():
     with pytest.raises(ValueError, match="differ"):
-        FastFunction(position_controller_function("pd"), state=("e", "fnn_state_next"))
+        FastFunction(position_controller_function(PD), state=("e", "fnn_state_next"))
 
 
 # --------------------------------------------------- closed loop with the FMU
@@ -249,32 +286,47 @@ def test_velocity_feed_forward_removes_the_ramp_lag_of_the_pd(plant_fmu):
     assert e_x[-1] == pytest.approx(drag / (DEFAULTS["m"] * GeometricParams().k_v * KP), rel=0.02)
 
 
-def test_feed_forward_zero_is_the_papers_law_bit_for_bit():
-    from fnn_controller.step import controller_step_function
+def _papers_law(variant, p_ref, p_ref_dot, x, psi_ref, state):
+    """The paper's step composed by hand from the two law functions, built
+    with numbers: an option's gain that is the number 0 leaves its term out
+    of the expressions (eq. 26 as printed; eq. 13 without a*)."""
+    v = lookup(variant)
+    n = 3 * v.axis_state_size
+    v_ref, fnn_next, tau_c, tau_n = position_controller_function(v)(p_ref - x[0:3], p_ref_dot - x[3:6], state[:n])
+    omega, vel_next, wrench, _, _ = velocity_controller_function()(v_ref, x[3:6], x[6:9], x[9:12], psi_ref,
+                                                                   state[n:])
+    y = np.concatenate([np.array(a).ravel() for a in (omega, v_ref, tau_c, tau_n, wrench)])
+    return y, np.concatenate([np.array(fnn_next).ravel(), np.array(vel_next).ravel()])
 
-    rng = np.random.default_rng(5)
-    args = (rng.normal(size=3), rng.normal(size=3), rng.normal(size=12), 0.3,
-            fc_initial_state(0, PositionParams(), "pd+lm"), rng.normal(size=3))
-    with_zero = controller_step_function("pd+lm", PositionParams(feedforward=0.0))(*args)
-    paper = controller_step_function("pd+lm")(*args)
-    assert all(np.array_equal(np.array(a), np.array(b)) for a, b in zip(with_zero, paper))
-    with_ff = controller_step_function("pd+lm", PositionParams(feedforward=1.0))(*args)
-    assert not np.array_equal(np.array(with_ff[2]), np.array(paper[2]))  # v_ref moved by dp*/dt
+
+def _step_inputs(seed, variant="pd+lm"):
+    rng = np.random.default_rng(seed)
+    return (rng.normal(size=3), rng.normal(size=3), HOVER + rng.normal(size=12), 0.3,
+            initial_state(lookup(variant), 0), rng.normal(size=3))
+
+
+def test_feed_forward_zero_is_the_papers_law_bit_for_bit():
+    """The step function a run evaluates keeps the option's term (its gain
+    is a parameter); at 0 it gives the paper's law to the bit."""
+    args = _step_inputs(5)
+    y_zero, next_zero, _ = bound_step_function("pd+lm", PositionParams(feedforward=0.0))(*args)
+    y, state_next = _papers_law("pd+lm", *args[:5])
+    np.testing.assert_array_equal(np.array(y_zero).ravel(), y)
+    np.testing.assert_array_equal(np.array(next_zero).ravel(), state_next)
+    with_ff = np.array(bound_step_function("pd+lm", PositionParams(feedforward=1.0))(*args)[0]).ravel()
+    assert not np.array_equal(with_ff[Y_SLICES["v_ref"]], y[Y_SLICES["v_ref"]])  # v_ref moved by dp*/dt
 
 
 def test_acceleration_feed_forward_zero_is_the_papers_law_bit_for_bit():
-    from fnn_controller.step import controller_step_function
-
-    rng = np.random.default_rng(6)
-    args = (rng.normal(size=3), rng.normal(size=3), rng.normal(size=12), 0.3,
-            fc_initial_state(0, PositionParams(), "pd+lm"), rng.normal(size=3))
-    with_zero = controller_step_function("pd+lm", PositionParams(accel_feedforward=0.0))(*args)
-    paper = controller_step_function("pd+lm")(*args[:5], np.zeros(3))
-    # every output but check (the sum of the inputs too, so of p_ref_ddot)
-    assert all(np.array_equal(np.array(a), np.array(b)) for a, b in zip(with_zero[:-1], paper[:-1]))
-    with_aff = controller_step_function("pd+lm", PositionParams(accel_feedforward=1.0))(*args)
-    assert np.array_equal(np.array(with_aff[2]), np.array(paper[2]))  # v* is the position loop's, unchanged
-    assert not np.array_equal(np.array(with_aff[5]), np.array(paper[5]))  # the wrench follows the force
+    args = _step_inputs(6)  # a nonzero d2p*/dt2 that the gain 0 must ignore
+    y_zero, next_zero, _ = bound_step_function("pd+lm", PositionParams(accel_feedforward=0.0))(*args)
+    y, state_next = _papers_law("pd+lm", *args[:5])
+    np.testing.assert_array_equal(np.array(y_zero).ravel(), y)
+    np.testing.assert_array_equal(np.array(next_zero).ravel(), state_next)
+    with_aff = np.array(bound_step_function("pd+lm", PositionParams(accel_feedforward=1.0))(*args)[0]).ravel()
+    v_ref, wrench = Y_SLICES["v_ref"], Y_SLICES["wrench"]
+    assert np.array_equal(with_aff[v_ref], y[v_ref])  # v* is the position loop's, unchanged
+    assert not np.array_equal(with_aff[wrench], y[wrench])  # the wrench follows the force
 
 
 def test_acceleration_feed_forward_tilts_the_desired_force_toward_a_ref():

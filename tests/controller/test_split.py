@@ -26,7 +26,7 @@ def test_outer_then_inner_is_the_whole_step_bit_for_bit(variant, options):
     p_outer = np.array([options.get(p.name, p.default) for p in outer_parameter_table(variant)])
     p_inner = np.array([options.get(p.name, p.default) for p in inner_parameter_table()])
     rng = np.random.default_rng(7)
-    state = fc.initial_state(3, fc.PositionParams(), variant)
+    state = fc.initial_state(fc.variant(variant), 3)
     n_fnn = len(state) - 10
     for _ in range(40):  # a few steps, the state fed forward, so the learning laws act
         p_ref, p_ref_dot, p_ref_ddot = rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)

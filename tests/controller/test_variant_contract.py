@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fmu_models.models.quadrotor import DEFAULTS, hover_rotor_speed
-from fnn_controller import PositionParams, QuadrotorController
+from fnn_controller import FnnInit, PositionParams, QuadrotorController
 from fnn_controller.variants import variant, variant_names
 from test_geometric import H, plant_fmu  # noqa: F401  (fixture)
 from test_position import fly
@@ -43,17 +43,25 @@ def test_outputs_are_finite_and_states_stay_in_their_box_over_random_states(name
 def test_hover_is_an_equilibrium(name):
     """At the set point, at rest: the PD is silent, the desired velocity is
     (all but) zero -- f_ij(0) <= 1e-3 m/s bounds what an untrained FNN may add
-    -- and the thrust carries the weight; a variant that adds nothing there
-    holds the hover speed on every rotor."""
+    -- and the thrust carries the weight. With f_ij(0) = 0 (f_high = 0) no
+    variant adds anything there, and every one holds the hover speed on
+    every rotor."""
     ctrl = QuadrotorController(name)
     ctrl.reset(0)
-    omega = ctrl.step(HOVER[:3], np.zeros(3), HOVER)
+    ctrl.step(HOVER[:3], np.zeros(3), HOVER)
     np.testing.assert_allclose(ctrl.outputs["tau_c"], 0.0, atol=1e-12)
     assert np.all(np.abs(ctrl.outputs["v_ref"]) <= PositionParams().init.f_high + 1e-12)
     # T = m (k_v e_v + g) . z_B (eq. 18): |e_v| <= f_high moves it by at most k_v f_high / g = 5e-4
     assert ctrl.outputs["wrench"][0] == pytest.approx(DEFAULTS["m"] * DEFAULTS["g"], rel=1e-3)
-    if not np.any(ctrl.outputs["tau_n"]):
-        np.testing.assert_allclose(omega, hover_rotor_speed(), rtol=1e-12)
+
+    silent = QuadrotorController(name, PositionParams(init=FnnInit(f_high=0.0)))
+    silent.reset(0)
+    omega = silent.step(HOVER[:3], np.zeros(3), HOVER)
+    np.testing.assert_array_equal(silent.outputs["tau_n"], 0.0)
+    np.testing.assert_array_equal(silent.outputs["v_ref"], 0.0)
+    np.testing.assert_allclose(silent.outputs["wrench"], [DEFAULTS["m"] * DEFAULTS["g"], 0.0, 0.0, 0.0],
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(omega, hover_rotor_speed(), rtol=1e-12)
 
 
 def test_the_closed_loop_with_the_plant_fmu_recovers_from_a_tilt(plant_fmu, name):

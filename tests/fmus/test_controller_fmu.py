@@ -93,7 +93,7 @@ def test_the_fmu_is_the_python_fast_path_bit_for_bit(variant, version):
     step, and the same learned state."""
     ctrl = Controller(variant, version, {"seed": 7})
     f, p = parametric_step_function(variant), parameter_vector(variant)
-    state = fc.initial_state(7, fc.PositionParams(), variant)
+    state = fc.initial_state(fc.variant(variant), 7)
     rng = np.random.default_rng(0)
     for k in range(300):
         u = _inputs(rng)
@@ -115,7 +115,7 @@ def test_the_acceleration_feed_forward_is_the_python_fast_path_bit_for_bit(versi
     paper = Controller("pd+lm", version, {"seed": 3})
     position = fc.PositionParams(accel_feedforward=1.0)
     f, p = parametric_step_function("pd+lm"), parameter_vector("pd+lm", position)
-    state = fc.initial_state(3, position, "pd+lm")
+    state = fc.initial_state(fc.variant("pd+lm"), 3, position)
     rng = np.random.default_rng(4)
     for k in range(50):
         u = _inputs(rng)
@@ -132,7 +132,7 @@ def test_the_acceleration_feed_forward_is_the_python_fast_path_bit_for_bit(versi
 
 def test_the_seed_draws_f_ij_0_as_numpy_does():
     ctrl = Controller("pd+lm", 2, {"seed": 12345})
-    expected = fc.initial_state(12345, fc.PositionParams(), "pd+lm")
+    expected = fc.initial_state(fc.variant("pd+lm"), 12345)
     names = [f"f_{i}{j}_{a}" for a in "xyz" for j in (1, 2, 3) for i in (1, 2, 3)]
     f_slice = np.r_[12:21, 37:46, 62:71]
     np.testing.assert_array_equal(ctrl.values(names), expected[f_slice])
@@ -156,7 +156,7 @@ def test_a_changed_gain_changes_the_control_as_in_python(version):
     position, geometric = fc.PositionParams(kp=3.0), fc.GeometricParams(vehicle=fc.VehicleParams(m=1.2))
     f = parametric_step_function("pd+lm")
     u = _inputs(np.random.default_rng(3))
-    state = fc.initial_state(0, position, "pd+lm")
+    state = fc.initial_state(fc.variant("pd+lm"), 0, position)
     y = np.array(f(u[0:3], u[3:6], u[7:19], u[6], state, parameter_vector("pd+lm", position, geometric),
                    u[19:22])[0]).ravel()
     np.testing.assert_array_equal(ctrl.outputs(u), y)

@@ -11,7 +11,7 @@ import pytest
 from cosim.errors import ScenarioError
 from cosim.scenario import build_master, load_scenario
 from fmu_models.models.quadrotor import DEFAULTS
-from fnn_controller import VehicleParams, initial_state
+from fnn_controller import VehicleParams, initial_state, variant
 from fnn_controller.fnn import AXIS_STATE_PORTS, F
 
 
@@ -21,10 +21,19 @@ def _vehicle(overrides=None) -> VehicleParams:
         return master.components["controller"].geometric.vehicle
 
 
+# a plant unlike the controller's defaults in every field the nominal vehicle has
+OTHER_PLANT = {"m": 1.31, "g": 9.79, "Ix": 0.033, "Iy": 0.047, "Iz": 0.025, "l": 0.19, "b": 7.1e-6, "d": 1.9e-7,
+               "Omega_max": 950.0}
+
+
 def test_the_nominal_vehicle_is_the_plants():
-    vehicle = _vehicle()
-    assert dataclasses.asdict(vehicle) == pytest.approx({f.name: DEFAULTS[f.name]
-                                                         for f in dataclasses.fields(VehicleParams)}, rel=1e-15)
+    """Every field of the nominal vehicle is read from the plant: the plant's
+    values differ from the controller's defaults in each, so nothing else
+    passes."""
+    assert set(OTHER_PLANT) == {f.name for f in dataclasses.fields(VehicleParams)}
+    assert all(OTHER_PLANT[k] != DEFAULTS[k] for k in OTHER_PLANT)
+    vehicle = _vehicle({f"fmus.Quadrotor.parameters.{k}": v for k, v in OTHER_PLANT.items()})
+    assert dataclasses.asdict(vehicle) == OTHER_PLANT
 
 
 def test_a_heavier_plant_makes_a_heavier_nominal_model():
@@ -54,7 +63,7 @@ def test_the_learned_state_records_like_an_output():
     with build_master(sc) as master:
         result = master.run(sc.duration, seed=3)
     learned = np.column_stack([result[n] for n in names])
-    start = initial_state(3, master.components["controller"].position, "pd+lm")[:len(names)]
+    start = initial_state(variant("pd+lm"), 3, master.components["controller"].position)[:len(names)]
     f_x = slice(F.start, F.stop)
     assert not np.allclose(learned[-1, f_x], start[f_x])  # the FNN of x has learned in 1 s
     assert result.units[result.columns.index("controller.f_11_x")] == "m/s"

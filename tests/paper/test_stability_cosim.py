@@ -15,6 +15,7 @@ from quadrotor_paper.stability.loops import LoopModel
 from quadrotor_paper.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
 from fnn_controller import FNN_STATE_SIZE, PositionParams
 from fnn_controller.step import initial_state
+from fnn_controller.variants import variant as lookup
 
 H = 0.01
 TOLERANCE = 0.01  # of the step: the stated agreement of linear model and co-simulation
@@ -126,7 +127,7 @@ def test_kd_below_minus_one_runs_away_in_the_co_simulation_too(op, fmu):
 
 def _synthetic_run(variant, tau_c, tau, t):
     n = t.size
-    states = np.tile(initial_state(0), (n, 1))
+    states = np.tile(initial_state(lookup(variant), 0), (n, 1))
     zeros = np.zeros((n, 3))
     return Recording("synthetic", variant, t, zeros, zeros, tau_c, zeros, tau, states, PositionParams())
 

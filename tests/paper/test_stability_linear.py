@@ -116,8 +116,8 @@ def test_fmu_linearization_honours_plant_parameters(quadrotor_fmu2):
 
 
 def test_pd_jacobian_is_kp_kd_and_the_composition_is_the_masters_function(ops):
-    """The two linearized laws composed = the Jacobian of
-    controller_step_function("pd"), the function the master runs."""
+    """The two linearized laws composed = the Jacobian of the parametric
+    step of "pd" with its parameters bound, the function the master runs."""
     for op in ops.values():
         c = linearize_controller(op)
         np.testing.assert_allclose(c.K_e, 2.5 * np.eye(3), rtol=1e-15)
