@@ -49,16 +49,17 @@ class Job:
 
 
 def _task_overrides(scenario: Scenario, job: Job) -> dict[str, Any]:
-    """The scenario overrides of ``job``: none for a variant's row, the option's for an option row."""
+    """The scenario overrides of ``job``: its variant (the controller FMU's
+    model, so no run-level parameter), and the option's for an option row."""
     if job.option is None:
-        return {}
+        return {"controller.variant": job.variant}
     from .options import option, scenario_overrides
 
-    return scenario_overrides(option(job.option), scenario)
+    return {"controller.variant": job.variant, **scenario_overrides(option(job.option), scenario)}
 
 
 def _parameters(scenario: Scenario, job: Job) -> dict[str, Any]:
-    params: dict[str, Any] = {"controller.variant": job.variant}
+    params: dict[str, Any] = {}
     if job.wind is not None:
         params[wind_parameter(scenario, "speed")] = job.wind
     return params
@@ -75,11 +76,13 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
     microseconds).
     """
     own = master is None
+    if variant:  # the controller's variant is its FMU's model: a scenario override
+        scenario = parse_scenario(apply_overrides(scenario.raw, {"controller.variant": variant}),
+                                  source=scenario.source)
     master = master or build_master(scenario)
-    params = {"controller.variant": variant} if variant else {}
     try:
         csv = Path(out_dir) / "results.csv" if out_dir is not None else None
-        result = master.run(scenario.duration, seed=scenario.seed if seed is None else seed, parameters=params,
+        result = master.run(scenario.duration, seed=scenario.seed if seed is None else seed,
                             csv_path=csv, t0=scenario.start_time, block_rows=scenario.block_rows,
                             raise_on_error=False, progress=progress, profile=profile)
     except FmuError as exc:  # could not start: a parameter refused, told with its scenario key

@@ -36,9 +36,10 @@ into one ``casadi.Function`` and mapped over the samples of a run
 (:func:`_lm_function`).
 
 The runs are co-simulations by the master (plant FMU, h = 0.01 s) that
-record the learned state the controller component publishes (its internal
-signals ``controller.f_12_x``, ...): a 1 m position step from hover, and the
-paper's mission (shipped scenario ``circles``, 3 m/s gust).
+record the learned state the controller publishes (its internal signals
+``controller.f_12_x``, ..., the controller FMU's local variables): a 1 m
+position step from hover, and the paper's mission (shipped scenario
+``circles``, 3 m/s gust).
 """
 from __future__ import annotations
 
@@ -53,9 +54,9 @@ import numpy as np
 from fnn_controller import PositionParams
 from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2, normalized_firing_strength
 from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
-from fnn_controller.position import axis_slice, initial_fnn_state
+from fnn_controller.position import axis_slice
 
-from .controller_component import internal_ports
+from .controller_component import ControllerComponent, internal_ports
 
 __all__ = ["Run", "AxisClaims", "record_run", "evaluate_claims", "default_runs",
            "finite_time_report"]
@@ -104,11 +105,9 @@ def record_run(name: str, variant: str, scenario: str = "circles", overrides: di
     sc = _scenario(scenario, variant, overrides or {})
     with build_master(sc) as master:
         result = master.run(sc.duration, seed=sc.seed, raise_on_error=False)
-        position = master.components["controller"].position
-    # the published state is the one after each step: the state before step n is the one after n - 1
-    after = np.column_stack([result[f"controller.{port.name}"] for port in internal_ports(variant)])
-    initial = initial_fnn_state(sc.seed, position, variant)
-    states = np.vstack([initial, after[:-1]])
+    position = ControllerComponent.from_parameters("controller", sc.components["controller"]["parameters"]).position
+    # the learned state recorded at t_n is the one step n starts from
+    states = np.column_stack([result[f"controller.{port.name}"] for port in internal_ports(variant)])
 
     def cols(fmt):
         return np.column_stack([result[fmt.format(a=a)] for a in _AXES])
