@@ -5,23 +5,30 @@ Algorithm (stated in full in ``docs/cosim.md``): communication points
 
 1. every FMU output is known at ``t_n`` (read after initialization, then after
    each step);
-2. the Python components are evaluated in topological order of their mutual
-   connections (a sampled-data block may have direct feedthrough: the
-   a controller's command at ``t_n`` may depend on the plant state at ``t_n``);
-   a cycle among them is refused before the first step;
+2. the Python components are evaluated in topological order of their
+   connections (a sampled-data block may have direct feedthrough: a
+   controller's command at ``t_n`` may depend on the plant state at ``t_n``),
+   and so are the FMUs with direct feedthrough (feedthrough ordering); a
+   cycle among them is refused before the first step;
 3. the recorded signals at ``t_n`` are stored (and streamed in blocks), and
    the guard checks every signal (finite, inside its envelope);
 4. every FMU gets all its connected inputs, taken at ``t_n``, in one call;
 5. every FMU steps from ``t_n`` to ``t_{n+1}`` (Jacobi among FMUs: they only
    see each other's values at ``t_n``, held constant over the step), and its
-   outputs at ``t_{n+1}`` are read in one call.
+   outputs (and internal signals in use) at ``t_{n+1}`` are read in one call.
 
-All signals live in one float64 array; each connection is an index into it,
-precomputed before the run, so a step allocates nothing but small temporaries.
+Everything above is decided once, before the first step, as one typed plan
+(:mod:`cosim.plan`: the slots of the one float64 signal array, the blocks at
+``t_n``, each FMU's bound inputs and reads, the held outputs and initial
+transfers of the exchange ordering, what is recorded and guarded). The
+master binds it and runs it in one of two loops that execute the same plan:
+its Python loop, or, when the plan evaluates only FMUs, the compiled loop of
+:mod:`cosim.kernel`; both give the same results bit for bit.
 
 The loop holds no clock: ``run(..., profile=True)`` wraps each phase (the FMU
 exchange, each Python component, recording, the guard) in a timer before the
-loop starts, and the result's ``phase_times`` says where the time went.
+loop starts (in the Python loop), and the result's ``phase_times`` says where
+the time went.
 """
 from __future__ import annotations
 

@@ -214,11 +214,10 @@ def _indices(values) -> np.ndarray:
 def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection], ordering: str,
               record: Sequence[str], bounds: Mapping[str, tuple[float, float]]) -> Plan:
     """The :class:`Plan` of a run of ``fmus`` and ``python`` components joined
-    by ``connections`` (already checked), recording ``record`` and guarding
+    by ``connections`` (already checked) in the ``ordering`` (one of
+    :data:`ORDERINGS`, checked by the master), recording ``record`` and guarding
     ``bounds`` (signal -> (low, high)); one-line
     :class:`~cosim.errors.ConnectionCheckError` for what cannot run."""
-    if ordering not in ORDERINGS:
-        raise ValueError(f"ordering = {ordering!r}: expected one of {', '.join(ORDERINGS)}")
     components = {c.name: c for c in list(fmus) + list(python)}
     record = list(record)
     source_of = {str(c.destination): str(c.source) for c in connections}
