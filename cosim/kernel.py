@@ -210,15 +210,13 @@ def _array(values, dtype) -> np.ndarray:
 
 
 def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, high: np.ndarray,
-            t0: float, h: float, n_steps: int) -> tuple[KernelRun, list]:
+            t0: float, h: float, n_steps: int) -> KernelRun:
     """The :class:`KernelRun` of ``plan`` for the bound ``fmus`` (the master's,
-    in the plan's order), with the arrays it points into (keep them alive
-    while it runs)."""
+    in the plan's order); it holds the arrays it points into."""
     entries = (KernelFmu * len(fmus))(*(fmu.kernel_entry(b.direct, b.sources) for fmu, b in zip(fmus, plan.fmus)))
     order = _array([b.index for b in plan.at_tn], np.int64)
     record, guard = _array(plan.record_slots, np.int64), _array(plan.watch_slots, np.int64)
     low, high = _array(low, np.float64), _array(high, np.float64)
-    keep = [entries, order, record, guard, low, high, signals, data]
 
     def p(array, kind):
         return array.ctypes.data_as(kind)
@@ -226,4 +224,5 @@ def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, 
     run = KernelRun(entries, len(fmus), p(order, _i64p), len(order), p(signals, _f64p), float(t0), float(h),
                     int(n_steps), p(data, _f64p), len(record), p(record, _i64p), len(guard), p(guard, _i64p),
                     p(low, _f64p), p(high, _f64p))
-    return run, keep
+    run.arrays = (entries, order, record, guard, low, high, signals, data)  # alive as long as the run
+    return run

@@ -326,9 +326,9 @@ class Master:
 
         h, signals, block = self.step, self.signals, recorder.block_rows
         low, high = self.guard.limits
-        args, keep = kernel.prepare(self.plan, self.fmus, signals, recorder.data, low, high, t0, h, n_steps)
+        args = kernel.prepare(self.plan, self.fmus, signals, recorder.data, low, high, t0, h, n_steps)
         stop = kernel.KernelStop()
-        if self.ordering == "exchange":
+        if self.plan.transfer:  # exchange ordering; no Python component, so no first_transfer
             self._initial_transfer(self.plan.transfer, t0)
         n = 0
         while n <= n_steps:
@@ -346,7 +346,6 @@ class Master:
                 if progress is not None:
                     progress(last, n_steps)
             n = last + 1
-        del keep
         if progress is not None:
             progress(n_steps, n_steps)
 

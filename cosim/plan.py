@@ -31,6 +31,7 @@ Nothing here runs a component: the plan reads ports (``inputs``, ``outputs``,
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any, Mapping, Sequence, Union
 
 import numpy as np
@@ -208,7 +209,10 @@ def _order(blocks: Sequence[str], components: Mapping[str, Any], connections: Se
 
 
 def _indices(values) -> np.ndarray:
-    return np.array(list(values), dtype=np.intp)
+    """Signal slots (or other indices) as a read-only array: a plan is decided once."""
+    array = np.array(list(values), dtype=np.intp)
+    array.flags.writeable = False
+    return array
 
 
 def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection], ordering: str,
@@ -297,10 +301,11 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
     columns = ("time",) + tuple(record)
     watched = tuple(s for s in slots if s != "time")
     return Plan(
-        ordering=ordering, slots=slots, start_values=tuple(start_values), source_of=source_of,
+        ordering=ordering, slots=MappingProxyType(slots), start_values=tuple(start_values),
+        source_of=MappingProxyType(source_of),
         fmus=tuple(fmu_blocks), at_tn=tuple(by_name[n] for n in at_tn), transfer=transfer,
         first_transfer=first_transfer, record=columns,
         record_units=("s",) + tuple(signal_port(components, s).unit for s in record),
         record_slots=_indices(slots[source_of.get(s, s)] for s in columns), watched=watched,
         watch_slots=_indices(slots[s] for s in watched),
-        bounds={source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in bounds.items()})
+        bounds=MappingProxyType({source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in bounds.items()}))

@@ -3,8 +3,9 @@ Table 2 and Table 3, and the metrics of a study's rows.
 
 A sweep is a list of jobs run through the engine's runner
 (:mod:`cosim.dask_runner`: in this process for one worker, else on Dask);
-each worker builds one master (extracting and instantiating its FMUs and
-controllers once) and runs its share of the jobs, resetting between runs. A
+each worker builds one master per variant and option row (extracting and
+instantiating its FMUs once) and runs its share of the jobs, resetting
+between runs. A
 job is (variant, wind speed, seed) and optionally an option row
 (:mod:`quadrotor_paper.options`: the variant with scenario overrides); its
 result is the RMSE, the status and the wall time.
@@ -146,8 +147,9 @@ def sweep(scenario: Scenario, jobs: Sequence[Job], workers: int = 2,
     :func:`cosim.dask_runner.run_tasks`: ``workers = 1`` (and no
     ``scheduler``) runs in this process, else a Dask ``LocalCluster`` of
     ``workers`` processes (or the cluster at ``scheduler``); each worker
-    builds one master and reuses it for every job, the job's variant and
-    wind speed being run-level parameters.
+    builds one master per variant (a scenario override: the controller
+    FMU's model) and option row, and reuses it across wind speeds (a
+    run-level parameter) and seeds.
     """
     from cosim.dask_runner import Task, run_tasks
 
