@@ -38,6 +38,7 @@ from fmpy.fmi1 import FMICallException
 
 from .component import Port
 from .errors import FmuCallError, FmuLoadError
+from .kernel import Call, KernelFmu
 
 __all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "SEED_LIMIT"]
 
@@ -107,11 +108,18 @@ def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
     """The variables of a modelDescription as ports, by causality.
 
     Keys: ``input``, ``output``, ``parameter`` (FMI 2.0 and 3.0 parameters,
-    tunable or not), ``other`` (locals, independent, calculated parameters).
+    tunable or not), ``local`` (the local variables of type Float64 but the
+    state derivatives, which are what a Model Exchange importer integrates),
+    ``other`` (the rest: derivatives, independent, calculated parameters).
     """
-    groups: dict[str, list[Port]] = {"input": [], "output": [], "parameter": [], "other": []}
+    derivatives = {d.variable.name for d in model_description.derivatives}
+    groups: dict[str, list[Port]] = {"input": [], "output": [], "parameter": [], "local": [], "other": []}
     for v in model_description.modelVariables:
-        groups.get(v.causality, groups["other"]).append(_port(v))
+        if v.causality == "local":
+            key = "local" if v.name not in derivatives and _TYPE.get(v.type) == "Float64" else "other"
+        else:
+            key = v.causality if v.causality in groups else "other"
+        groups[key].append(_port(v))
     return {k: tuple(v) for k, v in groups.items()}
 
 
@@ -134,7 +142,7 @@ class _Api:
         self._component = ctypes.c_void_p(slave.component)
         names = ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep") if version == 2 else \
             ("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep")
-        self._names = names
+        self._names = names  # indexed by Call
         self._set, self._get, self._step = (_bare(slave, n) for n in names)
         if version == 2:
             self._step_tail = (ctypes.c_int(1),)  # noSetFMUStatePriorToCurrentPoint
@@ -142,24 +150,24 @@ class _Api:
             self._step_tail = (ctypes.c_bool(True), *(ctypes.byref(ctypes.c_bool()) for _ in range(3)),
                                ctypes.byref(ctypes.c_double()))
 
-    def _check(self, status: int, which: int) -> None:
+    def _check(self, status: int, which: Call) -> None:
         if status > 1:  # fmiWarning is fine; discard, error, fatal are not
             raise FMICallException(function=self._names[which], status=status)
 
     def set(self, vrs, n: ctypes.c_size_t, values_ptr) -> None:
         if self.version == 2:
-            self._check(self._set(self._component, vrs, n, values_ptr), 0)
+            self._check(self._set(self._component, vrs, n, values_ptr), Call.SET)
         else:
-            self._check(self._set(self._component, vrs, n, values_ptr, n), 0)
+            self._check(self._set(self._component, vrs, n, values_ptr, n), Call.SET)
 
     def get(self, vrs, n: ctypes.c_size_t, values_ptr) -> None:
         if self.version == 2:
-            self._check(self._get(self._component, vrs, n, values_ptr), 1)
+            self._check(self._get(self._component, vrs, n, values_ptr), Call.GET)
         else:
-            self._check(self._get(self._component, vrs, n, values_ptr, n), 1)
+            self._check(self._get(self._component, vrs, n, values_ptr, n), Call.GET)
 
     def do_step(self, t: float, h: float) -> None:
-        self._check(self._step(self._component, ctypes.c_double(t), ctypes.c_double(h), *self._step_tail), 2)
+        self._check(self._step(self._component, ctypes.c_double(t), ctypes.c_double(h), *self._step_tail), Call.STEP)
 
 
 class FmuComponent:
@@ -199,6 +207,7 @@ class FmuComponent:
         self._check_binary()
         groups = fmu_ports(md)
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
+        self.internals = groups["local"]  # recorded and bounded like outputs, read with them (cosim.plan)
         self.variables = {v.name: v for v in md.modelVariables}
         if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
@@ -404,32 +413,32 @@ class FmuComponent:
         self._u_ptr = self.u.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         self._y_ptr = self.y.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
-    def kernel_entry(self, direct: bool, in_idx: np.ndarray):
+    def kernel_entry(self, direct: bool, in_idx: np.ndarray) -> KernelFmu:
         """This FMU as the compiled loop sees it (:mod:`cosim.kernel`):
-        function pointers, value references and buffers as :meth:`bind` set them."""
-        from .kernel import KernelFmu
-
+        function pointers, value references and buffers as :meth:`bind` set
+        them; ``in_idx``, the signal slots of the inputs' sources, is kept
+        alive with this component."""
         api = self._api
         address = lambda f: ctypes.cast(f, ctypes.c_void_p).value  # noqa: E731
-        self._kernel_in_idx = np.ascontiguousarray(in_idx, dtype=np.int64)  # kept alive with the entry
+        vrs = lambda refs: ctypes.cast(refs, ctypes.POINTER(ctypes.c_uint32))  # noqa: E731
+        self._kernel_in_idx = np.ascontiguousarray(in_idx, dtype=np.int64)
         return KernelFmu(self.fmi_version, api._component.value, address(api._set), address(api._get),
-                         address(api._step), ctypes.addressof(self._in_vr), self._n_in,
-                         self._kernel_in_idx.ctypes.data, self.u.ctypes.data, ctypes.addressof(self._out_vr),
-                         self._n_out, self.y.ctypes.data, int(direct))
+                         address(api._step), vrs(self._in_vr), self._n_in,
+                         self._kernel_in_idx.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), self._u_ptr,
+                         vrs(self._out_vr), self._n_out, self._y_ptr, int(direct))
 
-    _SET, _GET, _DO_STEP = 0, 1, 2  # the loop's three calls, as cosim/kernel.c numbers them
-
-    def _call_failure(self, call: int, exc: FMICallException, t: float, h: float = 0.0) -> FmuCallError:
+    def _call_failure(self, call: Call, exc: FMICallException, t: float, h: float = 0.0) -> FmuCallError:
         """The error of a failed loop call: what was asked, with the inputs' values when setting them."""
-        if call == self._SET:
+        if call == Call.SET:
             values = ", ".join(f"{n} = {float(v)!r}" for n, v in zip(self.input_names, self.u))
             return self._fail(f"setting inputs ({values})", exc, t)
-        if call == self._GET:
+        if call == Call.GET:
             return self._fail("getting outputs", exc, t)
         return self._fail(f"doStep from t = {t!r} by {h!r} s", exc, t)
 
-    def kernel_failure(self, call: int, status: int, t: float, h: float) -> FmuCallError:
+    def kernel_failure(self, call: Call, status: int, t: float, h: float) -> FmuCallError:
         """The error the Python path raises for the same failed call."""
+        call = Call(call)
         return self._call_failure(call, FMICallException(function=self._api._names[call], status=status), t, h)
 
     def write_inputs(self, t: float) -> None:
@@ -438,7 +447,7 @@ class FmuComponent:
             try:
                 self._api.set(self._in_vr, self._c_in, self._u_ptr)
             except FMICallException as exc:
-                raise self._call_failure(self._SET, exc, t) from None
+                raise self._call_failure(Call.SET, exc, t) from None
 
     def serialize_state(self) -> bytes:
         """The FMU's state, serialized (FMI getFMUState + serializeFMUState)."""
@@ -483,7 +492,7 @@ class FmuComponent:
         try:
             self._api.do_step(t, h)
         except FMICallException as exc:
-            raise self._call_failure(self._DO_STEP, exc, t, h) from None
+            raise self._call_failure(Call.STEP, exc, t, h) from None
 
     def read_outputs(self, t: float) -> None:
         """Get all bound outputs into :attr:`y` in one call."""
@@ -491,4 +500,4 @@ class FmuComponent:
             try:
                 self._api.get(self._out_vr, self._c_out, self._y_ptr)
             except FMICallException as exc:
-                raise self._call_failure(self._GET, exc, t) from None
+                raise self._call_failure(Call.GET, exc, t) from None

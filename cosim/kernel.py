@@ -1,18 +1,28 @@
-"""The compiled step loop for systems of FMUs only (``kernel.c``).
+"""The compiled step loop (``kernel.c``) and its one definition of what
+crosses between Python and C.
 
-When every block of a run is an FMU (no Python component), the master's loop
-makes nothing but FMI calls, copies between the signal array and the FMUs,
-the recording and the guard: :func:`load` compiles ``kernel.c`` once per
-machine (content-addressed, beside the user's cache; the C compiler FMUs are
-built with) and the master hands it each block of communication points. The
-Python master still plans the run and raises every error; the compiled loop
-only runs what the Python loop would, and gives the same results bit for bit
-(tests/engine/test_engine_kernel.py). Without a C compiler the Python loop
-runs (``load`` returns ``None``); ``COSIM_PYTHON_LOOP=1`` forces it.
+When every block a plan evaluates at t_n is an FMU (:attr:`Plan.fmus_only
+<cosim.plan.Plan.fmus_only>`), the master's loop makes nothing but FMI
+calls, copies between the signal array and the FMUs, the recording and the
+guard: the master hands this loop the plan (:func:`prepare`) and each block
+of communication points (:func:`load` compiles ``kernel.c`` once per machine,
+content-addressed beside the user's cache, with the C compiler FMUs are built
+with). The master still plans the run and raises every error; the compiled
+loop only runs what the Python loop would, and gives the same results bit for
+bit (tests/engine/test_engine_kernel.py). Without a C compiler the Python
+loop runs (``load`` returns ``None``); ``COSIM_PYTHON_LOOP=1`` forces it.
+
+One definition: the structures (:class:`KernelFmu`, :class:`KernelRun`,
+:class:`KernelStop`), the codes (:class:`Stop`, :class:`Call`) and the
+prototype of ``cosim_kernel_run`` are declared here, in Python, and
+:func:`header` writes them as the C header ``kernel.c`` is compiled with; the
+compiled library is addressed by the hash of both, so the two sides cannot
+drift apart (a prototype that does not match is a compile error).
 """
 from __future__ import annotations
 
 import ctypes
+import enum
 import hashlib
 import os
 import shutil
@@ -21,24 +31,137 @@ import tempfile
 from functools import lru_cache
 from pathlib import Path
 
-__all__ = ["KernelFmu", "KernelStop", "load", "KERNEL_OK", "KERNEL_GUARD", "KERNEL_FMU", "CALLS"]
+import numpy as np
 
-KERNEL_OK, KERNEL_GUARD, KERNEL_FMU = 0, 1, 2
-CALLS = ("set inputs", "get outputs", "doStep")
+__all__ = ["KernelFmu", "KernelRun", "KernelStop", "Stop", "Call", "header", "load", "prepare"]
+
 _SOURCE = Path(__file__).with_name("kernel.c")
+_HEADER = "kernel_abi.h"
+
+
+class Stop(enum.IntEnum):
+    """Why ``cosim_kernel_run`` returned."""
+
+    OK = 0  # the block of points ran
+    GUARD = 1  # a guarded signal left its envelope (or is not finite)
+    FMU = 2  # an FMI call failed (KernelStop says which FMU, which call, which status)
+
+
+class Call(enum.IntEnum):
+    """The loop's three FMI calls, as a failure names them."""
+
+    SET = 0  # fmi2SetReal / fmi3SetFloat64 of the bound inputs
+    GET = 1  # fmi2GetReal / fmi3GetFloat64 of the bound outputs and internals
+    STEP = 2  # fmi2DoStep / fmi3DoStep
+
+    @property
+    def label(self) -> str:
+        return ("set inputs", "get outputs", "doStep")[self]
+
+
+_i64, _f64, _ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
+_u32p, _i64p, _f64p = (ctypes.POINTER(t) for t in (ctypes.c_uint32, ctypes.c_int64, ctypes.c_double))
+
+# (name, ctypes type, what it is): the fields of each structure, in order
+_FMU_FIELDS = (
+    ("version", _i64, "FMI 2 or 3"),
+    ("component", _ptr, "the fmi2Component / fmi3Instance"),
+    ("set", _ptr, "fmi2SetReal / fmi3SetFloat64"),
+    ("get", _ptr, "fmi2GetReal / fmi3GetFloat64"),
+    ("step", _ptr, "fmi2DoStep / fmi3DoStep"),
+    ("in_vr", _u32p, "value references of the bound inputs"),
+    ("n_in", _i64, "how many"),
+    ("in_idx", _i64p, "signal slots of their sources"),
+    ("u", _f64p, "the inputs, gathered"),
+    ("out_vr", _u32p, "value references of the outputs and internals read"),
+    ("n_out", _i64, "how many"),
+    ("y", _f64p, "their slots in the signal array (contiguous)"),
+    ("direct", _i64, "evaluated at t_n (feedthrough ordering), else its inputs are set at the exchange"),
+)
 
 
 class KernelFmu(ctypes.Structure):
-    _fields_ = [("version", ctypes.c_int64), ("component", ctypes.c_void_p), ("set", ctypes.c_void_p),
-                ("get", ctypes.c_void_p), ("step", ctypes.c_void_p), ("in_vr", ctypes.c_void_p),
-                ("n_in", ctypes.c_int64), ("in_idx", ctypes.c_void_p), ("u", ctypes.c_void_p),
-                ("out_vr", ctypes.c_void_p), ("n_out", ctypes.c_int64), ("y", ctypes.c_void_p),
-                ("direct", ctypes.c_int64)]
+    """One FMU as the plan binds it (cosim.plan.FmuBlock)."""
+
+    _fields_ = [(name, kind) for name, kind, _ in _FMU_FIELDS]
+
+
+_RUN_FIELDS = (
+    ("fmus", ctypes.POINTER(KernelFmu), "every FMU, in stepping order"),
+    ("n_fmus", _i64, "how many"),
+    ("order", _i64p, "the FMUs evaluated at t_n, in order (indices into fmus)"),
+    ("n_order", _i64, "how many"),
+    ("signals", _f64p, "the signal array (slot 0 is the time)"),
+    ("t0", _f64, "start time (s)"),
+    ("h", _f64, "communication step (s)"),
+    ("n_steps", _i64, "steps of the run: points 0 .. n_steps"),
+    ("data", _f64p, "the recorder's rows, n_columns each"),
+    ("n_columns", _i64, "recorded columns"),
+    ("record_idx", _i64p, "their slots"),
+    ("n_guard", _i64, "guarded signals"),
+    ("guard_idx", _i64p, "their slots"),
+    ("low", _f64p, "their inclusive bounds (finite)"),
+    ("high", _f64p, ""),
+)
+
+
+class KernelRun(ctypes.Structure):
+    """A whole run: the plan's arrays and the run's time grid."""
+
+    _fields_ = [(name, kind) for name, kind, _ in _RUN_FIELDS]
+
+
+_STOP_FIELDS = (
+    ("n", _i64, "the communication point it stopped at"),
+    ("fmu", _i64, "Stop.FMU: which FMU (index into fmus)"),
+    ("call", _i64, "Stop.FMU: which Call"),
+    ("status", _i64, "Stop.FMU: the FMI status"),
+    ("recorded", _i64, "the row of point n was recorded before it stopped"),
+)
 
 
 class KernelStop(ctypes.Structure):
-    _fields_ = [("n", ctypes.c_int64), ("fmu", ctypes.c_int64), ("call", ctypes.c_int64), ("status", ctypes.c_int64),
-                ("recorded", ctypes.c_int64)]
+    """Where and why a block of points stopped early."""
+
+    _fields_ = [(name, kind) for name, kind, _ in _STOP_FIELDS]
+
+
+# the compiled entry point: runs points first .. last of the run, returns a Stop
+_RUN_ARGS = (("run", ctypes.POINTER(KernelRun)), ("first", _i64), ("last", _i64),
+             ("stop", ctypes.POINTER(KernelStop)))
+
+_C_SCALARS = {ctypes.c_int64: "int64_t", ctypes.c_double: "double", ctypes.c_void_p: "void *",
+              ctypes.c_uint32: "uint32_t"}
+
+
+def _c_type(kind) -> str:
+    if kind in _C_SCALARS:
+        return _C_SCALARS[kind]
+    if issubclass(kind, ctypes._Pointer):
+        return _c_type(kind._type_) + " *"
+    if issubclass(kind, ctypes.Structure):
+        return kind.__name__
+    raise TypeError(f"no C spelling for {kind!r}")
+
+
+def _declare(kind, name: str) -> str:
+    spelled = _c_type(kind)
+    return f"{spelled}{name}" if spelled.endswith("*") else f"{spelled} {name}"
+
+
+def header() -> str:
+    """The C header of this module's definitions, as ``kernel.c`` includes it."""
+    lines = ["/* Generated by cosim/kernel.py from its ctypes structures and enums: do not edit. */",
+             "#ifndef COSIM_KERNEL_ABI_H", "#define COSIM_KERNEL_ABI_H", "#include <stdint.h>", ""]
+    for prefix, codes in (("KERNEL", Stop), ("CALL", Call)):
+        lines.append("enum { " + ", ".join(f"{prefix}_{c.name} = {int(c)}" for c in codes) + " };")
+    for struct, fields in ((KernelFmu, _FMU_FIELDS), (KernelRun, _RUN_FIELDS), (KernelStop, _STOP_FIELDS)):
+        lines += ["", f"/* {struct.__doc__.splitlines()[0]} */", "typedef struct {"]
+        lines += [f"    {_declare(kind, name)};" + (f"  /* {text} */" if text else "") for name, kind, text in fields]
+        lines.append(f"}} {struct.__name__};")
+    arguments = ", ".join(_declare(kind, name) for name, kind in _RUN_ARGS)
+    lines += ["", f"int cosim_kernel_run({arguments});", "", "#endif", ""]
+    return "\n".join(lines)
 
 
 def _cache() -> Path:
@@ -49,12 +172,14 @@ def _cache() -> Path:
 
 @lru_cache(maxsize=None)
 def load():
-    """The compiled ``cosim_kernel_run``, or ``None`` (no compiler, or the
-    Python loop asked for)."""
+    """The compiled ``cosim_kernel_run``, or ``None`` (no C compiler, or the
+    Python loop asked for); a source that does not compile raises."""
     if os.environ.get("COSIM_PYTHON_LOOP"):
         return None
-    source = _SOURCE.read_bytes()
-    target = _cache() / f"cosim_kernel_{hashlib.sha256(source).hexdigest()[:16]}.so"
+    source, abi = _SOURCE.read_bytes(), header().encode()
+    digest = hashlib.sha256(source)
+    digest.update(abi)
+    target = _cache() / f"cosim_kernel_{digest.hexdigest()[:16]}.so"
     if not target.exists():
         cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
         if not cc:
@@ -64,14 +189,40 @@ def load():
             # compile beside the target and rename: parallel processes never load half a library
             fd, tmp = tempfile.mkstemp(suffix=".so.part", dir=target.parent)
             os.close(fd)
-            result = subprocess.run([cc, "-O2", "-std=c99", "-shared", "-fPIC", "-o", tmp, str(_SOURCE)],
-                                    capture_output=True, text=True)
-            if result.returncode != 0:
+            with tempfile.TemporaryDirectory() as include:
+                Path(include, _HEADER).write_bytes(abi)
+                result = subprocess.run([cc, "-O2", "-std=c99", "-Wall", "-Werror", "-shared", "-fPIC",
+                                         f"-I{include}", "-o", tmp, str(_SOURCE)], capture_output=True, text=True)
+            if result.returncode != 0:  # our own source that does not compile: a bug, never a silent fallback
                 os.unlink(tmp)
-                return None
+                raise RuntimeError(f"compiling {_SOURCE} with {cc} failed: {result.stderr.strip()}")
             os.replace(tmp, target)
         except OSError:
             return None
     run = ctypes.CDLL(str(target)).cosim_kernel_run
+    run.argtypes = [kind for _, kind in _RUN_ARGS]
     run.restype = ctypes.c_int
+    return run
+
+
+def _array(values, dtype) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=dtype)
+
+
+def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, high: np.ndarray,
+            t0: float, h: float, n_steps: int) -> KernelRun:
+    """The :class:`KernelRun` of ``plan`` for the bound ``fmus`` (the master's,
+    in the plan's order); it holds the arrays it points into."""
+    entries = (KernelFmu * len(fmus))(*(fmu.kernel_entry(b.direct, b.sources) for fmu, b in zip(fmus, plan.fmus)))
+    order = _array([b.index for b in plan.at_tn], np.int64)
+    record, guard = _array(plan.record_slots, np.int64), _array(plan.watch_slots, np.int64)
+    low, high = _array(low, np.float64), _array(high, np.float64)
+
+    def p(array, kind):
+        return array.ctypes.data_as(kind)
+
+    run = KernelRun(entries, len(fmus), p(order, _i64p), len(order), p(signals, _f64p), float(t0), float(h),
+                    int(n_steps), p(data, _f64p), len(record), p(record, _i64p), len(guard), p(guard, _i64p),
+                    p(low, _f64p), p(high, _f64p))
+    run.arrays = (entries, order, record, guard, low, high, signals, data)  # alive as long as the run
     return run

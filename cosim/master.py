@@ -5,23 +5,30 @@ Algorithm (stated in full in ``docs/cosim.md``): communication points
 
 1. every FMU output is known at ``t_n`` (read after initialization, then after
    each step);
-2. the Python components are evaluated in topological order of their mutual
-   connections (a sampled-data block may have direct feedthrough: the
-   a controller's command at ``t_n`` may depend on the plant state at ``t_n``);
-   a cycle among them is refused before the first step;
+2. the Python components are evaluated in topological order of their
+   connections (a sampled-data block may have direct feedthrough: a
+   controller's command at ``t_n`` may depend on the plant state at ``t_n``),
+   and so are the FMUs with direct feedthrough (feedthrough ordering); a
+   cycle among them is refused before the first step;
 3. the recorded signals at ``t_n`` are stored (and streamed in blocks), and
    the guard checks every signal (finite, inside its envelope);
 4. every FMU gets all its connected inputs, taken at ``t_n``, in one call;
 5. every FMU steps from ``t_n`` to ``t_{n+1}`` (Jacobi among FMUs: they only
    see each other's values at ``t_n``, held constant over the step), and its
-   outputs at ``t_{n+1}`` are read in one call.
+   outputs (and internal signals in use) at ``t_{n+1}`` are read in one call.
 
-All signals live in one float64 array; each connection is an index into it,
-precomputed before the run, so a step allocates nothing but small temporaries.
+Everything above is decided once, before the first step, as one typed plan
+(:mod:`cosim.plan`: the slots of the one float64 signal array, the blocks at
+``t_n``, each FMU's bound inputs and reads, the held outputs and initial
+transfers of the exchange ordering, what is recorded and guarded). The
+master binds it and runs it in one of two loops that execute the same plan:
+its Python loop, or, when the plan evaluates only FMUs, the compiled loop of
+:mod:`cosim.kernel`; both give the same results bit for bit.
 
 The loop holds no clock: ``run(..., profile=True)`` wraps each phase (the FMU
 exchange, each Python component, recording, the guard) in a timer before the
-loop starts, and the result's ``phase_times`` says where the time went.
+loop starts (in the Python loop), and the result's ``phase_times`` says where
+the time went.
 """
 from __future__ import annotations
 
@@ -32,16 +39,15 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .component import Port, PythonComponent
+from .component import PythonComponent
 from .connection import Connection, check_connections, parse_connections
 from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError
 from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
+from .plan import ORDERINGS, FmuBlock, PythonBlock, make_plan
 from .recorder import Recorder
 
 __all__ = ["Master", "RunResult", "ORDERINGS"]
-
-ORDERINGS = ("feedthrough", "exchange")
 
 
 @dataclass
@@ -121,163 +127,18 @@ class Master:
 
     # ---- planning -----------------------------------------------------------
 
-    def _signal_port(self, signal: str) -> Port:
-        comp_name, _, var = signal.partition(".")
-        comp = self.components.get(comp_name)
-        if comp is None:
-            raise ConnectionCheckError(
-                f"signal {signal!r}: unknown component {comp_name!r}; components are: "
-                f"{', '.join(sorted(self.components))}")
-        if not var:
-            raise ConnectionCheckError(f"signal {signal!r}: expected 'component.variable'")
-        internals = getattr(comp, "internals", ())
-        for port in comp.outputs + internals:
-            if port.name == var:
-                return port
-        for port in comp.inputs:  # an input is recorded as the value its source gives it
-            if port.name == var:
-                return port
-        known = ", ".join(p.name for p in comp.outputs + comp.inputs + internals)
-        kinds = "output, input or internal signal" if internals else "output or input"
-        raise ConnectionCheckError(f"signal {signal!r}: {comp_name} has no {kinds} {var!r}; it has: {known}")
-
-    def _direct_fmus(self, used: set[str]) -> set[str]:
-        """FMUs to evaluate at ``t_n`` (feedthrough ordering): those with a used
-        output that depends directly on a connected input (ModelStructure)."""
-        if self.ordering != "feedthrough":
-            return set()
-        direct = set()
-        for fmu in self.fmus:
-            connected = {c.destination.variable for c in self.connections if c.destination.component == fmu.name}
-            if any(fmu.feedthrough.get(p.name, frozenset()) & connected
-                   for p in fmu.outputs if f"{fmu.name}.{p.name}" in used):
-                direct.add(fmu.name)
-        return direct
-
-    def _order(self, direct: set[str]) -> list:
-        """The blocks evaluated at ``t_n``, in topological order of their
-        connections: the Python components (and, in the feedthrough ordering,
-        the FMUs with direct feedthrough). Only a connection whose source
-        depends on its block's inputs at ``t_n`` orders two blocks, so a
-        plant's states feeding a controller that feeds the plant is no loop.
-        In the exchange ordering nothing is ordered: every block reads the
-        values of the previous exchange."""
-        blocks = [c.name for c in self.python] + [f.name for f in self.fmus if f.name in direct]
-        deps: dict[str, set[str]] = {name: set() for name in blocks}
-        for c in self.connections:
-            src, dst = c.source.component, c.destination.component
-            if src not in deps or dst not in deps or self.ordering != "feedthrough":
-                continue
-            fmu = self.components[src] if src in direct else None
-            if fmu is None or fmu.feedthrough.get(c.source.variable):
-                deps[dst].add(src)
-        order: list[str] = []
-        state: dict[str, int] = {}
-
-        def visit(name: str, path: list[str]) -> None:
-            if state.get(name) == 2:
-                return
-            if state.get(name) == 1:
-                cycle = path[path.index(name):] + [name]
-                raise ConnectionCheckError(
-                    f"algebraic loop: {' -> '.join(cycle)}; each block needs the one before it at the same "
-                    f"instant: break it with a delay, or use the 'exchange' ordering")
-            state[name] = 1
-            for d in sorted(deps[name]):
-                visit(d, path + [name])
-            state[name] = 2
-            order.append(name)
-
-        for name in blocks:  # declared order breaks ties
-            visit(name, [])
-        return [self.components[n] for n in order]
-
     def _plan(self, record: list[str]) -> None:
-        source_of = {str(c.destination): str(c.source) for c in self.connections}
-        self.source_of = source_of
-        for s in record + list(self.bounds):
-            self._signal_port(s)
-            src = source_of.get(s, s)
-            comp, _, var = src.partition(".")
-            readable = self.components[comp].outputs + getattr(self.components[comp], "internals", ())
-            if var not in {p.name for p in readable}:
-                raise ConnectionCheckError(f"signal {s!r} is an input that nothing feeds; record its source")
-        used = {str(c.source) for c in self.connections}
-        used |= {source_of.get(s, s) for s in record + list(self.bounds)}
-        # Slot layout: time, then each FMU's used outputs (contiguous, so the
-        # FMU writes them straight into the signal array), then each Python
-        # component's outputs (contiguous, one slice assignment per step),
-        # then the internal signals that are recorded or bounded.
-        slots: dict[str, int] = {"time": 0}
-        blocks: dict[str, slice] = {}
-        for comp in self.fmus + self.python:
-            first = len(slots)
-            for p in comp.outputs:
-                name = f"{comp.name}.{p.name}"
-                if name in used or comp in self.python:
-                    slots[name] = len(slots)
-            blocks[comp.name] = slice(first, len(slots))
-        published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        for comp in self.python:
-            picked = [(i, f"{comp.name}.{p.name}") for i, p in enumerate(comp.internals)
-                      if f"{comp.name}.{p.name}" in used]
-            for _, name in picked:
-                slots[name] = len(slots)
-            if picked:
-                published[comp.name] = (np.array([i for i, _ in picked], dtype=np.intp),
-                                        np.array([slots[name] for _, name in picked], dtype=np.intp))
-        # Unconnected Python inputs that declare a start value: one slot each,
-        # written once here and by nothing after, so they hold that value.
-        held_inputs: dict[str, float] = {}
-        for comp in self.python:
-            for p in comp.inputs:
-                name = f"{comp.name}.{p.name}"
-                if name not in source_of and p.start is not None:
-                    held_inputs[name] = float(p.start)
-                    slots[name] = len(slots)
-        self.slots = slots
-        self.signals = np.zeros(len(slots))
-        for name, value in held_inputs.items():
-            self.signals[slots[name]] = value
-
-        direct = self._direct_fmus(used)
-        self._direct = direct
-        fmu_in: dict[str, np.ndarray] = {}
-        self._fmu_in_idx = fmu_in
-        self._fmu_in: list[tuple[FmuComponent, np.ndarray]] = []  # written at the exchange
-        self._fmu_out: list[FmuComponent] = []
-        for fmu in self.fmus:
-            ins = [c for c in self.connections if c.destination.component == fmu.name]
-            block = blocks[fmu.name]
-            outs = [s.partition(".")[2] for s, i in slots.items() if block.start <= i < block.stop]
-            fmu.bind([c.destination.variable for c in ins], outs, self.signals[block] if outs else None)
-            fmu_in[fmu.name] = np.array([slots[str(c.source)] for c in ins], dtype=np.intp)
-            if ins and fmu.name not in direct:
-                self._fmu_in.append((fmu, fmu_in[fmu.name]))
-            if outs:
-                self._fmu_out.append(fmu)
-
-        # the blocks evaluated at t_n: ("python", comp, in_idx, out_block, published) or ("fmu", fmu, in_idx)
-        self._blocks: list[tuple] = []
-        for comp in self._order(direct):
-            if comp.name in direct:
-                self._blocks.append(("fmu", comp, fmu_in[comp.name]))
-                continue
-            missing = [p.name for p in comp.inputs
-                       if f"{comp.name}.{p.name}" not in source_of and f"{comp.name}.{p.name}" not in held_inputs]
-            if missing:
-                raise ConnectionCheckError(f"inputs of {comp.name} not connected: {', '.join(missing)}")
-            in_idx = np.array([slots[source_of.get(name, name)] for name in (f"{comp.name}.{p.name}"
-                                                                              for p in comp.inputs)], dtype=np.intp)
-            self._blocks.append(("python", comp, in_idx, blocks[comp.name], published.get(comp.name)))
-
-        self.record_columns = ("time",) + tuple(record)
-        self.record_units = ("s",) + tuple(self._signal_port(s).unit for s in record)
-        self._rec_idx = np.array([slots[source_of.get(s, s)] for s in self.record_columns], dtype=np.intp)
-        watch_bounds = {source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in self.bounds.items()}
-        watched = [s for s in slots if s != "time"]
-        self.guard = Guard(watched, watch_bounds)
-        self._guard_idx = np.array([slots[s] for s in watched], dtype=np.intp)
+        """Plan the run (:func:`cosim.plan.make_plan`) and bind it: the signal
+        array, each FMU's inputs and reads (straight into its slots), the guard."""
+        self.plan = plan = make_plan(self.fmus, self.python, self.connections, self.ordering, record, self.bounds)
+        self.slots, self.source_of = plan.slots, plan.source_of
+        self.signals = np.zeros(len(plan.slots))
+        for slot, value in plan.start_values:
+            self.signals[slot] = value
+        for fmu, b in zip(self.fmus, plan.fmus):
+            fmu.bind(b.inputs, b.reads, self.signals[b.block] if b.reads else None)
+        self.record_columns, self.record_units = plan.record, plan.record_units
+        self.guard = Guard(plan.watched, plan.bounds)
 
     # ---- running --------------------------------------------------------------
 
@@ -346,47 +207,41 @@ class Master:
             raise failure
         return result
 
-    def _initial_transfer(self, t0: float, fmu_sources_only: bool = False) -> None:
-        """Exchange ordering, at t0 only: as libcosim does before its first
-        step, every FMU gets the values its inputs are connected to at t0 (the
-        FMUs' outputs after initialization, the Python components' first
-        outputs) and its outputs are read again, once per FMU, so a chain of
-        direct feedthroughs is consistent at t0. ``fmu_sources_only``: only
-        the connections from FMUs, the transfer that runs before the Python
-        components' first step (their outputs do not exist yet), so that
-        they read FMU outputs consistent at t0 too (an FMU with feedthrough
-        between the plant and a Python controller, such as a sensor)."""
-        fmu_names = {f.name for f in self.fmus}
-        feeds = {f.name: [c for c in self.connections if c.destination.component == f.name
-                          and (not fmu_sources_only or c.source.component in fmu_names)] for f in self.fmus}
+    def _initial_transfer(self, transfers, t0: float) -> None:
+        """Exchange ordering, at t0 only (the plan's ``transfer`` or
+        ``first_transfer``): as libcosim does before its first step, every FMU
+        gets the values its inputs are connected to at t0 and its outputs are
+        read again, once per FMU, so a chain of direct feedthroughs is
+        consistent at t0."""
+        signals = self.signals
         for _ in self.fmus:
-            for fmu in self.fmus:
-                fmu.set_inputs({c.destination.variable: self.signals[self.slots[str(c.source)]]
-                                for c in feeds[fmu.name]}, t0)
+            for tr in transfers:
+                fmu = self.fmus[tr.index]
+                fmu.set_inputs(dict(zip(tr.inputs, signals[tr.sources])), t0)
                 fmu.read_outputs(t0)
 
     # ---- the loop and its phases -------------------------------------------------
 
-    def _py_phase(self, comp: PythonComponent, in_idx: np.ndarray, out_block: slice,
-                  published: tuple[np.ndarray, np.ndarray] | None,
-                  held: np.ndarray | None = None) -> Callable[[int, float], None]:
+    def _py_phase(self, b: PythonBlock, held: np.ndarray | None = None) -> Callable[[int, float], None]:
         """One Python component's step at ``t_n``: gather its inputs (straight
         into its :meth:`~cosim.component.PythonComponent.input_buffers`, if it
         offers them), step it, store its outputs and published internals --
         into ``held`` instead of the signal array when the outputs are
         delayed (exchange ordering)."""
+        comp = self.python[b.index]
+        in_idx, out_block, published = b.sources, b.block, b.published
         signals, take, step = self.signals, np.take, comp.step
         buffers = comp.input_buffers()
         if buffers is None:
             u = np.zeros(len(in_idx))
             targets = [(in_idx, u)]
         else:
-            sizes = [b.size for b in buffers]
+            sizes = [buf.size for buf in buffers]
             if sum(sizes) != len(in_idx):
                 raise ValueError(f"{comp.name}.input_buffers() sizes {sizes} do not add up to "
                                  f"its {len(in_idx)} inputs")
             edges = np.cumsum([0] + sizes)
-            targets = [(in_idx[a:b], buf) for a, b, buf in zip(edges[:-1], edges[1:], buffers)]
+            targets = [(in_idx[a:z], buf) for a, z, buf in zip(edges[:-1], edges[1:], buffers)]
             u = None
 
         if held is not None:
@@ -414,10 +269,11 @@ class Master:
                 signals[slots] = internal_values()[which]
         return phase
 
-    def _fmu_eval_phase(self, fmu: FmuComponent, in_idx: np.ndarray) -> Callable[[int, float], None]:
+    def _fmu_eval_phase(self, b: FmuBlock) -> Callable[[int, float], None]:
         """An FMU with direct feedthrough at ``t_n`` (feedthrough ordering): its
         inputs at ``t_n`` set, its outputs at ``t_n`` read (it steps at the exchange)."""
-        signals, take, u = self.signals, np.take, fmu.u[:len(in_idx)]
+        fmu = self.fmus[b.index]
+        signals, take, in_idx, u = self.signals, np.take, b.sources, fmu.u[:len(b.sources)]
         write, read = fmu.write_inputs, fmu.read_outputs
 
         def phase(n: int, t: float) -> None:
@@ -428,12 +284,14 @@ class Master:
 
     def _fmu_phase(self, t0: float, holds=()) -> Callable[[int, float], None]:
         """Every FMU from ``t_n`` to ``t_{n+1}``: set all its connected inputs
-        (taken at ``t_n``), doStep, read its outputs at ``t_{n+1}``; then the
-        held outputs of delayed Python components become the values at ``t_{n+1}``."""
+        (taken at ``t_n``) unless it was evaluated at ``t_n``, doStep, read its
+        outputs at ``t_{n+1}``; then the held outputs of delayed Python
+        components become the values at ``t_{n+1}``."""
         signals, take, h = self.signals, np.take, self.step
-        writes = [(f.write_inputs, in_idx, f.u[:len(in_idx)]) for f, in_idx in self._fmu_in]
+        writes = [(self.fmus[b.index].write_inputs, b.sources, self.fmus[b.index].u[:len(b.sources)])
+                  for b in self.plan.exchanged]
         do_steps = [f.do_step for f in self.fmus]
-        reads = [f.read_outputs for f in self._fmu_out]
+        reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads]
 
         def phase(n: int, t: float) -> None:
             for write, in_idx, u in writes:
@@ -450,7 +308,7 @@ class Master:
 
     def _loop(self, t0: float, n_steps: int, recorder: Recorder, progress: Callable[[int, int], None] | None,
               phase_times: dict[str, float] | None) -> None:
-        if phase_times is None and all(kind == "fmu" for kind, *_ in self._blocks):
+        if phase_times is None and self.plan.fmus_only:
             from . import kernel
 
             run = kernel.load()
@@ -460,37 +318,27 @@ class Master:
 
     def _loop_compiled(self, run, t0: float, n_steps: int, recorder: Recorder,
                        progress: Callable[[int, int], None] | None) -> None:
-        """The loop of :meth:`_loop_python`, for FMUs only, compiled
-        (:mod:`cosim.kernel`): one call per block of recorded rows."""
+        """The plan run by the compiled loop (:mod:`cosim.kernel`): one call
+        per block of recorded rows, as :meth:`_loop_python` flushes them."""
         import ctypes
 
         from . import kernel
 
         h, signals, block = self.step, self.signals, recorder.block_rows
-        entries = (kernel.KernelFmu * len(self.fmus))(
-            *(f.kernel_entry(f.name in self._direct, self._fmu_in_idx[f.name]) for f in self.fmus))
-        order = np.array([self.fmus.index(comp) for _, comp, _ in self._blocks], dtype=np.int64)
-        rec_idx = np.ascontiguousarray(self._rec_idx, dtype=np.int64)
-        guard_idx = np.ascontiguousarray(self._guard_idx, dtype=np.int64)
         low, high = self.guard.limits
+        args = kernel.prepare(self.plan, self.fmus, signals, recorder.data, low, high, t0, h, n_steps)
         stop = kernel.KernelStop()
-        if self.ordering == "exchange":
-            self._initial_transfer(t0)
-        i64, dbl, ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
-        fixed = (ptr(ctypes.addressof(entries)), i64(len(self.fmus)), ptr(order.ctypes.data), i64(len(order)),
-                 ptr(signals.ctypes.data), dbl(t0), dbl(h))
-        tail = (i64(n_steps), ptr(recorder.data.ctypes.data), i64(len(rec_idx)), ptr(rec_idx.ctypes.data),
-                i64(len(guard_idx)), ptr(guard_idx.ctypes.data), ptr(low.ctypes.data), ptr(high.ctypes.data),
-                ctypes.byref(stop))
+        if self.plan.transfer:  # exchange ordering; no Python component, so no first_transfer
+            self._initial_transfer(self.plan.transfer, t0)
         n = 0
         while n <= n_steps:
             last = min((n // block + 1) * block - 1, n_steps)  # the Python loop flushes at the same rows
-            code = run(*fixed, i64(n), i64(last), *tail)
-            if code != kernel.KERNEL_OK:
+            code = run(ctypes.byref(args), n, last, ctypes.byref(stop))
+            if code != kernel.Stop.OK:
                 recorder.n_rows = int(stop.n) + int(stop.recorded)
                 t = t0 + int(stop.n) * h
-                if code == kernel.KERNEL_GUARD:
-                    self.guard.raise_violation(t, signals[self._guard_idx])
+                if code == kernel.Stop.GUARD:
+                    self.guard.raise_violation(t, signals[self.plan.watch_slots])
                 raise self.fmus[int(stop.fmu)].kernel_failure(int(stop.call), int(stop.status), t, h)
             recorder.n_rows = last + 1
             if (last + 1) % block == 0:
@@ -503,9 +351,9 @@ class Master:
 
     def _loop_python(self, t0: float, n_steps: int, recorder: Recorder,
                      progress: Callable[[int, int], None] | None, phase_times: dict[str, float] | None) -> None:
-        h, signals, take = self.step, self.signals, np.take
-        data, rec_idx = recorder.data, self._rec_idx
-        guard_ok, guard_idx, guard = self.guard.ok, self._guard_idx, self.guard
+        plan, h, signals, take = self.plan, self.step, self.signals, np.take
+        data, rec_idx = recorder.data, plan.record_slots
+        guard_ok, guard_idx, guard = self.guard.ok, plan.watch_slots, self.guard
         block = recorder.block_rows
 
         def record(n: int, t: float) -> None:
@@ -523,31 +371,30 @@ class Master:
 
         # exchange ordering: a Python component with inputs is sampled at t_n and
         # its outputs held from t_{n+1}, like an FMU whose outputs follow its inputs
-        python, holds = [], []
-        for kind, comp, *rest in self._blocks:
-            if kind == "fmu":
-                python.append((f"fmu:{comp.name}", self._fmu_eval_phase(comp, *rest)))
+        phases, holds = [], []
+        for b in plan.at_tn:
+            if isinstance(b, FmuBlock):
+                phases.append((f"fmu:{b.name}", self._fmu_eval_phase(b)))
                 continue
-            in_idx, out_block, published = rest
-            held = np.zeros(out_block.stop - out_block.start) if self.ordering == "exchange" and len(in_idx) else None
+            held = np.zeros(b.block.stop - b.block.start) if b.held else None
             if held is not None:
-                holds.append((held, out_block))
-            python.append((f"python:{comp.name}", self._py_phase(comp, in_idx, out_block, published, held)))
+                holds.append((held, b.block))
+            phases.append((f"python:{b.name}", self._py_phase(b, held)))
         exchange = self._fmu_phase(t0, holds)
         if phase_times is not None:  # timed from outside: the loop below is the same either way
-            python = [(name, _timed(phase, phase_times, name)) for name, phase in python]
+            phases = [(name, _timed(phase, phase_times, name)) for name, phase in phases]
             record, check = _timed(record, phase_times, "record"), _timed(check, phase_times, "guard")
             exchange = _timed(exchange, phase_times, "fmu")
-        steps = [phase for _, phase in python]
+        steps = [phase for _, phase in phases]
         for n in range(n_steps + 1):
             t = t0 + n * h  # time from the step counter, never accumulated
             signals[0] = t
-            if n == 0 and self.ordering == "exchange" and steps:
-                self._initial_transfer(t0, fmu_sources_only=True)
+            if n == 0 and plan.first_transfer and steps:
+                self._initial_transfer(plan.first_transfer, t0)
             for phase in steps:
                 phase(n, t)
-            if n == 0 and self.ordering == "exchange":
-                self._initial_transfer(t0)
+            if n == 0 and plan.transfer:
+                self._initial_transfer(plan.transfer, t0)
             record(n, t)
             check(n, t)
             if n < n_steps:

@@ -4,6 +4,14 @@ kinds (with their short sections ``[trajectory]`` and ``[controller]``), the
 ``[wind]`` and ``[metrics]`` sections, the cases studies name (a case per
 controller variant, the option rows) and the shipped scenarios.
 
+Both kinds build FMUs: a ``[trajectory]`` is its reference FMU
+(``ReferenceTwoCircles``, ...) with the trajectory's parameters, a
+``[controller]`` the controller FMU of its variant (unless ``form =
+"python"``), so a shipped mission is FMUs only and runs in the master's
+compiled loop. :func:`fmu_entry` states each as an ``[fmus]`` entry, which is
+what the component is built from and what an all-FMU scenario
+(:mod:`quadrotor_paper.portable`) lists.
+
 :func:`register` runs when :mod:`quadrotor_paper` is imported, and through
 the ``cosim.plugins`` entry point whenever the engine reads a scenario.
 Nothing heavy is imported here: the builders import what they build.
@@ -20,7 +28,7 @@ from cosim.config import check_number
 from cosim.errors import ScenarioError
 from cosim.scenario import refuse_unknown
 
-__all__ = ["register", "TRAJECTORY_INSTANCE", "CONTROLLER_INSTANCE"]
+__all__ = ["register", "fmu_entry", "TRAJECTORY_INSTANCE", "CONTROLLER_INSTANCE"]
 
 TRAJECTORY_INSTANCE = "reference"
 CONTROLLER_INSTANCE = "controller"
@@ -65,12 +73,45 @@ def _trajectory_kind(name: str) -> registry.ComponentKind:
             raise ScenarioError(f"{where}: {exc}") from None
 
     def build(instance: str, params: Mapping[str, Any], context) -> Any:
-        from .trajectories import ReferenceComponent, make_trajectory
+        from cosim.fmu_component import FmuComponent
+        from cosim.scenario import fmu_file
 
-        return ReferenceComponent(make_trajectory(name, **{k: float(v) for k, v in params.items()}), instance)
+        entry = _trajectory_entry(name, params)
+        return FmuComponent(instance, fmu_file(entry), parameters=entry["parameters"])
 
-    return registry.ComponentKind(name, build, check, f"reference trajectory {name}",
+    return registry.ComponentKind(name, build, check, f"reference trajectory {name} (its reference FMU)",
                                   alias="trajectory", instance=TRAJECTORY_INSTANCE)
+
+
+def _trajectory_entry(kind: str, params: Mapping[str, Any]) -> dict[str, Any]:
+    """The reference FMU of a trajectory of ``kind`` (FMI 2.0), the given
+    parameters by their FMU names, the values the trajectory checked."""
+    from .trajectories import make_trajectory
+
+    trajectory = make_trajectory(kind, **{k: float(v) for k, v in params.items()})
+    return {"model": trajectory.model.identifier, "fmi_version": 2,
+            "parameters": {trajectory.fmu_name(k): getattr(trajectory, k) for k in params}}
+
+
+def fmu_entry(instance: str, spec: Mapping[str, Any], context) -> dict[str, Any]:
+    """The ``[fmus]`` entry (model, FMI version, parameters, seed parameter)
+    a scenario's component ``instance`` (``spec``: its kind and parameters)
+    runs as: its reference FMU for a trajectory, the controller FMU for the
+    controller (FMI 2.0 whatever its ``form``; ``context`` gives the plant
+    its nominal vehicle is taken from). Any other component has no FMU: a
+    one-line :class:`~cosim.errors.ScenarioError` naming it."""
+    from .trajectories import TRAJECTORIES
+
+    kind, params = spec.get("kind"), spec.get("parameters", {})
+    if kind in TRAJECTORIES:
+        return _trajectory_entry(kind, params)
+    if kind == "fnn_controller":
+        from .controller_component import ControllerComponent
+
+        python = {k: v for k, v in params.items() if k not in ("form", "fmi_version")}
+        return ControllerComponent.from_parameters(instance, {**python, "form": "python"}, context).fmu_entry(2)
+    raise ScenarioError(f"components.{instance}: a {kind or spec.get('factory')!r} component has no FMU form; "
+                        f"an all-FMU scenario (SSP) cannot hold it")
 
 
 def _controller_kind() -> registry.ComponentKind:

@@ -1,14 +1,23 @@
 """The flight controller of ``fnn_controller`` as a component of the master.
 
-One adapter, no layer between it and CasADi: per variant used it holds the
-one step function of the controller, the parametric step
-(:func:`fnn_controller.parametric.parametric_step`: the function the
-controller FMU is generated from, its parameter input ``p`` filled from this
-component's parameters) behind a :class:`~fnn_controller.FastFunction`
-(built on first use, so a worker of ``table2`` switches between variants
-without rebuilding); the master gathers the 21 inputs straight into the
-function's input arrays (``input_buffers``) and takes the 17 outputs from
-its output vector.
+A scenario's ``[controller]`` runs as the controller FMU of its variant
+(``form = "fmu"``, the default: :mod:`fnn_controller.controller_fmu`, the
+parametric step compiled, built on demand), so a mission of FMUs only runs
+in the master's compiled loop (:mod:`cosim.kernel`). Its learned state
+starts from the run's seed, or from a saved one (``learned``,
+:mod:`quadrotor_paper.learned`).
+
+``form = "python"`` runs the same parametric step in process instead, one
+adapter with no layer between it and CasADi: the step function
+(:func:`fnn_controller.parametric.parametric_step`) behind a
+:class:`~fnn_controller.FastFunction`; the master gathers the 21 inputs
+straight into the function's input arrays (``input_buffers``) and takes the
+17 outputs from its output vector. Its purpose: a variant being written
+runs at once, with no C code generated and compiled per change, and a step
+that goes non-finite is reported naming the input or law that did
+(``fnn_controller.step.raise_non_finite``) rather than the state that
+became non-finite. Both forms fly bit for bit alike
+(``tests/paper/test_controller_component.py``).
 
 Ports (NED world frame, SI units):
 
@@ -22,16 +31,15 @@ outputs   Omega_1..Omega_4 (rotor speeds, to the plant)               rad/s
           tau_c_x/y/z (PD part, eq. 19), tau_n_x/y/z (FNN part, eq. 24) m/s
           T tau_phi tau_theta tau_psi (eq. 18, before saturation)     N, N.m
 internals the learned parameters of each axis, e.g. ``f_12_x``,
-          ``sigma1_2_z``, ``alpha_y`` (the variant's axis state ports)
+          ``sigma1_2_z``, ``alpha_y`` (the variant's axis state ports),
+          at t_n the ones the control at t_n was computed with (the FMU
+          form: its local variables, which also hold the previous R*)
 ========= ========================================================== =====
 
 The controller's nominal vehicle (mass, inertia, rotor coefficients, the
 rotor limit) is the plant's: ``plant`` names the FMU instance it is taken
 from (default ``Quadrotor``; its scenario parameters over the FMU's start
 values), and ``nominal = { m = 1.2 }`` is a deliberate, named mismatch.
-
-``form = "fmu"`` runs the controller as its FMU (the same function compiled,
-:mod:`fnn_controller.controller_fmu`) instead of the Python fast path.
 
 The run's seed draws f_ij(0) (§5.1) at every start.
 """
@@ -45,7 +53,7 @@ import numpy as np
 
 from cosim.component import Port, PythonComponent
 from cosim.config import check_number, dataclass_from_mapping
-from cosim.errors import CosimError, DivergenceError, ScenarioError
+from cosim.errors import DivergenceError, ScenarioError
 from cosim.scenario import refuse_unknown, string, table
 from fnn_controller.variants import DEFAULT_VARIANT
 
@@ -113,8 +121,10 @@ class ControllerComponent(PythonComponent):
 
     Parameters
     ----------
-    variant : a registered variant (``"pd"``, ``"pd+smc"``, ``"pd+lm"``, ...);
-        the run-level parameter ``variant`` switches it for one run.
+    variant : a registered variant (``"pd"``, ``"pd+smc"``, ``"pd+lm"``, ...),
+        which fixes the laws and the learned state (as the FMU's model does):
+        a scenario override ``controller.variant`` changes it, no run-level
+        parameter.
     position, geometric : mappings of :class:`fnn_controller.PositionParams`
         and :class:`fnn_controller.GeometricParams` fields (nested tables for
         ``init``, ``bounds``); unset fields keep the defaults.
@@ -139,10 +149,9 @@ class ControllerComponent(PythonComponent):
             geometric["vehicle"] = {**geometric.get("vehicle", {}), **vehicle}
         self.geometric = dataclass_from_mapping(fc.GeometricParams, geometric, f"{name}.geometric")
         self.psi_ref = float(psi_ref)
-        self.default_variant = self._check_variant(variant)
-        self.variant = self.default_variant
-        self.internals = internal_ports(self.default_variant)
-        self._functions: dict[str, Any] = {}
+        self.variant = self._check_variant(variant)
+        self.internals = internal_ports(self.variant)
+        self._fast = None
         self.learned: np.ndarray | None = None  # a saved state to start from instead of the seed's
 
     @classmethod
@@ -170,7 +179,7 @@ class ControllerComponent(PythonComponent):
         if context is not None and plant not in context.fmus and "plant" not in parameters:
             plant = ""  # no FMU of the default name: the controller keeps its own defaults
         vehicle = _nominal_vehicle(name, plant, nominal, context)
-        form = string(f"{name}.form", parameters.get("form", "python"))
+        form = string(f"{name}.form", parameters.get("form", "fmu"))
         if form not in FORMS:
             raise ScenarioError(f"{name}.form = {form!r}: expected one of {', '.join(FORMS)}")
         version = parameters.get("fmi_version", 2)
@@ -185,25 +194,36 @@ class ControllerComponent(PythonComponent):
             from .learned import load_learned
 
             component.learned = load_learned(string(f"{name}.learned", parameters["learned"]),
-                                             component.default_variant)
+                                             component.variant)
         return component.as_fmu(version) if form == "fmu" and context is not None else component
 
+    def fmu_entry(self, fmi_version: int = 2) -> dict[str, Any]:
+        """This controller as an ``[fmus]`` entry: the FMU of its variant
+        (:func:`fnn_controller.controller_fmu.fmu_identifier`), its
+        parameters set to this component's, ``psi_ref`` (then an input, held
+        at this value unless connected), its seed parameter (if its variant
+        draws f_ij(0)) bound to the run's seed."""
+        from fnn_controller.controller_fmu import controller_model, fmu_identifier
+        from fnn_controller.parametric import parameter_table
+
+        values = {p.name: p.default for p in parameter_table(self.variant, self.position, self.geometric)}
+        seed = controller_model(self.variant).sampled.seed
+        return {"model": fmu_identifier(self.variant), "fmi_version": fmi_version,
+                "parameters": {**values, "psi_ref": self.psi_ref}, **({"seed_parameter": seed} if seed else {})}
+
     def as_fmu(self, fmi_version: int = 2):
-        """This controller as its FMU (:mod:`fnn_controller.controller_fmu`): the same
-        parametric step compiled, its parameters set to this component's, its
-        ``seed`` to the run's seed; ``psi_ref`` is then an input, held at this
-        component's value unless connected."""
-        from cosim.fmu_component import FmuComponent
+        """This controller as its FMU (:meth:`fmu_entry`; the same parametric
+        step compiled, :func:`fnn_controller.controller_fmu.controller_model`),
+        starting from :attr:`learned` if set."""
         from fmu_models.export.build import cached_fmu
         from fnn_controller.controller_fmu import controller_model
-        from fnn_controller.parametric import parameter_table
 
         from .learned import LearnedControllerFmu
 
-        values = {p.name: p.default for p in parameter_table(self.default_variant, self.position, self.geometric)}
-        path = cached_fmu(controller_model(self.default_variant), fmi_version)
-        return LearnedControllerFmu(self.name, path, parameters={**values, "psi_ref": self.psi_ref},
-                                    seed_parameter="seed", variant=self.default_variant, state=self.learned)
+        entry = self.fmu_entry(fmi_version)
+        return LearnedControllerFmu(self.name, cached_fmu(controller_model(self.variant), fmi_version),
+                                    parameters=entry["parameters"], seed_parameter=entry.get("seed_parameter"),
+                                    variant=self.variant, state=self.learned)
 
     def _check_variant(self, variant: Any) -> str:
         names = self._fc.variant_names()
@@ -211,24 +231,24 @@ class ControllerComponent(PythonComponent):
             raise ScenarioError(f"{self.name}.variant = {variant!r}: expected one of {', '.join(names)}")
         return variant
 
-    def function(self, variant: str):
-        """The :class:`~fnn_controller.FastFunction` of ``variant``'s parametric
+    def function(self):
+        """The :class:`~fnn_controller.FastFunction` of the variant's parametric
         step (built once; the same function the controller FMU is generated
         from), its parameter input filled from this component's parameters."""
-        if variant not in self._functions:
+        if self._fast is None:
             from fnn_controller.parametric import parametric_step
 
-            function, p = parametric_step(variant, self.position, self.geometric)
+            function, p = parametric_step(self.variant, self.position, self.geometric)
             fast = self._fc.FastFunction(function, state=("state", "state_next"))
             fast.inputs["p"][:] = p
-            self._functions[variant] = fast
-        return self._functions[variant]
+            self._fast = fast
+        return self._fast
 
     def set_parameters(self, values: Mapping[str, Any]) -> None:
-        unknown = set(values) - {"variant", "psi_ref"}
+        unknown = set(values) - {"psi_ref"}
         if unknown:
-            raise KeyError(f"{self.name}: run-level parameters are 'variant' and 'psi_ref', not {sorted(unknown)}")
-        self.variant = self._check_variant(values.get("variant", self.default_variant))
+            raise KeyError(f"{self.name}: the run-level parameter is 'psi_ref', not {sorted(unknown)} "
+                           f"(the variant is the scenario's: override controller.variant)")
         self._psi = float(values.get("psi_ref", self.psi_ref))
 
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
@@ -237,16 +257,15 @@ class ControllerComponent(PythonComponent):
                                 f"the communication step {h} s")
         if not hasattr(self, "_psi"):
             self._psi = self.psi_ref
-        fast = self.function(self.variant)
-        if self.learned is not None and self.variant == self.default_variant:
+        fast = self.function()
+        if self.learned is not None:
             fast.state[:] = self.learned  # resume learning
         else:
             fast.state[:] = self._fc.initial_state(self._fc.variant(self.variant), seed, self.position)
         fast.inputs["psi_ref"][0] = self._psi
-        self._fast = fast
         self._n_internal = len(self.internals)
         self._last = n_steps
-        self._same_layout = internal_ports(self.variant) == self.internals
+        self._pending = False
 
     def input_buffers(self) -> list[np.ndarray]:
         """The step function's own input arrays (p*, dp*/dt, plant state, d²p*/dt²), in port order."""
@@ -255,6 +274,8 @@ class ControllerComponent(PythonComponent):
 
     def step(self, n: int, t: float, u: np.ndarray | None) -> np.ndarray:
         fast = self._fast
+        if self._pending:  # the update of the step before takes effect now, so that between
+            fast.commit()  # steps the state is the one the last control was computed with
         if u is not None:  # called without input_buffers(): copy the inputs in
             ins = fast.inputs
             ins["p_ref"][:], ins["p_ref_dot"][:], ins["x"][:] = u[0:3], u[3:6], u[6:18]
@@ -266,18 +287,17 @@ class ControllerComponent(PythonComponent):
                 self._fc.step.raise_non_finite(fast.inputs)
             except (ValueError, FloatingPointError) as exc:
                 raise DivergenceError(t, f"{self.name} ({exc})", float("nan"), None) from None
-        if n < self._last:  # at the last point no step follows: the control is output, nothing learned
-            fast.commit()
+        self._pending = n < self._last  # at the last point no step follows: nothing learned
         return pending["y"]
 
     @property
     def state(self) -> np.ndarray:
-        """A copy of the whole controller state now (after the last step)."""
+        """A copy of the whole controller state after the run (the last point
+        learns nothing: the state the last control was computed with)."""
         return self._fast.state.copy()
 
     def internal_values(self) -> np.ndarray:
-        """The learned state of the three axes (the position part of the state)."""
-        if not self._same_layout:
-            raise CosimError(f"{self.name}: its internal signals are those of variant {self.default_variant!r}; "
-                             f"variant {self.variant!r} has another state layout")
+        """The learned state of the three axes (the position part of the
+        state) the control at t_n was computed with, as the FMU form's
+        local variables read at t_n."""
         return self._fast.state[:self._n_internal]

@@ -36,9 +36,10 @@ into one ``casadi.Function`` and mapped over the samples of a run
 (:func:`_lm_function`).
 
 The runs are co-simulations by the master (plant FMU, h = 0.01 s) that
-record the learned state the controller component publishes (its internal
-signals ``controller.f_12_x``, ...): a 1 m position step from hover, and the
-paper's mission (shipped scenario ``circles``, 3 m/s gust).
+record the learned state the controller publishes (its internal signals
+``controller.f_12_x``, ..., the controller FMU's local variables): a 1 m
+position step from hover, and the paper's mission (shipped scenario
+``circles``, 3 m/s gust).
 """
 from __future__ import annotations
 
@@ -52,8 +53,7 @@ import numpy as np
 from fnn_controller import PositionParams
 from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2, normalized_firing_strength
 from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
-from fnn_controller.position import axis_slice, initial_fnn_state
-from fnn_controller.variants import variant as lookup
+from fnn_controller.position import axis_slice
 
 from .controller_component import internal_ports
 from .missions import controller_variant
@@ -105,9 +105,8 @@ def recorded(scenario, result) -> dict[str, Recording]:
     run as the claims read it, ``{"recorded": Recording}``."""
     variant = controller_variant(scenario)
     position = _position(scenario)
-    # the published state is the one after each step: the state before step n is the one after n - 1
-    after = np.column_stack([result[f"controller.{port.name}"] for port in internal_ports(variant)])
-    states = np.vstack([initial_fnn_state(lookup(variant), result.seed, position), after[:-1]])
+    # the learned state recorded at t_n is the one step n starts from (both forms of the controller)
+    states = np.column_stack([result[f"controller.{port.name}"] for port in internal_ports(variant)])
 
     def cols(fmt):
         return np.column_stack([result[fmt.format(a=a)] for a in _AXES])

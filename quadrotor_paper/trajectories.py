@@ -15,7 +15,14 @@ The three trajectories here are written once, in CasADi, in
 FMU (``ReferenceHover``, ``ReferenceTwoCircles``, ``ReferenceFigureEight``):
 ``reference(t)`` evaluates that definition (the FMU model's own ``out``
 function) on the whole time grid at once, and the parameters' admissible
-ranges are the FMU's declared ones, checked when a dataclass is made.
+ranges are the FMU's declared ones, checked when a dataclass is made. A
+scenario's ``[trajectory]`` flies the FMU (``model`` with
+``fmu_parameters()``, :mod:`quadrotor_paper.components`); the dataclasses
+serve the analyses that need p*(t) itself (plots, the stability package).
+
+:class:`ReferenceComponent` runs any object of this contract as a Python
+component of the master: a trajectory that has no FMU, such as the
+stability package's :class:`~quadrotor_paper.stability.validation.Ramp`.
 
 The paper's §5.2 and §6.1 describe their missions in one paragraph each; the
 choices made here to pin them down are listed in ``docs/cosim.md``.
@@ -36,29 +43,35 @@ __all__ = ["Hover", "TwoCircles", "FigureEight", "TRAJECTORIES", "make_trajector
 
 class _CasadiReference:
     """What the three dataclasses share: their fields are the parameters of
-    the FMU model ``_model`` (``_renamed`` maps a field to its FMU parameter
+    the FMU model ``model`` (``_renamed`` maps a field to its FMU parameter
     where the names differ), checked against its declared ranges when an
     instance is made, and ``reference(t)`` evaluates that model's CasADi
     definition."""
 
-    _model: ClassVar[Any]
+    model: ClassVar[Any]
     _renamed: ClassVar[Mapping[str, str]] = {}
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            variable = self._model.variable(self._renamed.get(f.name, f.name))
+            variable = self.model.variable(self._renamed.get(f.name, f.name))
             _reference.check_parameter(variable, getattr(self, f.name), name=f.name)
 
-    def _values(self) -> dict[str, float]:
-        return {self._renamed.get(f.name, f.name): getattr(self, f.name) for f in fields(self)}
+    @classmethod
+    def fmu_name(cls, field: str) -> str:
+        """The FMU ``model``'s name of the parameter ``field``."""
+        return cls._renamed.get(field, field)
+
+    def fmu_parameters(self) -> dict[str, float]:
+        """The parameter values of the FMU ``model``, by their FMU names."""
+        return {self.fmu_name(f.name): getattr(self, f.name) for f in fields(self)}
 
     def reference(self, t):
-        return _reference.evaluate(self._model, t, self._values())
+        return _reference.evaluate(self.model, t, self.fmu_parameters())
 
     def acceleration(self, t) -> np.ndarray:
         """d²p*/dt² (m/s², shape (n, 3)) at the times ``t``: the symbolic
         derivative of the same CasADi v* (``fmu_models.models.reference``)."""
-        return np.ascontiguousarray(_reference.evaluate_outputs(self._model, t, self._values())[:, 6:9])
+        return np.ascontiguousarray(_reference.evaluate_outputs(self.model, t, self.fmu_parameters())[:, 6:9])
 
 
 @dataclass(frozen=True)
@@ -69,7 +82,7 @@ class Hover(_CasadiReference):
     y: float = 0.0  # m
     z: float = -15.0  # m (NED: 15 m altitude)
 
-    _model: ClassVar[Any] = _reference.REFERENCE_HOVER
+    model: ClassVar[Any] = _reference.REFERENCE_HOVER
     _renamed: ClassVar[Mapping[str, str]] = {"x": "x0", "y": "y0", "z": "z0"}  # x, y, z are its outputs
 
 
@@ -96,7 +109,7 @@ class TwoCircles(_CasadiReference):
     y0: float = 0.0  # m
     z0: float = -15.0  # m (NED: hover at 15 m)
 
-    _model: ClassVar[Any] = _reference.REFERENCE_TWO_CIRCLES
+    model: ClassVar[Any] = _reference.REFERENCE_TWO_CIRCLES
 
     @property
     def slope(self) -> float:
@@ -132,7 +145,7 @@ class FigureEight(_CasadiReference):
     y0: float = 0.0  # m
     z0: float = -1.5  # m (NED: 1.5 m altitude)
 
-    _model: ClassVar[Any] = _reference.REFERENCE_FIGURE_EIGHT
+    model: ClassVar[Any] = _reference.REFERENCE_FIGURE_EIGHT
 
     @property
     def omega(self) -> float:

@@ -1,17 +1,24 @@
 """The compiled loop for systems of FMUs only (cosim.kernel): the same run as
-the Python loop, bit for bit, in both orderings and both FMI versions; the
-same errors, at the same point, with the same rows kept."""
+the Python loop, bit for bit, in both orderings and both FMI versions, FMU
+local variables recorded and bounded alike; the same errors, at the same
+point, with the same rows kept; its C header lays the structures out as
+ctypes does."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
+
+import ctypes
+import os
+import shutil
+import subprocess
 
 from cosim import kernel
 from cosim.errors import DivergenceError, FmuCallError
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.recorder import read_results
-from toy_models import lag_fmu_path
+from toy_models import lag_fmu_path, sum_fmu_path
 
 H = 0.01
 # A -> B -> C -> A, three lags; the recorded B.rate has feedthrough: in the feedthrough ordering B is evaluated at t_n
@@ -87,3 +94,69 @@ def test_a_profiled_run_and_a_python_component_take_the_python_loop(monkeypatch)
     """Profiling times phases of the Python loop; a Python component needs it."""
     with _master(2, "feedthrough") as master:
         assert set(master.run(0.1, profile=True).phase_times) >= {"fmu", "record", "guard"}
+
+
+def _lag_into_sum(version: int, ordering: str, bounds=None) -> Master:
+    """A lag feeding the running sum S, whose sum S.s is an FMU local variable."""
+    fmus = [FmuComponent("A", lag_fmu_path(version)), FmuComponent("S", sum_fmu_path(version))]
+    return Master(fmus, [], ["A.y -> S.u"], H, ["A.y", "S.s", "S.y"], bounds, {"A": {"y_0": 1.0, "tau": 0.3}},
+                  ordering=ordering)
+
+
+def _both_loops(monkeypatch, make) -> tuple:
+    results = []
+    for compiled in (True, False):
+        monkeypatch.setenv("COSIM_PYTHON_LOOP", "" if compiled else "1")
+        kernel.load.cache_clear()
+        with make() as master:
+            results.append(master.run(2.0, block_rows=16, raise_on_error=False))
+    kernel.load.cache_clear()
+    return tuple(results)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("ordering", ["feedthrough", "exchange"])
+def test_an_fmu_local_variable_records_like_an_output_in_both_loops(monkeypatch, version, ordering):
+    """S.s at t_n is the sum of the lag's outputs before t_n, in both
+    orderings; S.y is s + u read at t_n (feedthrough: S is evaluated at t_n)
+    or held from the step before (exchange; at t0 the initial transfer's)."""
+    fast, slow = _both_loops(monkeypatch, lambda: _lag_into_sum(version, ordering))
+    assert fast.status == slow.status == "ok"
+    np.testing.assert_array_equal(fast.data, slow.data)
+    y, s = fast["A.y"], fast["S.s"]
+    np.testing.assert_array_equal(s, np.concatenate([[0.0], np.cumsum(y)[:-1]]))
+    if ordering == "feedthrough":
+        np.testing.assert_array_equal(fast["S.y"], s + y)
+    else:
+        np.testing.assert_array_equal(fast["S.y"], np.concatenate([[y[0]], s[1:]]))
+    assert fast.units[fast.columns.index("S.s")] == "m"
+
+
+@pytest.mark.parametrize("ordering", ["feedthrough", "exchange"])
+def test_an_fmu_local_outside_its_envelope_stops_both_loops_at_the_same_point(monkeypatch, ordering):
+    fast, slow = _both_loops(monkeypatch, lambda: _lag_into_sum(2, ordering, bounds={"S.s": (-1.0, 5.0)}))
+    first = int(np.argmax(np.concatenate([[0.0], np.cumsum(fast["A.y"])[:-1]]) > 5.0))
+    assert fast.status == slow.status == "diverged" and fast.error == slow.error
+    assert fast.error.startswith(f"diverged at t = {first * H:.4f} s: S.s = ")
+    np.testing.assert_array_equal(fast.data, slow.data)
+
+
+def test_the_c_header_lays_the_structures_out_as_ctypes_does(tmp_path):
+    """The header kernel.c is compiled with, generated from the ctypes
+    structures: every field at the same offset, every structure of the same size."""
+    structures = (kernel.KernelFmu, kernel.KernelRun, kernel.KernelStop)
+    (tmp_path / "kernel_abi.h").write_text(kernel.header())
+    prints = [f'printf("{s.__name__} %zu\\n", sizeof({s.__name__}));' for s in structures]
+    prints += [f'printf("{s.__name__}.{name} %zu\\n", offsetof({s.__name__}, {name}));'
+               for s in structures for name, _ in s._fields_]
+    (tmp_path / "layout.c").write_text("#include <stddef.h>\n#include <stdio.h>\n#include \"kernel_abi.h\"\n"
+                                       "int main(void) {\n" + "\n".join(prints) + "\nreturn 0;\n}\n")
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    subprocess.run([cc, "-std=c99", f"-I{tmp_path}", "-o", str(tmp_path / "layout"), str(tmp_path / "layout.c")],
+                   check=True)
+    printed = dict(line.split() for line in subprocess.run([str(tmp_path / "layout")], capture_output=True,
+                                                          text=True, check=True).stdout.splitlines())
+    expected = {s.__name__: ctypes.sizeof(s) for s in structures}
+    expected.update({f"{s.__name__}.{name}": getattr(s, name).offset for s in structures for name, _ in s._fields_})
+    assert {k: int(v) for k, v in printed.items()} == expected
+    assert "enum { CALL_SET = 0, CALL_GET = 1, CALL_STEP = 2 };" in kernel.header()

@@ -1,10 +1,10 @@
-"""Toys for the engine's own tests: one tiny FMU and a few Python components.
+"""Toys for the engine's own tests: two tiny FMUs and a few Python components.
 
 Nothing here knows the quadrotor, the wind gust or the flight controller; the
 engine (:mod:`cosim`) is exercised on models whose answers can be derived by
 hand.
 
-The FMU, ``ToyFirstOrderLag``, is built by ``fmu_models``' exporter::
+The FMUs are built by ``fmu_models``' exporter. ``ToyFirstOrderLag``::
 
     dy/dt = (k u - y) / tau,      y(t0) = y_0,      rate = dy/dt (an output)
 
@@ -13,7 +13,8 @@ With ``u`` held constant over ``[t, t + h]`` the exact solution is
     y(t + h) = k u + (y(t) - k u) exp(-h / tau),
 
 which the FMU's internal RK4 (``internal_step``) reproduces to round-off for
-``h / tau`` small per internal step.
+``h / tau`` small per internal step. ``ToyRunningSum`` (sampled-data, its sum
+``s`` a local variable): ``y_n = s_n + u_n``, ``s_{n+1} = s_n + u_n``.
 
 The Python components (:class:`Constant`, :class:`Step`, :class:`PController`
 (publishing the internal signal ``error``),
@@ -40,10 +41,10 @@ from cosim.config import check_number
 from cosim.errors import ScenarioError
 from cosim.scenario import check_fmu_parameters, refuse_unknown
 from fmu_models.export.build import cached_fmu
-from fmu_models.export.model import FmuModel
-from fmu_models.export.variables import input_, output, parameter, state
+from fmu_models.export.model import FmuModel, Sampled
+from fmu_models.export.variables import discrete, input_, output, parameter, state
 
-__all__ = ["LAG", "LAG_TAU", "LAG_K", "lag_fmu_path", "lag_step", "lag_fmu2", "lag_fmu3", "Constant", "Step",
+__all__ = ["LAG", "LAG_TAU", "LAG_K", "lag_fmu_path", "lag_step", "lag_fmu2", "lag_fmu3", "RUNNING_SUM", "sum_fmu_path", "Constant", "Step",
            "PController", "Gain", "Probe", "Failing", "make_gain", "register_toys", "BUILDS"]
 
 # ---- the toy FMU ----------------------------------------------------------------------------
@@ -72,6 +73,30 @@ LAG = FmuModel(
 def lag_fmu_path(fmi_version: int) -> Path:
     """The toy FMU file (content-addressed cache: built once, then reused)."""
     return cached_fmu(LAG, fmi_version)
+
+
+# A sampled-data toy with a local variable: its running sum s is a discrete
+# state (an FMI local), y = s + u has direct feedthrough, and doStep makes
+# s_{n+1} = s_n + u_n. With s_0 = 0, s at t_n is the sum of the inputs before t_n.
+RUNNING_SUM = FmuModel(
+    identifier="ToyRunningSum",
+    description="Toy sampled-data running sum s_{n+1} = s_n + u_n, y = s + u, for the engine's tests",
+    variables=(
+        input_("u", "m", "summed input", start=0.0),
+        output("y", "m", "s + u"),
+        parameter("dt", "s", "sample period", 0.01, min=1e-6),
+        parameter("s_0", "m", "initial sum", 0.0),
+        discrete("s", "m", "the running sum (a local variable)"),
+    ),
+    sampled=Sampled(update=lambda t, v: ({"y": v["s"] + v["u"]}, {"s": v["s"] + v["u"]}),
+                    initial=lambda v, r: {"s": v["s_0"]}, n_random=0, seed=None, sample_period="dt"),
+)
+
+
+@functools.lru_cache(maxsize=None)
+def sum_fmu_path(fmi_version: int) -> Path:
+    """The running-sum toy FMU file."""
+    return cached_fmu(RUNNING_SUM, fmi_version)
 
 
 def lag_step(y: float, u: float, h: float, tau: float = LAG_TAU, k: float = LAG_K) -> float:

@@ -13,12 +13,15 @@ from cosim.scenario import build_master, load_scenario
 from fmu_models.models.quadrotor import DEFAULTS
 from fnn_controller import VehicleParams, initial_state, variant
 from fnn_controller.fnn import AXIS_STATE_PORTS, F
+from quadrotor_paper.controller_component import ControllerComponent
 
 
 def _vehicle(overrides=None) -> VehicleParams:
+    """The nominal vehicle the controller FMU is given (its ``vehicle.*`` parameters)."""
     sc = load_scenario("circles", {"simulation.duration": 0.1, **(overrides or {})})
     with build_master(sc) as master:
-        return master.components["controller"].geometric.vehicle
+        given = master.components["controller"].base_parameters
+    return VehicleParams(**{f.name: given[f"vehicle.{f.name}"] for f in dataclasses.fields(VehicleParams)})
 
 
 # a plant unlike the controller's defaults in every field the nominal vehicle has
@@ -58,16 +61,25 @@ def test_a_wrong_tie_is_refused_naming_the_key(overrides, message):
 
 
 def test_the_learned_state_records_like_an_output():
+    """Both forms record the learned state by the same names, bit for bit: at
+    t_n the state the control at t_n was computed with (the FMU's local
+    variables), so at t0 the seed's f_ij(0)."""
     names = [f"controller.{name}_{axis}" for axis in "xyz" for name, _ in AXIS_STATE_PORTS]
-    sc = load_scenario("circles", {"simulation.duration": 1.0, "record.signals": ["Quadrotor.x"] + names})
-    with build_master(sc) as master:
-        result = master.run(sc.duration, seed=3)
-    learned = np.column_stack([result[n] for n in names])
-    start = initial_state(variant("pd+lm"), 3, master.components["controller"].position)[:len(names)]
+    learned = {}
+    for form in ("fmu", "python"):
+        sc = load_scenario("circles", {"simulation.duration": 1.0, "record.signals": ["Quadrotor.x"] + names,
+                                       "controller.form": form})
+        with build_master(sc) as master:
+            result = master.run(sc.duration, seed=3)
+        learned[form] = np.column_stack([result[n] for n in names])
+        assert result.units[result.columns.index("controller.f_11_x")] == "m/s"
+    position = ControllerComponent.from_parameters("controller", sc.components["controller"]["parameters"]).position
+    start = initial_state(variant("pd+lm"), 3, position)[:len(names)]
+    np.testing.assert_array_equal(learned["fmu"], learned["python"])
+    np.testing.assert_array_equal(learned["fmu"][0], start)
     f_x = slice(F.start, F.stop)
-    assert not np.allclose(learned[-1, f_x], start[f_x])  # the FNN of x has learned in 1 s
-    assert result.units[result.columns.index("controller.f_11_x")] == "m/s"
-    assert np.all(np.isfinite(learned))
+    assert not np.allclose(learned["fmu"][-1, f_x], start[f_x])  # the FNN of x has learned in 1 s
+    assert np.all(np.isfinite(learned["fmu"]))
 
 
 @pytest.mark.parametrize("ordering", ["feedthrough", "exchange"])

@@ -190,6 +190,9 @@ CoreStatus core_enter_initialization(Instance *inst, double start_time) {
         return CORE_ERROR;
     }
     T_ = start_time;
+    inst->s.step_base_time = start_time;
+    inst->s.step_size = 0.0;
+    inst->s.step_count = 0;
     inst->s.mode = MODE_INITIALIZATION;
     inst->derived_valid = 0;
     return CORE_OK;
@@ -302,6 +305,33 @@ CoreStatus core_get_float64(Instance *inst, const unsigned vr[], size_t n, doubl
 
 /* ---- co-simulation --------------------------------------------------------- */
 
+/* The counter after a step from current_time by step_size (CoreState: time
+ * from a step counter): one more equal step if it starts exactly where the
+ * counted ones end, else a new count from current_time. Committed by the
+ * caller only when the step succeeds. */
+typedef struct {
+    double base, size;
+    uint64_t count;
+} StepCounter;
+
+static StepCounter count_step(const Instance *inst, double current_time, double step_size) {
+    StepCounter next = {current_time, step_size, 1};
+    const CoreState *s = &inst->s;
+    if (step_size == s->step_size && current_time == s->step_base_time + (double)s->step_count * s->step_size) {
+        next.base = s->step_base_time;
+        next.count = s->step_count + 1;
+    }
+    return next;
+}
+
+/* Commit a successful step: the counter, and the time it gives. */
+static void end_step(Instance *inst, StepCounter counter) {
+    inst->s.step_base_time = counter.base;
+    inst->s.step_size = counter.size;
+    inst->s.step_count = counter.count;
+    T_ = counter.base + (double)counter.count * counter.size;
+}
+
 /* Append "label: name = value, ..." for the n variables from value reference first. */
 static void append_values(Message *msg, const Instance *inst, const char *label, size_t first, size_t n) {
     char number[NUMBER_SIZE];
@@ -356,7 +386,7 @@ static CoreStatus sampled_step(Instance *inst, double current_time, double step_
 #endif
     inst->s.held = 1;
     inst->derived_valid = 1;
-    T_ = current_time + step_size;
+    end_step(inst, count_step(inst, current_time, step_size));
     return CORE_OK;
 }
 #endif
@@ -407,7 +437,7 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
         report_non_finite_state(inst, VR_X + (size_t)bad, value, current_time, current_time + step_size);
         return CORE_ERROR;
     }
-    T_ = current_time + step_size;
+    end_step(inst, count_step(inst, current_time, step_size));
     return CORE_OK;
 #endif
 }

@@ -59,9 +59,15 @@ typedef void (*CoreLogger)(void *environment, const char *instance_name,
 
 /* Everything get/set FMU state saves and restores. */
 /* The serialized FMU state is this struct's bytes: fixed-width header (with
- * the random stream of a stochastic model, NRS > 0), then
+ * the step counter and the random stream of a stochastic model, NRS > 0), then
  * v, the N_VARIABLES values in value-reference order (the last 8 N_VARIABLES
- * bytes), so a learned state can be written into a serialized state. */
+ * bytes), so a learned state can be written into a serialized state.
+ *
+ * Time from a step counter (co-simulation): after doStep(t_c, h) the FMU's
+ * time is step_base_time + step_count * step_size, where the steps counted are
+ * the equal steps made since step_base_time, each from exactly where the last
+ * ended. A master that steps from t0 + n h thus sees outputs computed at
+ * exactly t0 + (n + 1) h, never at the rounded sum t_c + h. */
 typedef struct {
     uint64_t magic;
     uint64_t n_variables;
@@ -69,6 +75,9 @@ typedef struct {
     int32_t failed;          /* a step produced a non-finite state */
     int32_t held;            /* sampled-data: outputs held from the last doStep */
     int32_t reserved;
+    double step_base_time;   /* where the counted steps began */
+    double step_size;        /* their size (0: none counted yet) */
+    uint64_t step_count;     /* how many were made */
 #if NRS > 0
     NpPcg64 rng;             /* stochastic sampled-data: the stream after the draws so far */
     double r_step[NRS];      /* the uniform numbers of the step to come (its sample's rs) */
