@@ -28,7 +28,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 __all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind",
            "register_section", "register_fmu_model", "register_scenarios", "register_case", "component_kinds",
-           "sections", "fmu_models", "cases", "aliases", "scenario_folders", "scoped", "with_connections",
+           "sections", "fmu_models", "cases", "aliases", "scenario_folders", "scoped", "with_connections", "version",
            "PLUGIN_GROUP"]
 
 PLUGIN_GROUP = "cosim.plugins"
@@ -48,18 +48,22 @@ class BuildContext:
 class ComponentKind:
     """A kind of Python component.
 
-    ``build(name, parameters, context)`` returns the component (a
-    :class:`~cosim.component.PythonComponent`); ``check(where, parameters)``
-    validates the parameters when the scenario is read, raising
-    :class:`~cosim.errors.ScenarioError` naming ``where.key``. ``alias`` is
-    a top-level section that stands for ``[components.<instance>]`` of this
-    kind; several kinds may share one alias section, whose ``kind`` key then
-    picks among them (``[trajectory] kind = "two_circles"``).
+    ``parameters()`` returns the declaration of its table (a
+    :class:`cosim.schema.Table`: the keys, their types and checks, in its own
+    words), loaded when a scenario is first read (so registering imports
+    nothing heavy); ``build(name,
+    parameters, context)`` returns the component (a
+    :class:`~cosim.component.PythonComponent`, or an
+    :class:`~cosim.fmu_component.FmuComponent`) from the table's values as
+    the document gave them. ``alias`` is a top-level section that stands
+    for ``[components.<instance>]`` of this kind; several kinds may share
+    one alias section, whose ``kind`` key then picks among them
+    (``[trajectory] kind = "two_circles"``).
     """
 
     name: str
     build: Callable[[str, Mapping[str, Any], BuildContext], Any]
-    check: Callable[[str, Mapping[str, Any]], None] | None = None
+    parameters: Callable[[], type]
     description: str = ""
     alias: str | None = None
     instance: str | None = None
@@ -69,13 +73,18 @@ class ComponentKind:
 class Section:
     """A top-level scenario table that is no component.
 
-    ``parse(where, table, fmus)`` validates the table and returns its value
-    (kept in ``Scenario.sections[name]``); it may set FMU parameters in
-    ``fmus`` (``{instance: {"parameters": {...}, ...}}``).
+    ``parameters()`` returns the declaration of the table (a
+    :class:`cosim.schema.Table`, loaded when a scenario is first read);
+    ``apply(where, table, fmus)`` takes the validated table and returns the
+    section's value (``Scenario.sections[name]``); it may set FMU parameters
+    in ``fmus`` (``{instance: {"parameters": {...}, ...}}``), raising
+    :class:`~cosim.errors.ScenarioError` naming ``where.key`` for what only
+    the whole scenario can tell (an FMU it names that does not exist).
     """
 
     name: str
-    parse: Callable[[str, Mapping[str, Any], dict[str, dict[str, Any]]], Any]
+    parameters: Callable[[], type]
+    apply: Callable[[str, Any, dict[str, dict[str, Any]]], Any]
     description: str = ""
 
 
@@ -131,12 +140,21 @@ _MODELS: dict[str, RegisteredModel] = {}
 _CASES: dict[str, Case] = {}
 _SCENARIO_FOLDERS: list[Path] = []
 _plugins_loaded = False
+_VERSION = [0]  # bumped by every change of the registry (the scenario's declaration is rebuilt)
 
 
 def _register(table: dict, key: str, entry: Any, what: str) -> None:
     if table.get(key, entry) != entry:
         raise ValueError(f"{what} {key!r} is registered twice, differently")
+    if key not in table:
+        _VERSION[0] += 1
     table[key] = entry
+
+
+def version() -> int:
+    """A number that changes whenever something is registered or unregistered."""
+    _load_plugins()
+    return _VERSION[0]
 
 
 def register_component_kind(kind: ComponentKind) -> ComponentKind:
@@ -229,3 +247,4 @@ def scoped():
             table.clear()
             table.update(before)
         _SCENARIO_FOLDERS[:] = saved[4]
+        _VERSION[0] += 1

@@ -1,137 +1,405 @@
 """Scenarios: TOML files describing a co-simulation, validated before anything runs.
 
-The engine reads the generic sections; every other top-level table is either
-an alias of a registered component kind or a registered section
-(:mod:`cosim.registry`). Schema (every key optional unless marked; units SI;
-see ``docs/cosim.md``)::
+Every table is declared once (:mod:`cosim.schema`, pydantic): the generic
+ones here (:class:`Simulation`, :class:`FmuSpec`, :class:`Record`, the
+components and the envelope), the component kinds' tables and the sections
+by the applications that register them (:mod:`cosim.registry`).
+:func:`scenario_model` assembles the declaration of a whole scenario from
+the registry; it validates every file and is the JSON Schema editors read
+(``fnn-cosim schema scenario``). What each key means, with an example:
+``docs/cosim.md``; its type, unit and range: the declarations below.
 
-    name = "circles"                     # str, default: the file name
-    description = "..."                  # str
-    connections = ["A.out -> B.in", ...] # required; brace groups expand: "A.{x,y} -> B.{x,y}"
-
-    [simulation]
-    duration = 50.0                      # s, > 0, a whole number of steps
-    step = 0.01                          # s, > 0
-    seed = 0                             # int >= 0: every component's start(), every FMU's seed_parameter
-    start_time = 0.0                     # s
-    ordering = "feedthrough"             # or "exchange": see cosim.master and docs/cosim.md
-
-    [fmus.<Name>]                        # one table per FMU instance, at least one
-    model = "Plant"                      # a registered model (built on demand), or
-    path = "other.fmu"                   #   an FMU file (relative to the scenario file)
-    fmi_version = 2                      # 2 or 3: the version built (models, default 2) or the
-                                         #   version the file must have (FMU files, default: any)
-    parameters = { x_0 = 1.0 }           # checked against the model's variables and ranges
-    seed_parameter = "seed"              # a parameter set to the run's seed at every start
-    seed_stream = 1                      # int >= 0, with seed_parameter: the run's random stream k
-                                         #   (cosim.fmu_component.stream_seed; default 0, the run's seed itself):
-                                         #   FMUs on different streams draw independent numbers
-
-    [components.<name>]                  # a Python component
-    kind = "step_source"                 # a registered component kind, or
-    factory = "package.module:callable"  #   any callable (name=<name>, **parameters)
-    amplitude = 1.0                      # every other key is a parameter of the component
-
-    [<alias>]                            # a registered kind's short section (e.g. [source] for
-                                         #   [components.source]); its `kind` key picks among
-                                         #   the kinds sharing the alias
-
-    [<section>]                          # a registered section (e.g. one that sets FMU parameters)
-
-    [record]
-    signals = ["Plant.x", ...]           # what the results CSV holds (after time)
-    block_rows = 100                     # rows per flushed block
-
-    [envelope]                           # divergence bounds, [low, high] per signal
-    "Plant.x" = [-10.0, 10.0]
-
-Errors are :class:`~cosim.errors.ScenarioError` naming the key and value.
+A :class:`Scenario` is immutable and holds one copy of its data: the
+document it was read from (``raw`` gives a fresh copy to change and parse
+again; workers receive it); its views (``fmus``, ``components``, ...) are
+read-only and derived from it. Errors are :class:`~cosim.errors.ScenarioError`
+naming the key and the value, in one line.
 """
 from __future__ import annotations
 
 import copy
 import importlib
+import json
 import math
 import tomllib
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from types import MappingProxyType
+from typing import Annotated, Any, Mapping, Union
+
+from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag, ValidationError, create_model, model_validator
 
 from . import registry
-from .config import check_number
 from .errors import FmuError, ScenarioError
+from .fmu_component import SEED_LIMIT
+from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, json_schema, one_of, refuse,
+                     scenario_error, where)
 
-__all__ = ["Scenario", "load_scenario", "parse_scenario", "shipped_scenarios", "scenario_path",
-           "apply_overrides", "build_master", "fmu_file", "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file",
-           "table", "string", "strings", "refuse_unknown", "read_toml"]
+__all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "scenario_model", "scenario_json_schema", "load_scenario",
+           "parse_scenario", "shipped_scenarios", "scenario_path", "apply_overrides", "build_master", "fmu_file",
+           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "read_toml", "ORDERINGS"]
 
-GENERIC = ("name", "description", "connections", "simulation", "fmus", "components", "record", "envelope")
-_SIMULATION = {"duration", "step", "seed", "start_time", "ordering"}
-_FMU = {"model", "path", "fmi_version", "parameters", "seed_parameter", "seed_stream"}
-_RECORD = {"signals", "block_rows"}
+ORDERINGS = ("feedthrough", "exchange")  # the master's (docs/cosim.md)
 
 
-@dataclass
+# ---- the generic tables -----------------------------------------------------------------------
+
+class Simulation(Table):
+    """``[simulation]``: the run's time grid, seed and ordering."""
+
+    duration: Positive = Field(50.0, description="length of the run [s], a whole number of steps")
+    step: Positive = Field(0.01, description="communication step [s]")
+    seed: Annotated[int, Field(strict=True, ge=0, le=SEED_LIMIT)] = Field(
+        0, description="the run's seed: every component's start(), every FMU's seed_parameter (exact to 2^53)")
+    start_time: Number = Field(0.0, description="time of the first communication point [s]")
+    ordering: one_of(ORDERINGS) = Field("feedthrough", description="how a step orders the blocks "
+                                                                   "(docs/cosim.md)")
+
+    @model_validator(mode="after")
+    def _whole_steps(self):
+        n = round(self.duration / self.step)
+        if n < 1 or abs(n * self.step - self.duration) > 1e-9 * max(1.0, self.duration):
+            raise refuse(f"not a whole number of steps of {self.step!r} s", key="duration", value=self.duration)
+        return self
+
+
+def _source(info) -> Path | None:
+    return (info.context or {}).get("source")
+
+
+class FmuSpec(Table):
+    """``[fmus.<Name>]``: an FMU instance, a registered model or a file."""
+
+    model: str = Field(None, description="a registered model, built on demand")
+    path: str = Field(None, description="an FMU file (relative to the scenario file)")
+    fmi_version: one_of((2, 3), "expected 2 or 3", int) = Field(
+        None, description="2 or 3: the version built (a model, default 2) or the version the file must have")
+    parameters: dict[str, Number] = Field(default_factory=dict, description="start values of parameters and inputs")
+    seed_parameter: str = Field(None, description="a parameter set to the run's seed at every start")
+    seed_stream: NonNegativeInt = Field(None, description="with seed_parameter: the run's random stream k")
+
+    @model_validator(mode="after")
+    def _one_source(self, info):
+        if (self.model is None) == (self.path is None):
+            raise refuse("give exactly one of 'model' (a registered model) or 'path' (an FMU file)")
+        if self.seed_stream is not None and self.seed_parameter is None:
+            raise refuse("only an FMU with a seed_parameter is seeded", key="seed_stream", value=self.seed_stream)
+        if self.model is not None:
+            models = registry.fmu_models()
+            if self.model not in models:
+                raise refuse(f"unknown model; known: {', '.join(sorted(models)) or '(none registered)'}",
+                             key="model", value=self.model)
+        else:
+            path = self.resolved(_source(info))
+            if not path.exists():
+                raise refuse(f"no such file ({path})", key="path", value=self.path)
+        _check_model_parameters(self.model, self.parameters)
+        return self
+
+    def resolved(self, source: Path | None) -> Path:
+        """The FMU file, relative paths taken from the scenario file's folder."""
+        path = Path(self.path)
+        return source.parent / path if not path.is_absolute() and source is not None else path
+
+
+def _check_model_parameters(model: str | None, params: Mapping[str, float], key: str = "parameters") -> None:
+    """A registered model's parameters: known names, values in their declared ranges."""
+    entry = registry.fmu_models().get(model)
+    if entry is None or entry.check_parameter is None:
+        return
+    for name, value in params.items():
+        try:
+            entry.check_parameter(name, float(value))
+        except (KeyError, ValueError) as exc:
+            raise refuse(exc.args[0], key=f"{key}.{name}") from None
+
+
+def check_fmu_parameters(where_: str, fmu: Mapping[str, Any], params: Mapping[str, Any]) -> None:
+    """For a section that sets FMU parameters: ``params`` known to ``fmu``'s
+    registered model and in range, else a :class:`ScenarioError` naming ``where_.<name>``."""
+    for name, value in params.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ScenarioError(f"{where_}.{name} = {value!r}: expected a finite number")
+    try:
+        _check_model_parameters(fmu.get("model"), params, key="")
+    except Exception as exc:  # PydanticCustomError: told in the section's words
+        ctx = getattr(exc, "context", None) or {}
+        raise ScenarioError(f"{where_}{ctx.get('key', '')}: {ctx.get('message', exc)}") from None
+
+
+class Record(Table):
+    """``[record]``: what the results hold."""
+
+    signals: Strings = Field(default_factory=list, description="recorded signals, 'Component.variable'")
+    block_rows: Count = Field(100, description="rows per block flushed to the results file")
+
+
+def _bounds(value: Any) -> Any:
+    if not isinstance(value, list) or len(value) != 2:
+        raise refuse("expected [low, high]", value=value)
+    return value
+
+
+def _low_below_high(value: list[float]) -> tuple[float, float]:
+    if not value[0] < value[1]:
+        raise refuse("low must be below high", value=value)
+    return (value[0], value[1])
+
+
+Bounds = Annotated[list[Number], BeforeValidator(_bounds), AfterValidator(_low_below_high),
+                   Field(min_length=2, max_length=2)]
+
+
+class FactoryComponent(Table):
+    """``[components.<name>] factory = "package.module:callable"``: any
+    callable, given ``name`` and every other key of the table."""
+
+    model_config = {**Table.model_config, "extra": "allow"}
+    factory: Annotated[str, Field(strict=True, pattern=r"^[\w.]+:[\w.]+$",
+                                  description="'package.module:callable', called with name=<name> and the "
+                                              "table's other keys")]
+
+    @classmethod
+    def known_keys(cls) -> list[str]:
+        return ["factory"]
+
+    @model_validator(mode="before")
+    @classmethod
+    def _a_table_of_known_keys(cls, data: Any) -> Any:  # any other key is the factory's parameter
+        if not isinstance(data, Mapping):
+            raise refuse("expected a table", value=data)
+        factory = data.get("factory")
+        if isinstance(factory, str) and factory.count(":") != 1:
+            raise refuse("expected 'package.module:callable'", key="factory", value=factory)
+        return data
+
+
+# ---- the whole scenario, assembled from the registry -------------------------------------------
+
+def _kind_table(kind: registry.ComponentKind, tag_required: bool) -> type[Table]:
+    """A component table of ``kind``: its parameters and its ``kind`` key."""
+    kind_field = (one_of((kind.name,)), ... if tag_required else kind.name)
+    model = create_model(f"Component_{_identifier(kind.name)}", __base__=kind.parameters(),
+                         __doc__=kind.description or None, kind=kind_field)
+    model.selector = "kind"
+    return model
+
+
+def _identifier(name: str) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in name)
+
+
+def _tag(value: Any) -> str | None:
+    if isinstance(value, Mapping):
+        if ("kind" in value) == ("factory" in value):
+            return None
+        return str(value["kind"]) if "kind" in value else "factory"
+    return getattr(value, "kind", None) or ("factory" if hasattr(value, "factory") else None)
+
+
+def _component_union(kinds) -> Any:
+    members = [Annotated[_kind_table(k, True), Tag(k.name)] for k in kinds]
+    members.append(Annotated[FactoryComponent, Tag("factory")])
+    return Annotated[Union[tuple(members)], Discriminator(_tag)]
+
+
+def _alias_type(kinds) -> Any:
+    if len(kinds) == 1:
+        return _kind_table(kinds[0], False)
+    members = [Annotated[_kind_table(k, True), Tag(k.name)] for k in kinds]
+    return Annotated[Union[tuple(members)], Discriminator(lambda v: str(v.get("kind", "")) if isinstance(v, Mapping)
+                                                          else getattr(v, "kind", None))]
+
+
+class _ScenarioBase(Table):
+    """What every scenario holds; the registry adds its aliases and sections."""
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        if not self.fmus:
+            raise refuse("at least one [fmus.<Name>] table is required", key="fmus")
+        for alias, kinds in registry.aliases().items():
+            instance = kinds[0].instance or alias
+            if getattr(self, alias, None) is not None and instance in self.components:
+                raise refuse("a component of that name is already given by its short section",
+                             key=f"components.{instance}")
+        return self
+
+
+_MODELS: dict[int, type[Table]] = {}
+
+
+def scenario_model() -> type[Table]:
+    """The declaration of a scenario file: the generic tables and what the
+    registry holds now (component kinds, their short sections, sections)."""
+    version = registry.version()
+    if version not in _MODELS:
+        kinds = list(registry.component_kinds().values())
+        fields: dict[str, Any] = {
+            "name": (Annotated[str, Field(strict=True)], Field(None, description="default: the file's name")),
+            "description": (Annotated[str, Field(strict=True)], ""),
+            "connections": (Strings, Field(..., description="'A.out -> B.in' strings; brace groups expand: "
+                                                            "'A.{x,y} -> B.{x,y}'")),
+            "simulation": (Simulation, Field(default_factory=Simulation)),
+            "fmus": (dict[str, FmuSpec], Field(default_factory=dict, description="the FMU instances")),
+            "components": (dict[str, _component_union(kinds)], Field(default_factory=dict,
+                                                                      description="the Python components")),
+            "record": (Record, Field(default_factory=Record)),
+            "envelope": (dict[str, Bounds], Field(default_factory=dict,
+                                                  description="divergence bounds [low, high] per signal")),
+        }
+        for alias, members in registry.aliases().items():
+            fields[alias] = (_alias_type(members), Field(None, description=f"short for [components."
+                                                                          f"{members[0].instance or alias}]"))
+        for name, section in registry.sections().items():
+            fields[name] = (section.parameters(), Field(None, description=section.description or None))
+        _MODELS.clear()
+        _MODELS[version] = create_model("Scenario", __base__=_ScenarioBase, **fields)
+    return _MODELS[version]
+
+
+def scenario_json_schema() -> dict[str, Any]:
+    """The JSON Schema of a scenario file (``fnn-cosim schema scenario``)."""
+    return json_schema(scenario_model(), "fnn-cosim scenario",
+                       "A co-simulation scenario (TOML): FMUs, Python components, connections, recording "
+                       "(docs/cosim.md)")
+
+
+def _validated(raw: Mapping[str, Any], source: Path | None):
+    """The scenario document validated, or the one-line error (the component
+    union's words for a missing or unknown kind)."""
+    try:
+        return scenario_model().model_validate(dict(raw), context={"source": source})
+    except ValidationError as exc:
+        err = dict(exc.errors(include_url=False)[0])
+        if err["type"] in ("union_tag_invalid", "union_tag_not_found"):
+            raise _kind_error(err) from None
+        loc = list(err["loc"])
+        # a component's table is a union keyed by its kind: pydantic names the member; the document does not
+        if loc[:1] == ["components"] and len(loc) > 2:
+            del loc[2]
+        elif len(loc) > 1 and len(registry.aliases().get(loc[0], ())) > 1:
+            del loc[1]
+        err["loc"] = tuple(loc)
+        raise scenario_error(err) from None
+
+
+def _kind_error(err: Mapping[str, Any]) -> ScenarioError:
+    loc, value = where(err["loc"]), err.get("input")
+    if not isinstance(value, Mapping):
+        return ScenarioError(f"{loc} = {value!r}: expected a table")
+    if err["loc"][0] == "components":
+        kind = value.get("kind")
+        if err["type"] == "union_tag_not_found":
+            return ScenarioError(f"{loc}: give exactly one of 'kind' (a registered component kind) or "
+                                 f"'factory' ('package.module:callable')")
+        if not isinstance(kind, str):
+            return ScenarioError(f"{loc}.kind = {kind!r}: expected a string")
+        known = ", ".join(sorted(registry.component_kinds())) or "(none registered)"
+        return ScenarioError(f"{loc}.kind = {kind!r}: unknown component kind; known: {known}")
+    names = ", ".join(k.name for k in registry.aliases()[err["loc"][0]])
+    return ScenarioError(f"{loc}.kind = {value.get('kind', '')!r}: expected one of {names}")
+
+
+# ---- the scenario ----------------------------------------------------------------------------------
+
+def _frozen(value: Any) -> Any:
+    """A read-only view of nested tables (lists become tuples)."""
+    if isinstance(value, Mapping):
+        return MappingProxyType({k: _frozen(v) for k, v in value.items()})
+    if isinstance(value, list):
+        return tuple(_frozen(v) for v in value)
+    return value
+
+
+def _plain(model: Table) -> dict[str, Any]:
+    """A table as the keys the document gave (defaults left out)."""
+    return model.model_dump(exclude_unset=True, exclude={"kind", "factory"})
+
+
 class Scenario:
-    """A validated scenario (plain data; :func:`build_master` makes it runnable).
+    """A validated scenario: immutable, one copy of its data.
 
-    ``fmus``: instance -> ``{"model" | "path", "fmi_version", "parameters"}``;
-    ``components``: instance -> ``{"kind" | "factory", "parameters"}``;
-    ``sections``: the value each registered section's parser returned.
+    ``raw`` is a fresh copy of the document (change it and parse it again:
+    :func:`apply_overrides`, :func:`parse_scenario`); the rest are read-only
+    views derived from it when it was validated: ``fmus`` (instance ->
+    ``{"model" | "path", "fmi_version", "parameters", "seed_parameter",
+    "seed_stream"}``, the sections' parameters applied), ``components``
+    (instance -> ``{"kind" | "factory", "parameters"}``), ``sections`` (the
+    value each registered section gave), the simulation's fields, ``record``,
+    ``block_rows``, ``envelope``, ``connections``.
     """
 
-    name: str
-    description: str
-    duration: float
-    step: float
-    seed: int
-    start_time: float
-    ordering: str
-    fmus: dict[str, dict[str, Any]]
-    components: dict[str, dict[str, Any]]
-    connections: list[str]
-    record: list[str]
-    block_rows: int
-    envelope: dict[str, tuple[float, float]]
-    sections: dict[str, Any] = field(default_factory=dict)
-    source: Path | None = None
-    raw: dict[str, Any] = field(default_factory=dict, repr=False)
+    __slots__ = ("__weakref__", "_document", "source", "name", "description", "duration", "step", "seed", "start_time", "ordering",
+                 "fmus", "components", "connections", "record", "block_rows", "envelope", "sections")
+
+    def __init__(self, raw: Mapping[str, Any], source: Path | None = None, name: str | None = None):
+        document = json.loads(json.dumps(raw))  # the one copy (a TOML document is JSON data)
+        model = _validated(document, source)
+        set_ = object.__setattr__
+        set_(self, "_document", json.dumps(document))
+        set_(self, "source", source)
+        set_(self, "name", model.name if model.name is not None else (name or (source.stem if source else
+                                                                                 "scenario")))
+        set_(self, "description", model.description)
+        sim = model.simulation
+        for key in ("duration", "step", "seed", "start_time", "ordering"):
+            set_(self, key, getattr(sim, key))
+        fmus: dict[str, dict[str, Any]] = {}
+        for instance, spec in model.fmus.items():
+            # the values as the document wrote them (an integer stays one, as an error quotes it)
+            entry: dict[str, Any] = {"parameters": dict(document["fmus"][instance].get("parameters", {}))}
+            if spec.model is not None:
+                entry.update(model=spec.model, fmi_version=spec.fmi_version or 2)
+            else:
+                entry.update(path=spec.resolved(source), fmi_version=spec.fmi_version)
+            if spec.seed_parameter is not None:
+                entry["seed_parameter"] = spec.seed_parameter
+            if spec.seed_stream is not None:
+                entry["seed_stream"] = spec.seed_stream
+            fmus[instance] = entry
+        components: dict[str, dict[str, Any]] = {}
+        for alias, kinds in registry.aliases().items():
+            table = getattr(model, alias, None)
+            if table is not None:
+                kind = next(k for k in kinds if k.name == table.kind)
+                components[kind.instance or alias] = {"kind": kind.name, "parameters": _plain(table)}
+        for instance, table in model.components.items():
+            if isinstance(table, FactoryComponent):
+                components[instance] = {"factory": table.factory, "parameters": dict(table.model_extra or {})}
+            else:
+                components[instance] = {"kind": table.kind, "parameters": _plain(table)}
+        sections = {}
+        for key, section in registry.sections().items():
+            value = getattr(model, key, None)
+            if value is not None:
+                sections[key] = section.apply(key, value, fmus)
+        set_(self, "fmus", _frozen(fmus))
+        set_(self, "components", _frozen(components))
+        set_(self, "sections", _frozen(sections))
+        set_(self, "connections", tuple(model.connections))
+        set_(self, "record", tuple(model.record.signals))
+        set_(self, "block_rows", model.record.block_rows)
+        set_(self, "envelope", MappingProxyType(dict(model.envelope)))
+
+    def __setattr__(self, key, value):
+        raise AttributeError(f"a Scenario is immutable: change its document (raw) and parse it again, not {key!r}")
+
+    @property
+    def raw(self) -> dict[str, Any]:
+        """A fresh copy of the document (changing it changes no scenario)."""
+        return json.loads(self._document)
 
     @property
     def n_steps(self) -> int:
         return int(round(self.duration / self.step))
 
-
-# ---- small validators, shared with the sections of applications ---------------------
-
-def refuse_unknown(where: str, values: Mapping[str, Any], known) -> None:
-    """Refuse the first key of ``values`` not in ``known``; ``where`` ends with a dot (or is empty)."""
-    extra = sorted(set(values) - set(known))
-    if extra:
-        raise ScenarioError(f"{where}{extra[0]}: unknown key; known keys: {', '.join(sorted(known))}")
+    def __repr__(self) -> str:
+        return f"Scenario({self.name!r}, source={str(self.source) if self.source else None!r})"
 
 
-def table(where: str, value: Any) -> dict[str, Any]:
-    if not isinstance(value, Mapping):
-        raise ScenarioError(f"{where} = {value!r}: expected a table")
-    return dict(value)
-
-
-def string(where: str, value: Any) -> str:
-    if not isinstance(value, str):
-        raise ScenarioError(f"{where} = {value!r}: expected a string")
-    return value
-
-
-def strings(where: str, value: Any) -> list[str]:
-    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-        raise ScenarioError(f"{where} = {value!r}: expected a list of strings")
-    return list(value)
-
-
-def apply_overrides(raw: dict[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
+def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
     """A copy of ``raw`` with dotted keys set, e.g. ``{"simulation.duration": 5.0}``."""
-    out = copy.deepcopy(raw)
+    out = copy.deepcopy(dict(raw))
     for dotted, value in overrides.items():
         keys = dotted.split(".")
         node = out
@@ -140,185 +408,15 @@ def apply_overrides(raw: dict[str, Any], overrides: Mapping[str, Any]) -> dict[s
             if not isinstance(nxt, dict):
                 raise ScenarioError(f"override {dotted}: {k!r} is not a table")
             node = nxt
-        node[keys[-1]] = value
+        node[keys[-1]] = copy.deepcopy(value)
     return out
-
-
-def check_fmu_parameters(where: str, fmu: Mapping[str, Any], params: Mapping[str, Any]) -> None:
-    """Every value a finite number; for a registered model, a known parameter
-    or input in its range (an FMU file is checked when it is read)."""
-    for key, value in params.items():
-        check_number(f"{where}.{key}", value)
-    model = registry.fmu_models().get(fmu.get("model"))
-    if model is None or model.check_parameter is None:
-        return
-    for key, value in params.items():
-        try:
-            model.check_parameter(key, float(value))
-        except KeyError as exc:
-            raise ScenarioError(f"{where}.{key}: {exc.args[0]}") from None
-        except ValueError as exc:
-            raise ScenarioError(f"{where}.{key}: {exc}") from None
-
-
-# ---- one parser per generic section -------------------------------------------------
-
-def _parse_simulation(raw: Mapping[str, Any]) -> dict[str, Any]:
-    sim = table("simulation", raw.get("simulation", {}))
-    refuse_unknown("simulation.", sim, _SIMULATION)
-    duration = float(check_number("simulation.duration", sim.get("duration", 50.0), positive=True))
-    step = float(check_number("simulation.step", sim.get("step", 0.01), positive=True))
-    n = round(duration / step)
-    if n < 1 or abs(n * step - duration) > 1e-9 * max(1.0, duration):
-        raise ScenarioError(f"simulation.duration = {duration!r}: not a whole number of steps of {step!r} s")
-    from .master import ORDERINGS
-
-    ordering = string("simulation.ordering", sim.get("ordering", "feedthrough"))
-    if ordering not in ORDERINGS:
-        raise ScenarioError(f"simulation.ordering = {ordering!r}: expected one of {', '.join(ORDERINGS)}")
-    return {"duration": duration, "step": step,
-            "seed": check_number("simulation.seed", sim.get("seed", 0), integer=True, nonnegative=True),
-            "start_time": float(check_number("simulation.start_time", sim.get("start_time", 0.0))),
-            "ordering": ordering}
-
-
-def _parse_fmu(where: str, spec: Any, source: Path | None) -> dict[str, Any]:
-    spec = table(where, spec)
-    refuse_unknown(where + ".", spec, _FMU)
-    if ("model" in spec) == ("path" in spec):
-        raise ScenarioError(f"{where}: give exactly one of 'model' (a registered model) or 'path' (an FMU file)")
-    # A registered model is built in the version asked (2 by default); an FMU
-    # file is what it is, and a version given for it must match (checked
-    # when the file is read, in build_master).
-    version = spec.get("fmi_version", 2 if "model" in spec else None)
-    if version is not None:
-        check_number(f"{where}.fmi_version", version, integer=True)
-        if version not in (2, 3):
-            raise ScenarioError(f"{where}.fmi_version = {version!r}: expected 2 or 3")
-    entry: dict[str, Any] = {"fmi_version": version, "parameters": table(f"{where}.parameters",
-                                                                         spec.get("parameters", {}))}
-    if "seed_parameter" in spec:
-        entry["seed_parameter"] = string(f"{where}.seed_parameter", spec["seed_parameter"])
-    if "seed_stream" in spec:
-        stream = spec["seed_stream"]
-        check_number(f"{where}.seed_stream", stream, integer=True, nonnegative=True)
-        if "seed_parameter" not in spec:
-            raise ScenarioError(f"{where}.seed_stream = {stream!r}: only an FMU with a seed_parameter is seeded")
-        entry["seed_stream"] = int(stream)
-    if "model" in spec:
-        entry["model"] = string(f"{where}.model", spec["model"])
-        models = registry.fmu_models()
-        if entry["model"] not in models:
-            raise ScenarioError(f"{where}.model = {entry['model']!r}: unknown model; known: "
-                                f"{', '.join(sorted(models)) or '(none registered)'}")
-    else:
-        path = Path(string(f"{where}.path", spec["path"]))
-        if not path.is_absolute() and source is not None:
-            path = source.parent / path
-        if not path.exists():
-            raise ScenarioError(f"{where}.path = {spec['path']!r}: no such file ({path})")
-        entry["path"] = path
-    check_fmu_parameters(f"{where}.parameters", entry, entry["parameters"])
-    return entry
-
-
-def _parse_fmus(raw: Mapping[str, Any], source: Path | None) -> dict[str, dict[str, Any]]:
-    fmus_raw = table("fmus", raw.get("fmus", {}))
-    if not fmus_raw:
-        raise ScenarioError("fmus: at least one [fmus.<Name>] table is required")
-    return {inst: _parse_fmu(f"fmus.{inst}", spec, source) for inst, spec in fmus_raw.items()}
-
-
-def _component(where: str, kind_name: str, parameters: dict[str, Any]) -> dict[str, Any]:
-    kinds = registry.component_kinds()
-    kind = kinds.get(kind_name)
-    if kind is None:
-        raise ScenarioError(f"{where}.kind = {kind_name!r}: unknown component kind; known: "
-                            f"{', '.join(sorted(kinds)) or '(none registered)'}")
-    if kind.check is not None:
-        kind.check(where, parameters)
-    return {"kind": kind_name, "parameters": parameters}
-
-
-def _parse_alias(section: str, value: Any) -> tuple[str, dict[str, Any]]:
-    """``[alias]`` -> (instance name, component entry)."""
-    kinds = registry.aliases()[section]
-    params = table(section, value)
-    if "kind" in params or len(kinds) > 1:
-        choice = string(f"{section}.kind", params.pop("kind", ""))
-        names = [k.name for k in kinds]
-        if choice not in names:
-            raise ScenarioError(f"{section}.kind = {choice!r}: expected one of {', '.join(names)}")
-        kind = kinds[names.index(choice)]
-    else:
-        kind = kinds[0]
-    return kind.instance or section, _component(section, kind.name, params)
-
-
-def _parse_components(raw: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
-    components: dict[str, dict[str, Any]] = {}
-    for section in registry.aliases():
-        if section in raw:
-            name, entry = _parse_alias(section, raw[section])
-            components[name] = entry
-    for name, spec in table("components", raw.get("components", {})).items():
-        where = f"components.{name}"
-        spec = table(where, spec)
-        if name in components:
-            raise ScenarioError(f"{where}: a component of that name is already given by its short section")
-        if ("kind" in spec) == ("factory" in spec):
-            raise ScenarioError(f"{where}: give exactly one of 'kind' (a registered component kind) or "
-                                f"'factory' ('package.module:callable')")
-        params = {k: v for k, v in spec.items() if k not in ("kind", "factory")}
-        if "kind" in spec:
-            components[name] = _component(where, string(f"{where}.kind", spec["kind"]), params)
-        else:
-            factory = string(f"{where}.factory", spec["factory"])
-            if factory.count(":") != 1:
-                raise ScenarioError(f"{where}.factory = {factory!r}: expected 'package.module:callable'")
-            components[name] = {"factory": factory, "parameters": params}
-    return components
-
-
-def _parse_record(raw: Mapping[str, Any]) -> tuple[list[str], int]:
-    rec = table("record", raw.get("record", {}))
-    refuse_unknown("record.", rec, _RECORD)
-    return (strings("record.signals", rec.get("signals", [])),
-            check_number("record.block_rows", rec.get("block_rows", 100), integer=True, positive=True))
-
-
-def _parse_envelope(raw: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
-    envelope = {}
-    for signal, bounds in table("envelope", raw.get("envelope", {})).items():
-        if not isinstance(bounds, list) or len(bounds) != 2:
-            raise ScenarioError(f"envelope.{signal} = {bounds!r}: expected [low, high]")
-        low, high = (float(check_number(f"envelope.{signal}[{i}]", b)) for i, b in enumerate(bounds))
-        if not low < high:
-            raise ScenarioError(f"envelope.{signal} = {bounds!r}: low must be below high")
-        envelope[signal] = (low, high)
-    return envelope
 
 
 def parse_scenario(raw: Mapping[str, Any], source: Path | None = None, name: str | None = None) -> Scenario:
     """Validate a scenario given as a mapping (a parsed TOML document)."""
-    raw = dict(raw)
-    extra_sections = registry.sections()
-    refuse_unknown("", raw, set(GENERIC) | set(registry.aliases()) | set(extra_sections))
-    simulation = _parse_simulation(raw)
-    fmus = _parse_fmus(raw, source)
-    sections = {key: section.parse(key, table(key, raw[key]), fmus)
-                for key, section in extra_sections.items() if key in raw}
-    components = _parse_components(raw)
-    if "connections" not in raw:
-        raise ScenarioError("connections: required (a list of 'A.out -> B.in' strings)")
-    record, block_rows = _parse_record(raw)
-    name = raw.get("name", name or (source.stem if source else "scenario"))
-    return Scenario(
-        name=string("name", name), description=string("description", raw.get("description", "")),
-        **simulation, fmus=fmus, components=components, connections=strings("connections", raw["connections"]),
-        record=record, block_rows=block_rows, envelope=_parse_envelope(raw), sections=sections, source=source,
-        raw=copy.deepcopy(raw),
-    )
+    if not isinstance(raw, Mapping):
+        raise ScenarioError(f"document = {raw!r}: expected a table")
+    return Scenario(raw, source, name)
 
 
 # ---- files ----------------------------------------------------------------------------

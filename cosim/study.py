@@ -49,25 +49,23 @@ import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Annotated, Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from . import registry
 from .registry import Case, with_connections
-from .config import check_number
-from .errors import CosimError, ScenarioError
-from .scenario import (Scenario, apply_overrides, load_scenario, parse_scenario, read_toml, refuse_unknown,
-                       scenario_path, string, strings, table)
+from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
 
-__all__ = ["Case", "Study", "Run", "parse_study", "load_study", "runs", "plan", "count", "cells", "cell_of",
-           "with_connections", "DISTRIBUTIONS", "MAX_RUNS"]
+from .errors import CosimError, ScenarioError
+from .scenario import Scenario, apply_overrides, load_scenario, parse_scenario, read_toml, scenario_path
+from .schema import Count, NonNegativeInt, Strings, Table, json_schema, numbers, refuse, validate
+
+__all__ = ["Case", "Study", "Run", "StudyFile", "parse_study", "load_study", "study_json_schema", "runs", "plan",
+           "count", "cells", "cell_of", "with_connections", "DISTRIBUTIONS", "MAX_RUNS"]
 
 DISTRIBUTIONS = ("uniform", "normal", "choice")
 MAX_RUNS = 1_000_000  # a study's runs: its runs.csv and its summary grow with them (docs/studies.md)
-_TOP = {"scenario", "name", "description", "set", "sweep", "cases"}
-_SWEEP = {"grid", "random", "seeds"}
-_CASE = {"label", "set", "connect", "seeds"}
 
 
 @dataclass(frozen=True)
@@ -134,53 +132,141 @@ class Run:
         return (self.case,) + self.point
 
 
+# ---- the study file: its declaration -------------------------------------------------------------
+
+def _seeds_value(value: Any) -> Any:
+    """``N`` (seeds 0..N-1) or a list of distinct seeds, each in [0, 2^53]."""
+    from .fmu_component import SEED_LIMIT
+
+    if isinstance(value, list):
+        for i, s in enumerate(value):
+            if isinstance(s, bool) or not isinstance(s, int):
+                raise refuse("expected an integer", key=f"[{i}]", value=s)
+            if not 0 <= s <= SEED_LIMIT:
+                raise refuse(f"a seed is an integer in [0, 2^53 = {SEED_LIMIT}]", key=f"[{i}]", value=s)
+        if not value or len(set(value)) != len(value):
+            raise refuse("expected distinct seeds, at least one", value=value)
+        return tuple(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise refuse("expected a number of seeds or a list of seeds", value=value)
+    if value < 1:
+        raise refuse("must be positive", value=value)
+    if value > MAX_RUNS:
+        raise refuse(f"at most {MAX_RUNS} runs a study", value=value)
+    return tuple(range(value))
+
+
+Seeds = Annotated[Any, BeforeValidator(_seeds_value),
+                  WithJsonSchema({"oneOf": [{"type": "integer", "minimum": 1, "maximum": MAX_RUNS,
+                                             "description": "N: seeds 0..N-1"},
+                                            {"type": "array", "items": {"type": "integer", "minimum": 0},
+                                             "minItems": 1, "uniqueItems": True}]})]
+
+
+class Distribution(Table):
+    """A drawn key: exactly one of ``uniform = [low, high]`` (low < high),
+    ``normal = [mean, std]`` (std >= 0), ``choice = [values...]``."""
+
+    uniform: numbers(2) = Field(None, description="[low, high): rng.uniform(low, high)")
+    normal: numbers(2) = Field(None, description="[mean, std]: rng.normal(mean, std)")
+    choice: list[Any] = Field(None, min_length=1, description="[values...]: equally likely")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _a_table_of_known_keys(cls, data: Any) -> Any:
+        if not isinstance(data, Mapping) or len(data) != 1 or next(iter(data)) not in DISTRIBUTIONS:
+            raise refuse("expected one of { uniform = [low, high] }, { normal = [mean, std] }, "
+                         "{ choice = [values...] }", value=data)
+        kind, args = next(iter(data.items()))
+        if kind == "choice" and (not isinstance(args, list) or not args):
+            raise refuse("expected a non-empty list of values", key=kind, value=args)
+        if kind != "choice" and (not isinstance(args, list) or len(args) != 2):
+            raise refuse(f"expected [{'low, high' if kind == 'uniform' else 'mean, std'}]", key=kind, value=args)
+        return data
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if self.uniform is not None and not self.uniform[0] < self.uniform[1]:
+            raise refuse("expected [low, high] with low < high", key="uniform", value=self.uniform)
+        if self.normal is not None and self.normal[1] < 0:
+            raise refuse("expected [mean, std] with std >= 0", key="normal", value=self.normal)
+        return self
+
+    @property
+    def kind(self) -> tuple[str, tuple[Any, ...]]:
+        """(kind, arguments)."""
+        kind = next(iter(self.model_fields_set))
+        return kind, tuple(getattr(self, kind))
+
+
+class RandomSweep(Table):
+    """``[sweep.random]``: ``samples`` draws of every other key (a dotted
+    scenario key -> its :class:`Distribution`), crossed with the cases and the grid."""
+
+    model_config = {**Table.model_config, "extra": "allow"}
+    __pydantic_extra__: dict[str, Distribution]
+    samples: Count = Field(..., description="the number of draws")
+    seed: NonNegativeInt = Field(0, description="numpy.random.default_rng(seed); the keys drawn in file order")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _a_table_of_known_keys(cls, data: Any) -> Any:  # every other key is a drawn scenario key
+        if not isinstance(data, Mapping):
+            raise refuse("expected a table", value=data)
+        if "samples" not in data:
+            raise refuse("required, the number of draws", key="samples")
+        if not set(data) - {"samples", "seed"}:
+            raise refuse("no key to draw (add e.g. \"wind.speed\" = { uniform = [1.0, 5.0] })")
+        return data
+
+
+def _grid_values(value: Any) -> Any:
+    if not isinstance(value, list) or not value:
+        raise refuse("expected a non-empty list of values", value=value)
+    return value
+
+
+class Sweep(Table):
+    """``[sweep]``: seeds, a grid and random draws."""
+
+    seeds: Seeds = Field(None, description="N (seeds 0..N-1) or a list; default: the scenario's own seed")
+    grid: dict[str, Annotated[list[Any], BeforeValidator(_grid_values)]] = Field(
+        default_factory=dict, description="dotted scenario key -> its values; the cartesian product")
+    random: RandomSweep = Field(None)
+
+
+class CaseTable(Table):
+    """``[cases.<name>]``: a registered case (only its ``seeds`` may be given)
+    or an inline one (``set`` and/or ``connect``)."""
+
+    label: Annotated[str, Field(strict=True)] = Field(None, description="the case's name in tables and plots")
+    set: dict[str, Any] = Field(None, description="dotted scenario keys this case sets")
+    connect: Strings = Field(None, description="connections added to the scenario's")
+    seeds: Seeds = Field(None, description="this case's seeds (default: the study's)")
+
+
+class StudyFile(Table):
+    """A study file (``docs/studies.md``)."""
+
+    scenario: Annotated[str, Field(strict=True)] = Field(
+        None, description="required: a shipped scenario's name, or a path relative to this file")
+    name: Annotated[str, Field(strict=True, min_length=1)] = Field(None, description="default: the file's name")
+    description: Annotated[str, Field(strict=True)] = ""
+    set: dict[str, Any] = Field(default_factory=dict, description="dotted scenario keys set for every run")
+    cases: dict[str, CaseTable] = Field(default_factory=dict, description="named sets of overrides: the rows")
+    sweep: Sweep = Field(default_factory=Sweep)
+
+
+def study_json_schema() -> dict[str, Any]:
+    """The JSON Schema of a study file (``fnn-cosim schema study``)."""
+    return json_schema(StudyFile, "fnn-cosim study",
+                       "A study: a scenario over named cases, a grid, random draws and seeds (docs/studies.md)")
+
+
 # ---- reading ------------------------------------------------------------------------------
 
 def _q(key: str) -> str:
     return f'"{key}"' if "." in key else key
-
-
-def _count(where: str, value: Any, positive: bool = False) -> int:
-    """A whole number >= 0 (``positive``: >= 1), or the scenario's error naming ``where``."""
-    return int(check_number(where, value, integer=True, positive=positive, nonnegative=not positive))
-
-
-def _seeds(where: str, value: Any) -> tuple[int, ...]:
-    """``N`` (seeds 0..N-1) or a list of distinct seeds."""
-    from .fmu_component import SEED_LIMIT
-
-    if isinstance(value, list):
-        seeds = tuple(_count(f"{where}[{i}]", s) for i, s in enumerate(value))
-        if not seeds or len(set(seeds)) != len(seeds):
-            raise ScenarioError(f"{where} = {value!r}: expected distinct seeds, at least one")
-    else:
-        n = _count(where, value, positive=True)
-        if n > MAX_RUNS:
-            raise ScenarioError(f"{where} = {value!r}: at most {MAX_RUNS} runs a study")
-        seeds = tuple(range(n))
-    if max(seeds) > SEED_LIMIT:
-        raise ScenarioError(f"{where} = {value!r}: a seed is at most 2^53 = {SEED_LIMIT}")
-    return seeds
-
-
-def _distribution(where: str, spec: Any) -> tuple[str, tuple[Any, ...]]:
-    if not isinstance(spec, Mapping) or len(spec) != 1 or next(iter(spec)) not in DISTRIBUTIONS:
-        raise ScenarioError(f"{where} = {spec!r}: expected one of {{ uniform = [low, high] }}, "
-                            f"{{ normal = [mean, std] }}, {{ choice = [values...] }}")
-    kind, args = next(iter(spec.items()))
-    where = f"{where}.{kind}"
-    if kind == "choice":
-        if not isinstance(args, list) or not args:
-            raise ScenarioError(f"{where} = {args!r}: expected a non-empty list of values")
-        return kind, tuple(args)
-    if not isinstance(args, list) or len(args) != 2:
-        raise ScenarioError(f"{where} = {args!r}: expected [{'low, high' if kind == 'uniform' else 'mean, std'}]")
-    a, b = (float(check_number(f"{where}[{i}]", v)) for i, v in enumerate(args))
-    if kind == "uniform" and not a < b:
-        raise ScenarioError(f"{where} = {args!r}: expected [low, high] with low < high")
-    if kind == "normal" and b < 0:
-        raise ScenarioError(f"{where} = {args!r}: expected [mean, std] with std >= 0")
-    return kind, (a, b)
 
 
 def _check(where: str, base: Scenario, overrides: Mapping[str, Any]) -> None:
@@ -191,37 +277,33 @@ def _check(where: str, base: Scenario, overrides: Mapping[str, Any]) -> None:
         raise ScenarioError(f"{where}: {exc}") from None
 
 
-def _case(where: str, name: str, spec: Any) -> Case:
-    """A ``[cases.NAME]`` table: a registered case (its ``seeds`` may be
-    given) or an inline one (``set`` and/or ``connect``)."""
-    spec = table(where, spec)
-    refuse_unknown(f"{where}.", spec, _CASE)
+def _case(where: str, name: str, spec: CaseTable) -> Case:
+    """A registered case (its ``seeds`` may be given) or an inline one."""
     known = registry.cases().get(name)
-    seeds = _seeds(f"{where}.seeds", spec["seeds"]) if "seeds" in spec else None
+    given = spec.model_fields_set
     if known is not None:
         for key in ("set", "connect", "label"):
-            if key in spec:
+            if key in given:
                 raise ScenarioError(f"{where}.{key}: {name!r} is a registered case (its own settings); "
                                     f"give an inline case another name")
-        return replace(known, seeds=seeds if seeds is not None else known.seeds)
-    if "set" not in spec and "connect" not in spec:
+        return replace(known, seeds=spec.seeds if "seeds" in given else known.seeds)
+    if "set" not in given and "connect" not in given:
         cases = ", ".join(registry.cases()) or "(none registered)"
         raise ScenarioError(f"{where}: not a registered case ({cases}); an inline case gives 'set' or 'connect'")
-    return Case(name, table(f"{where}.set", spec.get("set", {})),
-                tuple(strings(f"{where}.connect", spec.get("connect", []))),
-                string(f"{where}.label", spec.get("label", name)), seeds)
+    return Case(name, dict(spec.set or {}), tuple(spec.connect or ()), spec.label or name,
+                spec.seeds if "seeds" in given else None)
 
 
-def _scenario_file(raw: Mapping[str, Any], source: Path | None) -> Path:
-    if "scenario" not in raw or not isinstance(raw["scenario"], str):
-        raise ScenarioError(f"scenario = {raw.get('scenario')!r}: required, a shipped scenario name or a file path")
-    path = Path(raw["scenario"])
+def _scenario_file(name: str | None, source: Path | None) -> Path:
+    if name is None:
+        raise ScenarioError("scenario: required, a shipped scenario name or a file path")
+    path = Path(name)
     if not path.is_absolute() and source is not None and (source.parent / path).exists():
         path = source.parent / path
     try:
-        return scenario_path(path if path.exists() else raw["scenario"])
+        return scenario_path(path if path.exists() else name)
     except ScenarioError as exc:
-        raise ScenarioError(f"scenario = {raw['scenario']!r}: {exc}") from None
+        raise ScenarioError(f"scenario = {name!r}: {exc}") from None
 
 
 def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenario | None = None) -> Study:
@@ -229,73 +311,54 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
 
     ``base`` replaces the scenario the study names (``scenario`` may then be
     left out), e.g. to fly a shipped study on another mission."""
-    raw = dict(raw)
-    refuse_unknown("", raw, _TOP)
-    name = string("name", raw.get("name", source.stem if source else "study"))
-    if not name:
-        raise ScenarioError("name = '': expected a non-empty string")
-    description = string("description", raw.get("description", ""))
-    fixed = table("set", raw.get("set", {}))
-    scenario_file = _scenario_file(raw, source) if base is None else None
+    doc = validate(StudyFile, dict(raw), quote=True)
+    name = doc.name if doc.name is not None else (source.stem if source else "study")
     try:
-        if scenario_file is not None:
-            base = load_scenario(scenario_file, dict(fixed))
-        elif fixed:
-            base = parse_scenario(apply_overrides(base.raw, dict(fixed)), source=base.source)
+        if base is None:
+            base = load_scenario(_scenario_file(doc.scenario, source), dict(doc.set))
+        elif doc.set:
+            base = parse_scenario(apply_overrides(base.raw, dict(doc.set)), source=base.source)
     except ScenarioError as exc:
+        if str(exc).startswith("scenario"):
+            raise
         raise ScenarioError(f"set: {exc}") from None
 
-    cases = tuple(_case(f"cases.{_q(n)}", n, spec) for n, spec in table("cases", raw.get("cases", {})).items())
+    cases = tuple(_case(f"cases.{_q(n)}", n, spec) for n, spec in doc.cases.items())
     for case in cases:
         _check(f"cases.{_q(case.name)}", base, case.applied_to(base.raw))
-
-    sweep = table("sweep", raw.get("sweep", {}))
-    refuse_unknown("sweep.", sweep, _SWEEP)
-    seeds = _seeds("sweep.seeds", sweep["seeds"]) if "seeds" in sweep else None
-    if seeds is not None:
-        _check("sweep.seeds", base, {"simulation.seed": seeds[0]})
-
-    grid: dict[str, tuple[Any, ...]] = {}
     case_keys = {k: c.name for c in cases for k in c.overrides}
-    for key, values in table("sweep.grid", sweep.get("grid", {})).items():
+
+    sweep = doc.sweep
+    if sweep.seeds is not None:
+        _check("sweep.seeds", base, {"simulation.seed": sweep.seeds[0]})
+    grid: dict[str, tuple[Any, ...]] = {}
+    for key, values in sweep.grid.items():
         where = f"sweep.grid.{_q(key)}"
         if key == "simulation.seed":
             raise ScenarioError(f"{where}: sweep seeds with sweep.seeds")
         if key in case_keys:
             raise ScenarioError(f"{where}: also set by case {case_keys[key]!r}; a key is set in one place")
-        if not isinstance(values, list) or not values:
-            raise ScenarioError(f"{where} = {values!r}: expected a non-empty list of values")
         for value in values:
             _check(where, base, {key: value})
         grid[key] = tuple(values)
 
     random: dict[str, tuple[str, tuple[Any, ...]]] = {}
-    samples = random_seed = 0
-    rand = sweep.get("random")
-    if rand is not None:
-        rand = table("sweep.random", rand)
-        if "samples" not in rand:
-            raise ScenarioError("sweep.random.samples: required, the number of draws")
-        samples = _count("sweep.random.samples", rand["samples"], positive=True)
-        random_seed = _count("sweep.random.seed", rand.get("seed", 0))
-        for key, spec in rand.items():
-            if key in ("samples", "seed"):
-                continue
-            where = f"sweep.random.{_q(key)}"
-            if key in grid:
-                raise ScenarioError(f"{where}: already swept in sweep.grid")
-            if key == "simulation.seed":
-                raise ScenarioError(f"{where}: sweep seeds with sweep.seeds")
-            if key in case_keys:
-                raise ScenarioError(f"{where}: also set by case {case_keys[key]!r}; a key is set in one place")
-            random[key] = _distribution(where, spec)
-            kind, args = random[key]
-            for value in (args if kind == "choice" else args[:1]):
-                _check(where, base, {key: value})
-        if not random:
-            raise ScenarioError("sweep.random: no key to draw (add e.g. \"wind.speed\" = { uniform = [1.0, 5.0] })")
-    study = Study(name=name, description=description, scenario=base, cases=cases, grid=grid, random=random,
-                  samples=samples, random_seed=random_seed, seeds=seeds, source=source)
+    rand = sweep.random
+    for key, distribution in ((rand.model_extra or {}).items() if rand is not None else ()):
+        where = f"sweep.random.{_q(key)}"
+        if key in grid:
+            raise ScenarioError(f"{where}: already swept in sweep.grid")
+        if key == "simulation.seed":
+            raise ScenarioError(f"{where}: sweep seeds with sweep.seeds")
+        if key in case_keys:
+            raise ScenarioError(f"{where}: also set by case {case_keys[key]!r}; a key is set in one place")
+        random[key] = distribution.kind
+        kind, args = random[key]
+        for value in (args if kind == "choice" else args[:1]):
+            _check(where, base, {key: value})
+    study = Study(name=name, description=doc.description, scenario=base, cases=cases, grid=grid, random=random,
+                  samples=rand.samples if rand is not None else 0, random_seed=rand.seed if rand is not None else 0,
+                  seeds=sweep.seeds, source=source)
     total = count(study)
     if total > MAX_RUNS:
         raise ScenarioError(f"study {name!r}: {total} runs; at most {MAX_RUNS} a study (split it, or sweep "

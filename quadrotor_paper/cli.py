@@ -10,6 +10,7 @@ Subcommands::
     fnn-cosim reproduce [--out DIR] [--seeds 10] [--duration S] [--workers 2] [--scheduler ADDRESS]
     fnn-cosim sweep STUDY.toml|NAME [--out DIR] [--workers N] [--scheduler ADDRESS] [--no-plots]
     fnn-cosim scenarios
+    fnn-cosim schema scenario|study [--out FILE]
     fnn-cosim build-fmu [--out DIR]
     fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim]
 
@@ -49,11 +50,13 @@ def _value(text: str) -> Any:
 
 
 def _overrides(pairs: Sequence[str]) -> dict[str, Any]:
+    from cosim.errors import ScenarioError
+
     out = {}
     for pair in pairs:
         key, eq, value = pair.partition("=")
-        if not eq or not key:
-            raise SystemExit(f"--set {pair!r}: expected KEY=VALUE, e.g. --set wind.speed=5")
+        if not eq or not key.strip():
+            raise ScenarioError(f"--set {pair!r}: expected KEY=VALUE, e.g. --set wind.speed=5")
         out[key.strip()] = _value(value.strip())
     return out
 
@@ -217,6 +220,23 @@ def _cmd_export_ssp(args) -> int:
     return 0
 
 
+def _cmd_schema(args) -> int:
+    """Print the JSON Schema of a scenario or a study file (for editors: docs/cosim.md)."""
+    import json
+
+    if args.kind == "scenario":
+        from cosim.scenario import scenario_json_schema as schema
+    else:
+        from cosim.study import study_json_schema as schema
+    text = json.dumps(schema(), indent=1)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+        print(args.out)
+    else:
+        print(text)
+    return 0
+
+
 def _cmd_scenarios(args) -> int:
     from cosim.scenario import load_scenario, shipped_scenarios
 
@@ -360,6 +380,11 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--out", required=True, help="the .ssp file to write")
     e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
     e.set_defaults(func=_cmd_export_ssp)
+
+    js = sub.add_parser("schema", help="print the JSON Schema of a scenario or study file (for editors)")
+    js.add_argument("kind", choices=("scenario", "study"))
+    js.add_argument("--out", help="write it to this file instead")
+    js.set_defaults(func=_cmd_schema)
 
     sc = sub.add_parser("scenarios", help="list the shipped scenarios")
     sc.set_defaults(func=_cmd_scenarios)

@@ -18,15 +18,12 @@ Nothing heavy is imported here: the builders import what they build.
 """
 from __future__ import annotations
 
-from dataclasses import fields
 from functools import partial
 from pathlib import Path
 from typing import Any, Mapping
 
 from cosim import registry
-from cosim.config import check_number
 from cosim.errors import ScenarioError
-from cosim.scenario import refuse_unknown
 
 __all__ = ["register", "fmu_entry", "TRAJECTORY_INSTANCE", "CONTROLLER_INSTANCE"]
 
@@ -59,19 +56,17 @@ def _fmu_model(identifier: str, load) -> registry.RegisteredModel:
     return registry.RegisteredModel(identifier, build, check_parameter)
 
 
+def _trajectory_table(name: str):
+    """The declaration of a trajectory's table: its dataclass's fields (the
+    reference FMU's parameters, whose ranges the dataclass checks)."""
+    from cosim.schema import dataclass_table
+
+    from .trajectories import TRAJECTORIES
+
+    return dataclass_table(TRAJECTORIES[name])
+
+
 def _trajectory_kind(name: str) -> registry.ComponentKind:
-    def check(where: str, params: Mapping[str, Any]) -> None:
-        from .trajectories import TRAJECTORIES
-
-        cls = TRAJECTORIES[name]
-        refuse_unknown(f"{where}.", params, {f.name for f in fields(cls)})
-        for key, value in params.items():
-            check_number(f"{where}.{key}", value)
-        try:
-            cls(**{k: float(v) for k, v in params.items()})
-        except ValueError as exc:
-            raise ScenarioError(f"{where}: {exc}") from None
-
     def build(instance: str, params: Mapping[str, Any], context) -> Any:
         from cosim.fmu_component import FmuComponent
         from cosim.scenario import fmu_file
@@ -79,7 +74,8 @@ def _trajectory_kind(name: str) -> registry.ComponentKind:
         entry = _trajectory_entry(name, params)
         return FmuComponent(instance, fmu_file(entry), parameters=entry["parameters"])
 
-    return registry.ComponentKind(name, build, check, f"reference trajectory {name} (its reference FMU)",
+    return registry.ComponentKind(name, build, partial(_trajectory_table, name),
+                                  f"reference trajectory {name} (its reference FMU)",
                                   alias="trajectory", instance=TRAJECTORY_INSTANCE)
 
 
@@ -114,18 +110,19 @@ def fmu_entry(instance: str, spec: Mapping[str, Any], context) -> dict[str, Any]
                         f"an all-FMU scenario (SSP) cannot hold it")
 
 
+def _controller_table():
+    from .controller_component import controller_table
+
+    return controller_table()
+
+
 def _controller_kind() -> registry.ComponentKind:
-    def check(where: str, params: Mapping[str, Any]) -> None:
-        from .controller_component import ControllerComponent
-
-        ControllerComponent.from_parameters(where, params)
-
     def build(instance: str, params: Mapping[str, Any], context) -> Any:
         from .controller_component import ControllerComponent
 
         return ControllerComponent.from_parameters(instance, params, context)
 
-    return registry.ComponentKind("fnn_controller", build, check,
+    return registry.ComponentKind("fnn_controller", build, _controller_table,
                                   "PD + FNN position control and geometric velocity control (paper Fig. 2)",
                                   alias="controller", instance=CONTROLLER_INSTANCE)
 
@@ -145,7 +142,7 @@ def register() -> None:
     from fnn_controller.controller_fmu import controller_model, fmu_identifier
     from fnn_controller.split import INNER_IDENTIFIER, inner_model, outer_identifier, outer_model
 
-    from .missions import parse_metrics, parse_wind
+    from .missions import Metrics, Wind, apply_metrics, apply_wind
     from .trajectories import TRAJECTORIES
 
     for identifier in MODEL_NAMES:
@@ -163,6 +160,8 @@ def register() -> None:
         registry.register_case(variant_case(name))
     for case in OPTIONS.values():
         registry.register_case(case)
-    registry.register_section(registry.Section("wind", parse_wind, "shorthand for the WindGust FMU's parameters"))
-    registry.register_section(registry.Section("metrics", parse_metrics, "signals of the tracking error"))
+    registry.register_section(registry.Section("wind", lambda: Wind, apply_wind,
+                                               "shorthand for the WindGust FMU's parameters"))
+    registry.register_section(registry.Section("metrics", lambda: Metrics, apply_metrics,
+                                               "signals of the tracking error"))
     registry.register_scenarios(Path(__file__).parent / "scenarios")

@@ -45,22 +45,23 @@ The run's seed draws f_ij(0) (§5.1) at every start.
 """
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
-from dataclasses import asdict, fields
-from typing import Any, Mapping
+from dataclasses import fields
+from typing import Annotated, Any, Mapping
 
 import numpy as np
+from pydantic import AfterValidator, BeforeValidator, Field, WithJsonSchema, model_validator
 
 from cosim.component import Port, PythonComponent
-from cosim.config import check_number, dataclass_from_mapping
 from cosim.errors import DivergenceError, ScenarioError
-from cosim.scenario import refuse_unknown, string, table
+from cosim.schema import Number, ParameterTable, Table, dataclass_table, one_of, refuse, validate
 from fnn_controller.variants import DEFAULT_VARIANT
 
 __all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT", "internal_ports"]
 
 DEFAULT_PLANT = "Quadrotor"
-_PARAMETERS = ("variant", "psi_ref", "position", "geometric", "plant", "nominal", "form", "fmi_version", "learned")
 FORMS = ("python", "fmu")
 _AXES = "xyz"
 
@@ -116,6 +117,71 @@ def _nominal_vehicle(name: str, plant: str, nominal: Mapping[str, Any], context)
     return vehicle
 
 
+def _parameters(cls, value: Any, where: str, base: Any = None) -> Any:
+    """A parameter dataclass from its table's values (a mapping, or a
+    validated table), over ``base`` (default: the dataclass's defaults)."""
+    if isinstance(value, cls):
+        return value
+    table = value if isinstance(value, ParameterTable) else validate(dataclass_table(cls), dict(value or {}), where)
+    return table.applied(base)
+
+
+def _known_variant(name: str) -> str:
+    from fnn_controller.variants import variant_names
+
+    if name not in variant_names():
+        raise refuse(f"expected one of {', '.join(variant_names())}", value=name)
+    return name
+
+
+def _no_vehicle(value: Any) -> Any:
+    if isinstance(value, Mapping) and "vehicle" in value:
+        raise refuse("the nominal vehicle is the plant's (the controller's plant); set a deliberate mismatch in "
+                     "its nominal table", key="vehicle")
+    return value
+
+
+@functools.lru_cache(maxsize=None)
+def controller_table() -> type[Table]:
+    """The declaration of a ``[controller]`` table (``docs/controller.md``):
+    the variant, the yaw command, the position and geometric controllers'
+    parameters (their dataclasses' fields, units and ranges), the plant the
+    nominal vehicle is read from and the deliberate mismatch, the form, the
+    FMI version, a learned state to resume from."""
+    from fnn_controller import GeometricParams, PositionParams, VehicleParams
+    from fnn_controller.variants import variant_names
+
+    class ControllerTable(Table):
+        variant: Annotated[str, Field(strict=True), AfterValidator(_known_variant),
+                           WithJsonSchema({"type": "string", "enum": list(variant_names())})] = Field(
+            DEFAULT_VARIANT, description="the controller variant: its laws and learned state")
+        psi_ref: Number = Field(0.0, description="commanded yaw psi* [rad]")
+        position: dataclass_table(PositionParams) = Field(None, description="position controller (section 3.1)")
+        geometric: Annotated[dataclass_table(GeometricParams), BeforeValidator(_no_vehicle)] = Field(
+            None, description="geometric velocity controller (eqs. 13-18); its vehicle is the plant's")
+        plant: Annotated[str, Field(strict=True)] = Field(
+            DEFAULT_PLANT, description="the FMU whose parameters are the nominal vehicle ('' for none)")
+        nominal: dataclass_table(VehicleParams) = Field(
+            None, description="a deliberate mismatch: vehicle parameters that differ from the plant's")
+        form: one_of(FORMS) = Field("fmu", description="'fmu': the controller FMU (the compiled loop); 'python': "
+                                                       "the same step in process")
+        fmi_version: one_of((2, 3), "expected 2 or 3", int) = Field(2, description="FMI version of the FMU form")
+        learned: Annotated[str, Field(strict=True)] = Field(None, description="a learned-state file to resume from")
+
+        @model_validator(mode="after")
+        def _one_step(self):
+            position_dt = self.position.dt if self.position is not None and self.position.dt is not None \
+                else PositionParams().dt
+            geometric_dt = self.geometric.dt if self.geometric is not None and self.geometric.dt is not None \
+                else None
+            if geometric_dt is not None and geometric_dt != position_dt:
+                raise refuse(f"the position and the velocity controller run in one step: it must equal "
+                             f"position.dt = {position_dt!r} s", key="geometric.dt", value=geometric_dt)
+            return self
+
+    return ControllerTable
+
+
 class ControllerComponent(PythonComponent):
     """PD + FNN position control and geometric velocity control (paper Fig. 2).
 
@@ -136,18 +202,17 @@ class ControllerComponent(PythonComponent):
     inputs = CONTROLLER_INPUTS
     outputs = CONTROLLER_OUTPUTS
 
-    def __init__(self, variant: str = DEFAULT_VARIANT, position: Mapping[str, Any] | None = None,
-                 geometric: Mapping[str, Any] | None = None, psi_ref: float = 0.0,
-                 name: str = "controller", vehicle: Mapping[str, Any] | None = None):
+    def __init__(self, variant: str = DEFAULT_VARIANT, position: Any = None, geometric: Any = None,
+                 psi_ref: float = 0.0, name: str = "controller", vehicle: Mapping[str, Any] | None = None):
         super().__init__(name)
         import fnn_controller as fc
 
         self._fc = fc
-        self.position = dataclass_from_mapping(fc.PositionParams, position or {}, f"{name}.position")
-        geometric = dict(geometric or {})
-        if vehicle is not None:
-            geometric["vehicle"] = {**geometric.get("vehicle", {}), **vehicle}
-        self.geometric = dataclass_from_mapping(fc.GeometricParams, geometric, f"{name}.geometric")
+        self.position = _parameters(fc.PositionParams, position, f"{name}.position")
+        base = fc.GeometricParams()
+        if vehicle:  # the nominal vehicle first: the geometric table cannot set it (controller_table)
+            base = dataclasses.replace(base, vehicle=dataclasses.replace(base.vehicle, **vehicle))
+        self.geometric = _parameters(fc.GeometricParams, geometric, f"{name}.geometric", base)
         self.psi_ref = float(psi_ref)
         self.variant = self._check_variant(variant)
         self.internals = internal_ports(self.variant)
@@ -164,37 +229,23 @@ class ControllerComponent(PythonComponent):
         on purpose (model mismatch). The vehicle is not set through
         ``geometric.vehicle``: one way to say it.
         """
-        refuse_unknown(f"{name}.", parameters, _PARAMETERS)
-        for key in ("position", "geometric", "nominal"):
-            table(f"{name}.{key}", parameters.get(key, {}))
-        if "vehicle" in parameters.get("geometric", {}):
-            raise ScenarioError(f"{name}.geometric.vehicle: the nominal vehicle is the plant's "
-                                f"({name}.plant); set a deliberate mismatch in {name}.nominal")
-        psi_ref = float(check_number(f"{name}.psi_ref", parameters.get("psi_ref", 0.0)))
-        plant = string(f"{name}.plant", parameters.get("plant", DEFAULT_PLANT))
-        from fnn_controller import VehicleParams
-
-        nominal = asdict(dataclass_from_mapping(VehicleParams, parameters.get("nominal", {}), f"{name}.nominal"))
-        nominal = {k: v for k, v in nominal.items() if k in parameters.get("nominal", {})}
-        if context is not None and plant not in context.fmus and "plant" not in parameters:
+        table = validate(controller_table(), parameters, name)
+        nominal = dataclasses.asdict(table.nominal.applied()) if table.nominal is not None else {}
+        nominal = {k: v for k, v in nominal.items() if k in table.nominal.model_fields_set} if nominal else {}
+        plant = table.plant
+        if context is not None and plant not in context.fmus and "plant" not in table.model_fields_set:
             plant = ""  # no FMU of the default name: the controller keeps its own defaults
         vehicle = _nominal_vehicle(name, plant, nominal, context)
-        form = string(f"{name}.form", parameters.get("form", "fmu"))
-        if form not in FORMS:
-            raise ScenarioError(f"{name}.form = {form!r}: expected one of {', '.join(FORMS)}")
-        version = parameters.get("fmi_version", 2)
-        if version not in (2, 3):
-            raise ScenarioError(f"{name}.fmi_version = {version!r}: expected 2 or 3")
         try:
-            component = cls(parameters.get("variant", DEFAULT_VARIANT), parameters.get("position"),
-                            parameters.get("geometric"), psi_ref, name=name, vehicle=vehicle)
+            component = cls(table.variant, table.position, table.geometric, table.psi_ref, name=name,
+                            vehicle=vehicle)
         except ValueError as exc:  # a parameter dataclass refused a combination of values
             raise ScenarioError(f"{name}: {exc}") from None
+        form, version = table.form, table.fmi_version
         if "learned" in parameters:  # resume learning from a saved state
             from .learned import load_learned
 
-            component.learned = load_learned(string(f"{name}.learned", parameters["learned"]),
-                                             component.variant)
+            component.learned = load_learned(table.learned, component.variant)
         return component.as_fmu(version) if form == "fmu" and context is not None else component
 
     def fmu_entry(self, fmi_version: int = 2) -> dict[str, Any]:

@@ -20,65 +20,76 @@ between; and how the rest of the application reads them.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from typing import Annotated, Any
 
-from cosim.config import check_number
+from pydantic import Field, model_validator
+
 from cosim.errors import ScenarioError
-from cosim.scenario import Scenario, check_fmu_parameters, refuse_unknown, string, strings
+from cosim.scenario import Scenario, check_fmu_parameters
+from cosim.schema import NonNegative, NonNegativeInt, Strings, Table, numbers, refuse
 from fnn_controller.variants import DEFAULT_VARIANT
 
-__all__ = ["WIND_KEYS", "parse_wind", "parse_metrics", "wind_parameter", "metric_signals", "controller_variant"]
+__all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "wind_parameter", "metric_signals",
+           "controller_variant"]
 
 WIND_KEYS = {"speed": "v_w", "ramp_time": "ramp_time", "turbulence": "turbulence",
              "turbulence_seed": "turbulence_seed"}
-_WIND = {"fmu", "direction", "switch_times", *WIND_KEYS}
-_METRICS = {"position", "reference"}
 
 
-def _direction(value: Any) -> dict[str, float]:
-    if not isinstance(value, list) or len(value) != 3:
-        raise ScenarioError(f"wind.direction = {value!r}: expected a list of 3 numbers")
-    d = [check_number(f"wind.direction[{i}]", v) for i, v in enumerate(value)]
-    if math.hypot(*d) == 0:
-        raise ScenarioError(f"wind.direction = {d!r}: must not be the zero vector")
-    return dict(dir_x=d[0], dir_y=d[1], dir_z=d[2])
+class Wind(Table):
+    """``[wind]``: the WindGust FMU's parameters by the paper's names (section 5.3)."""
+
+    fmu: Annotated[str, Field(strict=True)] = Field("WindGust", description="the FMU instance it configures")
+    speed: NonNegative = Field(None, description="gust speed v_w [m/s]")
+    direction: numbers(3, "numbers") = Field(None, description="gust direction (normalized; not zero)")
+    switch_times: numbers(2, "times (s)", ge=0.0) = Field(
+        None, description="the gust reverses at the first and back at the second [s], in order")
+    ramp_time: NonNegative = Field(None, description="duration of each reversal [s] (0: a step)")
+    turbulence: NonNegative = Field(None, description="turbulence RMS [m/s]")
+    turbulence_seed: NonNegativeInt = Field(None, description="seed of the turbulence")
+
+    @model_validator(mode="after")
+    def _physical(self):
+        if self.direction is not None and math.hypot(*self.direction) == 0:
+            raise refuse("must not be the zero vector", key="direction", value=self.direction)
+        if self.switch_times is not None and self.switch_times[1] < self.switch_times[0]:
+            raise refuse("the second switch must not come before the first", key="switch_times",
+                         value=self.switch_times)
+        return self
 
 
-def _switch_times(value: Any) -> dict[str, float]:
-    if not isinstance(value, list) or len(value) != 2:
-        raise ScenarioError(f"wind.switch_times = {value!r}: expected a list of 2 times (s)")
-    s = [check_number(f"wind.switch_times[{i}]", v, nonnegative=True) for i, v in enumerate(value)]
-    if s[1] < s[0]:
-        raise ScenarioError(f"wind.switch_times = {s!r}: the second switch must not come before the first")
-    return dict(t_switch_1=s[0], t_switch_2=s[1])
-
-
-def parse_wind(where: str, wind: Mapping[str, Any], fmus: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def apply_wind(where: str, wind: Wind, fmus: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Set the WindGust FMU's parameters from ``[wind]``; returns ``{"fmu": instance}``."""
-    refuse_unknown(f"{where}.", wind, _WIND)
-    instance = string(f"{where}.fmu", wind.get("fmu", "WindGust"))
-    if instance not in fmus:
-        raise ScenarioError(f"{where}.fmu = {instance!r}: no such FMU in [fmus]; FMUs: {', '.join(fmus)}")
-    params = fmus[instance]["parameters"]
+    if wind.fmu not in fmus:
+        raise ScenarioError(f"{where}.fmu = {wind.fmu!r}: no such FMU in [fmus]; FMUs: {', '.join(fmus)}")
+    params: dict[str, float] = {}
     for key, target in WIND_KEYS.items():
-        if key in wind:
-            params[target] = check_number(f"{where}.{key}", wind[key], nonnegative=True,
-                                          integer=key == "turbulence_seed")
-    if "direction" in wind:
-        params.update(_direction(wind["direction"]))
-    if "switch_times" in wind:
-        params.update(_switch_times(wind["switch_times"]))
-    check_fmu_parameters(f"fmus.{instance}.parameters (from [{where}])", fmus[instance], params)
-    return {"fmu": instance}
+        if key in wind.model_fields_set:
+            params[target] = getattr(wind, key)
+    if "direction" in wind.model_fields_set:
+        params.update(dict(zip(("dir_x", "dir_y", "dir_z"), wind.direction)))
+    if "switch_times" in wind.model_fields_set:
+        params.update(dict(zip(("t_switch_1", "t_switch_2"), wind.switch_times)))
+    check_fmu_parameters(f"fmus.{wind.fmu}.parameters (from [{where}])", fmus[wind.fmu], params)
+    fmus[wind.fmu]["parameters"].update(params)
+    return {"fmu": wind.fmu}
 
 
-def parse_metrics(where: str, metrics: Mapping[str, Any], fmus) -> dict[str, list[str]]:
-    refuse_unknown(f"{where}.", metrics, _METRICS)
-    position = strings(f"{where}.position", metrics.get("position", []))
-    reference = strings(f"{where}.reference", metrics.get("reference", []))
-    if len(position) != len(reference):
-        raise ScenarioError(f"{where}: position has {len(position)} signals but reference has {len(reference)}")
-    return {"position": position, "reference": reference}
+class Metrics(Table):
+    """``[metrics]``: the signals the tracking error is taken between."""
+
+    position: Strings = Field(default_factory=list, description="the vehicle's position signals")
+    reference: Strings = Field(default_factory=list, description="the reference's, in the same order")
+
+    @model_validator(mode="after")
+    def _pairs(self):
+        if len(self.position) != len(self.reference):
+            raise refuse(f"position has {len(self.position)} signals but reference has {len(self.reference)}")
+        return self
+
+
+def apply_metrics(where: str, metrics: Metrics, fmus) -> dict[str, list[str]]:
+    return {"position": list(metrics.position), "reference": list(metrics.reference)}
 
 
 def wind_parameter(scenario: Scenario, key: str = "speed") -> str:

@@ -6,10 +6,9 @@ libcosim runs), so the loop flies exactly as the scenario does (``docs/ssp.md``)
 """
 from __future__ import annotations
 
-import copy
-
+from cosim import registry
 from cosim.registry import BuildContext
-from cosim.scenario import Scenario, fmu_file
+from cosim.scenario import Scenario, fmu_file, parse_scenario
 
 __all__ = ["all_fmu"]
 
@@ -21,10 +20,15 @@ def all_fmu(scenario: Scenario) -> Scenario:
 
     from .components import fmu_entry
 
-    out = copy.deepcopy(scenario)
     # the controller's nominal vehicle reads the plant's parameters, as when it is built for a run
     context = BuildContext(scenario, {n: FmuComponent(n, fmu_file(s)) for n, s in scenario.fmus.items()})
+    document = scenario.raw  # a new document: the scenario is immutable, and workers read documents
     for name, spec in scenario.components.items():
-        out.fmus[name] = fmu_entry(name, spec, context)
-        del out.components[name]
-    return out
+        document["fmus"][name] = fmu_entry(name, spec, context)
+        document.get("components", {}).pop(name, None)
+    for alias, kinds in registry.aliases().items():
+        if (kinds[0].instance or alias) in scenario.components:
+            document.pop(alias, None)
+    if not document.get("components", True):
+        del document["components"]
+    return parse_scenario(document, source=scenario.source, name=scenario.name)

@@ -98,7 +98,7 @@ def test_toy_scenario_is_read_as_written(scenario_file):
     assert sc.fmus["Lag"] == {"fmi_version": 3, "model": "toy_FirstOrderLag",
                               "parameters": {"y_0": 0.2, "tau": 0.25, "k": 2.0}}
     assert sc.sections == {"toy_lag": {"fmu": "Lag", "tau": 0.25, "k": 2.0}}
-    assert sc.record == ["Lag.y", "ctrl.u"] and sc.block_rows == 5
+    assert sc.record == ("Lag.y", "ctrl.u") and sc.block_rows == 5
     assert sc.envelope == {"Lag.y": (-10.0, 10.0)}
 
 
@@ -376,7 +376,7 @@ def test_cosim_imports_nothing_of_the_application():
     """Importing the engine (without reading a registry, which would load the
     cosim.plugins entry points) pulls in no application package."""
     code = ("import cosim.master, cosim.scenario, cosim.registry, cosim.fmu_component, cosim.recorder, cosim.guard, "
-            "cosim.connection, cosim.config, cosim.study, cosim.study_run, cosim.summary, cosim.dask_runner, sys; "
+            "cosim.connection, cosim.schema, cosim.study, cosim.study_run, cosim.summary, cosim.dask_runner, sys; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in "
             "('quadrotor_paper', 'fnn_controller', 'fmu_models')))")
     root = Path(cosim.__file__).resolve().parents[1]

@@ -35,11 +35,13 @@ from typing import Any, Callable, Mapping
 import numpy as np
 import pytest
 
+from pydantic import Field, create_model
+
 from cosim import registry
 from cosim.component import PythonComponent, ports
-from cosim.config import check_number
 from cosim.errors import ScenarioError
-from cosim.scenario import check_fmu_parameters, refuse_unknown
+from cosim.scenario import check_fmu_parameters
+from cosim.schema import Number, Table
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel, Sampled
 from fmu_models.export.variables import discrete, input_, output, parameter, state
@@ -247,12 +249,10 @@ def make_gain(name: str, **parameters: float) -> Gain:
 BUILDS: list[int] = []  # FMI versions the registered toy model was built for, in order
 
 
-def _numbers_only(cls) -> Callable[[str, Mapping[str, Any]], None]:
-    def check(where: str, params: Mapping[str, Any]) -> None:
-        refuse_unknown(f"{where}.", params, cls.defaults)
-        for key, value in params.items():
-            check_number(f"{where}.{key}", value)
-    return check
+def _numbers_only(cls) -> type[Table]:
+    """The table of a toy kind: its defaults' names, each a number."""
+    return create_model(f"{cls.__name__}Table", __base__=Table,
+                        **{key: (Number, Field(default)) for key, default in cls.defaults.items()})
 
 
 def _builder(cls) -> Callable[[str, Mapping[str, Any], registry.BuildContext], PythonComponent]:
@@ -273,18 +273,22 @@ def _check_lag_parameter(name: str, value: float) -> None:
     var.check(value)  # ValueError naming the variable and its range
 
 
-def _parse_toy_lag(where: str, table: Mapping[str, Any], fmus: dict[str, dict[str, Any]]) -> dict[str, Any]:
+class ToyLag(Table):
     """``[toy_lag] fmu = "Lag", time_constant = 0.25, gain = 3.0``: sets the FMU's tau and k."""
-    refuse_unknown(f"{where}.", table, {"fmu", "time_constant", "gain"})
-    fmu = table.get("fmu", "Lag")
-    if fmu not in fmus:
-        raise ScenarioError(f"{where}.fmu = {fmu!r}: no such FMU; FMUs are: {', '.join(fmus)}")
-    params = {name: table[key] for key, name in (("time_constant", "tau"), ("gain", "k")) if key in table}
-    check_fmu_parameters(f"{where}", fmus[fmu], params)
-    fmus[fmu]["parameters"].update({k: float(v) for k, v in params.items()})
-    return {"fmu": fmu, **params}
+
+    fmu: str = "Lag"
+    time_constant: Number = None
+    gain: Number = None
 
 
+def _apply_toy_lag(where: str, table: ToyLag, fmus: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    if table.fmu not in fmus:
+        raise ScenarioError(f"{where}.fmu = {table.fmu!r}: no such FMU; FMUs are: {', '.join(fmus)}")
+    params = {name: getattr(table, key) for key, name in (("time_constant", "tau"), ("gain", "k"))
+              if key in table.model_fields_set}
+    check_fmu_parameters(f"{where}", fmus[table.fmu], params)
+    fmus[table.fmu]["parameters"].update({k: float(v) for k, v in params.items()})
+    return {"fmu": table.fmu, **params}
 
 
 def register_toys() -> None:
@@ -297,14 +301,15 @@ def register_toys() -> None:
     ``toy_FirstOrderLag`` builds the toy FMU on demand.
     """
     registry.register_component_kind(registry.ComponentKind(
-        "toy_constant", _builder(Constant), _numbers_only(Constant), "toy constant source",
+        "toy_constant", _builder(Constant), functools.partial(_numbers_only, Constant), "toy constant source",
         alias="toy_source", instance="source"))
     registry.register_component_kind(registry.ComponentKind(
-        "toy_step", _builder(Step), _numbers_only(Step), "toy step source", alias="toy_source", instance="source"))
+        "toy_step", _builder(Step), functools.partial(_numbers_only, Step), "toy step source", alias="toy_source", instance="source"))
     registry.register_component_kind(registry.ComponentKind(
-        "toy_p_controller", _builder(PController), _numbers_only(PController), "toy P controller",
+        "toy_p_controller", _builder(PController), functools.partial(_numbers_only, PController), "toy P controller",
         alias="toy_controller", instance="ctrl"))
     registry.register_component_kind(registry.ComponentKind(
-        "toy_gain", _builder(Gain), _numbers_only(Gain), "toy gain"))
-    registry.register_section(registry.Section("toy_lag", _parse_toy_lag, "toy shorthand for the lag's parameters"))
+        "toy_gain", _builder(Gain), functools.partial(_numbers_only, Gain), "toy gain"))
+    registry.register_section(registry.Section("toy_lag", lambda: ToyLag, _apply_toy_lag,
+                                               "toy shorthand for the lag's parameters"))
     registry.register_fmu_model(registry.RegisteredModel("toy_FirstOrderLag", _build_lag, _check_lag_parameter))

@@ -734,9 +734,10 @@ def test_closed_loop_circles_with_a_20_ms_motor_lag_fly_without_diverging():
     from cosim.scenario import build_master, load_scenario
 
     def fly(tau_m):
-        scenario = load_scenario("circles", {"fmus.Quadrotor.parameters.tau_m": tau_m,
-                                             "simulation.duration": 5.0})
-        scenario.record.extend(f"Quadrotor.{name}" for name in ROTOR_STATE_NAMES)
+        base = load_scenario("circles", {"fmus.Quadrotor.parameters.tau_m": tau_m, "simulation.duration": 5.0})
+        scenario = load_scenario("circles", {"fmus.Quadrotor.parameters.tau_m": tau_m, "simulation.duration": 5.0,
+                                             "record.signals": [*base.record,
+                                                                *(f"Quadrotor.{n}" for n in ROTOR_STATE_NAMES)]})
         with build_master(scenario) as master:
             return master.run(scenario.duration)
 

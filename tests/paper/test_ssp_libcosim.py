@@ -47,7 +47,7 @@ def test_the_whole_mission_cannot_go_into_an_archive(tmp_path):
 
 def test_the_archive_of_plant_and_wind(tmp_path):
     scenario = plant_and_wind()
-    assert scenario.connections == ["WindGust.v_wind_{x,y,z} -> Quadrotor.wind_{x,y,z}"]
+    assert scenario.connections == ("WindGust.v_wind_{x,y,z} -> Quadrotor.wind_{x,y,z}",)
     path = export_ssp(scenario, tmp_path / "plant_and_wind.ssp")
     with zipfile.ZipFile(path) as z:
         assert ssd_schema_errors(z.read(SSD_NAME)) == []
