@@ -1,22 +1,22 @@
 """Many runs of one scenario, in this process or on a Dask cluster.
 
-A :class:`Task` is one run: dotted scenario overrides (applied to the base
-scenario's TOML document and validated, as ``--set`` does) and a seed
-(:func:`cosim.study_run.run_study` makes them from a study's plan). :func:`run_tasks` yields one
-small record (a dict) per task, in the order the runs finish:
+It runs :class:`~cosim.study.Run` s, the one record of a run: its index in
+a study's plan, its dotted scenario overrides (applied to the base
+scenario's document and validated, as ``--set`` does) and its seed. :func:`fly` yields one
+small record (a dict) per run, in the order the runs finish:
 
-    {"key": task.key, "status": "ok" | "diverged" | "failed", "error": str | None,
+    {"key": run.index, "status": "ok" | "diverged" | "failed", "error": str | None,
      "seed": int, "wall_time_s": float, "metrics": {...}, "pid": int}
 
 A run that diverges, fails, or cannot even be built (a sampled value the
 scenario refuses, an FMU that refuses a parameter, a worker that died) is a
 record with its status and message, never an exception.
 
-Engines: ``workers = 1`` and no ``scheduler`` runs every task in this
+Engines: ``workers = 1`` and no ``scheduler`` runs every run in this
 process, one after the other (no Dask at all). Otherwise a
 ``dask.distributed`` client: a ``LocalCluster`` of ``workers`` processes
 with one thread each, or the running cluster at ``scheduler`` (an address
-such as ``tcp://127.0.0.1:8786``). Tasks are submitted in a bounded window
+such as ``tcp://127.0.0.1:8786``). Runs are submitted in a bounded window
 (a few per worker thread) and collected with ``as_completed``, so memory
 stays flat however many runs a study has.
 
@@ -39,25 +39,16 @@ import shutil
 import tempfile
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping
 
 from .errors import CosimError, one_line
 from .scenario import Scenario, apply_overrides, build_master, fmu_file, parse_scenario
+from .study import Run
 
-__all__ = ["Task", "MasterCache", "run_tasks", "execute", "structure_key"]
+__all__ = ["MasterCache", "fly", "execute", "structure_key"]
 
 Metrics = Callable[[Scenario, Any], Mapping[str, Any]]
-
-
-@dataclass(frozen=True)
-class Task:
-    """One run: ``key`` is the caller's (returned with the record)."""
-
-    key: Any
-    overrides: Mapping[str, Any] = field(default_factory=dict)
-    seed: int | None = None  # None: the scenario's [simulation] seed
 
 
 def structure_key(scenario: Scenario) -> str:
@@ -141,18 +132,18 @@ def _message(exc: BaseException) -> str:
     return one_line(text)
 
 
-def execute(raw: Mapping[str, Any], source: str | None, task: Task, metrics: Metrics | None = None,
+def execute(raw: Mapping[str, Any], source: str | None, run: Run, metrics: Metrics | None = None,
             cache: MasterCache | None = None) -> dict[str, Any]:
-    """Run one task (in a worker, or here); always returns its record."""
-    record = _failed(task, None, os.getpid())
+    """Fly one run (in a worker, or here); always returns its record."""
+    record = _failed(run, None, os.getpid())
     cache = cache or _worker_cache()
     try:
-        scenario = parse_scenario(apply_overrides(dict(raw), task.overrides),
+        scenario = parse_scenario(apply_overrides(dict(raw), run.overrides),
                                   source=Path(source) if source else None)
     except Exception as exc:  # a value the scenario refuses: this run's failure, not the study's
         record["error"] = f"invalid scenario: {_message(exc)}"
         return record
-    seed = scenario.seed if task.seed is None else int(task.seed)
+    seed = scenario.seed if run.seed is None else int(run.seed)
     record["seed"] = seed
     try:
         master = cache.get(scenario)
@@ -174,27 +165,27 @@ def execute(raw: Mapping[str, Any], source: str | None, task: Task, metrics: Met
     return record
 
 
-def _failed(task: Task, error: str | None, pid: int | None = None) -> dict[str, Any]:
-    """A task's record as it stands when the run failed (or before it ran): the one record layout."""
-    return {"key": task.key, "status": "failed", "error": error, "seed": task.seed, "wall_time_s": None,
+def _failed(run: Run, error: str | None, pid: int | None = None) -> dict[str, Any]:
+    """A run's record as it stands when it failed (or before it flew): the one record layout."""
+    return {"key": run.index, "status": "failed", "error": error, "seed": run.seed, "wall_time_s": None,
             "metrics": {}, "pid": pid}
 
 
-def run_tasks(scenario: Scenario, tasks: Iterable[Task], workers: int = 1, scheduler: str | None = None,
+def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: str | None = None,
               metrics: Metrics | None = None, window: int = 4) -> Iterator[dict[str, Any]]:
-    """Run every task of ``scenario`` (its TOML document and file); yield each
+    """Fly every run of ``scenario`` (its document and file); yield each
     record as its run finishes. ``workers = 1`` without ``scheduler``: in
     this process; else on Dask (see the module's docstring)."""
     raw, source = scenario.raw, str(scenario.source) if scenario.source else None
     if scheduler is None and workers <= 1:
         cache = MasterCache()
         try:
-            for task in tasks:
-                yield execute(raw, source, task, metrics, cache)
+            for run in runs:
+                yield execute(raw, source, run, metrics, cache)
         finally:
             cache.close()
         return
-    yield from _run_dask(raw, source, tasks, workers, scheduler, metrics, window)
+    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window)
 
 
 def _client(workers: int, scheduler: str | None):
@@ -216,30 +207,30 @@ def _client(workers: int, scheduler: str | None):
         return Client(cluster), cluster
 
 
-def _run_dask(raw, source, tasks, workers, scheduler, metrics, window) -> Iterator[dict[str, Any]]:
+def _run_dask(raw, source, runs, workers, scheduler, metrics, window) -> Iterator[dict[str, Any]]:
     from dask.distributed import as_completed
 
     client, cluster = _client(workers, scheduler)
     try:
         slots = max(1, sum(client.nthreads().values())) * max(1, window)
-        pending = iter(tasks)
+        pending = iter(runs)
         raw = dict(raw)
-        submitted: dict[Any, Task] = {}
+        submitted: dict[Any, Run] = {}
 
-        def submit(task: Task):
+        def submit(run: Run):
             # pure=False: two runs are never the same task to Dask, even if equal
-            fut = client.submit(execute, raw, source, task, metrics, pure=False)
-            submitted[fut.key] = task
+            fut = client.submit(execute, raw, source, run, metrics, pure=False)
+            submitted[fut.key] = run
             return fut
 
         first = [submit(t) for _, t in zip(range(slots), pending)]
         flow = as_completed(first)
         for fut in flow:
-            task = submitted.pop(fut.key)
+            run = submitted.pop(fut.key)
             try:
                 record = fut.result()
             except Exception as exc:  # the worker died (e.g. a crash inside an FMU) or the task was lost
-                record = _failed(task, f"worker: {_message(exc)}")
+                record = _failed(run, f"worker: {_message(exc)}")
             fut.release()
             yield record
             nxt = next(pending, None)

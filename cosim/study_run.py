@@ -1,7 +1,7 @@
 """Running a study: its runs on the engine's runner, one row per run, the summary.
 
 :func:`run_study` executes the plan of a :class:`~cosim.study.Study`
-(:func:`~cosim.study.runs`) through :func:`cosim.dask_runner.run_tasks`
+(:func:`~cosim.study.runs`) through :func:`cosim.dask_runner.fly`
 (in this process or on a Dask cluster) and writes one results layout for
 every study, tables included (``docs/studies.md``)::
 
@@ -241,7 +241,7 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
     rows come back in :attr:`StudyResult.rows`, with whatever else ``metrics``
     returned (an analysis may return a recorded run). With ``out_dir`` the
     driver keeps no row in memory: its memory does not grow with the study."""
-    from .dask_runner import Task, run_tasks
+    from .dask_runner import fly
 
     started = time.perf_counter()
     base = study.scenario
@@ -265,11 +265,11 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
             _sidecar(out, study, total, skipped, "running")
         pending: dict[int, Any] = {}
 
-        def tasks():
+        def todo():
             for run in runs(study):
                 if not _is_done(done, run.index):
                     pending[run.index] = run
-                    yield Task(run.index, run.overrides, run.seed)
+                    yield run
 
         kept: list[dict[str, Any]] = []
         counts: dict[str, int] = {}
@@ -284,7 +284,7 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
         try:
             if progress is not None:
                 progress(0, total - skipped)
-            for n, rec in enumerate(run_tasks(base, tasks(), workers=workers, scheduler=scheduler, metrics=metrics),
+            for n, rec in enumerate(fly(base, todo(), workers=workers, scheduler=scheduler, metrics=metrics),
                                     1):
                 run = pending.pop(rec["key"])
                 # every metric the function gave stays in a row kept in memory (an analysis may return

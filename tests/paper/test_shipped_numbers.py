@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.dask_runner import MasterCache, Task, execute
+from cosim.dask_runner import MasterCache, execute
 from cosim.scenario import apply_overrides, parse_scenario
 from cosim.study import load_study, runs
 from quadrotor_paper.cli import _study_path
@@ -47,7 +47,7 @@ def test_the_first_and_last_run_of_every_shipped_study_are_unchanged(name):
     cache = MasterCache()
     try:
         for run in _planned(study, {0, len(REFERENCE[name]["runs"]) - 1}):
-            rec = execute(base.raw, str(base.source), Task(run.index, run.overrides, run.seed), study_metrics, cache)
+            rec = execute(base.raw, str(base.source), run, study_metrics, cache)
             _check(name, run.index, rec["status"], rec["metrics"])
     finally:
         cache.close()
