@@ -29,7 +29,7 @@ from cosim.scenario import Scenario, check_fmu_parameters
 from cosim.schema import NonNegative, NonNegativeInt, Strings, Table, numbers, refuse
 from fnn_controller.variants import DEFAULT_VARIANT
 
-__all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "wind_parameter", "metric_signals",
+__all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "metric_signals",
            "controller_variant"]
 
 WIND_KEYS = {"speed": "v_w", "ramp_time": "ramp_time", "turbulence": "turbulence",
@@ -90,14 +90,6 @@ class Metrics(Table):
 
 def apply_metrics(where: str, metrics: Metrics, fmus) -> dict[str, list[str]]:
     return {"position": list(metrics.position), "reference": list(metrics.reference)}
-
-
-def wind_parameter(scenario: Scenario, key: str = "speed") -> str:
-    """The run-level parameter name (``Fmu.var``) of a ``[wind]`` key."""
-    wind = scenario.sections.get("wind")
-    if wind is None:
-        raise ScenarioError(f"scenario {scenario.name!r} has no [wind] section")
-    return f"{wind['fmu']}.{WIND_KEYS[key]}"
 
 
 def metric_signals(scenario: Scenario) -> tuple[list[str], list[str]]:

@@ -220,20 +220,15 @@ def growth_rate(t: np.ndarray, y: np.ndarray, t_min: float = 0.0) -> float:
 def pd_mission_rmse(wind_speeds=(0.0, 1.0, 3.0, 5.0), scenario: str = "circles") -> dict[float, float]:
     """Euclidean RMSE (m) of the PD alone on the paper's mission (the shipped
     ``circles`` scenario, §5.2) for each gust speed (m/s) -- Table 2's PD row,
-    by :func:`quadrotor_paper.metrics.rmse` on the scenario's ``[metrics]`` signals."""
-    from cosim.scenario import build_master, load_scenario
+    a study (the case ``pd``, the wind speeds its grid) measured by
+    :func:`quadrotor_paper.experiments.study_metrics`."""
+    from cosim.study import parse_study
 
-    from ..metrics import rmse
-    from ..missions import metric_signals, wind_parameter
+    from ..experiments import measure
 
-    sc = load_scenario(scenario, {"controller.variant": "pd"})
-    position, reference = metric_signals(sc)
-    out = {}
-    with build_master(sc) as master:
-        for speed in wind_speeds:
-            run = master.run(sc.duration, seed=sc.seed, parameters={wind_parameter(sc, "speed"): float(speed)})
-            out[float(speed)] = rmse(run, position, reference)
-    return out
+    study = parse_study({"scenario": scenario, "name": "pd_mission_rmse", "cases": {"pd": {}},
+                         "sweep": {"grid": {"wind.speed": [float(w) for w in wind_speeds]}}})
+    return {row["wind.speed"]: row["rmse_m"] for row in measure(study).rows}
 
 
 # ---- checks (what the tests and the report state) --------------------------------------

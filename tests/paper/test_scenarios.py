@@ -10,7 +10,6 @@ import pytest
 from cosim import registry
 from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.scenario import apply_overrides, build_master, load_scenario, parse_scenario, shipped_scenarios
-from quadrotor_paper.missions import wind_parameter
 
 
 def _raw(name="circles"):
@@ -114,7 +113,7 @@ def test_bad_toml_is_reported_with_the_file(tmp_path):
 def test_overrides_and_wind_shorthand():
     sc = load_scenario("circles", {"wind.speed": 5.0, "simulation.duration": 2.0})
     assert sc.fmus["WindGust"]["parameters"]["v_w"] == 5.0 and sc.duration == 2.0
-    assert wind_parameter(sc, "speed") == "WindGust.v_w"
+    assert sc.sections["wind"] == {"fmu": "WindGust"}
 
 
 def test_custom_python_component_from_a_factory(tmp_path):
