@@ -17,7 +17,7 @@ process, one after the other (no Dask at all). Otherwise a
 ``dask.distributed`` client: a ``LocalCluster`` of ``workers`` processes
 with one thread each, or the running cluster at ``scheduler`` (an address
 such as ``tcp://127.0.0.1:8786``). Runs are submitted in a bounded window
-(a few per worker thread) and collected with ``as_completed``, so memory
+(a few per worker thread) and collected as they finish, so memory
 stays flat however many runs a study has.
 
 Each worker process keeps a small cache of built masters (:class:`MasterCache`),
@@ -38,11 +38,13 @@ import os
 import shutil
 import tempfile
 import threading
+import time
 from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping
 
-from .errors import CosimError, one_line
+from .errors import CosimError, ScenarioError, one_line
+from .limits import WORKER_TIMEOUT
 from .scenario import Scenario, apply_overrides, build_master, fmu_file, parse_scenario
 from .study import Run
 
@@ -72,7 +74,7 @@ class MasterCache:
         self._tmp: Path | None = None
 
     def _fmu_dirs(self, scenario: Scenario) -> dict[str, Path]:
-        from fmpy import extract
+        from .files import extract_zip
 
         dirs = {}
         for name, spec in scenario.fmus.items():
@@ -84,9 +86,13 @@ class MasterCache:
                     if self._tmp is None:
                         self._tmp = Path(tempfile.mkdtemp(prefix="cosim-worker-fmus-"))
                     target = self._tmp / str(len(self._extracted))
-                    extract(archive, str(target))
+                    try:
+                        extract_zip(archive, target, f"FMU {archive}")
+                    except ScenarioError:  # the build says why, in the scenario's words
+                        continue
                     self._extracted[archive] = target
-            dirs[name] = self._extracted[archive]
+            if archive in self._extracted:
+                dirs[name] = self._extracted[archive]
         return dirs
 
     def get(self, scenario: Scenario):
@@ -115,6 +121,7 @@ class MasterCache:
 
 
 LOG_LENGTH = 100  # entries of the local scheduler's diagnostic logs (see _client)
+POLL = 1.0  # s between looks at the cluster while no run finishes
 
 _LOCAL = threading.local()  # a worker's cache, one per thread (a master is not thread-safe)
 
@@ -172,10 +179,14 @@ def _failed(run: Run, error: str | None, pid: int | None = None) -> dict[str, An
 
 
 def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: str | None = None,
-              metrics: Metrics | None = None, window: int = 4) -> Iterator[dict[str, Any]]:
+        metrics: Metrics | None = None, window: int = 4,
+        worker_timeout: float | None = WORKER_TIMEOUT) -> Iterator[dict[str, Any]]:
     """Fly every run of ``scenario`` (its document and file); yield each
     record as its run finishes. ``workers = 1`` without ``scheduler``: in
-    this process; else on Dask (see the module's docstring)."""
+    this process; else on Dask (see the module's docstring). On Dask, when
+    the cluster has had no worker for ``worker_timeout`` seconds (``None``:
+    wait for ever), a :class:`~cosim.errors.CosimError` says so and the
+    flight stops (the records yielded so far are kept by the caller)."""
     raw, source = scenario.raw, str(scenario.source) if scenario.source else None
     if scheduler is None and workers <= 1:
         cache = MasterCache()
@@ -185,7 +196,7 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
         finally:
             cache.close()
         return
-    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window)
+    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout)
 
 
 def _client(workers: int, scheduler: str | None):
@@ -195,7 +206,10 @@ def _client(workers: int, scheduler: str | None):
     from dask.distributed import Client, LocalCluster
 
     if scheduler is not None:
-        return Client(scheduler), None
+        try:
+            return Client(scheduler, timeout=30), None
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise CosimError(f"--scheduler {scheduler}: no Dask scheduler answers there ({_message(exc)})") from None
     # The local scheduler lives in this process. Its diagnostic logs keep
     # about 19 kB per task up to 10 000 entries (measured by
     # benchmarks/study_efficiency.py): short logs keep the driver's memory
@@ -207,8 +221,9 @@ def _client(workers: int, scheduler: str | None):
         return Client(cluster), cluster
 
 
-def _run_dask(raw, source, runs, workers, scheduler, metrics, window) -> Iterator[dict[str, Any]]:
-    from dask.distributed import as_completed
+def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
+              worker_timeout: float | None) -> Iterator[dict[str, Any]]:
+    from dask.distributed import wait
 
     client, cluster = _client(workers, scheduler)
     try:
@@ -223,19 +238,33 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window) -> Iterato
             submitted[fut.key] = run
             return fut
 
-        first = [submit(t) for _, t in zip(range(slots), pending)]
-        flow = as_completed(first)
-        for fut in flow:
-            run = submitted.pop(fut.key)
+        flying = {submit(t) for _, t in zip(range(slots), pending)}
+        alone_since = None  # when the cluster was last seen without a worker
+        while flying:
             try:
-                record = fut.result()
-            except Exception as exc:  # the worker died (e.g. a crash inside an FMU) or the task was lost
-                record = _failed(run, f"worker: {_message(exc)}")
-            fut.release()
-            yield record
-            nxt = next(pending, None)
-            if nxt is not None:
-                flow.add(submit(nxt))
+                done, flying = wait(flying, timeout=POLL, return_when="FIRST_COMPLETED")
+            except TimeoutError:  # nothing finished within POLL: look at the cluster
+                done = set()
+            for fut in done:
+                run = submitted.pop(fut.key)
+                try:
+                    record = fut.result()
+                except Exception as exc:  # the worker died (e.g. a crash inside an FMU) or the task was lost
+                    record = _failed(run, f"worker: {_message(exc)}")
+                fut.release()
+                yield record
+                nxt = next(pending, None)
+                if nxt is not None:
+                    flying.add(submit(nxt))
+            if done or client.nthreads():
+                alone_since = None
+                continue
+            now = time.monotonic()
+            alone_since = alone_since or now
+            if worker_timeout is not None and now - alone_since >= worker_timeout:
+                raise CosimError(f"no Dask worker for {worker_timeout:g} s ({scheduler or 'the local cluster'} lost "
+                                 f"them all): the study stops with {len(submitted)} runs in flight; its table keeps "
+                                 f"every run that finished, and running it again resumes it")
     finally:
         client.close()
         if cluster is not None:

@@ -26,6 +26,7 @@ import ctypes
 import itertools
 import os
 import shutil
+import tempfile
 import weakref
 import zipfile
 from collections import deque
@@ -33,16 +34,16 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
-from fmpy import extract, platform, platform_tuple, read_model_description, sharedLibraryExtension
+from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 
 from .component import Port
-from .errors import FmuCallError, FmuLoadError
+from .errors import FmuCallError, FmuLoadError, ScenarioError
+from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
 
 __all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "SEED_LIMIT"]
 
-SEED_LIMIT = 2 ** 53  # a seed parameter is a double: every whole number up to 2^53 is exact
 
 _TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit float
 
@@ -230,7 +231,24 @@ class FmuComponent:
         return out
 
     def _read_model_description(self, validate: bool):
-        """fmpy's reading of the modelDescription, its failures told in one line."""
+        """fmpy's reading of the modelDescription, its failures told in one
+        line; an archive is looked at first (a regular file, every entry within
+        the limits of :mod:`cosim.files`): an FMU file is data from anyone."""
+        from .files import regular_file, zip_members
+        from .limits import MAX_DOCUMENT_BYTES
+
+        try:
+            if not self.path.is_dir():
+                regular_file(self.path, "FMU")
+                with zipfile.ZipFile(self.path) as archive:
+                    entry = zip_members(archive, "the archive").get("modelDescription.xml")
+                if entry is not None and entry.file_size > 4 * MAX_DOCUMENT_BYTES:
+                    raise FmuLoadError(self.name, self.path, f"modelDescription.xml is {entry.file_size} bytes; at "
+                                                             f"most {4 * MAX_DOCUMENT_BYTES} are read")
+        except ScenarioError as exc:
+            raise FmuLoadError(self.name, self.path, str(exc).removeprefix(f"FMU {str(self.path)!r}: ")) from None
+        except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, EOFError, ValueError) as exc:
+            raise FmuLoadError(self.name, self.path, f"not an FMU: not a zip archive ({exc})") from None
         try:
             return read_model_description(str(self.path), validate=validate)
         except zipfile.BadZipFile as exc:
@@ -280,9 +298,11 @@ class FmuComponent:
         if self.path.is_dir():
             self._unzipdir = self.path
         else:
+            from .files import extract_zip
+
             try:
-                self._unzipdir = Path(extract(str(self.path)))
-            except (zipfile.BadZipFile, OSError) as exc:
+                self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"), "the archive")
+            except ScenarioError as exc:
                 raise FmuLoadError(self.name, self.path, f"cannot extract the archive: {exc}") from None
             self._owns_unzipdir = True
         md = self.model_description

@@ -41,7 +41,8 @@ import numpy as np
 
 from .component import PythonComponent
 from .connection import Connection, check_connections, parse_connections
-from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError
+from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError
+from .limits import SEED_LIMIT
 from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
 from .plan import ORDERINGS, FmuBlock, PythonBlock, make_plan
@@ -168,6 +169,9 @@ class Master:
         raises: there is no run to return. ``profile`` times each phase of
         the loop (``RunResult.phase_times``), at a small cost per step.
         """
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= SEED_LIMIT:
+            # one range in every form: an FMU's seed parameter is a double, exact to 2^53
+            raise ScenarioError(f"seed = {seed!r}: expected an integer in [0, 2^53 = {SEED_LIMIT}]")
         h = self.step
         n_steps = int(round(duration / h))
         if n_steps < 1 or abs(n_steps * h - duration) > 1e-9 * max(1.0, abs(duration)):

@@ -8,18 +8,34 @@ on the way out); a process killed from outside loses at most the last
 unflushed block. :func:`read_results` reads a complete or partial file.
 
 Beside ``results.csv`` a sidecar ``results.csv.json`` holds the columns,
-their units, the step, and the run's status (``running`` until the run
-ends, then ``ok``, ``diverged`` or ``failed`` with the error message).
+their units, the step, the rows on disk (brought up to date as blocks are
+flushed, at least once a second) and the run's status (``running`` until the
+run ends, then ``ok``, ``diverged`` or ``failed`` with the error message).
+
+The rows in memory are the run's result: a run whose recording would need
+more than :data:`MAX_RECORD_BYTES` is refused before it starts, with what it
+would need (``docs/security.md``).
 """
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Recorder", "read_results", "sidecar_path"]
+from .errors import ScenarioError
+from .limits import MAX_RECORD_BYTES
+
+__all__ = ["Recorder", "read_results", "sidecar_path", "record_bytes"]
+
+SIDECAR_EVERY = 1.0  # s of wall time between updates of the sidecar's row count
+
+
+def record_bytes(n_rows: int, n_columns: int) -> int:
+    """Memory the rows of a run take (float64)."""
+    return 8 * n_rows * n_columns
 
 
 def sidecar_path(csv_path: str | Path) -> Path:
@@ -40,12 +56,18 @@ class Recorder:
         if block_rows < 1:
             raise ValueError(f"block_rows = {block_rows} must be at least 1")
         self.columns, self.units = tuple(columns), tuple(units)
+        need = record_bytes(n_rows, len(self.columns))
+        if need > MAX_RECORD_BYTES:
+            raise ScenarioError(f"simulation.duration: {n_rows} rows of {len(self.columns)} recorded signals need "
+                                f"{need / 2 ** 30:.1f} GiB in memory; at most {MAX_RECORD_BYTES / 2 ** 30:.0f} GiB "
+                                f"(record fewer signals, or run a shorter mission)")
         self.data = np.full((n_rows, len(self.columns)), np.nan)
         self.n_rows = 0  # rows written into data
         self.path = Path(path) if path is not None else None
         self.block_rows = block_rows
         self.meta = dict(meta or {})
         self._flushed = 0
+        self._told = time.monotonic()
         self._fmt = ",".join([f"%.{digits}g"] * len(self.columns)) + "\n"
         self._file = None
         if self.path is not None:
@@ -75,6 +97,10 @@ class Recorder:
         self._file.write("".join(fmt % tuple(row) for row in block))
         self._file.flush()
         self._flushed = self.n_rows
+        now = time.monotonic()
+        if now - self._told >= SIDECAR_EVERY:  # what is on disk, said while the run goes on (a kill loses no count)
+            self._told = now
+            self._write_sidecar("running", None)
 
     def close(self, status: str = "ok", error: str | None = None) -> None:
         if self._file is None:

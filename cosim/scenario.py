@@ -29,14 +29,18 @@ from typing import Annotated, Any, Mapping, Union
 from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag, ValidationError, create_model, model_validator
 
 from . import registry
-from .errors import FmuError, ScenarioError
-from .fmu_component import SEED_LIMIT
+from .errors import CosimError, FmuError, ScenarioError
+from .files import read_toml
+from .limits import MAX_STEPS
+from .limits import MAX_RECORD_BYTES
+from .recorder import record_bytes
+from .limits import SEED_LIMIT
 from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, json_schema, one_of, refuse,
                      scenario_error, where)
 
 __all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "scenario_model", "scenario_json_schema", "load_scenario",
            "parse_scenario", "shipped_scenarios", "scenario_path", "apply_overrides", "build_master", "fmu_file",
-           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "read_toml", "ORDERINGS"]
+           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "ORDERINGS"]
 
 ORDERINGS = ("feedthrough", "exchange")  # the master's (docs/cosim.md)
 
@@ -59,6 +63,17 @@ class Simulation(Table):
         n = round(self.duration / self.step)
         if n < 1 or abs(n * self.step - self.duration) > 1e-9 * max(1.0, self.duration):
             raise refuse(f"not a whole number of steps of {self.step!r} s", key="duration", value=self.duration)
+        if n > MAX_STEPS:
+            raise refuse(f"{n} steps of {self.step!r} s; at most {MAX_STEPS} a run", key="duration",
+                         value=self.duration)
+        # a double has about 16 digits: far from 0, t0 + n h can no longer tell one step from the next
+        end = abs(self.start_time) + self.duration
+        if math.ulp(end) > 1e-6 * self.step:
+            if math.ulp(self.duration) > 1e-6 * self.step:
+                raise refuse(f"too small to be told apart at t = {self.duration:g} s (a double has about 16 digits)",
+                             key="step", value=self.step)
+            raise refuse(f"at this time a step of {self.step!r} s is lost in rounding (a double has about 16 "
+                         f"digits); start nearer 0", key="start_time", value=self.start_time)
         return self
 
 
@@ -92,6 +107,9 @@ class FmuSpec(Table):
             path = self.resolved(_source(info))
             if not path.exists():
                 raise refuse(f"no such file ({path})", key="path", value=self.path)
+            if not (path.is_file() or path.is_dir()):  # /dev/zero, a FIFO: nothing an FMU is read from
+                raise refuse(f"not a regular file or an extracted FMU's folder ({path})", key="path",
+                             value=self.path)
         _check_model_parameters(self.model, self.parameters)
         return self
 
@@ -378,6 +396,12 @@ class Scenario:
         set_(self, "sections", _frozen(sections))
         set_(self, "connections", tuple(model.connections))
         set_(self, "record", tuple(model.record.signals))
+        need = record_bytes(self.n_steps + 1, len(self.record) + 1)  # the rows a run keeps: refused when read
+        if need > MAX_RECORD_BYTES:
+            raise ScenarioError(f"simulation.duration = {self.duration!r}: {self.n_steps + 1} rows of "
+                                f"{len(self.record) + 1} recorded columns need {need / 2 ** 30:.1f} GiB in memory; "
+                                f"at most {MAX_RECORD_BYTES / 2 ** 30:.0f} GiB (record fewer signals, or run a "
+                                f"shorter mission)")
         set_(self, "block_rows", model.record.block_rows)
         set_(self, "envelope", MappingProxyType(dict(model.envelope)))
 
@@ -397,16 +421,36 @@ class Scenario:
         return f"Scenario({self.name!r}, source={str(self.source) if self.source else None!r})"
 
 
+def dotted_key(dotted: str) -> list[str]:
+    """The parts of a dotted key as TOML writes one: ``simulation.duration``,
+    ``envelope."Quadrotor.phi"`` (a part holding a dot is quoted)."""
+    if '"' not in dotted and "'" not in dotted:
+        parts = dotted.split(".")
+        if all(parts):
+            return [p.strip() for p in parts]
+    try:
+        node: Any = tomllib.loads(f"{dotted} = 0")
+    except (tomllib.TOMLDecodeError, ValueError):
+        raise ScenarioError(f"key {dotted!r}: not a dotted key (parts joined by dots; a part holding a dot or a "
+                            f"space is quoted: envelope.\"Quadrotor.phi\")") from None
+    parts = []
+    while isinstance(node, dict) and len(node) == 1:
+        key, node = next(iter(node.items()))
+        parts.append(key)
+    return parts
+
+
 def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
-    """A copy of ``raw`` with dotted keys set, e.g. ``{"simulation.duration": 5.0}``."""
+    """A copy of ``raw`` with dotted keys set, e.g. ``{"simulation.duration": 5.0}``
+    (:func:`dotted_key`)."""
     out = copy.deepcopy(dict(raw))
     for dotted, value in overrides.items():
-        keys = dotted.split(".")
+        keys = dotted_key(dotted)
         node = out
         for k in keys[:-1]:
             nxt = node.setdefault(k, {})
             if not isinstance(nxt, dict):
-                raise ScenarioError(f"override {dotted}: {k!r} is not a table")
+                raise ScenarioError(f"{dotted} = {value!r}: {k!r} is not a table")
             node = nxt
         node[keys[-1]] = copy.deepcopy(value)
     return out
@@ -446,14 +490,6 @@ def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None 
     """Read, override (dotted keys) and validate a scenario file."""
     path = scenario_path(name_or_path)
     return parse_scenario(apply_overrides(read_toml(path), overrides or {}), source=path)
-
-
-def read_toml(path: Path) -> dict[str, Any]:
-    """A TOML file as a mapping, or a :class:`ScenarioError` naming the file and the fault."""
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
 
 
 # ---- from scenario to master ---------------------------------------------------------------
@@ -527,12 +563,30 @@ def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
 def _make_component(name: str, spec: Mapping[str, Any], context: registry.BuildContext):
     if "kind" in spec:
         return registry.component_kinds()[spec["kind"]].build(name, spec["parameters"], context)
+    where = f"components.{name}.factory = {spec['factory']!r}"
     module, _, attr = spec["factory"].partition(":")
     try:
         factory = getattr(importlib.import_module(module), attr)
     except (ImportError, AttributeError) as exc:
-        raise ScenarioError(f"components.{name}.factory = {spec['factory']!r}: {exc}") from None
-    return factory(name=name, **spec["parameters"])
+        raise ScenarioError(f"{where}: {exc}") from None
+    except Exception as exc:  # the module itself failed to import (the user's code)
+        raise ScenarioError(f"{where}: importing {module} failed: {type(exc).__name__}: {exc}") from None
+    if not callable(factory):
+        raise ScenarioError(f"{where}: {type(factory).__name__} {attr!r} is not callable")
+    try:
+        component = factory(name=name, **dict(spec["parameters"]))
+    except CosimError:
+        raise
+    except Exception as exc:  # the user's own code refused its parameters, or failed
+        raise ScenarioError(f"{where}: calling it with name={name!r} and {dict(spec['parameters'])!r} failed: "
+                            f"{type(exc).__name__}: {exc}") from None
+    from .fmu_component import FmuComponent
+
+    for port in (() if isinstance(component, FmuComponent) else ("inputs", "outputs", "step", "start")):
+        if not hasattr(component, port):
+            raise ScenarioError(f"{where}: it returned a {type(component).__name__}, not a component "
+                                f"(no {port!r}; cosim.component.PythonComponent)")
+    return component
 
 
 def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None):

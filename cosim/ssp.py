@@ -36,6 +36,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import posixpath
 import shutil
 import tempfile
 import time as _time
@@ -53,6 +54,8 @@ from lxml import etree
 from . import registry
 from .connection import check_connections, parse_connections
 from .errors import CosimError, FmuError, ScenarioError, one_line
+from .files import extract_zip, regular_file, safe_name, zip_members
+from .limits import MAX_DOCUMENT_BYTES
 from .scenario import Scenario, apply_overrides, fmu_error_in_scenario, fmu_file, parse_scenario
 from .scenario import check_fmu_file
 
@@ -342,7 +345,7 @@ def ssd_schema_errors(ssd: str | Path | bytes) -> list[str]:
             for p, f in (("ssd", "SystemStructureDescription.xsd"), ("ssv", "SystemStructureParameterValues.xsd")))
         driver = f'<xs:schema xmlns:xs="http://www.w3.org/2001/XMLSchema">{imports}</xs:schema>'
         _SCHEMA = etree.XMLSchema(etree.fromstring(driver.encode(), base_url=folder.as_uri() + "/"))
-    document = etree.fromstring(ssd) if isinstance(ssd, bytes) else etree.parse(str(ssd))
+    document = _xml(ssd)
     if _SCHEMA.validate(document):
         return []
     return [f"line {e.line}: {e.message}" for e in _SCHEMA.error_log]
@@ -383,6 +386,13 @@ def _number(where: str, text: str | None, what: str) -> float:
     if not math.isfinite(value):
         raise ScenarioError(f"{where}: {what} = {text!r} is not a finite number")
     return value
+
+
+def _integer(where: str, text: str | None, what: str) -> int:
+    """A whole number written as one (``1.5`` and ``1e3`` are refused, not truncated)."""
+    if text is None or not text.strip().lstrip("+-").isdigit():
+        raise ScenarioError(f"{where}: {what} = {text!r} is not an integer")
+    return int(text)
 
 
 def _source_path(where: str, source: str, folder: Path) -> Path:
@@ -454,7 +464,7 @@ def _bindings(where: str, component: etree._Element, folder: Path) -> dict[str, 
                 raise ScenarioError(f"{at}: sourceBase {binding.get('sourceBase')!r} is not supported")
             path = _source_path(at, source, folder)
             try:
-                node = etree.parse(str(path)).getroot()
+                node = _xml(path).getroot()
             except etree.XMLSyntaxError as exc:
                 raise ScenarioError(f"{at}: {source}: not well-formed XML: {exc}") from None
             values.update(_parameter_set(f"{at} ({source})", node))
@@ -523,7 +533,7 @@ def _annotations(parent: etree._Element, type_: str) -> list[etree._Element]:
 def _read_ssd(ssd_path: Path) -> _System:
     """Parse and check an SSD; every refusal names its element."""
     try:
-        root = etree.parse(str(ssd_path)).getroot()
+        root = _xml(ssd_path).getroot()
     except etree.XMLSyntaxError as exc:
         raise ScenarioError(f"not well-formed XML: {exc}") from None
     if root.tag != _q("ssd", "SystemStructureDescription"):
@@ -565,9 +575,9 @@ def _read_ssd(ssd_path: Path) -> _System:
     for scenario in _annotations(system, COSIM_ANNOTATION):
         where = f"ssd:System: ssc:Annotation {COSIM_ANNOTATION}"
         if scenario.get("seed") is not None:
-            out.seed = int(_number(where, scenario.get("seed"), "seed"))
+            out.seed = _integer(where, scenario.get("seed"), "seed")
         if scenario.get("blockRows") is not None:
-            out.block_rows = int(_number(where, scenario.get("blockRows"), "blockRows"))
+            out.block_rows = _integer(where, scenario.get("blockRows"), "blockRows")
         out.ordering = scenario.get("ordering")
         for item in scenario:
             tag = etree.QName(item).localname if isinstance(item.tag, str) else None
@@ -580,9 +590,8 @@ def _read_ssd(ssd_path: Path) -> _System:
                                         f"no parameter is named")
                 out.seed_parameters[component] = name
                 if item.get("stream") is not None:
-                    stream = _number(f"{where}: SeedParameter {component!r}", item.get("stream"), "stream")
-                    out.seed_streams[component] = int(stream) if stream == int(stream) else stream  # the scenario
-                    # parser refuses a fraction, naming the key
+                    out.seed_streams[component] = _integer(f"{where}: SeedParameter {component!r}", item.get("stream"),
+                                                           "stream")
             elif tag == "Envelope":
                 signal = item.get("signal", "")
                 out.envelope[signal] = [_number(f"{where}: Envelope {signal!r}", item.get(k), k)
@@ -602,10 +611,39 @@ def _read_ssd(ssd_path: Path) -> _System:
     return out
 
 
+def _xml(source: str | Path | bytes) -> etree._ElementTree:
+    """An XML document read as data: no entity expansion, no DTD, no network
+    (an archive is data from anyone: ``docs/security.md``)."""
+    parser = etree.XMLParser(resolve_entities=False, load_dtd=False, no_network=True, huge_tree=False)
+    if isinstance(source, bytes):
+        return etree.ElementTree(etree.fromstring(source, parser))
+    return etree.parse(str(source), parser)
+
+
+def _referenced(ssd: bytes) -> set[str]:
+    """The archive entries an SSD names (its components' and parameter
+    bindings' sources, resolved from the archive's root): all an archive
+    has extracted (the rest of it may be anything)."""
+    try:
+        root = _xml(ssd).getroot()
+    except etree.XMLSyntaxError:
+        return set()  # the reader says why, naming the line
+    names = set()
+    for element in root.iter(_q("ssd", "Component"), _q("ssd", "ParameterBinding")):
+        source = element.get("source")
+        if source and not urllib.parse.urlparse(source).scheme:
+            name = posixpath.normpath(urllib.parse.unquote(source))
+            if not name.startswith(("/", "../")) and name != "..":
+                names.add(name)
+    return names
+
+
 def _open(path: Path, extract_to: str | Path | None) -> tuple[Path, Path | None]:
     """The SSD of an archive, folder or ``.ssd`` file, and the folder made
     for a temporary extraction (None when nothing was extracted, or when
-    extracted to ``extract_to``)."""
+    extracted to ``extract_to``). Of an archive only the SSD and the entries
+    it references are extracted, within the limits of :mod:`cosim.files`;
+    a broken archive is one line, and leaves no folder behind."""
     if path.is_dir():
         ssd = path / SSD_NAME
         if not ssd.is_file():
@@ -613,27 +651,32 @@ def _open(path: Path, extract_to: str | Path | None) -> tuple[Path, Path | None]
         return ssd, None
     if not path.exists():
         raise ScenarioError(f"{path}: no such file")
+    regular_file(path, "SSP archive")
     if path.suffix.lower() == ".ssd":
         return path, None
+    label = f"{path}: not an SSP archive"
     try:
-        archive = zipfile.ZipFile(path)
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise ScenarioError(f"{path}: not an SSP archive: not a zip archive ({one_line(str(exc))})") from None
-    with archive:
-        if SSD_NAME not in archive.namelist():
-            raise ScenarioError(f"{path}: not an SSP archive: it holds no {SSD_NAME}")
-        temporary = None
-        if extract_to is None:
-            folder = temporary = Path(tempfile.mkdtemp(prefix=f"ssp-{path.stem}-"))
-        else:
-            folder = Path(extract_to)
-            folder.mkdir(parents=True, exist_ok=True)
-        try:
-            archive.extractall(folder)  # zipfile drops absolute paths and '..' from member names
-        except (zipfile.BadZipFile, OSError, EOFError) as exc:
-            if temporary is not None:
-                shutil.rmtree(temporary, ignore_errors=True)
-            raise ScenarioError(f"{path}: cannot extract the archive: {one_line(str(exc))}") from None
+        with zipfile.ZipFile(path) as archive:
+            members = zip_members(archive, str(path))
+            if SSD_NAME not in members:
+                raise ScenarioError(f"{label}: it holds no {SSD_NAME}")
+            if members[SSD_NAME].file_size > MAX_DOCUMENT_BYTES:
+                raise ScenarioError(f"{path}: {SSD_NAME} is {members[SSD_NAME].file_size} bytes; at most "
+                                    f"{MAX_DOCUMENT_BYTES} are read")
+            referenced = {n for n in _referenced(archive.read(members[SSD_NAME])) if n in members}
+    except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, EOFError, ValueError) as exc:
+        raise ScenarioError(f"{label}: not a zip archive ({one_line(str(exc))})") from None
+    temporary = None
+    if extract_to is None:
+        folder = temporary = Path(tempfile.mkdtemp(prefix=f"ssp-{safe_name(path.stem)}-"))
+    else:
+        folder = Path(extract_to)
+    try:
+        extract_zip(path, folder, str(path), only={SSD_NAME} | referenced)
+    except BaseException:
+        if temporary is not None:
+            shutil.rmtree(temporary, ignore_errors=True)
+        raise
     return folder / SSD_NAME, temporary
 
 

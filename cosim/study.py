@@ -58,14 +58,15 @@ from .registry import Case, with_connections
 from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
 
 from .errors import CosimError, ScenarioError
-from .scenario import Scenario, apply_overrides, load_scenario, parse_scenario, read_toml, scenario_path
+from .files import read_toml
+from .limits import MAX_RUNS
+from .scenario import Scenario, apply_overrides, load_scenario, parse_scenario, scenario_path
 from .schema import Count, NonNegativeInt, Strings, Table, json_schema, numbers, refuse, validate
 
 __all__ = ["Case", "Study", "Run", "StudyFile", "parse_study", "load_study", "study_json_schema", "runs", "plan",
            "count", "cells", "cell_of", "with_connections", "DISTRIBUTIONS", "MAX_RUNS"]
 
 DISTRIBUTIONS = ("uniform", "normal", "choice")
-MAX_RUNS = 1_000_000  # a study's runs: its runs.csv and its summary grow with them (docs/studies.md)
 
 
 @dataclass(frozen=True)
@@ -136,7 +137,7 @@ class Run:
 
 def _seeds_value(value: Any) -> Any:
     """``N`` (seeds 0..N-1) or a list of distinct seeds, each in [0, 2^53]."""
-    from .fmu_component import SEED_LIMIT
+    from .limits import SEED_LIMIT
 
     if isinstance(value, list):
         for i, s in enumerate(value):
@@ -223,6 +224,13 @@ class RandomSweep(Table):
 def _grid_values(value: Any) -> Any:
     if not isinstance(value, list) or not value:
         raise refuse("expected a non-empty list of values", value=value)
+    seen = set()
+    for v in value:  # a value twice would run twice and count as two independent samples of one cell
+        number = isinstance(v, (int, float)) and not isinstance(v, bool)
+        canonical = json.dumps(float(v) if number else v, sort_keys=True, default=str)
+        if canonical in seen:
+            raise refuse(f"{v!r} is given twice; a grid value is one point", value=value)
+        seen.add(canonical)
     return value
 
 
@@ -368,9 +376,7 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
 
 def load_study(path: str | Path, base: Scenario | None = None) -> Study:
     path = Path(path)
-    if not path.exists():
-        raise ScenarioError(f"study {str(path)!r}: no such file")
-    return parse_study(read_toml(path), source=path, base=base)
+    return parse_study(read_toml(path, "study"), source=path, base=base)
 
 
 # ---- the plan -----------------------------------------------------------------------------

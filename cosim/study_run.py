@@ -33,6 +33,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 from .errors import ScenarioError, one_line
 from .scenario import apply_overrides, parse_scenario
 from .study import Study, count, runs
+from .limits import WORKER_TIMEOUT
 from .summary import STATUSES, summarize
 
 __all__ = ["run_study", "StudyResult", "read_runs", "columns", "write_json", "FIXED_COLUMNS", "summary_of"]
@@ -111,6 +112,10 @@ def _done(path: Path, header: list[str], total: int) -> bytearray:
             raise ScenarioError(f"{path}: holds the runs of another study (columns {reader.fieldnames}); "
                                 f"choose another --out")
         for line, row in enumerate(reader, 2):
+            if None in row or None in row.values():  # csv's marks of a row longer or shorter than the header
+                fields = sum(v is not None for k, v in row.items() if k is not None) + len(row.get(None) or ())
+                raise ScenarioError(f"{path}: line {line}: {fields} fields where the header has {len(header)}; "
+                                    f"remove the line, or choose another --out")
             run = row.get("run", "")
             if not run.isdigit() or int(run) >= total:
                 raise ScenarioError(f"{path}: line {line}: run = {run!r} is no run of this study's plan "
@@ -229,7 +234,7 @@ def summary_of(study: Study, rows: Iterable[Mapping[str, Any]], metric_names: Se
 def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int = 1, scheduler: str | None = None,
               metrics: Callable[[Any, Any], Mapping[str, Any]] | None = None, metric_names: Sequence[str] = (),
               record: Sequence[str] | None = None, progress: Callable[[int, int], None] | None = None,
-              plots: bool = True, resume: bool = True) -> StudyResult:
+              plots: bool = True, resume: bool = True, worker_timeout: float | None = WORKER_TIMEOUT) -> StudyResult:
     """Run the runs of ``study`` (those not yet in ``out_dir/runs.csv`` when
     ``resume``; all of them, the folder's old rows dropped, otherwise),
     appending a row as each finishes; then write ``runs.parquet``,
@@ -240,7 +245,9 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
     run, then after each row. Without ``out_dir`` nothing is written and the
     rows come back in :attr:`StudyResult.rows`, with whatever else ``metrics``
     returned (an analysis may return a recorded run). With ``out_dir`` the
-    driver keeps no row in memory: its memory does not grow with the study."""
+    driver keeps no row in memory: its memory does not grow with the study.
+    ``worker_timeout``: how long a Dask cluster without a worker is waited
+    for before the study stops (:func:`cosim.dask_runner.fly`; ``None``: for ever)."""
     from .dask_runner import fly
 
     started = time.perf_counter()
@@ -284,7 +291,8 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
         try:
             if progress is not None:
                 progress(0, total - skipped)
-            for n, rec in enumerate(fly(base, todo(), workers=workers, scheduler=scheduler, metrics=metrics),
+            for n, rec in enumerate(fly(base, todo(), workers=workers, scheduler=scheduler, metrics=metrics,
+                                               worker_timeout=worker_timeout),
                                     1):
                 run = pending.pop(rec["key"])
                 # every metric the function gave stays in a row kept in memory (an analysis may return

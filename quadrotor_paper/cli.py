@@ -61,6 +61,13 @@ def _overrides(pairs: Sequence[str]) -> dict[str, Any]:
     return out
 
 
+def _out_folder(given: str | None, default: Path) -> Path:
+    """The output folder, checked (made, writable) before anything runs."""
+    from cosim.files import output_folder
+
+    return output_folder(given or default)
+
+
 def _workers(n: int | None) -> int:
     return max(1, min(n or 1, os.cpu_count() or 1))
 
@@ -75,36 +82,41 @@ def _cmd_run(args) -> int:
     from .progress import progress_bar
 
     from cosim.errors import ScenarioError
+    from cosim.files import output_file, output_folder, safe_name
     from cosim.ssp import is_ssp, load_ssp
 
     overrides = _overrides(args.set)
     if args.seed is not None:
         overrides["simulation.seed"] = args.seed
-    if args.load_learned:
-        overrides["controller.learned"] = str(args.load_learned)
     if is_ssp(args.scenario):
-        if args.variant:
-            raise ScenarioError(f"{args.scenario}: --variant names a Python controller; an SSP archive's "
-                                f"controller is the FMU it holds")
+        for flag, value in (("--variant", args.variant), ("--load-learned", args.load_learned)):
+            if value:
+                raise ScenarioError(f"{flag} {value}: an SSP archive's controller is an FMU it holds, with its "
+                                    f"own model and state; give it to a TOML scenario's [controller]")
         scenario = load_ssp(args.scenario, overrides=overrides)
     else:
         if args.variant:
             overrides["controller.variant"] = args.variant
+        if args.load_learned:
+            overrides["controller.learned"] = str(args.load_learned)
         scenario = load_scenario(args.scenario, overrides)
-    out = Path(args.out) if args.out else DEFAULT_OUT / f"run-{scenario.name}"
+    # every place a result goes is checked before the run: nothing computed is lost for want of it
+    out = output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}")
+    learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
     from cosim.scenario import build_master
 
     with build_master(scenario) as master:
+        if learned_file is not None and "controller" not in master.components:
+            raise ScenarioError(f"--save-learned {learned_file}: the scenario has no controller")
         with progress_bar(f"run {scenario.name}", enabled=not args.quiet, unit="step") as bar:
             result, summary = run_once(scenario, out, progress=bar, master=master, profile=args.profile)
-        if args.save_learned:
+        if args.load_learned:
+            summary["resumed_from"] = str(args.load_learned)
+        write_json(out / "summary.json", summary)  # the run's results first; the optional parts after
+        if learned_file is not None:
             from .learned import save_learned
 
-            if "controller" not in master.components:
-                raise ScenarioError(f"--save-learned {args.save_learned}: the scenario has no controller")
-            summary["learned_state"] = str(save_learned(master.components["controller"], args.save_learned))
-    if args.load_learned:
-        summary["resumed_from"] = str(args.load_learned)
+            summary["learned_state"] = str(save_learned(master.components["controller"], learned_file))
     figures = []
     if not args.no_plots and summary["rows"] > 1:
         from .plots import run_figures  # matplotlib only when there is something to draw
@@ -147,8 +159,9 @@ def _table_changes(args) -> dict[str, Any]:
 def _cmd_table2(args) -> int:
     from .report import table2
 
-    out = Path(args.out) if args.out else DEFAULT_OUT / "table2"
+    out = _out_folder(args.out, DEFAULT_OUT / "table2")
     summary = table2(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+                     worker_timeout=args.worker_timeout,
                      **_table_changes(args))
     return _print_table(summary, out / "table2.md", out)
 
@@ -156,8 +169,9 @@ def _cmd_table2(args) -> int:
 def _cmd_table3(args) -> int:
     from .report import table3
 
-    out = Path(args.out) if args.out else DEFAULT_OUT / "table3"
+    out = _out_folder(args.out, DEFAULT_OUT / "table3")
     summary = table3(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+                     worker_timeout=args.worker_timeout,
                      **_table_changes(args))
     return _print_table(summary, out / "table3.md", out)
 
@@ -172,8 +186,9 @@ def _print_table(summary, table_path: Path, out: Path) -> int:
 def _cmd_reproduce(args) -> int:
     from .report import reproduce
 
-    out = Path(args.out) if args.out else DEFAULT_OUT
+    out = _out_folder(args.out, DEFAULT_OUT)
     path = reproduce(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+                     worker_timeout=args.worker_timeout,
                      **_table_changes(args))
     print(f"report: {path}")
     return 0
@@ -197,12 +212,14 @@ def _cmd_sweep(args) -> int:
     from .experiments import measure
     from .progress import progress_bar
 
+    from cosim.files import safe_name
+
     study = load_study(_study_path(args.study))
-    out = Path(args.out) if args.out else DEFAULT_OUT / f"study-{study.name}"
+    out = _out_folder(args.out, DEFAULT_OUT / f"study-{safe_name(study.name)}")
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     with progress_bar(f"sweep {study.name}", enabled=not args.quiet) as bar:
         result = measure(study, out, workers=max(1, workers), scheduler=args.scheduler, progress=bar,
-                         plots=not args.no_plots)
+                         plots=not args.no_plots, worker_timeout=args.worker_timeout)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(result.counts.items())) or "nothing to run"
     print(f"{study.name}: {result.total} runs ({result.skipped} already done); this time: {counts}")
     print(f"results: {out} (runs.csv, runs.parquet, summary.json" + ", plots" * (not args.no_plots) + ")")
@@ -216,7 +233,10 @@ def _cmd_export_ssp(args) -> int:
 
     from .portable import all_fmu
 
-    print(export_ssp(all_fmu(load_scenario(args.scenario, _overrides(args.set))), args.out))
+    from cosim.files import output_file
+
+    out = output_file(args.out, "--out")
+    print(export_ssp(all_fmu(load_scenario(args.scenario, _overrides(args.set))), out))
     return 0
 
 
@@ -230,7 +250,9 @@ def _cmd_schema(args) -> int:
         from cosim.study import study_json_schema as schema
     text = json.dumps(schema(), indent=1)
     if args.out:
-        Path(args.out).write_text(text + "\n")
+        from cosim.files import output_file
+
+        output_file(args.out, "--out").write_text(text + "\n")
         print(args.out)
     else:
         print(text)
@@ -258,9 +280,12 @@ def _cmd_build_fmu(args) -> int:
     from cosim import registry
     from fmu_models.export.build import FMI_VERSIONS
 
+    from cosim.files import output_folder
+
+    out = output_folder(args.out)
     for name, model in registry.fmu_models().items():
         for version in sorted(FMI_VERSIONS):
-            target = Path(args.out) / f"fmi{version}" / f"{name}.fmu"
+            target = out / f"fmi{version}" / f"{name}.fmu"
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(model.build(version), target)
             print(target)
@@ -305,12 +330,41 @@ def _option_list(text: str) -> list[str]:
     return [] if text.strip() == "none" else _names(text, option_names(), "option", ", or none")
 
 
+def _seconds(text: str) -> float | None:
+    """``--worker-timeout``: seconds >= 0, or ``forever``."""
+    if text.strip() == "forever":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected seconds (a number >= 0) or 'forever'")
+    return value
+
+
+def _worker_timeout(parser) -> None:
+    from cosim.limits import WORKER_TIMEOUT
+
+    parser.add_argument("--worker-timeout", type=_seconds, default=WORKER_TIMEOUT, metavar="S",
+                        help=f"stop when the Dask cluster has had no worker for S seconds (default {WORKER_TIMEOUT:g}; "
+                             f"'forever': wait)")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its refusals in the tool's one line (exit 2: nothing ran)."""
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"fnn-cosim: error: {self.prog.removeprefix('fnn-cosim ')}: {message}\n"
+                  if self.prog != "fnn-cosim" else f"fnn-cosim: error: {message}\n")
+
+
 def _parser() -> argparse.ArgumentParser:
     from fnn_controller.variants import variant_names
 
     from .options import DEFAULT_OPTIONS, OPTION_SEEDS, option_names
 
-    p = argparse.ArgumentParser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
+    p = _Parser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -323,6 +377,7 @@ def _parser() -> argparse.ArgumentParser:
             sp.add_argument("--duration", type=float, help="override the missions' duration (s)")
             sp.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 1: in this process)")
             sp.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS instead")
+            _worker_timeout(sp)
             sp.add_argument("--variants", type=_variant_list,
                             metavar="A,B", help="the variants' rows, e.g. pd,pd+smc,pd+lm (default: the study's: "
                                                 + ", ".join(variant_names()) + ")")
@@ -371,6 +426,7 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("study", help="study TOML file (docs/studies.md) or a shipped study's name")
     sw.add_argument("--workers", type=int, help="local worker processes (default: one per core; 1: in this process)")
     sw.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (e.g. tcp://host:8786)")
+    _worker_timeout(sw)
     sw.add_argument("--no-plots", action="store_true")
     common(sw, seeds=False)
     sw.set_defaults(func=_cmd_sweep)
@@ -401,7 +457,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from cosim.errors import ConnectionCheckError, CosimError, FmuLoadError, ScenarioError
+    from cosim.errors import ConnectionCheckError, CosimError, FmuLoadError, ScenarioError, one_line
 
     args = _parser().parse_args(argv)
     try:
@@ -411,12 +467,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             import traceback
 
             traceback.print_exc()
-        print(f"fnn-cosim: error: {exc}", file=sys.stderr)
+        print(f"fnn-cosim: error: {one_line(str(exc))}", file=sys.stderr)
         bad_input = isinstance(exc, (ScenarioError, ConnectionCheckError, FmuLoadError))
         return EXIT_BAD_INPUT if bad_input else EXIT_RUN_FAILED
     except KeyboardInterrupt:
         print("fnn-cosim: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a fault of ours, not of the input: still one line (the traceback with --debug)
+        if args.debug:
+            raise
+        print(f"fnn-cosim: internal error: {type(exc).__name__}: {one_line(str(exc))[:300]} "
+              f"(a bug of fnn-cosim; --debug shows where)", file=sys.stderr)
+        return EXIT_RUN_FAILED
 
 
 if __name__ == "__main__":

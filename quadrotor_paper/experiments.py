@@ -16,6 +16,7 @@ from typing import Any, Callable, Mapping, Sequence
 from cosim.errors import FmuError
 from cosim.scenario import Scenario, build_master, fmu_error_in_scenario
 from cosim.study import Study
+from cosim.limits import WORKER_TIMEOUT
 from cosim.study_run import StudyResult, run_study
 
 from .metrics import euclidean_error, rmse
@@ -89,10 +90,11 @@ def measure(study: Study, out_dir: str | Path | None = None, *, workers: int = 1
             metrics: Callable[[Scenario, Any], Mapping[str, Any]] = study_metrics,
             metric_names: Sequence[str] = STUDY_METRICS, record: Sequence[str] | None = None,
             progress: Callable[[int, int], None] | None = None, plots: bool = False,
-            resume: bool = True) -> StudyResult:
+            resume: bool = True, worker_timeout: float | None = WORKER_TIMEOUT) -> StudyResult:
     """Run ``study`` the paper's way: :func:`cosim.study_run.run_study`
     measuring each row with ``metrics`` and recording only what they read
     (``record``, default :func:`lean_signals`)."""
     return run_study(study, out_dir, workers=workers, scheduler=scheduler, metrics=metrics,
                      metric_names=metric_names, record=record if record is not None
-                     else (lean_signals(study.scenario) or None), progress=progress, plots=plots, resume=resume)
+                     else (lean_signals(study.scenario) or None), progress=progress, plots=plots, resume=resume,
+                     worker_timeout=worker_timeout)

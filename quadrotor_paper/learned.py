@@ -25,7 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
+from typing import Annotated
+
+from pydantic import Field
+
 from cosim.errors import ScenarioError
+from cosim.files import output_file, read_json
+from cosim.limits import MAX_STATE
+from cosim.schema import Number, Strings, Table, one_of, validate
 from cosim.fmu_component import FmuComponent
 
 __all__ = ["FORMAT", "save_learned", "load_learned", "LearnedControllerFmu", "state_of", "write_learned"]
@@ -47,32 +54,40 @@ def write_learned(path: str | Path, variant: str, state: np.ndarray, source: str
     state = np.asarray(state, dtype=float)
     if state.shape != (len(names),) or not np.all(np.isfinite(state)):
         raise ValueError(f"a {variant} controller state is {len(names)} finite numbers, got shape {state.shape}")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = output_file(path, "learned state")
     path.write_text(json.dumps({"format": FORMAT, "version": VERSION, "variant": variant, "source": source,
                                 "names": names, "state": state.tolist()}, indent=1))
     return path
 
 
+class LearnedStateFile(Table):
+    """A learned-state file (the module's docstring): its declaration."""
+
+    format: Annotated[str, Field(strict=True)] = Field(..., description=f"'{FORMAT}'")
+    version: Annotated[int, Field(strict=True)] = Field(..., description=f"{VERSION}")
+    variant: Annotated[str, Field(strict=True, max_length=100)] = Field(..., description="the controller variant")
+    source: one_of(("python", "fmu")) = Field(..., description="the controller form it was saved from")
+    names: Annotated[Strings, Field(max_length=MAX_STATE)] = Field(..., description="the state's names, in order")
+    state: Annotated[list[Number], Field(max_length=MAX_STATE)] = Field(..., description="the state's values")
+
+
 def load_learned(path: str | Path, variant: str) -> np.ndarray:
     """The controller state saved in ``path``, for ``variant``; a one-line
-    :class:`~cosim.errors.ScenarioError` naming the file if it cannot serve."""
+    :class:`~cosim.errors.ScenarioError` naming the file if it cannot serve
+    (a learned-state file is data from anyone: ``docs/security.md``)."""
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ScenarioError(f"learned state {path}: cannot be read ({exc})") from None
+    where = f"learned state {path}"
+    doc = read_json(path, "learned state")
     if not isinstance(doc, dict) or doc.get("format") != FORMAT or doc.get("version") != VERSION:
-        raise ScenarioError(f"learned state {path}: not a '{FORMAT}' file of version {VERSION}")
-    if doc.get("variant") != variant:
-        raise ScenarioError(f"learned state {path}: saved from a {doc.get('variant')!r} controller, "
-                            f"this one is {variant!r}")
-    if doc.get("names") != _names(variant):
-        raise ScenarioError(f"learned state {path}: its state layout is not the {variant} controller's")
-    state = np.asarray(doc.get("state"), dtype=float)
-    if state.shape != (len(doc["names"]),) or not np.all(np.isfinite(state)):
-        raise ScenarioError(f"learned state {path}: 'state' must be {len(doc['names'])} finite numbers")
-    return state
+        raise ScenarioError(f"{where}: not a '{FORMAT}' file of version {VERSION}")
+    doc = validate(LearnedStateFile, doc, where)
+    if doc.variant != variant:
+        raise ScenarioError(f"{where}: saved from a {doc.variant!r} controller, this one is {variant!r}")
+    if doc.names != _names(variant):
+        raise ScenarioError(f"{where}: its state layout is not the {variant} controller's")
+    if len(doc.state) != len(doc.names):
+        raise ScenarioError(f"{where}: 'state' must be {len(doc.names)} finite numbers")
+    return np.asarray(doc.state, dtype=float)
 
 
 # ---- the FMU form: through its serialized state ---------------------------------------------------

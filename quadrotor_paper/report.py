@@ -20,7 +20,9 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from cosim import registry
-from cosim.scenario import load_scenario, read_toml
+from cosim.limits import WORKER_TIMEOUT
+from cosim.files import read_toml
+from cosim.scenario import load_scenario
 from cosim.study import Study, parse_study
 from cosim.study_run import write_json
 from fnn_controller.variants import variant, variant_names
@@ -51,7 +53,7 @@ def table_study(number: int, *, scenario: str | None = None, seeds: int | None =
     run (``fnn-cosim sweep table2`` runs the same runs). Every value is
     checked as the study file's are (a bad wind speed names its key)."""
     path = STUDIES / f"table{number}.toml"
-    raw = read_toml(path)
+    raw = read_toml(path, "study")
     base = None
     if scenario is not None or duration is not None or overrides:
         base = load_scenario(scenario or raw["scenario"],
@@ -80,11 +82,12 @@ def table_study(number: int, *, scenario: str | None = None, seeds: int | None =
 
 
 def _run_table(number: int, study: Study, out_dir: Path, workers: int, scheduler: str | None,
-               show_progress: bool) -> dict[str, Any]:
+               show_progress: bool, worker_timeout: float | None = WORKER_TIMEOUT) -> dict[str, Any]:
     """Run a table's study into ``out_dir`` (afresh) and write ``table<number>.md``;
     returns the summary with its markdown."""
     with progress_bar(f"table{number}", enabled=show_progress) as bar:
-        result = measure(study, out_dir, workers=workers, scheduler=scheduler, progress=bar, resume=False)
+        result = measure(study, out_dir, workers=workers, scheduler=scheduler, progress=bar, resume=False,
+                         worker_timeout=worker_timeout)
     summary = result.summary
     md = (table2_markdown if number == 2 else table3_markdown)(summary)
     (Path(out_dir) / f"table{number}.md").write_text(f"# Table {number}: {study.description}\n\n{md}")
@@ -92,16 +95,16 @@ def _run_table(number: int, study: Study, out_dir: Path, workers: int, scheduler
 
 
 def table2(out_dir: Path, workers: int = 2, scheduler: str | None = None, show_progress: bool = True,
-           **changes) -> dict[str, Any]:
+           worker_timeout: float | None = WORKER_TIMEOUT, **changes) -> dict[str, Any]:
     """Table 2: the study :func:`table_study` ``(2, **changes)`` run on
     ``workers`` local processes (or on the Dask cluster at ``scheduler``)."""
-    return _run_table(2, table_study(2, **changes), out_dir, workers, scheduler, show_progress)
+    return _run_table(2, table_study(2, **changes), out_dir, workers, scheduler, show_progress, worker_timeout)
 
 
 def table3(out_dir: Path, workers: int = 2, scheduler: str | None = None, show_progress: bool = True,
-           **changes) -> dict[str, Any]:
+           worker_timeout: float | None = WORKER_TIMEOUT, **changes) -> dict[str, Any]:
     """Table 3: the study :func:`table_study` ``(3, **changes)`` (no wind speeds)."""
-    return _run_table(3, table_study(3, **changes), out_dir, workers, scheduler, show_progress)
+    return _run_table(3, table_study(3, **changes), out_dir, workers, scheduler, show_progress, worker_timeout)
 
 
 def _share_stats(result, early=(0.0, 5.0), late_seconds: float = 10.0) -> dict[str, dict[str, float]]:
@@ -185,7 +188,7 @@ def _seed_note(summary: Mapping[str, Any]) -> str:
 
 
 def reproduce(out_dir: Path, workers: int = 2, scheduler: str | None = None, show_progress: bool = True,
-              **changes) -> Path:
+              worker_timeout: float | None = WORKER_TIMEOUT, **changes) -> Path:
     """Table 2, Table 3 (their studies, changed by ``changes`` as
     :func:`table_study` takes them, checked before any run) and the figures;
     returns the path of ``report.md``."""
@@ -193,8 +196,8 @@ def reproduce(out_dir: Path, workers: int = 2, scheduler: str | None = None, sho
     t0 = time.perf_counter()
     studies = {n: table_study(n, **({k: v for k, v in changes.items() if k != "winds"} if n == 3 else changes))
                for n in (2, 3)}  # both checked before any run
-    t2 = _run_table(2, studies[2], out_dir / "table2", workers, scheduler, show_progress)
-    t3 = _run_table(3, studies[3], out_dir / "table3", workers, scheduler, show_progress)
+    t2 = _run_table(2, studies[2], out_dir / "table2", workers, scheduler, show_progress, worker_timeout)
+    t3 = _run_table(3, studies[3], out_dir / "table3", workers, scheduler, show_progress, worker_timeout)
     figs = figures(out_dir / "figures", duration=changes.get("duration"), show_progress=show_progress)
     devs = deviations(t2, t3)
     wall = time.perf_counter() - t0

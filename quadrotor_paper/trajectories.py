@@ -186,15 +186,18 @@ REFERENCE_OUTPUTS = (
 
 
 class ReferenceComponent(PythonComponent):
-    """The trajectory as a component without inputs: evaluated once per run on
-    the time grid ``t0 + n h`` (n = 0..N), then read row by row."""
+    """The trajectory as a component without inputs: evaluated on the time
+    grid ``t0 + n h`` a block of :data:`BLOCK` points at a time (vectorized,
+    in memory that does not grow with the run), then read row by row."""
 
     outputs = REFERENCE_OUTPUTS
+    BLOCK = 1000  # points evaluated at once
 
     def __init__(self, trajectory, name: str = "reference"):
         super().__init__(name)
         self.trajectory = trajectory
         self._table = np.zeros((1, len(REFERENCE_OUTPUTS)))
+        self._first = 0
 
     def set_parameters(self, values: Mapping[str, Any]) -> None:
         if values:
@@ -205,9 +208,17 @@ class ReferenceComponent(PythonComponent):
             self.trajectory = type(self.trajectory)(**{**params, **values})
 
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
-        t = t0 + h * np.arange(n_steps + 1)
+        self._t0, self._h, self._last = t0, h, n_steps
+        self._fill(0)
+
+    def _fill(self, first: int) -> None:
+        n = np.arange(first, min(first + self.BLOCK, self._last + 1))
+        t = self._t0 + self._h * n  # the master's own t_n, from the step counter
         p, v = self.trajectory.reference(t)
         self._table = np.ascontiguousarray(np.hstack([p, v, self.trajectory.acceleration(t)]))
+        self._first = first
 
     def step(self, n: int, t: float, u: np.ndarray) -> np.ndarray:
-        return self._table[n]
+        if not self._first <= n < self._first + len(self._table):
+            self._fill(n)
+        return self._table[n - self._first]

@@ -42,10 +42,36 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return parser
 
 
+def _checked(args: argparse.Namespace) -> None:
+    """The physical meaning of the arguments, checked before anything runs (one line each)."""
+    from typing import Annotated
+
+    from pydantic import Field
+
+    from cosim.errors import ScenarioError
+    from cosim.files import output_folder
+    from cosim.schema import NonNegative, Number, Positive, Table, validate
+
+    class Arguments(Table):
+        kp: Positive = None  # a PD with kp <= 0 has no operating point to linearize around
+        kd: NonNegative = None
+        feedforward: Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0.0, le=1.0)] = 0.0
+        speed: Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0.0, le=10.0)] = 2.5  # m/s: trimmed flight
+        wind: Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0.0, le=10.0)] = 3.0  # m/s
+
+    given = {k: getattr(args, k) for k in ("kp", "kd", "feedforward", "speed", "wind") if getattr(args, k) is not None}
+    try:
+        validate(Arguments, given)
+    except ScenarioError as exc:  # named as the command line names them
+        raise ScenarioError(f"--{exc}") from None
+    output_folder(args.out)
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the study for parsed arguments; prints the report's path and verdicts."""
     from .study import run_stability_analysis
 
+    _checked(args)
     study = run_stability_analysis(args.out, speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
                                    cosim=not args.no_cosim, feedforward=args.feedforward)
     for a in study.analyses:

@@ -397,7 +397,8 @@ def test_a_bad_seed_stream_is_refused_naming_the_key(raw, spec, message):
 
 
 def test_stream_seeds_are_the_run_seed_for_stream_0_and_numpys_spawned_children_otherwise():
-    from cosim.fmu_component import SEED_LIMIT, stream_seed
+    from cosim.fmu_component import stream_seed
+    from cosim.limits import SEED_LIMIT
 
     assert [stream_seed(s, 0) for s in (0, 7, 2 ** 40)] == [0, 7, 2 ** 40]
     seeds = {stream_seed(s, k) for s in range(20) for k in range(1, 6)}

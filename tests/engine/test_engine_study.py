@@ -15,7 +15,8 @@ import pytest
 import toy_models
 from cosim import registry
 from cosim.errors import ScenarioError
-from cosim.study import MAX_RUNS, count, load_study, parse_study, plan, runs
+from cosim.limits import MAX_RUNS
+from cosim.study import count, load_study, parse_study, plan, runs
 from cosim.study_run import LOCK, read_runs, run_study
 from cosim.summary import summarize
 
@@ -405,3 +406,18 @@ def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, m
         assert {c: v for c, v in a[k].items() if c != "wall_time_s"} == {c: v for c, v in b[k].items()
                                                                           if c != "wall_time_s"}
     assert here.summary["cells"] == there.summary["cells"]
+
+
+def test_a_cluster_without_a_worker_stops_the_study_in_one_line(folder, tmp_path):
+    """The driver does not wait for ever: a cluster that has no worker for the
+    stated time stops the study, saying so (what ran is kept; nothing ran here)."""
+    from dask.distributed import LocalCluster
+
+    from cosim.errors import CosimError
+
+    study = load_study(study_file(folder, "[sweep]\nseeds = 2\n"))
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+        with pytest.raises(CosimError, match=r"^no Dask worker for 0\.5 s \(\w+://.* lost them all\): the study "
+                                             r"stops with 2 runs in flight; .* running it again resumes it$"):
+            run_study(study, tmp_path / "out", scheduler=cluster.scheduler_address, worker_timeout=0.5, plots=False)
+    assert read_runs(tmp_path / "out" / "runs.csv") == []

@@ -6,7 +6,7 @@ derives) cannot drift apart."""
 from __future__ import annotations
 
 from cosim import registry
-from cosim.fmu_component import SEED_LIMIT
+from cosim.limits import SEED_LIMIT
 from fmu_models.catalog import MODEL_NAMES, model
 from fnn_controller.controller_fmu import controller_model, fmu_identifier
 from fnn_controller.split import INNER_IDENTIFIER, inner_model, outer_identifier, outer_model

@@ -135,4 +135,4 @@ def test_run_takes_an_archive(tmp_path, capsys):
     assert main(["run", str(path), "--out", str(tmp_path / "run"), "--quiet", "--no-plots"]) == 0
     assert "Euclidean RMSE" in capsys.readouterr().out  # the [metrics] section travelled in the archive
     assert main(["run", str(path), "--variant", "pd", "--out", str(tmp_path / "r2"), "--quiet"]) == 2
-    assert "--variant names a Python controller" in capsys.readouterr().err
+    assert "--variant pd: an SSP archive's controller is an FMU it holds" in capsys.readouterr().err
