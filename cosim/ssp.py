@@ -737,7 +737,7 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
             "description": system.description,
             "connections": system.connections,
             "simulation": {"duration": length, "step": system.step if system.step is not None else step,
-                           "seed": system.seed or 0, "start_time": start,
+                           "seed": system.seed if system.seed is not None else 0, "start_time": start,
                            **({"ordering": system.ordering} if system.ordering else {})},
             "fmus": {c: {"path": str(entry["path"]),
                          # a seed parameter is set by the master to the run's seed: not a fixed value
@@ -746,7 +746,7 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
                          **({"seed_parameter": system.seed_parameters[c]} if c in system.seed_parameters else {}),
                          **({"seed_stream": system.seed_streams[c]} if c in system.seed_streams else {})}
                      for c, entry in system.components.items()},
-            "record": {"signals": record, **({"block_rows": system.block_rows} if system.block_rows else {})},
+            "record": {"signals": record, **({"block_rows": system.block_rows} if system.block_rows is not None else {})},
             "envelope": dict(system.envelope),
             **system.sections,
         }

@@ -62,7 +62,8 @@ def table_study(number: int, *, scenario: str | None = None, seeds: int | None =
     sweep = raw.setdefault("sweep", {})
     if seeds is not None:
         sweep["seeds"] = seeds
-        option_seeds = min(seeds, OPTION_SEEDS) if option_seeds is None else option_seeds
+        if option_seeds is None and seeds >= 1:  # (a bad --seeds is refused by the study, naming sweep.seeds)
+            option_seeds = min(seeds, OPTION_SEEDS)
     if option_seeds is not None:
         cases = {name: ({**spec, "seeds": option_seeds} if name in OPTIONS else spec) for name, spec in cases.items()}
     if variants is not None:

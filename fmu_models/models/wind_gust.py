@@ -45,6 +45,10 @@ from ..export.variables import output, parameter
 __all__ = ["WIND_GUST", "N_SINES", "TURBULENCE_BAND", "SWITCH_TOLERANCE", "gust_speed_factor"]
 
 SWITCH_TOLERANCE = 1e-9  # s
+# m/s: the strongest wind the model takes, gust or turbulence RMS. Beaufort 12 (a hurricane) starts at
+# 32.7 m/s and the strongest gusts measured near 113 m/s; a small quadrotor meets far less (the paper:
+# 1-5 m/s). A larger value is a typing slip, refused with its range (docs/plant-model.md).
+MAX_WIND = 100.0
 
 N_SINES = 6
 TURBULENCE_BAND = (0.05, 2.0)  # Hz
@@ -59,14 +63,15 @@ _VARIABLES = (
     output("v_wind_x", "m/s", "wind velocity north (world frame, NED)"),
     output("v_wind_y", "m/s", "wind velocity east (world frame, NED)"),
     output("v_wind_z", "m/s", "wind velocity down (world frame, NED)"),
-    parameter("v_w", "m/s", "gust speed (section 5.3: 1, 3 or 5 m/s)", 3.0, min=0.0),
+    parameter("v_w", "m/s", "gust speed (section 5.3: 1, 3 or 5 m/s)", 3.0, min=0.0, max=MAX_WIND),
     parameter("dir_x", "1", "gust direction, north component (normalized inside)", -1.0),
     parameter("dir_y", "1", "gust direction, east component (normalized inside)", -1.0),
     parameter("dir_z", "1", "gust direction, down component (normalized inside)", 0.0),
     parameter("t_switch_1", "s", "time at which the gust reverses (section 5.3: 17 s)", 17.0, min=0.0),
     parameter("t_switch_2", "s", "time at which the gust reverses back (section 5.3: 34 s)", 34.0, min=0.0),
     parameter("ramp_time", "s", "duration of each reversal (0: exact step as in Fig. 5)", 0.0, min=0.0),
-    parameter("turbulence", "m/s", "RMS per axis of the sum-of-sines turbulence (0: none)", 0.0, min=0.0),
+    parameter("turbulence", "m/s", "RMS per axis of the sum-of-sines turbulence (0: none)", 0.0, min=0.0,
+              max=MAX_WIND),
     parameter("turbulence_seed", "1", "integer selecting the turbulence phases", 0.0, min=0.0),
 )
 

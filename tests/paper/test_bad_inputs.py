@@ -1,0 +1,330 @@
+"""Every bad input of issue 17 gets one line and the right exit status (2:
+nothing ran; 1: a run failed), no traceback, nothing written outside the
+output folder, and no run lost; each on a file the test makes
+(``docs/security.md`` states what each kind of file may do)."""
+from __future__ import annotations
+
+import json
+import os
+import stat
+import struct
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from cosim.errors import ScenarioError
+from cosim.limits import MAX_RATIO
+from cosim.scenario import scenario_path
+from quadrotor_paper.cli import EXIT_BAD_INPUT, EXIT_RUN_FAILED, main
+
+SHORT = ["--set", "simulation.duration=0.2", "--no-plots", "--quiet"]
+
+
+def cli(capsys, *args) -> tuple[int, str]:
+    """Exit status and the one line on stderr (asserting there is one, and no traceback)."""
+    try:
+        code = main(list(args))
+    except SystemExit as exc:  # argparse's refusal, in the tool's one line
+        code = exc.code
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    if code:
+        assert len(lines) == 1 and lines[0].startswith("fnn-cosim: error: "), err
+        return code, lines[0]
+    return code, ""
+
+
+def files_under(folder: Path) -> set[Path]:
+    return {p for p in folder.rglob("*")}
+
+
+@pytest.fixture
+def sandbox(tmp_path, monkeypatch):
+    """A working folder of its own: whatever a command writes without --out lands here."""
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    return work
+
+
+# ---- files that are no documents -------------------------------------------------------------
+
+@pytest.mark.parametrize("make, message", [
+    (lambda p: p.mkdir(), "a folder, not a file"),
+    (lambda p: p.write_bytes(b"name = \"x\"\n\xff\xfe\n"), "not UTF-8 text"),
+    (lambda p: p.write_text("x = 1" + "0" * 5000 + "\n"), "not a document this tool reads"),
+    (lambda p: p.write_text(scenario_path("circles").read_text().replace("seed = 0 ", "seed = 1" + "0" * 400 + " ")),
+     "simulation.seed = 100000000000... (401 digits): must be at most"),
+    (lambda p: p.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n"), "not a document this tool reads"),
+])
+def test_a_scenario_that_is_no_document_is_one_line(sandbox, capsys, make, message):
+    path = sandbox / "s.toml"
+    make(path)
+    code, line = cli(capsys, "run", str(path), "--out", str(sandbox / "out"), "--quiet")
+    assert code == EXIT_BAD_INPUT and message in line
+
+
+def test_dev_zero_is_no_scenario_and_no_fmu(sandbox, capsys):
+    assert os.path.exists("/dev/zero")
+    code, line = cli(capsys, "run", "/dev/zero", "--quiet")
+    assert code == EXIT_BAD_INPUT and "not a regular file" in line
+    text = scenario_path("circles").read_text().replace('model = "Quadrotor"\nfmi_version = 2\n',
+                                                        'path = "/dev/zero"\n')
+    (sandbox / "s.toml").write_text(text)
+    code, line = cli(capsys, "run", str(sandbox / "s.toml"), "--quiet")
+    assert code == EXIT_BAD_INPUT and "fmus.Quadrotor.path = '/dev/zero': not a regular file" in line
+
+
+def test_a_fifo_is_no_study(sandbox, capsys):
+    fifo = sandbox / "study.toml"
+    os.mkfifo(fifo)
+    code, line = cli(capsys, "sweep", str(fifo), "--quiet")
+    assert code == EXIT_BAD_INPUT and "not a regular file" in line
+
+
+# ---- the command line ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("args, message", [
+    (["table2", "--winds", "abc"], "argument --winds: 'abc': expected wind speeds"),
+    (["stability", "--kp", "nan", "--no-cosim"], "--kp = nan: expected a finite number"),
+    (["stability", "--kp", "0", "--no-cosim"], "--kp = 0.0: must be positive"),
+    (["stability", "--speed", "nan", "--no-cosim"], "--speed = nan: expected a finite number"),
+    (["stability", "--wind", "inf", "--no-cosim"], "--wind = inf: expected a finite number"),
+    (["run", "circles", "--set", "simulation.duration"], "--set 'simulation.duration': expected KEY=VALUE"),
+    (["run", "circles", "--set", 'envelope."Quadrotor.phi=[1'], "not a dotted key"),
+    (["run", "circles", "--seed", "-1"], "simulation.seed = -1: must not be negative"),
+    (["run", "circles", "--set", f"simulation.seed={2 ** 64}"], "simulation.seed = 18446744073709551616: must be at "
+                                                                 "most 9007199254740992"),
+    (["table2", "--winds", "nan", "--seeds", "1"], "wind.speed = nan: expected a finite number"),
+    (["table2", "--winds", "-1", "--seeds", "1"], "wind.speed = -1.0: must not be negative"),
+    (["table2", "--winds", "1e9", "--seeds", "1"], "v_w = 1000000000.0 m/s is outside its range [0.0, 100.0]"),
+    (["table2", "--duration", "1e9", "--seeds", "1"], "steps of 0.01 s; at most 1000000000 a run"),
+    (["table2", "--seeds", "0"], "sweep.seeds = 0: must be positive"),
+    (["table2", "--winds", "1,1", "--seeds", "1"], "1.0 is given twice"),
+    (["run", "circles", "--set", "simulation.duration=1e6"], "need 17.1 GiB in memory; at most 1 GiB"),
+    (["run", "circles", "--set", "simulation.start_time=1e300"], "a step of 0.01 s is lost in rounding"),
+    (["run", "circles", "--set", "simulation.step=1e-12", "--set", "simulation.duration=1.0"],
+     "1000000000000 steps of 1e-12 s"),
+])
+def test_bad_arguments_are_one_line_and_nothing_runs(sandbox, capsys, args, message):
+    code, line = cli(capsys, *args)
+    assert code == EXIT_BAD_INPUT and message in line, line
+    assert not (sandbox / "results").exists() or not any((sandbox / "results").rglob("runs.csv"))
+
+
+def test_the_plausible_wind_of_1e9_is_refused_by_the_fmus_own_range(capsys, sandbox):
+    """``--winds 1e9``: the wind FMU declares no such gust (its range), so the study refuses it when read."""
+    code, line = cli(capsys, "table2", "--winds", "1e9", "--seeds", "1")
+    assert code == EXIT_BAD_INPUT and line.startswith("fnn-cosim: error: sweep.grid.\"wind.speed\": ")
+
+
+@pytest.mark.parametrize("target, message", [
+    ("a_file.txt", "not a folder"),
+    ("/proc/fnn-cosim-out", "cannot write there"),  # no one writes there, root included
+])
+def test_an_out_that_cannot_hold_results_is_refused_before_the_run(sandbox, capsys, target, message):
+    target = sandbox / target
+    if target.name == "a_file.txt":
+        target.write_text("x")
+    code, line = cli(capsys, "run", "circles", "--out", str(target), *SHORT)
+    assert code == EXIT_BAD_INPUT and f"--out {target}: {message}" in line
+
+
+def test_export_ssp_out_a_folder_and_save_learned_unwritable_are_refused_first(sandbox, capsys):
+    code, line = cli(capsys, "export-ssp", "circles", "--out", str(sandbox))
+    assert code == EXIT_BAD_INPUT and "a folder; give the file to write" in line
+    code, line = cli(capsys, "run", "circles", "--out", str(sandbox / "r"), "--save-learned", str(sandbox), *SHORT)
+    assert code == EXIT_BAD_INPUT and "--save-learned" in line and "a folder" in line
+    assert not (sandbox / "r" / "results.csv").exists()  # refused before the run: nothing ran, nothing half-made
+
+
+def test_a_name_with_dots_and_slashes_writes_under_results(sandbox, capsys):
+    text = scenario_path("circles").read_text().replace('name = "circles"', 'name = "../../escaped"')
+    (sandbox / "s.toml").write_text(text)
+    before = files_under(sandbox.parent)
+    code, _ = cli(capsys, "run", str(sandbox / "s.toml"), *SHORT)
+    assert code == 0
+    added = files_under(sandbox.parent) - before
+    assert added and all(p.is_relative_to(sandbox / "results") for p in added), added
+    assert (sandbox / "results" / "run-escaped" / "summary.json").is_file()
+
+
+# ---- component factories (a scenario is the user's own code) --------------------------------------
+
+NOT_CALLABLE = 3  # a module attribute a factory may name by mistake
+
+
+def raising_factory(name, **parameters):
+    raise RuntimeError("the user's code failed")
+
+
+@pytest.mark.parametrize("factory, message", [
+    ("test_bad_inputs:NOT_CALLABLE", "int 'NOT_CALLABLE' is not callable"),
+    ("test_bad_inputs:raising_factory", "failed: RuntimeError: the user's code failed"),
+    ("builtins:dict", "not a component"),
+])
+def test_a_factory_that_is_no_component_maker_is_one_line(sandbox, capsys, factory, message):
+    raw = scenario_path("circles").read_text() + f'\n[components.probe]\nfactory = "{factory}"\n'
+    (sandbox / "s.toml").write_text(raw)
+    code, line = cli(capsys, "run", str(sandbox / "s.toml"), "--out", str(sandbox / "out"), *SHORT)
+    assert code == EXIT_BAD_INPUT and f"components.probe.factory = '{factory}'" in line and message in line
+
+
+# ---- studies ---------------------------------------------------------------------------------------
+
+def test_a_malformed_line_of_runs_csv_is_one_line(sandbox, capsys):
+    study = sandbox / "s.toml"
+    study.write_text('scenario = "circles"\n[set]\n"simulation.duration" = 0.2\n[sweep]\nseeds = 2\n')
+    assert cli(capsys, "sweep", str(study), "--out", str(sandbox / "out"), "--workers", "1", "--quiet",
+               "--no-plots")[0] == 0
+    runs = sandbox / "out" / "runs.csv"
+    runs.write_text(runs.read_text().splitlines()[0] + "\n0,,,0,ok\n")
+    code, line = cli(capsys, "sweep", str(study), "--out", str(sandbox / "out"), "--workers", "1", "--quiet")
+    assert code == EXIT_BAD_INPUT and "runs.csv: line 2: 5 fields where the header has" in line
+
+
+def test_non_utf8_study_and_learned_files_are_one_line(sandbox, capsys):
+    (sandbox / "s.toml").write_bytes(b"scenario = \"circles\"\n# \xff\n")
+    code, line = cli(capsys, "sweep", str(sandbox / "s.toml"), "--quiet")
+    assert code == EXIT_BAD_INPUT and "study" in line and "not UTF-8 text" in line
+    (sandbox / "l.json").write_bytes(b"\xff{}")
+    code, line = cli(capsys, "run", "circles", "--load-learned", str(sandbox / "l.json"), *SHORT)
+    assert code == EXIT_BAD_INPUT and "learned state" in line and "not UTF-8 text" in line
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"format": "fnn-cosim learned state", "version": 1, "variant": "pd+lm", "source": "python",
+      "names": ["a"], "state": ["x"]}, "state[0] = 'x': expected a number"),
+    ({"format": "fnn-cosim learned state", "version": 1, "variant": "pd+lm", "source": "python",
+      "names": ["a"], "state": [[[[[[1.0]]]]]]}, "state[0] = [[[[[1.0]]]]]: expected a number"),
+    ("[" * 100_000 + "]" * 100_000, "not a document this tool reads"),
+])
+def test_a_learned_file_with_strings_or_deep_nesting_is_one_line(sandbox, capsys, doc, message):
+    path = sandbox / "l.json"
+    path.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+    code, line = cli(capsys, "run", "circles", "--load-learned", str(path), *SHORT)
+    assert code == EXIT_BAD_INPUT and message in line, line
+
+
+# ---- SSP archives --------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def archive(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("ssp") / "circles.ssp"
+    assert main(["export-ssp", "circles", "--out", str(path), "--set", "simulation.duration=0.2"]) == 0
+    return path
+
+
+def _edited(archive: Path, target: Path, edit) -> Path:
+    """A copy of ``archive`` with every entry's bytes (name, data, info) passed through ``edit``."""
+    with zipfile.ZipFile(archive) as src, zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            name, data = edit(info.filename, src.read(info))
+            dst.writestr(name, data)
+    return target
+
+
+def _temporary_folders() -> set[str]:
+    import tempfile
+
+    return {p.name for p in Path(tempfile.gettempdir()).glob("ssp-*")}
+
+
+def test_an_archive_extracts_only_what_its_ssd_names(archive, sandbox, capsys):
+    """A 1 GiB entry nobody references is never extracted (it would be refused by its size anyway)."""
+    bomb = sandbox / "bomb.ssp"
+    with zipfile.ZipFile(archive) as src, zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            dst.writestr(info.filename, src.read(info))
+        dst.writestr("junk/zeros.bin", b"\0" * (64 * 2 ** 20))  # 64 MiB of zeros, about 64 KiB compressed
+    before = _temporary_folders()
+    code, line = cli(capsys, "run", str(bomb), "--out", str(sandbox / "out"), "--quiet", "--no-plots")
+    assert code == EXIT_BAD_INPUT and "junk/zeros.bin" in line and f"at most {MAX_RATIO}" in line
+    assert _temporary_folders() == before
+
+
+@pytest.mark.parametrize("corrupt, message", [
+    ("crc", "a broken archive"),
+    ("encrypted", "is encrypted"),
+    ("method", "a broken archive"),
+])
+def test_a_corrupt_archive_is_one_line_and_leaves_no_folder(archive, sandbox, capsys, corrupt, message):
+    data = bytearray(archive.read_bytes())
+    with zipfile.ZipFile(archive) as z:
+        info = next(i for i in z.infolist() if i.filename.endswith(".fmu"))
+    offset = info.header_offset
+    if corrupt == "crc":
+        data[offset + 14] ^= 0xFF  # the local header's CRC-32
+        central = data.rfind(b"PK\x01\x02" + data[offset + 4:offset + 6])
+        start = data.find(info.filename.encode(), data.find(b"PK\x01\x02")) - 46
+        data[start + 16] ^= 0xFF  # and the central directory's, so the archive opens and the check fails on read
+    elif corrupt == "encrypted":
+        start = data.find(info.filename.encode(), data.find(b"PK\x01\x02")) - 46
+        flags = struct.unpack_from("<H", data, start + 8)[0] | 0x1
+        struct.pack_into("<H", data, start + 8, flags)
+    else:
+        start = data.find(info.filename.encode(), data.find(b"PK\x01\x02")) - 46
+        struct.pack_into("<H", data, start + 10, 99)  # AES / an unknown method
+        struct.pack_into("<H", data, offset + 8, 99)
+    bad = sandbox / "bad.ssp"
+    bad.write_bytes(bytes(data))
+    before = _temporary_folders()
+    code, line = cli(capsys, "run", str(bad), "--out", str(sandbox / "out"), "--quiet", "--no-plots")
+    assert code == EXIT_BAD_INPUT and message in line, line
+    assert _temporary_folders() == before
+
+
+def test_an_archive_reader_takes_whole_numbers_only(archive, sandbox, capsys):
+    def edit(name, data):
+        if name == "SystemStructure.ssd":
+            text = data.decode()
+            text = text.replace('blockRows="100"', 'blockRows="0"', 1)
+            return name, text.encode()
+        return name, data
+
+    code, line = cli(capsys, "run", str(_edited(archive, sandbox / "a.ssp", edit)), "--quiet")
+    assert code == EXIT_BAD_INPUT and "record.block_rows = 0: must be positive" in line
+
+    def seed(name, data):
+        if name == "SystemStructure.ssd":
+            text = data.decode()
+            start = text.index('seed="') + len('seed="')
+            return name, (text[:start] + "1.5" + text[text.index('"', start):]).encode()
+        return name, data
+
+    code, line = cli(capsys, "run", str(_edited(archive, sandbox / "b.ssp", seed)), "--quiet")
+    assert code == EXIT_BAD_INPUT and "seed = '1.5' is not an integer" in line
+
+
+def test_an_archive_takes_no_load_learned(archive, sandbox, capsys):
+    (sandbox / "l.json").write_text("{}")
+    code, line = cli(capsys, "run", str(archive), "--load-learned", str(sandbox / "l.json"), "--quiet")
+    assert code == EXIT_BAD_INPUT and "--load-learned" in line and "an SSP archive's controller is an FMU" in line
+
+
+# ---- the engine's own API ------------------------------------------------------------------------
+
+def test_a_seed_beyond_2_53_is_refused_by_the_master_whatever_the_form():
+    from cosim.scenario import build_master, load_scenario
+
+    sc = load_scenario("circles", {"simulation.duration": 0.1, "controller.form": "python"})
+    with build_master(sc) as master:
+        for seed in (2 ** 64, -1, 1.5, True):
+            with pytest.raises(ScenarioError, match=r"^seed = .*: expected an integer in \[0, 2\^53"):
+                master.run(sc.duration, seed=seed)
+
+
+def test_the_results_sidecar_counts_rows_as_blocks_are_flushed(tmp_path, monkeypatch):
+    """A run killed mid-way leaves a sidecar that says how many rows are on disk."""
+    import cosim.recorder as recorder
+
+    monkeypatch.setattr(recorder, "SIDECAR_EVERY", 0.0)
+    rec = recorder.Recorder(("time", "x"), ("s", "m"), 1000, tmp_path / "r.csv", block_rows=10)
+    for n in range(25):
+        rec.data[n] = (n, 2 * n)
+        rec.commit(n + 1)
+    sidecar = json.loads((tmp_path / "r.csv.json").read_text())
+    assert (sidecar["status"], sidecar["rows"]) == ("running", 20)  # two blocks flushed, the third not yet
+    assert len((tmp_path / "r.csv").read_text().splitlines()) == 21
