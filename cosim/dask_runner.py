@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import atexit
 import json
+import logging
 import os
 import shutil
 import tempfile
@@ -260,6 +261,10 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
                 alone_since = None
                 continue
             now = time.monotonic()
+            if alone_since is None:  # said once per wait, on stderr by logging's last resort
+                logging.getLogger(__name__).warning(
+                    f"fnn-cosim: waiting: the Dask cluster ({scheduler or 'local'}) has no worker; the study stops "
+                    + (f"if none comes within {worker_timeout:g} s" if worker_timeout is not None else "never"))
             alone_since = alone_since or now
             if worker_timeout is not None and now - alone_since >= worker_timeout:
                 raise CosimError(f"no Dask worker for {worker_timeout:g} s ({scheduler or 'the local cluster'} lost "

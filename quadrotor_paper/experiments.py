@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from cosim.errors import FmuError
+from cosim.errors import FmuError, ScenarioError
 from cosim.scenario import Scenario, build_master, fmu_error_in_scenario
 from cosim.study import Study
 from cosim.limits import WORKER_TIMEOUT
@@ -32,6 +32,10 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
     Returns ``(result, summary)``: the :class:`~cosim.master.RunResult` and a
     JSON-ready summary (:func:`run_summary`).
     """
+    position, reference = metric_signals(scenario)
+    missing = [s for s in position + reference if s not in scenario.record]
+    if missing:  # the summary's RMSE reads them from the recorded rows
+        raise ScenarioError(f"metrics: {missing[0]!r} is not recorded; add it to record.signals")
     own = master is None
     master = master or build_master(scenario)
     try:
