@@ -452,6 +452,7 @@ class FmuComponent:
     def serialize_state(self) -> bytes:
         """The FMU's state, serialized (FMI getFMUState + serializeFMUState)."""
         s = self._slave
+        self.messages.clear()  # an error quotes what this call logged, not an earlier call
         try:
             state = s.getFMUState()
             try:
@@ -462,8 +463,15 @@ class FmuComponent:
             raise self._fail("serializing the FMU state", exc) from None
 
     def restore_state(self, blob: bytes) -> None:
-        """Restore a serialized FMU state (deserializeFMUState + setFMUState)."""
+        """Restore a serialized FMU state (deserializeFMUState + setFMUState).
+
+        A state the FMU refuses (this project's FMUs refuse one of another
+        model, of the wrong size, or holding a value they would refuse on a
+        set or at initialization) is an :class:`~cosim.errors.FmuCallError`
+        quoting the FMU's log, in one line; the instance keeps its state.
+        """
         s = self._slave
+        self.messages.clear()  # an error quotes what this call logged, not an earlier call
         try:
             state = s.deserializeFMUState(blob)
             try:
