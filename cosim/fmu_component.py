@@ -18,7 +18,11 @@ instantiation and status checking (every failed call raises fmpy's
 * a file that is no usable FMU (not a zip archive, a broken
   modelDescription.xml, no binary for this platform, an instantiation the FMU
   refuses) is an :class:`~cosim.errors.FmuLoadError` that names the file and
-  the cause in one line, raised when the component is made.
+  the cause in one line, raised when the component is made;
+* a sampled-data FMU's declaration of its period parameter (an annotation of
+  its modelDescription, :data:`PERIOD_ANNOTATION`) is read into
+  :attr:`FmuComponent.sample_period`, so a master can refuse a communication
+  step the FMU cannot take before anything runs.
 """
 from __future__ import annotations
 
@@ -33,6 +37,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
+from lxml import etree
 from fmpy import extract, platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 
@@ -40,9 +45,17 @@ from .component import Port
 from .errors import FmuCallError, FmuLoadError
 from .kernel import Call, KernelFmu
 
-__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "SEED_LIMIT"]
+__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "SEED_LIMIT", "PERIOD_ANNOTATION"]
 
 SEED_LIMIT = 2 ** 53  # a seed parameter is a double: every whole number up to 2^53 is exact
+
+# A sampled-data FMU declares the parameter that is its period, the one
+# communication step it takes (docs/fmi-export.md, "Sampled-data period"):
+#   FMI 2.0  <VendorAnnotations><Tool name="fnn-cosim.sampled-data"><SampledData periodParameter="dt"/>
+#   FMI 3.0  <Annotations><Annotation type="fnn-cosim.sampled-data"><SampledData periodParameter="dt"/>
+# The name is the exporter's (fmu_models.export.model_description), repeated
+# here: the engine reads a declaration, it imports no exporter.
+PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
 
 _TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit float
 
@@ -188,6 +201,13 @@ class FmuComponent:
         components).
     seed_stream : which of the run's random streams seeds it
         (:func:`stream_seed`; 0: the run's seed itself).
+
+    Attributes
+    ----------
+    sample_period : str or None
+        The parameter a sampled-data FMU declares as its period, the one
+        communication step it takes (:data:`PERIOD_ANNOTATION`); ``None`` if
+        it declares none.
     """
 
     def __init__(self, name: str, path: str | Path, validate: bool = False,
@@ -209,6 +229,7 @@ class FmuComponent:
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
         self.internals = groups["local"]  # recorded and bounded like outputs, read with them (cosim.plan)
         self.variables = {v.name: v for v in md.modelVariables}
+        self.sample_period = self._declared_period()
         if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
         self.feedthrough = self._feedthrough(md)
@@ -242,6 +263,28 @@ class FmuComponent:
         except Exception as exc:  # lxml's syntax errors, fmpy's validation and attribute errors
             reason = f"broken modelDescription.xml: {type(exc).__name__}: {exc}"
         raise FmuLoadError(self.name, self.path, reason) from None
+
+    def _declared_period(self) -> str | None:
+        """The parameter a sampled-data FMU declares as its period
+        (:data:`PERIOD_ANNOTATION`), or ``None`` for an FMU that declares
+        none. fmpy does not read annotations, so the modelDescription (which
+        fmpy has read already) is parsed here, entities and network off."""
+        if self.path.is_dir():
+            xml = (self.path / "modelDescription.xml").read_bytes()
+        else:
+            with zipfile.ZipFile(self.path) as archive:
+                xml = archive.read("modelDescription.xml")
+        root = etree.fromstring(xml, etree.XMLParser(resolve_entities=False, no_network=True))
+        annotation = (f"VendorAnnotations/Tool[@name='{PERIOD_ANNOTATION}']" if self.fmi_version == 2 else
+                      f"Annotations/Annotation[@type='{PERIOD_ANNOTATION}']")
+        declaration = root.find(f"{annotation}/SampledData")
+        if declaration is None:
+            return None
+        name = declaration.get("periodParameter")
+        if getattr(self.variables.get(name), "causality", None) != "parameter":
+            raise FmuLoadError(self.name, self.path, f"its {PERIOD_ANNOTATION} annotation declares "
+                               f"periodParameter = {name!r}, which is no parameter of the FMU")
+        return name
 
     def _file_names(self) -> list[str]:
         if self.path.is_dir():
