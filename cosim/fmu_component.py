@@ -18,7 +18,11 @@ instantiation and status checking (every failed call raises fmpy's
 * a file that is no usable FMU (not a zip archive, a broken
   modelDescription.xml, no binary for this platform, an instantiation the FMU
   refuses) is an :class:`~cosim.errors.FmuLoadError` that names the file and
-  the cause in one line, raised when the component is made.
+  the cause in one line, raised when the component is made;
+* a sampled-data FMU's declaration of its period parameter (an annotation of
+  its modelDescription, :data:`PERIOD_ANNOTATION`) is read into
+  :attr:`FmuComponent.sample_period`, so a master can refuse a communication
+  step the FMU cannot take before anything runs.
 """
 from __future__ import annotations
 
@@ -34,6 +38,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
+from lxml import etree
 from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 
@@ -42,8 +47,15 @@ from .errors import FmuCallError, FmuLoadError, ScenarioError
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
 
-__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "SEED_LIMIT"]
+__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "PERIOD_ANNOTATION"]
 
+# A sampled-data FMU declares the parameter that is its period, the one
+# communication step it takes (docs/fmi-export.md, "Sampled-data period"):
+#   FMI 2.0  <VendorAnnotations><Tool name="fnn-cosim.sampled-data"><SampledData periodParameter="dt"/>
+#   FMI 3.0  <Annotations><Annotation type="fnn-cosim.sampled-data"><SampledData periodParameter="dt"/>
+# The name is the exporter's (fmu_models.export.model_description), repeated
+# here: the engine reads a declaration, it imports no exporter.
+PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
 
 _TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit float
 
@@ -189,6 +201,13 @@ class FmuComponent:
         components).
     seed_stream : which of the run's random streams seeds it
         (:func:`stream_seed`; 0: the run's seed itself).
+
+    Attributes
+    ----------
+    sample_period : str or None
+        The parameter a sampled-data FMU declares as its period, the one
+        communication step it takes (:data:`PERIOD_ANNOTATION`); ``None`` if
+        it declares none.
     """
 
     def __init__(self, name: str, path: str | Path, validate: bool = False,
@@ -210,6 +229,7 @@ class FmuComponent:
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
         self.internals = groups["local"]  # recorded and bounded like outputs, read with them (cosim.plan)
         self.variables = {v.name: v for v in md.modelVariables}
+        self.sample_period = self._declared_period()
         if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
         self.feedthrough = self._feedthrough(md)
@@ -260,6 +280,28 @@ class FmuComponent:
         except Exception as exc:  # lxml's syntax errors, fmpy's validation and attribute errors
             reason = f"broken modelDescription.xml: {type(exc).__name__}: {exc}"
         raise FmuLoadError(self.name, self.path, reason) from None
+
+    def _declared_period(self) -> str | None:
+        """The parameter a sampled-data FMU declares as its period
+        (:data:`PERIOD_ANNOTATION`), or ``None`` for an FMU that declares
+        none. fmpy does not read annotations, so the modelDescription (which
+        fmpy has read already) is parsed here, entities and network off."""
+        if self.path.is_dir():
+            xml = (self.path / "modelDescription.xml").read_bytes()
+        else:
+            with zipfile.ZipFile(self.path) as archive:
+                xml = archive.read("modelDescription.xml")
+        root = etree.fromstring(xml, etree.XMLParser(resolve_entities=False, no_network=True))
+        annotation = (f"VendorAnnotations/Tool[@name='{PERIOD_ANNOTATION}']" if self.fmi_version == 2 else
+                      f"Annotations/Annotation[@type='{PERIOD_ANNOTATION}']")
+        declaration = root.find(f"{annotation}/SampledData")
+        if declaration is None:
+            return None
+        name = declaration.get("periodParameter")
+        if getattr(self.variables.get(name), "causality", None) != "parameter":
+            raise FmuLoadError(self.name, self.path, f"its {PERIOD_ANNOTATION} annotation declares "
+                               f"periodParameter = {name!r}, which is no parameter of the FMU")
+        return name
 
     def _file_names(self) -> list[str]:
         if self.path.is_dir():
@@ -472,6 +514,7 @@ class FmuComponent:
     def serialize_state(self) -> bytes:
         """The FMU's state, serialized (FMI getFMUState + serializeFMUState)."""
         s = self._slave
+        self.messages.clear()  # an error quotes what this call logged, not an earlier call
         try:
             state = s.getFMUState()
             try:
@@ -482,8 +525,15 @@ class FmuComponent:
             raise self._fail("serializing the FMU state", exc) from None
 
     def restore_state(self, blob: bytes) -> None:
-        """Restore a serialized FMU state (deserializeFMUState + setFMUState)."""
+        """Restore a serialized FMU state (deserializeFMUState + setFMUState).
+
+        A state the FMU refuses (this project's FMUs refuse one of another
+        model, of the wrong size, or holding a value they would refuse on a
+        set or at initialization) is an :class:`~cosim.errors.FmuCallError`
+        quoting the FMU's log, in one line; the instance keeps its state.
+        """
         s = self._slave
+        self.messages.clear()  # an error quotes what this call logged, not an earlier call
         try:
             state = s.deserializeFMUState(blob)
             try:

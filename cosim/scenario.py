@@ -503,9 +503,10 @@ def fmu_file(spec: Mapping[str, Any]) -> Path:
 
 def check_fmu_file(scenario: Scenario, fmu) -> None:
     """What the scenario says of an FMU file (its FMI version, its
-    parameters and their declared ranges) against what the file declares; a
-    value the FMU refuses although its description allows it is refused at
-    start-up, quoting the FMU (:func:`fmu_error_in_scenario`)."""
+    parameters and their declared ranges, the step of a sampled-data FMU)
+    against what the file declares; a value the FMU refuses although its
+    description allows it is refused at start-up, quoting the FMU
+    (:func:`fmu_error_in_scenario`)."""
     spec = scenario.fmus[fmu.name]
     version = spec.get("fmi_version")
     if version is not None and fmu.fmi_version != version:
@@ -520,6 +521,27 @@ def check_fmu_file(scenario: Scenario, fmu) -> None:
         if not low <= float(value) <= high:
             raise ScenarioError(f"fmus.{fmu.name}.parameters.{key} = {value!r}: outside the range [{low:g}, {high:g}] "
                                 f"the FMU file {fmu.path} declares")
+    _check_sample_period(fmu, spec["parameters"], scenario.step, f"fmus.{fmu.name}.parameters")
+
+
+def _check_sample_period(fmu, parameters: Mapping[str, Any], step: float, where: str) -> None:
+    """A sampled-data FMU (one that declares its period parameter,
+    :attr:`~cosim.fmu_component.FmuComponent.sample_period`) takes one
+    communication step only, the period it runs with (``parameters``' value,
+    else the file's start value): refuse another step before anything runs,
+    naming ``where.<parameter>``."""
+    name = fmu.sample_period
+    if name is None:
+        return
+    given = name in parameters
+    value = parameters[name] if given else fmu.variables[name].start
+    if value is None:  # no value to compare: the FMU's own doStep is the check
+        return
+    period = float(value)
+    if abs(step - period) > 1e-9 * period:  # the tolerance of our FMUs' own check (fmu_core.c, sampled_step)
+        told = f"{value!r}" if given else f"{period!r} (the file's start value)"
+        raise ScenarioError(f"{where}.{name} = {told}: a sampled-data FMU runs at its period; the communication "
+                            f"step is {step!r} s")
 
 
 def fmu_error_in_scenario(scenario: Scenario, exc: FmuError) -> ScenarioError:
@@ -611,6 +633,7 @@ def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None
         for fmu in (c for c in built if isinstance(c, FmuComponent)):
             fmus.append(fmu)
             fmu.instantiate()
+            _check_sample_period(fmu, fmu.base_parameters, scenario.step, fmu.name)  # the kind set its parameters
         return Master(fmus, python, scenario.connections, scenario.step, scenario.record, scenario.envelope,
                       {name: spec["parameters"] for name, spec in scenario.fmus.items()},
                       ordering=scenario.ordering)

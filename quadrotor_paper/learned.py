@@ -16,7 +16,10 @@ their value references, and it is restored (the FMU's own parameters, seed
 and clock untouched); after a run its serialized state is read the same way.
 The serialized state of this project's FMUs ends with every variable's value
 in value-reference order (``fmu_core.h``, ``CoreState``), which is what makes
-the offsets known.
+the offsets known. The FMU checks a restored state like any input (its
+model, its size, its values: ``docs/fmi-export.md``); a state it refuses is
+a one-line :class:`~cosim.errors.FmuCallError` quoting its log
+(:meth:`~cosim.fmu_component.FmuComponent.restore_state`).
 """
 from __future__ import annotations
 

@@ -81,6 +81,7 @@ def _config_header(model: FmuModel, guid: str, work: dict[str, int]) -> str:
 #include <math.h>
 
 #define MODEL_IDENTIFIER {model.identifier}
+#define MODEL_NAME "{model.identifier}"
 #define MODEL_GUID "{guid}"
 
 #define NX {nx}

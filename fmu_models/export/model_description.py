@@ -20,7 +20,7 @@ from .model import FmuModel
 from .variables import UNITS
 
 __all__ = ["fmi2_model_description", "fmi3_model_description", "fmi3_build_description",
-           "derivative_unit", "dependency_kinds", "SOURCE_FILES_FMI2", "SOURCE_FILES_FMI3"]
+           "derivative_unit", "dependency_kinds", "SOURCE_FILES_FMI2", "SOURCE_FILES_FMI3", "PERIOD_ANNOTATION"]
 
 SOURCE_FILES_FMI2 = ("fmu_core.c", "numpy_random.c", "fmi2_functions.c", "model_generated.c")
 SOURCE_FILES_FMI3 = ("fmu_core.c", "numpy_random.c", "fmi3_functions.c", "model_generated.c")
@@ -33,6 +33,20 @@ def derivative_unit(unit: str) -> str:
         return _DERIVATIVE_UNIT[unit]
     except KeyError:
         raise ValueError(f"no derivative unit known for {unit!r}; add it to _DERIVATIVE_UNIT") from None
+
+
+# A sampled-data model's declaration of its period, for tools (docs/fmi-export.md,
+# "Sampled-data period"): the FMI 2.0 <VendorAnnotations><Tool name=...> and the
+# FMI 3.0 <Annotations><Annotation type=...> of this name hold
+# <SampledData periodParameter="..."/>, the parameter whose value is the one
+# communication step the FMU takes. cosim.fmu_component reads it (by the same
+# name: the engine does not import the exporter).
+PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
+
+
+def _period_declaration(model: FmuModel) -> str:
+    """The element inside either annotation (the same in FMI 2.0 and 3.0)."""
+    return f'<SampledData periodParameter={quoteattr(model.sampled.sample_period)}/>'
 
 
 def _fmt(value: float) -> str:
@@ -225,7 +239,7 @@ def fmi2_model_description(model: FmuModel, guid: str) -> str:
 {sources}
     </SourceFiles>
   </CoSimulation>
-{_shared_sections(model)}
+{_shared_sections(model)}{_fmi2_vendor_annotations(model)}
   <ModelVariables>
 {chr(10).join(sv)}
   </ModelVariables>
@@ -233,6 +247,16 @@ def fmi2_model_description(model: FmuModel, guid: str) -> str:
 {_fmi2_section("Outputs", outputs)}{_fmi2_section("Derivatives", derivatives)}{_fmi2_section("InitialUnknowns", initial)}  </ModelStructure>
 </fmiModelDescription>
 """
+
+
+def _fmi2_vendor_annotations(model: FmuModel) -> str:
+    """A sampled-data model's period declaration (:data:`PERIOD_ANNOTATION`), else nothing."""
+    if model.sampled is None:
+        return ""
+    return f"""
+  <VendorAnnotations>
+    <Tool name="{PERIOD_ANNOTATION}">{_period_declaration(model)}</Tool>
+  </VendorAnnotations>"""
 
 
 def _fmi2_section(tag: str, unknowns: list[str]) -> str:
@@ -282,9 +306,19 @@ def fmi3_model_description(model: FmuModel, instantiation_token: str) -> str:
   </ModelVariables>
   <ModelStructure>
 {chr(10).join(structure)}
-  </ModelStructure>
+  </ModelStructure>{_fmi3_annotations(model)}
 </fmiModelDescription>
 """
+
+
+def _fmi3_annotations(model: FmuModel) -> str:
+    """A sampled-data model's period declaration (:data:`PERIOD_ANNOTATION`), else nothing."""
+    if model.sampled is None:
+        return ""
+    return f"""
+  <Annotations>
+    <Annotation type="{PERIOD_ANNOTATION}">{_period_declaration(model)}</Annotation>
+  </Annotations>"""
 
 
 def fmi3_build_description(model: FmuModel) -> str:

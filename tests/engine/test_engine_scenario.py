@@ -425,3 +425,62 @@ def test_a_seed_parameter_the_fmu_file_lacks_is_refused_naming_the_key(raw):
     raw["fmus"]["Lag"]["seed_parameter"] = "nope"
     with pytest.raises(ScenarioError, match=r"^fmus\.Lag\.seed_parameter = 'nope': no parameter of the FMU file "):
         build_master(parse_scenario(raw))
+
+
+# ---- a sampled-data FMU runs at its period -----------------------------------------------------------
+
+def _sum_scenario(version: int, step: float, parameters: dict, fmu: Path | None = None):
+    """The toy running sum (it declares its period ``dt``) fed a constant 1, at ``step``."""
+    return parse_scenario({
+        "name": "toy_sum", "connections": ["source.out -> Sum.u"],
+        "simulation": {"duration": 10 * step, "step": step},
+        "fmus": {"Sum": {"path": str(fmu or toy_models.sum_fmu_path(version)), "parameters": parameters}},
+        "toy_source": {"kind": "toy_constant", "value": 1.0},
+        "record": {"signals": ["Sum.y"]},
+    })
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_sampled_data_fmu_declares_its_period_and_a_continuous_one_none(version):
+    from cosim.fmu_component import FmuComponent
+
+    assert FmuComponent("Sum", toy_models.sum_fmu_path(version)).sample_period == "dt"
+    assert FmuComponent("Lag", toy_models.lag_fmu_path(version)).sample_period is None
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("step, parameters, message", [
+    (0.01, {"dt": 0.02}, "fmus.Sum.parameters.dt = 0.02: a sampled-data FMU runs at its period; "
+                         "the communication step is 0.01 s"),
+    (0.02, {}, "fmus.Sum.parameters.dt = 0.01 (the file's start value): a sampled-data FMU runs at its period; "
+               "the communication step is 0.02 s"),
+])
+def test_a_step_that_is_not_the_period_is_refused_when_building(version, step, parameters, message):
+    with pytest.raises(ScenarioError) as info:
+        build_master(_sum_scenario(version, step, parameters))
+    assert str(info.value) == message
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_at_its_period_a_sampled_data_fmu_runs(version):
+    """y_n = s_n + u_n with s_n the sum of the n inputs before: n + 1 for a constant 1."""
+    with build_master(_sum_scenario(version, 0.02, {"dt": 0.02})) as master:
+        result = master.run(0.2)
+    np.testing.assert_array_equal(result["Sum.y"], np.arange(1.0, 12.0))
+
+
+def test_a_period_declaration_naming_no_parameter_is_refused_naming_it(tmp_path):
+    import zipfile
+
+    bad = tmp_path / "sum.fmu"
+    with zipfile.ZipFile(toy_models.sum_fmu_path(2)) as src, zipfile.ZipFile(bad, "w") as dst:
+        for info in src.infolist():
+            data = src.read(info)
+            if info.filename == "modelDescription.xml":
+                assert b'periodParameter="dt"' in data
+                data = data.replace(b'periodParameter="dt"', b'periodParameter="u"')
+            dst.writestr(info, data)
+    with pytest.raises(ScenarioError) as info:
+        build_master(_sum_scenario(2, 0.01, {}, bad))
+    assert str(info.value).endswith("its fnn-cosim.sampled-data annotation declares periodParameter = 'u', "
+                                    "which is no parameter of the FMU")

@@ -176,3 +176,32 @@ def test_debug_shows_the_traceback(tmp_path, capsys):
                  "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == EXIT_BAD_INPUT and "Traceback" in err and "not a zip archive" in err
+
+
+# ---- a sampled-data FMU at a step that is not its period: refused before the run --------------------
+
+def test_a_mission_whose_step_is_not_the_controller_fmus_period_is_refused_before_the_run(tmp_path, capsys):
+    """The controller FMU (built by the [controller] table) declares its
+    period dt: a master refuses another step before anything runs, where the
+    FMU itself would refuse it only at the first doStep (exit 1, RMSE 0)."""
+    out = tmp_path / "out"
+    code = main(["run", "circles", "--set", "simulation.step=0.02", "--set", "simulation.duration=0.1",
+                 "--out", str(out), "--quiet", "--no-plots"])
+    _assert_one_line(code, capsys.readouterr().err,
+                     "controller.dt = 0.01: a sampled-data FMU runs at its period; the communication step is 0.02 s")
+    assert not out.exists()
+
+
+def test_an_archive_whose_controller_period_is_not_its_step_is_refused_before_the_run(tmp_path, capsys):
+    archive = tmp_path / "circles.ssp"
+    assert main(["export-ssp", "circles", "--out", str(archive)]) == 0
+    binding = re.compile(rb'(<ssv:Parameter name="dt">\s*<ssv:Real value=")0\.01("/>)')
+    with zipfile.ZipFile(archive) as z:  # the controller's dt is the mission's only one
+        assert len(binding.findall(z.read("SystemStructure.ssd"))) == 1
+    bad = _rewrite(archive, tmp_path / "bad.ssp", lambda name, data: (
+        name, binding.sub(rb"\g<1>0.02\g<2>", data) if name == "SystemStructure.ssd" else data))
+    out = tmp_path / "out"
+    code = main(["run", str(bad), "--set", "simulation.duration=0.1", "--out", str(out), "--quiet", "--no-plots"])
+    _assert_one_line(code, capsys.readouterr().err, "fmus.controller.parameters.dt = 0.02: a sampled-data FMU runs "
+                     "at its period; the communication step is 0.01 s")
+    assert not out.exists()

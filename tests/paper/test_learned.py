@@ -69,3 +69,25 @@ def test_a_file_that_cannot_serve_is_refused_in_one_line(saved, tmp_path, capsys
     code = main(["run", "circles", "--out", str(tmp_path / "r"), *RUN, "--load-learned", str(bad)])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == EXIT_BAD_INPUT and len(err) == 1 and message in err[0] and str(bad) in err[0]
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_value_the_controller_fmu_refuses_in_its_restored_state_is_one_line_quoting_it(version):
+    """The FMU checks the state a learned state is written into like any
+    input (here a non-finite value the file reader would have refused)."""
+    from cosim.errors import FmuCallError
+    from fmu_models.export.build import cached_fmu
+    from fnn_controller.controller_fmu import controller_model
+    from fnn_controller.step import state_ports
+    from fnn_controller.variants import variant
+    from quadrotor_paper.learned import LearnedControllerFmu
+
+    names = [name for name, _, _ in state_ports(variant("pd+lm"))]
+    state = np.zeros(len(names))
+    state[3] = np.inf
+    with LearnedControllerFmu("controller", cached_fmu(controller_model("pd+lm"), version), variant="pd+lm",
+                              state=state) as fmu:
+        with pytest.raises(FmuCallError) as info:
+            fmu.start(0.0)
+    assert "\n" not in str(info.value)
+    assert info.value.log == f"[ERROR] deserialize FMU state: {names[3]} = inf refused: not a finite number"

@@ -1,4 +1,5 @@
 /* Model-independent core; see fmu_core.h. */
+#include <ctype.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -9,7 +10,11 @@
 #include "model_generated.h"
 #include "numpy_random.h"
 
-#define STATE_MAGIC 0x464E4E43UL /* "FNNC" */
+/* The first 8 bytes of every state: "FNNC" and the version of CoreState's
+ * layout (2: with the model's token); a change of the layout changes it. */
+#define STATE_MAGIC ((uint64_t)0x464E4E43 << 32 | 2u)
+/* The token field holds MODEL_GUID whole (C99: a negative array size stops the build). */
+typedef char guid_fits_the_state_header[sizeof MODEL_GUID <= STATE_TOKEN_SIZE ? 1 : -1];
 /* Room for the longest message, the failed-step report with every input and
  * parameter of the plant (about 1.5 kB at worst); a longer report, of a bigger
  * model, ends in "..." (message_append). */
@@ -78,8 +83,9 @@ CoreStatus core_check_mode(Instance *inst, const char *function, unsigned allowe
 
 static void set_defaults(Instance *inst) {
     memset(&inst->s, 0, sizeof inst->s);
-    inst->s.magic = STATE_MAGIC;
-    inst->s.n_variables = N_VARIABLES;
+    inst->s.header.magic = STATE_MAGIC;
+    memcpy(inst->s.header.token, MODEL_GUID, sizeof MODEL_GUID);
+    snprintf(inst->s.header.model, sizeof inst->s.header.model, "%s", MODEL_NAME);
     inst->s.mode = MODE_INSTANTIATED;
     for (size_t i = 0; i < N_VARIABLES; i++) inst->s.v[i] = VAR_START[i];
     inst->derived_valid = 0;
@@ -182,13 +188,48 @@ static void update_derived(Instance *inst) {
 }
 #endif
 
+/* ---- the values a variable may hold ----------------------------------------- */
+
+/* The one test of a value entering the instance, and its words: finite, within
+ * the variable's declared range (inclusive, as FMI's min and max and
+ * Variable.check are) and whole if it is a count. Time and the states have
+ * the range of all reals, so this is "finite" for them. Every way in goes
+ * through it: a set, the start time, the initial state, a restored state.
+ * `context` prefixes the message ("" for a set, else e.g. "set FMU state: "). */
+static CoreStatus check_value(Instance *inst, const char *context, unsigned vr, double value) {
+    if (!isfinite(value)) {
+        core_log(inst, CORE_ERROR, "%s%s = %g refused: not a finite number", context, VAR_NAME[vr], value);
+        return CORE_ERROR;
+    }
+    if (!(value >= VAR_MIN[vr] && value <= VAR_MAX[vr])) {
+        char v[NUMBER_SIZE], lo[NUMBER_SIZE], hi[NUMBER_SIZE];
+        core_log(inst, CORE_ERROR, "%s%s = %s refused: outside its range [%s, %s]", context, VAR_NAME[vr],
+                 exact(v, value), exact(lo, VAR_MIN[vr]), exact(hi, VAR_MAX[vr]));
+        return CORE_ERROR;
+    }
+    if (VAR_INTEGER[vr] && value != floor(value)) {  /* a count (Variable.integer) */
+        char v[NUMBER_SIZE];
+        core_log(inst, CORE_ERROR, "%s%s = %s refused: not a whole number", context, VAR_NAME[vr], exact(v, value));
+        return CORE_ERROR;
+    }
+    return CORE_OK;
+}
+
+/* check_value on every value an instance leaves initialization with: the
+ * time, the states x, the inputs and parameters, the discrete states z. The
+ * derivatives and outputs are computed from these and are not checked. */
+static CoreStatus check_values(Instance *inst, const char *context, const double v[N_VARIABLES]) {
+    for (unsigned vr = 0; vr < N_VARIABLES; vr++) {
+        if (vr >= VR_DX && vr < VR_U) continue;  /* der(x) and y */
+        if (check_value(inst, context, vr, v[vr]) != CORE_OK) return CORE_ERROR;
+    }
+    return CORE_OK;
+}
+
 /* ---- initialization ------------------------------------------------------- */
 
 CoreStatus core_enter_initialization(Instance *inst, double start_time) {
-    if (!isfinite(start_time)) {
-        core_log(inst, CORE_ERROR, "start time = %g is not finite", start_time);
-        return CORE_ERROR;
-    }
+    if (check_value(inst, "start ", 0, start_time) != CORE_OK) return CORE_ERROR;  /* "start time = ..." */
     T_ = start_time;
     inst->s.step_base_time = start_time;
     inst->s.step_size = 0.0;
@@ -205,19 +246,10 @@ static int first_non_finite(const double *values, size_t n) {
     return -1;
 }
 
-/* Refuse a non-finite initial value among the n variables from value reference first. */
-static CoreStatus check_initial_values(Instance *inst, size_t first, size_t n) {
-    int bad = first_non_finite(inst->s.v + first, n);
-    if (bad < 0) return CORE_OK;
-    core_log(inst, CORE_ERROR, "initial value of %s = %g is not finite", VAR_NAME[first + bad],
-             inst->s.v[first + bad]);
-    return CORE_ERROR;
-}
-
 CoreStatus core_exit_initialization(Instance *inst) {
     if (initial_state(inst) != CORE_OK) return CORE_ERROR;
-    if (check_initial_values(inst, VR_X, NX) != CORE_OK || check_initial_values(inst, VR_Z, NZ) != CORE_OK)
-        return CORE_ERROR;
+    /* the initial state from the parameters, and what was set */
+    if (check_values(inst, "initial value: ", inst->s.v) != CORE_OK) return CORE_ERROR;
     inst->s.held = 0;
     inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE : MODE_EVENT;
     update_derived(inst);
@@ -225,26 +257,6 @@ CoreStatus core_exit_initialization(Instance *inst) {
 }
 
 /* ---- get / set ------------------------------------------------------------ */
-
-static CoreStatus check_value(Instance *inst, unsigned vr, double value) {
-    if (!isfinite(value)) {
-        core_log(inst, CORE_ERROR, "%s = %g refused: not a finite number", VAR_NAME[vr], value);
-        return CORE_ERROR;
-    }
-    /* inclusive on both sides, as FMI's min and max (and Variable.check) are */
-    if (!(value >= VAR_MIN[vr] && value <= VAR_MAX[vr])) {
-        char v[NUMBER_SIZE], lo[NUMBER_SIZE], hi[NUMBER_SIZE];
-        core_log(inst, CORE_ERROR, "%s = %s refused: outside its range [%s, %s]", VAR_NAME[vr], exact(v, value),
-                 exact(lo, VAR_MIN[vr]), exact(hi, VAR_MAX[vr]));
-        return CORE_ERROR;
-    }
-    if (VAR_INTEGER[vr] && value != floor(value)) {  /* a count (Variable.integer) */
-        char v[NUMBER_SIZE];
-        core_log(inst, CORE_ERROR, "%s = %s refused: not a whole number", VAR_NAME[vr], exact(v, value));
-        return CORE_ERROR;
-    }
-    return CORE_OK;
-}
 
 CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const double value[]) {
     if (n > 0 && (!vr || !value)) {
@@ -277,7 +289,7 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
             core_log(inst, CORE_ERROR, "%s is not an input or parameter and cannot be set", VAR_NAME[vr[i]]);
             return CORE_ERROR;
         }
-        if (check_value(inst, vr[i], value[i]) != CORE_OK) return CORE_ERROR;
+        if (check_value(inst, "", vr[i], value[i]) != CORE_OK) return CORE_ERROR;
     }
     for (size_t i = 0; i < n; i++) inst->s.v[vr[i]] = value[i];
     if (n > 0) {
@@ -445,10 +457,7 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
 /* ---- model exchange --------------------------------------------------------- */
 
 CoreStatus core_set_time(Instance *inst, double time) {
-    if (!isfinite(time)) {
-        core_log(inst, CORE_ERROR, "time = %g refused: not finite", time);
-        return CORE_ERROR;
-    }
+    if (check_value(inst, "", 0, time) != CORE_OK) return CORE_ERROR;
     T_ = time;
     inst->derived_valid = 0;
     return CORE_OK;
@@ -459,12 +468,8 @@ CoreStatus core_set_states(Instance *inst, const double x[], size_t nx) {
         core_log(inst, CORE_ERROR, "set continuous states: expected %d states, got %zu", NX, nx);
         return CORE_ERROR;
     }
-    for (size_t i = 0; i < nx; i++) {
-        if (!isfinite(x[i])) {
-            core_log(inst, CORE_ERROR, "state %s = %g refused: not finite", VAR_NAME[VR_X + i], x[i]);
-            return CORE_ERROR;
-        }
-    }
+    for (size_t i = 0; i < nx; i++)
+        if (check_value(inst, "", (unsigned)(VR_X + i), x[i]) != CORE_OK) return CORE_ERROR;
     memcpy(X_, x, nx * sizeof(double));
     inst->derived_valid = 0;
     return CORE_OK;
@@ -593,11 +598,52 @@ CoreState *core_get_state(Instance *inst, CoreState *reuse) {
     return state;
 }
 
-CoreStatus core_set_state(Instance *inst, const CoreState *state) {
-    if (!state || state->magic != STATE_MAGIC || state->n_variables != N_VARIABLES) {
-        core_log(inst, CORE_ERROR, "set FMU state: not a state of this model");
+/* A fixed-width text field of a state from outside as a printable string:
+ * the bytes may be anything. */
+static const char *printable(char out[STATE_NAME_SIZE], const char *field, size_t width) {
+    size_t i = 0;
+    for (; i + 1 < STATE_NAME_SIZE && i < width && field[i]; i++)
+        out[i] = isprint((unsigned char)field[i]) ? field[i] : '?';
+    out[i] = '\0';
+    return out;
+}
+
+/* A state of this model: this exporter's layout, this model's token; else
+ * names the model the state is of, and this one. */
+static CoreStatus check_header(Instance *inst, const char *context, const StateHeader *header) {
+    char model[STATE_NAME_SIZE], token[STATE_NAME_SIZE];
+    if (header->magic != STATE_MAGIC) {
+        core_log(inst, CORE_ERROR, "%snot an FMU state of this exporter (layout %u), so not one of %s %s", context,
+                 (unsigned)(STATE_MAGIC & 0xFFFFu), MODEL_NAME, MODEL_GUID);
         return CORE_ERROR;
     }
+    if (memcmp(header->token, MODEL_GUID, sizeof MODEL_GUID) != 0) {
+        core_log(inst, CORE_ERROR, "%sa state of %s %s, this FMU is %s %s", context,
+                 printable(model, header->model, sizeof header->model),
+                 printable(token, header->token, sizeof header->token), MODEL_NAME, MODEL_GUID);
+        return CORE_ERROR;
+    }
+    return CORE_OK;
+}
+
+/* The one check of a state restored from outside the instance (set or
+ * deserialized), as of any other input: this model's, in a mode of the state
+ * machine, with values that setting and initialization accept (check_values). */
+static CoreStatus check_state(Instance *inst, const char *context, const CoreState *state) {
+    if (check_header(inst, context, &state->header) != CORE_OK) return CORE_ERROR;
+    if (state->mode < 0 || state->mode >= MODE_N) {
+        core_log(inst, CORE_ERROR, "%smode %d is no mode of the FMI state machine", context, (int)state->mode);
+        return CORE_ERROR;
+    }
+    return check_values(inst, context, state->v);
+}
+
+CoreStatus core_set_state(Instance *inst, const CoreState *state) {
+    if (!state) {
+        core_log(inst, CORE_ERROR, "set FMU state: NULL state");
+        return CORE_ERROR;
+    }
+    if (check_state(inst, "set FMU state: ", state) != CORE_OK) return CORE_ERROR;
     inst->s = *state;
     inst->derived_valid = 0;
     return CORE_OK;
@@ -615,18 +661,29 @@ CoreStatus core_serialize(Instance *inst, const CoreState *state, unsigned char 
 }
 
 CoreState *core_deserialize(Instance *inst, const unsigned char *bytes, size_t size) {
-    CoreState tmp;
-    if (!bytes || size != sizeof(CoreState)) {
-        core_log(inst, CORE_ERROR, "deserialize FMU state: %zu bytes, expected %zu", size, sizeof(CoreState));
+    static const char context[] = "deserialize FMU state: ";
+    StateHeader header;
+    if (!bytes || size < sizeof header) {
+        core_log(inst, CORE_ERROR, "%s%zu bytes, a state of %s is %zu", context, bytes ? size : 0, MODEL_NAME,
+                 sizeof(CoreState));
         return NULL;
     }
-    memcpy(&tmp, bytes, sizeof tmp);
-    if (tmp.magic != STATE_MAGIC || tmp.n_variables != N_VARIABLES || tmp.mode < 0 || tmp.mode >= MODE_N) {
-        core_log(inst, CORE_ERROR, "deserialize FMU state: the bytes are not a state of this model");
+    memcpy(&header, bytes, sizeof header);
+    /* whose state it is, before its size: another model's has another size */
+    if (check_header(inst, context, &header) != CORE_OK) return NULL;
+    if (size != sizeof(CoreState)) {
+        core_log(inst, CORE_ERROR, "%s%zu bytes, a state of %s is %zu", context, size, MODEL_NAME, sizeof(CoreState));
         return NULL;
     }
     CoreState *state = (CoreState *)malloc(sizeof(CoreState));
-    if (!state) return NULL;
-    *state = tmp;
+    if (!state) {
+        core_log(inst, CORE_ERROR, "%sout of memory", context);
+        return NULL;
+    }
+    memcpy(state, bytes, sizeof(CoreState));
+    if (check_state(inst, context, state) != CORE_OK) {
+        free(state);
+        return NULL;
+    }
     return state;
 }

@@ -57,11 +57,25 @@ typedef enum { KIND_MODEL_EXCHANGE, KIND_CO_SIMULATION } CoreKind;
 typedef void (*CoreLogger)(void *environment, const char *instance_name,
                            CoreStatus status, const char *category, const char *message);
 
+/* What every saved state starts with, at the same offsets in every model, so
+ * that a state of another model is recognised (and named) before anything
+ * else of it is read. */
+#define STATE_TOKEN_SIZE 40  /* MODEL_GUID, "{8-4-4-4-12}", and its NUL */
+#define STATE_NAME_SIZE 64   /* MODEL_NAME, cut if longer: it only names the model in messages */
+typedef struct {
+    uint64_t magic;                /* STATE_MAGIC: this exporter's layout of CoreState */
+    char token[STATE_TOKEN_SIZE];  /* MODEL_GUID: the model's generated code and variable table */
+    char model[STATE_NAME_SIZE];   /* MODEL_NAME */
+} StateHeader;
+
 /* Everything get/set FMU state saves and restores. */
-/* The serialized FMU state is this struct's bytes: fixed-width header (with
- * the step counter and the random stream of a stochastic model, NRS > 0), then
- * v, the N_VARIABLES values in value-reference order (the last 8 N_VARIABLES
- * bytes), so a learned state can be written into a serialized state.
+/* The serialized FMU state is this struct's bytes: the header above, the
+ * fixed-width fields (with the step counter and the random stream of a
+ * stochastic model, NRS > 0), then v, the N_VARIABLES values in
+ * value-reference order (the last 8 N_VARIABLES bytes), so a learned state
+ * can be written into a serialized state. A state is restored (set or
+ * deserialized) only if it is this model's and its values are ones setting
+ * and initialization accept (fmu_core.c, check_state).
  *
  * Time from a step counter (co-simulation): after doStep(t_c, h) the FMU's
  * time is step_base_time + step_count * step_size, where the steps counted are
@@ -69,8 +83,7 @@ typedef void (*CoreLogger)(void *environment, const char *instance_name,
  * ended. A master that steps from t0 + n h thus sees outputs computed at
  * exactly t0 + (n + 1) h, never at the rounded sum t_c + h. */
 typedef struct {
-    uint64_t magic;
-    uint64_t n_variables;
+    StateHeader header;
     int32_t mode;
     int32_t failed;          /* a step produced a non-finite state */
     int32_t held;            /* sampled-data: outputs held from the last doStep */
