@@ -557,6 +557,8 @@ def fmu_error_in_scenario(scenario: Scenario, exc: FmuError) -> ScenarioError:
                              f"{exc.path}: {said}")
     if "model" in spec:
         return ScenarioError(f"fmus.{exc.instance}.model = {spec['model']!r} ({exc.path}): {exc.reason}")
+    if exc.instance not in scenario.fmus:  # an FMU a component kind built (e.g. the controller's FMU form)
+        return ScenarioError(f"{exc.instance} (its FMU {exc.path}): {exc.reason}")
     return ScenarioError(f"fmus.{exc.instance}.path = {str(exc.path)!r}: {exc.reason}")
 
 

@@ -100,12 +100,12 @@ def _cmd_run(args) -> int:
         if args.load_learned:
             overrides["controller.learned"] = str(args.load_learned)
         scenario = load_scenario(args.scenario, overrides)
-    # every place a result goes is checked before the run: nothing computed is lost for want of it
-    out = output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}")
-    learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
     from cosim.scenario import build_master
 
-    with build_master(scenario) as master:
+    with build_master(scenario) as master:  # every input refused before anything is written
+        # every place a result goes is checked before the run: nothing computed is lost for want of it
+        out = output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}")
+        learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
         if learned_file is not None and "controller" not in master.components:
             raise ScenarioError(f"--save-learned {learned_file}: the scenario has no controller")
         with progress_bar(f"run {scenario.name}", enabled=not args.quiet, unit="step") as bar:

@@ -209,7 +209,7 @@ class ControllerComponent(PythonComponent):
 
         self._fc = fc
         self.position = _parameters(fc.PositionParams, position, f"{name}.position")
-        base = fc.GeometricParams()
+        base = dataclasses.replace(fc.GeometricParams(), dt=self.position.dt)  # one step for both loops
         if vehicle:  # the nominal vehicle first: the geometric table cannot set it (controller_table)
             base = dataclasses.replace(base, vehicle=dataclasses.replace(base.vehicle, **vehicle))
         self.geometric = _parameters(fc.GeometricParams, geometric, f"{name}.geometric", base)
@@ -242,6 +242,10 @@ class ControllerComponent(PythonComponent):
         except ValueError as exc:  # a parameter dataclass refused a combination of values
             raise ScenarioError(f"{name}: {exc}") from None
         form, version = table.form, table.fmi_version
+        if context is not None and abs(context.scenario.step - component.position.dt) > 1e-12:
+            # the controller computes once per position.dt: a master takes no other step (refused before any run)
+            raise ScenarioError(f"{name}.position.dt = {component.position.dt!r}: the controller's period must equal "
+                                f"the communication step simulation.step = {context.scenario.step!r} s")
         if "learned" in parameters:  # resume learning from a saved state
             from .learned import load_learned
 

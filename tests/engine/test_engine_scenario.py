@@ -469,6 +469,28 @@ def test_at_its_period_a_sampled_data_fmu_runs(version):
     np.testing.assert_array_equal(result["Sum.y"], np.arange(1.0, 12.0))
 
 
+@pytest.mark.parametrize("version", [2, 3])
+def test_an_fmu_a_kind_builds_is_held_to_its_period_too(version):
+    """A component kind may build its component as an FMU (the controller's
+    FMU form does): the parameters the kind set are checked against the
+    step like a scenario's own FMU's."""
+    def scenario(step, dt):
+        return parse_scenario({
+            "name": "toy_sum_kind", "connections": ["source.out -> S.u", "S.y -> Lag.u"],
+            "simulation": {"duration": 10 * step, "step": step},
+            "fmus": {"Lag": {"path": str(toy_models.lag_fmu_path(version))}},
+            "components": {"S": {"kind": "toy_sum_fmu", "fmi_version": version, "dt": dt}},
+            "toy_source": {"kind": "toy_constant", "value": 1.0},
+            "record": {"signals": ["S.y"]},
+        })
+
+    with pytest.raises(ScenarioError) as info:
+        build_master(scenario(0.01, 0.02))
+    assert str(info.value) == "S.dt = 0.02: a sampled-data FMU runs at its period; the communication step is 0.01 s"
+    with build_master(scenario(0.02, 0.02)) as master:
+        np.testing.assert_array_equal(master.run(0.2)["S.y"], np.arange(1.0, 12.0))
+
+
 def test_a_period_declaration_naming_no_parameter_is_refused_naming_it(tmp_path):
     import zipfile
 

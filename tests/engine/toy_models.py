@@ -261,6 +261,21 @@ def _builder(cls) -> Callable[[str, Mapping[str, Any], registry.BuildContext], P
     return build
 
 
+class ToySumFmu(Table):
+    """``[components.X] kind = "toy_sum_fmu", dt = 0.02``: the running sum as an FMU a kind builds."""
+
+    fmi_version: int = 2
+    dt: Number = None
+
+
+def _build_sum_fmu(name: str, params: Mapping[str, Any], context: registry.BuildContext):
+    from cosim.fmu_component import FmuComponent
+
+    table = dict(params)
+    parameters = {"dt": float(table["dt"])} if table.get("dt") is not None else {}
+    return FmuComponent(name, sum_fmu_path(int(table.get("fmi_version", 2))), parameters=parameters)
+
+
 def _build_lag(fmi_version: int) -> Path:
     BUILDS.append(fmi_version)
     return lag_fmu_path(fmi_version)
@@ -310,6 +325,8 @@ def register_toys() -> None:
         alias="toy_controller", instance="ctrl"))
     registry.register_component_kind(registry.ComponentKind(
         "toy_gain", _builder(Gain), functools.partial(_numbers_only, Gain), "toy gain"))
+    registry.register_component_kind(registry.ComponentKind(
+        "toy_sum_fmu", _build_sum_fmu, lambda: ToySumFmu, "toy running sum a kind builds as its FMU"))
     registry.register_section(registry.Section("toy_lag", lambda: ToyLag, _apply_toy_lag,
                                                "toy shorthand for the lag's parameters"))
     registry.register_fmu_model(registry.RegisteredModel("toy_FirstOrderLag", _build_lag, _check_lag_parameter))

@@ -328,3 +328,15 @@ def test_the_results_sidecar_counts_rows_as_blocks_are_flushed(tmp_path, monkeyp
     sidecar = json.loads((tmp_path / "r.csv.json").read_text())
     assert (sidecar["status"], sidecar["rows"]) == ("running", 20)  # two blocks flushed, the third not yet
     assert len((tmp_path / "r.csv").read_text().splitlines()) == 21
+
+
+@pytest.mark.parametrize("form", ["fmu", "python"])
+def test_a_controller_period_that_is_not_the_step_is_refused_before_anything_is_written(sandbox, capsys, form):
+    code, line = cli(capsys, "run", "circles", "--set", "controller.position.dt=0.02", "--set",
+                     f'controller.form="{form}"', "--out", str(sandbox / "out"), "--quiet")
+    assert code == EXIT_BAD_INPUT and "controller.position.dt = 0.02: the controller's period must equal the " \
+                                      "communication step simulation.step = 0.01 s" in line
+    assert not (sandbox / "out").exists()
+    code, line = cli(capsys, "run", "circles", "--set", "controller.geometric.dt=0.02", "--quiet")
+    assert code == EXIT_BAD_INPUT and "controller.geometric.dt = 0.02: the position and the velocity controller" \
+                                      " run in one step" in line

@@ -181,14 +181,17 @@ def test_debug_shows_the_traceback(tmp_path, capsys):
 # ---- a sampled-data FMU at a step that is not its period: refused before the run --------------------
 
 def test_a_mission_whose_step_is_not_the_controller_fmus_period_is_refused_before_the_run(tmp_path, capsys):
-    """The controller FMU (built by the [controller] table) declares its
-    period dt: a master refuses another step before anything runs, where the
-    FMU itself would refuse it only at the first doStep (exit 1, RMSE 0)."""
+    """The controller (the [controller] table, built as its FMU) computes at
+    its period position.dt: another step is refused before anything runs,
+    naming the scenario's key, where the FMU itself would refuse it only at
+    the first doStep (exit 1, RMSE 0). (An FMU a kind builds is also checked
+    by the engine against its declared period: tests/engine.)"""
     out = tmp_path / "out"
     code = main(["run", "circles", "--set", "simulation.step=0.02", "--set", "simulation.duration=0.1",
                  "--out", str(out), "--quiet", "--no-plots"])
     _assert_one_line(code, capsys.readouterr().err,
-                     "controller.dt = 0.01: a sampled-data FMU runs at its period; the communication step is 0.02 s")
+                     "controller.position.dt = 0.01: the controller's period must equal the communication step "
+                     "simulation.step = 0.02 s")
     assert not out.exists()
 
 
