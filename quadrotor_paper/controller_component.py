@@ -182,6 +182,13 @@ def controller_table() -> type[Table]:
     return ControllerTable
 
 
+def _check_period(name: str, dt: float, step: float) -> None:
+    """The controller computes once per ``position.dt``: a master takes no other communication step."""
+    if abs(step - dt) > 1e-12:
+        raise ScenarioError(f"{name}.position.dt = {dt!r}: the controller's period must equal the communication "
+                            f"step simulation.step = {step!r} s")
+
+
 class ControllerComponent(PythonComponent):
     """PD + FNN position control and geometric velocity control (paper Fig. 2).
 
@@ -242,10 +249,8 @@ class ControllerComponent(PythonComponent):
         except ValueError as exc:  # a parameter dataclass refused a combination of values
             raise ScenarioError(f"{name}: {exc}") from None
         form, version = table.form, table.fmi_version
-        if context is not None and abs(context.scenario.step - component.position.dt) > 1e-12:
-            # the controller computes once per position.dt: a master takes no other step (refused before any run)
-            raise ScenarioError(f"{name}.position.dt = {component.position.dt!r}: the controller's period must equal "
-                                f"the communication step simulation.step = {context.scenario.step!r} s")
+        if context is not None:  # refused before any run, not at its start
+            _check_period(name, component.position.dt, context.scenario.step)
         if "learned" in parameters:  # resume learning from a saved state
             from .learned import load_learned
 
@@ -307,9 +312,7 @@ class ControllerComponent(PythonComponent):
         self._psi = float(values.get("psi_ref", self.psi_ref))
 
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
-        if abs(h - self.position.dt) > 1e-12:
-            raise ScenarioError(f"{self.name}: the controller step position.dt = {self.position.dt} s must equal "
-                                f"the communication step {h} s")
+        _check_period(self.name, self.position.dt, h)  # a component made without a scenario: checked here
         if not hasattr(self, "_psi"):
             self._psi = self.psi_ref
         fast = self.function()
