@@ -21,6 +21,23 @@ The paper's claims (section 4), with tau = tau_c - tau_n the control
 * **LM, Theorem 4, eq. (70)**: ``S_p`` reaches zero within
   ``t_h <= 4 K_d S_p(0)/gamma = 4 |tau_c(0)|/gamma``.
 
+Two assumptions the proofs make without saying so, checked on the same runs
+for the type-1 and the interval type-2 laws (eqs. IT-14, IT-15 of
+``docs/controller.md``):
+
+* **alpha* inside the projection box (SMC).** The proof of Theorem 1 needs a
+  constant ``alpha* >= 2 B`` in ``V_c``; the law projects alpha onto
+  ``[0, alpha_max]``, and a projected adaptive law keeps the Lyapunov
+  argument only if ``alpha*`` lies in the box: ``2 B <= alpha_max``, i.e.
+  ``B <= alpha_max / 2``.
+* **W_bar does not move (eq. 45, IT-12).** In continuous time the centre and
+  width laws leave the normalized firing strengths unchanged; the forward
+  Euler step does not (second order in ``dt alpha``): the largest step-to-step
+  change of the regressor the law uses (W_bar, or W_bar_q for the IT2 FNN),
+  ``max_n ||W_n - W_{n-1}||_inf``, is reported, and
+  :func:`regressor_step_change` gives it for one step at a given alpha, away
+  from the width floor (second order) and at it (first order).
+
 What a run shows (per axis): ``B`` measured as ``max |Delta tau|/h`` (and its
 99th percentile), the time |tau_c| enters eq. (53)'s neighbourhood for good,
 the first time tau_c reaches zero (changes sign), the largest |tau_c| after
@@ -28,12 +45,13 @@ t_h, and for LM the delta the law actually uses (``max(W^T W, alpha_bar)``,
 eq. 62) and the resulting decrease rate ``gamma W^T W/(delta + W^T W)``
 against the proof's gamma/2.
 
-No law is written again here: W_bar (eq. 25), delta (eq. 62) and the f rate
-(eq. 61) are the controller's own CasADi definitions
+No law is written again here: W_bar (eq. 25) or W_bar_q (IT-5), delta (eq.
+62) and the f rate (eq. 61) are the controller's own CasADi definitions
 (``fnn_controller.fnn.normalized_firing_strength``,
+``fnn_controller.it2.it2_normalized_firing_strengths``, ``it2_regressor``,
 ``fnn_controller.learning.clip_inputs``, ``lm_delta``, ``lm_f_rate``), built
 into one ``casadi.Function`` and mapped over the samples of a run
-(:func:`_lm_function`).
+(:func:`_claims_function`).
 
 The runs are co-simulations by the master (plant FMU, h = 0.01 s) that
 record the learned state the controller publishes (its internal signals
@@ -51,17 +69,22 @@ import casadi as ca
 import numpy as np
 
 from fnn_controller import PositionParams
-from fnn_controller.fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, SIGMA1, SIGMA2, normalized_firing_strength
+from fnn_controller.fnn import ALPHA, C1, C2, SIGMA1, SIGMA2, normalized_firing_strength
+from fnn_controller.it2 import Q, it2_normalized_firing_strengths, it2_regressor
 from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
 from fnn_controller.position import axis_slice
+from fnn_controller.variants import variant as _variant
 
 from .controller_component import internal_ports
 from .missions import controller_variant
 
 __all__ = ["Recording", "AxisClaims", "record_run", "recorded", "evaluate_claims", "default_runs",
-           "finite_time_report", "CLAIM_MISSIONS"]
+           "finite_time_report", "regressor_step_change", "CLAIM_MISSIONS", "CLAIM_VARIANTS"]
 
 _AXES = ("x", "y", "z")
+# the learning variants the claims cover, by law: the type-1 FNN (eq. 25) and the interval type-2 FNN (IT-5)
+_SMC, _LM = ("pd+smc", "pd+it2-smc"), ("pd+lm", "pd+it2-lm")
+CLAIM_VARIANTS = (*_SMC, *_LM)
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,33 +155,105 @@ def record_run(name: str, variant: str, scenario: str = "circles", overrides: di
     return replace(recorded(sc, result)["recorded"], name=name)
 
 
+def _is_it2(variant: str) -> bool:
+    return variant in ("pd+it2-smc", "pd+it2-lm")
+
+
+def _regressor(x1, x2, s, variant: str, position: PositionParams):
+    """The regressor the law of ``variant`` uses at one sample, from the
+    controller's own definitions: W_bar of eq. 25 (type-1) or
+    W_bar_q = q W_bar_lower + (1 - q) W_bar_upper of IT-5 (interval type-2),
+    the inputs clipped by eq. 27."""
+    c1, c2 = clip_inputs(x1, x2, position.bounds)
+    if _is_it2(variant):
+        lower, upper = it2_normalized_firing_strengths(c1, c2, s[C1], s[C2], s[SIGMA1], s[SIGMA2],
+                                                       position.it2.spread)
+        return it2_regressor(lower, upper, s[Q])
+    return normalized_firing_strength(c1, c2, s[C1], s[C2], s[SIGMA1], s[SIGMA2])
+
+
 @lru_cache(maxsize=None)
-def _lm_function(bounds: LearningBounds) -> ca.Function:
-    """The LM law's terms at one sample, from the controller's definitions.
+def _claims_function(variant: str, position: PositionParams) -> ca.Function:
+    """The law's terms at one sample, from the controller's definitions.
 
     Inputs ``x1 = e``, ``x2 = de/dt`` (clipped by ``clip_inputs``), the axis
-    state, ``gamma`` and ``alpha_bar``; outputs ``W_bar^T W_bar`` (W_bar of
-    eq. 25), ``delta = lm_delta(W_bar, alpha_bar)`` (eq. 62) and the decrease
-    rate of tau_n, ``-W_bar^T lm_f_rate(W_bar, 1, gamma, alpha_bar)`` (eq. 61
-    with sgn(tau_c) = 1), which is ``gamma W^T W/(delta + W^T W)``.
+    state, ``gamma`` and ``alpha_bar``; outputs the regressor W (W_bar of eq. 25,
+    or W_bar_q of IT-5), ``W^T W``, ``delta = lm_delta(W, alpha_bar)`` (eq. 62,
+    IT-11) and the decrease rate of tau_n, ``-W^T lm_f_rate(W, 1, gamma,
+    alpha_bar)`` (eq. 61 / IT-10 with sgn(tau_c) = 1), which is
+    ``gamma W^T W/(delta + W^T W)``.
     """
     x1, x2 = ca.SX.sym("x1"), ca.SX.sym("x2")
-    s = ca.SX.sym("axis_state", AXIS_STATE_SIZE)
+    s = ca.SX.sym("axis_state", _variant(variant).axis_state_size)
     gamma, alpha_bar = ca.SX.sym("gamma"), ca.SX.sym("alpha_bar")
-    c1, c2 = clip_inputs(x1, x2, bounds)
-    w = normalized_firing_strength(c1, c2, s[C1], s[C2], s[SIGMA1], s[SIGMA2])
+    w = _regressor(x1, x2, s, variant, position)
     rate = -ca.dot(w, lm_f_rate(w, 1.0, gamma, alpha_bar))
-    return ca.Function("lm_claims", [x1, x2, s, gamma, alpha_bar], [ca.dot(w, w), lm_delta(w, alpha_bar), rate],
-                       ["x1", "x2", "axis_state", "gamma", "alpha_bar"], ["w_bar_squared", "delta", "rate"])
+    return ca.Function("claims", [x1, x2, s, gamma, alpha_bar], [w, ca.dot(w, w), lm_delta(w, alpha_bar), rate],
+                       ["x1", "x2", "axis_state", "gamma", "alpha_bar"], ["w", "w_squared", "delta", "rate"])
+
+
+def _law_terms(run: Recording, axis: int, gamma: float, alpha_bar: float):
+    """The regressor (n, 9), W^T W, delta (eq. 62) and the decrease rate at
+    every sample of ``axis`` of ``run``: :func:`_claims_function` mapped over
+    the samples."""
+    f = _claims_function(run.variant, run.position).map(len(run.t))
+    states = run.states[:, axis_slice(axis, _variant(run.variant).axis_state_size)].T
+    out = f(run.e[:, axis][None, :], run.e_dot[:, axis][None, :], states, gamma, alpha_bar)
+    w = np.array(out[0]).T
+    return (w, *(np.array(o).ravel() for o in out[1:]))
 
 
 def _lm_terms(run: Recording, axis: int, gamma: float, alpha_bar: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """W_bar^T W_bar, delta (eq. 62) and the decrease rate at every sample of
-    ``axis`` of ``run``: :func:`_lm_function` mapped over the samples."""
-    f = _lm_function(run.position.bounds).map(len(run.t))
-    states = run.states[:, axis_slice(axis)].T
-    out = f(run.e[:, axis][None, :], run.e_dot[:, axis][None, :], states, gamma, alpha_bar)
-    return tuple(np.array(o).ravel() for o in out)
+    """W^T W, delta (eq. 62) and the decrease rate at every sample of ``axis`` of ``run``."""
+    return _law_terms(run, axis, gamma, alpha_bar)[1:]
+
+
+def _regressor_steps(w: np.ndarray) -> np.ndarray:
+    """``||W_n - W_{n-1}||_inf`` from the third sample on: from step 2 the
+    centre law has moved every centre with its input (eqs. 33-34), so ``x - c``
+    is what it was and only the widths (and the clipping) move W."""
+    return np.abs(np.diff(w[1:], axis=0)).max(axis=1) if len(w) > 2 else np.zeros(0)
+
+
+def regressor_step_change(variant: str, alpha: float, position: PositionParams = PositionParams(),
+                          x1=np.linspace(-3.0, 3.0, 25), x2=np.linspace(-30.0, 30.0, 25),
+                          tau_c: float = 1.0) -> tuple[float, float]:
+    """The largest change of the regressor (W_bar, eq. 25, or W_bar_q, IT-5)
+    over one learning step at ``alpha``, with the inputs held (so the centres
+    do not move) and the section 5.1 initial values, over the grid of inputs
+    ``x1 x x2`` (default: the span of the initial centres).
+
+    Returns ``(away from the floor, at the floor)``: the largest change over
+    the inputs where no membership function has ``|A| = |x - c|/sigma <
+    a_min``, and over those where one has (``nan`` where the grid has none).
+    The continuous-time laws leave the regressor unchanged (eq. 45, IT-12)
+    away from the floor; there the forward Euler step moves it at second order
+    in ``dt alpha``; at the floor the width law is another law and moves it
+    at first order. q is held (IT-9 moves it by design). The step is the
+    variant's own ``axis_law``, not a copy.
+    """
+    v = _variant(variant)
+    state0 = np.array(ca.DM(v.initial_axis(position, ca.DM(np.random.default_rng(0).random(v.n_random))))).ravel()
+    state0[ALPHA] = alpha
+    s = ca.SX.sym("s", v.axis_state_size)
+    e, e_dot = ca.SX.sym("e"), ca.SX.sym("e_dot")
+    _, nxt = v.axis_law(e, e_dot, tau_c, s, 0, position)
+    step = ca.Function("step", [e, e_dot, s], [nxt])
+    reg = ca.Function("w", [e, e_dot, s], [_regressor(e, e_dot, s, variant, position)])
+    a_min = position.bounds.a_min
+    worst = {False: math.nan, True: math.nan}
+    for a in x1:
+        for b in x2:
+            state = state0.copy()
+            state[-3:] = (a, b, 1.0)  # primed with the same inputs: the centres stay where they are
+            after = np.array(step(a, b, state)).ravel()
+            if _is_it2(variant):
+                after[Q] = state[Q]
+            change = float(np.abs(np.array(reg(a, b, after)) - np.array(reg(a, b, state))).max())
+            on_floor = bool((np.abs(a - state[C1]) / state[SIGMA1] < a_min).any()
+                            or (np.abs(b - state[C2]) / state[SIGMA2] < a_min).any())
+            worst[on_floor] = np.nanmax([worst[on_floor], change])
+    return float(worst[False]), float(worst[True])
 
 
 @dataclass(frozen=True)
@@ -192,6 +287,10 @@ class AxisClaims:
     delta_is_wtw: float = math.nan  # fraction of samples where delta = W^T W (the proof's choice)
     rate_min: float = math.nan  # m/s^2, min of gamma W^T W / (delta + W^T W)
     rate_max: float = math.nan
+    # assumptions of both proofs
+    alpha_bound: float = math.nan  # m/s^2, the projection's alpha_max (SMC)
+    alpha_star_in_box: bool | None = None  # SMC: alpha* = 2 B <= alpha_max
+    regressor_step_max: float = math.nan  # max ||W_n - W_{n-1}||_inf (eq. 45 / IT-12 say 0)
 
 
 def _enter_for_good(t: np.ndarray, inside: np.ndarray) -> float:
@@ -216,24 +315,29 @@ def evaluate_claims(run: Recording, axis: int) -> AxisClaims:
                   tau_c_max=float(np.abs(tc).max()), B=B, B99=B99,
                   final_band=float(np.abs(tc[last]).max()), t_zero=t_zero)
     p = run.position
-    if run.variant == "pd+smc":
+    if run.variant not in CLAIM_VARIANTS:
+        raise ValueError(f"run {run.name!r}: variant {run.variant!r} has no learning law "
+                         f"({', '.join(CLAIM_VARIANTS)})")
+    gamma = p.gamma_smc[axis] if run.variant in _SMC else p.gamma_lm[axis]
+    w, wtw, delta, rate = _law_terms(run, axis, gamma, p.alpha_bar[axis])  # eqs. 25 / IT-5, 61, 62
+    steps = _regressor_steps(w)
+    common["regressor_step_max"] = float(steps.max()) if steps.size else math.nan
+    if run.variant in _SMC:
         nu = p.nu[axis]
         radius = nu * B  # nu alpha*/2 with alpha* = 2 B
-        alpha = run.states[:, axis_slice(axis)][:, ALPHA]
-        return AxisClaims(gamma=p.gamma_smc[axis], nu=nu, radius_53=radius,
+        alpha = run.states[:, axis_slice(axis, _variant(run.variant).axis_state_size)][:, ALPHA]
+        return AxisClaims(gamma=gamma, nu=nu, radius_53=radius,
                           t_enter_53=_enter_for_good(t, np.abs(tc) < radius),
-                          alpha_min=float(alpha.min()), alpha_max=float(alpha.max()), **common)
-    if run.variant == "pd+lm":
-        gamma, alpha_bar = p.gamma_lm[axis], p.alpha_bar[axis]
-        t_h = 4.0 * float(abs(tc[0])) / gamma  # eq. 70 with S_p(0) = tau_c(0)/K_d
-        wtw, delta, rate = _lm_terms(run, axis, gamma, alpha_bar)  # eqs. 25, 61, 62
-        after = t >= t[0] + t_h
-        return AxisClaims(gamma=gamma, t_h_70=t_h,
-                          max_after_t_h=float(np.abs(tc[after]).max()) if after.any() else math.nan,
-                          printed_condition=bool(gamma > B / 4), needed_condition=bool(gamma >= 4 * B),
-                          delta_is_wtw=float(np.mean(delta == wtw)), rate_min=float(rate.min()),
-                          rate_max=float(rate.max()), **common)
-    raise ValueError(f"run {run.name!r}: variant {run.variant!r} has no learning law (pd+smc or pd+lm)")
+                          alpha_min=float(alpha.min()), alpha_max=float(alpha.max()),
+                          alpha_bound=p.bounds.alpha_max, alpha_star_in_box=bool(2 * B <= p.bounds.alpha_max),
+                          **common)
+    t_h = 4.0 * float(abs(tc[0])) / gamma  # eq. 70 with S_p(0) = tau_c(0)/K_d
+    after = t >= t[0] + t_h
+    return AxisClaims(gamma=gamma, t_h_70=t_h,
+                      max_after_t_h=float(np.abs(tc[after]).max()) if after.any() else math.nan,
+                      printed_condition=bool(gamma > B / 4), needed_condition=bool(gamma >= 4 * B),
+                      delta_is_wtw=float(np.mean(delta == wtw)), rate_min=float(rate.min()),
+                      rate_max=float(rate.max()), **common)
 
 
 # the two missions of the claims: (name, dotted overrides of the circles scenario)
@@ -244,7 +348,7 @@ CLAIM_MISSIONS = (
 )
 
 
-def default_runs(variants=("pd+smc", "pd+lm"), kp: float | None = None, kd: float | None = None,
+def default_runs(variants=CLAIM_VARIANTS, kp: float | None = None, kd: float | None = None,
                  workers: int = 1) -> list[Recording]:
     """The two recorded runs per variant, a study on ``circles`` (one case
     per mission and variant): a 1 m step of the x reference from hover (20 s,

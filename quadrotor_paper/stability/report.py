@@ -397,18 +397,21 @@ def _section_cosim_gains(study) -> list[str]:
 
 def _finite_time_row(c) -> list[str]:
     """One row of the finite-time table: an :class:`~quadrotor_paper.learning_claims.AxisClaims`
-    with the bound of its law (eq. 53 for SMC, eqs. 66 and 70 for LM)."""
-    if c.variant == "pd+smc":
+    with the bound of its law (eq. 53 / IT-14 for SMC, eqs. 66 and 70 / IT-15 for LM) and the
+    assumptions the proofs make (alpha* in the projection box, the regressor held)."""
+    if c.variant.endswith("smc"):
         claim = f"radius nu B = {c.radius_53:.3g} m/s; entered for good at {_f(c.t_enter_53)} s"
         if c.radius_53 >= c.tau_c_max:
             claim += " (never binding: the whole run is inside)"
-        extra = f"alpha in [{c.alpha_min:.2g}, {c.alpha_max:.2g}]"
+        extra = (f"alpha in [{c.alpha_min:.2g}, {c.alpha_max:.2g}]; alpha* = 2B <= alpha_max = "
+                 f"{c.alpha_bound:.3g}: {'yes' if c.alpha_star_in_box else 'NO'}")
     else:
         claim = (f"t_h <= {c.t_h_70:.3g} s; max abs(tau_c) after t_h = {c.max_after_t_h:.3g} m/s; "
                  f"gamma > B/4: {'yes' if c.printed_condition else 'NO'}, gamma >= 4B: "
                  f"{'yes' if c.needed_condition else 'NO'}")
         extra = (f"delta = W^T W in {100 * c.delta_is_wtw:.0f} % of samples; decrease rate "
                  f"{c.rate_min:.2f}..{c.rate_max:.2f} m/s² (proof: gamma/2 = {c.gamma / 2:.2f})")
+    extra += f"; W moves per step up to {c.regressor_step_max:.2g} (proof: 0)"
     return [c.run, c.variant, c.axis, f"{c.tau_c0:.3g} / {c.tau_c_max:.3g}", f"{c.B:.3g} ({c.B99:.3g})", claim,
             f"{_f(c.t_zero)} s", f"{c.final_band:.3g}", extra]
 
@@ -422,7 +425,10 @@ def _section_finite_time(study) -> list[str]:
             "B = max |d tau/dt| on the run (99th percentile in brackets). SMC: eq. 53's neighbourhood "
             "|tau_c| < nu alpha*/2 = nu B (alpha* = 2B, the smallest allowed). LM: eq. 70's t_h = "
             "4 K_d S_p(0)/gamma = 4|tau_c(0)|/gamma; eq. 66 as printed needs gamma > B/4, its algebra "
-            "needs gamma >= 4B; the proof sets delta = W^T W, the law uses max(W^T W, alpha_bar).", "",
+            "needs gamma >= 4B; the proof sets delta = W^T W, the law uses max(W^T W, alpha_bar). The interval "
+            "type-2 rows (IT-14, IT-15 of docs/controller.md) read W as W_bar_q. Both proofs also assume "
+            "alpha* = 2B inside the projection box [0, alpha_max] (SMC) and a regressor that does not move "
+            "(eq. 45, IT-12); W's largest step-to-step change on the run is given.", "",
             _table(["run", "law", "axis", "abs(tau_c): at 0 / max (m/s)", "B (m/s²)", "paper's bound on this run",
                     "tau_c first reaches 0", "max abs(tau_c), last fifth (m/s)", "assumptions"],
                    [_finite_time_row(c) for c in study.finite_time]), ""]

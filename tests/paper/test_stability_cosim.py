@@ -13,7 +13,7 @@ from quadrotor_paper.stability import critical_gain_factor, hover
 from quadrotor_paper.learning_claims import AxisClaims, Recording, evaluate_claims, record_run
 from quadrotor_paper.stability.loops import LoopModel
 from quadrotor_paper.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
-from fnn_controller import FNN_STATE_SIZE, PositionParams
+from fnn_controller import PositionParams
 from fnn_controller.step import initial_state
 from fnn_controller.variants import variant as lookup
 
@@ -158,8 +158,28 @@ def test_claims_of_a_known_learning_error():
     assert lm.printed_condition and lm.needed_condition  # 1.5 >= 4 * 0.3
     assert lm.delta_is_wtw == 0.0  # W^T W <= 1 < alpha_bar_x = 1.1: delta is never W^T W
     assert 1.5 / 9 / (1.1 + 1 / 9) - 1e-12 <= lm.rate_min <= lm.rate_max <= 1.5 / 2.1 + 1e-12
-    with pytest.raises(ValueError, match="pd\\+smc or pd\\+lm"):
+    assert smc.alpha_star_in_box and smc.alpha_bound == 10.0  # alpha* = 2 B = 0.6 <= alpha_max
+    steep = tau.copy()
+    steep[:, 0] = 6.0 * t  # B = 6: alpha* >= 12 lies outside [0, 10]
+    assert not evaluate_claims(_synthetic_run("pd+smc", tc, steep, t), 0).alpha_star_in_box
+    assert not evaluate_claims(_synthetic_run("pd+it2-smc", tc, steep, t), 0).alpha_star_in_box
+    with pytest.raises(ValueError, match="variant 'pd' has no learning law"):
         evaluate_claims(_synthetic_run("pd", tc, tau, t), 0)
+
+
+@pytest.mark.parametrize("variant", ["pd+smc", "pd+it2-smc"])
+def test_the_regressor_moves_per_step_second_order_away_from_the_floor(variant):
+    """Eq. 45 / IT-12 say the normalized firing strengths do not move; the
+    forward Euler step moves them at second order in dt alpha away from the
+    width floor (halving alpha quarters the change) and at first order where
+    the floor acts (halving alpha halves it)."""
+    from quadrotor_paper.learning_claims import regressor_step_change
+
+    away_1, floor_1 = regressor_step_change(variant, 0.2)
+    away_2, floor_2 = regressor_step_change(variant, 0.1)
+    assert away_1 / away_2 == pytest.approx(4.0, rel=0.05)
+    assert floor_1 / floor_2 == pytest.approx(2.0, rel=0.05)
+    assert 0 < away_1 < floor_1
 
 
 def test_lm_terms_are_the_controllers_law():
@@ -180,14 +200,16 @@ def test_lm_terms_are_the_controllers_law():
     assert rate == pytest.approx(1.5 * wtw / (2.0 + wtw), rel=1e-12)
 
 
-def test_lm_step_run_reaches_zero_inside_t_h_but_does_not_stay(fmu):
-    """A 1 m x step from hover under PD + LM: tau_c first reaches zero well
-    inside eq. 70's t_h, then chatters (relay limit cycle) instead of
-    staying on the manifold; eq. 66's gamma >= 4B fails on the run."""
-    run = record_run("step", "pd+lm", "circles", {
+@pytest.mark.parametrize("variant", ["pd+lm", "pd+it2-lm"])
+def test_lm_step_run_reaches_zero_inside_t_h_but_does_not_stay(fmu, variant):
+    """A 1 m x step from hover under PD + LM (type-1, eqs. 61-62, or interval
+    type-2, IT-10, IT-11): tau_c first reaches zero well inside eq. 70's t_h,
+    then chatters (relay limit cycle) instead of staying on the manifold;
+    eq. 66's gamma >= 4B (IT-15's too) fails on the run."""
+    run = record_run("step", variant, "circles", {
         "trajectory": {"kind": "hover", "x": 1.0, "y": 0.0, "z": -15.0},
         "wind.speed": 0.0, "simulation.duration": 10.0})
-    assert run.status == "ok" and run.states.shape == (run.t.size, FNN_STATE_SIZE)
+    assert run.status == "ok" and run.states.shape == (run.t.size, 3 * lookup(variant).axis_state_size)
     c: AxisClaims = evaluate_claims(run, 0)
     assert c.tau_c0 == pytest.approx(2.5, rel=1e-9)  # kp e(0) = 2.5 x 1 m
     assert c.t_h_70 == pytest.approx(4 * 2.5 / 1.5)
@@ -195,6 +217,7 @@ def test_lm_step_run_reaches_zero_inside_t_h_but_does_not_stay(fmu):
     assert c.max_after_t_h > 0.05  # not on the sliding manifold after t_h
     assert c.printed_condition and not c.needed_condition
     assert c.delta_is_wtw == 0.0 and c.rate_max < 0.75  # below the gamma/2 of eq. 65
+    assert 0 < c.regressor_step_max < 0.01  # the regressor moves, a little (IT-12 / eq. 45 say not at all)
 
 
 def test_smc_step_run_converges_and_alpha_adapts(fmu):
