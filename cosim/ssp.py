@@ -16,8 +16,11 @@ Open Simulation Platform's libcosim runs it (``docs/ssp.md``).
   libcosim takes its step size from, and this engine's own annotation (seed,
   ordering, seed parameters, recorded signals, envelope; an FMU's seed
   parameter also gets the scenario's seed in its parameter set, for other
-  tools). Python components cannot go into an archive: such a scenario is
-  refused, naming them.
+  tools). The FMU of a registered model is packed with the scenario's values
+  as its own start values (``RegisteredModel.build_with``), so that a tool
+  that ignores parameter bindings (fmpy's ``simulate_ssp``) still flies the
+  scenario (``docs/ssp.md``, "Self-contained archives"). Python components
+  cannot go into an archive: such a scenario is refused, naming them.
 * :func:`load_ssp` reads an archive (or its extracted folder, or the ``.ssd``
   file) back into a :class:`~cosim.scenario.Scenario` (FMUs by path), checked
   by :func:`~cosim.scenario.parse_scenario` like any TOML scenario; a bad
@@ -307,9 +310,11 @@ def export_ssp(scenario: Scenario, out_path: str | Path, fmu_files: Mapping[str,
     """Write ``scenario`` as an SSP 1.0 archive at ``out_path``; return its path.
 
     Every FMU instance becomes a component whose FMU is copied to
-    ``resources/<Instance>.fmu`` (a registered model is built on demand;
-    ``fmu_files`` may give, per instance, an FMU file or extracted folder to
-    use instead). Refused with a :class:`~cosim.errors.ScenarioError`: Python
+    ``resources/<Instance>.fmu``: a registered model that can be is built with
+    the values the archive binds (the instance's parameters and its seed) as
+    its own start values, else as the registry builds it; ``fmu_files`` may
+    give, per instance, an FMU file or extracted folder to use instead (its
+    values are then in the bindings only). Refused with a :class:`~cosim.errors.ScenarioError`: Python
     components (an archive holds FMUs only; the message names them), an FMU
     file that cannot be used, a parameter the FMU does not have, a recorded
     or bounded signal that is no FMU input or output; a wrong connection is a
