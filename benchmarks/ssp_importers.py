@@ -40,13 +40,14 @@ from cosim.ssp import export_ssp, load_ssp, run_libcosim
 from quadrotor_paper.metrics import rmse
 from quadrotor_paper.portable import all_fmu
 
+_FMPY = "Jacobi, transfer after the step"
 HONOURS = {  # importer -> (parameter bindings, initial transfer, ordering)
     "our master (scenario)": ("yes", "yes", "feedthrough: Gauss-Seidel along direct feedthrough"),
     "our master (archive, `load_ssp`)": ("yes", "yes", "feedthrough: Gauss-Seidel along direct feedthrough"),
     "our master (archive, `exchange` ordering)": ("yes", "yes", "Jacobi (libcosim's)"),
     "libcosim 0.11 (`libcosimpy`)": ("yes", "yes", "Jacobi (our `exchange`)"),
-    "fmpy `simulate_ssp`, archive as exported": ("no", "no: connectors start at 0.0", "Jacobi, transfer after the step"),
-    "fmpy `simulate_ssp`, stock FMUs (before)": ("no", "no: connectors start at 0.0", "Jacobi, transfer after the step"),
+    "fmpy `simulate_ssp`, archive as exported": ("no", "no: connectors start at 0.0", _FMPY),
+    "fmpy `simulate_ssp`, stock FMUs (before)": ("no", "no: connectors start at 0.0", _FMPY),
     "fmpy `simulate_fmu`, each FMU alone": ("no (SSD not read)", "none: no connection", "none"),
 }
 

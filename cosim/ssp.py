@@ -314,8 +314,9 @@ def export_ssp(scenario: Scenario, out_path: str | Path, fmu_files: Mapping[str,
     the values the archive binds (the instance's parameters and its seed) as
     its own start values, else as the registry builds it; ``fmu_files`` may
     give, per instance, an FMU file or extracted folder to use instead (its
-    values are then in the bindings only). Refused with a :class:`~cosim.errors.ScenarioError`: Python
-    components (an archive holds FMUs only; the message names them), an FMU
+    values are then in the bindings only). Refused with a
+    :class:`~cosim.errors.ScenarioError`: Python components (an archive holds
+    FMUs only; the message names them), an FMU
     file that cannot be used, a parameter the FMU does not have, a recorded
     or bounded signal that is no FMU input or output; a wrong connection is a
     :class:`~cosim.errors.ConnectionCheckError`. Nothing is written then.

@@ -47,7 +47,8 @@ from .parametric import initial_state_function, parameter_table, parametric_step
 from .position_parameters import PositionParams
 from .variants import Variant, variant as lookup
 
-__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "PSI_REF", "ACCELERATION_INPUTS", "FNN_SEED"]
+__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "PSI_REF",
+           "ACCELERATION_INPUTS", "FNN_SEED"]
 
 _AXES = "xyz"
 REFERENCE_INPUTS = (

@@ -44,12 +44,15 @@ def test_it_is_another_fmu_unless_nothing_changed():
     same = read_model_description(str(cached_fmu(QUADROTOR.with_defaults({"z_0": QUADROTOR.variable("z_0").start}), 2)))
     assert baked.guid != stock.guid and same.guid == stock.guid
     assert baked.coSimulation.modelIdentifier == stock.coSimulation.modelIdentifier == "Quadrotor"
-    assert cached_fmu(QUADROTOR.with_defaults({"z_0": -15.0}), 2).parent.parent != cached_fmu(QUADROTOR, 2).parent.parent
+    baked_folder = cached_fmu(QUADROTOR.with_defaults({"z_0": -15.0}), 2).parent.parent
+    assert baked_folder != cached_fmu(QUADROTOR, 2).parent.parent  # another build-cache key
 
 
-@pytest.mark.parametrize("values, said", [({"nope": 1.0}, "no parameter or input 'nope'"),
-                                          ({"x": 1.0}, "no parameter or input 'x'"),
-                                          ({"internal_step": 0.0}, r"internal_step = 0.0 s is outside its range \[1e-06, inf\]")])
+@pytest.mark.parametrize("values, said", [
+    ({"nope": 1.0}, "no parameter or input 'nope'"),
+    ({"x": 1.0}, "no parameter or input 'x'"),  # a state: its start comes from the parameters
+    ({"internal_step": 0.0}, r"internal_step = 0.0 s is outside its range \[1e-06, inf\]"),
+])
 def test_a_name_or_value_the_model_refuses_is_refused(values, said):
     with pytest.raises((KeyError, ValueError), match=said):
         QUADROTOR.with_defaults(values)
