@@ -27,6 +27,7 @@ benchmark: $(VENV)/.installed
 	$(BIN)/python benchmarks/cosim_speed.py
 	$(BIN)/python benchmarks/loop_speed.py
 	$(BIN)/python benchmarks/study_efficiency.py --seeds 8
+	$(BIN)/python benchmarks/ssp_importers.py
 
 clean:
 	rm -rf build results

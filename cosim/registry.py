@@ -96,11 +96,17 @@ class RegisteredModel:
     builder). ``check_parameter(name, value)``, if given, refuses an unknown
     name with ``KeyError`` and an inadmissible value with ``ValueError``,
     both naming the variable, so a scenario is checked before any build.
+    ``build_with(values, fmi_version)``, if given, returns the path of an FMU
+    of the model whose start values (its modelDescription's and its
+    binary's) are ``values`` (parameter or input name -> value): a
+    self-contained FMU, which runs a scenario's values in a tool that
+    ignores the values an SSP archive binds (:func:`cosim.ssp.export_ssp`).
     """
 
     name: str
     build: Callable[[int], Path]
     check_parameter: Callable[[str, float], None] | None = None
+    build_with: Callable[[Mapping[str, float], int], Path] | None = None
 
 
 @dataclass(frozen=True)

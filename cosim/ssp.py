@@ -16,8 +16,11 @@ Open Simulation Platform's libcosim runs it (``docs/ssp.md``).
   libcosim takes its step size from, and this engine's own annotation (seed,
   ordering, seed parameters, recorded signals, envelope; an FMU's seed
   parameter also gets the scenario's seed in its parameter set, for other
-  tools). Python components cannot go into an archive: such a scenario is
-  refused, naming them.
+  tools). The FMU of a registered model is packed with the scenario's values
+  as its own start values (``RegisteredModel.build_with``), so that a tool
+  that ignores parameter bindings (fmpy's ``simulate_ssp``) still flies the
+  scenario (``docs/ssp.md``, "Self-contained archives"). Python components
+  cannot go into an archive: such a scenario is refused, naming them.
 * :func:`load_ssp` reads an archive (or its extracted folder, or the ``.ssd``
   file) back into a :class:`~cosim.scenario.Scenario` (FMUs by path), checked
   by :func:`~cosim.scenario.parse_scenario` like any TOML scenario; a bad
@@ -123,9 +126,15 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     from .fmu_component import FmuComponent, stream_seed
 
     components: dict[str, FmuComponent] = {}
+    values: dict[str, dict[str, Any]] = {}
     try:
         for name, spec in scenario.fmus.items():
-            components[name] = FmuComponent(name, fmu_files.get(name) or fmu_file(spec),
+            values[name] = params = dict(spec["parameters"])
+            if spec.get("seed_parameter") is not None:
+                # the scenario's seed (of the FMU's stream), so that another SSP tool runs with it; our
+                # master sets the run's
+                params[spec["seed_parameter"]] = stream_seed(scenario.seed, spec.get("seed_stream", 0))
+            components[name] = FmuComponent(name, fmu_files.get(name) or _self_contained(name, spec, params),
                                             seed_parameter=spec.get("seed_parameter"))
     except FmuError as exc:
         raise fmu_error_in_scenario(scenario, exc) from None
@@ -135,11 +144,7 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
         check_fmu_file(scenario, fmu)
         part = _Part(name, _fmu_bytes(fmu.path))
         defined = {u.name: u.baseUnit for u in fmu.model_description.unitDefinitions}
-        params = dict(scenario.fmus[name]["parameters"])
-        if fmu.seed_parameter is not None:  # a parameter of the file: FmuComponent checked it
-            # the scenario's seed (of the FMU's stream), so that another SSP tool runs with it; our
-            # master sets the run's
-            params[fmu.seed_parameter] = stream_seed(scenario.seed, scenario.fmus[name].get("seed_stream", 0))
+        params = values[name]
         for var in fmu.model_description.modelVariables:
             kind = var.causality
             if kind not in _KINDS or (kind == "parameter" and var.name not in params):
@@ -166,6 +171,21 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
                 raise ScenarioError(f"{where}: {signal!r} is no input or output of an FMU of the scenario "
                                     f"({', '.join(components)})")
     return parts
+
+
+def _self_contained(name: str, spec: Mapping[str, Any], values: Mapping[str, Any]) -> Path:
+    """The FMU file of the ``[fmus]`` entry ``name``: for a registered model
+    that can build one, an FMU whose own start values are ``values`` (the
+    scenario's parameters and seed), so that a tool that ignores the SSD's
+    parameter bindings still runs the scenario; else the entry's file. A
+    value the model refuses is one line naming it."""
+    model = registry.fmu_models().get(spec.get("model")) if "path" not in spec else None
+    if model is None or model.build_with is None:
+        return fmu_file(spec)
+    try:
+        return model.build_with({k: float(v) for k, v in values.items()}, spec["fmi_version"])
+    except (KeyError, ValueError) as exc:
+        raise ScenarioError(f"fmus.{name}.parameters: {one_line(str(exc).strip(chr(39)))}") from None
 
 
 def _osp_algorithm(step: float) -> etree._Element:
@@ -290,10 +310,13 @@ def export_ssp(scenario: Scenario, out_path: str | Path, fmu_files: Mapping[str,
     """Write ``scenario`` as an SSP 1.0 archive at ``out_path``; return its path.
 
     Every FMU instance becomes a component whose FMU is copied to
-    ``resources/<Instance>.fmu`` (a registered model is built on demand;
-    ``fmu_files`` may give, per instance, an FMU file or extracted folder to
-    use instead). Refused with a :class:`~cosim.errors.ScenarioError`: Python
-    components (an archive holds FMUs only; the message names them), an FMU
+    ``resources/<Instance>.fmu``: a registered model that can be is built with
+    the values the archive binds (the instance's parameters and its seed) as
+    its own start values, else as the registry builds it; ``fmu_files`` may
+    give, per instance, an FMU file or extracted folder to use instead (its
+    values are then in the bindings only). Refused with a
+    :class:`~cosim.errors.ScenarioError`: Python components (an archive holds
+    FMUs only; the message names them), an FMU
     file that cannot be used, a parameter the FMU does not have, a recorded
     or bounded signal that is no FMU input or output; a wrong connection is a
     :class:`~cosim.errors.ConnectionCheckError`. Nothing is written then.

@@ -9,7 +9,7 @@ state, which FMI cannot change after instantiation, so it is the FMU's
 identity rather than a parameter.
 
 =========== ================================================================
-inputs      x_ref y_ref z_ref (m), vx_ref vy_ref vz_ref (m/s), psi_ref (rad),
+inputs      x_ref y_ref z_ref (m), vx_ref vy_ref vz_ref (m/s),
             the 12 plant states x y z u v w phi theta psi p q r (SI), and
             ax_ref ay_ref az_ref (m/s², start 0: read only with the
             parameter ``accel_feedforward`` > 0)
@@ -17,7 +17,8 @@ outputs     Omega_1..4, v_ref_x..z, tau_c_x..z, tau_n_x..z, T, tau_phi,
             tau_theta, tau_psi (:data:`fnn_controller.step.OUTPUTS`)
 parameters  every entry of :func:`~fnn_controller.parametric.parameter_table`
             (gains, learning rates, bounds, initial values, nominal vehicle)
-            with unit, description and range; ``seed`` (f_ij(0), the draws of
+            with unit, description and range; ``psi_ref`` (rad, the commanded
+            yaw psi*, held for the run); ``seed`` (f_ij(0), the draws of
             numpy's ``default_rng(seed)``)
 locals      the learned state of each axis (``f_12_x``, ``sigma1_2_z``,
             ``alpha_y``, ...) and the velocity controller's previous R*
@@ -46,14 +47,17 @@ from .parametric import initial_state_function, parameter_table, parametric_step
 from .position_parameters import PositionParams
 from .variants import Variant, variant as lookup
 
-__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "ACCELERATION_INPUTS", "FNN_SEED"]
+__all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "PSI_REF",
+           "ACCELERATION_INPUTS", "FNN_SEED"]
 
 _AXES = "xyz"
 REFERENCE_INPUTS = (
     *((f"{a}_ref", "m", f"reference position {a} (world, z down)") for a in _AXES),
     *((f"v{a}_ref", "m/s", f"reference velocity d{a}*/dt") for a in _AXES),
-    ("psi_ref", "rad", "commanded yaw psi*"),
 )
+# The commanded yaw is held for a run (the paper's missions fly at psi* = 0): a
+# parameter, so that no input of the FMU is left for an importer to find unconnected.
+PSI_REF = parameter("psi_ref", "rad", "commanded yaw psi*, held for the run", 0.0)
 # After the plant states, start 0: unconnected they leave the paper's law as it is.
 ACCELERATION_INPUTS = tuple((f"a{a}_ref", "m/s2", f"reference acceleration d2{a}*/dt2 "
                              "(fed forward with accel_feedforward)") for a in _AXES)
@@ -80,7 +84,7 @@ def step_model(identifier: str, description: str, inputs: Sequence, arguments: S
                initial: Callable[[ca.SX, ca.SX], Any], n_random: int = 0) -> FmuModel:
     """A sampled-data FMU model around a controller step ``step(*args) ->
     (y, state_next, check)``: ``arguments`` says what each argument of
-    ``step`` is, a tuple of input names stacked into a vector, :data:`STATE`
+    ``step`` is, a tuple of names of ``inputs`` stacked into a vector, :data:`STATE`
     (the discrete ``states``) or :data:`PARAMETERS` (the parameters of
     ``table``, :mod:`fnn_controller.parametric`); ``y`` is laid out as
     ``outputs``; ``initial(p, r)`` gives the state after reset from the
@@ -125,6 +129,7 @@ def controller_model(variant: str, position: PositionParams = PositionParams(),
         *(input_(name, unit, text) for name, unit, text in REFERENCE_INPUTS),
         *(input_(var.name, var.unit, f"plant state: {var.description}") for var in plant),
         *(input_(name, unit, text) for name, unit, text in ACCELERATION_INPUTS),
+        PSI_REF,
     )
     arguments = (tuple(f"{a}_ref" for a in _AXES), tuple(f"v{a}_ref" for a in _AXES), STATE_NAMES, ("psi_ref",),
                  STATE, PARAMETERS, tuple(name for name, _, _ in ACCELERATION_INPUTS))

@@ -34,7 +34,7 @@ from fmu_models.export.variables import discrete, input_
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
 from .step import OUTPUTS, state_ports
-from .controller_fmu import ACCELERATION_INPUTS, PARAMETERS, REFERENCE_INPUTS, STATE, step_model
+from .controller_fmu import ACCELERATION_INPUTS, PARAMETERS, PSI_REF, REFERENCE_INPUTS, STATE, step_model
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
 from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table, structure
 from .position import fnn_state_size, position_controller
@@ -143,7 +143,7 @@ def outer_model(variant: str, position: PositionParams = PositionParams()) -> Fm
     inputs the reference (and its acceleration, start 0) and the measured
     x y z u v w, outputs v*, tau_c, tau_n, a_ref; parameters its table and
     ``seed`` (f_ij(0)); locals the learned state of each axis."""
-    inputs = (*(input_(n, u, t) for n, u, t in REFERENCE_INPUTS if n != "psi_ref"), *_plant_inputs(OUTER_MEASURED),
+    inputs = (*(input_(n, u, t) for n, u, t in REFERENCE_INPUTS), *_plant_inputs(OUTER_MEASURED),
               *(input_(n, u, t) for n, u, t in ACCELERATION_INPUTS))
     arguments = (tuple(f"{a}_ref" for a in _AXES), tuple(f"v{a}_ref" for a in _AXES), OUTER_MEASURED, STATE,
                  PARAMETERS, tuple(n for n, _, _ in ACCELERATION_INPUTS))
@@ -159,13 +159,14 @@ def outer_model(variant: str, position: PositionParams = PositionParams()) -> Fm
 
 @lru_cache(maxsize=None)
 def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
-    """The inner loop as an FMU model (on board): inputs v*, psi*, the
+    """The inner loop as an FMU model (on board): inputs v*, the
     vehicle's u v w phi theta psi p q r and a_ref (start 0), outputs the
     rotor speeds and the wrench of eq. 18; parameters the geometric gains and
-    the nominal vehicle; it draws nothing, so it has no seed."""
+    the nominal vehicle, psi_ref (the commanded yaw psi*, held for the run); it
+    draws nothing, so it has no seed."""
     v_ref = tuple(n for n, _, _ in OUTER_OUTPUTS[:3])
-    inputs = (*(input_(n, u, t) for n, u, t in OUTER_OUTPUTS[:3]), input_("psi_ref", "rad", "commanded yaw psi*"),
-              *_plant_inputs(INNER_MEASURED), *(input_(n, u, t + "; start 0: none") for n, u, t in A_REF_PORTS))
+    inputs = (*(input_(n, u, t) for n, u, t in OUTER_OUTPUTS[:3]), *_plant_inputs(INNER_MEASURED),
+              *(input_(n, u, t + "; start 0: none") for n, u, t in A_REF_PORTS), PSI_REF)
     arguments = (v_ref, INNER_MEASURED, ("psi_ref",), STATE, PARAMETERS, tuple(n for n, _, _ in A_REF_PORTS))
     states = tuple(discrete(n, u, t) for n, u, t in state_ports(lookup("pd"))[-VEL_STATE_SIZE:])  # any variant's
     return step_model(

@@ -53,7 +53,12 @@ def _fmu_model(identifier: str, load) -> registry.RegisteredModel:
             raise KeyError(f"{name!r} is {article} {var.causality} of {model.identifier}, not a parameter")
         var.check(value)
 
-    return registry.RegisteredModel(identifier, build, check_parameter)
+    def build_with(values: Mapping[str, float], version: int):
+        from fmu_models.export.build import cached_fmu
+
+        return cached_fmu(load().with_defaults(values), version)
+
+    return registry.RegisteredModel(identifier, build, check_parameter, build_with)
 
 
 def _trajectory_table(name: str):

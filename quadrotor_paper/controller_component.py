@@ -260,8 +260,8 @@ class ControllerComponent(PythonComponent):
     def fmu_entry(self, fmi_version: int = 2) -> dict[str, Any]:
         """This controller as an ``[fmus]`` entry: the FMU of its variant
         (:func:`fnn_controller.controller_fmu.fmu_identifier`), its
-        parameters set to this component's, ``psi_ref`` (then an input, held
-        at this value unless connected), its seed parameter (if its variant
+        parameters set to this component's, ``psi_ref`` (a parameter, held for
+        the run), its seed parameter (if its variant
         draws f_ij(0)) bound to the run's seed."""
         from fnn_controller.controller_fmu import controller_model, fmu_identifier
         from fnn_controller.parametric import parameter_table

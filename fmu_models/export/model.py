@@ -34,6 +34,7 @@ the FMU state, so restoring a state continues the same stream.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Callable, Mapping
@@ -132,7 +133,8 @@ class FmuModel:
     @property
     def all_variables(self) -> tuple[Variable, ...]:
         """The table, plus the integrator's ``internal_step`` for a continuous model."""
-        return self.variables + ((INTERNAL_STEP,) if self.sampled is None else ())
+        own = any(v.name == INTERNAL_STEP.name for v in self.variables)  # a start of its own (with_defaults)
+        return self.variables + ((INTERNAL_STEP,) if self.sampled is None and not own else ())
 
     def _of(self, causality: str) -> tuple[Variable, ...]:
         return tuple(v for v in self.all_variables if v.causality == causality)
@@ -163,6 +165,32 @@ class FmuModel:
                 return v
         known = ", ".join(v.name for v in self.all_variables)
         raise KeyError(f"model {self.identifier} has no variable {name!r}; it has: {known}")
+
+    def with_defaults(self, values: Mapping[str, float]) -> "FmuModel":
+        """This model with the start values of some parameters and inputs
+        replaced by ``values`` (each checked against its variable's range).
+
+        The one number becomes both the modelDescription's ``start`` and the
+        default compiled into the binary (both are generated from the table),
+        so the FMU runs with ``values`` without being told them, as FMI
+        requires of a start value. Its GUID (and so the token of its saved
+        states and its build-cache key) is a digest of the table: it cannot be
+        taken for the stock FMU's. Unchanged values give an equal table, and
+        the same FMU.
+        """
+        table = {v.name: v for v in self.all_variables}
+        for name, value in values.items():
+            var = table.get(name)
+            if var is None or var.causality not in ("parameter", "input"):
+                raise KeyError(f"model {self.identifier} has no parameter or input {name!r}")
+            var.check(float(value))
+        replaced = tuple(dataclasses.replace(v, start=float(values[v.name])) if v.name in values else v
+                         for v in self.variables)
+        own = any(v.name == INTERNAL_STEP.name for v in self.variables)
+        if INTERNAL_STEP.name in values and self.sampled is None and not own:
+            # internal_step is appended to every continuous model's table: kept as a variable of its own
+            replaced += (dataclasses.replace(INTERNAL_STEP, start=float(values[INTERNAL_STEP.name])),)
+        return dataclasses.replace(self, variables=replaced)
 
     def parameter_values(self, **overrides: float) -> list[float]:
         """Parameter vector in table order: start values, with ``overrides``

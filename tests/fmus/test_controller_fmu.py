@@ -21,6 +21,7 @@ from fnn_controller.controller_fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS,
 from fnn_controller.parametric import parameter_table, parameter_vector, parametric_step_function
 
 INPUTS = [name for name, _, _ in REFERENCE_INPUTS] + list(STATE_NAMES) + [name for name, _, _ in ACCELERATION_INPUTS]
+PSI_REF = 0.3  # rad: the commanded yaw, a parameter held for the run (not the default 0: it acts)
 OUTS = [name for name, _, _ in OUTPUTS]
 
 
@@ -52,7 +53,7 @@ class Controller:
             self.fmu.instantiate(logMessage=lambda env, status, cat, msg: self.log.receive(status, msg))
             self.set, self.get = self.fmu.setFloat64, self.fmu.getFloat64
         self.version = version
-        for name, value in (parameters or {}).items():
+        for name, value in {"psi_ref": PSI_REF, **(parameters or {})}.items():
             self.set([self.vr[name]], [float(value)])
         if version == 2:
             self.fmu.setupExperiment(startTime=0.0)
@@ -62,7 +63,8 @@ class Controller:
         self.fmu.exitInitializationMode()
 
     def outputs(self, u) -> np.ndarray:
-        self.set([self.vr[n] for n in INPUTS], list(u))
+        assert u[6] == PSI_REF  # the step's psi_ref argument is the FMU's parameter
+        self.set([self.vr[n] for n in INPUTS], list(u[:6]) + list(u[7:]))
         return np.array(self.get([self.vr[n] for n in OUTS]))
 
     def step(self, t: float, h: float = 0.01) -> None:
@@ -73,8 +75,9 @@ class Controller:
 
 
 def _inputs(rng) -> np.ndarray:
-    """x_ref..vz_ref, psi_ref, the 12 plant states, ax_ref..az_ref (INPUTS' order)."""
-    return np.r_[rng.normal(size=3), rng.normal(size=3), rng.uniform(-1, 1), rng.normal(size=6),
+    """x_ref..vz_ref, psi_ref (:data:`PSI_REF`), the 12 plant states, ax_ref..az_ref: the step's arguments."""
+    rng.uniform(-1, 1)  # the draw psi_ref had when it was an input: the other inputs stay as they were
+    return np.r_[rng.normal(size=3), rng.normal(size=3), PSI_REF, rng.normal(size=6),
                  rng.normal(size=3) * 0.3, rng.normal(size=3), rng.normal(size=3)]
 
 

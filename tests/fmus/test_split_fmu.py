@@ -45,26 +45,27 @@ def test_a_model_that_draws_needs_a_seed():
 def test_outer_and_inner_fmus_step_as_their_functions_bit_for_bit(variant):
     options = {"feedforward": 1.0, "accel_feedforward": 0.5}  # every input and output in use
     outer = Fmi2Instance(str(cached_fmu(outer_model(variant), 2)), parameters={"seed": 5, **options})
-    inner = Fmi2Instance(str(cached_fmu(inner_model(), 2)))
+    psi_ref = 0.4  # rad: the commanded yaw, a parameter held for the run
+    inner = Fmi2Instance(str(cached_fmu(inner_model(), 2)), parameters={"psi_ref": psi_ref})
     f_outer, f_inner = outer_step_function(variant), inner_step_function()
     p_outer = np.array([options.get(p.name, p.default) for p in outer_parameter_table(variant)])
     p_inner = np.array([p.default for p in inner_parameter_table()])
     v = fc.variant(variant)
     state = np.array(outer_initial_function(variant)(p_outer, np.random.default_rng(5).random(3 * v.n_random))).ravel()
     vel_state = fc.initial_velocity_state()
-    references = [n for n, _, _ in REFERENCE_INPUTS if n != "psi_ref"]
+    references = [n for n, _, _ in REFERENCE_INPUTS]
     rng = np.random.default_rng(11)
     try:
         for _ in range(100):
             ref, x = rng.normal(size=9), np.r_[rng.normal(size=6), rng.normal(size=3) * 0.3, rng.normal(size=3)]
-            psi_ref = rng.uniform(-1, 1)
+            rng.uniform(-1, 1)  # the draw psi_ref had when it was an input: the other values stay as they were
             outer.set(**dict(zip(references, ref)), **dict(zip(OUTER_MEASURED, x[0:6])),
                       **dict(zip((n for n, _, _ in ACCELERATION_INPUTS), ref[6:9])))
             got_outer = outer.get(*(n for n, _, _ in OUTER_OUTPUTS))
             y, state, _ = f_outer(ref[0:3], ref[3:6], x[0:6], state, p_outer, ref[6:9])
             assert np.array_equal(got_outer, np.array(y).ravel())
             a_ref = got_outer[-3:]
-            inner.set(**dict(zip(("v_ref_x", "v_ref_y", "v_ref_z"), got_outer[0:3])), psi_ref=psi_ref,
+            inner.set(**dict(zip(("v_ref_x", "v_ref_y", "v_ref_z"), got_outer[0:3])),
                       **dict(zip(INNER_MEASURED, x[3:12])), **dict(zip((n for n, _, _ in A_REF_PORTS), a_ref)))
             got_inner = inner.get(*(n for n, _, _ in INNER_OUTPUTS))
             y, vel_state, _ = f_inner(got_outer[0:3], x[3:12], psi_ref, vel_state, p_inner, a_ref)
