@@ -10,7 +10,10 @@ States  p = (x, y, z) [m], v = (u, v, w) [m/s] (world frame, eq. 6),
 Inputs  Omega_1..4 [rad/s] rotor speeds, saturated to [0, Omega_max] (section
         5.2 saturates the control inputs); wind_x, wind_y, wind_z [m/s] wind
         velocity in the world frame.
-Outputs the 12 states and the thrust and torques actually applied.
+Outputs the 12 states, the thrust and torques actually applied, and the
+        acceleration a_x, a_y, a_z [m/s^2] (world frame, dv/dt of eqs. 9-11 with
+        drag): what an IMU model needs for its specific force
+        (docs/estimation.md, eq. E1).
 
 Motor dynamics (not in the paper): with tau_m > 0 each rotor speed Omega_r_i
 follows its saturated command through a first-order lag,
@@ -137,6 +140,12 @@ _VARIABLES = (
                 f"starts at hover, as the command Omega_{i}", _HOVER_SPEED, min=0.0)
       for i, v in enumerate(_ROTOR_STATES, start=1)),
     *_ROTOR_STATES,
+    # Appended last, so every variable above keeps its value reference: the
+    # acceleration the IMU (fmu_models/models/imu.py) turns into specific force.
+    output("a_x", "m/s2", "acceleration north (world frame): du/dt, eqs. (9)-(11) with drag"),
+    output("a_y", "m/s2", "acceleration east (world frame): dv/dt, eqs. (9)-(11) with drag"),
+    output("a_z", "m/s2", "acceleration down (world frame): dw/dt, eqs. (9)-(11) with drag; +g in free fall "
+                          "(z down)"),
 )
 
 
@@ -198,7 +207,8 @@ def _equations(t, s):
     derivatives = dict(zip(STATE_NAMES, ca.vertsplit(ca.vertcat(velocity, acceleration, euler_rates,
                                                                   angular_acceleration))))
     derivatives.update(zip(ROTOR_STATE_NAMES, rotor_rates))
-    outputs = {"T": thrust, "tau_phi": tau_phi, "tau_theta": tau_theta, "tau_psi": tau_psi}
+    outputs = {"T": thrust, "tau_phi": tau_phi, "tau_theta": tau_theta, "tau_psi": tau_psi,
+               "a_x": acceleration[0], "a_y": acceleration[1], "a_z": acceleration[2]}
     return derivatives, outputs
 
 
