@@ -10,10 +10,7 @@ States  p = (x, y, z) [m], v = (u, v, w) [m/s] (world frame, eq. 6),
 Inputs  Omega_1..4 [rad/s] rotor speeds, saturated to [0, Omega_max] (section
         5.2 saturates the control inputs); wind_x, wind_y, wind_z [m/s] wind
         velocity in the world frame.
-Outputs the 12 states, the thrust and torques actually applied, and the
-        acceleration a_x, a_y, a_z [m/s^2] (world frame, dv/dt of eqs. 9-11 with
-        drag): what an IMU model needs for its specific force
-        (docs/estimation.md, eq. E1).
+Outputs the 12 states and the thrust and torques actually applied.
 
 Motor dynamics (not in the paper): with tau_m > 0 each rotor speed Omega_r_i
 follows its saturated command through a first-order lag,
@@ -40,6 +37,7 @@ from .rotor import thrust_and_torques
 from ..export.variables import input_, output, parameter, state
 
 __all__ = ["QUADROTOR", "STATE_NAMES", "BODY_STATES", "ROTOR_STATE_NAMES", "rotation_matrix", "euler_rate_matrix",
+           "aerodynamic_drag",
            "hover_rotor_speed", "DEFAULTS"]
 
 # Keeps d|v_rel|/dv_rel finite at v_rel = 0 (the Jacobian at hover would be
@@ -140,12 +138,6 @@ _VARIABLES = (
                 f"starts at hover, as the command Omega_{i}", _HOVER_SPEED, min=0.0)
       for i, v in enumerate(_ROTOR_STATES, start=1)),
     *_ROTOR_STATES,
-    # Appended last, so every variable above keeps its value reference: the
-    # acceleration the IMU (fmu_models/models/imu.py) turns into specific force.
-    output("a_x", "m/s2", "acceleration north (world frame): du/dt, eqs. (9)-(11) with drag"),
-    output("a_y", "m/s2", "acceleration east (world frame): dv/dt, eqs. (9)-(11) with drag"),
-    output("a_z", "m/s2", "acceleration down (world frame): dw/dt, eqs. (9)-(11) with drag; +g in free fall "
-                          "(z down)"),
 )
 
 
@@ -170,6 +162,14 @@ def euler_rate_matrix(phi, theta):
     )
 
 
+def aerodynamic_drag(v_rel, k_drag_lin, k_drag_quad):
+    """Drag force (N, world frame) on the air-relative velocity ``v_rel = v - v_wind``
+    (m/s): ``-(k_drag_lin + k_drag_quad |v_rel|) v_rel`` (docs/plant-model.md); the
+    plant's law, which the estimator (docs/estimation.md, eq. E6) inverts for the wind."""
+    speed = ca.sqrt(ca.sumsqr(v_rel) + _SPEED_SMOOTHING**2)
+    return -(k_drag_lin + k_drag_quad * speed) * v_rel
+
+
 def _clip(omega, omega_max):
     return ca.fmin(ca.fmax(omega, 0), omega_max)
 
@@ -192,8 +192,7 @@ def _equations(t, s):
     R = rotation_matrix(s["phi"], s["theta"], s["psi"])
     velocity = ca.vertcat(s["u"], s["v"], s["w"])
     v_rel = velocity - ca.vertcat(s["wind_x"], s["wind_y"], s["wind_z"])
-    speed = ca.sqrt(ca.sumsqr(v_rel) + _SPEED_SMOOTHING**2)
-    drag = -(s["k_drag_lin"] + s["k_drag_quad"] * speed) * v_rel
+    drag = aerodynamic_drag(v_rel, s["k_drag_lin"], s["k_drag_quad"])
     e3 = ca.DM([0, 0, 1])
     # eqs. (9)-(11) with the drag force added to F
     acceleration = (-R @ e3 * thrust + drag) / s["m"] + s["g"] * e3
@@ -207,8 +206,7 @@ def _equations(t, s):
     derivatives = dict(zip(STATE_NAMES, ca.vertsplit(ca.vertcat(velocity, acceleration, euler_rates,
                                                                   angular_acceleration))))
     derivatives.update(zip(ROTOR_STATE_NAMES, rotor_rates))
-    outputs = {"T": thrust, "tau_phi": tau_phi, "tau_theta": tau_theta, "tau_psi": tau_psi,
-               "a_x": acceleration[0], "a_y": acceleration[1], "a_z": acceleration[2]}
+    outputs = {"T": thrust, "tau_phi": tau_phi, "tau_theta": tau_theta, "tau_psi": tau_psi}
     return derivatives, outputs
 
 
