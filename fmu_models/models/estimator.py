@@ -53,10 +53,10 @@ COVARIANCE_BLOCKS = {"position": ("x", "y", "z"), "velocity": ("u", "v", "w"), "
                      "wind": ("wind_x", "wind_y", "wind_z")}
 # Tuning (docs/estimation.md, "Tuning"); the sensor values are the IMU's defaults.
 ESTIMATOR_DEFAULTS = {
-    "wind_walk": 0.5,             # m/s/sqrt(s): the horizontal wind's random walk, fast enough for a reversal
+    "wind_walk": 4.0,             # m/s/sqrt(s): the horizontal wind's random walk, fast enough for a reversal
     "wind_walk_z": 0.01,          # m/s/sqrt(s): the vertical wind's, nearly constant (hardly observable, E9)
-    "drag_noise_density": 0.05,   # m/s2/sqrt(Hz): error of the drag model in the prediction
-    "sigma_drag": 0.02,           # m/s2: error of the drag model in the accelerometer measurement
+    "drag_noise_density": 0.005,  # m/s2/sqrt(Hz): error of the drag model in the prediction
+    "sigma_drag": 0.005,          # m/s2: error of the drag model in the accelerometer measurement
     "P0_position": 1.0, "P0_velocity": 0.2, "P0_attitude": 0.05,
     "P0_gyro_bias": 0.005, "P0_accel_bias": 0.01, "P0_wind": 3.0, "P0_wind_z": 0.1,
 }
@@ -156,6 +156,7 @@ def _variables():
           for name, i, j in covariance_names()),
         output("nis_fix", "1", "normalized innovation squared of this step's fix (6 degrees of freedom; "
                                "0 without a fresh fix)"),
+        output("fix_used", "1", "1 when this step corrected with the fix (fresh), else 0"),
         output("nis_acc", "1", "normalized innovation squared of the accelerometer's drag measurement "
                                "(2 degrees of freedom)"),
         parameter("m", "kg", "vehicle mass of the drag model (the plant's)", DEFAULTS["m"], min=1e-3),
@@ -252,7 +253,7 @@ def _update(t, v):
     out = {name: xs[k] for k, name in enumerate(ESTIMATED_STATES)}
     rates = gyro - xs[9:12]
     out.update({"p": rates[0], "q": rates[1], "r": rates[2], "nis_acc": nis_acc,
-                "nis_fix": ca.if_else(fresh, nis_fix, 0.0)})
+                "nis_fix": ca.if_else(fresh, nis_fix, 0.0), "fix_used": ca.if_else(fresh, 1.0, 0.0)})
     out.update({name: P[i, j] for name, i, j in covariance_names()})
     return out, {"started": 1.0, **_discrete(xs, P)}
 
