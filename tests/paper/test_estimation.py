@@ -73,3 +73,15 @@ def test_circles_estimated_as_fmus_flies_in_libcosim_as_in_our_master(tmp_path):
         assert np.allclose(lc[name], ours[name], rtol=0, atol=1e-9), name
     assert np.std(np.diff(ours["IMU.acc_x"])) > 0.01  # the IMU's noise is in the loop
     assert np.max(np.abs(ours["Quadrotor.x"])) > 1.0  # it flew
+
+
+def test_a_variant_row_flies_its_variant_on_a_scenario_cut_at_v_star():
+    """Table 3's rows on the laboratory's scenarios (no [controller]; the
+    ground controller an outer-loop FMU) set that FMU's model, so
+    ``fnn-cosim table3 --scenario figure8_lab_estimated`` compares variants."""
+    from cosim import registry
+
+    for name in ("figure8_lab", "figure8_lab_estimated"):
+        raw = load_scenario(name).raw
+        assert registry.cases()["pd+it2-lm"].applied_to(raw) == {"fmus.Ground.model": "PositionControllerPDIT2LM"}
+    assert registry.cases()["pd"].applied_to(load_scenario("circles_estimated").raw) == {"controller.variant": "pd"}
