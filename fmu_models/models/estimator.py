@@ -39,7 +39,7 @@ from .quadrotor import DEFAULTS, aerodynamic_drag, euler_rate_matrix, rotation_m
 from .sensors import DT_DEFAULT
 
 __all__ = ["ESTIMATOR", "ESTIMATED_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
-           "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
+           "body_drag_acceleration", "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
 
 # The filter's state, in order: the 9 plant states it estimates, then the biases and the wind.
 ESTIMATED_STATES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi",

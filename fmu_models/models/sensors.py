@@ -1,7 +1,7 @@
 """Sensors and links as FMUs: noise, bias, sample-and-hold and transport delay.
 
 One generic sampled-data model family, :func:`sensors_model`, with N
-channels; three members are shipped (``docs/sensors.md``):
+channels; four members are shipped (``docs/sensors.md``):
 
 * ``Measurement12``: the measurement path, plant -> controller. Inputs the 12
   rigid-body states ``x y z u v w phi theta psi p q r``, outputs the measured
@@ -12,7 +12,10 @@ channels; three members are shipped (``docs/sensors.md``):
 * ``VelocityLink3``: the velocity-command path, outer loop -> on-board
   velocity controller (the AR.Drone's Wi-Fi). Inputs ``v_ref_x, v_ref_y,
   v_ref_z``, the desired velocity v* of eq. 26 (m/s, world frame, z down),
-  outputs ``v_ref_x_rx ..``; a link: packets can be lost.
+  outputs ``v_ref_x_rx ..``; a link: packets can be lost;
+* ``GNSS6``: a GNSS receiver, plant -> estimator. Inputs ``x y z u v w``,
+  outputs ``x_m .. w_m`` and ``fresh`` (1 on the step a new fix arrives,
+  ``fresh=True`` below; docs/estimation.md).
 
 Per communication step n (``t_n = n dt``), channel i, with ``u`` the input::
 
