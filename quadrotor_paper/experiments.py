@@ -36,7 +36,8 @@ _BLOCKS = {
     "wind": (("wind_x", "wind_y", "wind_z"), ("wind_x", "wind_y", "wind_z"), "mps"),
 }
 ESTIMATION_METRICS = (*(f"nees_{b}" for b in _BLOCKS), "nis_fix", "nis_acc",
-                      *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in _BLOCKS.items()), "est_rmse_wind_settled_mps")
+                      *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in _BLOCKS.items()), "est_rmse_wind_settled_mps",
+                      "est_bias_position_m", "rmse_seen_m")
 
 
 def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None = None,
@@ -139,7 +140,10 @@ def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
     the RMSE of the estimate (Euclidean over the block's three axes; yaw
     wrapped); the mean NIS of the fix (over the steps that used one) and of
     the drag measurement; and the wind RMSE over the rows where the true wind
-    has been steady for ``settle`` s. NEES, NIS and RMSE skip the first
+    has been steady for ``settle`` s; the length of the position estimate's
+    mean error (its bias) and the RMSE of reference - estimate over the whole
+    run (the error the controller sees, beside ``rmse_m``, the true one).
+    NEES, NIS and RMSE skip the first
     ``settle`` s (the filter's convergence from its initial guess)."""
     estimator, truth, settle = estimation_spec(scenario)
     t = result.time
@@ -160,6 +164,13 @@ def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
         out[f"est_rmse_{block}_{unit}"] = float(np.sqrt(np.mean(np.sum(error[after_start] ** 2, axis=1))))
         if block == "wind":
             out["est_rmse_wind_settled_mps"] = float(np.sqrt(np.mean(np.sum(error[judged] ** 2, axis=1))))
+        if block == "position":
+            # the estimate's bias: the length of its mean error; and the tracking error the controller
+            # sees, reference - estimate (the FNN learns on it; E18)
+            out["est_bias_position_m"] = float(np.linalg.norm(np.mean(error[after_start], axis=0)))
+            position, reference = metric_signals(scenario)
+            seen = np.column_stack([result[r] - result[f"{estimator}.{e}"] for e, r in zip(estimated, reference)])
+            out["rmse_seen_m"] = float(np.sqrt(np.mean(np.sum(seen ** 2, axis=1))))
     used = result[f"{estimator}.fix_used"] > 0.5
     out["nis_fix"] = float(np.mean(result[f"{estimator}.nis_fix"][used & after_start]))
     out["nis_acc"] = float(np.mean(result[f"{estimator}.nis_acc"][after_start]))

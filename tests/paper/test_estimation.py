@@ -47,32 +47,35 @@ def test_the_estimated_scenarios_name_their_estimator_and_record_what_it_needs()
     assert "nees_wind" not in study_metric_names(load_scenario("circles"))
 
 
-def test_circles_estimated_as_fmus_flies_in_libcosim_as_in_our_master(tmp_path):
-    """``fnn-cosim export-ssp circles_estimated``: plant, gust, IMU, GNSS,
-    Estimator, reference and PD+LM controller, every one an FMU. libcosim and
-    our master in libcosim's ('exchange') ordering agree to 1e-9 m over 10 s,
-    the sensors' noise included (the seeds travel in the archive)."""
+@pytest.mark.parametrize("name, parts", [
+    ("circles_estimated", ("IMU", "GNSS", "Estimator", "controller", "reference")),
+    ("figure8_lab_estimated", ("IMU", "Mocap", "Estimator", "Ground", "WiFi", "Onboard", "reference")),
+])
+def test_the_estimated_missions_as_fmus_fly_in_libcosim_as_in_our_master(tmp_path, name, parts):
+    """``fnn-cosim export-ssp``: the plant, the gust, the sensors, the
+    Estimator and the controller, every one an FMU. libcosim and our master
+    in libcosim's ('exchange') ordering agree to 1e-9 m over 10 s, the
+    sensors' noise included (the seeds travel in the archive)."""
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
     from cosim.ssp import run_libcosim
     from quadrotor_paper.cli import main
 
-    path = tmp_path / "circles_estimated.ssp"
-    assert main(["export-ssp", "circles_estimated", "--set", "simulation.duration=10.0", "--out", str(path)]) == 0
-    names = set(zipfile.ZipFile(path).namelist())
+    path = tmp_path / f"{name}.ssp"
+    assert main(["export-ssp", name, "--set", "simulation.duration=10.0", "--out", str(path)]) == 0
     assert ssd_schema_errors(zipfile.ZipFile(path).read(SSD_NAME)) == []
-    assert {f"resources/{c}.fmu" for c in ("IMU", "GNSS", "Estimator", "controller", "reference")} <= names
-    signals = POSITION + ["Estimator.x", "Estimator.wind_x", "IMU.acc_x", "GNSS.x_m"]
+    assert {f"resources/{c}.fmu" for c in parts} <= set(zipfile.ZipFile(path).namelist())
+    signals = POSITION + ["Estimator.x", "Estimator.wind_x", "IMU.acc_x"]
     lc = run_libcosim(path, signals)
     scenario = load_ssp(path, overrides={"simulation.ordering": "exchange", "record.signals": signals})
     with build_master(scenario) as master:
         ours = master.run(scenario.duration, seed=scenario.seed)
     assert ours.status == "ok" and lc.data.shape == ours.data.shape == (1001, len(signals) + 1)
-    for name in POSITION + ["Estimator.x"]:
-        assert np.max(np.abs(lc[name] - ours[name])) <= TOLERANCE, name
-    for name in signals[4:]:
-        assert np.allclose(lc[name], ours[name], rtol=0, atol=1e-9), name
+    for signal in POSITION + ["Estimator.x"]:
+        assert np.max(np.abs(lc[signal] - ours[signal])) <= TOLERANCE, signal
+    for signal in signals[4:]:
+        assert np.allclose(lc[signal], ours[signal], rtol=0, atol=1e-9), signal
     assert np.std(np.diff(ours["IMU.acc_x"])) > 0.01  # the IMU's noise is in the loop
-    assert np.max(np.abs(ours["Quadrotor.x"])) > 1.0  # it flew
+    assert np.max(np.abs(ours["Quadrotor.x"])) > 0.5  # it flew
 
 
 def test_a_variant_row_flies_its_variant_on_a_scenario_cut_at_v_star():
