@@ -132,6 +132,11 @@ def _cmd_run(args) -> int:
              f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
     if summary.get("max_error_m") is not None:
         lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
+    if summary.get("nees_position") is not None:  # flown on an estimate (docs/estimation.md)
+        lines.append("- estimate: NEES position {nees_position:.2f}, velocity {nees_velocity:.2f}, attitude "
+                     "{nees_attitude:.2f}, wind {nees_wind:.2f} (3 each when consistent); NIS fix {nis_fix:.2f} "
+                     "(6); RMSE position {est_rmse_position_m:.4f} m, wind once steady "
+                     "{est_rmse_wind_settled_mps:.3f} m/s".format(**summary))
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]
     (out / "summary.md").write_text("\n".join(lines))
     print("\n".join(lines[4:-2]))

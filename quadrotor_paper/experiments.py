@@ -48,7 +48,7 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
     JSON-ready summary (:func:`run_summary`).
     """
     position, reference = metric_signals(scenario)
-    missing = [s for s in position + reference if s not in scenario.record]
+    missing = [s for s in position + reference + estimation_signals(scenario) if s not in scenario.record]
     if missing:  # the summary's RMSE reads them from the recorded rows
         raise ScenarioError(f"metrics: {missing[0]!r} is not recorded; add it to record.signals")
     own = master is None
@@ -69,7 +69,8 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
 def run_summary(scenario: Scenario, result) -> dict[str, Any]:
     """A run's summary: status, error, seed, variant, duration, rows, wall
     time, real-time factor, the cost per step of each phase (us, profiled
-    runs) and, with ``[metrics]``, the Euclidean RMSE, largest and final error (m)."""
+    runs) and, with ``[metrics]``, the Euclidean RMSE, largest and final error (m)
+    and, when it names an estimator, :func:`estimation_metrics`."""
     summary: dict[str, Any] = {
         "scenario": scenario.name, "status": result.status, "error": result.error, "seed": result.seed,
         "variant": controller_variant(scenario),
@@ -85,6 +86,8 @@ def run_summary(scenario: Scenario, result) -> dict[str, Any]:
         summary["rmse_m"] = rmse(result, position, reference)
         summary["max_error_m"] = float(e.max()) if len(e) else None
         summary["final_error_m"] = float(e[-1]) if len(e) else None
+    if estimation_spec(scenario) is not None and len(result.time):
+        summary.update(estimation_metrics(scenario, result))
     if result.csv_path is not None:
         summary["results_csv"] = str(result.csv_path)
     return summary
@@ -95,12 +98,10 @@ STUDY_METRICS = ("rmse_m", "max_error_m", "final_error_m")
 
 def study_metrics(scenario: Scenario, result) -> dict[str, Any]:
     """A study row's metrics: those of :func:`run_summary` (RMSE, max and
-    final error, m), on whatever part of the run was recorded."""
+    final error, m; the estimate's, :func:`study_metric_names`), on whatever
+    part of the run was recorded."""
     summary = run_summary(scenario, result)
-    metrics = {k: summary.get(k) for k in STUDY_METRICS}
-    if estimation_spec(scenario) is not None and len(result.time):
-        metrics.update(estimation_metrics(scenario, result))
-    return metrics
+    return {k: summary.get(k) for k in study_metric_names(scenario)}
 
 
 def lean_signals(scenario: Scenario) -> list[str]:

@@ -88,3 +88,16 @@ def test_a_variant_row_flies_its_variant_on_a_scenario_cut_at_v_star():
         raw = load_scenario(name).raw
         assert registry.cases()["pd+it2-lm"].applied_to(raw) == {"fmus.Ground.model": "PositionControllerPDIT2LM"}
     assert registry.cases()["pd"].applied_to(load_scenario("circles_estimated").raw) == {"controller.variant": "pd"}
+
+
+def test_a_run_on_the_estimate_reports_the_filter_and_a_bad_estimator_is_one_line(tmp_path, capsys):
+    from quadrotor_paper.cli import main
+
+    assert main(["run", "circles_estimated", "--set", "simulation.duration=8.0", "--out", str(tmp_path / "r"),
+                 "--quiet", "--no-plots"]) == 0
+    assert "- estimate: NEES position " in capsys.readouterr().out
+    assert main(["run", "circles", "--set", 'metrics.estimator="Nope"', "--out", str(tmp_path / "b"),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == "fnn-cosim: error: metrics.estimator = 'Nope': no such FMU in [fmus]; FMUs: Quadrotor, " \
+                          "WindGust" and "Traceback" not in err
