@@ -24,6 +24,9 @@ _WHERE: dict[str, tuple[str, str]] = {
     "Measurement12": ("fmu_models.models.sensors", "MEASUREMENT_12"),
     "CommandLink4": ("fmu_models.models.sensors", "COMMAND_LINK_4"),
     "VelocityLink3": ("fmu_models.models.sensors", "VELOCITY_LINK_3"),
+    "GNSS6": ("fmu_models.models.sensors", "GNSS_6"),
+    "IMU": ("fmu_models.models.imu", "IMU"),
+    "Estimator": ("fmu_models.models.estimator", "ESTIMATOR"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 

@@ -132,6 +132,11 @@ def _cmd_run(args) -> int:
              f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
     if summary.get("max_error_m") is not None:
         lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
+    if summary.get("nees_position") is not None:  # flown on an estimate (docs/estimation.md)
+        lines.append("- estimate: NEES position {nees_position:.2f}, velocity {nees_velocity:.2f}, attitude "
+                     "{nees_attitude:.2f}, wind {nees_wind:.2f} (3 each when consistent); NIS fix {nis_fix:.2f} "
+                     "(6); RMSE position {est_rmse_position_m:.4f} m, wind once steady "
+                     "{est_rmse_wind_settled_mps:.3f} m/s".format(**summary))
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]
     (out / "summary.md").write_text("\n".join(lines))
     print("\n".join(lines[4:-2]))
@@ -205,6 +210,17 @@ def _study_path(name_or_path: str) -> Path:
     return shipped if shipped.exists() else path
 
 
+def _cell_means(summary) -> str:
+    """The study's cells, one line each: case, grid point, ok runs and each
+    metric's mean over them (what summary.json holds, to read at a glance)."""
+    lines = []
+    for cell in summary.get("cells", []):
+        point = ", ".join(f"{k}={v}" for k, v in cell["values"].items())
+        means = ", ".join(f"{m} {s['mean']:.4g}" for m, s in cell["metrics"].items() if s["mean"] is not None)
+        lines.append(f"{' / '.join(x for x in (cell['label'], point) if x)}: {cell['ok']} ok; {means}")
+    return "\n".join(lines)
+
+
 def _cmd_sweep(args) -> int:
     """A study: the base scenario over its cases and sweep, one row per run in runs.csv."""
     from cosim.study import load_study
@@ -221,6 +237,7 @@ def _cmd_sweep(args) -> int:
         result = measure(study, out, workers=max(1, workers), scheduler=args.scheduler, progress=bar,
                          plots=not args.no_plots, worker_timeout=args.worker_timeout)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(result.counts.items())) or "nothing to run"
+    print(_cell_means(result.summary))
     print(f"{study.name}: {result.total} runs ({result.skipped} already done); this time: {counts}")
     print(f"results: {out} (runs.csv, runs.parquet, summary.json" + ", plots" * (not args.no_plots) + ")")
     return 0

@@ -19,10 +19,25 @@ from cosim.study import Study
 from cosim.limits import WORKER_TIMEOUT
 from cosim.study_run import StudyResult, run_study
 
-from .metrics import euclidean_error, rmse
-from .missions import controller_variant, metric_signals
+import numpy as np
 
-__all__ = ["run_once", "run_summary", "measure", "study_metrics", "STUDY_METRICS", "lean_signals"]
+from .metrics import euclidean_error, nees, rmse, settled, wrap_angle
+from .missions import controller_variant, estimation_spec, metric_signals
+
+__all__ = ["run_once", "run_summary", "measure", "study_metrics", "STUDY_METRICS", "ESTIMATION_METRICS",
+           "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics"]
+
+# The estimate's blocks (docs/estimation.md, E15-E17): the Estimator's outputs, the truth's signals of the
+# plant instance (its wind inputs for the wind), and the unit of the block's RMSE.
+_BLOCKS = {
+    "position": (("x", "y", "z"), ("x", "y", "z"), "m"),
+    "velocity": (("u", "v", "w"), ("u", "v", "w"), "mps"),
+    "attitude": (("phi", "theta", "psi"), ("phi", "theta", "psi"), "rad"),
+    "wind": (("wind_x", "wind_y", "wind_z"), ("wind_x", "wind_y", "wind_z"), "mps"),
+}
+ESTIMATION_METRICS = (*(f"nees_{b}" for b in _BLOCKS), "nis_fix", "nis_acc",
+                      *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in _BLOCKS.items()), "est_rmse_wind_settled_mps",
+                      "est_bias_position_m", "rmse_seen_m")
 
 
 def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None = None,
@@ -33,7 +48,7 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
     JSON-ready summary (:func:`run_summary`).
     """
     position, reference = metric_signals(scenario)
-    missing = [s for s in position + reference if s not in scenario.record]
+    missing = [s for s in position + reference + estimation_signals(scenario) if s not in scenario.record]
     if missing:  # the summary's RMSE reads them from the recorded rows
         raise ScenarioError(f"metrics: {missing[0]!r} is not recorded; add it to record.signals")
     own = master is None
@@ -54,7 +69,8 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
 def run_summary(scenario: Scenario, result) -> dict[str, Any]:
     """A run's summary: status, error, seed, variant, duration, rows, wall
     time, real-time factor, the cost per step of each phase (us, profiled
-    runs) and, with ``[metrics]``, the Euclidean RMSE, largest and final error (m)."""
+    runs) and, with ``[metrics]``, the Euclidean RMSE, largest and final error (m)
+    and, when it names an estimator, :func:`estimation_metrics`."""
     summary: dict[str, Any] = {
         "scenario": scenario.name, "status": result.status, "error": result.error, "seed": result.seed,
         "variant": controller_variant(scenario),
@@ -70,6 +86,8 @@ def run_summary(scenario: Scenario, result) -> dict[str, Any]:
         summary["rmse_m"] = rmse(result, position, reference)
         summary["max_error_m"] = float(e.max()) if len(e) else None
         summary["final_error_m"] = float(e[-1]) if len(e) else None
+    if estimation_spec(scenario) is not None and len(result.time):
+        summary.update(estimation_metrics(scenario, result))
     if result.csv_path is not None:
         summary["results_csv"] = str(result.csv_path)
     return summary
@@ -80,25 +98,96 @@ STUDY_METRICS = ("rmse_m", "max_error_m", "final_error_m")
 
 def study_metrics(scenario: Scenario, result) -> dict[str, Any]:
     """A study row's metrics: those of :func:`run_summary` (RMSE, max and
-    final error, m), on whatever part of the run was recorded."""
+    final error, m; the estimate's, :func:`study_metric_names`), on whatever
+    part of the run was recorded."""
     summary = run_summary(scenario, result)
-    return {k: summary.get(k) for k in STUDY_METRICS}
+    return {k: summary.get(k) for k in study_metric_names(scenario)}
 
 
 def lean_signals(scenario: Scenario) -> list[str]:
     """What the metrics read: only these are recorded in studies."""
-    return list(dict.fromkeys(sum(metric_signals(scenario), [])))
+    return list(dict.fromkeys(sum(metric_signals(scenario), []) + estimation_signals(scenario)))
+
+
+def study_metric_names(scenario: Scenario) -> tuple[str, ...]:
+    """The metrics :func:`study_metrics` gives for ``scenario``'s rows."""
+    return STUDY_METRICS + (ESTIMATION_METRICS if estimation_spec(scenario) else ())
+
+
+def _covariance_name(a: str, b: str, order: tuple[str, ...]) -> str:
+    if a == b:
+        return f"var_{a}"
+    a, b = sorted((a, b), key=order.index)
+    return f"cov_{a}_{b}"
+
+
+def estimation_signals(scenario: Scenario) -> list[str]:
+    """The signals :func:`estimation_metrics` reads (none without ``[metrics].estimator``)."""
+    spec = estimation_spec(scenario)
+    if spec is None:
+        return []
+    estimator, truth, _ = spec
+    names = []
+    for estimated, true, _ in _BLOCKS.values():
+        names += [f"{truth}.{n}" for n in true] + [f"{estimator}.{n}" for n in estimated]
+        names += [f"{estimator}.{_covariance_name(a, b, estimated)}" for i, a in enumerate(estimated)
+                  for b in estimated[i:]]
+    return names + [f"{estimator}.{n}" for n in ("nis_fix", "nis_acc", "fix_used")]
+
+
+def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
+    """The estimate's consistency and accuracy over one run (docs/estimation.md,
+    E15-E17): per block (position, velocity, attitude, wind) the mean NEES and
+    the RMSE of the estimate (Euclidean over the block's three axes; yaw
+    wrapped); the mean NIS of the fix (over the steps that used one) and of
+    the drag measurement; and the wind RMSE over the rows where the true wind
+    has been steady for ``settle`` s; the length of the position estimate's
+    mean error (its bias) and the RMSE of reference - estimate over the whole
+    run (the error the controller sees, beside ``rmse_m``, the true one).
+    NEES, NIS and RMSE skip the first
+    ``settle`` s (the filter's convergence from its initial guess)."""
+    estimator, truth, settle = estimation_spec(scenario)
+    t = result.time
+    after_start = t - t[0] >= settle
+    out: dict[str, float] = {}
+    for block, (estimated, true, unit) in _BLOCKS.items():
+        error = np.column_stack([result[f"{estimator}.{e}"] - result[f"{truth}.{n}"]
+                                 for e, n in zip(estimated, true)])
+        if block == "attitude":
+            error = wrap_angle(error)
+        covariance = np.stack([np.column_stack([result[f"{estimator}.{_covariance_name(a, b, estimated)}"]
+                                                for b in estimated]) for a in estimated], axis=1)
+        # the wind's NEES where it is steady: a step of the gust is no random walk (E13), the filter is
+        # not consistent through it by construction; its RMSE both ways
+        judged = settled(t, np.column_stack([result[f"{truth}.{n}"] for n in true]), settle) \
+            if block == "wind" else after_start
+        out[f"nees_{block}"] = float(np.mean(nees(error[judged], covariance[judged])))
+        out[f"est_rmse_{block}_{unit}"] = float(np.sqrt(np.mean(np.sum(error[after_start] ** 2, axis=1))))
+        if block == "wind":
+            out["est_rmse_wind_settled_mps"] = float(np.sqrt(np.mean(np.sum(error[judged] ** 2, axis=1))))
+        if block == "position":
+            # the estimate's bias: the length of its mean error; and the tracking error the controller
+            # sees, reference - estimate (the FNN learns on it; E18)
+            out["est_bias_position_m"] = float(np.linalg.norm(np.mean(error[after_start], axis=0)))
+            position, reference = metric_signals(scenario)
+            seen = np.column_stack([result[r] - result[f"{estimator}.{e}"] for e, r in zip(estimated, reference)])
+            out["rmse_seen_m"] = float(np.sqrt(np.mean(np.sum(seen ** 2, axis=1))))
+    used = result[f"{estimator}.fix_used"] > 0.5
+    out["nis_fix"] = float(np.mean(result[f"{estimator}.nis_fix"][used & after_start]))
+    out["nis_acc"] = float(np.mean(result[f"{estimator}.nis_acc"][after_start]))
+    return out
 
 
 def measure(study: Study, out_dir: str | Path | None = None, *, workers: int = 1, scheduler: str | None = None,
             metrics: Callable[[Scenario, Any], Mapping[str, Any]] = study_metrics,
-            metric_names: Sequence[str] = STUDY_METRICS, record: Sequence[str] | None = None,
+            metric_names: Sequence[str] | None = None, record: Sequence[str] | None = None,
             progress: Callable[[int, int], None] | None = None, plots: bool = False,
             resume: bool = True, worker_timeout: float | None = WORKER_TIMEOUT) -> StudyResult:
     """Run ``study`` the paper's way: :func:`cosim.study_run.run_study`
     measuring each row with ``metrics`` and recording only what they read
-    (``record``, default :func:`lean_signals`)."""
+    (``record``, default :func:`lean_signals`); ``metric_names`` default
+    :func:`study_metric_names` of the study's scenario."""
     return run_study(study, out_dir, workers=workers, scheduler=scheduler, metrics=metrics,
-                     metric_names=metric_names, record=record if record is not None
+                     metric_names=study_metric_names(study.scenario) if metric_names is None else metric_names, record=record if record is not None
                      else (lean_signals(study.scenario) or None), progress=progress, plots=plots, resume=resume,
                      worker_timeout=worker_timeout)

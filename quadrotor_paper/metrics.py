@@ -4,6 +4,12 @@ Euclidean position error e(t_n) = |p*(t_n) - p(t_n)| (m, Fig. 9) and its RMSE
 over every communication point of the run, n = 0 .. N (Tables 2 and 3):
 
     RMSE = sqrt( (1 / (N + 1)) * sum_n |p*(t_n) - p(t_n)|^2 )
+
+State estimation (docs/estimation.md, eqs. E15-E17): the normalized
+estimation error squared of a k-vector block with error e_n and the
+filter's covariance P_n, ``NEES_n = e_n^T P_n^-1 e_n`` (chi-square with k
+degrees of freedom for a consistent filter), and the rows where a signal
+has settled (unchanged for ``settle`` seconds).
 """
 from __future__ import annotations
 
@@ -11,7 +17,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["position_error", "euclidean_error", "rmse", "pd_share", "oscillation_period"]
+__all__ = ["position_error", "euclidean_error", "rmse", "pd_share", "oscillation_period", "nees", "settled",
+           "wrap_angle"]
 
 
 def position_error(result, position: Sequence[str], reference: Sequence[str]) -> np.ndarray:
@@ -49,3 +56,32 @@ def oscillation_period(x: np.ndarray, step: float, longest: float = 5.0) -> tupl
     first_zero = int(np.argmax(ac < 0))
     k = first_zero + int(np.argmax(ac[first_zero:first_zero + int(longest / step)]))
     return k * step, float(ac[k])
+
+
+def nees(error: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """NEES per row (eq. E15): ``e_n^T P_n^-1 e_n`` for errors of shape (N, k)
+    and covariances of shape (N, k, k); NaN where P_n is singular."""
+    error = np.asarray(error, dtype=float)
+    out = np.full(len(error), np.nan)
+    for n, (e, P) in enumerate(zip(error, np.asarray(covariance, dtype=float))):
+        try:
+            out[n] = float(e @ np.linalg.solve(P, e))
+        except np.linalg.LinAlgError:
+            pass
+    return out
+
+
+def settled(time: np.ndarray, signal: np.ndarray, settle: float) -> np.ndarray:
+    """Rows at least ``settle`` seconds after the start and after the last
+    change of ``signal`` (shape (N,) or (N, k)): where an estimate of it may
+    be asked to have converged (E17)."""
+    time = np.asarray(time, dtype=float)
+    signal = np.asarray(signal, dtype=float).reshape(len(time), -1)
+    changed = np.r_[True, np.any(signal[1:] != signal[:-1], axis=1)]
+    last_change = np.maximum.accumulate(np.where(changed, time, -np.inf))
+    return (time - time[0] >= settle) & (time - last_change >= settle) if len(time) else changed
+
+
+def wrap_angle(angle: np.ndarray) -> np.ndarray:
+    """Angle difference wrapped to [-pi, pi) (rad): the error of a yaw estimate."""
+    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi

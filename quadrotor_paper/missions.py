@@ -16,6 +16,12 @@ between; and how the rest of the application reads them.
 
     position = ["Quadrotor.x", "Quadrotor.y", "Quadrotor.z"]
     reference = ["reference.x", "reference.y", "reference.z"]
+    estimator = "Estimator"     # optional: the Estimator FMU instance whose estimate is measured
+    settle = 5.0                # s: wind estimate judged this long after the start and each change
+
+With ``estimator``, the study metrics add the estimate's consistency and
+accuracy (:func:`quadrotor_paper.experiments.estimation_metrics`), against
+the truth of the plant instance that ``position`` names.
 """
 from __future__ import annotations
 
@@ -29,7 +35,7 @@ from cosim.scenario import Scenario, check_fmu_parameters
 from cosim.schema import NonNegative, NonNegativeInt, Strings, Table, numbers, refuse
 from fnn_controller.variants import DEFAULT_VARIANT
 
-__all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "metric_signals",
+__all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "metric_signals", "estimation_spec",
            "controller_variant"]
 
 WIND_KEYS = {"speed": "v_w", "ramp_time": "ramp_time", "turbulence": "turbulence",
@@ -80,6 +86,10 @@ class Metrics(Table):
 
     position: Strings = Field(default_factory=list, description="the vehicle's position signals")
     reference: Strings = Field(default_factory=list, description="the reference's, in the same order")
+    estimator: Annotated[str, Field(strict=True)] = Field(
+        None, description="the Estimator FMU instance whose estimate is measured (NEES, NIS, RMSE)")
+    settle: NonNegative = Field(5.0, description="time after the start and after each change of the true wind "
+                                                 "before the wind estimate is judged [s]")
 
     @model_validator(mode="after")
     def _pairs(self):
@@ -88,14 +98,31 @@ class Metrics(Table):
         return self
 
 
-def apply_metrics(where: str, metrics: Metrics, fmus) -> dict[str, list[str]]:
-    return {"position": list(metrics.position), "reference": list(metrics.reference)}
+def apply_metrics(where: str, metrics: Metrics, fmus) -> dict[str, Any]:
+    out: dict[str, Any] = {"position": list(metrics.position), "reference": list(metrics.reference)}
+    if metrics.estimator is not None:
+        if metrics.estimator not in fmus:
+            raise ScenarioError(f"{where}.estimator = {metrics.estimator!r}: no such FMU in [fmus]; "
+                                f"FMUs: {', '.join(fmus)}")
+        if not metrics.position:
+            raise ScenarioError(f"{where}.estimator = {metrics.estimator!r}: needs position (the truth's instance)")
+        out.update(estimator=metrics.estimator, settle=metrics.settle)
+    return out
 
 
 def metric_signals(scenario: Scenario) -> tuple[list[str], list[str]]:
     """The position and reference signals of ``[metrics]`` (empty without it)."""
     metrics = scenario.sections.get("metrics", {})
     return list(metrics.get("position", [])), list(metrics.get("reference", []))
+
+
+def estimation_spec(scenario: Scenario) -> tuple[str, str, float] | None:
+    """``(estimator instance, truth instance, settle s)`` of ``[metrics]``, or
+    ``None`` when it names no estimator."""
+    metrics = scenario.sections.get("metrics", {})
+    if metrics.get("estimator") is None:
+        return None
+    return metrics["estimator"], metrics["position"][0].split(".")[0], float(metrics["settle"])
 
 
 def controller_variant(scenario: Scenario, instance: str = "controller") -> str | None:

@@ -16,6 +16,8 @@ for every wind speed and for the figure-8: nothing is tuned per cell.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any, Mapping
 
 from cosim.registry import Case
 
@@ -63,8 +65,31 @@ def option_names() -> tuple[str, ...]:
     return tuple(OPTIONS)
 
 
+@dataclass(frozen=True)
+class VariantCase(Case):
+    """A variant's case: ``controller.variant``, or, on a scenario whose
+    controller is cut at v* (the laboratory's: no ``[controller]``, one FMU
+    of an outer-loop model ``PositionController<V>``, docs/controller-fmu.md),
+    that FMU's model, so the row flies its variant there too."""
+
+    variant: str = ""
+
+    def applied_to(self, raw: Mapping[str, Any]) -> dict[str, Any]:
+        out = super().applied_to(raw)
+        if "controller" not in raw:
+            from fnn_controller.split import outer_identifier
+            from fnn_controller.variants import variant_names
+
+            outer = {outer_identifier(v) for v in variant_names()}
+            cut = [name for name, spec in raw.get("fmus", {}).items() if spec.get("model") in outer]
+            if len(cut) == 1:
+                del out[VARIANT_KEY]
+                out[f"fmus.{cut[0]}.model"] = outer_identifier(self.variant)
+        return out
+
+
 def variant_case(name: str) -> Case:
     """The case that flies controller variant ``name`` as it is."""
     from fnn_controller.variants import variant
 
-    return Case(name, {VARIANT_KEY: name}, label=variant(name).label)
+    return VariantCase(name, {VARIANT_KEY: name}, label=variant(name).label, variant=name)

@@ -271,9 +271,11 @@ class FmuModel:
         missing |= {v.name for v in self.discrete_states} - set(z0)
         if missing:
             raise ValueError(f"model {self.identifier}: the sampled part does not define {sorted(missing)}")
-        y = ca.vertcat(*[outputs[v.name] for v in self.outputs])
-        z_plus = ca.vertcat(*[z_next[v.name] for v in self.discrete_states])
-        z_init = ca.vertcat(*[z0[v.name] for v in self.discrete_states])
+        # dense: a structurally zero entry (e.g. an off-diagonal of a diagonal matrix) would otherwise be left
+        # out of the generated code's output, which the C layer reads as one value per variable
+        y = ca.densify(ca.vertcat(*[outputs[v.name] for v in self.outputs]))
+        z_plus = ca.densify(ca.vertcat(*[z_next[v.name] for v in self.discrete_states]))
+        z_init = ca.densify(ca.vertcat(*[z0[v.name] for v in self.discrete_states]))
         return {
             "dinit": ca.Function("model_dinit", [p, r], [z_init], ["p", "r"], ["z0"]),
             # rs only where the model asks for it: the others' generated code stays as it was

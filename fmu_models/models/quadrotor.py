@@ -37,6 +37,7 @@ from .rotor import thrust_and_torques
 from ..export.variables import input_, output, parameter, state
 
 __all__ = ["QUADROTOR", "STATE_NAMES", "BODY_STATES", "ROTOR_STATE_NAMES", "rotation_matrix", "euler_rate_matrix",
+           "aerodynamic_drag",
            "hover_rotor_speed", "DEFAULTS"]
 
 # Keeps d|v_rel|/dv_rel finite at v_rel = 0 (the Jacobian at hover would be
@@ -161,6 +162,14 @@ def euler_rate_matrix(phi, theta):
     )
 
 
+def aerodynamic_drag(v_rel, k_drag_lin, k_drag_quad):
+    """Drag force (N, world frame) on the air-relative velocity ``v_rel = v - v_wind``
+    (m/s): ``-(k_drag_lin + k_drag_quad |v_rel|) v_rel`` (docs/plant-model.md); the
+    plant's law, which the estimator (docs/estimation.md, eq. E6) inverts for the wind."""
+    speed = ca.sqrt(ca.sumsqr(v_rel) + _SPEED_SMOOTHING**2)
+    return -(k_drag_lin + k_drag_quad * speed) * v_rel
+
+
 def _clip(omega, omega_max):
     return ca.fmin(ca.fmax(omega, 0), omega_max)
 
@@ -183,8 +192,7 @@ def _equations(t, s):
     R = rotation_matrix(s["phi"], s["theta"], s["psi"])
     velocity = ca.vertcat(s["u"], s["v"], s["w"])
     v_rel = velocity - ca.vertcat(s["wind_x"], s["wind_y"], s["wind_z"])
-    speed = ca.sqrt(ca.sumsqr(v_rel) + _SPEED_SMOOTHING**2)
-    drag = -(s["k_drag_lin"] + s["k_drag_quad"] * speed) * v_rel
+    drag = aerodynamic_drag(v_rel, s["k_drag_lin"], s["k_drag_quad"])
     e3 = ca.DM([0, 0, 1])
     # eqs. (9)-(11) with the drag force added to F
     acceleration = (-R @ e3 * thrust + drag) / s["m"] + s["g"] * e3

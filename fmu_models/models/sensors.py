@@ -1,7 +1,7 @@
 """Sensors and links as FMUs: noise, bias, sample-and-hold and transport delay.
 
 One generic sampled-data model family, :func:`sensors_model`, with N
-channels; three members are shipped (``docs/sensors.md``):
+channels; four members are shipped (``docs/sensors.md``):
 
 * ``Measurement12``: the measurement path, plant -> controller. Inputs the 12
   rigid-body states ``x y z u v w phi theta psi p q r``, outputs the measured
@@ -12,7 +12,10 @@ channels; three members are shipped (``docs/sensors.md``):
 * ``VelocityLink3``: the velocity-command path, outer loop -> on-board
   velocity controller (the AR.Drone's Wi-Fi). Inputs ``v_ref_x, v_ref_y,
   v_ref_z``, the desired velocity v* of eq. 26 (m/s, world frame, z down),
-  outputs ``v_ref_x_rx ..``; a link: packets can be lost.
+  outputs ``v_ref_x_rx ..``; a link: packets can be lost;
+* ``GNSS6``: a GNSS receiver, plant -> estimator. Inputs ``x y z u v w``,
+  outputs ``x_m .. w_m`` and ``fresh`` (1 on the step a new fix arrives,
+  ``fresh=True`` below; docs/estimation.md).
 
 Per communication step n (``t_n = n dt``), channel i, with ``u`` the input::
 
@@ -59,7 +62,8 @@ from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter, seed_parameter
 from .quadrotor import QUADROTOR, STATE_NAMES
 
-__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "VELOCITY_LINK_3", "DELAY_MAX", "SAMPLE_RATE_MAX",
+__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "VELOCITY_LINK_3", "GNSS_6", "DELAY_MAX",
+           "SAMPLE_RATE_MAX",
            "hold_period", "hold_steps", "gaussian"]
 
 DELAY_MAX = 20            # samples: the length of the delay line, fixed at build
@@ -85,7 +89,7 @@ def gaussian(r1, r2):
 
 
 def sensors_model(identifier: str, description: str, channels: Sequence[tuple[str, str, str, float]],
-                  suffix: str, delay_max: int = DELAY_MAX, loss: bool = False) -> FmuModel:
+                  suffix: str, delay_max: int = DELAY_MAX, loss: bool = False, fresh: bool = False) -> FmuModel:
     """A sensor/link model with one channel per ``(name, unit, description,
     input start)``: input ``name``, output ``name + suffix``, parameters
     ``sigma_<name>``, ``bias_<name>`` and the shared ``sample_rate``,
@@ -95,7 +99,13 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
     law): the parameter ``loss_probability`` (1, in [0, 1]), one more uniform
     number per step after the channels' 2N, and the discrete states
     ``delivered_<name>`` (the receiver's last value) and ``packets_lost``.
-    ``loss=False`` builds exactly the model it built before links existed."""
+    ``loss=False`` builds exactly the model it built before links existed.
+
+    ``fresh=True`` adds the output ``fresh``: 1 at the steps where a new
+    sample reaches the output (the sample flag ``c_n = 0`` through the same
+    delay line, 0 where the line is still filled with ``s_0``), 0 while the
+    output holds an old one; an estimator corrects only on it. The model
+    without it is exactly the one before."""
     names = [c[0] for c in channels]
     units = {c[0]: c[1] for c in channels}
     delivered = "noise, bias, hold, delay, loss" if loss else "noise, bias, hold, delay"
@@ -133,6 +143,11 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
               for name in names),
             discrete("packets_lost", "1", "packets lost since the start"),
         ]
+    if fresh:  # appended, as the loss' variables
+        variables += [
+            output("fresh", "1", "1 when a new sample reaches the output this step (after the delay), else 0"),
+            *(discrete(f"fresh_delay_{j}", "1", f"sample flag {j} step(s) ago") for j in range(1, delay_max + 1)),
+        ]
     n_channel_random = 2 * len(names)  # the noise's numbers per step; the loss draw, if any, comes after
 
     def update(t, v, rs):
@@ -143,6 +158,14 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         if loss:
             lost = rs[n_channel_random] < v["loss_probability"]  # r_L < p_loss: p_loss = 0 never, 1 always
             nxt["packets_lost"] = v["packets_lost"] + ca.if_else(lost, 1.0, 0.0)
+        if fresh:
+            flags = [ca.if_else(sample, 1.0, 0.0)] + [ca.if_else(started > 0, v[f"fresh_delay_{j}"], 0.0)
+                                                      for j in range(1, delay_max + 1)]
+            flag = flags[0]
+            for j in range(1, delay_max + 1):
+                flag = ca.if_else(delay == j, flags[j], flag)
+            out["fresh"] = flag
+            nxt.update({f"fresh_delay_{j}": flags[j - 1] for j in range(1, delay_max + 1)})
         for i, name in enumerate(names):
             measured = v[name] + v[f"sigma_{name}"] * gaussian(rs[2 * i], rs[2 * i + 1]) + v[f"bias_{name}"]
             s = ca.if_else(sample, measured, v[f"held_{name}"])
@@ -168,6 +191,8 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         if loss:
             z0.update({f"delivered_{name}": 0.0 for name in names})
             z0["packets_lost"] = 0.0
+        if fresh:
+            z0.update({f"fresh_delay_{j}": 0.0 for j in range(1, delay_max + 1)})
         return z0
 
     return FmuModel(
@@ -206,4 +231,14 @@ VELOCITY_LINK_3 = sensors_model(
     [(f"v_ref_{a}", "m/s", f"desired velocity v* along {a} (eq. 26; world frame, z down)", 0.0) for a in "xyz"],
     suffix="_rx",
     loss=True,
+)
+
+GNSS_6 = sensors_model(
+    "GNSS6",
+    "GNSS receiver (plant -> estimator): position and velocity with Gaussian noise, sampled at sample_rate "
+    "(5-10 Hz), held, delivered delay_steps communication steps late (the receiver's latency), with a fresh "
+    "flag set when a new fix arrives; seeded; z axis down",
+    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES[:6]],
+    suffix="_m",
+    fresh=True,
 )
