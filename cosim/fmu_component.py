@@ -211,6 +211,10 @@ class FmuComponent:
         components).
     seed_stream : which of the run's random streams seeds it
         (:func:`stream_seed`; 0: the run's seed itself).
+    interface : ``"CoSimulation"`` (the default) or ``"ModelExchange"``,
+        which only a clocked FMI 3.0 FMU without continuous states may use:
+        its ticks are time events, and there is nothing to integrate between
+        them (docs/cosim.md, "Clocked FMUs").
 
     Attributes
     ----------
@@ -225,7 +229,7 @@ class FmuComponent:
 
     def __init__(self, name: str, path: str | Path, validate: bool = False,
                  parameters: Mapping[str, float] | None = None, seed_parameter: str | None = None,
-                 seed_stream: int = 0):
+                 seed_stream: int = 0, interface: str = "CoSimulation"):
         self.name = name
         self.path = Path(path)
         self.base_parameters = dict(parameters or {})
@@ -244,6 +248,13 @@ class FmuComponent:
         self.variables = {v.name: v for v in md.modelVariables}
         self.sample_period = self._declared_period()
         self.clock = self._input_clock()
+        self.interface = interface
+        if interface not in ("CoSimulation", "ModelExchange"):
+            raise FmuLoadError(name, self.path, "expected 'CoSimulation' or 'ModelExchange'",
+                               setting=("interface", interface))
+        if interface == "ModelExchange" and (self.clock is None or md.modelExchange is None or md.derivatives):
+            raise FmuLoadError(name, self.path, "the master drives Model Exchange only for a clocked FMI 3.0 FMU "
+                               "without continuous states", setting=("interface", interface))
         self._tick_pending = False  # clocked: in Event Mode at a tick whose clock is not yet activated
         if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
@@ -385,11 +396,15 @@ class FmuComponent:
                 self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
                 slave.instantiate(callbacks=self._callbacks)
             else:
-                from fmpy.fmi3 import FMU3Slave
+                from fmpy.fmi3 import FMU3Model, FMU3Slave
 
-                slave = FMU3Slave(**common)
-                slave.instantiate(eventModeUsed=self.clock is not None,
-                                  logMessage=lambda env, status, category, message: self._log(status, message))
+                log = lambda env, status, category, message: self._log(status, message)  # noqa: E731
+                if self.interface == "ModelExchange":
+                    slave = FMU3Model(**{**common, "modelIdentifier": md.modelExchange.modelIdentifier})
+                    slave.instantiate(logMessage=log)
+                else:
+                    slave = FMU3Slave(**common)
+                    slave.instantiate(eventModeUsed=self.clock is not None, logMessage=log)
         except Exception as exc:  # fmpy raises plain Exceptions here; the FMU's log says why
             self.close()
             said = "; ".join(self.messages)
@@ -612,14 +627,22 @@ class FmuComponent:
             raise self._call_failure(Call.STEP, exc, t, h) from None
 
     def _clocked_step(self, t: float, h: float) -> None:
-        """Event Mode at the tick t: compute it; step to t + h; Event Mode at the next tick."""
+        """Event Mode at the tick t: compute it; to t + h (Co-Simulation: doStep;
+        Model Exchange: the time set, no state to integrate); Event Mode at the
+        next tick."""
         if self._tick_pending:  # no input set since the tick began: it samples the inputs held
             self._activate_clock(t)
         s = self._slave
         try:
-            s.updateDiscreteStates()
-            s.enterStepMode()
-            event, _, _, _ = s.doStep(t, h)
+            *_, next_defined, next_tick = s.updateDiscreteStates()
+            if self.interface == "ModelExchange":
+                s.enterContinuousTimeMode()
+                s.setTime(t + h)  # within the FMU's tolerance of the tick, taken as the tick
+                s.completedIntegratorStep()
+                event = next_defined and abs(next_tick - (t + h)) <= 1e-9 * h
+            else:
+                s.enterStepMode()
+                event, _, _, _ = s.doStep(t, h)
             s.enterEventMode()
         except FMICallException as exc:
             raise self._call_failure(Call.STEP, exc, t, h) from None

@@ -315,20 +315,41 @@ def test_the_controller_declares_its_clock(fmus):
     assert not {u.variable.name for u in md.initialUnknowns} & clocked
 
 
-def test_our_master_flies_circles_with_the_clocked_controller_bit_for_bit():
-    """The whole circles mission (50 s), its controller the clocked FMI 3.0
-    FMU in Co-Simulation with Event Mode (the Python loop: cosim.master), is
-    the FMI 2.0 controller's flight to the last bit."""
+@pytest.fixture(scope="module")
+def fmi2_circles():
+    return _fly_circles({"controller.fmi_version": 2})
+
+
+def _fly_circles(overrides):
     from cosim.scenario import build_master, load_scenario
 
-    runs = []
-    for version in (2, 3):
-        scenario = load_scenario("circles", {"controller.fmi_version": version})
-        with build_master(scenario) as master:
-            controller = master.components["controller"]
-            assert controller.fmi_version == version and (controller.clock is not None) == (version == 3)
-            runs.append(master.run(scenario.duration, seed=scenario.seed, t0=scenario.start_time))
-    assert runs[0].status == runs[1].status == "ok" and runs[0].columns == runs[1].columns
-    assert runs[0].data.shape[0] == 5001
-    for i, name in enumerate(runs[0].columns):
-        np.testing.assert_array_equal(runs[1].data[:, i], runs[0].data[:, i], err_msg=name)
+    scenario = load_scenario("circles", overrides)
+    with build_master(scenario) as master:
+        controller = master.components["controller"]
+        assert controller.fmi_version == overrides["controller.fmi_version"]
+        assert controller.interface == overrides.get("controller.interface", "CoSimulation")
+        assert (controller.clock is not None) == (controller.fmi_version == 3)
+        return master.run(scenario.duration, seed=scenario.seed, t0=scenario.start_time)
+
+
+@pytest.mark.parametrize("interface", ["CoSimulation", "ModelExchange"])
+def test_our_master_flies_circles_with_the_clocked_controller_bit_for_bit(fmi2_circles, interface):
+    """The whole circles mission (50 s), its controller the clocked FMI 3.0
+    FMU, in Co-Simulation with Event Mode or in Model Exchange (the Python
+    loop: cosim.master), is the FMI 2.0 controller's flight to the last bit."""
+    run = _fly_circles({"controller.fmi_version": 3, "controller.interface": interface})
+    assert run.status == fmi2_circles.status == "ok" and run.columns == fmi2_circles.columns
+    assert run.data.shape[0] == 5001
+    for i, name in enumerate(run.columns):
+        np.testing.assert_array_equal(run.data[:, i], fmi2_circles.data[:, i], err_msg=name)
+
+
+def test_model_exchange_is_for_a_clocked_fmu_only():
+    from cosim.errors import FmuLoadError
+    from cosim.fmu_component import FmuComponent
+    from fmu_models.models.quadrotor import QUADROTOR
+
+    with pytest.raises(FmuLoadError, match="interface = 'ModelExchange': the master drives Model Exchange only"):
+        FmuComponent("Quadrotor", cached_fmu(QUADROTOR, 3), interface="ModelExchange")
+    with pytest.raises(FmuLoadError, match="interface = 'ModelExchange'"):
+        FmuComponent("controller", cached_fmu(controller_model(VARIANT), 2), interface="ModelExchange")
