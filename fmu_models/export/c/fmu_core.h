@@ -15,7 +15,9 @@
  * numpy's default_rng(seed) (numpy_random.c). Its outputs have direct
  * feedthrough and are sample-and-hold: after setting inputs, a get returns
  * y = g(z, u); doStep then makes z its next value and holds that y until the
- * inputs are set again.
+ * inputs are set again. In FMI 3.0 such a model is clocked (VR_CLOCK below):
+ * the same update runs once per tick of its clock instead of once per
+ * communication step (core_clocked_step, core_compute_tick).
  *
  * A stochastic sampled-data model (NRS > 0) has model_dstep(t, u, p, z, rs)
  * with NRS fresh uniform numbers rs per communication step, drawn from the
