@@ -22,7 +22,15 @@ instantiation and status checking (every failed call raises fmpy's
 * a sampled-data FMU's declaration of its period parameter (an annotation of
   its modelDescription, :data:`PERIOD_ANNOTATION`) is read into
   :attr:`FmuComponent.sample_period`, so a master can refuse a communication
-  step the FMU cannot take before anything runs.
+  step the FMU cannot take before anything runs;
+* a clocked FMI 3.0 FMU (a periodic input clock, this project's sampled-data
+  FMUs: docs/fmi-export.md, "Clocks") runs in Co-Simulation with Event Mode:
+  at each communication point, a tick, the clock is activated before the
+  inputs are set, and :meth:`FmuComponent.do_step` computes the tick
+  (``fmi3UpdateDiscreteStates``), steps to the next tick and enters Event Mode
+  again. The values are those of the FMI 2.0 FMU, bit for bit; the master runs
+  such an FMU in its Python loop (the compiled loop makes set, get and doStep
+  calls only).
 """
 from __future__ import annotations
 
@@ -128,7 +136,9 @@ def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
     derivatives = {d.variable.name for d in model_description.derivatives}
     groups: dict[str, list[Port]] = {"input": [], "output": [], "parameter": [], "local": [], "other": []}
     for v in model_description.modelVariables:
-        if v.causality == "local":
+        if v.type == "Clock":  # a clock is no signal: the component activates it (FmuComponent.clock)
+            groups["other"].append(_port(v))
+        elif v.causality == "local":
             key = "local" if v.name not in derivatives and _TYPE.get(v.type) == "Float64" else "other"
         else:
             key = v.causality if v.causality in groups else "other"
@@ -201,6 +211,10 @@ class FmuComponent:
         components).
     seed_stream : which of the run's random streams seeds it
         (:func:`stream_seed`; 0: the run's seed itself).
+    interface : ``"CoSimulation"`` (the default) or ``"ModelExchange"``,
+        which only a clocked FMI 3.0 FMU without continuous states may use:
+        its ticks are time events, and there is nothing to integrate between
+        them (docs/cosim.md, "Clocked FMUs").
 
     Attributes
     ----------
@@ -208,11 +222,14 @@ class FmuComponent:
         The parameter a sampled-data FMU declares as its period, the one
         communication step it takes (:data:`PERIOD_ANNOTATION`); ``None`` if
         it declares none.
+    clock : int or None
+        The value reference of a clocked FMI 3.0 FMU's input clock, which
+        ticks at every communication point; ``None`` for an FMU without one.
     """
 
     def __init__(self, name: str, path: str | Path, validate: bool = False,
                  parameters: Mapping[str, float] | None = None, seed_parameter: str | None = None,
-                 seed_stream: int = 0):
+                 seed_stream: int = 0, interface: str = "CoSimulation"):
         self.name = name
         self.path = Path(path)
         self.base_parameters = dict(parameters or {})
@@ -230,6 +247,15 @@ class FmuComponent:
         self.internals = groups["local"]  # recorded and bounded like outputs, read with them (cosim.plan)
         self.variables = {v.name: v for v in md.modelVariables}
         self.sample_period = self._declared_period()
+        self.clock = self._input_clock()
+        self.interface = interface
+        if interface not in ("CoSimulation", "ModelExchange"):
+            raise FmuLoadError(name, self.path, "expected 'CoSimulation' or 'ModelExchange'",
+                               setting=("interface", interface))
+        if interface == "ModelExchange" and (self.clock is None or md.modelExchange is None or md.derivatives):
+            raise FmuLoadError(name, self.path, "the master drives Model Exchange only for a clocked FMI 3.0 FMU "
+                               "without continuous states", setting=("interface", interface))
+        self._tick_pending = False  # clocked: in Event Mode at a tick whose clock is not yet activated
         if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
         self.feedthrough = self._feedthrough(md)
@@ -303,6 +329,17 @@ class FmuComponent:
                                f"periodParameter = {name!r}, which is no parameter of the FMU")
         return name
 
+    def _input_clock(self) -> int | None:
+        """The input clock of a clocked FMI 3.0 FMU: one periodic input clock,
+        ticking at the period it declares (:data:`PERIOD_ANNOTATION`)."""
+        clocks = [v for v in self.model_description.modelVariables if v.type == "Clock"]
+        if not clocks:
+            return None
+        if len(clocks) > 1 or clocks[0].causality != "input" or self.sample_period is None:
+            raise FmuLoadError(self.name, self.path, f"clocks {[c.name for c in clocks]}: only one input clock, "
+                               f"ticking at the period its {PERIOD_ANNOTATION} annotation declares, is supported")
+        return clocks[0].valueReference
+
     def _file_names(self) -> list[str]:
         if self.path.is_dir():
             return [Path(root, f).relative_to(self.path).as_posix()
@@ -359,10 +396,15 @@ class FmuComponent:
                 self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
                 slave.instantiate(callbacks=self._callbacks)
             else:
-                from fmpy.fmi3 import FMU3Slave
+                from fmpy.fmi3 import FMU3Model, FMU3Slave
 
-                slave = FMU3Slave(**common)
-                slave.instantiate(logMessage=lambda env, status, category, message: self._log(status, message))
+                log = lambda env, status, category, message: self._log(status, message)  # noqa: E731
+                if self.interface == "ModelExchange":
+                    slave = FMU3Model(**{**common, "modelIdentifier": md.modelExchange.modelIdentifier})
+                    slave.instantiate(logMessage=log)
+                else:
+                    slave = FMU3Slave(**common)
+                    slave.instantiate(eventModeUsed=self.clock is not None, logMessage=log)
         except Exception as exc:  # fmpy raises plain Exceptions here; the FMU's log says why
             self.close()
             said = "; ".join(self.messages)
@@ -436,10 +478,11 @@ class FmuComponent:
                 s.exitInitializationMode()
             else:
                 s.enterInitializationMode(startTime=t0)
-                s.exitInitializationMode()
+                s.exitInitializationMode()  # a clocked FMU: in Event Mode at its first tick
         except FMICallException as exc:
             raise self._fail("initialization with " + (repr(parameters) if parameters else "default parameters"),
                              exc) from None
+        self._tick_pending = self.clock is not None
         self.read_outputs(t0)
 
     # ---- fast path -----------------------------------------------------------
@@ -503,8 +546,20 @@ class FmuComponent:
         call = Call(call)
         return self._call_failure(call, FMICallException(function=self._api._names[call], status=status), t, h)
 
+    def _activate_clock(self, t: float) -> None:
+        """A clocked FMU at a tick: its clock activated (once), so the inputs
+        set next are the tick's and a get returns the tick's outputs."""
+        self._tick_pending = False
+        try:
+            self._slave.setClock([self.clock], [True])
+        except FMICallException as exc:
+            raise self._fail("activating its clock", exc, t) from None
+
     def write_inputs(self, t: float) -> None:
-        """Set all bound inputs from :attr:`u` in one call."""
+        """Set all bound inputs from :attr:`u` in one call (a clocked FMU's
+        clock activated first: the inputs are its tick's)."""
+        if self._tick_pending:
+            self._activate_clock(t)
         if self._n_in:
             try:
                 self._api.set(self._in_vr, self._c_in, self._u_ptr)
@@ -542,11 +597,15 @@ class FmuComponent:
                 s.freeFMUState(state)
         except FMICallException as exc:
             raise self._fail("restoring a serialized FMU state", exc) from None
+        if self.clock is not None:  # a state this component saved: at a tick, in Event Mode
+            self._tick_pending = True
 
     def set_inputs(self, values: Mapping[str, float], t: float) -> None:
         """Set some inputs by name (the slow path, outside the step loop)."""
         if not values:
             return
+        if self._tick_pending:
+            self._activate_clock(t)
         vrs = [self.variables[name].valueReference for name in values]
         try:
             if self.fmi_version == 2:
@@ -558,11 +617,39 @@ class FmuComponent:
             raise self._fail(f"setting inputs ({shown})", exc, t) from None
 
     def do_step(self, t: float, h: float) -> None:
-        """Advance the FMU from ``t`` to ``t + h``."""
+        """Advance the FMU from ``t`` to ``t + h``; a clocked FMU computes the
+        tick at ``t`` first, and must meet its next tick at ``t + h``."""
+        if self.clock is not None:
+            return self._clocked_step(t, h)
         try:
             self._api.do_step(t, h)
         except FMICallException as exc:
             raise self._call_failure(Call.STEP, exc, t, h) from None
+
+    def _clocked_step(self, t: float, h: float) -> None:
+        """Event Mode at the tick t: compute it; to t + h (Co-Simulation: doStep;
+        Model Exchange: the time set, no state to integrate); Event Mode at the
+        next tick."""
+        if self._tick_pending:  # no input set since the tick began: it samples the inputs held
+            self._activate_clock(t)
+        s = self._slave
+        try:
+            *_, next_defined, next_tick = s.updateDiscreteStates()
+            if self.interface == "ModelExchange":
+                s.enterContinuousTimeMode()
+                s.setTime(t + h)  # within the FMU's tolerance of the tick, taken as the tick
+                s.completedIntegratorStep()
+                event = next_defined and abs(next_tick - (t + h)) <= 1e-9 * h
+            else:
+                s.enterStepMode()
+                event, _, _, _ = s.doStep(t, h)
+            s.enterEventMode()
+        except FMICallException as exc:
+            raise self._call_failure(Call.STEP, exc, t, h) from None
+        if not event:
+            raise self._fail(f"doStep from t = {t!r} by {h!r} s", RuntimeError("it ended before the next tick of "
+                             "its clock"), t)
+        self._tick_pending = True
 
     def read_outputs(self, t: float) -> None:
         """Get all bound outputs into :attr:`y` in one call."""

@@ -312,7 +312,8 @@ class Master:
 
     def _loop(self, t0: float, n_steps: int, recorder: Recorder, progress: Callable[[int, int], None] | None,
               phase_times: dict[str, float] | None) -> None:
-        if phase_times is None and self.plan.fmus_only:
+        # a clocked FMU's tick is Event Mode calls the compiled loop does not make (docs/cosim.md)
+        if phase_times is None and self.plan.fmus_only and not any(f.clock is not None for f in self.fmus):
             from . import kernel
 
             run = kernel.load()

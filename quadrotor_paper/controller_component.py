@@ -166,6 +166,9 @@ def controller_table() -> type[Table]:
         form: one_of(FORMS) = Field("fmu", description="'fmu': the controller FMU (the compiled loop); 'python': "
                                                        "the same step in process")
         fmi_version: one_of((2, 3), "expected 2 or 3", int) = Field(2, description="FMI version of the FMU form")
+        interface: one_of(("CoSimulation", "ModelExchange")) = Field(
+            "CoSimulation", description="how the master drives the FMU form; 'ModelExchange' needs fmi_version = 3 "
+                                        "(the clocked controller: its ticks are time events)")
         learned: Annotated[str, Field(strict=True)] = Field(None, description="a learned-state file to resume from")
 
         @model_validator(mode="after")
@@ -255,7 +258,7 @@ class ControllerComponent(PythonComponent):
             from .learned import load_learned
 
             component.learned = load_learned(table.learned, component.variant)
-        return component.as_fmu(version) if form == "fmu" and context is not None else component
+        return component.as_fmu(version, table.interface) if form == "fmu" and context is not None else component
 
     def fmu_entry(self, fmi_version: int = 2) -> dict[str, Any]:
         """This controller as an ``[fmus]`` entry: the FMU of its variant
@@ -271,7 +274,7 @@ class ControllerComponent(PythonComponent):
         return {"model": fmu_identifier(self.variant), "fmi_version": fmi_version,
                 "parameters": {**values, "psi_ref": self.psi_ref}, **({"seed_parameter": seed} if seed else {})}
 
-    def as_fmu(self, fmi_version: int = 2):
+    def as_fmu(self, fmi_version: int = 2, interface: str = "CoSimulation"):
         """This controller as its FMU (:meth:`fmu_entry`; the same parametric
         step compiled, :func:`fnn_controller.controller_fmu.controller_model`),
         starting from :attr:`learned` if set."""
@@ -283,7 +286,7 @@ class ControllerComponent(PythonComponent):
         entry = self.fmu_entry(fmi_version)
         return LearnedControllerFmu(self.name, cached_fmu(controller_model(self.variant), fmi_version),
                                     parameters=entry["parameters"], seed_parameter=entry.get("seed_parameter"),
-                                    variant=self.variant, state=self.learned)
+                                    variant=self.variant, state=self.learned, interface=interface)
 
     def _check_variant(self, variant: Any) -> str:
         names = self._fc.variant_names()

@@ -97,8 +97,9 @@ def load_learned(path: str | Path, variant: str) -> np.ndarray:
 
 def _offsets(fmu: FmuComponent, size: int, names: list[str]) -> np.ndarray:
     """Byte offsets of ``names`` in ``fmu``'s serialized state (its values are
-    the last 8 N bytes, N the number of variables, in value-reference order)."""
-    n_variables = max(v.valueReference for v in fmu.variables.values()) + 1
+    the last 8 N bytes, N the number of Float64 variables, in value-reference
+    order; an FMI 3.0 clock's value reference comes after them)."""
+    n_variables = max(v.valueReference for v in fmu.variables.values() if v.type != "Clock") + 1
     header = size - 8 * n_variables
     if header < 0:
         raise ScenarioError(f"{fmu.name} ({fmu.path}): its serialized state is no state of this project's FMUs")

@@ -20,7 +20,8 @@ from .model import FmuModel
 from .variables import UNITS
 
 __all__ = ["fmi2_model_description", "fmi3_model_description", "fmi3_build_description",
-           "derivative_unit", "dependency_kinds", "SOURCE_FILES_FMI2", "SOURCE_FILES_FMI3", "PERIOD_ANNOTATION"]
+           "derivative_unit", "dependency_kinds", "clock_reference", "SOURCE_FILES_FMI2", "SOURCE_FILES_FMI3",
+           "PERIOD_ANNOTATION", "CLOCK_NAME"]
 
 SOURCE_FILES_FMI2 = ("fmu_core.c", "numpy_random.c", "fmi2_functions.c", "model_generated.c")
 SOURCE_FILES_FMI3 = ("fmu_core.c", "numpy_random.c", "fmi3_functions.c", "model_generated.c")
@@ -42,6 +43,20 @@ def derivative_unit(unit: str) -> str:
 # communication step the FMU takes. cosim.fmu_component reads it (by the same
 # name: the engine does not import the exporter).
 PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
+
+
+# The periodic input clock of a sampled-data model in FMI 3.0 (docs/fmi-export.md,
+# "Clocks"): it ticks every sample period from the start time; the outputs and
+# discrete states are clocked by it. Its value reference is the one after the
+# Float64 variables (VR_CLOCK in fmu_core.h).
+CLOCK_NAME = "sample_clock"
+
+
+def clock_reference(model: FmuModel) -> int:
+    """The value reference of a sampled-data model's :data:`CLOCK_NAME` (FMI 3.0)."""
+    if model.sampled is None:
+        raise ValueError(f"model {model.identifier} is continuous: it has no clock")
+    return len(value_references(model))
 
 
 def _period_declaration(model: FmuModel) -> str:
@@ -273,33 +288,52 @@ def fmi3_model_description(model: FmuModel, instantiation_token: str) -> str:
 
     The sources are listed in ``sources/buildDescription.xml``
     (:func:`fmi3_build_description`), not here as in FMI 2.0. Co-Simulation
-    declares ``hasEventMode``: the model has no events, so an importer that
-    uses Event Mode only ever sees ``fmi3UpdateDiscreteStates`` report nothing.
+    declares ``hasEventMode``: a continuous model has no events, so an
+    importer that uses Event Mode only ever sees ``fmi3UpdateDiscreteStates``
+    report nothing. A sampled-data model is clocked (:data:`CLOCK_NAME`, a
+    periodic input clock of the sample period, ``intervalVariability="fixed"``):
+    its outputs and discrete states are clocked, and it has Model Exchange
+    (a time event per tick), Co-Simulation with Event Mode and early return,
+    and Scheduled Execution (one model partition).
     """
     entries = _model_variables(model)
     vr = {e.name: e.vr for e in entries}
-    variables = [f"    <Float64 {_variable_attributes(e)} {_value_attributes(e, vr.get)}/>" for e in entries]
+    sampled = model.sampled is not None
+    clock = clock_reference(model) if sampled else None
+
+    def clocked(e: _Entry) -> str:
+        return f' clocks="{clock}"' if sampled and e.variability == "discrete" else ""
+
+    variables = [f"    <Float64 {_variable_attributes(e)}{clocked(e)} {_value_attributes(e, vr.get)}/>"
+                 for e in entries]
+    if sampled:
+        what = f"ticks every {model.sampled.sample_period} s from the start time: one sample"
+        variables.append(f'    <Clock name="{CLOCK_NAME}" valueReference="{clock}" causality="input" '
+                         f'variability="discrete" intervalVariability="fixed" priority="0" description={quoteattr(what)}/>')
     outputs, derivatives, initial = _model_structure(model)
+    if sampled:  # clocked outputs have no initial value to compute: they change at the ticks
+        initial = [name for name in initial if name not in {n for n, _ in outputs}]
     structure = ([_unknown("Output", "valueReference", vr.get, name, deps, 4) for name, deps in outputs]
                  + [_unknown("ContinuousStateDerivative", "valueReference", vr.get, name, deps, 4)
                     for name, deps in derivatives]
                  + [_unknown("InitialUnknown", "valueReference", vr.get, name, indent=4) for name in initial])
-    sampled = model.sampled is not None
     derivatives_flag = str(not sampled).lower()
     capabilities = ('canGetAndSetFMUState="true" canSerializeFMUState="true" '
                     f'providesDirectionalDerivatives="{derivatives_flag}" '
                     f'providesAdjointDerivatives="{derivatives_flag}"')
-    model_exchange = "" if sampled else (f'\n  <ModelExchange modelIdentifier="{model.identifier}" {capabilities} '
-                                         'needsCompletedIntegratorStep="false"/>')
-    cosimulation = (f'canHandleVariableCommunicationStepSize="false" fixedInternalStepSize="'
-                    f'{_fmt(model.variable(model.sampled.sample_period).start)}"' if sampled
-                    else 'canHandleVariableCommunicationStepSize="true" hasEventMode="true"')
+    model_exchange = (f'\n  <ModelExchange modelIdentifier="{model.identifier}" {capabilities} '
+                      'needsCompletedIntegratorStep="false"/>')
+    cosimulation = 'canHandleVariableCommunicationStepSize="true" hasEventMode="true"'
+    if sampled:
+        cosimulation += ' mightReturnEarlyFromDoStep="true"'
+    scheduled = (f'\n  <ScheduledExecution modelIdentifier="{model.identifier}" canGetAndSetFMUState="true" '
+                 'canSerializeFMUState="true"/>' if sampled else "")
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="3.0" modelName="{model.identifier}" instantiationToken="{instantiation_token}"
   {_root_attributes(model)}
   variableNamingConvention="structured">{model_exchange}
   <CoSimulation modelIdentifier="{model.identifier}" {capabilities}
-    {cosimulation}/>
+    {cosimulation}/>{scheduled}
 {_shared_sections(model)}
   <ModelVariables>
 {chr(10).join(variables)}

@@ -193,9 +193,10 @@ def test_fmu_state_save_restore_and_serialize_resume_learning(version):
 @pytest.mark.parametrize("version", [2, 3])
 def test_refusals_name_the_variable_and_the_value_and_the_instance_survives(version):
     ctrl = Controller("pd+lm", version)
-    with pytest.raises(FMICallException):
-        ctrl.step(0.0, 0.02)
-    assert any("communication step size = 0.02" in m and "dt = 0.01" in m for m in ctrl.log.messages)
+    if version == 2:  # the FMI 3.0 controller is clocked: any step (tests/fmus/test_clocked_fmu.py)
+        with pytest.raises(FMICallException):
+            ctrl.step(0.0, 0.02)
+        assert any("communication step size = 0.02" in m and "dt = 0.01" in m for m in ctrl.log.messages)
     with pytest.raises(FMICallException):
         ctrl.set([ctrl.vr["x"]], [float("nan")])
     assert any("x = nan refused" in m for m in ctrl.log.messages)

@@ -1,14 +1,29 @@
-/* FMI 3.0 Model Exchange and Co-Simulation on top of the model-independent core.
+/* FMI 3.0 Model Exchange, Co-Simulation and Scheduled Execution on top of the
+ * model-independent core.
  *
  * Every function of fmi3FunctionTypes.h is defined here (importers resolve all
  * of them when they load the library). The model has Float64 variables only,
- * no clocks, no event indicators and no structural parameters; the functions
- * for those return fmi3OK when asked about zero variables and fmi3Error
- * otherwise. Scheduled Execution is not supported.
+ * no event indicators and no structural parameters; the functions for those
+ * return fmi3OK when asked about zero variables and fmi3Error otherwise.
+ *
+ * A continuous model (NZ = 0) has no clocks: Model Exchange and Co-Simulation.
+ * A sampled-data model (NZ > 0) is clocked (docs/fmi-export.md, "Clocks"):
+ * one periodic input clock, sample_clock (VR_CLOCK), ticks every sample
+ * period from the start time, and its outputs and discrete states are
+ * computed at the ticks only. Model Exchange: a time event at each tick
+ * (nextEventTime); Co-Simulation with Event Mode: doStep stops at the ticks
+ * (eventHandlingNeeded, or early return); without: doStep computes the ticks
+ * it covers; Scheduled Execution: fmi3ActivateModelPartition computes one.
+ * At a tick the importer activates the clock (fmi3SetClock, or the
+ * activation), sets the inputs, may get the outputs (they follow the inputs
+ * then), and fmi3UpdateDiscreteStates commits the tick. Every call the
+ * standard forbids in an interface or a mode is refused with fmi3Error and a
+ * message naming the call.
  *
  * Compiled into a shared library the function names carry no prefix; an
  * importer that links the sources statically may define FMI3_FUNCTION_PREFIX.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,6 +36,7 @@ typedef struct {
     fmi3LogMessageCallback log_message;
     fmi3InstanceEnvironment environment;
     int event_mode_used; /* Co-Simulation: the importer handles events (hasEventMode) */
+    int early_return_allowed; /* Co-Simulation: doStep may stop at a tick before its end */
 } Fmi3Env;
 
 /* The core hands over a finished message; FMI 3.0 messages carry no instance name. */
@@ -47,13 +63,17 @@ static void forward_log(void *environment, const char *instance_name, CoreStatus
     } while (0)
 
 #define ME_MODES (IN(MODE_EVENT) | IN(MODE_CONTINUOUS_TIME))
-#define AFTER_INIT (IN(MODE_EVENT) | IN(MODE_CONTINUOUS_TIME) | IN(MODE_STEP_COMPLETE))
+#define AFTER_INIT (IN(MODE_EVENT) | IN(MODE_CONTINUOUS_TIME) | IN(MODE_STEP_COMPLETE) | IN(MODE_CLOCK_ACTIVATION))
 #define NOT_TERMINATED (ANY_MODE & ~IN(MODE_TERMINATED))
 #define ME_EVALUATION (IN(MODE_INITIALIZATION) | ME_MODES | IN(MODE_TERMINATED))
 
+static const char *kind_name(const Instance *inst) {
+    return inst->kind == KIND_CO_SIMULATION ? "Co-Simulation"
+         : inst->kind == KIND_SCHEDULED_EXECUTION ? "Scheduled Execution" : "Model Exchange";
+}
+
 static fmi3Status wrong_kind(Instance *inst, const char *fn) {
-    core_log(inst, CORE_ERROR, "%s: not available, the instance was created for %s", fn,
-             inst->kind == KIND_CO_SIMULATION ? "Co-Simulation" : "Model Exchange");
+    core_log(inst, CORE_ERROR, "%s: not available, the instance was created for %s", fn, kind_name(inst));
     return fmi3Error;
 }
 
@@ -105,7 +125,14 @@ static fmi3Instance instantiate(Fmi3Env *env, const char *function, fmi3String i
         return NULL;
     }
     Instance *inst = core_instantiate(name, kind, env, forward_log, loggingOn);
-    if (!inst) free(env);
+    if (!inst) {
+        free(env);
+        return NULL;
+    }
+    /* a sampled-data model is clocked; the importer computes its ticks but in
+     * Co-Simulation without Event Mode */
+    inst->clocked = NZ > 0;
+    inst->events = inst->clocked && (kind != KIND_CO_SIMULATION || env->event_mode_used);
     return inst;
 }
 
@@ -128,7 +155,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3InstanceEnvironment instanceEnvironment,
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate) {
-    (void)resourcePath; (void)visible; (void)earlyReturnAllowed; /* doStep never returns early */
+    (void)resourcePath; (void)visible;
     (void)requiredIntermediateVariables; (void)intermediateUpdate;
     Fmi3Env *env = new_env(instanceEnvironment, logMessage);
     if (!env) return NULL;
@@ -140,6 +167,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
         return NULL;
     }
     env->event_mode_used = eventModeUsed;
+    env->early_return_allowed = earlyReturnAllowed;
     return instantiate(env, "fmi3InstantiateCoSimulation", instanceName, instantiationToken,
                        KIND_CO_SIMULATION, loggingOn);
 }
@@ -150,13 +178,22 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
                                                fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
                                                fmi3LockPreemptionCallback lockPreemption,
                                                fmi3UnlockPreemptionCallback unlockPreemption) {
-    (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
+    (void)resourcePath; (void)visible;
+    /* one model partition, computed in the caller's thread: nothing to call back or lock */
     (void)clockUpdate; (void)lockPreemption; (void)unlockPreemption;
+#if NZ > 0
+    Fmi3Env *env = new_env(instanceEnvironment, logMessage);
+    if (!env) return NULL;
+    return instantiate(env, "fmi3InstantiateScheduledExecution", instanceName, instantiationToken,
+                       KIND_SCHEDULED_EXECUTION, loggingOn);
+#else
+    (void)instantiationToken; (void)loggingOn; (void)instanceName;
     if (logMessage)
         logMessage(instanceEnvironment, fmi3Error, "logStatusError",
-                   "fmi3InstantiateScheduledExecution: this FMU supports Model Exchange and Co-Simulation only");
-    (void)instanceName;
+                   "fmi3InstantiateScheduledExecution: this FMU has no clock (a continuous model): Model Exchange "
+                   "and Co-Simulation only");
     return NULL;
+#endif
 }
 
 void fmi3FreeInstance(fmi3Instance instance) {
@@ -185,6 +222,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
     if (!instance) return fmi3Error;
+    if (INST->kind == KIND_SCHEDULED_EXECUTION) return wrong_kind(INST, "fmi3EnterEventMode");
     int cs = INST->kind == KIND_CO_SIMULATION;
     CHECK("fmi3EnterEventMode", cs ? IN(MODE_STEP_COMPLETE) : IN(MODE_CONTINUOUS_TIME));
     if (cs && !ENV->event_mode_used) {
@@ -271,16 +309,75 @@ fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
     return no_such_variables(instance, "fmi3SetBinary", nValueReferences);
 }
 
+#if NZ > 0
+/* The clock functions take sample_clock only. */
+static fmi3Status only_the_clock(Instance *inst, const char *fn, const fmi3ValueReference vr[], size_t n) {
+    if (n > 0 && !vr) {
+        core_log(inst, CORE_ERROR, "%s: NULL value references", fn);
+        return fmi3Error;
+    }
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != VR_CLOCK) {
+            core_log(inst, CORE_ERROR, "%s: value reference %u is no clock (sample_clock is %u)", fn, vr[i],
+                     (unsigned)VR_CLOCK);
+            return fmi3Error;
+        }
+    }
+    return fmi3OK;
+}
+
+/* Event Mode of Model Exchange or of Co-Simulation with eventModeUsed: Scheduled
+ * Execution activates the clock with fmi3ActivateModelPartition, Co-Simulation
+ * without Event Mode computes the ticks inside doStep. */
+static fmi3Status check_event_mode_clock(Instance *inst, const char *fn) {
+    if (inst->kind == KIND_SCHEDULED_EXECUTION) {
+        core_log(inst, CORE_ERROR, "%s: not available in Scheduled Execution (fmi3ActivateModelPartition "
+                 "activates sample_clock)", fn);
+        return fmi3Error;
+    }
+    if (!inst->events) {
+        core_log(inst, CORE_ERROR, "%s: not available in Co-Simulation with eventModeUsed = false (doStep "
+                 "computes the ticks of sample_clock)", fn);
+        return fmi3Error;
+    }
+    return core_check_mode(inst, fn, IN(MODE_EVENT)) == CORE_OK ? fmi3OK : fmi3Error;
+}
+#endif
+
 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, fmi3Clock values[]) {
+#if NZ > 0
+    if (!instance) return fmi3Error;
+    if (check_event_mode_clock(INST, "fmi3GetClock") != fmi3OK) return fmi3Error;
+    if (only_the_clock(INST, "fmi3GetClock", valueReferences, nValueReferences) != fmi3OK) return fmi3Error;
+    for (size_t i = 0; i < nValueReferences; i++) values[i] = INST->s.clock_active ? fmi3ClockActive : fmi3ClockInactive;
+    return fmi3OK;
+#else
     (void)valueReferences; (void)values;
     return no_such_variables(instance, "fmi3GetClock", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, const fmi3Clock values[]) {
+#if NZ > 0
+    if (!instance) return fmi3Error;
+    if (check_event_mode_clock(INST, "fmi3SetClock") != fmi3OK) return fmi3Error;
+    if (only_the_clock(INST, "fmi3SetClock", valueReferences, nValueReferences) != fmi3OK) return fmi3Error;
+    for (size_t i = 0; i < nValueReferences; i++) {
+        if (values[i]) {
+            if (!INST->s.clock_active && core_activate_clock(INST, "fmi3SetClock") != CORE_OK) return fmi3Error;
+        } else if (INST->s.clock_active) {
+            core_log(INST, CORE_ERROR, "fmi3SetClock: sample_clock cannot be deactivated (canBeDeactivated = "
+                     "false); fmi3UpdateDiscreteStates computes its tick");
+            return fmi3Error;
+        }
+    }
+    return fmi3OK;
+#else
     (void)valueReferences; (void)values;
     return no_such_variables(instance, "fmi3SetClock", nValueReferences);
+#endif
 }
 
 /* ---- variable dependencies (the modelDescription's ModelStructure has them) -- */
@@ -407,56 +504,114 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
 
 /* ---- clocks: the model has none --------------------------------------------------- */
 
+#if NZ > 0
+#define CLOCK_ONLY(fn, vrs, n)                                                                 \
+    do {                                                                                        \
+        if (!instance) return fmi3Error;                                                        \
+        if (core_check_mode(INST, fn, ANY_MODE & ~IN(MODE_INSTANTIATED)) != CORE_OK) return fmi3Error; \
+        if (only_the_clock(INST, fn, vrs, n) != fmi3OK) return fmi3Error;                        \
+    } while (0)
+#endif
+
+/* The interval of sample_clock is its model's sample period parameter
+ * (intervalVariability = "fixed"): read after initialization begins, set only
+ * during it (setting it sets the parameter). Its shift is 0: tick 0 is the
+ * start time. No fractions (supportsFraction = false). */
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[]) {
+#if NZ > 0
+    CLOCK_ONLY("fmi3GetIntervalDecimal", valueReferences, nValueReferences);
+    for (size_t i = 0; i < nValueReferences; i++) {
+        intervals[i] = INST->s.v[VR_SAMPLE_PERIOD];
+        qualifiers[i] = fmi3IntervalChanged;
+    }
+    return fmi3OK;
+#else
     (void)valueReferences; (void)intervals; (void)qualifiers;
     return no_such_variables(instance, "fmi3GetIntervalDecimal", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[],
                                    fmi3IntervalQualifier qualifiers[]) {
     (void)valueReferences; (void)counters; (void)resolutions; (void)qualifiers;
+#if NZ > 0
+    return not_provided(instance, "fmi3GetIntervalFraction", "supportsFraction=false: fmi3GetIntervalDecimal");
+#else
     return no_such_variables(instance, "fmi3GetIntervalFraction", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, fmi3Float64 shifts[]) {
+#if NZ > 0
+    CLOCK_ONLY("fmi3GetShiftDecimal", valueReferences, nValueReferences);
+    for (size_t i = 0; i < nValueReferences; i++) shifts[i] = 0.0;
+    return fmi3OK;
+#else
     (void)valueReferences; (void)shifts;
     return no_such_variables(instance, "fmi3GetShiftDecimal", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[]) {
     (void)valueReferences; (void)counters; (void)resolutions;
+#if NZ > 0
+    return not_provided(instance, "fmi3GetShiftFraction", "supportsFraction=false: fmi3GetShiftDecimal");
+#else
     return no_such_variables(instance, "fmi3GetShiftFraction", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, const fmi3Float64 intervals[]) {
+#if NZ > 0
+    CLOCK_ONLY("fmi3SetIntervalDecimal", valueReferences, nValueReferences);
+    if (core_check_mode(INST, "fmi3SetIntervalDecimal", IN(MODE_INITIALIZATION)) != CORE_OK) return fmi3Error;
+    for (size_t i = 0; i < nValueReferences; i++) {
+        const unsigned period = VR_SAMPLE_PERIOD;
+        if (core_set_float64(INST, &period, 1, &intervals[i]) != CORE_OK) return fmi3Error;
+    }
+    return fmi3OK;
+#else
     (void)valueReferences; (void)intervals;
     return no_such_variables(instance, "fmi3SetIntervalDecimal", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, const fmi3UInt64 counters[],
                                    const fmi3UInt64 resolutions[]) {
     (void)valueReferences; (void)counters; (void)resolutions;
+#if NZ > 0
+    return not_provided(instance, "fmi3SetIntervalFraction", "supportsFraction=false: fmi3SetIntervalDecimal");
+#else
     return no_such_variables(instance, "fmi3SetIntervalFraction", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, const fmi3Float64 shifts[]) {
     (void)valueReferences; (void)shifts;
+#if NZ > 0
+    return not_provided(instance, "fmi3SetShiftDecimal", "sample_clock's shift is 0: it ticks at the start time");
+#else
     return no_such_variables(instance, "fmi3SetShiftDecimal", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, const fmi3UInt64 counters[],
                                 const fmi3UInt64 resolutions[]) {
     (void)valueReferences; (void)counters; (void)resolutions;
+#if NZ > 0
+    return not_provided(instance, "fmi3SetShiftFraction", "sample_clock's shift is 0: it ticks at the start time");
+#else
     return no_such_variables(instance, "fmi3SetShiftFraction", nValueReferences);
+#endif
 }
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
@@ -469,14 +624,37 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
                                     fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime) {
+    if (!instance) return fmi3Error;
+    if (INST->kind == KIND_SCHEDULED_EXECUTION) return wrong_kind(INST, "fmi3UpdateDiscreteStates");
     CHECK("fmi3UpdateDiscreteStates", IN(MODE_EVENT));
-    /* no discrete states, no time events: nothing ever changes at an event */
     if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
     if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = fmi3False;
+#if NZ > 0
+    /* the tick of an active clock is computed; the next tick is the next time event */
+    if (INST->s.clock_active && core_compute_tick(INST) != CORE_OK) return fmi3Error;
+    if (nextEventTimeDefined) *nextEventTimeDefined = fmi3True;
+    if (nextEventTime) *nextEventTime = core_next_tick(INST);
+#else
+    /* no discrete states, no time events: nothing ever changes at an event */
     if (nextEventTimeDefined) *nextEventTimeDefined = fmi3False;
     if (nextEventTime) *nextEventTime = 0.0;
+#endif
+    return fmi3OK;
+}
+
+/* Event Mode is left with no tick half done: an active clock's tick is computed first. */
+static fmi3Status leave_event_mode(Instance *inst, const char *fn) {
+#if NZ > 0
+    if (inst->s.clock_active) {
+        core_log(inst, CORE_ERROR, "%s refused: sample_clock is active and its tick not computed (call "
+                 "fmi3UpdateDiscreteStates first)", fn);
+        return fmi3Error;
+    }
+#else
+    (void)inst; (void)fn;
+#endif
     return fmi3OK;
 }
 
@@ -484,6 +662,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
 
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
     CHECK_KIND("fmi3EnterContinuousTimeMode", IN(MODE_EVENT), KIND_MODEL_EXCHANGE);
+    if (leave_event_mode(INST, "fmi3EnterContinuousTimeMode") != fmi3OK) return fmi3Error;
     INST->s.mode = MODE_CONTINUOUS_TIME;
     return fmi3OK;
 }
@@ -561,6 +740,7 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nConti
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
     CHECK_KIND("fmi3EnterStepMode", IN(MODE_EVENT), KIND_CO_SIMULATION);
+    if (leave_event_mode(INST, "fmi3EnterStepMode") != fmi3OK) return fmi3Error;
     INST->s.mode = MODE_STEP_COMPLETE;
     return fmi3OK;
 }
@@ -581,18 +761,38 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Float64 *lastSuccessfulTime) {
     (void)noSetFMUStatePriorToCurrentPoint;
     CHECK_KIND("fmi3DoStep", IN(MODE_STEP_COMPLETE), KIND_CO_SIMULATION);
+    int event_needed = 0, early = 0;
+#if NZ > 0
+    fmi3Status status = (fmi3Status)core_clocked_step(INST, currentCommunicationPoint, communicationStepSize,
+                                                      ENV->early_return_allowed, &event_needed, &early);
+#else
     fmi3Status status = (fmi3Status)core_do_step(INST, currentCommunicationPoint, communicationStepSize);
-    if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
+#endif
+    if (eventHandlingNeeded) *eventHandlingNeeded = event_needed ? fmi3True : fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
-    if (earlyReturn) *earlyReturn = fmi3False;
+    if (earlyReturn) *earlyReturn = early ? fmi3True : fmi3False;
     if (lastSuccessfulTime) *lastSuccessfulTime = INST->s.v[0]; /* the core's time: end of step, or start if refused */
     return status;
 }
 
-/* ---- Scheduled Execution: not supported ---------------------------------------------- */
+/* ---- Scheduled Execution: one model partition, sample_clock's ------------------------- */
 
 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
                                       fmi3Float64 activationTime) {
+#if NZ > 0
+    CHECK_KIND("fmi3ActivateModelPartition", IN(MODE_CLOCK_ACTIVATION), KIND_SCHEDULED_EXECUTION);
+    if (only_the_clock(INST, "fmi3ActivateModelPartition", &clockReference, 1) != fmi3OK) return fmi3Error;
+    const double tick = core_next_tick(INST);
+    if (!(fabs(activationTime - tick) <= 1e-9 * INST->s.v[VR_SAMPLE_PERIOD])) {
+        core_log(INST, CORE_ERROR, "fmi3ActivateModelPartition: sample_clock ticks at t = %.17g, not at t = %.17g",
+                 tick, activationTime);
+        return fmi3Error;
+    }
+    INST->s.v[0] = tick;  /* the tick's own time, from the tick counter */
+    if (core_activate_clock(INST, "fmi3ActivateModelPartition") != CORE_OK) return fmi3Error;
+    return (fmi3Status)core_compute_tick(INST);
+#else
     (void)clockReference; (void)activationTime;
-    return not_provided(instance, "fmi3ActivateModelPartition", "Scheduled Execution is not supported");
+    return not_provided(instance, "fmi3ActivateModelPartition", "a continuous model has no clock, no partition");
+#endif
 }

@@ -11,8 +11,9 @@
 #include "numpy_random.h"
 
 /* The first 8 bytes of every state: "FNNC" and the version of CoreState's
- * layout (2: with the model's token); a change of the layout changes it. */
-#define STATE_MAGIC ((uint64_t)0x464E4E43 << 32 | 2u)
+ * layout (2: with the model's token; 3: with the clock's tick counter); a
+ * change of the layout changes it. */
+#define STATE_MAGIC ((uint64_t)0x464E4E43 << 32 | 3u)
 /* The token field holds MODEL_GUID whole (C99: a negative array size stops the build). */
 typedef char guid_fits_the_state_header[sizeof MODEL_GUID <= STATE_TOKEN_SIZE ? 1 : -1];
 /* Room for the longest message, the failed-step report with every input and
@@ -23,7 +24,7 @@ typedef char guid_fits_the_state_header[sizeof MODEL_GUID <= STATE_TOKEN_SIZE ? 
 
 static const char *const MODE_NAMES[MODE_N] = {
     "Instantiated", "InitializationMode", "EventMode", "ContinuousTimeMode",
-    "StepComplete", "ConfigurationMode", "Terminated"};
+    "StepComplete", "ConfigurationMode", "Terminated", "ClockActivationMode"};
 
 void core_log(Instance *inst, CoreStatus status, const char *fmt, ...) {
     char message[MESSAGE_SIZE];
@@ -231,6 +232,9 @@ static CoreStatus check_values(Instance *inst, const char *context, const double
 CoreStatus core_enter_initialization(Instance *inst, double start_time) {
     if (check_value(inst, "start ", 0, start_time) != CORE_OK) return CORE_ERROR;  /* "start time = ..." */
     T_ = start_time;
+    inst->s.tick_base = start_time;
+    inst->s.tick_count = 0;
+    inst->s.clock_active = 0;
     inst->s.step_base_time = start_time;
     inst->s.step_size = 0.0;
     inst->s.step_count = 0;
@@ -251,7 +255,8 @@ CoreStatus core_exit_initialization(Instance *inst) {
     /* the initial state from the parameters, and what was set */
     if (check_values(inst, "initial value: ", inst->s.v) != CORE_OK) return CORE_ERROR;
     inst->s.held = 0;
-    inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE : MODE_EVENT;
+    inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE
+                 : inst->kind == KIND_SCHEDULED_EXECUTION ? MODE_CLOCK_ACTIVATION : MODE_EVENT;
     update_derived(inst);
     return CORE_OK;
 }
@@ -294,7 +299,13 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
     for (size_t i = 0; i < n; i++) inst->s.v[vr[i]] = value[i];
     if (n > 0) {
         inst->derived_valid = 0;
-        inst->s.held = 0;
+        /* a sample opens: the outputs follow the inputs until it is committed. A
+         * clocked model samples only at a tick: with the importer computing the
+         * ticks, when it activates the clock; else at a tick's time, as FMI 2.0. */
+#if NZ > 0
+        if (!inst->clocked || (!inst->events && core_tick_due(inst)))
+#endif
+            inst->s.held = 0;
     }
     return CORE_OK;
 }
@@ -367,6 +378,27 @@ static void report_non_finite_state(Instance *inst, size_t vr, double value, dou
 }
 
 #if NZ > 0
+/* Commit the pending sample: z <- f(z, u), outputs held at g(z, u), both at
+ * the inputs in effect; a non-finite z refuses it (t0, t1: the sample's span,
+ * for the report). */
+static CoreStatus commit_sample(Instance *inst, double t0, double t1) {
+    if (!inst->derived_valid || inst->s.held) update_pending(inst);  /* else g, f of this z and u are pending */
+    int bad = first_non_finite(inst->z_next, NZ);
+    if (bad >= 0) {
+        report_non_finite_state(inst, VR_Z + (size_t)bad, inst->z_next[bad], t0, t1);
+        inst->s.failed = 1;
+        return CORE_ERROR;
+    }
+    memcpy(Z_, inst->z_next, NZ * sizeof(double));
+    memcpy(Y_, inst->y_next, NY * sizeof(double));
+#if NRS > 0
+    for (size_t i = 0; i < NRS; i++) inst->s.r_step[i] = np_random(&inst->s.rng);  /* the next step's */
+#endif
+    inst->s.held = 1;
+    inst->derived_valid = 1;
+    return CORE_OK;
+}
+
 /* One sample of a sampled-data model: z <- f(z, u), outputs held at g(z, u),
  * both at the inputs in effect. Its laws do not depend on time, so a step
  * from another time than the FMU's (after restoring a state saved in another
@@ -384,21 +416,117 @@ static CoreStatus sampled_step(Instance *inst, double current_time, double step_
     }
     if (fabs(current_time - T_) > 1e-9 * fmax(1.0, fabs(T_)))
         core_log(inst, CORE_OK, "doStep at t = %.17g: clock re-based from t = %.17g", current_time, T_);
-    if (!inst->derived_valid || inst->s.held) update_pending(inst);  /* else g, f of this z and u are pending */
-    int bad = first_non_finite(inst->z_next, NZ);
-    if (bad >= 0) {
-        report_non_finite_state(inst, VR_Z + (size_t)bad, inst->z_next[bad], current_time, current_time + step_size);
-        inst->s.failed = 1;
+    if (commit_sample(inst, current_time, current_time + step_size) != CORE_OK) return CORE_ERROR;
+    end_step(inst, count_step(inst, current_time, step_size));
+    return CORE_OK;
+}
+
+/* ---- clocked sampled-data models (FMI 3.0) ------------------------------------ */
+
+/* Times within this of a tick are the tick (a master's t0 + n h against the
+ * FMU's tick_base + k period). */
+static double tick_tolerance(const Instance *inst) { return 1e-9 * inst->s.v[VR_SAMPLE_PERIOD]; }
+
+double core_next_tick(const Instance *inst) {
+    return inst->s.tick_base + (double)inst->s.tick_count * inst->s.v[VR_SAMPLE_PERIOD];
+}
+
+int core_tick_due(const Instance *inst) { return fabs(T_ - core_next_tick(inst)) <= tick_tolerance(inst); }
+
+CoreStatus core_activate_clock(Instance *inst, const char *function) {
+    char now[NUMBER_SIZE], tick[NUMBER_SIZE];
+    if (!core_tick_due(inst)) {
+        core_log(inst, CORE_ERROR, "%s: sample_clock ticks at t = %s, not at t = %s", function,
+                 exact(tick, core_next_tick(inst)), exact(now, T_));
         return CORE_ERROR;
     }
-    memcpy(Z_, inst->z_next, NZ * sizeof(double));
-    memcpy(Y_, inst->y_next, NY * sizeof(double));
-#if NRS > 0
-    for (size_t i = 0; i < NRS; i++) inst->s.r_step[i] = np_random(&inst->s.rng);  /* the next step's */
-#endif
-    inst->s.held = 1;
-    inst->derived_valid = 1;
+    T_ = core_next_tick(inst);  /* the tick's own time, from the tick counter */
+    inst->s.clock_active = 1;
+    inst->s.held = 0;           /* the outputs follow the inputs until the tick is computed */
+    inst->derived_valid = 0;
+    return CORE_OK;
+}
+
+CoreStatus core_compute_tick(Instance *inst) {
+    const double period = inst->s.v[VR_SAMPLE_PERIOD];
+    if (inst->s.failed) {
+        core_log(inst, CORE_ERROR, "tick refused: an earlier tick failed; reset or restore a saved state");
+        return CORE_ERROR;
+    }
+    if (commit_sample(inst, T_, T_ + period) != CORE_OK) return CORE_ERROR;
+    inst->s.tick_count++;
+    inst->s.clock_active = 0;
+    return CORE_OK;
+}
+
+CoreStatus core_clocked_step(Instance *inst, double current_time, double step_size, int early_return_allowed,
+                             int *event_needed, int *early_return) {
+    const double tol = tick_tolerance(inst);
+    char a[NUMBER_SIZE], b[NUMBER_SIZE], c[NUMBER_SIZE];
+    *event_needed = 0;
+    *early_return = 0;
+    if (inst->s.failed) {
+        core_log(inst, CORE_ERROR, "fmi3DoStep refused: an earlier tick failed; reset or restore a saved state");
+        return CORE_ERROR;
+    }
+    if (!(step_size > 0) || !isfinite(step_size) || !isfinite(current_time)) {
+        core_log(inst, CORE_ERROR, "fmi3DoStep from t = %g by %g refused: the step must be positive and finite",
+                 current_time, step_size);
+        return CORE_ERROR;
+    }
+    if (fabs(current_time - T_) > 1e-9 * fmax(1.0, fabs(T_))) {
+        /* a state saved in another run: its laws do not depend on time, so the clock re-bases */
+        core_log(inst, CORE_OK, "fmi3DoStep at t = %.17g: clock re-based from t = %.17g", current_time, T_);
+        T_ = current_time;
+        inst->s.tick_base = current_time;
+        inst->s.tick_count = 0;
+    }
+    const double end = current_time + step_size;
+    if (inst->events) {
+        /* the importer computes the ticks in Event Mode; the FMU stops at them */
+        if (core_tick_due(inst)) {
+            core_log(inst, CORE_ERROR, "fmi3DoStep at t = %s refused: sample_clock ticks there and the tick was not "
+                     "computed (fmi3SetClock, then fmi3UpdateDiscreteStates in Event Mode)", exact(a, T_));
+            return CORE_ERROR;
+        }
+        const double tick = core_next_tick(inst);
+        if (end > tick + tol) {
+            if (!early_return_allowed) {
+                core_log(inst, CORE_ERROR, "fmi3DoStep from t = %s to %s refused: it passes the tick of sample_clock "
+                         "at t = %s; end the step there, or instantiate with earlyReturnAllowed",
+                         exact(a, current_time), exact(b, end), exact(c, tick));
+                return CORE_ERROR;
+            }
+            T_ = tick;  /* returns early at the tick */
+            inst->s.step_base_time = tick;
+            inst->s.step_size = 0.0;
+            inst->s.step_count = 0;
+            *early_return = 1;
+            *event_needed = 1;
+            return CORE_OK;
+        }
+        end_step(inst, count_step(inst, current_time, step_size));
+        if (core_tick_due(inst)) {
+            T_ = tick;
+            *event_needed = 1;
+        }
+        return CORE_OK;
+    }
+    /* eventModeUsed = false: every tick in [current_time, end) computed inside, from the inputs set */
+    while (core_next_tick(inst) < end - tol) {
+        T_ = core_next_tick(inst);
+        if (T_ < current_time - tol) {  /* cannot happen: every step computes the ticks it covers */
+            core_log(inst, CORE_ERROR, "fmi3DoStep at t = %s: the tick at t = %s was skipped", exact(a, current_time),
+                     exact(b, T_));
+            return CORE_ERROR;
+        }
+        if (core_compute_tick(inst) != CORE_OK) {
+            T_ = current_time;
+            return CORE_ERROR;
+        }
+    }
     end_step(inst, count_step(inst, current_time, step_size));
+    if (core_tick_due(inst)) T_ = core_next_tick(inst);
     return CORE_OK;
 }
 #endif
@@ -458,6 +586,18 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
 
 CoreStatus core_set_time(Instance *inst, double time) {
     if (check_value(inst, "", 0, time) != CORE_OK) return CORE_ERROR;
+#if NZ > 0
+    if (inst->clocked) {  /* time events: the importer stops at each tick (nextEventTime) */
+        char t[NUMBER_SIZE], tick[NUMBER_SIZE];
+        const double next = core_next_tick(inst);
+        if (time > next + tick_tolerance(inst) || (core_tick_due(inst) && time > T_ + tick_tolerance(inst))) {
+            core_log(inst, CORE_ERROR, "set time t = %s refused: it passes the tick of sample_clock at t = %s, "
+                     "which was not computed (stop at nextEventTime)", exact(t, time), exact(tick, next));
+            return CORE_ERROR;
+        }
+        if (fabs(time - next) <= tick_tolerance(inst)) time = next;
+    }
+#endif
     T_ = time;
     inst->derived_valid = 0;
     return CORE_OK;

@@ -15,7 +15,9 @@
  * numpy's default_rng(seed) (numpy_random.c). Its outputs have direct
  * feedthrough and are sample-and-hold: after setting inputs, a get returns
  * y = g(z, u); doStep then makes z its next value and holds that y until the
- * inputs are set again.
+ * inputs are set again. In FMI 3.0 such a model is clocked (VR_CLOCK below):
+ * the same update runs once per tick of its clock instead of once per
+ * communication step (core_clocked_step, core_compute_tick).
  *
  * A stochastic sampled-data model (NRS > 0) has model_dstep(t, u, p, z, rs)
  * with NRS fresh uniform numbers rs per communication step, drawn from the
@@ -45,13 +47,23 @@ typedef enum {
     MODE_STEP_COMPLETE,      /* Co-Simulation */
     MODE_CONFIGURATION,      /* FMI 3.0 configuration modes */
     MODE_TERMINATED,
+    MODE_CLOCK_ACTIVATION,   /* Scheduled Execution */
     MODE_N
 } CoreMode;
 
 #define IN(m) (1u << (m))
 #define ANY_MODE ((1u << MODE_N) - 1u)
 
-typedef enum { KIND_MODEL_EXCHANGE, KIND_CO_SIMULATION } CoreKind;
+typedef enum { KIND_MODEL_EXCHANGE, KIND_CO_SIMULATION, KIND_SCHEDULED_EXECUTION } CoreKind;
+
+/* A clocked sampled-data model (FMI 3.0, docs/fmi-export.md "Clocks"): one
+ * periodic input clock, sample_clock, its value reference the one after the
+ * Float64 variables. Tick k is at tick_base + k * period (the start time and
+ * the sample period parameter); at a tick the outputs and discrete states are
+ * computed once, from the inputs in effect, exactly as one FMI 2.0 step. */
+#if NZ > 0
+#define VR_CLOCK N_VARIABLES
+#endif
 
 /* Logger adapter: each FMI layer forwards to its own callback type. */
 typedef void (*CoreLogger)(void *environment, const char *instance_name,
@@ -87,10 +99,12 @@ typedef struct {
     int32_t mode;
     int32_t failed;          /* a step produced a non-finite state */
     int32_t held;            /* sampled-data: outputs held from the last doStep */
-    int32_t reserved;
+    int32_t clock_active;    /* clocked: the importer activated the clock, the tick is not yet computed */
     double step_base_time;   /* where the counted steps began */
     double step_size;        /* their size (0: none counted yet) */
     uint64_t step_count;     /* how many were made */
+    double tick_base;        /* clocked: the time of tick 0 (the start time) */
+    uint64_t tick_count;     /* the ticks computed: the next is at tick_base + tick_count * period */
 #if NRS > 0
     NpPcg64 rng;             /* stochastic sampled-data: the stream after the draws so far */
     double r_step[NRS];      /* the uniform numbers of the step to come (its sample's rs) */
@@ -106,6 +120,8 @@ typedef struct {
     CoreLogger logger;
     int logging_on;
     int derived_valid;       /* der(x) and y are up to date */
+    int clocked;             /* FMI 3.0 sampled-data: ticks of sample_clock, not communication steps */
+    int events;              /* clocked, and the importer computes the ticks (Event Mode or Scheduled Execution) */
     const double *arg[MODEL_SZ_ARG];
     double *res[MODEL_SZ_RES];
     long long iw[MODEL_SZ_IW + 1];
@@ -133,6 +149,19 @@ CoreStatus core_get_float64(Instance *inst, const unsigned vr[], size_t n, doubl
 CoreStatus core_do_step(Instance *inst, double current_time, double step_size);
 
 CoreStatus core_set_time(Instance *inst, double time);
+
+#if NZ > 0
+/* Clocked sampled-data models (FMI 3.0). */
+double core_next_tick(const Instance *inst);
+int core_tick_due(const Instance *inst);  /* the FMU's time is the next tick's */
+/* Activate the clock at a tick (the outputs then follow the inputs set). */
+CoreStatus core_activate_clock(Instance *inst, const char *function);
+/* Compute the tick whose clock is active: z and the held outputs take their next values. */
+CoreStatus core_compute_tick(Instance *inst);
+/* doStep of a clocked model: ticks computed inside (events == 0) or stop at the next tick. */
+CoreStatus core_clocked_step(Instance *inst, double current_time, double step_size, int early_return_allowed,
+                             int *event_needed, int *early_return);
+#endif
 CoreStatus core_set_states(Instance *inst, const double x[], size_t nx);
 CoreStatus core_get_states(Instance *inst, double x[], size_t nx);
 CoreStatus core_get_derivatives(Instance *inst, double dx[], size_t nx);
