@@ -42,10 +42,17 @@ def files_under(folder: Path) -> set[Path]:
 
 @pytest.fixture
 def sandbox(tmp_path, monkeypatch):
-    """A working folder of its own: whatever a command writes without --out lands here."""
+    """A working folder of its own: whatever a command writes without --out lands here; and a
+    temporary directory of its own, so that counting what a command leaves there sees no other
+    process's folders (tests and tools running beside this one)."""
+    import tempfile
+
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)
+    private = tmp_path / "tmp"
+    private.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(private))
     return work
 
 
