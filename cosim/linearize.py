@@ -44,7 +44,7 @@ from fmpy.fmi1 import FMICallException
 from .errors import FmuCallError
 from .fmu_component import FmuComponent
 
-__all__ = ["Linearization", "LinearizationError", "linearize_fmu", "METHODS"]
+__all__ = ["Linearization", "LinearizationError", "linearize_fmu", "save_linearization", "METHODS"]
 
 METHODS = ("auto", "derivatives", "differences")
 _REL_STEP = np.finfo(float).eps ** (1.0 / 3.0)  # central differences: truncation h^2 vs round-off eps / h
@@ -100,6 +100,17 @@ def _check_values(what: str, values: Mapping[str, float], variables: Mapping, al
             raise LinearizationError(f"{what} {name!r}: it is a {var.causality}, not a {' or '.join(allowed)}")
         if not np.isfinite(float(value)):
             raise LinearizationError(f"{what} {name} = {value!r}: not a finite number")
+
+
+def _check_states(start: Mapping[str, float], variables: Mapping, states: Sequence[str], kind: str) -> None:
+    for name, value in start.items():
+        if name not in variables:
+            raise LinearizationError(f"start value {name!r}: the FMU has no such variable")
+        if name not in states:
+            raise LinearizationError(f"start value {name!r}: not a {kind} state of the FMU "
+                                     f"(its {kind} states: {', '.join(states) or 'none'})")
+        if not np.isfinite(float(value)):
+            raise LinearizationError(f"start value {name} = {value!r}: not a finite number")
 
 
 def _scale(var, value: float) -> float:
@@ -211,12 +222,7 @@ def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> 
     use_dd = provides and method != "differences"
     states = [d.variable.derivative for d in md.derivatives]
     state_names = [s.name for s in states]
-    _check_values("start value", start, {n: variables[n] for n in state_names} | {
-        n: v for n, v in variables.items() if n not in state_names}, ("local", "output"))
-    unknown = [n for n in start if n not in state_names]
-    if unknown:
-        raise LinearizationError(f"start value {unknown[0]!r}: not a continuous state of the FMU "
-                                 f"(its states: {', '.join(state_names)})")
+    _check_states(start, variables, state_names, "continuous")
     in_names = [v.name for v in md.modelVariables if v.causality == "input" and v.type in ("Real", "Float64")]
     out_names = [v.name for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")]
     vr = {n: v.valueReference for n, v in variables.items()}
@@ -331,11 +337,7 @@ def _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state
                                      "sample period (a black-box Co-Simulation FMU, and no Model Exchange)")
         z_names = [v.name for v in md.modelVariables if v.causality == "local" and v.variability == "discrete"
                    and v.type in ("Real", "Float64")]
-        unknown = [n for n in start if n not in z_names]
-        if unknown:
-            raise LinearizationError(f"start value {unknown[0]!r}: not a discrete state of the FMU "
-                                     f"(its discrete states: {', '.join(z_names) or 'none'})")
-        _check_values("start value", start, variables, ("local",))
+        _check_states(start, variables, z_names, "discrete")
         in_names = [v.name for v in md.modelVariables if v.causality == "input" and v.type in ("Real", "Float64")]
         out_names = [v.name for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")]
         try:
@@ -390,3 +392,60 @@ def _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state
     system = _system(A, B, C, D, z_names, in_names, out_names, dt=period)
     return Linearization(system, "central differences", error, _units(z_names + in_names + out_names, variables),
                          point)
+
+
+# ---- files ---------------------------------------------------------------------------------------
+
+def save_linearization(lin: Linearization, out_dir: str | Path, bode: Sequence[tuple[str, str]] = (),
+                       stem: str = "linearization") -> list[Path]:
+    """Write ``lin`` into ``out_dir``: ``<stem>.npz`` (A, B, C, D, dt and the
+    names), ``<stem>.json`` (the same, readable, with units, method, error
+    estimate, operating point and poles) and one Bode plot
+    ``<stem>_bode_<input>_<output>.png`` per ``(input, output)`` pair of
+    ``bode``. Returns the paths written. Unknown names in ``bode`` are a
+    :class:`LinearizationError` raised before anything is written."""
+    import json
+
+    sys_ = lin.system
+    states, ins, outs = list(sys_.state_labels), list(sys_.input_labels), list(sys_.output_labels)
+    for i, o in bode:
+        if i not in ins:
+            raise LinearizationError(f"bode pair {i}:{o}: {i!r} is not an input of the system "
+                                     f"(inputs: {', '.join(ins) or 'none'})")
+        if o not in outs:
+            raise LinearizationError(f"bode pair {i}:{o}: {o!r} is not an output of the system "
+                                     f"(outputs: {', '.join(outs) or 'none'})")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    dt = float(sys_.dt) if sys_.dt else 0.0
+    poles = np.linalg.eigvals(lin.A) if states else np.zeros(0, dtype=complex)
+    written = [out_dir / f"{stem}.npz", out_dir / f"{stem}.json"]
+    np.savez(written[0], A=lin.A, B=lin.B, C=lin.C, D=lin.D, dt=dt, states=np.array(states, dtype=str),
+             inputs=np.array(ins, dtype=str), outputs=np.array(outs, dtype=str))
+    document = {
+        "time": "discrete" if dt else "continuous", "dt": dt, "method": lin.method,
+        "error_estimate": lin.error_estimate,
+        "states": [{"name": n, "unit": lin.units.get(n, "")} for n in states],
+        "inputs": [{"name": n, "unit": lin.units.get(n, "")} for n in ins],
+        "outputs": [{"name": n, "unit": lin.units.get(n, "")} for n in outs],
+        "operating_point": {k: float(v) for k, v in lin.operating_point.items()},
+        "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist(),
+        "poles": [{"re": float(p.real), "im": float(p.imag)} for p in poles],
+        "stable": bool(np.all(np.abs(poles) < 1.0) if dt else np.all(poles.real < 0.0)),
+    }
+    written[1].write_text(json.dumps(document, indent=1) + "\n")
+    if bode:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        for i, o in bode:
+            siso = sys_[outs.index(o), ins.index(i)]
+            plt.figure(figsize=(7, 6))
+            control.bode_plot(siso, dB=True, title=f"{i} -> {o} ({lin.units.get(i, '')} -> {lin.units.get(o, '')})")
+            path = out_dir / f"{stem}_bode_{i}_{o}.png".replace("(", "_").replace(")", "_")
+            plt.savefig(path, dpi=90)
+            plt.close("all")
+            written.append(path)
+    return written
