@@ -231,18 +231,23 @@ def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> 
 
     unzip = extract(str(path))
     common = dict(guid=md.guid, unzipDirectory=unzip, modelIdentifier=me.modelIdentifier, instanceName="linearize")
+    fmu = None
     try:
-        if version == 2:
-            from fmpy.fmi2 import FMU2Model
-            fmu = FMU2Model(**common)
-            fmu.instantiate()
-            fmu.setupExperiment(startTime=t)
-            set_real, get_real = fmu.setReal, fmu.getReal
-        else:
-            from fmpy.fmi3 import FMU3Model
-            fmu = FMU3Model(**common)
-            fmu.instantiate()
-            set_real, get_real = fmu.setFloat64, fmu.getFloat64
+        try:
+            if version == 2:
+                from fmpy.fmi2 import FMU2Model
+                fmu = FMU2Model(**common)
+                fmu.instantiate()
+                fmu.setupExperiment(startTime=t)
+                set_real, get_real = fmu.setReal, fmu.getReal
+            else:
+                from fmpy.fmi3 import FMU3Model
+                fmu = FMU3Model(**common)
+                fmu.instantiate()
+                set_real, get_real = fmu.setFloat64, fmu.getFloat64
+        except Exception as exc:  # fmpy raises plain Exceptions: no binary, a refused instantiation
+            fmu = None
+            raise LinearizationError(f"{path.name}: cannot instantiate it for Model Exchange ({exc})") from None
         try:
             for name, value in parameters.items():
                 set_real([vr[name]], [float(value)])
@@ -253,10 +258,7 @@ def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> 
             if inputs:
                 set_real([vr[n] for n in inputs], [float(v) for v in inputs.values()])
             fmu.exitInitializationMode()
-            if version == 2:
-                fmu.enterContinuousTimeMode()
-            else:
-                fmu.enterContinuousTimeMode()
+            fmu.enterContinuousTimeMode()
         except FMICallException as exc:
             raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
         x = np.zeros(nx)
@@ -279,10 +281,7 @@ def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> 
         if use_dd:
             unknowns = der_vrs + [vr[n] for n in out_names]
             knowns = [s.valueReference for s in states] + [vr[n] for n in in_names]
-            if version == 2:
-                cols = [fmu.getDirectionalDerivative(unknowns, [k], [1.0]) for k in knowns]
-            else:
-                cols = [fmu.getDirectionalDerivative(unknowns, [k], [1.0]) for k in knowns]
+            cols = [fmu.getDirectionalDerivative(unknowns, [k], [1.0]) for k in knowns]
             J = np.array(cols, dtype=float).reshape(len(knowns), len(unknowns)).T
             error, how = 0.0, "directional derivatives"
         else:
@@ -305,14 +304,12 @@ def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> 
     except FMICallException as exc:
         raise LinearizationError(f"{path.name}: an FMU call failed while linearizing ({exc})") from None
     finally:
-        try:
-            fmu.terminate()
-        except Exception:
-            pass
-        try:
-            fmu.freeInstance()
-        except Exception:
-            pass
+        if fmu is not None:
+            for release in (fmu.terminate, fmu.freeInstance):
+                try:
+                    release()
+                except Exception:  # an instance that failed to instantiate has nothing to release
+                    pass
         shutil.rmtree(unzip, ignore_errors=True)
     A, B = J[:nx, :nx], J[:nx, nx:]
     C, D = J[nx:, :nx], J[nx:, nx:]
