@@ -185,7 +185,7 @@ def linearize_fmu(path: str | Path, *, start: Mapping[str, float] | None = None,
 
 
 def _units(names, variables) -> dict[str, str]:
-    return {n: (variables[n].unit or "") if variables[n].unit is not None else "" for n in names}
+    return {n: variables[n].unit or "" for n in names}
 
 
 def _system(A, B, C, D, states, ins, outs, dt=0) -> control.StateSpace:
