@@ -12,6 +12,8 @@ Subcommands::
     fnn-cosim scenarios
     fnn-cosim schema scenario|study [--out FILE]
     fnn-cosim build-fmu [--out DIR]
+    fnn-cosim linearize FMU|MODEL [--fmi 2|3] [--parameter N=V ...] [--input N=V ...] [--start N=V ...]
+                 [--method auto|derivatives|differences] [--interface auto|me|cs] [--bode IN:OUT ...] [--out DIR]
     fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim]
 
 SCENARIO is a TOML file or the name of a shipped scenario (``circles``, ``circles_sensors``,
@@ -309,6 +311,73 @@ def _cmd_build_fmu(args) -> int:
     return 0
 
 
+# ---- linearize -------------------------------------------------------------------------
+
+def _named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
+    """``NAME=VALUE`` pairs of ``option``, every value a finite number (one line otherwise)."""
+    import math
+
+    from cosim.errors import ScenarioError
+
+    out = {}
+    for pair in pairs:
+        name, eq, text = pair.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not eq or not name.strip() or not math.isfinite(value):
+            raise ScenarioError(f"{option} {pair!r}: expected NAME=VALUE with a finite number, e.g. {option} m=1.2")
+        out[name.strip()] = value
+    return out
+
+
+def _cmd_linearize(args) -> int:
+    """Linearize an FMU file or a registered model (built as FMI ``--fmi``) at
+    the operating point given; write the system, its poles and Bode plots."""
+    from cosim import registry
+    from cosim.errors import ScenarioError
+    from cosim.linearize import LinearizationError, linearize_fmu, save_linearization
+
+    models = registry.fmu_models()
+    if Path(args.fmu).exists():
+        path = Path(args.fmu)
+    elif args.fmu in models:
+        path = models[args.fmu].build(args.fmi)
+    else:
+        raise ScenarioError(f"linearize {args.fmu!r}: no such FMU file, and no model of that name "
+                            f"(models: {', '.join(models)})")
+    pairs = []
+    for pair in args.bode:
+        i, colon, o = pair.partition(":")
+        if not colon or not i or not o:
+            raise ScenarioError(f"--bode {pair!r}: expected INPUT:OUTPUT, e.g. --bode Omega_1:z")
+        pairs.append((i, o))
+    out = _out_folder(args.out, DEFAULT_OUT / "linearize")
+    try:
+        lin = linearize_fmu(path, start=_named_values(args.start, "--start"),
+                            inputs=_named_values(args.input, "--input"),
+                            parameters=_named_values(args.parameter, "--parameter"), method=args.method,
+                            interface=args.interface)
+        written = save_linearization(lin, out, pairs, stem=path.stem)
+    except LinearizationError as exc:
+        raise ScenarioError(str(exc)) from None
+    system = lin.system
+    kind = f"discrete, dt = {system.dt:g} s" if system.dt else "continuous"
+    print(f"{path.name}: {system.nstates} states, {system.ninputs} inputs, {system.noutputs} outputs ({kind}); "
+          f"{lin.method}, error estimate {lin.error_estimate:.3g}")
+    import numpy as np
+
+    poles = np.linalg.eigvals(lin.A) if system.nstates else np.zeros(0)
+    if system.nstates:
+        measure = ("spectral radius", float(np.max(np.abs(poles)))) if system.dt else \
+            ("largest real part", float(np.max(poles.real)))
+        print(f"poles: {measure[0]} {measure[1]:.6g}")
+    for f in written:
+        print(f)
+    return 0
+
+
 # ---- entry point ------------------------------------------------------------------------
 
 def _names(text: str, known: Sequence[str], kind: str, extra: str = "") -> list[str]:
@@ -465,6 +534,20 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("build-fmu", help="build every model as FMI 2.0 (and 3.0) FMUs")
     b.add_argument("--out", default="build/fmus", help="output directory (default build/fmus)")
     b.set_defaults(func=_cmd_build_fmu)
+
+    lz = sub.add_parser("linearize", help="linearize an FMU (Model Exchange, or a sampled-data Co-Simulation "
+                        "FMU's step): system (.npz, .json), poles, Bode plots")
+    lz.add_argument("fmu", help="an FMU file, or the name of a model fnn-cosim builds (e.g. Quadrotor, ControllerPDLM)")
+    lz.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
+    lz.add_argument("--parameter", action="append", default=[], metavar="NAME=VALUE", help="a parameter (repeatable)")
+    lz.add_argument("--input", action="append", default=[], metavar="NAME=VALUE", help="an input (repeatable)")
+    lz.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
+                    help="a continuous (ME) or discrete (CS) state (repeatable)")
+    lz.add_argument("--method", choices=("auto", "derivatives", "differences"), default="auto")
+    lz.add_argument("--interface", choices=("auto", "me", "cs"), default="auto")
+    lz.add_argument("--bode", action="append", default=[], metavar="INPUT:OUTPUT", help="a Bode plot (repeatable)")
+    lz.add_argument("--out", default=None, help="output directory (default results/linearize)")
+    lz.set_defaults(func=_cmd_linearize)
 
     # the subcommand's own module: argparse only; python-control loads when it runs
     from .stability.cli import add_parser as add_stability_parser

@@ -28,6 +28,7 @@ _EXPORTS = {
                  "critical_gain_factor", "gain_sweep", "loop_margins", "ramp_error", "feedforward_comparison"),
     "linearize": ("linearize_controller", "linearize_controller_step", "linearize_plant", "linearize_plant_fmu",
                   "linearize_position_controller", "linearize_velocity_controller", "linearize_feedforward"),
+    "fmu_loop": ("FmuLoop", "fmu_closed_loop", "inert_states"),
     "loops": ("LoopModel",),
     "operating_points": ("OperatingPoint", "default_operating_points", "forward_flight", "hover", "operating_point",
                          "trim_closed_loop", "trim_plant"),

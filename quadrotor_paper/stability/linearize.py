@@ -2,10 +2,10 @@
 the one source of truth.
 
 * Plant: ``QUADROTOR.functions["jac"]`` (CasADi AD of the equations the FMU
-  is generated from), rows der(x), columns [x, u] -- or, for any FMI 2.0
-  FMU with directional derivatives, ``fmi2GetDirectionalDerivative`` in
-  Model Exchange (:func:`linearize_plant_fmu`). A test checks that the two
-  agree.
+  is generated from), rows der(x), columns [x, u] -- or, from the plant
+  FMU (FMI 2.0 or 3.0), the engine's linearizer
+  :func:`cosim.linearize.linearize_fmu` in Model Exchange
+  (:func:`linearize_plant_fmu`). A test checks that the two agree.
 
   .. math:: \\delta\\dot x = A\\,\\delta x + B_\\Omega\\,\\delta\\Omega + B_w\\,\\delta w
 
@@ -28,8 +28,6 @@ composition.
 """
 from __future__ import annotations
 
-import shutil
-from ctypes import POINTER, c_double
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -99,46 +97,21 @@ def linearize_plant(op: OperatingPoint) -> PlantLinearization:
 
 
 def linearize_plant_fmu(fmu_path: str | Path, op: OperatingPoint) -> PlantLinearization:
-    """A and B of an FMI 2.0 FMU at ``op`` from its directional derivatives.
+    """A and B of the plant FMU (FMI 2.0 or 3.0) at ``op`` by the engine's
+    linearizer, :func:`cosim.linearize.linearize_fmu`, in Model Exchange
+    (directional derivatives where the FMU provides them): states ``op.x``
+    and ``op.omega``, inputs ``op.plant_u``, parameters
+    ``op.plant_parameters``; rows and columns picked by the quadrotor's names."""
+    from cosim.linearize import linearize_fmu
 
-    The FMU is instantiated for Model Exchange, initialized with
-    ``op.plant_parameters``, put in continuous-time mode at state ``op.x`` and
-    inputs ``op.plant_u``; column j of [A B] is
-    ``fmi2GetDirectionalDerivative(der(x), [known_j], [1])``. The FMU must
-    provide directional derivatives and have the quadrotor's variable names.
-    """
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Model
-
-    md = read_model_description(str(fmu_path))
-    if md.modelExchange is None or not md.modelExchange.providesDirectionalDerivative:
-        raise ValueError(f"{fmu_path}: no Model Exchange interface with directional derivatives")
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    unzip_dir = extract(str(fmu_path))
-    fmu = FMU2Model(guid=md.guid, unzipDirectory=unzip_dir, modelIdentifier=md.modelExchange.modelIdentifier,
-                    instanceName="linearize")
-    try:
-        fmu.instantiate()
-        fmu.setupExperiment(startTime=0.0)
-        if op.plant_parameters:
-            fmu.setReal([vr[k] for k in op.plant_parameters], [float(v) for v in op.plant_parameters.values()])
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        fmu.enterContinuousTimeMode()
-        x = np.ascontiguousarray(np.concatenate([op.x, op.omega]), dtype=float)
-        fmu.setContinuousStates(x.ctypes.data_as(POINTER(c_double)), len(x))
-        fmu.setReal([vr[n] for n in INPUT_NAMES], [float(v) for v in op.plant_u])
-        unknowns = [vr[f"der({n})"] for n in STATE_NAMES]
-        knowns = list(STATE_NAMES) + list(INPUT_NAMES)
-        columns = [fmu.getDirectionalDerivative(unknowns, [vr[k]], [1.0]) for k in knowns]
-        J = np.array(columns, dtype=float).T
-    finally:
-        try:
-            fmu.terminate()
-        finally:
-            fmu.freeInstance()
-            shutil.rmtree(unzip_dir, ignore_errors=True)
-    return PlantLinearization(A=J[:, :_N_X], B=J[:, _N_X:])
+    start = dict(zip((v.name for v in QUADROTOR.states), np.concatenate([op.x, op.omega])))
+    lin = linearize_fmu(fmu_path, start=start, inputs=dict(zip(INPUT_NAMES, op.plant_u)),
+                        parameters=dict(op.plant_parameters or {}), interface="me")
+    states, inputs = list(lin.system.state_labels), list(lin.system.input_labels)
+    rows = [states.index(n) for n in STATE_NAMES]
+    A = lin.A[np.ix_(rows, rows)]
+    B = lin.B[np.ix_(rows, [inputs.index(n) for n in INPUT_NAMES])]
+    return PlantLinearization(A=A, B=B)
 
 
 def _jacobian(f: ca.Function, output: str, inputs: list[str], values: dict) -> list[np.ndarray]:

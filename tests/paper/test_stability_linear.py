@@ -11,12 +11,14 @@ import control as ct
 import numpy as np
 import pytest
 
+from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
 from fnn_controller import GeometricParams, PositionParams
 from quadrotor_paper.stability import (LoopModel, critical_gain_factor, forward_flight, gain_sweep, hover, linearize_controller,
                              linearize_controller_step, linearize_plant, linearize_plant_fmu, loop_margins,
                              ramp_error, trim_plant)
 from quadrotor_paper.stability.analysis import affine_closed_loop, analyze, closed_loop_poles
+from quadrotor_paper.stability.linearize import INPUT_NAMES
 from quadrotor_paper.stability.operating_points import STATE_NAMES
 
 H = 0.01
@@ -100,12 +102,35 @@ def test_hover_linearization_is_the_known_double_integrator_chain(ops):
     np.testing.assert_allclose(B, expected_B, rtol=1e-9, atol=1e-6)
 
 
-def test_fmu_directional_derivatives_agree_with_the_casadi_jacobian(quadrotor_fmu2, ops):
-    """Model Exchange fmi2GetDirectionalDerivative(der(x), [x, u]) at each point."""
+@pytest.mark.parametrize("version", [2, 3])
+def test_fmu_directional_derivatives_agree_with_the_casadi_jacobian(version, ops):
+    """Model Exchange fmiXGetDirectionalDerivative(der(x), [x, u]) at each
+    point (hover, forward flight), FMI 2.0 and 3.0, through the engine's
+    linearizer."""
+    fmu = cached_fmu(QUADROTOR, version)
     for op in ops.values():
-        a, f = linearize_plant(op), linearize_plant_fmu(quadrotor_fmu2, op)
+        a, f = linearize_plant(op), linearize_plant_fmu(fmu, op)
         np.testing.assert_allclose(f.A, a.A, rtol=1e-10, atol=1e-10, err_msg=op.name)
         np.testing.assert_allclose(f.B, a.B, rtol=1e-10, atol=1e-12, err_msg=op.name)
+
+
+def test_plant_fmu_central_differences_agree_with_the_casadi_jacobian(quadrotor_fmu2, ops):
+    """The linearizer's fallback on the same FMU: central differences, names
+    and units from the modelDescription, and an error estimate that bounds
+    the actual error's order."""
+    from cosim.linearize import linearize_fmu
+
+    op = ops["forward_wind"]
+    start = dict(zip((v.name for v in QUADROTOR.states), np.concatenate([op.x, op.omega])))
+    lin = linearize_fmu(quadrotor_fmu2, start=start, inputs=dict(zip(INPUT_NAMES, op.plant_u)),
+                        parameters=dict(op.plant_parameters or {}), method="differences")
+    assert lin.method == "central differences"
+    a = linearize_plant(op)
+    n = len(STATE_NAMES)
+    scale = max(np.max(np.abs(a.A)), np.max(np.abs(a.B)))
+    assert np.max(np.abs(lin.A[:n, :n] - a.A)) <= 1e-6 * scale
+    assert np.max(np.abs(lin.B[:n, :] - a.B)) <= 1e-6 * scale
+    assert lin.units["u"] == "m/s" and lin.units["Omega_1"] == "rad/s"
 
 
 def test_fmu_linearization_honours_plant_parameters(quadrotor_fmu2):

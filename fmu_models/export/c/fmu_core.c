@@ -275,9 +275,15 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
             return CORE_ERROR;
         }
         if (vr[i] >= VR_Z) {
-            core_log(inst, CORE_ERROR, "%s is a discrete state and cannot be set (restore an FMU state instead)",
-                     VAR_NAME[vr[i]]);
-            return CORE_ERROR;
+            /* A discrete state may be set between communication steps of a Co-Simulation instance (the
+             * state the next doStep starts from), so an importer can linearize the sampled step
+             * (docs/stability.md, "Discrete states"); before then dinit sets it, in Model Exchange there
+             * is none. */
+            if (inst->kind != KIND_CO_SIMULATION || inst->s.mode != MODE_STEP_COMPLETE) {
+                core_log(inst, CORE_ERROR, "%s is a discrete state and can only be set between communication "
+                         "steps (now in %s)", VAR_NAME[vr[i]], MODE_NAMES[inst->s.mode]);
+                return CORE_ERROR;
+            }
         } else if (vr[i] >= VR_P) {
             if (inst->s.mode != MODE_INSTANTIATED && inst->s.mode != MODE_INITIALIZATION &&
                 inst->s.mode != MODE_CONFIGURATION) {

@@ -1,0 +1,448 @@
+"""Linearization of an FMU (FMI 2.0 or 3.0) at an operating point.
+
+The engine's one way to linearize an FMU; it knows no model. It returns a
+:class:`Linearization`: a ``control.StateSpace`` whose states, inputs and
+outputs carry the FMU's variable names (their units in :attr:`Linearization.units`),
+the method used and an estimate of its error.
+
+* **Model Exchange** (continuous time): ``A, B, C, D`` of
+  ``der(x) = f(x, u)``, ``y = g(x, u)`` at the state and inputs given.
+  With ``providesDirectionalDerivative(s)`` each column is one directional
+  derivative (``fmiXGetDirectionalDerivative``, seed 1 on one known): exact
+  to round-off. Otherwise (or with ``method="differences"``) central
+  differences, the step of variable ``j`` being ``h_j = eps^(1/3) *
+  max(|v_j|, nominal_j)`` (the step that balances the O(h^2) truncation
+  against round-off; a Model Exchange evaluation integrates nothing, so
+  the FMU's tolerance does not enter); the error estimate is the largest
+  difference between the Jacobians at ``h`` and ``2 h``.
+* **Co-Simulation, sampled data** (an FMU declaring its period,
+  :data:`cosim.fmu_component.PERIOD_ANNOTATION`): the discrete-time map over
+  one period, ``z+ = A z + B u``, ``y = C z + D u``, ``dt`` the period. The
+  discrete states ``z`` are the FMU's local Real variables of variability
+  ``discrete``; they must be readable and settable between communication
+  steps (this project's exporter allows it, docs/stability.md "Discrete
+  states"), and the FMU must be able to get and set its state, which is
+  restored before every evaluation. Central differences as above; the map
+  is evaluated by one ``doStep``.
+* Anything else (a Co-Simulation FMU with no Model Exchange interface, no
+  declared period, or discrete states it refuses to set) is refused with a
+  :class:`LinearizationError` saying why, in one line.
+"""
+from __future__ import annotations
+
+import ctypes
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import control
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+
+from .errors import FmuCallError
+from .fmu_component import FmuComponent
+
+__all__ = ["Linearization", "LinearizationError", "linearize_fmu", "save_linearization", "METHODS"]
+
+METHODS = ("auto", "derivatives", "differences")
+_REL_STEP = np.finfo(float).eps ** (1.0 / 3.0)  # central differences: truncation h^2 vs round-off eps / h
+
+
+class LinearizationError(ValueError):
+    """An FMU, or an operating point, this module cannot linearize; one line."""
+
+
+@dataclass(frozen=True, eq=False)
+class Linearization:
+    """The linear system and how it was obtained.
+
+    ``system``: ``control.StateSpace`` (``dt`` = 0 for Model Exchange, the
+    period for a sampled-data FMU), its ``state_labels``, ``input_labels``
+    and ``output_labels`` the FMU's variable names. ``method``:
+    ``"directional derivatives"`` or ``"central differences"``.
+    ``error_estimate``: for differences, the largest absolute difference of
+    any entry of ``[A B; C D]`` between steps ``h`` and ``2 h``; 0.0 for
+    directional derivatives (exact to round-off). ``units``: variable name
+    -> unit (``""`` when the FMU declares none).
+    """
+
+    system: control.StateSpace
+    method: str
+    error_estimate: float
+    units: dict[str, str] = field(default_factory=dict)
+    operating_point: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def A(self) -> np.ndarray:
+        return np.asarray(self.system.A)
+
+    @property
+    def B(self) -> np.ndarray:
+        return np.asarray(self.system.B)
+
+    @property
+    def C(self) -> np.ndarray:
+        return np.asarray(self.system.C)
+
+    @property
+    def D(self) -> np.ndarray:
+        return np.asarray(self.system.D)
+
+
+def _check_values(what: str, values: Mapping[str, float], variables: Mapping, allowed: Sequence[str]) -> None:
+    for name, value in values.items():
+        var = variables.get(name)
+        if var is None:
+            raise LinearizationError(f"{what} {name!r}: the FMU has no such variable")
+        if var.causality not in allowed:
+            raise LinearizationError(f"{what} {name!r}: it is a {var.causality}, not a {' or '.join(allowed)}")
+        if not np.isfinite(float(value)):
+            raise LinearizationError(f"{what} {name} = {value!r}: not a finite number")
+
+
+def _check_states(start: Mapping[str, float], variables: Mapping, states: Sequence[str], kind: str) -> None:
+    for name, value in start.items():
+        if name not in variables:
+            raise LinearizationError(f"start value {name!r}: the FMU has no such variable")
+        if name not in states:
+            raise LinearizationError(f"start value {name!r}: not a {kind} state of the FMU "
+                                     f"(its {kind} states: {', '.join(states) or 'none'})")
+        if not np.isfinite(float(value)):
+            raise LinearizationError(f"start value {name} = {value!r}: not a finite number")
+
+
+def _scale(var, value: float) -> float:
+    nominal = getattr(var, "nominal", None)
+    try:
+        nominal = abs(float(nominal)) if nominal is not None else 1.0
+    except (TypeError, ValueError):
+        nominal = 1.0
+    return max(abs(value), nominal if nominal > 0 else 1.0)
+
+
+def _central(evaluate, base: np.ndarray, scales: np.ndarray) -> tuple[np.ndarray, float]:
+    """Jacobian of ``evaluate(v)`` at ``base`` by central differences, with the
+    estimate ``max |J(h) - J(2 h)|``."""
+    def jac(factor):
+        columns = []
+        for j in range(base.size):
+            h = factor * _REL_STEP * scales[j]
+            plus, minus = base.copy(), base.copy()
+            plus[j] += h
+            minus[j] -= h
+            columns.append((evaluate(plus) - evaluate(minus)) / (2.0 * h))
+        return np.array(columns).T
+    J = jac(1.0)
+    return J, float(np.max(np.abs(J - jac(2.0)), initial=0.0))
+
+
+def linearize_fmu(path: str | Path, *, start: Mapping[str, float] | None = None,
+                  inputs: Mapping[str, float] | None = None, parameters: Mapping[str, float] | None = None,
+                  fmu_state: bytes | None = None, t: float = 0.0, method: str = "auto",
+                  interface: str = "auto") -> Linearization:
+    """Linearize the FMU at ``path`` at an operating point.
+
+    ``parameters`` are set before initialization; ``start`` sets continuous
+    states (Model Exchange, after initialization) or discrete states
+    (sampled-data Co-Simulation, after initialization or after restoring
+    ``fmu_state``); ``inputs`` the inputs. ``fmu_state`` (Co-Simulation) is
+    a serialized FMU state, e.g. ``FmuComponent.serialize_state()`` during
+    a run at time ``t``: the operating point is then the run's. ``method``:
+    ``"auto"`` (directional derivatives where the FMU provides them),
+    ``"derivatives"`` or ``"differences"``. ``interface``: ``"auto"`` (Model
+    Exchange if the FMU has it and no ``fmu_state`` is given, else
+    Co-Simulation), ``"me"`` or ``"cs"``.
+    """
+    path = Path(path)
+    if method not in METHODS:
+        raise LinearizationError(f"method {method!r}: not one of {', '.join(METHODS)}")
+    if not np.isfinite(t):
+        raise LinearizationError(f"time t = {t!r}: not a finite number")
+    try:
+        md = read_model_description(str(path))
+    except Exception as exc:  # not a zip, broken XML: fmpy's message says which
+        raise LinearizationError(f"{path}: not a readable FMU ({type(exc).__name__}: {exc})") from None
+    variables = {v.name: v for v in md.modelVariables}
+    start, inputs, parameters = dict(start or {}), dict(inputs or {}), dict(parameters or {})
+    _check_values("input", inputs, variables, ("input",))
+    _check_values("parameter", parameters, variables, ("parameter",))
+    if interface not in ("auto", "me", "cs"):
+        raise LinearizationError(f"interface {interface!r}: not one of auto, me, cs")
+    if interface == "auto":
+        interface = "me" if md.modelExchange is not None and fmu_state is None else "cs"
+    if interface == "me":
+        if md.modelExchange is None:
+            raise LinearizationError(f"{path.name}: no Model Exchange interface")
+        if fmu_state is not None:
+            raise LinearizationError(f"{path.name}: an FMU state is a Co-Simulation operating point; give the "
+                                     "states' values (start) for Model Exchange")
+        return _linearize_me(path, md, variables, start, inputs, parameters, t, method)
+    if md.coSimulation is None:
+        raise LinearizationError(f"{path.name}: no Co-Simulation interface")
+    return _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state, t, method)
+
+
+def _units(names, variables) -> dict[str, str]:
+    return {n: variables[n].unit or "" for n in names}
+
+
+def _system(A, B, C, D, states, ins, outs, dt=0) -> control.StateSpace:
+    return control.ss(A, B, C, D, dt, states=list(states), inputs=list(ins), outputs=list(outs))
+
+
+def _provides_derivatives(path: Path, version: int, me) -> bool:
+    """The Model Exchange interface's directional-derivative flag. fmpy
+    (0.3.x) reads FMI 3.0's ``providesDirectionalDerivatives`` under FMI
+    2.0's singular name and so reports False: read the attribute itself."""
+    if version == 2:
+        return bool(me.providesDirectionalDerivative)
+    import zipfile
+
+    from lxml import etree
+
+    if path.is_dir():
+        xml = (path / "modelDescription.xml").read_bytes()
+    else:
+        with zipfile.ZipFile(path) as archive:
+            xml = archive.read("modelDescription.xml")
+    node = etree.fromstring(xml, etree.XMLParser(resolve_entities=False, no_network=True)).find("ModelExchange")
+    return node is not None and node.get("providesDirectionalDerivatives") == "true"
+
+
+# ---- Model Exchange ---------------------------------------------------------------------------
+
+def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> Linearization:
+    version = int(md.fmiVersion.split(".")[0])
+    me = md.modelExchange
+    provides = _provides_derivatives(path, version, me)
+    if method == "derivatives" and not provides:
+        raise LinearizationError(f"{path.name}: provides no directional derivatives (use differences)")
+    use_dd = provides and method != "differences"
+    states = [d.variable.derivative for d in md.derivatives]
+    state_names = [s.name for s in states]
+    _check_states(start, variables, state_names, "continuous")
+    in_names = [v.name for v in md.modelVariables if v.causality == "input" and v.type in ("Real", "Float64")]
+    out_names = [v.name for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")]
+    vr = {n: v.valueReference for n, v in variables.items()}
+    der_vrs = [d.variable.valueReference for d in md.derivatives]
+    nx = len(states)
+
+    unzip = extract(str(path))
+    common = dict(guid=md.guid, unzipDirectory=unzip, modelIdentifier=me.modelIdentifier, instanceName="linearize")
+    fmu = None
+    try:
+        try:
+            if version == 2:
+                from fmpy.fmi2 import FMU2Model
+                fmu = FMU2Model(**common)
+                fmu.instantiate()
+                fmu.setupExperiment(startTime=t)
+                set_real, get_real = fmu.setReal, fmu.getReal
+            else:
+                from fmpy.fmi3 import FMU3Model
+                fmu = FMU3Model(**common)
+                fmu.instantiate()
+                set_real, get_real = fmu.setFloat64, fmu.getFloat64
+        except Exception as exc:  # fmpy raises plain Exceptions: no binary, a refused instantiation
+            fmu = None
+            raise LinearizationError(f"{path.name}: cannot instantiate it for Model Exchange ({exc})") from None
+        try:
+            for name, value in parameters.items():
+                set_real([vr[name]], [float(value)])
+            if version == 2:
+                fmu.enterInitializationMode()
+            else:
+                fmu.enterInitializationMode(startTime=t)
+            if inputs:
+                set_real([vr[n] for n in inputs], [float(v) for v in inputs.values()])
+            fmu.exitInitializationMode()
+            fmu.enterContinuousTimeMode()
+        except FMICallException as exc:
+            raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
+        x = np.zeros(nx)
+        if nx:
+            fmu.getContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), nx)
+        for i, n in enumerate(state_names):
+            if n in start:
+                x[i] = float(start[n])
+        u = np.array([float(inputs.get(n, get_real([vr[n]])[0])) for n in in_names])
+
+        def put(xv, uv):
+            xc = np.ascontiguousarray(xv, dtype=float)
+            if nx:
+                fmu.setContinuousStates(xc.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), nx)
+            if in_names:
+                set_real([vr[n] for n in in_names], [float(v) for v in uv])
+
+        put(x, u)
+        point = dict(zip(state_names, x)) | dict(zip(in_names, u)) | parameters
+        if use_dd:
+            unknowns = der_vrs + [vr[n] for n in out_names]
+            knowns = [s.valueReference for s in states] + [vr[n] for n in in_names]
+            cols = [fmu.getDirectionalDerivative(unknowns, [k], [1.0]) for k in knowns]
+            J = np.array(cols, dtype=float).reshape(len(knowns), len(unknowns)).T
+            error, how = 0.0, "directional derivatives"
+        else:
+            def evaluate(v):
+                put(v[:nx], v[nx:])
+                dx = np.zeros(nx)
+                if nx:
+                    ptr = dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+                    if version == 2:
+                        fmu.getDerivatives(ptr, nx)
+                    else:
+                        fmu.getContinuousStateDerivatives(ptr, nx)
+                y = np.array(get_real([vr[n] for n in out_names])) if out_names else np.zeros(0)
+                return np.concatenate([dx, y])
+            base = np.concatenate([x, u])
+            scales = np.array([_scale(variables[n], b) for n, b in zip(state_names + in_names, base)])
+            J, error = _central(evaluate, base, scales)
+            put(x, u)
+            how = "central differences"
+    except FMICallException as exc:
+        raise LinearizationError(f"{path.name}: an FMU call failed while linearizing ({exc})") from None
+    finally:
+        if fmu is not None:
+            for release in (fmu.terminate, fmu.freeInstance):
+                try:
+                    release()
+                except Exception:  # an instance that failed to instantiate has nothing to release
+                    pass
+        shutil.rmtree(unzip, ignore_errors=True)
+    A, B = J[:nx, :nx], J[:nx, nx:]
+    C, D = J[nx:, :nx], J[nx:, nx:]
+    system = _system(A, B, C, D, state_names, in_names, out_names)
+    return Linearization(system, how, error, _units(state_names + in_names + out_names, variables), point)
+
+
+# ---- Co-Simulation, sampled data ---------------------------------------------------------------
+
+def _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state, t, method) -> Linearization:
+    if method == "derivatives":
+        raise LinearizationError(f"{path.name}: a Co-Simulation step has no directional derivatives here "
+                                 "(use differences)")
+    cs = md.coSimulation
+    if not cs.canGetAndSetFMUstate:
+        raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: it cannot get and "
+                                 "set its FMU state")
+    comp = FmuComponent("linearize", path)
+    try:
+        if comp.sample_period is None:
+            raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: it declares no "
+                                     "sample period (a black-box Co-Simulation FMU, and no Model Exchange)")
+        z_names = [v.name for v in md.modelVariables if v.causality == "local" and v.variability == "discrete"
+                   and v.type in ("Real", "Float64")]
+        _check_states(start, variables, z_names, "discrete")
+        in_names = [v.name for v in md.modelVariables if v.causality == "input" and v.type in ("Real", "Float64")]
+        out_names = [v.name for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")]
+        try:
+            comp.start(t, parameters)
+            if fmu_state is not None:
+                comp.restore_state(fmu_state)
+        except FmuCallError as exc:
+            raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
+        s = comp._slave
+        get_real = s.getReal if comp.fmi_version == 2 else s.getFloat64
+        set_real = s.setReal if comp.fmi_version == 2 else s.setFloat64
+        vr = {n: v.valueReference for n, v in variables.items()}
+        period = float(parameters.get(comp.sample_period, get_real([vr[comp.sample_period]])[0]))
+        z = np.array(get_real([vr[n] for n in z_names])) if z_names else np.zeros(0)
+        for i, n in enumerate(z_names):
+            if n in start:
+                z[i] = float(start[n])
+        u = np.array([float(inputs.get(n, get_real([vr[n]])[0])) for n in in_names])
+        if z_names:
+            try:
+                set_real([vr[n] for n in z_names], list(z))
+            except FMICallException:
+                said = "; ".join(comp.messages)
+                raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: its discrete "
+                                         f"states cannot be set ({said or 'refused'}) and it provides no "
+                                         "derivatives of its step") from None
+        base_state = comp.serialize_state()
+        nz = len(z_names)
+
+        def evaluate(v):
+            comp.restore_state(base_state)
+            if nz:
+                set_real([vr[n] for n in z_names], list(v[:nz]))
+            if in_names:
+                set_real([vr[n] for n in in_names], list(v[nz:]))
+            y = np.array(get_real([vr[n] for n in out_names])) if out_names else np.zeros(0)
+            comp.do_step(t, period)
+            z_next = np.array(get_real([vr[n] for n in z_names])) if nz else np.zeros(0)
+            return np.concatenate([z_next, y])
+
+        base = np.concatenate([z, u])
+        scales = np.array([_scale(variables[n], b) for n, b in zip(z_names + in_names, base)])
+        try:
+            J, error = _central(evaluate, base, scales)
+        except (FMICallException, FmuCallError) as exc:
+            raise LinearizationError(f"{path.name}: an FMU call failed while linearizing ({exc})") from None
+    finally:
+        comp.close()
+    A, B = J[:nz, :nz], J[:nz, nz:]
+    C, D = J[nz:, :nz], J[nz:, nz:]
+    point = dict(zip(z_names, z)) | dict(zip(in_names, u)) | parameters
+    system = _system(A, B, C, D, z_names, in_names, out_names, dt=period)
+    return Linearization(system, "central differences", error, _units(z_names + in_names + out_names, variables),
+                         point)
+
+
+# ---- files ---------------------------------------------------------------------------------------
+
+def save_linearization(lin: Linearization, out_dir: str | Path, bode: Sequence[tuple[str, str]] = (),
+                       stem: str = "linearization") -> list[Path]:
+    """Write ``lin`` into ``out_dir``: ``<stem>.npz`` (A, B, C, D, dt and the
+    names), ``<stem>.json`` (the same, readable, with units, method, error
+    estimate, operating point and poles) and one Bode plot
+    ``<stem>_bode_<input>_<output>.png`` per ``(input, output)`` pair of
+    ``bode``. Returns the paths written. Unknown names in ``bode`` are a
+    :class:`LinearizationError` raised before anything is written."""
+    import json
+
+    sys_ = lin.system
+    states, ins, outs = list(sys_.state_labels), list(sys_.input_labels), list(sys_.output_labels)
+    for i, o in bode:
+        if i not in ins:
+            raise LinearizationError(f"bode pair {i}:{o}: {i!r} is not an input of the system "
+                                     f"(inputs: {', '.join(ins) or 'none'})")
+        if o not in outs:
+            raise LinearizationError(f"bode pair {i}:{o}: {o!r} is not an output of the system "
+                                     f"(outputs: {', '.join(outs) or 'none'})")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    dt = float(sys_.dt) if sys_.dt else 0.0
+    poles = np.linalg.eigvals(lin.A) if states else np.zeros(0, dtype=complex)
+    written = [out_dir / f"{stem}.npz", out_dir / f"{stem}.json"]
+    np.savez(written[0], A=lin.A, B=lin.B, C=lin.C, D=lin.D, dt=dt, states=np.array(states, dtype=str),
+             inputs=np.array(ins, dtype=str), outputs=np.array(outs, dtype=str))
+    document = {
+        "time": "discrete" if dt else "continuous", "dt": dt, "method": lin.method,
+        "error_estimate": lin.error_estimate,
+        "states": [{"name": n, "unit": lin.units.get(n, "")} for n in states],
+        "inputs": [{"name": n, "unit": lin.units.get(n, "")} for n in ins],
+        "outputs": [{"name": n, "unit": lin.units.get(n, "")} for n in outs],
+        "operating_point": {k: float(v) for k, v in lin.operating_point.items()},
+        "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist(),
+        "poles": [{"re": float(p.real), "im": float(p.imag)} for p in poles],
+        "stable": bool(np.all(np.abs(poles) < 1.0) if dt else np.all(poles.real < 0.0)),
+    }
+    written[1].write_text(json.dumps(document, indent=1) + "\n")
+    if bode:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        for i, o in bode:
+            siso = sys_[outs.index(o), ins.index(i)]
+            plt.figure(figsize=(7, 6))
+            control.bode_plot(siso, dB=True, title=f"{i} -> {o} ({lin.units.get(i, '')} -> {lin.units.get(o, '')})")
+            path = out_dir / f"{stem}_bode_{i}_{o}.png".replace("(", "_").replace(")", "_")
+            plt.savefig(path, dpi=90)
+            plt.close("all")
+            written.append(path)
+    return written
