@@ -152,8 +152,10 @@ def linearize_fmu(path: str | Path, *, start: Mapping[str, float] | None = None,
     a run at time ``t``: the operating point is then the run's. ``method``:
     ``"auto"`` (directional derivatives where the FMU provides them),
     ``"derivatives"`` or ``"differences"``. ``interface``: ``"auto"`` (Model
-    Exchange if the FMU has it and no ``fmu_state`` is given, else
-    Co-Simulation), ``"me"`` or ``"cs"``.
+    Exchange if the FMU has it, has continuous states and no ``fmu_state``
+    is given, else Co-Simulation: a clocked sampled-data FMI 3.0 FMU also
+    declares Model Exchange, where its ticks are time events and it has no
+    continuous state to linearize), ``"me"`` or ``"cs"``.
     """
     path = Path(path)
     if method not in METHODS:
@@ -171,7 +173,8 @@ def linearize_fmu(path: str | Path, *, start: Mapping[str, float] | None = None,
     if interface not in ("auto", "me", "cs"):
         raise LinearizationError(f"interface {interface!r}: not one of auto, me, cs")
     if interface == "auto":
-        interface = "me" if md.modelExchange is not None and fmu_state is None else "cs"
+        continuous = bool(md.derivatives)
+        interface = "me" if md.modelExchange is not None and continuous and fmu_state is None else "cs"
     if interface == "me":
         if md.modelExchange is None:
             raise LinearizationError(f"{path.name}: no Model Exchange interface")

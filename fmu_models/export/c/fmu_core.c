@@ -277,9 +277,11 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
         if (vr[i] >= VR_Z) {
             /* A discrete state may be set between communication steps of a Co-Simulation instance (the
              * state the next doStep starts from), so an importer can linearize the sampled step
-             * (docs/stability.md, "Discrete states"); before then dinit sets it, in Model Exchange there
-             * is none. */
-            if (inst->kind != KIND_CO_SIMULATION || inst->s.mode != MODE_STEP_COMPLETE) {
+             * (docs/stability.md, "Discrete states"); a clocked FMI 3.0 Co-Simulation instance with
+             * Event Mode rests in Event Mode between its steps, so there too. Before then dinit sets
+             * it; in Model Exchange and Scheduled Execution it is refused. */
+            if (inst->kind != KIND_CO_SIMULATION ||
+                (inst->s.mode != MODE_STEP_COMPLETE && inst->s.mode != MODE_EVENT)) {
                 core_log(inst, CORE_ERROR, "%s is a discrete state and can only be set between communication "
                          "steps (now in %s)", VAR_NAME[vr[i]], MODE_NAMES[inst->s.mode]);
                 return CORE_ERROR;
