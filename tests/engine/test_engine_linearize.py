@@ -34,10 +34,16 @@ U = [f"u{j}" for j in range(NU)]
 Y = [f"y{i}" for i in range(NY)]
 
 
-def _continuous_equations(t, v):
-    dx, y = _affine(A, X, v), _affine(C, X, v)
+def _linear(v):
+    """``(A x + B u, C x + D u)`` by name: the right-hand side (continuous) or the next state
+    (discrete), and the outputs."""
+    ax, cx = _affine(A, X, v), _affine(C, X, v)
     bu, du = _affine(B, U, v), _affine(D, U, v)
-    return {n: dx[i] + bu[i] for i, n in enumerate(X)}, {n: y[i] + du[i] for i, n in enumerate(Y)}
+    return {n: ax[i] + bu[i] for i, n in enumerate(X)}, {n: cx[i] + du[i] for i, n in enumerate(Y)}
+
+
+def _continuous_equations(t, v):
+    return _linear(v)
 
 
 LINEAR = FmuModel(
@@ -51,9 +57,8 @@ LINEAR = FmuModel(
 
 
 def _discrete_update(t, v):
-    zn, y = _affine(A, X, v), _affine(C, X, v)
-    bu, du = _affine(B, U, v), _affine(D, U, v)
-    return {n: y[i] + du[i] for i, n in enumerate(Y)}, {n: zn[i] + bu[i] for i, n in enumerate(X)}
+    z_next, y = _linear(v)
+    return y, z_next
 
 
 LINEAR_DISCRETE = FmuModel(
