@@ -8,6 +8,11 @@ small record (a dict) per run, in the order the runs finish:
     {"key": run.index, "status": "ok" | "diverged" | "failed", "error": str | None,
      "seed": int, "wall_time_s": float, "metrics": {...}, "pid": int}
 
+A metric is called as ``metrics(scenario, result)``. One with an attribute
+``snapshot_times(scenario) -> times`` gets the run's FMU states at those
+times in ``result.snapshots`` (:class:`~cosim.master.Snapshot`), e.g. to
+linearize the loop along the flight.
+
 A run that diverges, fails, or cannot even be built (a sampled value the
 scenario refuses, an FMU that refuses a parameter, a worker that died) is a
 record with its status and message, never an exception.
@@ -159,7 +164,10 @@ def execute(raw: Mapping[str, Any], source: str | None, run: Run, metrics: Metri
         record["error"] = f"could not build: {_message(exc)}"
         return record
     try:
-        result = master.run(scenario.duration, seed=seed, t0=scenario.start_time, raise_on_error=False)
+        # a metric may ask for the run's FMU states at chosen times (cosim.master.Snapshot)
+        wanted = getattr(metrics, "snapshot_times", None)
+        result = master.run(scenario.duration, seed=seed, t0=scenario.start_time, raise_on_error=False,
+                            snapshots=wanted(scenario) if wanted is not None else ())
     except Exception as exc:  # could not start, or a component raised mid-run
         cache.drop(scenario)
         record["error"] = _message(exc)

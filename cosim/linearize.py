@@ -65,7 +65,9 @@ class Linearization:
     ``error_estimate``: for differences, the largest absolute difference of
     any entry of ``[A B; C D]`` between steps ``h`` and ``2 h``; 0.0 for
     directional derivatives (exact to round-off). ``units``: variable name
-    -> unit (``""`` when the FMU declares none).
+    -> unit (``""`` when the FMU declares none). ``operating_point``: the
+    states, inputs and parameters linearized at; ``outputs``: the outputs
+    there (for a sampled-data FMU, those of its step at the point).
     """
 
     system: control.StateSpace
@@ -73,6 +75,7 @@ class Linearization:
     error_estimate: float
     units: dict[str, str] = field(default_factory=dict)
     operating_point: dict[str, float] = field(default_factory=dict)
+    outputs: dict[str, float] = field(default_factory=dict)
 
     @property
     def A(self) -> np.ndarray:
@@ -147,13 +150,17 @@ def linearize_fmu(path: str | Path, *, start: Mapping[str, float] | None = None,
     ``parameters`` are set before initialization; ``start`` sets continuous
     states (Model Exchange, after initialization) or discrete states
     (sampled-data Co-Simulation, after initialization or after restoring
-    ``fmu_state``); ``inputs`` the inputs. ``fmu_state`` (Co-Simulation) is
-    a serialized FMU state, e.g. ``FmuComponent.serialize_state()`` during
-    a run at time ``t``: the operating point is then the run's. ``method``:
+    ``fmu_state``); ``inputs`` the inputs. ``fmu_state`` is a serialized
+    Co-Simulation FMU state, e.g. ``FmuComponent.serialize_state()`` or a
+    :class:`~cosim.master.Snapshot`'s during a run at time ``t``: the
+    operating point is then the run's. For a sampled-data FMU it is restored
+    and stepped; for Model Exchange a Co-Simulation instance restores it and
+    its continuous states' values are read from it (``start`` may still
+    override some). ``method``:
     ``"auto"`` (directional derivatives where the FMU provides them),
     ``"derivatives"`` or ``"differences"``. ``interface``: ``"auto"`` (Model
-    Exchange if the FMU has it, has continuous states and no ``fmu_state``
-    is given, else Co-Simulation: a clocked sampled-data FMI 3.0 FMU also
+    Exchange if the FMU has it and has continuous states, else
+    Co-Simulation: a clocked sampled-data FMI 3.0 FMU also
     declares Model Exchange, where its ticks are time events and it has no
     continuous state to linearize), ``"me"`` or ``"cs"``.
     """
@@ -174,17 +181,36 @@ def linearize_fmu(path: str | Path, *, start: Mapping[str, float] | None = None,
         raise LinearizationError(f"interface {interface!r}: not one of auto, me, cs")
     if interface == "auto":
         continuous = bool(md.derivatives)
-        interface = "me" if md.modelExchange is not None and continuous and fmu_state is None else "cs"
+        interface = "me" if md.modelExchange is not None and continuous else "cs"
     if interface == "me":
         if md.modelExchange is None:
             raise LinearizationError(f"{path.name}: no Model Exchange interface")
         if fmu_state is not None:
-            raise LinearizationError(f"{path.name}: an FMU state is a Co-Simulation operating point; give the "
-                                     "states' values (start) for Model Exchange")
+            names = [d.variable.derivative.name for d in md.derivatives]
+            start = _values_in_state(path, md, parameters, fmu_state, t, names) | start
         return _linearize_me(path, md, variables, start, inputs, parameters, t, method)
     if md.coSimulation is None:
         raise LinearizationError(f"{path.name}: no Co-Simulation interface")
     return _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state, t, method)
+
+
+def _values_in_state(path: Path, md, parameters, fmu_state: bytes, t: float, names) -> dict[str, float]:
+    """``names``' values in a serialized Co-Simulation FMU state (a
+    Co-Simulation instance started with ``parameters``, the state restored)."""
+    if md.coSimulation is None or not md.coSimulation.canGetAndSetFMUstate:
+        raise LinearizationError(f"{path.name}: an FMU state is read through Co-Simulation, and this FMU cannot "
+                                 "set its FMU state there")
+    comp = FmuComponent("linearize", path)
+    try:
+        comp.start(t, parameters)
+        comp.restore_state(fmu_state)
+        get_real = comp._slave.getReal if comp.fmi_version == 2 else comp._slave.getFloat64
+        values = get_real([comp.variables[n].valueReference for n in names])
+    except FmuCallError as exc:
+        raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
+    finally:
+        comp.close()
+    return dict(zip(names, map(float, values)))
 
 
 def _units(names, variables) -> dict[str, str]:
@@ -281,6 +307,7 @@ def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> 
 
         put(x, u)
         point = dict(zip(state_names, x)) | dict(zip(in_names, u)) | parameters
+        y0 = dict(zip(out_names, map(float, get_real([vr[n] for n in out_names])))) if out_names else {}
         if use_dd:
             unknowns = der_vrs + [vr[n] for n in out_names]
             knowns = [s.valueReference for s in states] + [vr[n] for n in in_names]
@@ -317,7 +344,7 @@ def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> 
     A, B = J[:nx, :nx], J[:nx, nx:]
     C, D = J[nx:, :nx], J[nx:, nx:]
     system = _system(A, B, C, D, state_names, in_names, out_names)
-    return Linearization(system, how, error, _units(state_names + in_names + out_names, variables), point)
+    return Linearization(system, how, error, _units(state_names + in_names + out_names, variables), point, y0)
 
 
 # ---- Co-Simulation, sampled data ---------------------------------------------------------------
@@ -381,6 +408,7 @@ def _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state
         base = np.concatenate([z, u])
         scales = np.array([_scale(variables[n], b) for n, b in zip(z_names + in_names, base)])
         try:
+            y0 = dict(zip(out_names, map(float, evaluate(base)[nz:])))
             J, error = _central(evaluate, base, scales)
         except (FMICallException, FmuCallError) as exc:
             raise LinearizationError(f"{path.name}: an FMU call failed while linearizing ({exc})") from None
@@ -391,7 +419,7 @@ def _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state
     point = dict(zip(z_names, z)) | dict(zip(in_names, u)) | parameters
     system = _system(A, B, C, D, z_names, in_names, out_names, dt=period)
     return Linearization(system, "central differences", error, _units(z_names + in_names + out_names, variables),
-                         point)
+                         point, y0)
 
 
 # ---- files ---------------------------------------------------------------------------------------

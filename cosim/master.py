@@ -48,7 +48,36 @@ from .guard import Guard
 from .plan import ORDERINGS, FmuBlock, PythonBlock, make_plan
 from .recorder import Recorder
 
-__all__ = ["Master", "RunResult", "ORDERINGS"]
+__all__ = ["Master", "RunResult", "Snapshot", "ORDERINGS"]
+
+
+@dataclass(frozen=True, eq=False)
+class Snapshot:
+    """The run's FMUs frozen at a communication point ``t_n`` (``time``,
+    step ``n``): every FMU has stepped to ``t_n``, and everything at ``t_n``
+    is evaluated (the feedthrough FMUs' inputs set and outputs read, the
+    Python components stepped), before the step to ``t_{n+1}``.
+
+    ``states``: FMU name -> its serialized FMU state (getFMUState +
+    serializeFMUState); ``parameters``: FMU name -> the values it was
+    started with (base, scenario, seed, run); ``outputs``: ``component.name``
+    -> value at ``t_n`` of every signal the master holds (the outputs in
+    use, published internals); ``inputs``: the same for every connected
+    input. Python components are not part of a snapshot: a run resumed from
+    it (``Master.run(..., t0=time, restore=snapshot.states)``) starts them
+    afresh."""
+
+    time: float
+    step: int
+    states: dict[str, bytes]
+    parameters: dict[str, dict[str, Any]]
+    outputs: dict[str, float]
+    inputs: dict[str, float]
+
+    def inputs_of(self, component: str) -> dict[str, float]:
+        """The values at ``t_n`` of ``component``'s inputs in :attr:`inputs`, by variable name."""
+        prefix = component + "."
+        return {k[len(prefix):]: v for k, v in self.inputs.items() if k.startswith(prefix)}
 
 
 @dataclass
@@ -71,6 +100,7 @@ class RunResult:
     csv_path: Path | None = None
     seed: int = 0
     parameters: dict[str, Any] = field(default_factory=dict)
+    snapshots: list[Snapshot] = field(default_factory=list)
 
     @property
     def time(self) -> np.ndarray:
@@ -157,7 +187,8 @@ class Master:
     def run(self, duration: float, seed: int = 0, parameters: Mapping[str, Any] | None = None,
             csv_path: str | Path | None = None, t0: float = 0.0, block_rows: int = 100,
             raise_on_error: bool = True, progress: Callable[[int, int], None] | None = None,
-            profile: bool = False) -> RunResult:
+            profile: bool = False, snapshots: Sequence[float] = (),
+            restore: Mapping[str, bytes] | None = None) -> RunResult:
         """Run from ``t0`` for ``duration`` seconds (a whole number of steps).
 
         ``parameters`` overrides, for this run only, FMU parameters and Python
@@ -168,6 +199,15 @@ class Master:
         (a parameter the FMU refuses, a component that cannot start) always
         raises: there is no run to return. ``profile`` times each phase of
         the loop (``RunResult.phase_times``), at a small cost per step.
+
+        ``snapshots``: communication points (s, in ``[t0, t0 + duration]``)
+        at which every FMU's state is taken (:class:`Snapshot`, in
+        ``RunResult.snapshots``, in time order); a time between two points
+        is refused. ``restore``: FMU name -> a serialized FMU state (e.g. a
+        snapshot's ``states``) set after that FMU is started at ``t0``: a
+        run resumed from a snapshot (``t0`` its time). An FMU left out
+        starts from its parameters, so a run can resume with some FMUs put
+        in another state (a perturbed plant, a linearization's check).
         """
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= SEED_LIMIT:
             # one range in every form: an FMU's seed parameter is a double, exact to 2^53
@@ -177,9 +217,17 @@ class Master:
         if n_steps < 1 or abs(n_steps * h - duration) > 1e-9 * max(1.0, abs(duration)):
             raise ValueError(f"duration = {duration!r} s is not a positive whole number of steps of {h!r} s")
         split = self._split_parameters(parameters or {})
+        snap_steps = self._snapshot_steps(snapshots, t0, n_steps)
+        restore = dict(restore or {})
+        unknown = sorted(set(restore) - {f.name for f in self.fmus})
+        if unknown:
+            raise ConnectionCheckError(f"restore: no FMU named {', '.join(map(repr, unknown))}; the FMUs are "
+                                       f"{', '.join(f.name for f in self.fmus)}")
         recorder = Recorder(self.record_columns, self.record_units, n_steps + 1, csv_path, block_rows,
                             meta={"step": h, "t0": t0, "seed": seed})
         phase_times: dict[str, float] = {}
+        started: dict[str, dict[str, Any]] = {}
+        taken: list[Snapshot] = []
         status, error = "ok", None
         wall0 = _time.perf_counter()
         try:
@@ -188,13 +236,18 @@ class Master:
                 comp.start(t0, h, n_steps, seed)
             for fmu in self.fmus:  # reads the outputs at t0 into the signal array
                 seeded = {fmu.seed_parameter: stream_seed(seed, fmu.seed_stream)} if fmu.seed_parameter else {}
-                fmu.start(t0, {**fmu.base_parameters, **self.fmu_parameters.get(fmu.name, {}), **seeded,
-                               **split[fmu.name]})
+                started[fmu.name] = {**fmu.base_parameters, **self.fmu_parameters.get(fmu.name, {}), **seeded,
+                                     **split[fmu.name]}
+                fmu.start(t0, started[fmu.name])
+                if fmu.name in restore:
+                    fmu.restore_state(restore[fmu.name])
+                    fmu.read_outputs(t0)
         except BaseException as exc:  # nothing ran: a refused start is raised, never a run's status
             recorder.close("failed", f"could not start: {exc}")
             raise
         try:
-            self._loop(t0, n_steps, recorder, progress, phase_times if profile else None)
+            take = self._snapshot_taker(snap_steps, t0, started, taken)
+            self._loop(t0, n_steps, recorder, progress, phase_times if profile else None, take, snap_steps)
         except DivergenceError as exc:
             status, error, failure = "diverged", str(exc), exc
         except (FmuCallError, CosimError) as exc:
@@ -205,11 +258,37 @@ class Master:
         recorder.close(status, error)
         result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
                            status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
-                           recorder.path, seed, dict(parameters or {}))
+                           recorder.path, seed, dict(parameters or {}), taken)
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure
         return result
+
+    def _snapshot_steps(self, times: Sequence[float], t0: float, n_steps: int) -> frozenset[int]:
+        h, steps = self.step, set()
+        for t in times:
+            n = round((float(t) - t0) / h) if np.isfinite(t) else -1
+            if not 0 <= n <= n_steps or abs(t0 + n * h - float(t)) > 1e-9 * max(1.0, abs(float(t))):
+                raise ValueError(f"snapshot at t = {t!r} s: not a communication point t0 + n h of this run "
+                                 f"(t0 = {t0!r} s, h = {h!r} s, {n_steps} steps)")
+            steps.add(n)
+        return frozenset(steps)
+
+    def _snapshot_taker(self, steps: frozenset[int], t0: float, started, taken: list[Snapshot]):
+        """``take(n)``: the :class:`Snapshot` at ``t_n`` appended to ``taken``
+        if ``n`` is one of ``steps``; ``None`` without snapshots."""
+        if not steps:
+            return None
+        outputs = [name for name in self.slots if name != "time"]
+        inputs = list(self.source_of.items())
+
+        def take(n: int) -> None:
+            if n in steps:
+                values = {name: float(self.signals[self.slots[name]]) for name in outputs}
+                taken.append(Snapshot(t0 + n * self.step, n, {f.name: f.serialize_state() for f in self.fmus},
+                                      {k: dict(v) for k, v in started.items()}, values,
+                                      {dst: values[src] for dst, src in inputs}))
+        return take
 
     def _initial_transfer(self, transfers, t0: float) -> None:
         """Exchange ordering, at t0 only (the plan's ``transfer`` or
@@ -311,20 +390,22 @@ class Master:
         return phase
 
     def _loop(self, t0: float, n_steps: int, recorder: Recorder, progress: Callable[[int, int], None] | None,
-              phase_times: dict[str, float] | None) -> None:
+              phase_times: dict[str, float] | None, take: Callable[[int], None] | None = None,
+              marks: frozenset[int] = frozenset()) -> None:
         # a clocked FMU's tick is Event Mode calls the compiled loop does not make (docs/cosim.md)
         if phase_times is None and self.plan.fmus_only and not any(f.clock is not None for f in self.fmus):
             from . import kernel
 
             run = kernel.load()
             if run is not None:
-                return self._loop_compiled(run, t0, n_steps, recorder, progress)
-        self._loop_python(t0, n_steps, recorder, progress, phase_times)
+                return self._loop_compiled(run, t0, n_steps, recorder, progress, take, marks)
+        self._loop_python(t0, n_steps, recorder, progress, phase_times, take)
 
     def _loop_compiled(self, run, t0: float, n_steps: int, recorder: Recorder,
-                       progress: Callable[[int, int], None] | None) -> None:
+                       progress: Callable[[int, int], None] | None, take=None, marks=frozenset()) -> None:
         """The plan run by the compiled loop (:mod:`cosim.kernel`): one call
-        per block of recorded rows, as :meth:`_loop_python` flushes them."""
+        per block of recorded rows, as :meth:`_loop_python` flushes them, a
+        call also ending before a snapshot's row (``marks``, taken by ``take``)."""
         import ctypes
 
         from . import kernel
@@ -335,9 +416,17 @@ class Master:
         stop = kernel.KernelStop()
         if self.plan.transfer:  # exchange ordering; no Python component, so no first_transfer
             self._initial_transfer(self.plan.transfer, t0)
+        marks = sorted(marks)
+        evaluate = [self._fmu_eval_phase(b) for b in self.plan.at_tn] if marks else []
         n = 0
         while n <= n_steps:
+            if n in marks:  # the blocks at t_n evaluated once before the snapshot; the kernel repeats them
+                for phase in evaluate:  # (the same inputs set again at t_n: the same outputs)
+                    signals[0] = t0 + n * h
+                    phase(n, t0 + n * h)
+                take(n)
             last = min((n // block + 1) * block - 1, n_steps)  # the Python loop flushes at the same rows
+            last = min([last] + [m - 1 for m in marks if m > n])  # a snapshot is taken between kernel calls
             code = run(ctypes.byref(args), n, last, ctypes.byref(stop))
             if code != kernel.Stop.OK:
                 recorder.n_rows = int(stop.n) + int(stop.recorded)
@@ -355,7 +444,8 @@ class Master:
             progress(n_steps, n_steps)
 
     def _loop_python(self, t0: float, n_steps: int, recorder: Recorder,
-                     progress: Callable[[int, int], None] | None, phase_times: dict[str, float] | None) -> None:
+                     progress: Callable[[int, int], None] | None, phase_times: dict[str, float] | None,
+                     snap: Callable[[int], None] | None = None) -> None:
         plan, h, signals, take = self.plan, self.step, self.signals, np.take
         data, rec_idx = recorder.data, plan.record_slots
         guard_ok, guard_idx, guard = self.guard.ok, plan.watch_slots, self.guard
@@ -400,6 +490,8 @@ class Master:
                 phase(n, t)
             if n == 0 and plan.transfer:
                 self._initial_transfer(plan.transfer, t0)
+            if snap is not None:
+                snap(n)
             record(n, t)
             check(n, t)
             if n < n_steps:

@@ -1,0 +1,238 @@
+"""The learning loop's local stability along a flight (docs/stability.md,
+"Along the flight").
+
+Every ``every`` seconds of a mission the run is frozen (the master's
+snapshots: every FMU's state, :class:`cosim.master.Snapshot`) and the
+closed loop is linearized there from the FMUs themselves
+(:func:`~.fmu_loop.snapshot_loop`: the plant held over the controller's
+period, the controller's one-period map with its learned FNN state as part
+of its discrete state). Two readings of the same linearization:
+
+* **learning on**: the whole loop, the learning law's step linearized with
+  the rest. Under the paper's sign law (phi = 0) the step is not
+  differentiable where a sliding variable tau_c crosses 0; elsewhere
+  sgn(tau_c) is locally constant, so this is the loop with the *sign
+  frozen*. The controller's error estimate (relative, :attr:`FlightPoint.error`)
+  says where the differences straddled a switch and the reading has no
+  meaning. With the boundary layer (phi > 0) the law is smooth inside the
+  layer and the reading is its linearization.
+* **learning held**: the learned FNN state held at its value (removed from
+  the loop's state): the flight modes of the PD + FNN controller as learned
+  at that moment, defined whatever the law.
+
+The spectral radius (largest |eigenvalue|, inert states left out) < 1 is
+local stability of the sampled loop at that moment; the loop's operating
+point moves along the flight, so this is a frozen-time reading, checked
+against the nonlinear loop by a **perturbation check**: from the frozen
+state the co-simulation is resumed for ``check`` s twice (the plant started
+at its state then, plus ``delta`` for the second), and the growth of the
+plant-state difference is compared with the linear loop's prediction
+``C A^n (delta, 0)``, both as a rate ln(gain)/check (1/s).
+
+The study is one :mod:`cosim.study` per mission (cases: variant x law), run
+by :func:`~quadrotor_paper.experiments.measure`, so on Dask like every
+multi-run command; the metric, :class:`AlongFlight`, asks the runner for
+the snapshots.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from cosim.scenario import Scenario, build_master
+
+from ..missions import controller_variant
+from .fmu_loop import FmuLoop, snapshot_loop
+from .operating_points import STATE_NAMES
+
+__all__ = ["FlightPoint", "FlightRadius", "AlongFlight", "along_flight", "along_flight_study", "flight_events",
+           "learned_state_names", "VARIANTS", "BOUNDARY_LAYER", "MISSIONS", "DELTA"]
+
+VARIANTS = ("pd", "pd+smc", "pd+lm", "pd+it2-smc", "pd+it2-lm")
+MISSIONS = ("circles", "figure8")
+# m/s: the layer docs/results.md found to remove the z limit cycle (docs/stability.md)
+BOUNDARY_LAYER = 0.2
+# the perturbation of the plant state (SI): a gust-sized velocity kick and a small roll
+DELTA = {"u": 0.05, "phi": 0.02}
+_PLANT, _CONTROLLER = "Quadrotor", "controller"
+
+
+@dataclass(frozen=True)
+class FlightPoint:
+    """One frozen moment ``time`` (s): ``radius`` (learning on), ``radius_held``
+    (learned state held), ``error`` (the controller map's error estimate
+    relative to its largest entry), ``tau_c_min`` (m/s, the smallest
+    |tau_c| of the three axes: how near a switch of the sign law),
+    ``linear_rate`` and ``nonlinear_rate`` (1/s, the perturbation check; NaN
+    where it was not made)."""
+
+    time: float
+    radius: float
+    radius_held: float
+    error: float
+    tau_c_min: float
+    linear_rate: float = math.nan
+    nonlinear_rate: float = math.nan
+
+
+@dataclass(frozen=True)
+class FlightRadius:
+    """The points of one run (mission, variant, boundary layer ``phi`` in m/s;
+    0 is the paper's sign law), its status and error."""
+
+    mission: str
+    variant: str
+    phi: float
+    status: str
+    error: str | None
+    points: tuple[FlightPoint, ...] = field(default_factory=tuple)
+
+    def column(self, name: str) -> np.ndarray:
+        return np.array([getattr(p, name) for p in self.points], dtype=float)
+
+    @property
+    def law(self) -> str:
+        return "sign law" if self.phi == 0 else f"boundary layer {self.phi:g} m/s"
+
+
+def learned_state_names(variant: str) -> list[str]:
+    """The controller FMU's locals that are the learned FNN state of ``variant``
+    (every axis; the velocity controller's memory is not learned)."""
+    from fnn_controller.position import fnn_state_size
+    from fnn_controller.step import state_ports
+    from fnn_controller.variants import variant as lookup
+
+    v = lookup(variant)
+    return [name for name, _, _ in state_ports(v)[:fnn_state_size(v)]]
+
+
+def _radius_held(loop: FmuLoop, held: Sequence[str]) -> float:
+    labels = list(loop.system.state_labels)
+    out = {labels.index(f"controller_{n}") for n in held}
+    keep = [i for i in loop.active if i not in out]
+    A = np.asarray(loop.system.A)[np.ix_(keep, keep)]
+    return float(np.max(np.abs(np.linalg.eigvals(A))))
+
+
+def _relative_error(loop: FmuLoop) -> float:
+    lin = loop.controller
+    scale = max(np.max(np.abs(m)) if m.size else 0.0 for m in (lin.A, lin.B, lin.C, lin.D))
+    return float(lin.error_estimate / scale) if scale > 0 else float(lin.error_estimate)
+
+
+@dataclass(frozen=True)
+class AlongFlight:
+    """A study metric (module level, picklable: it may run on a Dask
+    worker): :class:`FlightRadius` of the run, ``{"along_flight": ...}``.
+    Frozen every ``every`` s from ``every`` to the end less ``check``; the
+    perturbation check (``check`` s, ``delta``) at every point when
+    ``check`` > 0."""
+
+    every: float = 1.0
+    check: float = 1.0
+    delta: tuple[tuple[str, float], ...] = tuple(DELTA.items())
+
+    def snapshot_times(self, scenario: Scenario) -> list[float]:
+        h = scenario.step
+        last = scenario.start_time + scenario.duration - max(self.check, 0.0)
+        k = int(round(self.every / h))
+        if k < 1 or abs(k * h - self.every) > 1e-9 * self.every:
+            raise ValueError(f"along the flight every {self.every!r} s: not a whole number of steps of {h!r} s")
+        n_last = int(math.floor((last - scenario.start_time) / h + 1e-9))
+        return [scenario.start_time + n * h for n in range(k, n_last + 1, k)]
+
+    def __call__(self, scenario: Scenario, result) -> dict[str, Any]:
+        variant = controller_variant(scenario) or "pd"
+        phi = float(scenario.raw.get("controller", {}).get("position", {}).get("phi", [0.0])[0])
+        held = learned_state_names(variant)
+        points = []
+        master = build_master(scenario)
+        try:
+            paths = {f.name: f.path for f in master.fmus}
+            for snap in result.snapshots:
+                loop = snapshot_loop(snap, paths[_PLANT], paths[_CONTROLLER], _PLANT, _CONTROLLER)
+                tau_c = [abs(loop.controller.outputs[f"tau_c_{a}"]) for a in "xyz"]
+                rates = self._check(master, snap, loop, result.seed) if self.check > 0 else (math.nan, math.nan)
+                points.append(FlightPoint(snap.time, loop.spectral_radius, _radius_held(loop, held),
+                                          _relative_error(loop), float(min(tau_c)), *rates))
+        finally:
+            master.close()
+        return {"along_flight": FlightRadius(scenario.name, variant, phi, result.status, result.error, tuple(points))}
+
+    def _check(self, master, snap, loop: FmuLoop, seed: int) -> tuple[float, float]:
+        """(linear, nonlinear) rate of the perturbation ``delta`` over ``check`` s."""
+        h = master.step
+        n = int(round(self.check / h))
+        delta = dict(self.delta)
+        size = float(np.linalg.norm(list(delta.values())))
+        linear = np.linalg.norm(loop.propagate(delta, n)) / size
+        start = {k: v for k, v in loop.plant.operating_point.items() if k in loop.plant.system.state_labels}
+        restore = {k: v for k, v in snap.states.items() if k != _PLANT}
+
+        def final(kick: dict[str, float]) -> np.ndarray:
+            values = {f"{_PLANT}.{k}_0": v + kick.get(k, 0.0) for k, v in start.items()}
+            run = master.run(n * h, seed=seed, t0=snap.time, parameters=values, restore=restore,
+                             snapshots=[snap.time + n * h], raise_on_error=False)
+            if run.status != "ok" or not run.snapshots:
+                return np.full(len(STATE_NAMES), np.nan)
+            return np.array([run.snapshots[-1].outputs[f"{_PLANT}.{s}"] for s in STATE_NAMES])
+
+        nonlinear = np.linalg.norm(final(delta) - final({})) / size
+        return math.log(linear) / self.check, math.log(nonlinear) / self.check
+
+
+def along_flight(scenario: Scenario, metric: AlongFlight = AlongFlight()) -> FlightRadius:
+    """One run of ``scenario`` frozen along its flight, in this process."""
+    master = build_master(scenario)
+    try:
+        result = master.run(scenario.duration, seed=scenario.seed, t0=scenario.start_time, raise_on_error=False,
+                            snapshots=metric.snapshot_times(scenario))
+    finally:
+        master.close()
+    return metric(scenario, result)["along_flight"]
+
+
+def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[str] = VARIANTS,
+                       phis: Sequence[float] = (0.0, BOUNDARY_LAYER), metric: AlongFlight = AlongFlight(),
+                       workers: int = 1, overrides: dict[str, Any] | None = None) -> list[FlightRadius]:
+    """Every mission x variant x law (``phis``, m/s; 0 the sign law), one study per
+    mission run by :func:`~quadrotor_paper.experiments.measure`; ``overrides``
+    (dotted keys) set for every run, e.g. a shorter ``simulation.duration``."""
+    from cosim.study import parse_study
+
+    from ..experiments import measure
+
+    out = []
+    for mission in missions:
+        cases = {f"{v} / phi {phi:g}": {"set": {**dict(overrides or {}), "controller.variant": v,
+                                               "controller.position.phi": [float(phi)] * 3}}
+                 for v in variants for phi in phis}
+        study = parse_study({"scenario": mission, "name": f"along_flight_{mission}", "cases": cases})
+        rows = measure(study, workers=workers, metrics=metric, metric_names=()).rows
+        order = {name: i for i, name in enumerate(cases)}
+        rows = sorted(rows, key=lambda r: order[r["case"]])
+        out += [row["along_flight"] if "along_flight" in row else
+                FlightRadius(mission, "?", math.nan, row.get("status", "failed"), row.get("error")) for row in rows]
+    return out
+
+
+def flight_events(scenario: Scenario) -> list[tuple[float, str]]:
+    """The moments to mark along ``scenario``'s flight (s, label): the gust's
+    reversals and, for the two circles, the change of circle; for the
+    figure-8, each crossing of its centre."""
+    from ..trajectories import make_trajectory
+
+    raw = scenario.raw
+    end = scenario.start_time + scenario.duration
+    events = [(float(t), "gust reverses") for t in raw.get("wind", {}).get("switch_times", []) if 0 < t < end]
+    spec = dict(raw.get("trajectory", {}))
+    kind = spec.pop("kind", None)
+    if kind == "two_circles":
+        events.append((make_trajectory(kind, **spec).path_time / 2, "second circle"))
+    elif kind == "figure_eight":
+        half = make_trajectory(kind, **spec).lap_time / 2
+        events += [(k * half, "crossing") for k in range(1, int(end / half) + 1)]
+    return sorted(events)

@@ -1,0 +1,80 @@
+"""The learning loop frozen along a flight (quadrotor_paper.stability.along_flight):
+a snapshot of a run linearized from the FMUs is the trimmed loop where the
+run is at trim, the linear loop predicts the co-simulated decay of a
+perturbation for the PD, and the study runs every case through the one
+study runner."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.scenario import build_master, load_scenario
+from quadrotor_paper.stability import hover
+from quadrotor_paper.stability.along_flight import (AlongFlight, along_flight, along_flight_study, flight_events,
+                                                    learned_state_names)
+from quadrotor_paper.stability.fmu_loop import fmu_closed_loop, snapshot_loop
+
+HOVER = {"trajectory": {"kind": "hover", "x": 0.0, "y": 0.0, "z": -15.0}, "wind.speed": 0.0,
+         "simulation.duration": 20.0}
+
+
+def test_a_snapshot_of_a_settled_hover_is_the_trimmed_hover_loop():
+    """PD hovering in still air for 15 s has settled at the trim point: the
+    loop from its snapshot (plant state read from its FMU state, controller
+    at its FMU state, inputs as they were) is fmu_closed_loop(hover())."""
+    scenario = load_scenario("circles", {**HOVER, "controller.variant": "pd"})
+    with build_master(scenario) as master:
+        snap = master.run(20.0, snapshots=[15.0]).snapshots[0]
+        paths = {f.name: f.path for f in master.fmus}
+    frozen = snapshot_loop(snap, paths["Quadrotor"], paths["controller"])
+    trimmed = fmu_closed_loop(hover(), "pd")
+    assert frozen.spectral_radius == pytest.approx(trimmed.spectral_radius, abs=1e-9)
+    np.testing.assert_allclose(np.sort(np.abs(frozen.poles)), np.sort(np.abs(trimmed.poles)), atol=1e-8)
+    assert frozen.plant.operating_point["z"] == pytest.approx(-15.0, abs=1e-6)
+
+
+def test_along_the_circles_the_pd_loop_is_stable_and_the_linear_decay_is_the_co_simulated_one():
+    scenario = load_scenario("circles", {"controller.variant": "pd", "simulation.duration": 12.0})
+    flight = along_flight(scenario, AlongFlight(every=5.0))
+    assert flight.status == "ok" and [p.time for p in flight.points] == [5.0, 10.0]
+    for p in flight.points:
+        assert p.radius < 0.98 and p.radius_held == p.radius  # a PD learns nothing
+        assert p.error < 1e-4
+        assert p.linear_rate < -1.0 and p.nonlinear_rate == pytest.approx(p.linear_rate, abs=0.05)
+
+
+def test_learning_on_and_learning_held_are_two_readings_of_the_same_loop():
+    """PD+LM with the boundary layer at 10 s of the circles: with the learned
+    state held the flight modes are the PD's (< 1); with learning on, the
+    learned widths add modes at |z| about 1 (the laws integrate)."""
+    scenario = load_scenario("circles", {"controller.variant": "pd+lm", "controller.position.phi": [0.2] * 3,
+                                         "simulation.duration": 12.0})
+    p = along_flight(scenario, AlongFlight(every=10.0, check=1.0)).points[0]
+    assert p.radius_held < 0.98
+    assert abs(p.radius - 1.0) < 1e-3
+    assert math.isfinite(p.linear_rate) and math.isfinite(p.nonlinear_rate)
+
+
+def test_the_study_runs_every_case_through_the_study_runner_in_case_order():
+    flights = along_flight_study(missions=("circles",), variants=("pd", "pd+lm"), phis=(0.0, 0.2),
+                                 metric=AlongFlight(every=2.0, check=0.0), overrides={"simulation.duration": 4.0})
+    assert [(f.variant, f.phi) for f in flights] == [("pd", 0.0), ("pd", 0.2), ("pd+lm", 0.0), ("pd+lm", 0.2)]
+    for f in flights:
+        assert f.status == "ok" and [p.time for p in f.points] == [2.0, 4.0]
+        assert all(math.isnan(p.linear_rate) for p in f.points)  # check = 0: no perturbation check
+
+
+def test_flight_events_and_learned_state_names():
+    assert flight_events(load_scenario("circles")) == [(17.0, "gust reverses"), (pytest.approx(25.2122, abs=1e-4),
+                                                                                  "second circle"), (34.0, "gust reverses")]
+    crossings = flight_events(load_scenario("figure8"))
+    assert {label for _, label in crossings} == {"crossing"} and crossings[0][0] == pytest.approx(8.8858, abs=1e-4)
+    names = learned_state_names("pd+lm")
+    assert "f_11_x" in names and "sigma2_3_z" in names and not any(n.startswith("R_ref") for n in names)
+
+
+def test_snapshot_times_must_be_whole_steps():
+    with pytest.raises(ValueError, match=r"every 0\.015 s: not a whole number of steps of 0\.01 s"):
+        AlongFlight(every=0.015).snapshot_times(load_scenario("circles"))
