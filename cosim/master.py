@@ -25,6 +25,10 @@ master binds it and runs it in one of two loops that execute the same plan:
 its Python loop, or, when the plan evaluates only FMUs, the compiled loop of
 :mod:`cosim.kernel`; both give the same results bit for bit.
 
+A run can be frozen at chosen points (``snapshots``: every FMU's state and
+every signal, :class:`Snapshot`) and resumed from one (``restore``);
+``docs/cosim.md``, "Snapshots and resuming a run".
+
 The loop holds no clock: ``run(..., profile=True)`` wraps each phase (the FMU
 exchange, each Python component, recording, the guard) in a timer before the
 loop starts (in the Python loop), and the result's ``phase_times`` says where

@@ -14,7 +14,9 @@ Subcommands::
     fnn-cosim build-fmu [--out DIR]
     fnn-cosim linearize FMU|MODEL [--fmi 2|3] [--parameter N=V ...] [--input N=V ...] [--start N=V ...]
                  [--method auto|derivatives|differences] [--interface auto|me|cs] [--bode IN:OUT ...] [--out DIR]
-    fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim]
+    fnn-cosim linearize INSTANCE --scenario SCENARIO --time T [--set KEY=VALUE ...] [--bode IN:OUT ...] [--out DIR]
+    fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim] [--along-every S]
+                 [--workers N]
 
 SCENARIO is a TOML file or the name of a shipped scenario (``circles``, ``circles_sensors``,
 ``figure8``); STUDY a study file (``docs/studies.md``) or the name of a
@@ -332,21 +334,62 @@ def _named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
     return out
 
 
+def _operating_point_of_run(args) -> tuple[Path, dict[str, Any]]:
+    """``--scenario S --time T``: fly S to T, take its snapshot there and
+    return the FMU file of instance ``args.fmu`` with its operating point
+    (its FMU state, its inputs and parameters then, as keyword arguments of
+    ``linearize_fmu``)."""
+    import math
+
+    from cosim.errors import ScenarioError
+    from cosim.scenario import build_master, load_scenario
+
+    if args.parameter:
+        raise ScenarioError("--parameter: with --scenario the parameters are the run's; set them with --set")
+    scenario = load_scenario(args.scenario, _overrides(args.set))
+    t0, h = scenario.start_time, scenario.step
+    end = t0 + scenario.duration
+    t = args.time
+    n = round((t - t0) / h) if t is not None and math.isfinite(t) else -1
+    if t is None or not 0 <= n * h <= end - t0 + 1e-9 * h or abs(t0 + n * h - t) > 1e-9 * max(1.0, abs(t)):
+        raise ScenarioError(f"--time {t!r}: expected a communication point of {scenario.name} in [{t0:g}, {end:g}] s "
+                            f"(a whole number of steps of {h:g} s)")
+    with build_master(scenario) as master:
+        names = [f.name for f in master.fmus]
+        if args.fmu not in names:
+            raise ScenarioError(f"linearize {args.fmu!r}: no FMU instance of that name in {scenario.name} "
+                                f"(its FMUs: {', '.join(names)})")
+        result = master.run(max(n, 1) * h, seed=scenario.seed, t0=t0, snapshots=[t0 + n * h], raise_on_error=False)
+        path = Path(master.components[args.fmu].path)
+    if not result.snapshots:
+        raise ScenarioError(f"--time {t!r}: the run of {scenario.name} {result.status} before it: {result.error}")
+    snap = result.snapshots[0]
+    return path, dict(inputs=snap.inputs_of(args.fmu), parameters=snap.parameters[args.fmu],
+                      fmu_state=snap.states[args.fmu], t=snap.time)
+
+
 def _cmd_linearize(args) -> int:
     """Linearize an FMU file or a registered model (built as FMI ``--fmi``) at
-    the operating point given; write the system, its poles and Bode plots."""
+    the operating point given, or an FMU instance of a scenario at time
+    ``--time`` of its run; write the system, its poles and Bode plots."""
     from cosim import registry
     from cosim.errors import ScenarioError
     from cosim.linearize import LinearizationError, linearize_fmu, save_linearization
 
     models = registry.fmu_models()
-    if Path(args.fmu).exists():
-        path = Path(args.fmu)
-    elif args.fmu in models:
-        path = models[args.fmu].build(args.fmi)
+    if args.scenario is not None or args.time is not None:
+        if args.scenario is None:
+            raise ScenarioError("--time: give the run's scenario with --scenario")
+        path, point = _operating_point_of_run(args)
     else:
-        raise ScenarioError(f"linearize {args.fmu!r}: no such FMU file, and no model of that name "
-                            f"(models: {', '.join(models)})")
+        if Path(args.fmu).exists():
+            path = Path(args.fmu)
+        elif args.fmu in models:
+            path = models[args.fmu].build(args.fmi)
+        else:
+            raise ScenarioError(f"linearize {args.fmu!r}: no such FMU file, and no model of that name "
+                                f"(models: {', '.join(models)})")
+        point = dict(parameters=_named_values(args.parameter, "--parameter"))
     pairs = []
     for pair in args.bode:
         i, colon, o = pair.partition(":")
@@ -355,10 +398,9 @@ def _cmd_linearize(args) -> int:
         pairs.append((i, o))
     out = _out_folder(args.out, DEFAULT_OUT / "linearize")
     try:
-        lin = linearize_fmu(path, start=_named_values(args.start, "--start"),
-                            inputs=_named_values(args.input, "--input"),
-                            parameters=_named_values(args.parameter, "--parameter"), method=args.method,
-                            interface=args.interface)
+        point["inputs"] = point.get("inputs", {}) | _named_values(args.input, "--input")
+        lin = linearize_fmu(path, start=_named_values(args.start, "--start"), method=args.method,
+                            interface=args.interface, **point)
         written = save_linearization(lin, out, pairs, stem=path.stem)
     except LinearizationError as exc:
         raise ScenarioError(str(exc)) from None
@@ -537,7 +579,8 @@ def _parser() -> argparse.ArgumentParser:
 
     lz = sub.add_parser("linearize", help="linearize an FMU (Model Exchange, or a sampled-data Co-Simulation "
                         "FMU's step): system (.npz, .json), poles, Bode plots")
-    lz.add_argument("fmu", help="an FMU file, or the name of a model fnn-cosim builds (e.g. Quadrotor, ControllerPDLM)")
+    lz.add_argument("fmu", help="an FMU file, or the name of a model fnn-cosim builds (e.g. Quadrotor, ControllerPDLM); "
+                    "with --scenario, an FMU instance of the scenario (e.g. Quadrotor, controller)")
     lz.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
     lz.add_argument("--parameter", action="append", default=[], metavar="NAME=VALUE", help="a parameter (repeatable)")
     lz.add_argument("--input", action="append", default=[], metavar="NAME=VALUE", help="an input (repeatable)")
@@ -546,6 +589,12 @@ def _parser() -> argparse.ArgumentParser:
     lz.add_argument("--method", choices=("auto", "derivatives", "differences"), default="auto")
     lz.add_argument("--interface", choices=("auto", "me", "cs"), default="auto")
     lz.add_argument("--bode", action="append", default=[], metavar="INPUT:OUTPUT", help="a Bode plot (repeatable)")
+    lz.add_argument("--scenario", default=None, metavar="NAME|FILE",
+                    help="take the operating point from a run of this scenario at --time: the instance's FMU state, "
+                         "inputs and parameters then")
+    lz.add_argument("--time", type=float, default=None, metavar="T", help="the run's time (s) for --scenario")
+    lz.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a value of --scenario (repeatable)")
     lz.add_argument("--out", default=None, help="output directory (default results/linearize)")
     lz.set_defaults(func=_cmd_linearize)
 

@@ -48,8 +48,8 @@ from ..missions import controller_variant
 from .fmu_loop import FmuLoop, snapshot_loop
 from .operating_points import STATE_NAMES
 
-__all__ = ["FlightPoint", "FlightRadius", "AlongFlight", "along_flight", "along_flight_study", "flight_events",
-           "learned_state_names", "VARIANTS", "BOUNDARY_LAYER", "MISSIONS", "DELTA"]
+__all__ = ["FlightPoint", "FlightRadius", "AlongFlight", "along_flight", "along_flight_study", "flight_events", "verdict", "write_points",
+           "learned_state_names", "VARIANTS", "BOUNDARY_LAYER", "MISSIONS", "DELTA", "NEUTRAL_RATE"]
 
 VARIANTS = ("pd", "pd+smc", "pd+lm", "pd+it2-smc", "pd+it2-lm")
 MISSIONS = ("circles", "figure8")
@@ -207,9 +207,10 @@ def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[st
 
     out = []
     for mission in missions:
+        # the PD learns nothing: its loop does not depend on the boundary layer
         cases = {f"{v} / phi {phi:g}": {"set": {**dict(overrides or {}), "controller.variant": v,
                                                "controller.position.phi": [float(phi)] * 3}}
-                 for v in variants for phi in phis}
+                 for v in variants for phi in (phis if v != "pd" else phis[:1])}
         study = parse_study({"scenario": mission, "name": f"along_flight_{mission}", "cases": cases})
         rows = measure(study, workers=workers, metrics=metric, metric_names=()).rows
         order = {name: i for i, name in enumerate(cases)}
@@ -236,3 +237,54 @@ def flight_events(scenario: Scenario) -> list[tuple[float, str]]:
         half = make_trajectory(kind, **spec).lap_time / 2
         events += [(k * half, "crossing") for k in range(1, int(end / half) + 1)]
     return sorted(events)
+
+
+# 1/s: a mode growing at most this fast, ln|z| / dt, is neutral (a learning law's
+# integrator: at most a factor e^0.5 = 1.65 over a 50 s mission), not an instability
+NEUTRAL_RATE = 0.01
+
+
+def _where(f: FlightRadius, values: np.ndarray, dt: float) -> str:
+    i = int(np.argmax(values))
+    rate = math.log(values[i]) / dt
+    return f"max {values[i]:.4f} ({rate:+.3g} 1/s) at {f.points[i].time:g} s"
+
+
+def verdict(f: FlightRadius, dt: float = 0.01) -> dict[str, str]:
+    """One line each for the learning held, the learning on and the
+    perturbation check of a flight (the report's and docs/stability.md's
+    words); ``dt`` the controller's period (s), for the growth rates ln|z|/dt."""
+    if not f.points:
+        return {"held": f"no point ({f.status}: {f.error})", "on": "–", "check": "–"}
+    n = len(f.points)
+    held, on = f.column("radius_held"), f.column("radius")
+    out = {}
+    bad = int(np.sum(held >= 1.0))
+    out["held"] = (f"stable at all {n} points ({_where(f, held, dt)})" if bad == 0 else
+                   f"UNSTABLE at {bad} of {n} points ({_where(f, held, dt)})")
+    grow = int(np.sum(np.log(on) / dt > NEUTRAL_RATE))
+    if np.all(on < 1.0):
+        out["on"] = f"stable at all {n} points ({_where(f, on, dt)})"
+    elif grow == 0:
+        out["on"] = (f"neutral: learning modes at abs(z) = 1 + {np.max(on) - 1:.1e} at most "
+                     f"(growth <= {NEUTRAL_RATE:g} 1/s), the rest stable")
+    else:
+        out["on"] = f"UNSTABLE at {grow} of {n} points ({_where(f, on, dt)})"
+    diff = np.abs(f.column("linear_rate") - f.column("nonlinear_rate"))
+    diff = diff[np.isfinite(diff)]
+    out["check"] = (f"rates differ by median {np.median(diff):.3f} 1/s, max {np.max(diff):.3f} 1/s"
+                    if diff.size else "not made")
+    return out
+
+
+def write_points(flights: Sequence[FlightRadius], path) -> None:
+    """Every point of every flight as CSV (one row per mission, variant, law, time)."""
+    import csv
+
+    names = [f.name for f in FlightPoint.__dataclass_fields__.values()]
+    with open(path, "w", newline="", encoding="utf-8") as out:
+        writer = csv.writer(out)
+        writer.writerow(["mission", "variant", "phi_mps"] + names)
+        for f in flights:
+            for p in f.points:
+                writer.writerow([f.mission, f.variant, f.phi] + [repr(getattr(p, n)) for n in names])

@@ -13,7 +13,8 @@ __all__ = ["add_parser", "run", "main"]
 
 DEFAULT_OUT = "results/stability"
 _DESCRIPTION = ("Linear stability report of the PD baseline (poles, margins, Bode/Nyquist/pole-zero plots, "
-                "kp-kd sweep, ramp error), checked against the co-simulation; see docs/stability.md.")
+                "kp-kd sweep, ramp error), checked against the co-simulation, and the learning loop of every "
+                "variant linearized along the circles and figure-8 missions; see docs/stability.md.")
 
 
 def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -27,7 +28,12 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--wind", type=float, default=3.0,
                         help="steady wind of the third operating point, m/s, along [-1, -1, 0] (default 3)")
     parser.add_argument("--no-cosim", action="store_true",
-                        help="linear analysis only: skip the co-simulation checks and the finite-time runs")
+                        help="linear analysis only: skip the co-simulation checks, the finite-time runs and the "
+                             "learning loop along the flight")
+    parser.add_argument("--along-every", type=float, default=1.0,
+                        help="freeze the learning loop every this many seconds of each mission (default 1; 0 skips it)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="Dask worker processes for the runs (default: one per core; 1 runs in this process)")
     return parser
 
 
@@ -58,12 +64,15 @@ def _checked(args: argparse.Namespace) -> None:
         feedforward: Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0.0, le=1.0)] = 0.0
         speed: Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0.0, le=10.0)] = 2.5  # m/s: trimmed flight
         wind: Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0.0, le=10.0)] = 3.0  # m/s
+        along_every: Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0.0, le=60.0)] = 1.0  # s
+        workers: Annotated[int, Field(strict=True, ge=1)] = None
 
-    given = {k: getattr(args, k) for k in ("kp", "kd", "feedforward", "speed", "wind") if getattr(args, k) is not None}
+    names = ("kp", "kd", "feedforward", "speed", "wind", "along_every", "workers")
+    given = {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
     try:
         validate(Arguments, given)
     except ScenarioError as exc:  # named as the command line names them
-        raise ScenarioError(f"--{exc}") from None
+        raise ScenarioError(f"--{str(exc).replace('along_every', 'along-every')}") from None
     output_folder(args.out)
 
 
@@ -72,8 +81,12 @@ def run(args: argparse.Namespace) -> int:
     from .study import run_stability_analysis
 
     _checked(args)
+    import os
+
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     study = run_stability_analysis(args.out, speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
-                                   cosim=not args.no_cosim, feedforward=args.feedforward)
+                                   cosim=not args.no_cosim, feedforward=args.feedforward,
+                                   along_every=args.along_every, workers=workers)
     for a in study.analyses:
         p = a.poles["discrete"]
         outer = min(m.gain_margin for m in a.margins["discrete"] if m.loop.startswith("outer"))
@@ -88,6 +101,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"feed-forward {case.feedforward:g}: ramp lag linear {case.ramp.linear_discrete:.4f} m, "
               f"trim {case.ramp.trim:.4f} m" + (f", co-simulation {cosim:.4f} m" if cosim is not None else "")
               + f"; circle RMS {case.circle.rms:.4f} m; outer GM >= {min(case.outer_gain_margin.values()):.3g}")
+    if study.along_flight:
+        from .along_flight import verdict
+
+        for f in study.along_flight:
+            v = verdict(f, study.dt)
+            print(f"along {f.mission}, {f.variant}, {f.law}: learning held {v['held']}; learning on {v['on']}")
     print(f"report: {study.report_path}")
     return 0
 

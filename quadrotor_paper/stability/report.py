@@ -195,6 +195,58 @@ def _figure_finite_time(study):
     return fig
 
 
+def _figure_along_flight(study):
+    """Spectral radius along each mission (rows): learning on under the sign
+    law, learning on with the boundary layer, learning held (columns); the
+    gust's reversals and the trajectory's changes marked."""
+    missions = list(dict.fromkeys(f.mission for f in study.along_flight))
+    variants = list(dict.fromkeys(f.variant for f in study.along_flight))  # one colour per variant
+    readings = (("radius", 0.0, "learning on, sign law (sign frozen)"),
+                ("radius", None, "learning on, boundary layer"),
+                ("radius_held", 0.0, "learning held (FNN as learned)"))
+    fig, axes = plt.subplots(len(missions), 3, figsize=(15, 3.6 * len(missions)), sharex="row", squeeze=False)
+    for row, mission in zip(axes, missions):
+        for ax, (column, phi, title) in zip(row, readings):
+            for f in study.along_flight:
+                if f.mission == mission and f.points and ((f.phi == 0) if phi == 0.0 else (f.phi > 0)):
+                    ax.plot(f.column("time"), f.column(column), color=f"C{variants.index(f.variant)}", lw=1.2,
+                            label=f.variant)
+            ax.axhline(1.0, color="k", lw=0.8)
+            for t, label in study.flight_events.get(mission, []):
+                ax.axvline(t, color="0.5", ls="--", lw=0.8)
+                ax.annotate(label, (t, 1.0), xycoords=("data", "axes fraction"), rotation=90, va="top", ha="right",
+                            fontsize=7, color="0.4")
+            ax.set_title(f"{mission}: {title}", fontsize=9)
+            ax.set_ylabel("spectral radius")
+            ax.grid(True, alpha=0.3)
+        row[-1].set_xlabel("t (s)")
+    handles = {h.get_label(): h for ax in axes.flat for h in ax.get_lines() if not h.get_label().startswith("_")}
+    axes[0, 0].legend(handles.values(), handles.keys(), fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _figure_perturbation(study):
+    """The perturbation check: the co-simulated decay rate of a small
+    perturbation over 1 s against the linear loop's, every point, per law."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5), squeeze=False)
+    variants = list(dict.fromkeys(f.variant for f in study.along_flight))
+    for ax, (law, pick) in zip(axes[0], (("sign law", lambda f: f.phi == 0), ("boundary layer", lambda f: f.phi > 0))):
+        for f in (f for f in study.along_flight if f.points and pick(f)):
+            k = variants.index(f.variant)
+            ax.plot(f.column("linear_rate"), f.column("nonlinear_rate"), "o" if f.mission == "circles" else "x",
+                    color=f"C{k}", ms=3, label=f"{f.variant}, {f.mission}")
+        lo, hi = ax.get_xlim()
+        ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
+        ax.set_xlabel("linear loop: ln(gain)/1 s (1/s)")
+        ax.set_ylabel("co-simulation: ln(gain)/1 s (1/s)")
+        ax.set_title(f"Perturbation check, {law}", fontsize=9)
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    return fig
+
+
 def make_figures(study, out_dir: Path) -> dict[str, Path]:
     """Write every figure into ``out_dir``; returns name -> path.
 
@@ -219,6 +271,9 @@ def make_figures(study, out_dir: Path) -> dict[str, Path]:
         _save(_figure_gains(study), out, "gains_across_the_boundary", figures)
     if study.runs:
         _save(_figure_finite_time(study), out, "finite_time", figures)
+    if any(f.points for f in study.along_flight):
+        _save(_figure_along_flight(study), out, "along_flight", figures)
+        _save(_figure_perturbation(study), out, "perturbation_check", figures)
     return figures
 
 
@@ -434,17 +489,44 @@ def _section_finite_time(study) -> list[str]:
                    [_finite_time_row(c) for c in study.finite_time]), ""]
 
 
+def _section_along_flight(study) -> list[str]:
+    """The learning loop frozen along the missions (:mod:`.along_flight`):
+    one row per mission, variant and law, and what it says of the paper's claim."""
+    if not study.along_flight:
+        return []
+    from .along_flight import DELTA, verdict
+
+    rows = []
+    for f in study.along_flight:
+        v = verdict(f, study.dt)
+        rows.append([f.mission, f.variant, f.law, str(len(f.points)), v["held"], v["on"], v["check"]])
+    kick = ", ".join(f"{k} + {v:g}" for k, v in DELTA.items())
+    return ["## The learning loop along the flight", "",
+            "Every second of each mission, plant and controller are frozen (their FMU states) and the closed loop "
+            "is linearized from the FMUs: the plant held over the controller's period (ZOH), the controller's "
+            "one-period map with its learned FNN state as part of its state. *Learning held*: the FNN as learned "
+            "at that moment, its state held (the flight modes). *Learning on*: the learning step linearized with "
+            "the rest; under the paper's sign law this is the loop with sgn(tau_c) frozen (the step has no "
+            "derivative where tau_c crosses 0), with the boundary layer the smooth law's. The spectral radius "
+            "(largest abs(z); in brackets the growth rate ln(abs(z))/dt) < 1 is local stability at that moment. Perturbation check: from each frozen state the "
+            f"co-simulation is resumed for 1 s with the plant's state {kick} (SI) and without; the growth of the "
+            "difference against the linear loop's prediction, as rates ln(gain)/1 s.", "",
+            _table(["mission", "variant", "law", "points", "learning held", "learning on", "perturbation check"],
+                   rows), ""]
+
+
 def _section_figures(figures: dict[str, Path]) -> list[str]:
     """The list of figure files; the gain sweep and the steps shown inline."""
     return (["## Figures", ""]
-            + [f"* `{p.name}`" + (f"\n\n  ![{name}]({p.name})" if name in ("gain_sweep", "steps_linear_vs_nonlinear")
+            + [f"* `{p.name}`" + (f"\n\n  ![{name}]({p.name})" if name in ("gain_sweep", "steps_linear_vs_nonlinear",
+                                                                         "along_flight")
                                   else "") for name, p in figures.items()]
             + [""])
 
 
 _SECTIONS = (_section_title, _section_loop_structure, _section_operating_points, _section_poles,
              _section_margins, _section_gain_sweep, _section_ramp, _section_feedforward, _section_cosim_steps, _section_cosim_gains,
-             _section_finite_time)
+             _section_finite_time, _section_along_flight)
 
 
 def _markdown(study, figures: dict[str, Path]) -> str:
@@ -459,6 +541,10 @@ def write_report(study, out_dir: str | Path) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     study.figures = make_figures(study, out)
+    if study.along_flight:
+        from .along_flight import write_points
+
+        write_points(study.along_flight, out / "along_flight.csv")
     path = out / "stability.md"
     path.write_text(_markdown(study, study.figures), encoding="utf-8")
     study.report_path = path

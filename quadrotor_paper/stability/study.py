@@ -59,6 +59,8 @@ class StabilityStudy:
     gain_checks: list[GainCheck] = field(default_factory=list)
     runs: list[Recording] = field(default_factory=list)
     finite_time: list[AxisClaims] = field(default_factory=list)
+    along_flight: list = field(default_factory=list)  # FlightRadius, every mission x variant x law
+    flight_events: dict[str, list[tuple[float, str]]] = field(default_factory=dict)  # mission -> (t, label)
     report_path: Path | None = None
     figures: dict[str, Path] = field(default_factory=dict)
 
@@ -72,7 +74,7 @@ class StabilityStudy:
 def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.01, kp: float | None = None,
                     kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
                     geometric: GeometricParams = GeometricParams(), feedforward: float = 0.0,
-                    feedforward_gains=(0.0, 1.0)) -> StabilityStudy:
+                    feedforward_gains=(0.0, 1.0), along_every: float = 1.0, workers: int = 1) -> StabilityStudy:
     """Run every analysis.
 
     Parameters
@@ -86,8 +88,11 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
         the paper's law; ``PositionParams.feedforward``).
     feedforward_gains : the gains compared side by side (poles, margins,
         ramp and circle error; with ``cosim`` the co-simulated ramp lag too).
-    cosim : also run the co-simulation checks (steps, gains, ramp, mission)
-        and the finite-time runs of :mod:`quadrotor_paper.learning_claims`.
+    cosim : also run the co-simulation checks (steps, gains, ramp, mission),
+        the finite-time runs of :mod:`quadrotor_paper.learning_claims` and the
+        learning loop along the missions (:mod:`.along_flight`, frozen every
+        ``along_every`` s; 0 skips it).
+    workers : Dask worker processes of the studies (1: in this process).
     sweep_kp, sweep_kd : the grid of the gain sweep.
     """
     position = PositionParams()
@@ -113,8 +118,17 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
                              for f in GAIN_FACTORS]
         study.ramp_nonlinear = ramp_lag(hover, speed, dt=dt)[0]
         study.mission_rmse = pd_mission_rmse()
-        study.runs = default_runs(kp=kp, kd=kd)
+        study.runs = default_runs(kp=kp, kd=kd, workers=workers)
         study.finite_time = [evaluate_claims(run, a) for run in study.runs for a in range(3)]
+        if along_every > 0:
+            from cosim.scenario import load_scenario
+
+            from .along_flight import MISSIONS, AlongFlight, along_flight_study, flight_events
+
+            gains = {f"controller.position.{k}": float(v) for k, v in (("kp", kp), ("kd", kd)) if v is not None}
+            study.along_flight = along_flight_study(metric=AlongFlight(every=along_every), workers=workers,
+                                                    overrides=gains)
+            study.flight_events = {m: flight_events(load_scenario(m)) for m in MISSIONS}
     return study
 
 

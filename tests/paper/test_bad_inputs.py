@@ -99,6 +99,8 @@ def test_a_fifo_is_no_study(sandbox, capsys):
     (["stability", "--kp", "0", "--no-cosim"], "--kp = 0.0: must be positive"),
     (["stability", "--speed", "nan", "--no-cosim"], "--speed = nan: expected a finite number"),
     (["stability", "--wind", "inf", "--no-cosim"], "--wind = inf: expected a finite number"),
+    (["stability", "--along-every", "-1", "--no-cosim"], "--along-every = -1.0: must not be negative"),
+    (["stability", "--workers", "0", "--no-cosim"], "--workers = 0: must be at least 1"),
     (["run", "circles", "--set", "simulation.duration"], "--set 'simulation.duration': expected KEY=VALUE"),
     (["run", "circles", "--set", 'envelope."Quadrotor.phi=[1'], "not a dotted key"),
     (["run", "circles", "--seed", "-1"], "simulation.seed = -1: must not be negative"),

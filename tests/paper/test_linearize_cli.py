@@ -57,6 +57,46 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
     assert words in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["linearize", "Quadrotor", "--scenario", "circles", "--time", "1.005"], "--time 1.005: expected a communication point"),
+    (["linearize", "Quadrotor", "--scenario", "circles", "--time", "60"], "--time 60.0: expected a communication point"),
+    (["linearize", "Plant", "--scenario", "circles", "--time", "1"], "no FMU instance of that name in circles"),
+    (["linearize", "Quadrotor", "--time", "1"], "--time: give the run's scenario with --scenario"),
+    (["linearize", "Quadrotor", "--scenario", "circles", "--time", "1", "--parameter", "m=1"], "--parameter: with "),
+])
+def test_bad_scenario_times_and_instances_are_one_line_and_exit_2(tmp_path, capsys, argv, words):
+    assert main(argv + ["--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1
+
+
+def test_linearize_an_instance_of_a_run_at_time_t_is_the_snapshots_linearization(tmp_path, capsys):
+    """``--scenario S --time T``: the controller FMU at its state, inputs and
+    parameters at T of the run, the same map as linearize_fmu on the
+    master's snapshot; the plant at its state then (z of the run, not z_0)."""
+    from cosim.linearize import linearize_fmu
+    from cosim.scenario import build_master, load_scenario
+
+    sets = ["--set", "simulation.duration=3.0", "--set", "controller.variant=pd+lm"]
+    assert main(["linearize", "controller", "--scenario", "circles", "--time", "2.5", "--out", str(tmp_path / "c")]
+                + sets) == 0
+    assert main(["linearize", "Quadrotor", "--scenario", "circles", "--time", "2.5", "--out", str(tmp_path / "p")]
+                + sets) == 0
+    assert "85 states" in capsys.readouterr().out
+    scenario = load_scenario("circles", {"simulation.duration": 3.0, "controller.variant": "pd+lm"})
+    with build_master(scenario) as master:
+        snap = master.run(3.0, snapshots=[2.5]).snapshots[0]
+        path = master.components["controller"].path
+    lin = linearize_fmu(path, inputs=snap.inputs_of("controller"), parameters=snap.parameters["controller"],
+                        fmu_state=snap.states["controller"], t=2.5)
+    saved = np.load(tmp_path / "c" / "ControllerPDLM.npz")
+    np.testing.assert_array_equal(saved["A"], lin.A)
+    np.testing.assert_array_equal(saved["D"], lin.D)
+    plant = json.loads((tmp_path / "p" / "Quadrotor.json").read_text())
+    assert plant["operating_point"]["z"] == pytest.approx(snap.outputs["Quadrotor.z"], abs=1e-12)
+    assert plant["operating_point"]["z"] != pytest.approx(-15.0, abs=1e-3)  # not the z_0 it started from
+
+
 def test_the_example_script_of_the_docs_runs(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(sys, "argv", ["linearize_fmus.py", str(tmp_path)])
     runpy.run_path(str(ROOT / "docs" / "examples" / "linearize_fmus.py"), run_name="__main__")

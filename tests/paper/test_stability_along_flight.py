@@ -60,7 +60,7 @@ def test_learning_on_and_learning_held_are_two_readings_of_the_same_loop():
 def test_the_study_runs_every_case_through_the_study_runner_in_case_order():
     flights = along_flight_study(missions=("circles",), variants=("pd", "pd+lm"), phis=(0.0, 0.2),
                                  metric=AlongFlight(every=2.0, check=0.0), overrides={"simulation.duration": 4.0})
-    assert [(f.variant, f.phi) for f in flights] == [("pd", 0.0), ("pd", 0.2), ("pd+lm", 0.0), ("pd+lm", 0.2)]
+    assert [(f.variant, f.phi) for f in flights] == [("pd", 0.0), ("pd+lm", 0.0), ("pd+lm", 0.2)]
     for f in flights:
         assert f.status == "ok" and [p.time for p in f.points] == [2.0, 4.0]
         assert all(math.isnan(p.linear_rate) for p in f.points)  # check = 0: no perturbation check
@@ -78,3 +78,43 @@ def test_flight_events_and_learned_state_names():
 def test_snapshot_times_must_be_whole_steps():
     with pytest.raises(ValueError, match=r"every 0\.015 s: not a whole number of steps of 0\.01 s"):
         AlongFlight(every=0.015).snapshot_times(load_scenario("circles"))
+
+
+def _flight(radius, held, lin=(-1.0,), nl=(-1.1,)):
+    from quadrotor_paper.stability.along_flight import FlightPoint, FlightRadius
+
+    n = len(radius)
+    lin, nl = (list(lin) * n)[:n], (list(nl) * n)[:n]
+    points = tuple(FlightPoint(float(t + 1), r, h, 1e-7, 0.1, a, b)
+                   for t, (r, h, a, b) in enumerate(zip(radius, held, lin, nl)))
+    return FlightRadius("circles", "pd+lm", 0.0, "ok", None, points)
+
+
+def test_the_verdicts_read_stable_neutral_and_unstable_from_the_growth_rate():
+    from quadrotor_paper.stability.along_flight import verdict
+
+    stable = verdict(_flight([0.97, 0.98], [0.97, 0.98]))
+    assert stable["held"].startswith("stable at all 2 points (max 0.9800") and stable["on"].startswith("stable")
+    neutral = verdict(_flight([1.00004, 0.97], [0.97, 0.97]))  # ln(1.00004)/0.01 = 0.004 1/s
+    assert neutral["on"].startswith("neutral: learning modes at abs(z) = 1 + 4.0e-05")
+    slow = verdict(_flight([1.0006, 0.97, 1.0002], [0.97, 1.2, 0.97]))  # 0.06 1/s and 0.02 1/s: both grow
+    assert slow["on"].startswith("UNSTABLE at 2 of 3 points (max 1.0006 (+0.06 1/s) at 1 s)")
+    assert slow["held"].startswith("UNSTABLE at 1 of 3 points (max 1.2000 (+18.2 1/s) at 2 s)")
+    assert verdict(_flight([0.9], [0.9], lin=(-1.0,), nl=(-1.3,)))["check"] == \
+        "rates differ by median 0.300 1/s, max 0.300 1/s"
+
+
+def test_the_report_writes_the_section_the_table_and_the_points(tmp_path):
+    from quadrotor_paper.stability.report import _section_along_flight
+    from quadrotor_paper.stability.along_flight import write_points
+
+    class Study:  # the report reads only these
+        dt = 0.01
+        along_flight = [_flight([0.97, 1.0006], [0.97, 0.97])]
+
+    text = "\n".join(_section_along_flight(Study))
+    assert "## The learning loop along the flight" in text
+    assert "| circles | pd+lm | sign law | 2 | stable at all 2 points" in text and "UNSTABLE at 1 of 2" in text
+    write_points(Study.along_flight, tmp_path / "points.csv")
+    lines = (tmp_path / "points.csv").read_text().splitlines()
+    assert lines[0].startswith("mission,variant,phi_mps,time,radius,radius_held") and len(lines) == 3
