@@ -55,7 +55,7 @@ from .errors import FmuCallError, FmuLoadError, ScenarioError
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
 
-__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "PERIOD_ANNOTATION"]
+__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "state_values", "state_with", "PERIOD_ANNOTATION"]
 
 # A sampled-data FMU declares the parameter that is its period, the one
 # communication step it takes (docs/fmi-export.md, "Sampled-data period"):
@@ -658,3 +658,49 @@ class FmuComponent:
                 self._api.get(self._out_vr, self._c_out, self._y_ptr)
             except FMICallException as exc:
                 raise self._call_failure(Call.GET, exc, t) from None
+
+
+def _with_state(path: str | Path, fmu_state: bytes, parameters: Mapping[str, float] | None, t: float, work):
+    """``work(component, get_real, set_real)`` on a Co-Simulation instance of
+    ``path`` started with ``parameters`` at ``t``, ``fmu_state`` restored."""
+    comp = FmuComponent("state", path)
+    try:
+        comp.start(t, parameters)
+        comp.restore_state(fmu_state)
+        s = comp._slave
+        get_real, set_real = (s.getReal, s.setReal) if comp.fmi_version == 2 else (s.getFloat64, s.setFloat64)
+        return work(comp, get_real, set_real)
+    finally:
+        comp.close()
+
+
+def state_values(path: str | Path, fmu_state: bytes, names: Sequence[str],
+                 parameters: Mapping[str, float] | None = None, t: float = 0.0) -> dict[str, float]:
+    """The values of ``names`` in a serialized FMU state (e.g. a
+    :class:`~cosim.master.Snapshot`'s), read through an instance of ``path``
+    started with ``parameters`` (those the state was taken with)."""
+    def read(comp, get_real, set_real):
+        missing = [n for n in names if n not in comp.variables]
+        if missing:
+            raise KeyError(f"{comp.path.name} has no variable(s) {missing}")
+        return dict(zip(names, map(float, get_real([comp.variables[n].valueReference for n in names]))))
+    return _with_state(path, fmu_state, parameters, t, read)
+
+
+def state_with(path: str | Path, fmu_state: bytes, values: Mapping[str, float],
+               parameters: Mapping[str, float] | None = None, t: float = 0.0) -> bytes:
+    """A serialized FMU state: ``fmu_state`` with ``values`` set (variables the
+    FMU lets an importer set between steps, e.g. this project's discrete
+    states), serialized again. A value the FMU refuses is an
+    :class:`~cosim.errors.FmuCallError` naming it."""
+    def edit(comp, get_real, set_real):
+        for name, value in values.items():
+            try:
+                set_real([comp.variables[name].valueReference], [float(value)])
+            except KeyError:
+                raise KeyError(f"{comp.path.name} has no variable {name!r}") from None
+            except FMICallException as exc:
+                raise comp._fail(f"setting {name} = {value!r} in a restored state", exc, t, name, value) from None
+        return comp.serialize_state()
+    return _with_state(path, fmu_state, parameters, t, edit)
+

@@ -42,7 +42,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 
 from .errors import FmuCallError
-from .fmu_component import FmuComponent
+from .fmu_component import FmuComponent, state_values
 
 __all__ = ["Linearization", "LinearizationError", "linearize_fmu", "save_linearization", "METHODS"]
 
@@ -200,17 +200,10 @@ def _values_in_state(path: Path, md, parameters, fmu_state: bytes, t: float, nam
     if md.coSimulation is None or not md.coSimulation.canGetAndSetFMUstate:
         raise LinearizationError(f"{path.name}: an FMU state is read through Co-Simulation, and this FMU cannot "
                                  "set its FMU state there")
-    comp = FmuComponent("linearize", path)
     try:
-        comp.start(t, parameters)
-        comp.restore_state(fmu_state)
-        get_real = comp._slave.getReal if comp.fmi_version == 2 else comp._slave.getFloat64
-        values = get_real([comp.variables[n].valueReference for n in names])
+        return state_values(path, fmu_state, names, parameters, t)
     except FmuCallError as exc:
         raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
-    finally:
-        comp.close()
-    return dict(zip(names, map(float, values)))
 
 
 def _units(names, variables) -> dict[str, str]:

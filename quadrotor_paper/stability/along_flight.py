@@ -27,7 +27,10 @@ against the nonlinear loop by a **perturbation check**: from the frozen
 state the co-simulation is resumed for ``check`` s twice (the plant started
 at its state then, plus ``delta`` for the second), and the growth of the
 plant-state difference is compared with the linear loop's prediction
-``C A^n (delta, 0)``, both as a rate ln(gain)/check (1/s).
+``C A^n (delta, 0)``, both as a rate ln(gain)/check (1/s). A second check
+perturbs along the loop's least stable mode (its eigenvector, learned state
+included, set in the controller's FMU state: :func:`cosim.fmu_component.state_with`)
+and compares the growth of the whole state's difference with ``A^n``'s.
 
 The study is one :mod:`cosim.study` per mission (cases: variant x law), run
 by :func:`~quadrotor_paper.experiments.measure`, so on Dask like every
@@ -57,6 +60,9 @@ MISSIONS = ("circles", "figure8")
 BOUNDARY_LAYER = 0.2
 # the perturbation of the plant state (SI): a gust-sized velocity kick and a small roll
 DELTA = {"u": 0.05, "phi": 0.02}
+# the size of the perturbation along the least stable mode (its state's units): small enough
+# to stay linear after a growth of e^4 over the 1 s check
+MODE_SIZE = 1e-4
 _PLANT, _CONTROLLER = "Quadrotor", "controller"
 
 
@@ -66,8 +72,11 @@ class FlightPoint:
     (learned state held), ``error`` (the controller map's error estimate
     relative to its largest entry), ``tau_c_min`` (m/s, the smallest
     |tau_c| of the three axes: how near a switch of the sign law),
-    ``linear_rate`` and ``nonlinear_rate`` (1/s, the perturbation check; NaN
-    where it was not made)."""
+    ``linear_rate`` and ``nonlinear_rate`` (1/s, the perturbation check of
+    the plant state; NaN where it was not made); ``mode_linear_rate`` and
+    ``mode_nonlinear_rate`` (1/s, the same along the loop's least stable
+    mode, learned state included; the co-simulated rate is the larger of the
+    two directions along it)."""
 
     time: float
     radius: float
@@ -76,6 +85,8 @@ class FlightPoint:
     tau_c_min: float
     linear_rate: float = math.nan
     nonlinear_rate: float = math.nan
+    mode_linear_rate: float = math.nan
+    mode_nonlinear_rate: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -155,33 +166,80 @@ class AlongFlight:
             for snap in result.snapshots:
                 loop = snapshot_loop(snap, paths[_PLANT], paths[_CONTROLLER], _PLANT, _CONTROLLER)
                 tau_c = [abs(loop.controller.outputs[f"tau_c_{a}"]) for a in "xyz"]
-                rates = self._check(master, snap, loop, result.seed) if self.check > 0 else (math.nan, math.nan)
+                rates = self._check(master, snap, loop, result.seed, paths) if self.check > 0 else (math.nan,) * 4
                 points.append(FlightPoint(snap.time, loop.spectral_radius, _radius_held(loop, held),
                                           _relative_error(loop), float(min(tau_c)), *rates))
         finally:
             master.close()
         return {"along_flight": FlightRadius(scenario.name, variant, phi, result.status, result.error, tuple(points))}
 
-    def _check(self, master, snap, loop: FmuLoop, seed: int) -> tuple[float, float]:
-        """(linear, nonlinear) rate of the perturbation ``delta`` over ``check`` s."""
+    def _check(self, master, snap, loop: FmuLoop, seed: int, paths) -> tuple[float, float, float, float]:
+        """(linear, nonlinear) rates over ``check`` s of the perturbation
+        ``delta`` of the plant state, then of a perturbation along the least
+        stable mode."""
+        from cosim.fmu_component import state_values, state_with
+
         h = master.step
         n = int(round(self.check / h))
+        start = {k: v for k, v in loop.plant.operating_point.items() if k in loop.plant.system.state_labels}
+        labels = list(loop.system.state_labels)
+        active = loop.active
+        names = [labels[i] for i in active]
+        ctrl_names = [k[len("controller_"):] for k in names if k.startswith("controller_")]
+        plant_names = [k[len("plant_"):] for k in names if k.startswith("plant_")]
+
+        def resume(plant_kick: dict[str, float], controller_state: bytes) -> dict[str, float]:
+            """Every active state's value after ``check`` s of co-simulation from the snapshot."""
+            values = {f"{_PLANT}.{k}_0": v + plant_kick.get(k, 0.0) for k, v in start.items()}
+            restore = {k: v for k, v in snap.states.items() if k != _PLANT} | {_CONTROLLER: controller_state}
+            end = snap.time + n * h
+            run = master.run(n * h, seed=seed, t0=snap.time, parameters=values, restore=restore, snapshots=[end],
+                             raise_on_error=False)
+            if run.status != "ok" or not run.snapshots:
+                return dict.fromkeys(names, math.nan)
+            last = run.snapshots[-1]
+            out = {f"plant_{k}": v for k, v in state_values(paths[_PLANT], last.states[_PLANT], plant_names,
+                                                            last.parameters[_PLANT], end).items()}
+            return out | {f"controller_{k}": v for k, v in state_values(
+                paths[_CONTROLLER], last.states[_CONTROLLER], ctrl_names, last.parameters[_CONTROLLER], end).items()}
+
+        def gap(a: dict[str, float], b: dict[str, float], keys) -> float:
+            return float(np.linalg.norm([a[k] - b[k] for k in keys]))
+
+        nominal = resume({}, snap.states[_CONTROLLER])
+        # the plant's state kicked
         delta = dict(self.delta)
         size = float(np.linalg.norm(list(delta.values())))
         linear = np.linalg.norm(loop.propagate(delta, n)) / size
-        start = {k: v for k, v in loop.plant.operating_point.items() if k in loop.plant.system.state_labels}
-        restore = {k: v for k, v in snap.states.items() if k != _PLANT}
+        kicked = resume(delta, snap.states[_CONTROLLER])
+        plant12 = [f"plant_{s}" for s in STATE_NAMES]
+        rates = [_rate(linear, self.check), _rate(gap(kicked, nominal, plant12) / size, self.check)]
+        # along the least stable mode (its eigenvector's real part), learned state included
+        A = np.asarray(loop.system.A)[np.ix_(active, active)]
+        w, V = np.linalg.eig(A)
+        v = np.real(V[:, int(np.argmax(np.abs(w)))])
+        v = MODE_SIZE * v / np.linalg.norm(v)
+        mode = dict(zip(names, v))
+        now = state_values(paths[_CONTROLLER], snap.states[_CONTROLLER], ctrl_names, snap.parameters[_CONTROLLER],
+                           snap.time)
+        grown = []
+        for sign in (1.0, -1.0):  # both ways along the mode: a bound (a width's floor) may stop one side only
+            ctrl_state = state_with(paths[_CONTROLLER], snap.states[_CONTROLLER],
+                                    {k: now[k] + sign * mode[f"controller_{k}"] for k in ctrl_names},
+                                    snap.parameters[_CONTROLLER], snap.time)
+            moved = resume({k: sign * mode[f"plant_{k}"] for k in plant_names}, ctrl_state)
+            grown.append(gap(moved, nominal, names) / MODE_SIZE)
+        linear_mode = np.linalg.norm(np.linalg.matrix_power(A, n) @ v) / MODE_SIZE
+        rates += [_rate(linear_mode, self.check), _rate(max(grown), self.check)]
+        return tuple(rates)
 
-        def final(kick: dict[str, float]) -> np.ndarray:
-            values = {f"{_PLANT}.{k}_0": v + kick.get(k, 0.0) for k, v in start.items()}
-            run = master.run(n * h, seed=seed, t0=snap.time, parameters=values, restore=restore,
-                             snapshots=[snap.time + n * h], raise_on_error=False)
-            if run.status != "ok" or not run.snapshots:
-                return np.full(len(STATE_NAMES), np.nan)
-            return np.array([run.snapshots[-1].outputs[f"{_PLANT}.{s}"] for s in STATE_NAMES])
 
-        nonlinear = np.linalg.norm(final(delta) - final({})) / size
-        return math.log(linear) / self.check, math.log(nonlinear) / self.check
+def _rate(gain: float, duration: float) -> float:
+    """ln(gain)/duration (1/s); -inf for a perturbation erased to the last bit
+    (both runs clipped to the same bound), NaN for a run that failed."""
+    if not gain > 0:
+        return -math.inf if gain == 0 else math.nan
+    return math.log(gain) / duration
 
 
 def along_flight(scenario: Scenario, metric: AlongFlight = AlongFlight()) -> FlightRadius:
@@ -215,8 +273,13 @@ def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[st
         rows = measure(study, workers=workers, metrics=metric, metric_names=()).rows
         order = {name: i for i, name in enumerate(cases)}
         rows = sorted(rows, key=lambda r: order[r["case"]])
-        out += [row["along_flight"] if "along_flight" in row else
-                FlightRadius(mission, "?", math.nan, row.get("status", "failed"), row.get("error")) for row in rows]
+        for row in rows:
+            if "along_flight" in row:
+                out.append(row["along_flight"])
+            else:  # the run or its metric failed: the row says why
+                values = cases[row["case"]]["set"]
+                out.append(FlightRadius(mission, values["controller.variant"], values["controller.position.phi"][0],
+                                        row.get("status", "failed"), row.get("error")))
     return out
 
 
@@ -250,12 +313,17 @@ def _where(f: FlightRadius, values: np.ndarray, dt: float) -> str:
     return f"max {values[i]:.4f} ({rate:+.3g} 1/s) at {f.points[i].time:g} s"
 
 
+def _erased(rates: np.ndarray) -> str:
+    n = int(np.sum(np.isneginf(rates)))
+    return f"; erased (both runs at the same bound) at {n} points" if n else ""
+
+
 def verdict(f: FlightRadius, dt: float = 0.01) -> dict[str, str]:
     """One line each for the learning held, the learning on and the
     perturbation check of a flight (the report's and docs/stability.md's
     words); ``dt`` the controller's period (s), for the growth rates ln|z|/dt."""
     if not f.points:
-        return {"held": f"no point ({f.status}: {f.error})", "on": "–", "check": "–"}
+        return {"held": f"no point ({f.status}: {f.error})", "on": "–", "check": "–", "mode": "–"}
     n = len(f.points)
     held, on = f.column("radius_held"), f.column("radius")
     out = {}
@@ -270,10 +338,21 @@ def verdict(f: FlightRadius, dt: float = 0.01) -> dict[str, str]:
                      f"(growth <= {NEUTRAL_RATE:g} 1/s), the rest stable")
     else:
         out["on"] = f"UNSTABLE at {grow} of {n} points ({_where(f, on, dt)})"
-    diff = np.abs(f.column("linear_rate") - f.column("nonlinear_rate"))
-    diff = diff[np.isfinite(diff)]
+    lin, nl = f.column("linear_rate"), f.column("nonlinear_rate")
+    diff = np.abs(lin - nl)[np.isfinite(lin) & np.isfinite(nl)]
     out["check"] = (f"rates differ by median {np.median(diff):.3f} 1/s, max {np.max(diff):.3f} 1/s"
-                    if diff.size else "not made")
+                    + _erased(nl) if diff.size else "not made")
+    lin, nl = f.column("mode_linear_rate"), f.column("mode_nonlinear_rate")
+    made = np.isfinite(lin) & ~np.isnan(nl)
+    if made.any():
+        lin, nl = lin[made], nl[made]
+        grows = lin > NEUTRAL_RATE
+        finite = np.isfinite(nl)
+        out["mode"] = (f"rates differ by median {np.median(np.abs(lin - nl)[finite]):.3f} 1/s; predicted to grow at "
+                       f"{int(grows.sum())} of {int(made.sum())} points, co-simulation grows at "
+                       f"{int((grows & (nl > NEUTRAL_RATE)).sum())} of those" + _erased(nl))
+    else:
+        out["mode"] = "not made"
     return out
 
 

@@ -43,18 +43,22 @@ def test_along_the_circles_the_pd_loop_is_stable_and_the_linear_decay_is_the_co_
         assert p.radius < 0.98 and p.radius_held == p.radius  # a PD learns nothing
         assert p.error < 1e-4
         assert p.linear_rate < -1.0 and p.nonlinear_rate == pytest.approx(p.linear_rate, abs=0.05)
+        # along the least stable mode (the PD's flight modes: its FNN is inert)
+        assert p.mode_linear_rate < -2.5 and p.mode_nonlinear_rate == pytest.approx(p.mode_linear_rate, abs=0.05)
 
 
 def test_learning_on_and_learning_held_are_two_readings_of_the_same_loop():
     """PD+LM with the boundary layer at 10 s of the circles: with the learned
     state held the flight modes are the PD's (< 1); with learning on, the
-    learned widths add modes at |z| about 1 (the laws integrate)."""
+    learned widths add modes at |z| about 1 (the laws integrate), and the
+    co-simulation, perturbed along that mode, grows as slowly."""
     scenario = load_scenario("circles", {"controller.variant": "pd+lm", "controller.position.phi": [0.2] * 3,
                                          "simulation.duration": 12.0})
     p = along_flight(scenario, AlongFlight(every=10.0, check=1.0)).points[0]
     assert p.radius_held < 0.98
     assert abs(p.radius - 1.0) < 1e-3
     assert math.isfinite(p.linear_rate) and math.isfinite(p.nonlinear_rate)
+    assert abs(p.mode_linear_rate) < 0.01 and p.mode_nonlinear_rate == pytest.approx(p.mode_linear_rate, abs=0.01)
 
 
 def test_the_study_runs_every_case_through_the_study_runner_in_case_order():
@@ -80,12 +84,12 @@ def test_snapshot_times_must_be_whole_steps():
         AlongFlight(every=0.015).snapshot_times(load_scenario("circles"))
 
 
-def _flight(radius, held, lin=(-1.0,), nl=(-1.1,)):
+def _flight(radius, held, lin=(-1.0,), nl=(-1.1,), mode=(math.nan, math.nan)):
     from quadrotor_paper.stability.along_flight import FlightPoint, FlightRadius
 
     n = len(radius)
     lin, nl = (list(lin) * n)[:n], (list(nl) * n)[:n]
-    points = tuple(FlightPoint(float(t + 1), r, h, 1e-7, 0.1, a, b)
+    points = tuple(FlightPoint(float(t + 1), r, h, 1e-7, 0.1, a, b, *mode)
                    for t, (r, h, a, b) in enumerate(zip(radius, held, lin, nl)))
     return FlightRadius("circles", "pd+lm", 0.0, "ok", None, points)
 
@@ -102,6 +106,9 @@ def test_the_verdicts_read_stable_neutral_and_unstable_from_the_growth_rate():
     assert slow["held"].startswith("UNSTABLE at 1 of 3 points (max 1.2000 (+18.2 1/s) at 2 s)")
     assert verdict(_flight([0.9], [0.9], lin=(-1.0,), nl=(-1.3,)))["check"] == \
         "rates differ by median 0.300 1/s, max 0.300 1/s"
+    assert verdict(_flight([1.04, 1.04], [0.9, 0.9], mode=(4.0, -3.0)))["mode"] == \
+        "rates differ by median 7.000 1/s; predicted to grow at 2 of 2 points, co-simulation grows at 0 of those"
+    assert verdict(_flight([0.9], [0.9]))["mode"] == "not made"
 
 
 def test_the_report_writes_the_section_the_table_and_the_points(tmp_path):
