@@ -227,22 +227,29 @@ def _figure_along_flight(study):
 
 
 def _figure_perturbation(study):
-    """The perturbation check: the co-simulated decay rate of a small
-    perturbation over 1 s against the linear loop's, every point, per law."""
-    fig, axes = plt.subplots(1, 2, figsize=(11, 5), squeeze=False)
+    """The perturbation checks: the co-simulated growth rate over 1 s against
+    the linear loop's, every point; the plant state kicked (sign law,
+    boundary layer), and along the least stable mode (both laws)."""
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5), squeeze=False)
     variants = list(dict.fromkeys(f.variant for f in study.along_flight))
-    for ax, (law, pick) in zip(axes[0], (("sign law", lambda f: f.phi == 0), ("boundary layer", lambda f: f.phi > 0))):
+    panels = (("plant state kicked, sign law", lambda f: f.phi == 0, "linear_rate", "nonlinear_rate"),
+              ("plant state kicked, boundary layer", lambda f: f.phi > 0, "linear_rate", "nonlinear_rate"),
+              ("along the least stable mode, both laws", lambda f: True, "mode_linear_rate", "mode_nonlinear_rate"))
+    for ax, (title, pick, lin, nl) in zip(axes[0], panels):
         for f in (f for f in study.along_flight if f.points and pick(f)):
-            k = variants.index(f.variant)
-            ax.plot(f.column("linear_rate"), f.column("nonlinear_rate"), "o" if f.mission == "circles" else "x",
-                    color=f"C{k}", ms=3, label=f"{f.variant}, {f.mission}")
+            x, y = f.column(lin), f.column(nl)
+            keep = np.isfinite(x) & np.isfinite(y)  # a perturbation erased at a bound (-inf) is not drawn
+            ax.plot(x[keep], y[keep], "o" if f.mission == "circles" else "x", color=f"C{variants.index(f.variant)}",
+                    ms=3, label=f"{f.variant}, {f.mission}")
         lo, hi = ax.get_xlim()
         ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
         ax.set_xlabel("linear loop: ln(gain)/1 s (1/s)")
         ax.set_ylabel("co-simulation: ln(gain)/1 s (1/s)")
-        ax.set_title(f"Perturbation check, {law}", fontsize=9)
+        ax.set_title(f"Perturbation check, {title}", fontsize=9)
         ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(fontsize=7, ncol=2)
+    handles = {h.get_label(): h for h in axes[0, 0].get_lines() + axes[0, 2].get_lines()
+               if not h.get_label().startswith("_")}
+    axes[0, 0].legend(handles.values(), handles.keys(), fontsize=7, ncol=2)
     fig.tight_layout()
     return fig
 
