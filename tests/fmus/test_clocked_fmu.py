@@ -353,3 +353,21 @@ def test_model_exchange_is_for_a_clocked_fmu_only():
         FmuComponent("Quadrotor", cached_fmu(QUADROTOR, 3), interface="ModelExchange")
     with pytest.raises(FmuLoadError, match="interface = 'ModelExchange'"):
         FmuComponent("controller", cached_fmu(controller_model(VARIANT), 2), interface="ModelExchange")
+
+
+@pytest.mark.parametrize("interface", ["CoSimulation", "ModelExchange"])
+def test_a_clocked_controller_is_snapshotted_and_resumed_like_any_fmu(interface):
+    """A snapshot taken at a tick (the clocked FMU in Event Mode there) leaves
+    the run as it was, and a run resumed from it continues the run: the
+    first row exactly, the rest to round-off of the resumed time grid."""
+    from cosim.scenario import build_master, load_scenario
+
+    scenario = load_scenario("circles", {"controller.fmi_version": 3, "controller.interface": interface,
+                                         "simulation.duration": 5.0})
+    with build_master(scenario) as master:
+        plain = master.run(5.0)
+        run = master.run(5.0, snapshots=[2.0])
+        resumed = master.run(3.0, t0=2.0, restore=run.snapshots[0].states)
+    np.testing.assert_array_equal(run.data, plain.data)
+    np.testing.assert_array_equal(resumed.data[0], plain.data[200])
+    np.testing.assert_allclose(resumed.data, plain.data[200:], rtol=0, atol=1e-9)
