@@ -12,6 +12,9 @@ Modules, one job each:
 * :mod:`~quadrotor_paper.stability.analysis` -- poles, damping, margins, gain sweep,
   ramp and circle errors;
 * :mod:`~quadrotor_paper.stability.validation` -- the same steps in the co-simulation;
+* :mod:`~quadrotor_paper.stability.fmu_loop` -- the sampled loop from the FMUs, at a trimmed
+  point or at a run's snapshot; :mod:`~quadrotor_paper.stability.along_flight` -- the
+  learning loop of every variant along the missions, checked by perturbations;
 * :mod:`~quadrotor_paper.stability.finite_time` -- the learning laws' bounds (eqs. 53,
   66, 70) on recorded runs;
 * :mod:`~quadrotor_paper.stability.study`, :mod:`~quadrotor_paper.stability.report`,
@@ -28,7 +31,8 @@ _EXPORTS = {
                  "critical_gain_factor", "gain_sweep", "loop_margins", "ramp_error", "feedforward_comparison"),
     "linearize": ("linearize_controller", "linearize_controller_step", "linearize_plant", "linearize_plant_fmu",
                   "linearize_position_controller", "linearize_velocity_controller", "linearize_feedforward"),
-    "fmu_loop": ("FmuLoop", "fmu_closed_loop", "inert_states"),
+    "fmu_loop": ("FmuLoop", "fmu_closed_loop", "snapshot_loop", "join_loop", "inert_states"),
+    "along_flight": ("AlongFlight", "FlightRadius", "along_flight", "along_flight_study"),
     "loops": ("LoopModel",),
     "operating_points": ("OperatingPoint", "default_operating_points", "forward_flight", "hover", "operating_point",
                          "trim_closed_loop", "trim_plant"),
