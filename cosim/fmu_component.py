@@ -459,7 +459,7 @@ class FmuComponent:
             if var is None or var.causality not in ("parameter", "input"):
                 raise FmuCallError(self.name, self.path, f"{key!r} is not a parameter or input of this FMU", key,
                                    parameters[key])
-        set_float = s.setReal if self.fmi_version == 2 else s.setFloat64
+        set_float = self.real_calls()[1]
         try:
             if self._initialized_once:
                 s.reset()
@@ -608,13 +608,16 @@ class FmuComponent:
             self._activate_clock(t)
         vrs = [self.variables[name].valueReference for name in values]
         try:
-            if self.fmi_version == 2:
-                self._slave.setReal(vrs, [float(v) for v in values.values()])
-            else:
-                self._slave.setFloat64(vrs, [float(v) for v in values.values()])
+            self.real_calls()[1](vrs, [float(v) for v in values.values()])
         except FMICallException as exc:
             shown = ", ".join(f"{n} = {float(v)!r}" for n, v in values.items())
             raise self._fail(f"setting inputs ({shown})", exc, t) from None
+
+    def real_calls(self):
+        """``(get, set)``: the instance's calls for Real (FMI 2.0) or Float64
+        (FMI 3.0) values by value references."""
+        s = self._slave
+        return (s.getReal, s.setReal) if self.fmi_version == 2 else (s.getFloat64, s.setFloat64)
 
     def do_step(self, t: float, h: float) -> None:
         """Advance the FMU from ``t`` to ``t + h``; a clocked FMU computes the
@@ -667,9 +670,7 @@ def _with_state(path: str | Path, fmu_state: bytes, parameters: Mapping[str, flo
     try:
         comp.start(t, parameters)
         comp.restore_state(fmu_state)
-        s = comp._slave
-        get_real, set_real = (s.getReal, s.setReal) if comp.fmi_version == 2 else (s.getFloat64, s.setFloat64)
-        return work(comp, get_real, set_real)
+        return work(comp, *comp.real_calls())
     finally:
         comp.close()
 

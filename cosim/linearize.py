@@ -366,9 +366,7 @@ def _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state
                 comp.restore_state(fmu_state)
         except FmuCallError as exc:
             raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
-        s = comp._slave
-        get_real = s.getReal if comp.fmi_version == 2 else s.getFloat64
-        set_real = s.setReal if comp.fmi_version == 2 else s.setFloat64
+        get_real, set_real = comp.real_calls()
         vr = {n: v.valueReference for n, v in variables.items()}
         period = float(parameters.get(comp.sample_period, get_real([vr[comp.sample_period]])[0]))
         z = np.array(get_real([vr[n] for n in z_names])) if z_names else np.zeros(0)

@@ -52,7 +52,18 @@ from .guard import Guard
 from .plan import ORDERINGS, FmuBlock, PythonBlock, make_plan
 from .recorder import Recorder
 
-__all__ = ["Master", "RunResult", "Snapshot", "ORDERINGS"]
+__all__ = ["Master", "RunResult", "Snapshot", "ORDERINGS", "communication_point"]
+
+
+def communication_point(t: float, t0: float, h: float, n_steps: int) -> int | None:
+    """``n`` with ``t = t0 + n h`` (to 1e-9 relative) and ``0 <= n <= n_steps``:
+    the step of a run at which time ``t`` is a communication point; ``None``
+    if it is none."""
+    t = float(t)
+    if not np.isfinite(t):
+        return None
+    n = round((t - t0) / h)
+    return n if 0 <= n <= n_steps and abs(t0 + n * h - t) <= 1e-9 * max(1.0, abs(t)) else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -271,8 +282,8 @@ class Master:
     def _snapshot_steps(self, times: Sequence[float], t0: float, n_steps: int) -> frozenset[int]:
         h, steps = self.step, set()
         for t in times:
-            n = round((float(t) - t0) / h) if np.isfinite(t) else -1
-            if not 0 <= n <= n_steps or abs(t0 + n * h - float(t)) > 1e-9 * max(1.0, abs(float(t))):
+            n = communication_point(t, t0, h, n_steps)
+            if n is None:
                 raise ValueError(f"snapshot at t = {t!r} s: not a communication point t0 + n h of this run "
                                  f"(t0 = {t0!r} s, h = {h!r} s, {n_steps} steps)")
             steps.add(n)

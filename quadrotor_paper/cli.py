@@ -339,9 +339,8 @@ def _operating_point_of_run(args) -> tuple[Path, dict[str, Any]]:
     return the FMU file of instance ``args.fmu`` with its operating point
     (its FMU state, its inputs and parameters then, as keyword arguments of
     ``linearize_fmu``)."""
-    import math
-
     from cosim.errors import ScenarioError
+    from cosim.master import communication_point
     from cosim.scenario import build_master, load_scenario
 
     if args.parameter:
@@ -350,8 +349,8 @@ def _operating_point_of_run(args) -> tuple[Path, dict[str, Any]]:
     t0, h = scenario.start_time, scenario.step
     end = t0 + scenario.duration
     t = args.time
-    n = round((t - t0) / h) if t is not None and math.isfinite(t) else -1
-    if t is None or not 0 <= n * h <= end - t0 + 1e-9 * h or abs(t0 + n * h - t) > 1e-9 * max(1.0, abs(t)):
+    n = communication_point(t, t0, h, scenario.n_steps) if t is not None else None
+    if n is None:
         raise ScenarioError(f"--time {t!r}: expected a communication point of {scenario.name} in [{t0:g}, {end:g}] s "
                             f"(a whole number of steps of {h:g} s)")
     with build_master(scenario) as master:

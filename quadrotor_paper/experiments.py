@@ -169,9 +169,8 @@ def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
             # the estimate's bias: the length of its mean error; and the tracking error the controller
             # sees, reference - estimate (the FNN learns on it; E18)
             out["est_bias_position_m"] = float(np.linalg.norm(np.mean(error[after_start], axis=0)))
-            position, reference = metric_signals(scenario)
-            seen = np.column_stack([result[r] - result[f"{estimator}.{e}"] for e, r in zip(estimated, reference)])
-            out["rmse_seen_m"] = float(np.sqrt(np.mean(np.sum(seen ** 2, axis=1))))
+            _, reference = metric_signals(scenario)
+            out["rmse_seen_m"] = rmse(result, [f"{estimator}.{e}" for e in estimated], reference)
     used = result[f"{estimator}.fix_used"] > 0.5
     out["nis_fix"] = float(np.mean(result[f"{estimator}.nis_fix"][used & after_start]))
     out["nis_acc"] = float(np.mean(result[f"{estimator}.nis_acc"][after_start]))
@@ -188,6 +187,7 @@ def measure(study: Study, out_dir: str | Path | None = None, *, workers: int = 1
     (``record``, default :func:`lean_signals`); ``metric_names`` default
     :func:`study_metric_names` of the study's scenario."""
     return run_study(study, out_dir, workers=workers, scheduler=scheduler, metrics=metrics,
-                     metric_names=study_metric_names(study.scenario) if metric_names is None else metric_names, record=record if record is not None
-                     else (lean_signals(study.scenario) or None), progress=progress, plots=plots, resume=resume,
+                     metric_names=study_metric_names(study.scenario) if metric_names is None else metric_names,
+                     record=record if record is not None else (lean_signals(study.scenario) or None),
+                     progress=progress, plots=plots, resume=resume,
                      worker_timeout=worker_timeout)

@@ -120,14 +120,6 @@ def learned_state_names(variant: str) -> list[str]:
     return [name for name, _, _ in state_ports(v)[:fnn_state_size(v)]]
 
 
-def _radius_held(loop: FmuLoop, held: Sequence[str]) -> float:
-    labels = list(loop.system.state_labels)
-    out = {labels.index(f"controller_{n}") for n in held}
-    keep = [i for i in loop.active if i not in out]
-    A = np.asarray(loop.system.A)[np.ix_(keep, keep)]
-    return float(np.max(np.abs(np.linalg.eigvals(A))))
-
-
 def _relative_error(loop: FmuLoop) -> float:
     lin = loop.controller
     scale = max(np.max(np.abs(m)) if m.size else 0.0 for m in (lin.A, lin.B, lin.C, lin.D))
@@ -167,7 +159,8 @@ class AlongFlight:
                 loop = snapshot_loop(snap, paths[_PLANT], paths[_CONTROLLER], _PLANT, _CONTROLLER)
                 tau_c = [abs(loop.controller.outputs[f"tau_c_{a}"]) for a in "xyz"]
                 rates = self._check(master, snap, loop, result.seed, paths) if self.check > 0 else (math.nan,) * 4
-                points.append(FlightPoint(snap.time, loop.spectral_radius, _radius_held(loop, held),
+                points.append(FlightPoint(snap.time, loop.spectral_radius,
+                                          float(np.max(np.abs(loop.poles_holding(held)))),
                                           _relative_error(loop), float(min(tau_c)), *rates))
         finally:
             master.close()
@@ -260,15 +253,16 @@ def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[st
     mission run by :func:`~quadrotor_paper.experiments.measure`; ``overrides``
     (dotted keys) set for every run, e.g. a shorter ``simulation.duration``."""
     from cosim.study import parse_study
+    from fnn_controller.variants import variant as lookup
 
     from ..experiments import measure
 
     out = []
     for mission in missions:
-        # the PD learns nothing: its loop does not depend on the boundary layer
+        # a variant that learns nothing (the PD) does not depend on the boundary layer
         cases = {f"{v} / phi {phi:g}": {"set": {**dict(overrides or {}), "controller.variant": v,
                                                "controller.position.phi": [float(phi)] * 3}}
-                 for v in variants for phi in (phis if v != "pd" else phis[:1])}
+                 for v in variants for phi in (phis if lookup(v).learns else phis[:1])}
         study = parse_study({"scenario": mission, "name": f"along_flight_{mission}", "cases": cases})
         rows = measure(study, workers=workers, metrics=metric, metric_names=()).rows
         order = {name: i for i, name in enumerate(cases)}

@@ -68,13 +68,20 @@ class FmuLoop:
 
     @property
     def poles(self) -> np.ndarray:
-        keep = self.active
-        return np.linalg.eigvals(np.asarray(self.system.A)[np.ix_(keep, keep)])
+        return self.poles_holding(())
 
     @property
     def spectral_radius(self) -> float:
         """max |eigenvalue| of the loop without its inert states: < 1 is locally stable."""
         return float(np.max(np.abs(self.poles)))
+
+    def poles_holding(self, controller_states) -> np.ndarray:
+        """The poles with the controller's ``controller_states`` (names) held at
+        their values: their rows and columns removed, as the inert states' are."""
+        labels = list(self.system.state_labels)
+        held = {labels.index(f"controller_{n}") for n in controller_states}
+        keep = [i for i in self.active if i not in held]
+        return np.linalg.eigvals(np.asarray(self.system.A)[np.ix_(keep, keep)])
 
     def propagate(self, plant_deviation: Mapping[str, float], steps: int) -> np.ndarray:
         """The 12 plant states' deviation after ``steps`` periods of the linear
