@@ -107,7 +107,7 @@ def _time_master(scenario, repeats: int, profile: bool = False):
 
     times, phases = [], {}
     with build_master(scenario) as master:
-        loop = "compiled" if master.plan.fmus_only and kernel.load() is not None else "Python"
+        loop = "compiled" if master.plan.compiled and kernel.load() is not None else "Python"
         run = lambda **kw: master.run(scenario.duration, seed=scenario.seed, t0=scenario.start_time, **kw)  # noqa: E731
         run()  # warm-up
         for _ in range(repeats):

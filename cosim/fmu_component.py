@@ -266,6 +266,15 @@ class FmuComponent:
         self._initialized_once = False
         self.bind((), ())
 
+    def python_loop_reason(self) -> str | None:
+        """Why the master's compiled loop, which makes set, get and doStep
+        calls of Float64 values only, cannot drive this FMU (the plan then
+        takes the Python loop: :attr:`cosim.plan.Plan.python_loop`); ``None``
+        if it can."""
+        if self.clock is not None:
+            return "a clocked FMU: its ticks are Event Mode calls"
+        return None
+
     def _feedthrough(self, md) -> dict[str, frozenset[str]]:
         """Output name -> the inputs it depends on directly (ModelStructure;
         an output without a dependencies list depends on all of them)."""

@@ -407,8 +407,7 @@ class Master:
     def _loop(self, t0: float, n_steps: int, recorder: Recorder, progress: Callable[[int, int], None] | None,
               phase_times: dict[str, float] | None, take: Callable[[int], None] | None = None,
               marks: frozenset[int] = frozenset()) -> None:
-        # a clocked FMU's tick is Event Mode calls the compiled loop does not make (docs/cosim.md)
-        if phase_times is None and self.plan.fmus_only and not any(f.clock is not None for f in self.fmus):
+        if phase_times is None and self.plan.compiled:  # the plan decides (Plan.python_loop)
             from . import kernel
 
             run = kernel.load()

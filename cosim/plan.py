@@ -104,7 +104,10 @@ class Plan:
     feedthroughs is consistent at t0; ``first_transfer`` the part of it
     whose sources are FMUs, made before the Python components' first step
     (their outputs do not exist yet). Both are empty in the feedthrough
-    ordering.
+    ordering. ``python_loop``: why the compiled loop cannot run the plan,
+    one reason per component (a Python component, an FMU whose
+    :meth:`~cosim.fmu_component.FmuComponent.python_loop_reason` names
+    one); empty when it can (:attr:`compiled`).
     """
 
     ordering: str
@@ -122,10 +125,19 @@ class Plan:
     watch_slots: np.ndarray
     bounds: Mapping[str, tuple[float, float]]
 
+    python_loop: tuple[str, ...] = ()
+
     @property
     def fmus_only(self) -> bool:
-        """Every block at t_n is an FMU: the compiled kernel can run the plan."""
+        """Every block at t_n is an FMU (no Python component)."""
         return all(isinstance(b, FmuBlock) for b in self.at_tn)
+
+    @property
+    def compiled(self) -> bool:
+        """The compiled kernel can run the plan: nothing in
+        :attr:`python_loop`, the reasons (one per component, naming it) the
+        plan takes the Python loop instead."""
+        return not self.python_loop
 
     @property
     def exchanged(self) -> tuple[FmuBlock, ...]:
@@ -298,6 +310,9 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         transfer = transfers(lambda c: True)
         first_transfer = transfers(lambda c: c.source.component in fmu_names)
 
+    # what the compiled loop cannot do (it makes set, get and doStep calls of Float64 values only)
+    python_loop = tuple(f"Python component {c.name}" for c in python if c.name in at_tn)
+    python_loop += tuple(f"{f.name}: {why}" for f in fmus if (why := f.python_loop_reason()) is not None)
     columns = ("time",) + tuple(record)
     watched = tuple(s for s in slots if s != "time")
     return Plan(
@@ -307,5 +322,5 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         first_transfer=first_transfer, record=columns,
         record_units=("s",) + tuple(signal_port(components, s).unit for s in record),
         record_slots=_indices(slots[source_of.get(s, s)] for s in columns), watched=watched,
-        watch_slots=_indices(slots[s] for s in watched),
+        watch_slots=_indices(slots[s] for s in watched), python_loop=python_loop,
         bounds=MappingProxyType({source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in bounds.items()}))

@@ -58,4 +58,4 @@ def test_the_shipped_missions_build_their_reference_and_controller_as_fmus():
     with build_master(load_scenario("circles")) as master:
         assert isinstance(master.components["reference"], FmuComponent)
         assert isinstance(master.components["controller"], FmuComponent)
-        assert master.python == [] and master.plan.fmus_only
+        assert master.python == [] and master.plan.compiled
