@@ -49,7 +49,6 @@ import numpy as np
 from lxml import etree
 from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
-from fmpy.simulation import settable_in_initialization_mode, settable_in_instantiated
 
 from .component import Port
 from .errors import FmuCallError, FmuLoadError, ScenarioError
@@ -127,6 +126,8 @@ def start_value_rule(variable) -> str | None:
     ``initial`` is ``exact`` or ``approx`` (FMI 2.0 §2.2.7, FMI 3.0 §2.4.7.5;
     fmpy's ``settable_in_instantiated``), or one the standard lets an
     importer set in Initialization Mode (``settable_in_initialization_mode``)."""
+    from fmpy.simulation import settable_in_initialization_mode, settable_in_instantiated
+
     if variable is None:
         return "is no variable of the FMU"
     if settable_in_instantiated(variable) or settable_in_initialization_mode(variable):
@@ -266,7 +267,8 @@ class FmuComponent:
         without continuous states in Model Exchange has its ticks as time
         events and nothing to integrate (docs/cosim.md, "Clocked FMUs").
     solver : :class:`~cosim.model_exchange.SolverSettings` of a Model
-        Exchange instance (default: CVODE, relative tolerance 1e-6).
+        Exchange instance (default: CVODE at the tolerance of the FMU's
+        default experiment, else 1e-5).
 
     Attributes
     ----------
@@ -298,13 +300,16 @@ class FmuComponent:
                                setting=("interface", interface))
         self.interface = interface
         self.kind = md.coSimulation if interface == "CoSimulation" else md.modelExchange
+        if md.coSimulation is None and md.modelExchange is None:
+            raise FmuLoadError(name, self.path, "the FMU has neither Co-Simulation nor Model Exchange (Scheduled "
+                               "Execution only: the master does not drive it; docs/fmi-support.md)")
         if self.kind is None:
             has = "Model Exchange" if md.modelExchange is not None else "Co-Simulation"
             raise FmuLoadError(name, self.path, f"the FMU has no {'Co-Simulation' if interface == 'CoSimulation' else 'Model Exchange'} "
                                f"interface (it has {has} only)", setting=("interface", interface))
         from .model_exchange import SolverSettings
 
-        self.solver = solver if solver is not None else SolverSettings()
+        self.solver = (solver if solver is not None else SolverSettings()).for_fmu(md)
         self._check_binary()
         groups = fmu_ports(md)
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
@@ -558,6 +563,8 @@ class FmuComponent:
         except FMICallException as exc:
             raise self._fail("reset", exc) from None
         self._initialized_once = True  # from here on, parameters may be set: the next start resets
+        from fmpy.simulation import settable_in_instantiated
+
         later = {k: v for k, v in parameters.items() if not settable_in_instantiated(self.variables[k])}
         self._set_start_values({k: v for k, v in parameters.items() if k not in later})
         self._initial_parameters = parameters

@@ -34,13 +34,14 @@ from __future__ import annotations
 
 import ctypes
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 __all__ = ["SolverSettings", "Integrator", "IntegrationError", "METHODS"]
 
 METHODS = ("cvode", "euler")
+DEFAULT_TOLERANCE = 1e-5  # fmpy's, for an FMU whose default experiment gives none
 MAX_EVENT_ITERATIONS = 1000  # newDiscreteStates calls at one event instant
 
 
@@ -57,28 +58,37 @@ class SolverSettings:
     """How a Model Exchange FMU is integrated (a scenario's ``[fmus.X.solver]``).
 
     ``method``: ``"cvode"`` (variable step, BDF, root finding) or
-    ``"euler"`` (fixed step). ``relative_tolerance``: CVODE's; the absolute
-    tolerance of each state is it times the state's nominal value, as fmpy
-    sets it. ``step``: Euler's step (s; default: the communication step),
+    ``"euler"`` (fixed step). ``relative_tolerance``: CVODE's (``None``:
+    the tolerance of the FMU's default experiment, else 1e-5, as fmpy's
+    ``simulate_fmu`` chooses); the absolute tolerance of each state is it
+    times the state's nominal value, as fmpy sets it. ``step``: Euler's step (s; default: the communication step),
     or CVODE's largest step (default: unbounded but for the stop at every
     communication point). ``max_events``: events allowed in one
     communication step before the model is taken to chatter.
     """
 
     method: str = "cvode"
-    relative_tolerance: float = 1e-6
+    relative_tolerance: float | None = None
     step: float | None = None
     max_events: int = 1000
 
     def __post_init__(self):
         if self.method not in METHODS:
             raise ValueError(f"solver method {self.method!r}: expected one of {', '.join(METHODS)}")
-        if not (0 < self.relative_tolerance < 1):
+        if self.relative_tolerance is not None and not (0 < self.relative_tolerance < 1):
             raise ValueError(f"relative_tolerance = {self.relative_tolerance!r}: expected a number in (0, 1)")
         if self.step is not None and not (math.isfinite(self.step) and self.step > 0):
             raise ValueError(f"step = {self.step!r} s: expected a positive number")
         if self.max_events < 1:
             raise ValueError(f"max_events = {self.max_events!r}: expected a positive integer")
+
+    def for_fmu(self, model_description) -> "SolverSettings":
+        """These settings with the relative tolerance resolved for an FMU."""
+        if self.relative_tolerance is not None:
+            return self
+        experiment = model_description.defaultExperiment
+        tolerance = experiment.tolerance if experiment is not None and experiment.tolerance is not None else None
+        return replace(self, relative_tolerance=float(tolerance) if tolerance is not None else DEFAULT_TOLERANCE)
 
     def substeps(self, h: float) -> int:
         """Euler steps in one communication step ``h``; the step must divide it."""
@@ -206,7 +216,9 @@ class Integrator:
         close = 1e-9 * max(h, 1e-300)  # a time event this near t_end is at t_end (its time is a sum of steps)
         events_before = self.events
         euler = self.settings.method == "euler"
-        substep = h / self.settings.substeps(h) if euler else None
+        substep = (self.settings.step or h) if euler else None
+        if euler:
+            self.settings.substeps(h)  # the step divides the communication step
         while t_end - t > close:
             target, time_event = t_end, False
             if self.next_event_time is not None and self.next_event_time <= t_end + close:
@@ -215,9 +227,11 @@ class Integrator:
                                               f"the past")
                 target, time_event = (t_end if abs(self.next_event_time - t_end) <= close else
                                       max(self.next_event_time, t)), True
-            if euler:
-                reached = min(target, t + substep) if target - (t + substep) > close else target
-                state_event = self._euler_step(t, reached)
+            if euler:  # whole steps of the given size (the step the Reference FMUs' own Euler takes), cut at events
+                whole = target - (t + substep) > -close  # a whole step fits (to rounding)
+                dt = substep if whole else target - t
+                reached = t + substep if target - (t + substep) > close else target
+                state_event = self._euler_step(t, reached, dt)
                 time_event = time_event and reached == target
             else:
                 state_event, reached = self._cvode_step(t, target)
@@ -245,7 +259,7 @@ class Integrator:
         state_event = bool(np.any(roots))
         return state_event, float(reached) if state_event else target
 
-    def _euler_step(self, t: float, t_next: float) -> bool:
+    def _euler_step(self, t: float, t_next: float, dt: float) -> bool:
         """One forward Euler step; a state event where an indicator changed
         sign over it (fmpy's ``ForwardEuler``: seen at the end of the step)."""
         m, nx, nz = self.model, self.nx, self.nz
@@ -256,7 +270,7 @@ class Integrator:
         if nx:
             m.getContinuousStates(self._px, nx)
             self._derivatives(self._pdx, nx)
-            self.x += (t_next - t) * self.dx
+            self.x += dt * self.dx
             m.setTime(t_next)
             m.setContinuousStates(self._px, nx)
         if not nz:

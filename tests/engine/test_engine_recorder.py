@@ -51,7 +51,7 @@ def test_blocks_are_flushed_every_block_rows_rows(tmp_path):
     assert rec.n_rows == 25
     rec.close("ok")
     assert len(data_lines(path)) == 25  # the last, partial block on close
-    assert data_lines(path)[:3] == ["0,0", "1,2", "2,4"]
+    assert data_lines(path)[:3] == ["0.0,0.0", "1.0,2.0", "2.0,4.0"]  # each double as its shortest exact text
     info = sidecar(path)
     assert info["status"] == "ok" and info["error"] is None and info["rows"] == 25
 
