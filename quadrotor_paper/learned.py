@@ -115,15 +115,15 @@ def state_of(fmu: FmuComponent, variant: str) -> np.ndarray:
 
 
 class LearnedControllerFmu(FmuComponent):
-    """A controller FMU that starts from a saved state: after each start
-    (initialization), ``state`` is written into its serialized FMU state."""
+    """A controller FMU that starts from a saved state: after each
+    initialization, ``state`` is written into its serialized FMU state."""
 
     def __init__(self, *args, variant: str, state: np.ndarray | None = None, **kwargs):
         super().__init__(*args, **kwargs)
         self.variant, self.learned = variant, state
 
-    def start(self, t0, parameters=None) -> None:
-        super().start(t0, parameters)
+    def exit_initialization(self, t0) -> None:
+        super().exit_initialization(t0)
         if self.learned is None:
             return
         blob = bytearray(self.serialize_state())
