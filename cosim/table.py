@@ -144,7 +144,7 @@ def read_table(path: str | Path, types: Mapping[str, str] | None = None) -> tupl
                 raise ScenarioError(f"{where}: line {i + 2}, column {name}: {len(parts)} values; the rows before "
                                     f"have {size}")
             size = len(parts)
-            if type_ != "String" and not all(p.strip() for p in parts):
+            if type_ not in ("String", "Binary") and not all(p.strip() for p in parts):  # b"" is a Binary
                 raise ScenarioError(f"{where}: line {i + 2}, column {name}: empty field")
             try:
                 parsed = [typed_value(type_, p.strip() if type_ != "String" else p, "value") for p in parts]
@@ -209,7 +209,7 @@ class SignalTable(PythonComponent):
                 row = data[max(i, 0)]
             else:
                 t0, t1 = times[i], times[i + 1]
-                w = (t - t0) / (t1 - t0)
+                w = max(0.0, (t - t0) / (t1 - t0))  # t within 1e-9 below row i's time: that row
                 row = data[i] + w * (data[i + 1] - data[i])
             if shape:
                 out.extend(row.tolist() if isinstance(row, np.ndarray) else row)
