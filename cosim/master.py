@@ -118,10 +118,12 @@ class RunResult:
     snapshots: list[Snapshot] = field(default_factory=list)
     types: tuple[str, ...] = ()
     objects: dict[str, np.ndarray] = field(default_factory=dict)
+    python_loop: tuple[str, ...] = ()
     """``types``: each column's signal type (docs/cosim.md, "Signal types");
     ``objects``: the columns of Int64, UInt64, String and Binary signals, as
     object arrays of ``int``, ``str`` and ``bytes`` (their ``data`` column is
-    NaN)."""
+    NaN); ``python_loop``: why the plan cannot run in the compiled loop
+    (:attr:`cosim.plan.Plan.python_loop`, empty when it can)."""
 
     @property
     def time(self) -> np.ndarray:
@@ -290,7 +292,7 @@ class Master:
         result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
                            status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
                            recorder.path, seed, dict(parameters or {}), taken, self.plan.record_types,
-                           recorder.object_columns())
+                           recorder.object_columns(), self.plan.python_loop)
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure

@@ -19,6 +19,7 @@ every communication point, the others stay as published).
 from __future__ import annotations
 
 import csv
+import json
 import math
 import re
 from pathlib import Path
@@ -85,10 +86,10 @@ def scenario_file(tmp_path: Path, text: str) -> Path:
     return path
 
 
-def run_cli(toml: Path, out: Path) -> tuple[list[str], list[list[str]]]:
+def run_cli(toml: Path, out: Path, *more: str) -> tuple[list[str], list[list[str]]]:
     from quadrotor_paper.cli import main
 
-    assert main(["run", str(toml), "--out", str(out), "--no-plots", "--quiet"]) == 0
+    assert main(["run", str(toml), "--out", str(out), "--no-plots", "--quiet", *more]) == 0
     return written(out / "results.csv")
 
 
@@ -163,8 +164,11 @@ interpolation = "hold"
 [record]
 signals = {[f"Feedthrough.{n}" for n in outputs]}
 """.replace("'", '"'))
-    ours_header, ours = run_cli(toml, tmp_path / "out")
+    ours_header, ours = run_cli(toml, tmp_path / "out", "--profile")
     assert len(ours) == len(rows)
+    told = json.loads((tmp_path / "out" / "summary.json").read_text())["python_loop"]
+    assert told[0] == "Python component inputs"  # --profile names why the compiled loop could not run it
+    assert told[1].startswith("Feedthrough: signals of type Int32 (Int32_input), String (String_input)")
     times = [float(r[0]) for r in in_rows]
     follows = {n.replace("_input", "_output"): n for n in driven}
     changed = 0
