@@ -152,7 +152,8 @@ def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
     for v in model_description.modelVariables:
         if v.type == "Clock":  # a clock is no signal: the component activates it (FmuComponent.clock)
             groups["other"].append(_port(v))
-        elif v.causality == "local":
+            continue
+        if v.causality == "local":
             key = "local" if v.name not in derivatives and _TYPE.get(v.type) == "Float64" else "other"
         else:
             key = v.causality if v.causality in groups else "other"

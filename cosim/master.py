@@ -77,7 +77,8 @@ class Snapshot:
     serializeFMUState); ``parameters``: FMU name -> the values it was
     started with (base, scenario, seed, run); ``outputs``: ``component.name``
     -> value at ``t_n`` of every signal the master holds (the outputs in
-    use, published internals); ``inputs``: the same for every connected
+    use, published internals; an Int64, UInt64, String or Binary signal as
+    its Python value); ``inputs``: the same for every connected
     input. Python components are not part of a snapshot: a run resumed from
     it (``Master.run(..., t0=time, restore=snapshot.states)``) starts them
     afresh."""
@@ -86,8 +87,8 @@ class Snapshot:
     step: int
     states: dict[str, bytes]
     parameters: dict[str, dict[str, Any]]
-    outputs: dict[str, float]
-    inputs: dict[str, float]
+    outputs: dict[str, Any]
+    inputs: dict[str, Any]
 
     def inputs_of(self, component: str) -> dict[str, float]:
         """The values at ``t_n`` of ``component``'s inputs in :attr:`inputs`, by variable name."""
@@ -319,6 +320,7 @@ class Master:
         def take(n: int) -> None:
             if n in steps:
                 values = {name: float(self.signals[self.slots[name]]) for name in outputs}
+                values.update((name, self.values[slot]) for name, slot in self.plan.object_slots.items())
                 taken.append(Snapshot(t0 + n * self.step, n, {f.name: f.serialize_state() for f in self.fmus},
                                       {k: dict(v) for k, v in started.items()}, values,
                                       {dst: values[src] for dst, src in inputs}))

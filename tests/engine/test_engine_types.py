@@ -445,3 +445,17 @@ def test_a_python_component_takes_and_gives_typed_values(tmp_path):
         with pytest.raises(ConnectionCheckError, match=re.escape(
                 "envelope of 'F.String_output': a String signal; an envelope bounds numbers")):
             Master([f], [], [], 0.25, record=["F.String_output"], bounds={"F.String_output": (0, 1)})
+
+
+def test_a_snapshot_holds_typed_signals_as_their_values(tmp_path):
+    (tmp_path / "in.csv").write_text(f"time,i,s\n0,{2 ** 60},first\n0.5,-1,second\n", encoding="utf-8")
+    raw = {"connections": ["inputs.{i,s} -> F.{Int64_input,String_input}"],
+           "simulation": {"duration": 1.0, "step": 0.25},
+           "fmus": {"F": {"path": str(fmu(3, "Feedthrough"))}},
+           "components": {"inputs": {"kind": "signal_table", "file": str(tmp_path / "in.csv"),
+                                     "columns": {"i": {"type": "Int64"}, "s": {"type": "String"}}}},
+           "record": {"signals": ["F.Int64_output", "F.String_output"]}}
+    with build_master(parse_scenario(raw)) as master:
+        shot, = master.run(1.0, snapshots=[0.25]).snapshots
+    assert shot.inputs_of("F") == {"Int64_input": 2 ** 60, "String_input": "first"}
+    assert shot.outputs["F.Int64_output"] == 2 ** 60 and shot.outputs["F.String_output"] == "first"
