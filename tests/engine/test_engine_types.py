@@ -459,3 +459,39 @@ def test_a_snapshot_holds_typed_signals_as_their_values(tmp_path):
         shot, = master.run(1.0, snapshots=[0.25]).snapshots
     assert shot.inputs_of("F") == {"Int64_input": 2 ** 60, "String_input": "first"}
     assert shot.outputs["F.Int64_output"] == 2 ** 60 and shot.outputs["F.String_output"] == "first"
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_the_table_feeds_the_fmu_as_fmpy_simulate_fmu_does(version):
+    """fmpy's ``simulate_fmu`` (Co-Simulation, ``input=`` a table) sets at
+    each communication point t_n the discrete inputs' last row at or before
+    t_n and the continuous inputs' linear interpolation, then steps and
+    records the outputs at t_{n+1}: the master's exchange ordering does the
+    same, so with the table's Float64_continuous_input ``linear`` and the
+    rest ``hold``, every row equals fmpy's. (fmpy sets no String input:
+    that column is left out here; the CLI test drives it.)"""
+    from fmpy import simulate_fmu
+
+    in_header, in_rows = published("Feedthrough_in.csv")
+    t0, stop, h = experiment(version, "Feedthrough", "Feedthrough_out.csv")
+    columns = [c for c in in_header[1:] if c != "String_input"]
+    dtype = [("time", float)] + [(c, np.int32 if c == "Int32_input" else float) for c in columns]
+    signals = np.array([tuple(float(r[in_header.index(c)]) for c in ["time"] + columns) for r in in_rows],
+                       dtype=dtype)
+    outputs = [c.replace("_input", "_output") for c in columns]
+    theirs = simulate_fmu(str(fmu(version, "Feedthrough")), start_time=t0, stop_time=stop, output_interval=h,
+                          input=signals, output=outputs)
+    raw = {"connections": [f"inputs.{{{','.join(columns)}}} -> F.{{{','.join(columns)}}}"],
+           "simulation": {"start_time": t0, "duration": stop - t0, "step": h, "ordering": "exchange"},
+           "fmus": {"F": {"path": str(fmu(version, "Feedthrough"))}},
+           "components": {"inputs": {"kind": "signal_table", "file": str(RESULTS / "Feedthrough_in.csv"),
+                                     "columns": {"Int32_input": {"type": "Int32"},
+                                                 "String_input": {"type": "String"},
+                                                 "Float64_continuous_input": {"interpolation": "linear"}}}},
+           "record": {"signals": [f"F.{o}" for o in outputs]}}
+    with build_master(parse_scenario(raw)) as master:
+        ours = master.run(stop - t0, t0=t0)
+    assert len(ours.time) == len(theirs) and np.abs(ours.time - theirs["time"]).max() <= 1e-9
+    for o in outputs:
+        assert np.abs(ours[f"F.{o}"] - theirs[o]).max() <= 1e-9, o
+    assert len(set(ours["F.Float64_continuous_output"])) > 3  # interpolated, not only held
