@@ -50,7 +50,7 @@ from lxml import etree
 from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 
-from .component import FLOAT_HELD, TYPES, Port, element_of, element_ports, typed_value
+from .component import TYPES, Port, element_of, typed_value
 from .errors import FmuCallError, FmuLoadError, ScenarioError
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu

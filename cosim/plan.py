@@ -299,7 +299,8 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
     for s in record + list(bounds):
         signal_port(components, s)
         comp, _, var = source_of.get(s, s).partition(".")
-        if var not in {p.name for p in _elements(components[comp], "outputs") + element_ports(_internals(components[comp]))}:
+        sources = _elements(components[comp], "outputs") + element_ports(_internals(components[comp]))
+        if var not in {p.name for p in sources}:
             raise ConnectionCheckError(f"signal {s!r} is an input that nothing feeds; record its source")
     for s in bounds:
         if types[s] not in FLOAT_HELD:

@@ -173,7 +173,8 @@ class SignalTable(PythonComponent):
         self.path = Path(file)
         specs = {k: dict(v) for k, v in (columns or {}).items()}
         if interpolation not in INTERPOLATIONS:
-            raise ScenarioError(f"{name}.interpolation = {interpolation!r}: expected one of {', '.join(INTERPOLATIONS)}")
+            raise ScenarioError(f"{name}.interpolation = {interpolation!r}: expected one of "
+                                f"{', '.join(INTERPOLATIONS)}")
         self.times, values = read_table(self.path, {k: v.get("type", "Float64") for k, v in specs.items()})
         ports, self._columns = [], []
         for column, data in values.items():

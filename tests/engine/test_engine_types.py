@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from cosim.component import Port, PythonComponent
-from cosim.connection import check_connections, parse_connection, parse_connections, Connection, Endpoint
+from cosim.connection import Connection, Endpoint, parse_connection
 from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.fmu_component import FmuComponent
 from cosim.scenario import build_master, parse_scenario
