@@ -452,7 +452,7 @@ class Master:
         writes = [(self.fmus[b.index].write_inputs, b.sources, self.fmus[b.index].u[:len(b.sources)])
                   for b in self.plan.exchanged]
         do_steps = [f.do_step for f in self.fmus]
-        reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads]
+        reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads or b.object_reads]
 
         def phase(n: int, t: float) -> None:
             for write, in_idx, u in writes:

@@ -168,7 +168,7 @@ class Plan:
     @property
     def exchanged(self) -> tuple[FmuBlock, ...]:
         """The FMUs whose inputs are set at the exchange (not at t_n)."""
-        return tuple(b for b in self.fmus if b.inputs and not b.direct)
+        return tuple(b for b in self.fmus if (b.inputs or b.object_inputs) and not b.direct)
 
 
 def _internals(comp) -> tuple[Port, ...]:

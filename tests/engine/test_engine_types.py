@@ -220,6 +220,22 @@ def test_int64_and_uint64_beyond_2_53_pass_exactly_and_narrow_types_refuse_what_
         build_master(parse_scenario(raw))
 
 
+@pytest.mark.parametrize("ordering", ["feedthrough", "exchange"])
+def test_an_fmu_fed_only_through_object_slots_gets_its_inputs_in_either_ordering(tmp_path, ordering):
+    (tmp_path / "in.csv").write_text(f"time,i,s\n0,{2 ** 60},a\n0.5,7,b\n", encoding="utf-8")
+    raw = {"connections": ["inputs.{i,s} -> F.{Int64_input,String_input}"],
+           "simulation": {"duration": 1.0, "step": 0.25, "ordering": ordering},
+           "fmus": {"F": {"path": str(fmu(3, "Feedthrough"))}},
+           "components": {"inputs": {"kind": "signal_table", "file": str(tmp_path / "in.csv"),
+                                     "columns": {"i": {"type": "Int64"}, "s": {"type": "String"}}}},
+           "record": {"signals": ["F.Int64_output", "F.String_output"]}}
+    with build_master(parse_scenario(raw)) as master:
+        result = master.run(1.0)
+    late = 1 if ordering == "exchange" else 0  # exchange: set at t_n, read after the step at t_{n+1}
+    assert list(result["F.Int64_output"]) == [2 ** 60] * (2 + late) + [7] * (3 - late)
+    assert list(result["F.String_output"]) == ["a"] * (2 + late) + ["b"] * (3 - late)
+
+
 def test_a_boolean_output_into_a_float64_input_is_refused_naming_both_types():
     raw = {"connections": ["A.Boolean_output -> B.Float64_continuous_input"],
            "fmus": {"A": {"path": str(fmu(3, "Feedthrough"))}, "B": {"path": str(fmu(3, "Feedthrough"))}}}
