@@ -69,7 +69,7 @@ class Port:
     unit: str | None = None
     type: str = "Float64"
     description: str = ""
-    start: float | None = None
+    start: float | tuple | None = None  # an array's: one value per element, row-major
     shape: tuple[int, ...] = ()
 
     @property

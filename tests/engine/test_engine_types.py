@@ -511,3 +511,27 @@ def test_the_table_feeds_the_fmu_as_fmpy_simulate_fmu_does(version):
     for o in outputs:
         assert np.abs(ours[f"F.{o}"] - theirs[o]).max() <= 1e-9, o
     assert len(set(ours["F.Float64_continuous_output"])) > 3  # interpolated, not only held
+
+
+def test_recorded_strings_are_bounded_each_and_in_all(tmp_path, monkeypatch):
+    import cosim.recorder
+
+    (tmp_path / "in.csv").write_text("time,s\n0,short\n0.5,a longer text\n", encoding="utf-8")
+    raw = {"connections": ["inputs.s -> F.String_input"], "simulation": {"duration": 1.0, "step": 0.25},
+           "fmus": {"F": {"path": str(fmu(3, "Feedthrough"))}},
+           "components": {"inputs": {"kind": "signal_table", "file": str(tmp_path / "in.csv"),
+                                     "columns": {"s": {"type": "String"}}}},
+           "record": {"signals": ["F.String_output"]}}
+    monkeypatch.setattr(cosim.recorder, "MAX_STRING_BYTES", 8)
+    with build_master(parse_scenario(raw)) as master:
+        result = master.run(1.0, raise_on_error=False)
+    assert result.status == "failed" and result.error == (
+        "recording F.String_output: a value of 13 bytes; at most 8 bytes each are recorded")
+    assert list(result["F.String_output"]) == ["short", "short"]  # the rows before are kept
+    monkeypatch.setattr(cosim.recorder, "MAX_STRING_BYTES", 100)
+    monkeypatch.setattr(cosim.recorder, "MAX_RECORD_BYTES", 5 * 2 * 8 + 12)
+    with build_master(parse_scenario(raw)) as master:
+        result = master.run(1.0, raise_on_error=False)
+    assert result.status == "failed" and result.error.startswith(
+        "recording: the String and Binary values recorded reach 23 bytes; with the numbers, at most 92 bytes")
+    assert len(result.time) == 2  # "short" twice (10 bytes) fit beside the 80 of the numbers; 13 more do not
