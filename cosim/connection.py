@@ -20,7 +20,7 @@ Int64; docs/cosim.md, "Signal types"), different shapes, different units
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Iterable, Mapping
 
 from .component import Port, element_of, element_ports
@@ -105,10 +105,12 @@ def _find(ports: tuple[Port, ...], name: str) -> Port | None:
 
 def _elements(c: Connection, out_port: Port, in_port: Port) -> list[Connection]:
     """A whole-array connection as its element connections (element k to
-    element k); a scalar one as itself."""
+    element k, each keeping whatever else the connection carries); a scalar
+    one as itself."""
     if not out_port.shape:
         return [c]
-    return [Connection(Endpoint(c.source.component, a.name), Endpoint(c.destination.component, b.name))
+    return [replace(c, source=Endpoint(c.source.component, a.name),
+                    destination=Endpoint(c.destination.component, b.name))
             for a, b in zip(element_ports((out_port,)), element_ports((in_port,)))]
 
 
