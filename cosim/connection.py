@@ -3,20 +3,27 @@
 A connection is written ``"Source.variable -> Destination.variable"``, e.g.
 ``"Source.y -> Plant.u"``. One brace group per side expands
 pairwise, so ``"Plant.{x,y,z} -> controller.{x,y,z}"`` is three
-connections.
+connections; a single source fans out to a group of destinations,
+``"Source.y -> Plant.{u1,u2}"`` (two connections from one output).
+
+An FMI 3.0 array variable is connected whole (``"A.y -> B.u"``, both of one
+shape: element k to element k) or element by element (``"A.y[2] -> B.v"``,
+1-based, ``name[i,j]`` for a matrix, row-major as FMI 3.0 serializes arrays).
 
 :func:`check_connections` runs before the first step and refuses, with a
 message naming the connection, any of: an unknown component or variable, a
 source that is not an output, a destination that is not an input, an input
-fed twice, different types, different units (where both sides declare one).
+fed twice, different types (no widening: a Boolean is no Float64, an Int32 no
+Int64; docs/cosim.md, "Signal types"), different shapes, different units
+(where both sides declare one).
 """
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Iterable, Mapping
 
-from .component import Port
+from .component import Port, element_of, element_ports
 from .errors import ConnectionCheckError
 
 __all__ = ["Connection", "parse_connection", "parse_connections", "check_connections", "Endpoint"]
@@ -66,9 +73,12 @@ def parse_connection(text: str) -> list[Connection]:
         raise ConnectionCheckError(f"connection {text!r} must be a string 'A.out -> B.in'")
     left, right = text.split("->")
     sources, destinations = _expand(left, text), _expand(right, text)
+    if len(sources) == 1 and len(destinations) > 1:  # fan-out: one output feeds every destination
+        sources = sources * len(destinations)
     if len(sources) != len(destinations):
         raise ConnectionCheckError(
-            f"connection {text!r}: {len(sources)} sources but {len(destinations)} destinations")
+            f"connection {text!r}: {len(sources)} sources but {len(destinations)} destinations (a group "
+            f"pairs with a group of the same size; one source may feed a group)")
     return [Connection(_endpoint(s, text), _endpoint(d, text)) for s, d in zip(sources, destinations)]
 
 
@@ -80,10 +90,28 @@ def parse_connections(texts: Iterable[str]) -> list[Connection]:
 
 
 def _find(ports: tuple[Port, ...], name: str) -> Port | None:
+    """The port ``name`` (a scalar or a whole array), or the element port
+    ``name[i]`` of an array port; ``None`` if there is none."""
     for p in ports:
         if p.name == name:
             return p
+    base, index = element_of(name)
+    if index is not None:
+        for p in ports:
+            if p.name == base and p.shape:
+                return next((e for e in element_ports((p,)) if e.name == name), None)
     return None
+
+
+def _elements(c: Connection, out_port: Port, in_port: Port) -> list[Connection]:
+    """A whole-array connection as its element connections (element k to
+    element k, each keeping whatever else the connection carries); a scalar
+    one as itself."""
+    if not out_port.shape:
+        return [c]
+    return [replace(c, source=Endpoint(c.source.component, a.name),
+                    destination=Endpoint(c.destination.component, b.name))
+            for a, b in zip(element_ports((out_port,)), element_ports((in_port,)))]
 
 
 def check_connections(connections: Iterable[Connection], components: Mapping[str, object]) -> list[Connection]:
@@ -93,7 +121,8 @@ def check_connections(connections: Iterable[Connection], components: Mapping[str
     ``outputs`` (tuples of :class:`~cosim.component.Port`); FMUs additionally
     have ``variables`` (every variable of the modelDescription), which lets
     the message say *why* a name is not an output or input (e.g. "is a
-    parameter"). Returns the connections as a list; raises
+    parameter"). Returns the connections as a list, a whole-array
+    connection as its element connections (``A.y[1] -> B.u[1]``, ...); raises
     :class:`ConnectionCheckError` at the first wrong one.
     """
     checked: list[Connection] = []
@@ -123,16 +152,20 @@ def check_connections(connections: Iterable[Connection], components: Mapping[str
         if out_port.type != in_port.type:
             raise ConnectionCheckError(
                 f"connection {c}: type mismatch, {c.source} is {out_port.type} but {c.destination} is {in_port.type}")
-        if out_port.type != "Float64":
+        if out_port.shape != in_port.shape:
+            def shape(p: Port) -> str:
+                return f"an array of shape {p.shape}" if p.shape else "a scalar"
             raise ConnectionCheckError(
-                f"connection {c}: only Float64 (FMI 2.0 Real) signals can be connected, not {out_port.type}")
+                f"connection {c}: shape mismatch, {c.source} is {shape(out_port)} but {c.destination} is "
+                f"{shape(in_port)} (connect whole arrays of one shape, or element by element: name[1], 1-based)")
         if out_port.unit and in_port.unit and out_port.unit != in_port.unit:
             raise ConnectionCheckError(
                 f"connection {c}: unit mismatch, {c.source} is in {out_port.unit} but {c.destination} "
                 f"is in {in_port.unit}")
-        key = str(c.destination)
-        if key in fed:
-            raise ConnectionCheckError(f"connection {c}: {c.destination} is already fed by {fed[key]}")
-        fed[key] = c
-        checked.append(c)
+        for e in _elements(c, out_port, in_port):
+            key = str(e.destination)  # an element fed twice: also as an element and in its whole array
+            if key in fed:
+                raise ConnectionCheckError(f"connection {c}: {e.destination} is already fed by {fed[key]}")
+            fed[key] = c
+            checked.append(e)
     return checked

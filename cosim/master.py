@@ -43,7 +43,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .component import PythonComponent
+from .component import PythonComponent, typed_value
 from .connection import Connection, check_connections, parse_connections
 from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError
 from .limits import SEED_LIMIT
@@ -77,7 +77,8 @@ class Snapshot:
     serializeFMUState); ``parameters``: FMU name -> the values it was
     started with (base, scenario, seed, run); ``outputs``: ``component.name``
     -> value at ``t_n`` of every signal the master holds (the outputs in
-    use, published internals); ``inputs``: the same for every connected
+    use, published internals; an Int64, UInt64, String or Binary signal as
+    its Python value); ``inputs``: the same for every connected
     input. Python components are not part of a snapshot: a run resumed from
     it (``Master.run(..., t0=time, restore=snapshot.states)``) starts them
     afresh."""
@@ -86,8 +87,8 @@ class Snapshot:
     step: int
     states: dict[str, bytes]
     parameters: dict[str, dict[str, Any]]
-    outputs: dict[str, float]
-    inputs: dict[str, float]
+    outputs: dict[str, Any]
+    inputs: dict[str, Any]
 
     def inputs_of(self, component: str) -> dict[str, float]:
         """The values at ``t_n`` of ``component``'s inputs in :attr:`inputs`, by variable name."""
@@ -116,12 +117,24 @@ class RunResult:
     seed: int = 0
     parameters: dict[str, Any] = field(default_factory=dict)
     snapshots: list[Snapshot] = field(default_factory=list)
+    types: tuple[str, ...] = ()
+    objects: dict[str, np.ndarray] = field(default_factory=dict)
+    python_loop: tuple[str, ...] = ()
+    """``types``: each column's signal type (docs/cosim.md, "Signal types");
+    ``objects``: the columns of Int64, UInt64, String and Binary signals, as
+    object arrays of ``int``, ``str`` and ``bytes`` (their ``data`` column is
+    NaN); ``python_loop``: why the plan cannot run in the compiled loop
+    (:attr:`cosim.plan.Plan.python_loop`, empty when it can)."""
 
     @property
     def time(self) -> np.ndarray:
         return self.data[:, 0]
 
     def __getitem__(self, name: str) -> np.ndarray:
+        """A recorded column: float64 values, or the objects of an Int64,
+        UInt64, String or Binary column (:attr:`objects`)."""
+        if name in self.objects:
+            return self.objects[name]
         try:
             return self.data[:, self.columns.index(name)]
         except ValueError:
@@ -181,8 +194,13 @@ class Master:
         self.signals = np.zeros(len(plan.slots))
         for slot, value in plan.start_values:
             self.signals[slot] = value
+        self.values = np.full(len(plan.object_slots), None, dtype=object)  # Int64, UInt64, String, Binary
+        for slot, value in plan.object_start_values:
+            self.values[slot] = value
         for fmu, b in zip(self.fmus, plan.fmus):
-            fmu.bind(b.inputs, b.reads, self.signals[b.block] if b.reads else None)
+            fmu.bind(b.inputs, b.reads, self.signals[b.block] if b.reads else None,
+                     objects=self.values, object_inputs=(b.object_inputs, b.object_sources),
+                     object_reads=(b.object_reads, b.object_block))
         self.record_columns, self.record_units = plan.record, plan.record_units
         self.guard = Guard(plan.watched, plan.bounds)
 
@@ -239,7 +257,8 @@ class Master:
             raise ConnectionCheckError(f"restore: no FMU named {', '.join(map(repr, unknown))}; the FMUs are "
                                        f"{', '.join(f.name for f in self.fmus)}")
         recorder = Recorder(self.record_columns, self.record_units, n_steps + 1, csv_path, block_rows,
-                            meta={"step": h, "t0": t0, "seed": seed})
+                            meta={"step": h, "t0": t0, "seed": seed}, types=self.plan.record_types,
+                            objects=self.plan.record_objects)
         phase_times: dict[str, float] = {}
         started: dict[str, dict[str, Any]] = {}
         taken: list[Snapshot] = []
@@ -276,7 +295,8 @@ class Master:
         recorder.close(status, error)
         result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
                            status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
-                           recorder.path, seed, dict(parameters or {}), taken)
+                           recorder.path, seed, dict(parameters or {}), taken, self.plan.record_types,
+                           recorder.object_columns(), self.plan.python_loop)
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure
@@ -332,6 +352,7 @@ class Master:
         def take(n: int) -> None:
             if n in steps:
                 values = {name: float(self.signals[self.slots[name]]) for name in outputs}
+                values.update((name, self.values[slot]) for name, slot in self.plan.object_slots.items())
                 taken.append(Snapshot(t0 + n * self.step, n, {f.name: f.serialize_state() for f in self.fmus},
                                       {k: dict(v) for k, v in started.items()}, values,
                                       {dst: values[src] for dst, src in inputs}))
@@ -343,11 +364,12 @@ class Master:
         gets the values its inputs are connected to at t0 and its outputs are
         read again, once per FMU, so a chain of direct feedthroughs is
         consistent at t0."""
-        signals = self.signals
+        signals, values = self.signals, self.values
         for _ in self.fmus:
             for tr in transfers:
                 fmu = self.fmus[tr.index]
-                fmu.set_inputs(dict(zip(tr.inputs, signals[tr.sources])), t0)
+                fmu.set_inputs({**dict(zip(tr.inputs, signals[tr.sources])),
+                                **dict(zip(tr.object_inputs, values[tr.object_sources]))}, t0)
                 fmu.read_outputs(t0)
 
     # ---- the loop and its phases -------------------------------------------------
@@ -358,6 +380,8 @@ class Master:
         offers them), step it, store its outputs and published internals --
         into ``held`` instead of the signal array when the outputs are
         delayed (exchange ordering)."""
+        if b.typed is not None:
+            return self._py_typed_phase(b)
         comp = self.python[b.index]
         in_idx, out_block, published = b.sources, b.block, b.published
         signals, take, step = self.signals, np.take, comp.step
@@ -399,6 +423,45 @@ class Master:
                 signals[slots] = internal_values()[which]
         return phase
 
+    def _py_typed_phase(self, b: PythonBlock) -> Callable[[int, float], None]:
+        """A Python component with ports of other types than Float64 at
+        ``t_n``: ``step`` receives its inputs as a list of Python values (in
+        port order, an array's elements in row-major order: float, int, bool,
+        str, bytes as :func:`~cosim.component.typed_value` makes them) and
+        returns its outputs in the same form; each is checked against its
+        port's type (a value the type cannot hold is refused, never rounded)."""
+        from .component import element_ports
+
+        comp = self.python[b.index]
+        signals, values, step = self.signals, self.values, comp.step
+        in_types = [p.type for p in element_ports(tuple(comp.inputs))]
+        outputs = element_ports(tuple(comp.outputs))
+        sources, targets = b.typed
+
+        def value_of(in_objects: bool, slot: int, type_: str):
+            if in_objects:
+                return values[slot]
+            value = float(signals[slot])
+            if type_ in ("Float64", "Float32"):
+                return value
+            return bool(value) if type_ == "Boolean" else int(value)  # held exactly (FLOAT_HELD)
+
+        def phase(n: int, t: float) -> None:
+            u = [value_of(o, slot, ty) for (o, slot), ty in zip(sources, in_types)]
+            y = step(n, t, u)
+            if len(y) != len(outputs):
+                raise CosimError(f"{comp.name}.step returned {len(y)} values for its {len(outputs)} outputs")
+            for (in_objects, slot), port, value in zip(targets, outputs, y):
+                try:
+                    value = typed_value(port.type, value, f"{comp.name}.{port.name}")
+                except ValueError as exc:
+                    raise CosimError(f"at t = {t!r} s: {exc}") from None
+                if in_objects:
+                    values[slot] = value
+                else:
+                    signals[slot] = value
+        return phase
+
     def _fmu_eval_phase(self, b: FmuBlock) -> Callable[[int, float], None]:
         """An FMU with direct feedthrough at ``t_n`` (feedthrough ordering): its
         inputs at ``t_n`` set, its outputs at ``t_n`` read (it steps at the exchange)."""
@@ -421,7 +484,7 @@ class Master:
         writes = [(self.fmus[b.index].write_inputs, b.sources, self.fmus[b.index].u[:len(b.sources)])
                   for b in self.plan.exchanged]
         do_steps = [f.do_step for f in self.fmus]
-        reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads]
+        reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads or b.object_reads]
 
         def phase(n: int, t: float) -> None:
             for write, in_idx, u in writes:
@@ -497,8 +560,13 @@ class Master:
         guard_ok, guard_idx, guard = self.guard.ok, plan.watch_slots, self.guard
         block = recorder.block_rows
 
+        record_objects = recorder.record_objects if plan.record_objects else None
+        values = self.values
+
         def record(n: int, t: float) -> None:
             take(signals, rec_idx, out=data[n])
+            if record_objects is not None:  # Int64, UInt64, String, Binary columns
+                record_objects(n, values)
             recorder.n_rows = n + 1
             if (n + 1) % block == 0:
                 recorder.commit(n + 1)

@@ -523,7 +523,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
     r.add_argument("--variant", choices=variant_names(), help="controller variant")
     r.add_argument("--no-plots", action="store_true")
-    r.add_argument("--profile", action="store_true", help="time each phase of the loop (summary.json: cost_per_step_us)")
+    r.add_argument("--profile", action="store_true",
+                   help="time each phase of the loop (summary.json: cost_per_step_us; python_loop: why the "
+                        "compiled loop cannot run the plan)")
     r.add_argument("--save-learned", metavar="FILE", help="write the controller's learned state after the run")
     r.add_argument("--load-learned", metavar="FILE",
                    help="start the controller from a saved learned state (resume learning)")
