@@ -26,9 +26,12 @@ Two optional parts of the contract:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .units import Unit
 
 __all__ = ["Port", "PythonComponent", "ports"]
 
