@@ -45,7 +45,10 @@ class Port:
     component declares none (the unit check is then skipped). An input with
     a ``start`` value may be left unconnected: it then holds that value, as
     an FMU's input holds its start value; an input without one must be
-    connected.
+    connected. ``unit_definition`` is the meaning of ``unit`` the
+    component's own description gives (an FMU's ``UnitDefinitions``, read by
+    :mod:`cosim.units`), ``None`` when it gives none: the name is then read
+    by pint.
     """
 
     name: str
@@ -53,6 +56,7 @@ class Port:
     type: str = "Float64"
     description: str = ""
     start: float | None = None
+    unit_definition: "Unit | None" = None
 
 
 def ports(*spec: tuple[str, str | None] | str) -> tuple[Port, ...]:

@@ -133,13 +133,14 @@ def unit_conversion(c: Connection, out_port: Port, in_port: Port) -> tuple[float
         return None
     if out_port.unit_definition is None and in_port.unit_definition is None and out_port.unit == in_port.unit:
         return None  # one name, defined nowhere: one unit (and no pint on the common path)
-    source = units.unit_of(out_port.unit, out_port.unit_definition) or out_port.unit
-    destination = units.unit_of(in_port.unit, in_port.unit_definition) or in_port.unit
+    source = units.unit_of(out_port.unit, out_port.unit_definition)
+    destination = units.unit_of(in_port.unit, in_port.unit_definition)
     try:
-        factor, offset = units.conversion(source, destination)
-    except ConnectionCheckError as exc:
+        factor, offset = units.conversion(source or out_port.unit, destination or in_port.unit)
+    except ConnectionCheckError:
         raise ConnectionCheckError(
-            f"connection {c}: {c.source} is in {out_port.unit} but {c.destination} is in {in_port.unit}: {exc}; "
+            f"connection {c}: unit mismatch, {c.source} is in {units.describe(out_port.unit, source)} but "
+            f"{c.destination} is in {units.describe(in_port.unit, destination)}, not one quantity; "
             f"state the conversion, {{ connect = \"{c}\", factor = ..., offset = ... }} "
             f"({c.destination} = factor * {c.source} + offset), or mark it "
             f"{{ connect = \"{c}\", units = \"unchecked\" }}") from None

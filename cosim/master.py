@@ -294,15 +294,17 @@ class Master:
         if ``n`` is one of ``steps``; ``None`` without snapshots."""
         if not steps:
             return None
-        outputs = [name for name in self.slots if name != "time"]
-        inputs = list(self.source_of.items())
+        conversion_of = self.plan.conversion_of
+        outputs = [name for name in self.slots if name != "time" and name not in conversion_of]
+        inputs = [(dst, src, conversion_of.get(dst)) for dst, src in self.source_of.items()]
 
         def take(n: int) -> None:
             if n in steps:
                 values = {name: float(self.signals[self.slots[name]]) for name in outputs}
                 taken.append(Snapshot(t0 + n * self.step, n, {f.name: f.serialize_state() for f in self.fmus},
                                       {k: dict(v) for k, v in started.items()}, values,
-                                      {dst: values[src] for dst, src in inputs}))
+                                      {dst: values[src] if conv is None else conv[0] * values[src] + conv[1]
+                                       for dst, src, conv in inputs}))
         return take
 
     def _initial_transfer(self, transfers, t0: float) -> None:
@@ -315,7 +317,10 @@ class Master:
         for _ in self.fmus:
             for tr in transfers:
                 fmu = self.fmus[tr.index]
-                fmu.set_inputs(dict(zip(tr.inputs, signals[tr.sources])), t0)
+                values = signals[tr.sources]
+                for i, factor, offset in tr.converted:  # unit conversions of the connections
+                    values[i] = factor * values[i] + offset
+                fmu.set_inputs(dict(zip(tr.inputs, values)), t0)
                 fmu.read_outputs(t0)
 
     # ---- the loop and its phases -------------------------------------------------
@@ -341,6 +346,7 @@ class Master:
             edges = np.cumsum([0] + sizes)
             targets = [(in_idx[a:z], buf) for a, z, buf in zip(edges[:-1], edges[1:], buffers)]
             u = None
+        step = _converting(step, [buf for _, buf in targets], b.converted)
 
         if held is not None:
             def phase(n: int, t: float) -> None:
@@ -372,7 +378,7 @@ class Master:
         inputs at ``t_n`` set, its outputs at ``t_n`` read (it steps at the exchange)."""
         fmu = self.fmus[b.index]
         signals, take, in_idx, u = self.signals, np.take, b.sources, fmu.u[:len(b.sources)]
-        write, read = fmu.write_inputs, fmu.read_outputs
+        write, read = _converting(fmu.write_inputs, [u], b.converted), fmu.read_outputs
 
         def phase(n: int, t: float) -> None:
             take(signals, in_idx, out=u)
@@ -386,8 +392,8 @@ class Master:
         outputs at ``t_{n+1}``; then the held outputs of delayed Python
         components become the values at ``t_{n+1}``."""
         signals, take, h = self.signals, np.take, self.step
-        writes = [(self.fmus[b.index].write_inputs, b.sources, self.fmus[b.index].u[:len(b.sources)])
-                  for b in self.plan.exchanged]
+        writes = [(_converting(self.fmus[b.index].write_inputs, [self.fmus[b.index].u[:len(b.sources)]], b.converted),
+                   b.sources, self.fmus[b.index].u[:len(b.sources)]) for b in self.plan.exchanged]
         do_steps = [f.do_step for f in self.fmus]
         reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads]
 
@@ -473,6 +479,9 @@ class Master:
                 if progress is not None:
                     progress(n, n_steps)
 
+        if plan.derived:  # converted inputs recorded or bounded: their values before the row is recorded
+            record = _deriving(record, signals, plan.derived)
+
         def check(n: int, t: float) -> None:
             values = signals[guard_idx]
             if not guard_ok(values):
@@ -522,6 +531,41 @@ class Master:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _converting(call: Callable, buffers: Sequence[np.ndarray], converted) -> Callable:
+    """``call`` preceded by the unit conversions ``converted`` (``(i, factor,
+    offset)``: input ``i`` becomes ``factor * input + offset``) of the inputs
+    just gathered into ``buffers`` (in port order); ``call`` itself when
+    there are none, so an input without a conversion is never touched (not
+    even ``x * 1 + 0``, which would turn -0.0 into +0.0)."""
+    fixes, first = [], 0
+    for buf in buffers:
+        mine = [(i - first, f, o) for i, f, o in converted if first <= i < first + buf.size]
+        if mine:
+            index, factor, offset = (np.array(column) for column in zip(*mine))
+            fixes.append((buf, index.astype(np.intp), factor, offset))
+        first += buf.size
+    if not fixes:
+        return call
+
+    def converting(*args):
+        for buf, index, factor, offset in fixes:
+            buf[index] = factor * buf[index] + offset
+        return call(*args)
+    return converting
+
+
+def _deriving(record: Callable[[int, float], None], signals: np.ndarray, derived) -> Callable[[int, float], None]:
+    """``record`` preceded by the plan's ``derived`` slots (a converted input
+    recorded or bounded: ``slot = factor * source + offset``)."""
+    slot, source, factor, offset = (np.array(column) for column in zip(*derived))
+    slot, source = slot.astype(np.intp), source.astype(np.intp)
+
+    def deriving(n: int, t: float) -> None:
+        signals[slot] = factor * signals[source] + offset
+        record(n, t)
+    return deriving
 
 
 def _timed(phase: Callable[[int, float], None], totals: dict[str, float], name: str) -> Callable[[int, float], None]:

@@ -23,14 +23,20 @@ master's two loops, the Python one and the compiled kernel
   values of t_{n+1}, as an FMU's do;
 * **the initial transfers** of the exchange ordering (:class:`Transfer`);
 * **what is recorded** (columns, units, slots) **and what is guarded** (every
-  slot but the time, with the envelope of the bounded ones).
+  slot but the time, with the envelope of the bounded ones);
+* **the unit conversions** of the connections that carry one
+  (:class:`~cosim.connection.Connection` ``conversion``): per block, the
+  inputs converted after they are gathered (``converted``: index, factor,
+  offset; no other input is touched, so a run without conversions is the
+  same bit for bit), and a slot of its own for a converted input that is
+  recorded or bounded (``derived``), so it is recorded in its own unit.
 
 Nothing here runs a component: the plan reads ports (``inputs``, ``outputs``,
 ``internals``) and, of an FMU, its ModelStructure (``feedthrough``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Mapping, Sequence, Union
 
@@ -54,7 +60,9 @@ class FmuBlock:
     ``reads`` (its outputs in use, then its internal signals recorded or
     bounded) are read in one call into the slots ``block``; ``direct``: it
     is evaluated at t_n (feedthrough ordering: a used output depends directly
-    on a connected input), else its inputs are set at the exchange.
+    on a connected input), else its inputs are set at the exchange;
+    ``converted``: ``(i, factor, offset)``, input ``i`` receives ``factor *
+    source + offset`` (a unit conversion of its connection).
     """
 
     index: int
@@ -64,6 +72,7 @@ class FmuBlock:
     reads: tuple[str, ...]
     block: slice
     direct: bool
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +81,8 @@ class PythonBlock:
     ``sources`` (in port order), its outputs stored in ``block``, the internal
     signals it publishes (``published``: their indices in
     ``internal_values()`` and their slots, or ``None``); ``held``: exchange
-    ordering, its outputs are held and become the values of t_{n+1}."""
+    ordering, its outputs are held and become the values of t_{n+1};
+    ``converted`` as :class:`FmuBlock`'s, by port index."""
 
     index: int
     name: str
@@ -80,16 +90,19 @@ class PythonBlock:
     block: slice
     published: tuple[np.ndarray, np.ndarray] | None
     held: bool
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
 class Transfer:
     """At t0 (exchange ordering): FMU ``index`` gets ``inputs`` from the
-    slots ``sources``, then its outputs are read again."""
+    slots ``sources`` (``converted`` as :class:`FmuBlock`'s), then its
+    outputs are read again."""
 
     index: int
     inputs: tuple[str, ...]
     sources: np.ndarray
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 Block = Union[FmuBlock, PythonBlock]
@@ -107,7 +120,10 @@ class Plan:
     ordering. ``python_loop``: why the compiled loop cannot run the plan,
     one reason per component (a Python component, an FMU whose
     :meth:`~cosim.fmu_component.FmuComponent.python_loop_reason` names
-    one); empty when it can (:attr:`compiled`).
+    one); empty when it can (:attr:`compiled`). ``conversion_of``:
+    destination -> ``(factor, offset)`` of every converted connection;
+    ``derived``: ``(slot, source slot, factor, offset)``, the converted
+    inputs recorded or bounded, computed before each row is recorded.
     """
 
     ordering: str
@@ -126,6 +142,8 @@ class Plan:
     bounds: Mapping[str, tuple[float, float]]
 
     python_loop: tuple[str, ...] = ()
+    conversion_of: Mapping[str, tuple[float, float]] = field(default_factory=lambda: MappingProxyType({}))
+    derived: tuple[tuple[int, int, float, float], ...] = ()
 
     @property
     def fmus_only(self) -> bool:
@@ -275,13 +293,27 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
                 slots[name] = len(slots)
                 start_values.append((slots[name], float(p.start)))
 
+    # A converted input recorded or bounded: a slot of its own, its source's value converted
+    conversion_of = {str(c.destination): c.conversion for c in connections if c.conversion is not None}
+    derived = []
+    for s in dict.fromkeys(record + list(bounds)):
+        if s in conversion_of:
+            slots[s] = len(slots)
+            derived.append((slots[s], slots[source_of[s]], *conversion_of[s]))
+
+    def resolved(s: str) -> str:
+        return s if s in conversion_of and s in slots else source_of.get(s, s)
+
+    def converted(names: Sequence[str]) -> tuple[tuple[int, float, float], ...]:
+        return tuple((k, *conversion_of[n]) for k, n in enumerate(names) if n in conversion_of)
+
     direct = _direct_fmus(fmus, connections, used, ordering)
     fmu_blocks = []
     for i, fmu in enumerate(fmus):
         ins = [c for c in connections if c.destination.component == fmu.name]
         fmu_blocks.append(FmuBlock(i, fmu.name, tuple(c.destination.variable for c in ins),
                                    _indices(slots[str(c.source)] for c in ins), reads[fmu.name], blocks[fmu.name],
-                                   fmu.name in direct))
+                                   fmu.name in direct, converted([str(c.destination) for c in ins])))
     at_tn = _order([c.name for c in python] + [f.name for f in fmus if f.name in direct], components, connections,
                    direct, ordering)
     by_name: dict[str, Block] = {b.name: b for b in fmu_blocks}
@@ -293,7 +325,8 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
             raise ConnectionCheckError(f"inputs of {comp.name} not connected: {', '.join(missing)}")
         by_name[comp.name] = PythonBlock(index[comp.name], comp.name,
                                          _indices(slots[source_of.get(n, n)] for n in names), blocks[comp.name],
-                                         published.get(comp.name), ordering == "exchange" and bool(comp.inputs))
+                                         published.get(comp.name), ordering == "exchange" and bool(comp.inputs),
+                                         converted(names))
 
     transfer = first_transfer = ()
     if ordering == "exchange":
@@ -304,7 +337,8 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
             for b in fmu_blocks:
                 ins = [c for c in connections if c.destination.component == b.name and keep(c)]
                 out.append(Transfer(b.index, tuple(c.destination.variable for c in ins),
-                                    _indices(slots[str(c.source)] for c in ins)))
+                                    _indices(slots[str(c.source)] for c in ins),
+                                    converted([str(c.destination) for c in ins])))
             return tuple(out)
 
         transfer = transfers(lambda c: True)
@@ -321,6 +355,7 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         fmus=tuple(fmu_blocks), at_tn=tuple(by_name[n] for n in at_tn), transfer=transfer,
         first_transfer=first_transfer, record=columns,
         record_units=("s",) + tuple(signal_port(components, s).unit for s in record),
-        record_slots=_indices(slots[source_of.get(s, s)] for s in columns), watched=watched,
+        record_slots=_indices(slots[resolved(s)] for s in columns), watched=watched,
         watch_slots=_indices(slots[s] for s in watched), python_loop=python_loop,
-        bounds=MappingProxyType({source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in bounds.items()}))
+        bounds=MappingProxyType({resolved(s): (float(b[0]), float(b[1])) for s, b in bounds.items()}),
+        conversion_of=MappingProxyType(conversion_of), derived=tuple(derived))

@@ -43,7 +43,8 @@ from typing import Any, Mapping
 
 from .errors import ConnectionCheckError
 
-__all__ = ["BASE_UNITS", "Unit", "definition", "definitions", "parse", "unit_of", "conversion", "DIMENSIONLESS"]
+__all__ = ["BASE_UNITS", "Unit", "definition", "definitions", "parse", "unit_of", "conversion", "describe",
+           "DIMENSIONLESS"]
 
 # the SI base units of FMI 2.0 section 2.2.2 / FMI 3.0 section 2.4.3, in the standards' order
 BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
@@ -170,7 +171,9 @@ def unit_of(name: str, defined: Mapping[str, Unit] | Unit | None = None) -> Unit
     return parse(name)
 
 
-def _shown(name: str, unit: Unit | None) -> str:
+def describe(name: str, unit: Unit | None) -> str:
+    """Unit ``name`` for a message, with its SI base units when they say
+    more than the name (``km/h (SI m.s-1)``), or that nothing knows it."""
     if unit is None:
         return f"{name} (unknown to the modelDescription and to pint)"
     return name if unit.si == name else f"{name} (SI {unit.si})"
@@ -189,7 +192,7 @@ def conversion(source: str | Unit, destination: str | Unit) -> tuple[float, floa
     if src is None and dst is None and src_name == dst_name:
         return 1.0, 0.0  # one name, unknown to pint: nothing says the two differ
     if src is None or dst is None or not src.same_quantity(dst):
-        raise ConnectionCheckError(f"units {_shown(src_name, src)} and {_shown(dst_name, dst)} "
+        raise ConnectionCheckError(f"units {describe(src_name, src)} and {describe(dst_name, dst)} "
                                    f"are not one quantity")
     # v_dst = (f_src v + o_src - o_dst) / f_dst
     return src.factor / dst.factor, (src.offset - dst.offset) / dst.factor
