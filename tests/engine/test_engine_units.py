@@ -278,9 +278,6 @@ def test_a_python_component_input_is_converted(tmp_path):
 
 
 def test_a_scenario_states_a_conversion_and_refuses_a_wrong_table(tmp_path):
-    from toy_models import register_toys
-
-    register_toys()
     raw = {"fmus": {"A": {"path": str(lag_fmu_path(2))}, "B": {"path": str(lag_fmu_path(2))}},
            "connections": [{"connect": "A.y -> B.u", "factor": 3.0, "offset": -1.0}],
            "simulation": {"duration": 0.05, "step": H}, "record": {"signals": ["A.y", "B.u"]}}
@@ -306,3 +303,112 @@ def test_the_scenario_schema_declares_connection_tables():
     table = schema["$defs"]["ConnectionTable"]
     assert set(table["properties"]) == {"connect", "factor", "offset", "units"}
     assert table["properties"]["units"]["enum"] == ["unchecked"]
+
+
+# ---- SSP ---------------------------------------------------------------------------------------------
+
+SSP_SCENARIO = """
+name = "converted_chain"
+connections = [{ connect = "A.y -> B.u", factor = 1000.0, offset = 0.5 },
+               { connect = "B.y -> C.u", units = "unchecked" }]
+
+[simulation]
+duration = 1.0
+step = 0.1
+ordering = "exchange"
+
+[fmus.A]
+model = "toy_FirstOrderLag"
+parameters = { y_0 = 1.5, u = 2.0 }
+
+[fmus.B]
+model = "toy_FirstOrderLag"
+
+[fmus.C]
+model = "toy_FirstOrderLag"
+
+[record]
+signals = ["A.y", "B.y", "C.y", "B.u", "C.u"]
+"""
+
+
+@pytest.fixture
+def converted_archive(toys, tmp_path):
+    import tomllib
+
+    from cosim.ssp import export_ssp
+
+    scenario = parse_scenario(tomllib.loads(SSP_SCENARIO))
+    return scenario, export_ssp(scenario, tmp_path / "converted.ssp")
+
+
+def _ssd(path: Path):
+    from lxml import etree
+
+    from cosim.ssp import SSD_NAME
+
+    with zipfile.ZipFile(path) as z:
+        return etree.fromstring(z.read(SSD_NAME))
+
+
+def test_an_archive_carries_the_conversions_the_ssp_way_and_reads_them_back(converted_archive):
+    from cosim.ssp import NS, load_ssp, ssd_schema_errors
+
+    scenario, archive = converted_archive
+    root = _ssd(archive)
+    converted, unchecked = root.findall("ssd:System/ssd:Connections/ssd:Connection", NS)
+    assert converted.get("suppressUnitConversion") == unchecked.get("suppressUnitConversion") == "true"
+    (transformation,) = converted
+    assert transformation.tag == f"{{{NS['ssc']}}}LinearTransformation"
+    assert (float(transformation.get("factor")), float(transformation.get("offset"))) == (1000.0, 0.5)
+    assert len(unchecked) == 0
+    with zipfile.ZipFile(archive) as z:
+        assert ssd_schema_errors(z.read("SystemStructure.ssd")) == []
+    loaded = load_ssp(archive)
+    assert [dict(c) for c in loaded.connections] == [dict(c) for c in scenario.connections]
+    with build_master(scenario) as master:
+        ours = master.run(scenario.duration)
+    with build_master(loaded) as master:
+        again = master.run(loaded.duration)
+    assert np.array_equal(ours.data, again.data)
+    np.testing.assert_array_equal(ours["B.u"], 1000.0 * ours["A.y"] + 0.5)
+
+
+def test_a_transformation_applies_after_the_connectors_unit_conversion(converted_archive, tmp_path):
+    """SSP 1.0: without suppressUnitConversion, the connectors' units convert first, then the transformation."""
+    from lxml import etree
+
+    from cosim.ssp import NS, SSD_NAME, load_ssp
+
+    _, archive = converted_archive
+    folder = tmp_path / "edited"
+    with zipfile.ZipFile(archive) as z:
+        z.extractall(folder)
+    tree = etree.parse(str(folder / SSD_NAME))
+    connection = tree.find("ssd:System/ssd:Connections/ssd:Connection", NS)
+    del connection.attrib["suppressUnitConversion"]
+    a_y = tree.find("ssd:System/ssd:Elements/ssd:Component[@name='A']/ssd:Connectors/ssd:Connector[@name='y']/"
+                    "ssc:Real", NS)
+    a_y.set("unit", "km")  # no ssd:Units entry: read by pint
+    tree.write(str(folder / SSD_NAME))
+    loaded = load_ssp(folder)
+    assert dict(loaded.connections[0]) == {"connect": "A.y -> B.u", "factor": 1000.0 * 1000.0, "offset": 0.5}
+    a_y.set("unit", "s")
+    tree.write(str(folder / SSD_NAME))
+    with pytest.raises(ScenarioError, match=re.escape("ssd:Connection 1: units s and m are not one quantity")):
+        load_ssp(folder)
+
+
+def test_libcosim_applies_the_archives_conversions(converted_archive):
+    """libcosim (libcosimpy) loads the archive and applies ssc:LinearTransformation: it flies the
+    'exchange' ordering's run (docs/ssp.md)."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
+    from cosim.ssp import run_libcosim
+
+    scenario, archive = converted_archive
+    lc = run_libcosim(archive, ["A.y", "B.y", "C.y", "B.u"])
+    with build_master(scenario) as master:
+        ours = master.run(scenario.duration)
+    assert lc["B.u"][0] == 1000.0 * 1.5 + 0.5  # the transformation, at initialization
+    for name in ("A.y", "B.y", "C.y"):
+        np.testing.assert_allclose(lc[name], ours[name], rtol=1e-12, atol=1e-9, err_msg=name)
