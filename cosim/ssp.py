@@ -616,8 +616,8 @@ def _connection(where: str, element: etree._Element, components: Mapping[str, di
             transformation = (_number(f"{where}: ssc:LinearTransformation", child.get("factor", "1"), "factor"),
                               _number(f"{where}: ssc:LinearTransformation", child.get("offset", "0"), "offset"))
         elif child.tag not in (_q("ssd", "ConnectionGeometry"), _q("ssd", "Annotations")):
-            raise ScenarioError(f"{where}: {etree.QName(child).localname}: only ssc:LinearTransformation is "
-                                f"supported among the transformations")
+            raise ScenarioError(f"{where}: {etree.QName(child).localname}: not supported (of the "
+                                f"transformations, a connection may carry one ssc:LinearTransformation)")
     if suppress in ("true", "1"):
         if transformation is None:
             return {"connect": text, "units": "unchecked"}
