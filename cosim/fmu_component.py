@@ -144,7 +144,7 @@ def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
     groups: dict[str, list[Port]] = {"input": [], "output": [], "parameter": [], "local": [], "other": []}
     for v in model_description.modelVariables:
         if v.type == "Clock":  # a clock is no signal: the component activates it (FmuComponent.clock)
-            groups["other"].append(_port(v, units))
+            key = "other"
         elif v.causality == "local":
             key = "local" if v.name not in derivatives and _TYPE.get(v.type) == "Float64" else "other"
         else:

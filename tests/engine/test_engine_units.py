@@ -303,6 +303,13 @@ def test_the_scenario_schema_declares_connection_tables():
     table = schema["$defs"]["ConnectionTable"]
     assert set(table["properties"]) == {"connect", "factor", "offset", "units"}
     assert table["properties"]["units"]["enum"] == ["unchecked"]
+    jsonschema = pytest.importorskip("jsonschema", reason="jsonschema (a test extra) is not installed")
+    validator = jsonschema.Draft202012Validator(schema)
+    good = {"fmus": {"A": {"path": "a.fmu"}}, "connections": [
+        "A.y -> B.u", {"connect": "A.y -> C.u", "factor": 0.5}, {"connect": "A.y -> D.u", "units": "unchecked"}]}
+    assert [e.message for e in validator.iter_errors(good)] == []
+    for bad in ({"connect": "A.y -> B.u", "units": "off"}, {"factor": 2.0}, {"connect": "A.y -> B.u", "gain": 2.0}):
+        assert list(validator.iter_errors({**good, "connections": [bad]})), bad
 
 
 # ---- SSP ---------------------------------------------------------------------------------------------
