@@ -6,8 +6,9 @@ instantiation and status checking (every failed call raises fmpy's
 
 * the FMU is extracted once and instantiated once per :class:`FmuComponent`;
   :meth:`FmuComponent.start` resets it between runs (``fmiXReset``);
-* ports read from the modelDescription (name, causality, type, unit), so the
-  master can check connections before the first step;
+* ports read from the modelDescription (name, causality, type, unit and its
+  ``UnitDefinitions`` meaning, :mod:`cosim.units`), so the master can check
+  connections before the first step;
 * a per-step fast path: the value references of the connected inputs and of
   the wanted outputs are bound once (:meth:`bind`) into ctypes arrays, and each
   step is one ``set`` of all inputs, one ``doStep`` and one ``get`` of all
