@@ -419,3 +419,29 @@ def test_libcosim_applies_the_archives_conversions(converted_archive):
     assert lc["B.u"][0] == 1000.0 * 1.5 + 0.5  # the transformation, at initialization
     for name in ("A.y", "B.y", "C.y"):
         np.testing.assert_allclose(lc[name], ours[name], rtol=1e-12, atol=1e-9, err_msg=name)
+
+
+class _TwoInputs(Probe):
+    """Remembers its two inputs as given (a, b in m)."""
+
+    inputs = ports(("a", "m"), ("b", "m"))
+
+
+def test_only_the_converted_inputs_are_touched():
+    """b converts (km -> m); a does not, and keeps the sign of its -0.0 (x * 1 + 0 would not)."""
+    zero, two_km, probe = Constant("zero", value=-0.0), Constant("two_km", value=2.0), _TwoInputs("probe")
+    two_km.outputs = ports(("out", "km"))
+    master = Master([], [zero, two_km, probe], ["zero.out -> probe.a", "two_km.out -> probe.b"], H)
+    assert [c.conversion for c in master.connections] == [None, (1000.0, 0.0)]
+    master.run(0.01)
+    for _, _, u in probe.calls:
+        assert np.signbit(u[0]) and u[0] == 0.0 and u[1] == 2000.0
+
+
+def test_a_snapshot_holds_the_converted_inputs(tmp_path):
+    a = FmuComponent("A", _with_unit_definition(tmp_path, 2, *MM_NAMED_M))
+    b = FmuComponent("B", lag_fmu_path(2))
+    with Master([a, b], [], ["A.y -> B.u"], H, ["A.y"], fmu_parameters={"A": {"y_0": 300.0}}) as master:
+        (snapshot,) = master.run(0.1, snapshots=[0.05]).snapshots
+    assert snapshot.inputs["B.u"] == 0.001 * snapshot.outputs["A.y"] != 0.0
+    assert "B.u" not in snapshot.outputs
