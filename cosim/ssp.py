@@ -50,11 +50,12 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from io import BytesIO
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Mapping, Sequence
 
 from lxml import etree
 
-from . import registry
+from . import registry, units
 from .connection import check_connections, parse_connections
 from .errors import CosimError, FmuError, ScenarioError, one_line
 from .files import extract_zip, regular_file, safe_name, zip_members
@@ -232,10 +233,10 @@ def _ssd_class():
 
         def __write__(self):
             super().__write__()
-            units = self.root.find("ssd:Units", NS)
+            defined = self.root.find("ssd:Units", NS)
             experiment = self.root.find("ssd:DefaultExperiment", NS)
-            if units is not None and experiment is not None:
-                experiment.addprevious(units)
+            if defined is not None and experiment is not None:
+                experiment.addprevious(defined)
             _write_conversions(self.root, getattr(self, "conversions", {}))
             etree.cleanup_namespaces(self.root, top_nsmap={"ssv": NS["ssv"], "osp": OSP_NAMESPACE,
                                                            "cosim": COSIM_NAMESPACE})
@@ -329,10 +330,15 @@ def _write_ssd(scenario: Scenario, parts: list[_Part], path: Path) -> None:
         ssd.conversions = conversions
         for part in parts:
             for unit, base in part.units.items():
-                if base is None or unit in ssd.units:
-                    continue  # a unit the modelDescription does not define stays a bare name
-                exponents = {k: getattr(base, k) for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
-                             if getattr(base, k)}
+                if unit in ssd.units:
+                    continue
+                if base is None:  # a unit the modelDescription does not define: as pint reads its name, so
+                    base = units.parse(unit)  # that an importer converts as our master does (cosim.units)
+                    if base is None:
+                        continue  # a name nothing knows stays a bare name
+                    base = SimpleNamespace(**dict(zip(units.BASE_UNITS, base.exponents)), factor=base.factor,
+                                           offset=base.offset)
+                exponents = {k: getattr(base, k) for k in units.BASE_UNITS if getattr(base, k)}
                 if base.factor != 1.0:
                     exponents["factor"] = base.factor
                 if base.offset != 0.0:
@@ -568,22 +574,20 @@ def _component(where: str, element: etree._Element, folder: Path) -> tuple[str, 
 def _ssd_units(root: etree._Element) -> dict[str, Any]:
     """The SSD's ``ssd:Units`` (SystemStructureCommon ``ssc:Unit``/``ssc:BaseUnit``,
     the FMI form) as :class:`cosim.units.Unit`, by name."""
-    from .units import BASE_UNITS, Unit
-
     out = {}
     for unit in root.iterfind("ssd:Units/ssc:Unit", NS):
         base = unit.find("ssc:BaseUnit", NS)
         if unit.get("name") and base is not None:
             where = f"ssd:Units: ssc:Unit {unit.get('name')!r}"
-            out[unit.get("name")] = Unit(unit.get("name"),
-                                         tuple(_integer(where, base.get(b, "0"), b) for b in BASE_UNITS),
-                                         _number(where, base.get("factor", "1"), "factor"),
-                                         _number(where, base.get("offset", "0"), "offset"))
+            exponents = tuple(_integer(where, base.get(b, "0"), b) for b in units.BASE_UNITS)
+            out[unit.get("name")] = units.Unit(unit.get("name"), exponents,
+                                               _number(where, base.get("factor", "1"), "factor"),
+                                               _number(where, base.get("offset", "0"), "offset"))
     return out
 
 
 def _connection(where: str, element: etree._Element, components: Mapping[str, dict[str, Any]],
-                units: Mapping[str, Any] | None = None) -> str | dict[str, Any]:
+                ssd_units: Mapping[str, Any] | None = None) -> str | dict[str, Any]:
     """One ``ssd:Connection`` as the scenario's connection: a string, or a
     table with the conversion it states (``ssc:LinearTransformation``) or
     ``units = "unchecked"`` (``suppressUnitConversion = "true"`` without
@@ -630,11 +634,9 @@ def _connection(where: str, element: etree._Element, components: Mapping[str, di
     target_unit = components[end].get("units", {}).get(end_connector)
     unit_factor, unit_offset = 1.0, 0.0
     if source_unit and target_unit and source_unit != target_unit:
-        from .units import conversion, unit_of
-
         try:
-            unit_factor, unit_offset = conversion(unit_of(source_unit, units) or source_unit,
-                                                  unit_of(target_unit, units) or target_unit)
+            unit_factor, unit_offset = units.conversion(units.unit_of(source_unit, ssd_units) or source_unit,
+                                                        units.unit_of(target_unit, ssd_units) or target_unit)
         except CosimError as exc:
             raise ScenarioError(f"{where}: {exc}") from None
     factor, offset = transformation
@@ -669,8 +671,8 @@ def _read_ssd(ssd_path: Path) -> _System:
         components[name] = entry
     if not components:
         raise ScenarioError(f"ssd:System {system.get('name')!r}: no ssd:Component (an FMU) in its ssd:Elements")
-    units = _ssd_units(root)
-    connections = [_connection(f"ssd:Connection {i}", c, components, units)
+    ssd_units = _ssd_units(root)
+    connections = [_connection(f"ssd:Connection {i}", c, components, ssd_units)
                    for i, c in enumerate(system.findall("ssd:Connections/ssd:Connection", NS), 1)]
 
     start = stop = step = None

@@ -445,3 +445,18 @@ def test_a_snapshot_holds_the_converted_inputs(tmp_path):
         (snapshot,) = master.run(0.1, snapshots=[0.05]).snapshots
     assert snapshot.inputs["B.u"] == 0.001 * snapshot.outputs["A.y"] != 0.0
     assert "B.u" not in snapshot.outputs
+
+
+def test_an_archive_defines_a_unit_the_fmu_only_names(toys, tmp_path):
+    """A unit the modelDescription names but does not define goes into ssd:Units as pint reads it,
+    so that an importer converts as our master does."""
+    import tomllib
+
+    from cosim.ssp import NS, export_ssp
+
+    no_m = _with_unit_definition(tmp_path, 2, '<Unit name="m"><BaseUnit m="1"/></Unit>', "")
+    text = SSP_SCENARIO.replace('model = "toy_FirstOrderLag"', f'path = "{no_m}"')
+    assert text.count(str(no_m)) == 3
+    archive = export_ssp(parse_scenario(tomllib.loads(text)), tmp_path / "no_m.ssp")
+    (m,) = [u for u in _ssd(archive).iterfind("ssd:Units/ssc:Unit", NS) if u.get("name") == "m"]
+    assert dict(m.find("ssc:BaseUnit", NS).attrib) == {"m": "1"}
