@@ -96,14 +96,13 @@ def _from_table(entry: Mapping[str, Any]) -> list[Connection]:
     """A connection table: ``connect`` (the string), and either a conversion
     (``factor``, ``offset``: destination = factor * source + offset) or
     ``units = "unchecked"``."""
-    unknown = sorted(set(entry) - set(TABLE_KEYS))
-    if unknown or "connect" not in entry:
-        raise ConnectionCheckError(f"connection {dict(entry)!r}: expected the keys 'connect' and factor/offset or "
-                                   f"units = 'unchecked'")
-    conversion = None
-    if "factor" in entry or "offset" in entry:
-        conversion = (float(entry.get("factor", 1.0)), float(entry.get("offset", 0.0)))
-    unchecked = entry.get("units", "checked") == "unchecked"
+    converts = "factor" in entry or "offset" in entry
+    if (set(entry) - set(TABLE_KEYS) or "connect" not in entry or entry.get("units", "unchecked") != "unchecked"
+            or converts == ("units" in entry)):
+        raise ConnectionCheckError(f"connection {dict(entry)!r}: expected 'connect' and either a conversion "
+                                   f"(factor, offset) or units = 'unchecked'")
+    conversion = (float(entry.get("factor", 1.0)), float(entry.get("offset", 0.0))) if converts else None
+    unchecked = "units" in entry
     return [replace(c, conversion=conversion, unchecked=unchecked) for c in parse_connection(entry["connect"])]
 
 

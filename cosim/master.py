@@ -392,8 +392,11 @@ class Master:
         outputs at ``t_{n+1}``; then the held outputs of delayed Python
         components become the values at ``t_{n+1}``."""
         signals, take, h = self.signals, np.take, self.step
-        writes = [(_converting(self.fmus[b.index].write_inputs, [self.fmus[b.index].u[:len(b.sources)]], b.converted),
-                   b.sources, self.fmus[b.index].u[:len(b.sources)]) for b in self.plan.exchanged]
+        writes = []
+        for b in self.plan.exchanged:
+            fmu = self.fmus[b.index]
+            u = fmu.u[:len(b.sources)]
+            writes.append((_converting(fmu.write_inputs, [u], b.converted), b.sources, u))
         do_steps = [f.do_step for f in self.fmus]
         reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads]
 

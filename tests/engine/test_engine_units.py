@@ -460,3 +460,12 @@ def test_an_archive_defines_a_unit_the_fmu_only_names(toys, tmp_path):
     archive = export_ssp(parse_scenario(tomllib.loads(text)), tmp_path / "no_m.ssp")
     (m,) = [u for u in _ssd(archive).iterfind("ssd:Units/ssc:Unit", NS) if u.get("name") == "m"]
     assert dict(m.find("ssc:BaseUnit", NS).attrib) == {"m": "1"}
+
+
+@pytest.mark.parametrize("table", [{"connect": "src.x -> sink.t"}, {"connect": "src.x -> sink.t", "units": "no"},
+                                   {"connect": "src.x -> sink.t", "factor": 2.0, "units": "unchecked"},
+                                   {"factor": 2.0}, {"connect": "src.x -> sink.t", "gain": 2.0}])
+def test_a_wrong_connection_table_given_to_the_master_is_refused(table):
+    with pytest.raises(ConnectionCheckError, match=re.escape("expected 'connect' and either a conversion (factor, "
+                                                             "offset) or units = 'unchecked'")):
+        parse_connections([table])
