@@ -26,9 +26,12 @@ Two optional parts of the contract:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .units import Unit
 
 __all__ = ["Port", "PythonComponent", "ports", "TYPES", "FLOAT_HELD", "element_ports", "element_of", "typed_value"]
 
@@ -62,7 +65,10 @@ class Port:
     component declares none (the unit check is then skipped). An input with
     a ``start`` value may be left unconnected: it then holds that value, as
     an FMU's input holds its start value; an input without one must be
-    connected.
+    connected. ``unit_definition`` is the meaning of ``unit`` the
+    component's own description gives (an FMU's ``UnitDefinitions``, read by
+    :mod:`cosim.units`), ``None`` when it gives none: the name is then read
+    by pint.
     """
 
     name: str
@@ -71,6 +77,7 @@ class Port:
     description: str = ""
     start: float | tuple | None = None  # an array's: one value per element, row-major
     shape: tuple[int, ...] = ()
+    unit_definition: "Unit | None" = None  # the unit's definition in the FMU's modelDescription
 
     @property
     def size(self) -> int:
@@ -99,7 +106,8 @@ def element_ports(ports_: tuple[Port, ...]) -> tuple[Port, ...]:
         starts = p.start if isinstance(p.start, (tuple, list)) else None
         for k, index in enumerate(_index_names(p.shape)):
             start = starts[k] if starts is not None and k < len(starts) else None
-            out.append(Port(f"{p.name}[{index}]", p.unit, p.type, p.description, start))
+            out.append(Port(f"{p.name}[{index}]", p.unit, p.type, p.description, start,
+                            unit_definition=p.unit_definition))
     return tuple(out)
 
 

@@ -6,8 +6,9 @@ instantiation and status checking (every failed call raises fmpy's
 
 * the FMU is extracted once and instantiated once per :class:`FmuComponent`;
   :meth:`FmuComponent.start` resets it between runs (``fmiXReset``);
-* ports read from the modelDescription (name, causality, type, unit), so the
-  master can check connections before the first step;
+* ports read from the modelDescription (name, causality, type, unit and its
+  ``UnitDefinitions`` meaning, :mod:`cosim.units`), so the master can check
+  connections before the first step;
 * a per-step fast path: the value references of the connected inputs and of
   the wanted outputs are bound once (:meth:`bind`) into ctypes arrays, and each
   step is one ``set`` of all inputs, one ``doStep`` and one ``get`` of all
@@ -54,6 +55,7 @@ from .component import TYPES, Port, element_of, typed_value
 from .errors import FmuCallError, FmuLoadError, ScenarioError
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
+from .units import Unit, definitions as unit_definitions
 
 __all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "state_values", "state_with", "PERIOD_ANNOTATION"]
 
@@ -182,9 +184,14 @@ def _shape(variable) -> tuple[int, ...]:
     return tuple(shape)
 
 
-def _port(variable) -> Port:
-    return Port(variable.name, variable.unit or None, _TYPE.get(variable.type, variable.type),
-                variable.description or "", shape=_shape(variable))
+def _port(variable, units: Mapping[str, "Unit"] | None = None) -> Port:
+    """A variable as a port; its unit is its own ``unit`` or, failing that,
+    its ``declaredType``'s (FMI 2.0 section 2.2.3, FMI 3.0 section 2.4.4),
+    with the modelDescription's definition of it (``units``, by name)."""
+    declared = getattr(variable, "declaredType", None)
+    unit = getattr(variable, "unit", None) or getattr(declared, "unit", None) or None
+    return Port(variable.name, unit, _TYPE.get(variable.type, variable.type), variable.description or "",
+                shape=_shape(variable), unit_definition=(units or {}).get(unit) if unit else None)
 
 
 def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
@@ -196,16 +203,16 @@ def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
     ``other`` (the rest: derivatives, independent, calculated parameters).
     """
     derivatives = {d.variable.name for d in model_description.derivatives}
+    units = unit_definitions(model_description)
     groups: dict[str, list[Port]] = {"input": [], "output": [], "parameter": [], "local": [], "other": []}
     for v in model_description.modelVariables:
         if v.type == "Clock":  # a clock is no signal: the component activates it (FmuComponent.clock)
-            groups["other"].append(_port(v))
-            continue
-        if v.causality == "local":
+            key = "other"
+        elif v.causality == "local":
             key = "local" if v.name not in derivatives and _TYPE.get(v.type) == "Float64" else "other"
         else:
             key = v.causality if v.causality in groups else "other"
-        groups[key].append(_port(v))
+        groups[key].append(_port(v, units))
     return {k: tuple(v) for k, v in groups.items()}
 
 

@@ -26,6 +26,10 @@ typedef int (*step3_t)(void *, double, double, _Bool, _Bool *, _Bool *, _Bool *,
 
 static int set_inputs(KernelFmu *f, const double *signals) {
     for (int64_t i = 0; i < f->n_in; i++) f->u[i] = signals[f->in_idx[i]];
+    for (int64_t j = 0; j < f->n_conv; j++) {  /* unit conversions: only the inputs that have one */
+        const int64_t i = f->conv_idx[j];
+        f->u[i] = f->conv_factor[j] * f->u[i] + f->conv_offset[j];
+    }
     size_t n = (size_t)f->n_in;
     return f->version == 2 ? ((set2_t)f->set)(f->component, f->in_vr, n, f->u)
                            : ((set3_t)f->set)(f->component, f->in_vr, n, f->u, n);
@@ -65,6 +69,9 @@ int cosim_kernel_run(KernelRun *run, int64_t first, int64_t last, KernelStop *st
             if (f->n_in && (status = set_inputs(f, signals)) > 1) FAIL(run->order[k], CALL_SET, 0);
             if (f->n_out && (status = get_outputs(f)) > 1) FAIL(run->order[k], CALL_GET, 0);
         }
+        for (int64_t j = 0; j < run->n_derived; j++)  /* converted inputs recorded or bounded */
+            signals[run->derived_slot[j]] = run->derived_factor[j] * signals[run->derived_source[j]]
+                                            + run->derived_offset[j];
         double *row = run->data + n * run->n_columns;
         for (int64_t j = 0; j < run->n_columns; j++) row[j] = signals[run->record_idx[j]];
         for (int64_t j = 0; j < run->n_guard; j++) {

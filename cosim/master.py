@@ -314,22 +314,26 @@ class Master:
         transfers = self.plan.initialization
         if not transfers:
             return
-        signals = self.signals
+        signals, objects = self.signals, self.values
+
+        def still(before: np.ndarray) -> np.ndarray:  # the float slots still moving
+            return ~((np.abs(signals - before) <= 1e-12 * np.maximum(np.abs(signals), 1.0)) | (signals == before))
+
         for _ in range(passes):
-            before = signals.copy()
+            before, objects_before = signals.copy(), list(objects)
             for tr in transfers:
                 fmu = self.fmus[tr.index]
-                fmu.set_inputs(dict(zip(tr.inputs, signals[tr.sources].tolist())), t0)
+                fmu.set_inputs(self._transferred(tr), t0)
                 fmu.read_outputs(t0)
-            change = np.abs(signals - before)
-            if np.all((change <= 1e-12 * np.maximum(np.abs(signals), 1.0)) | (signals == before)):
+            if not still(before).any() and list(objects) == objects_before:
                 return
-        moving = [f"{src} -> {dst}" for dst, src in self.source_of.items() if src in self.slots
-                  and not abs(signals[self.slots[src]] - before[self.slots[src]]) <= 1e-12 * max(abs(signals[self.slots[src]]), 1.0)
-                  and dst.partition(".")[0] in {self.fmus[tr.index].name for tr in transfers}]
+        moving = still(before)
+        fed = {self.fmus[tr.index].name for tr in transfers}
+        loop = [f"{src} -> {dst}" for dst, src in self.source_of.items()
+                if dst.partition(".")[0] in fed and (src in self.slots and moving[self.slots[src]])]
         raise ConnectionCheckError(f"initialization at t0 = {t0!r} s: the FMUs' outputs did not settle after {passes} "
                                    f"passes through the connections (an algebraic loop at t0 through "
-                                   f"{', '.join(moving) or 'the feedthrough FMUs'}): break it with a delay")
+                                   f"{', '.join(loop) or 'the feedthrough FMUs'}): break it with a delay")
 
     def _snapshot_steps(self, times: Sequence[float], t0: float, n_steps: int) -> frozenset[int]:
         h, steps = self.step, set()
@@ -346,8 +350,9 @@ class Master:
         if ``n`` is one of ``steps``; ``None`` without snapshots."""
         if not steps:
             return None
-        outputs = [name for name in self.slots if name != "time"]
-        inputs = list(self.source_of.items())
+        conversion_of = self.plan.conversion_of
+        outputs = [name for name in self.slots if name != "time" and name not in conversion_of]
+        inputs = [(dst, src, conversion_of.get(dst)) for dst, src in self.source_of.items()]
 
         def take(n: int) -> None:
             if n in steps:
@@ -355,8 +360,18 @@ class Master:
                 values.update((name, self.values[slot]) for name, slot in self.plan.object_slots.items())
                 taken.append(Snapshot(t0 + n * self.step, n, {f.name: f.serialize_state() for f in self.fmus},
                                       {k: dict(v) for k, v in started.items()}, values,
-                                      {dst: values[src] for dst, src in inputs}))
+                                      {dst: values[src] if conv is None else conv[0] * values[src] + conv[1]
+                                       for dst, src, conv in inputs}))
         return take
+
+    def _transferred(self, tr) -> dict[str, Any]:
+        """The values a :class:`~cosim.plan.Transfer` sets now: its sources'
+        (float and object slots), its connections' unit conversions applied."""
+        floats = self.signals[tr.sources]
+        for i, factor, offset in tr.converted:
+            floats[i] = factor * floats[i] + offset
+        return {**dict(zip(tr.inputs, floats.tolist())),
+                **dict(zip(tr.object_inputs, self.values[tr.object_sources]))}
 
     def _initial_transfer(self, transfers, t0: float) -> None:
         """Exchange ordering, at t0 only (the plan's ``transfer`` or
@@ -364,12 +379,10 @@ class Master:
         gets the values its inputs are connected to at t0 and its outputs are
         read again, once per FMU, so a chain of direct feedthroughs is
         consistent at t0."""
-        signals, values = self.signals, self.values
         for _ in self.fmus:
             for tr in transfers:
                 fmu = self.fmus[tr.index]
-                fmu.set_inputs({**dict(zip(tr.inputs, signals[tr.sources])),
-                                **dict(zip(tr.object_inputs, values[tr.object_sources]))}, t0)
+                fmu.set_inputs(self._transferred(tr), t0)
                 fmu.read_outputs(t0)
 
     # ---- the loop and its phases -------------------------------------------------
@@ -397,6 +410,7 @@ class Master:
             edges = np.cumsum([0] + sizes)
             targets = [(in_idx[a:z], buf) for a, z, buf in zip(edges[:-1], edges[1:], buffers)]
             u = None
+        step = _converting(step, [buf for _, buf in targets], b.converted)
 
         if held is not None:
             def phase(n: int, t: float) -> None:
@@ -467,7 +481,7 @@ class Master:
         inputs at ``t_n`` set, its outputs at ``t_n`` read (it steps at the exchange)."""
         fmu = self.fmus[b.index]
         signals, take, in_idx, u = self.signals, np.take, b.sources, fmu.u[:len(b.sources)]
-        write, read = fmu.write_inputs, fmu.read_outputs
+        write, read = _converting(fmu.write_inputs, [u], b.converted), fmu.read_outputs
 
         def phase(n: int, t: float) -> None:
             take(signals, in_idx, out=u)
@@ -481,8 +495,11 @@ class Master:
         outputs at ``t_{n+1}``; then the held outputs of delayed Python
         components become the values at ``t_{n+1}``."""
         signals, take, h = self.signals, np.take, self.step
-        writes = [(self.fmus[b.index].write_inputs, b.sources, self.fmus[b.index].u[:len(b.sources)])
-                  for b in self.plan.exchanged]
+        writes = []
+        for b in self.plan.exchanged:
+            fmu = self.fmus[b.index]
+            u = fmu.u[:len(b.sources)]
+            writes.append((_converting(fmu.write_inputs, [u], b.converted), b.sources, u))
         do_steps = [f.do_step for f in self.fmus]
         reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads or b.object_reads]
 
@@ -573,6 +590,9 @@ class Master:
                 if progress is not None:
                     progress(n, n_steps)
 
+        if plan.derived:  # converted inputs recorded or bounded: their values before the row is recorded
+            record = _deriving(record, signals, plan.derived)
+
         def check(n: int, t: float) -> None:
             values = signals[guard_idx]
             if not guard_ok(values):
@@ -622,6 +642,41 @@ class Master:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _converting(call: Callable, buffers: Sequence[np.ndarray], converted) -> Callable:
+    """``call`` preceded by the unit conversions ``converted`` (``(i, factor,
+    offset)``: input ``i`` becomes ``factor * input + offset``) of the inputs
+    just gathered into ``buffers`` (in port order); ``call`` itself when
+    there are none, so an input without a conversion is never touched (not
+    even ``x * 1 + 0``, which would turn -0.0 into +0.0)."""
+    fixes, first = [], 0
+    for buf in buffers:
+        mine = [(i - first, f, o) for i, f, o in converted if first <= i < first + buf.size]
+        if mine:
+            index, factor, offset = (np.array(column) for column in zip(*mine))
+            fixes.append((buf, index.astype(np.intp), factor, offset))
+        first += buf.size
+    if not fixes:
+        return call
+
+    def converting(*args):
+        for buf, index, factor, offset in fixes:
+            buf[index] = factor * buf[index] + offset
+        return call(*args)
+    return converting
+
+
+def _deriving(record: Callable[[int, float], None], signals: np.ndarray, derived) -> Callable[[int, float], None]:
+    """``record`` preceded by the plan's ``derived`` slots (a converted input
+    recorded or bounded: ``slot = factor * source + offset``)."""
+    slot, source, factor, offset = (np.array(column) for column in zip(*derived))
+    slot, source = slot.astype(np.intp), source.astype(np.intp)
+
+    def deriving(n: int, t: float) -> None:
+        signals[slot] = factor * signals[source] + offset
+        record(n, t)
+    return deriving
 
 
 def _timed(phase: Callable[[int, float], None], totals: dict[str, float], name: str) -> Callable[[int, float], None]:

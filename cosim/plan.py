@@ -29,7 +29,13 @@ master's two loops, the Python one and the compiled kernel
   values of t_{n+1}, as an FMU's do;
 * **the initial transfers** of the exchange ordering (:class:`Transfer`);
 * **what is recorded** (columns, units, slots) **and what is guarded** (every
-  slot but the time, with the envelope of the bounded ones).
+  slot but the time, with the envelope of the bounded ones);
+* **the unit conversions** of the connections that carry one
+  (:class:`~cosim.connection.Connection` ``conversion``): per block, the
+  inputs converted after they are gathered (``converted``: index, factor,
+  offset; no other input is touched, so a run without conversions is the
+  same bit for bit), and a slot of its own for a converted input that is
+  recorded or bounded (``derived``), so it is recorded in its own unit.
 
 Nothing here runs a component: the plan reads ports (``inputs``, ``outputs``,
 ``internals``) and, of an FMU, its ModelStructure (``feedthrough``).
@@ -63,7 +69,9 @@ class FmuBlock:
     on a connected input), else its inputs are set at the exchange.
     ``object_inputs``/``object_sources`` and ``object_reads``/``object_block``
     are the same for its signals held in the object slots (set and read by
-    the component with its other inputs and outputs).
+    the component with its other inputs and outputs); ``converted``:
+    ``(i, factor, offset)``, float-held input ``i`` receives ``factor *
+    source + offset`` (a unit conversion of its connection).
     """
 
     index: int
@@ -77,6 +85,7 @@ class FmuBlock:
     object_sources: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     object_reads: tuple[str, ...] = ()
     object_block: slice = field(default_factory=lambda: slice(0, 0))
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,7 +97,8 @@ class PythonBlock:
     ordering, its outputs are held and become the values of t_{n+1}.
     ``typed``: a component with a port of another type than Float64, its
     inputs (in port order) and outputs as ``(in_objects, slot)`` pairs (the
-    slot in the object slots when ``in_objects``), ``None`` for the others."""
+    slot in the object slots when ``in_objects``), ``None`` for the others;
+    ``converted`` as :class:`FmuBlock`'s, by index in ``sources``."""
 
     index: int
     name: str
@@ -97,18 +107,21 @@ class PythonBlock:
     published: tuple[np.ndarray, np.ndarray] | None
     held: bool
     typed: tuple[tuple[tuple[bool, int], ...], tuple[tuple[bool, int], ...]] | None = None
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
 class Transfer:
     """At t0 (exchange ordering): FMU ``index`` gets ``inputs`` from the
-    slots ``sources``, then its outputs are read again."""
+    slots ``sources`` (``converted`` as :class:`FmuBlock`'s), then its
+    outputs are read again."""
 
     index: int
     inputs: tuple[str, ...]
     sources: np.ndarray
     object_inputs: tuple[str, ...] = ()
     object_sources: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 Block = Union[FmuBlock, PythonBlock]
@@ -129,7 +142,10 @@ class Plan:
     computed) until the FMUs' outputs settle. ``python_loop``: why the compiled loop cannot run the plan,
     one reason per component (a Python component, an FMU whose
     :meth:`~cosim.fmu_component.FmuComponent.python_loop_reason` names
-    one); empty when it can (:attr:`compiled`).
+    one); empty when it can (:attr:`compiled`). ``conversion_of``:
+    destination -> ``(factor, offset)`` of every converted connection;
+    ``derived``: ``(slot, source slot, factor, offset)``, the converted
+    inputs recorded or bounded, computed before each row is recorded.
     """
 
     ordering: str
@@ -156,6 +172,8 @@ class Plan:
     """``record_types``: the type of each column; ``record_objects``: the
     columns held in the object slots, as ``(column, object slot)`` (their
     ``record_slots`` entry is 0, the time, overwritten by the recorder)."""
+    conversion_of: Mapping[str, tuple[float, float]] = field(default_factory=lambda: MappingProxyType({}))
+    derived: tuple[tuple[int, int, float, float], ...] = ()
 
     @property
     def fmus_only(self) -> bool:
@@ -366,6 +384,20 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         return (tuple(c.destination.variable for c in floats), _indices(slots[str(c.source)] for c in floats),
                 tuple(c.destination.variable for c in others), _indices(objects[str(c.source)] for c in others))
 
+    # A converted input recorded or bounded: a slot of its own, its source's value converted
+    conversion_of = {str(c.destination): c.conversion for c in connections if c.conversion is not None}
+    derived = []
+    for s in dict.fromkeys(record + list(bounds)):
+        if s in conversion_of:
+            slots[s] = len(slots)
+            derived.append((slots[s], slots[source_of[s]], *conversion_of[s]))
+
+    def resolved(s: str) -> str:
+        return s if s in conversion_of and s in slots else source_of.get(s, s)
+
+    def converted(names: Sequence[str]) -> tuple[tuple[int, float, float], ...]:
+        return tuple((k, *conversion_of[n]) for k, n in enumerate(names) if n in conversion_of)
+
     direct = _direct_fmus(fmus, connections, used, ordering)
     fmu_blocks = []
     for i, fmu in enumerate(fmus):
@@ -373,7 +405,7 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
             [c for c in connections if c.destination.component == fmu.name])
         fmu_blocks.append(FmuBlock(i, fmu.name, inputs, sources, reads[fmu.name], blocks[fmu.name],
                                    fmu.name in direct, obj_inputs, obj_sources, object_reads[fmu.name],
-                                   object_blocks[fmu.name]))
+                                   object_blocks[fmu.name], converted([f"{fmu.name}.{n}" for n in inputs])))
     at_tn = _order([c.name for c in python] + [f.name for f in fmus if f.name in direct], components, connections,
                    direct, ordering)
     by_name: dict[str, Block] = {b.name: b for b in fmu_blocks}
@@ -400,7 +432,8 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         by_name[comp.name] = PythonBlock(index[comp.name], comp.name,
                                          _indices(slots[source_of.get(n, n)] for n in names
                                                   if source_of.get(n, n) in slots), blocks[comp.name],
-                                         published.get(comp.name), held, typed)
+                                         published.get(comp.name), held, typed,
+                                         converted([n for n in names if source_of.get(n, n) in slots]))
 
     fmu_names = {f.name for f in fmus}
 
@@ -409,14 +442,16 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         for b in fmu_blocks:
             inputs, sources, obj_inputs, obj_sources = split(
                 [c for c in connections if c.destination.component == b.name and keep(c)])
-            out.append(Transfer(b.index, inputs, sources, obj_inputs, obj_sources))
+            out.append(Transfer(b.index, inputs, sources, obj_inputs, obj_sources,
+                                converted([f"{b.name}.{n}" for n in inputs])))
         return tuple(out)
 
     transfer = first_transfer = ()
     if ordering == "exchange":
         transfer = transfers(lambda c: True)
         first_transfer = transfers(lambda c: c.source.component in fmu_names)
-    initialization = tuple(t for t in transfers(lambda c: c.source.component in fmu_names) if t.inputs)
+    initialization = tuple(t for t in transfers(lambda c: c.source.component in fmu_names)
+                           if t.inputs or t.object_inputs)
 
     # what the compiled loop cannot do (it makes set, get and doStep calls of Float64 values only)
     python_loop = tuple(f"Python component {c.name}" for c in python if c.name in at_tn)
@@ -426,7 +461,7 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
             python_loop += (f"{f.name}: {why}",)
     columns = ("time",) + tuple(record)
     watched = tuple(s for s in slots if s != "time")
-    sourced = [source_of.get(s, s) for s in columns]
+    sourced = [resolved(s) for s in columns]  # a converted input recorded: its own slot
     return Plan(
         ordering=ordering, slots=MappingProxyType(slots), start_values=tuple(start_values),
         source_of=MappingProxyType(source_of),
@@ -436,7 +471,8 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         record_slots=_indices(slots.get(s, 0) for s in sourced), watched=watched,
         watch_slots=_indices(slots[s] for s in watched), python_loop=python_loop,
         initialization=initialization,
-        bounds=MappingProxyType({source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in bounds.items()}),
+        bounds=MappingProxyType({resolved(s): (float(b[0]), float(b[1])) for s, b in bounds.items()}),
         object_slots=MappingProxyType(objects), object_start_values=tuple(object_start_values),
-        record_types=("Float64",) + tuple(types[s] for s in sourced[1:]),
-        record_objects=tuple((k, objects[s]) for k, s in enumerate(sourced) if s in objects))
+        record_types=("Float64",) + tuple(types[source_of.get(s, s)] for s in columns[1:]),
+        record_objects=tuple((k, objects[s]) for k, s in enumerate(sourced) if s in objects),
+        conversion_of=MappingProxyType(conversion_of), derived=tuple(derived))

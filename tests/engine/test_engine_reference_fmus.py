@@ -67,7 +67,7 @@ def fly(tmp_path: Path, version: int, model: str, step: float, stop: float, **fm
     lines += ["", "[record]", f"signals = {json.dumps([f'{model}.{n}' for n in names])}"]
     scenario = tmp_path / f"{model}.toml"
     scenario.parent.mkdir(parents=True, exist_ok=True)
-    scenario.write_text("connections = []\n\n" + "\n".join(lines) + "\n")
+    scenario.write_text("\n".join(lines) + "\n")
     out = tmp_path / "out"
     assert main(["run", str(scenario), "--out", str(out), "--no-plots", "--quiet"]) == 0
     header = (out / "results.csv").read_text().split("\n", 1)[0].split(",")
@@ -149,7 +149,7 @@ def test_a_start_value_of_a_state_is_set_by_the_standard(tmp_path):
 ])
 def test_a_start_value_the_standard_forbids_is_one_line(tmp_path, capsys, start, message):
     scenario = tmp_path / "ball.toml"
-    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.BouncingBall]\n'
+    scenario.write_text(f'[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.BouncingBall]\n'
                         f'path = {json.dumps(str(fmu(3, "BouncingBall")))}\nstart = {toml_value(start)}\n')
     assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
@@ -161,7 +161,7 @@ def test_an_fmu_that_chatters_is_stopped_naming_the_time_and_the_fmu(tmp_path, c
     one, with BouncingBall's bounces coming ever faster): one line with the
     FMU, the time and the reason; the rows before it are kept."""
     scenario = tmp_path / "ball.toml"
-    scenario.write_text(f'connections = []\n[simulation]\nduration = 3.0\nstep = 0.5\n[fmus.Ball]\n'
+    scenario.write_text(f'[simulation]\nduration = 3.0\nstep = 0.5\n[fmus.Ball]\n'
                         f'path = {json.dumps(str(fmu(2, "BouncingBall")))}\ninterface = "ModelExchange"\n'
                         f'solver = {{ max_events = 1 }}\n[record]\nsignals = ["Ball.h"]\n')
     assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 1
@@ -174,7 +174,7 @@ def test_an_fmu_that_chatters_is_stopped_naming_the_time_and_the_fmu(tmp_path, c
 
 def test_an_euler_step_that_does_not_divide_the_communication_step_is_refused(tmp_path, capsys):
     scenario = tmp_path / "ball.toml"
-    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Ball]\n'
+    scenario.write_text(f'[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Ball]\n'
                         f'path = {json.dumps(str(fmu(2, "BouncingBall")))}\ninterface = "ModelExchange"\n'
                         f'solver = {{ method = "euler", step = 0.003 }}\n')
     assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
@@ -184,7 +184,7 @@ def test_an_euler_step_that_does_not_divide_the_communication_step_is_refused(tm
 
 def test_scheduled_execution_only_is_refused_by_name(tmp_path, capsys):
     scenario = tmp_path / "clocks.toml"
-    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Clocks]\n'
+    scenario.write_text(f'[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Clocks]\n'
                         f'path = {json.dumps(str(fmu(3, "Clocks")))}\n')
     assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
     assert "neither Co-Simulation nor Model Exchange (Scheduled Execution only" in capsys.readouterr().err
