@@ -52,7 +52,7 @@ from fmpy import platform, platform_tuple, read_model_description, sharedLibrary
 from fmpy.fmi1 import FMICallException
 
 from .component import TYPES, Port, element_of, typed_value
-from .errors import FmuCallError, FmuLoadError, ScenarioError
+from .errors import FmuCallError, FmuLoadError, ScenarioError, SimulationTerminated
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
 from .units import Unit, definitions as unit_definitions
@@ -241,8 +241,9 @@ class _Api:
         if version == 2:
             self._step_tail = (ctypes.c_int(1),)  # noSetFMUStatePriorToCurrentPoint
         else:
-            self._step_tail = (ctypes.c_bool(True), *(ctypes.byref(ctypes.c_bool()) for _ in range(3)),
-                               ctypes.byref(ctypes.c_double()))
+            self.terminate = ctypes.c_bool()  # fmi3DoStep's terminateSimulation, read after each step
+            self._step_tail = (ctypes.c_bool(True), ctypes.byref(ctypes.c_bool()), ctypes.byref(self.terminate),
+                               ctypes.byref(ctypes.c_bool()), ctypes.byref(ctypes.c_double()))
 
     def _check(self, status: int, which: Call) -> None:
         if status > 1:  # fmiWarning is fine; discard, error, fatal are not
@@ -847,6 +848,8 @@ class FmuComponent:
     def kernel_failure(self, call: Call, status: int, t: float, h: float) -> FmuCallError:
         """The error the Python path raises for the same failed call."""
         call = Call(call)
+        if call == Call.STEP and self._asked_to_terminate(status):
+            return self._terminated(t, h)
         return self._call_failure(call, FMICallException(function=self._api._names[call], status=status), t, h)
 
     def _activate_clock(self, t: float) -> None:
@@ -912,6 +915,9 @@ class FmuComponent:
         try:
             work()
         except IntegrationError as exc:
+            if exc.terminate:
+                raise SimulationTerminated(self.name, self.path, t, f"asked to terminate the simulation at t = "
+                                           f"{exc.time!r} s; the run ends at t = {t!r} s") from None
             raise self._fail(f"Model Exchange integration ({self.solver.method})", exc, exc.time) from None
         except FMICallException as exc:
             raise self._fail(f"Model Exchange integration ({self.solver.method}) from t = {t!r} s", exc, t) from None
@@ -1013,7 +1019,30 @@ class FmuComponent:
         try:
             self._api.do_step(t, h)
         except FMICallException as exc:
+            if self._asked_to_terminate(exc.status):
+                raise self._terminated(t, h) from None
             raise self._call_failure(Call.STEP, exc, t, h) from None
+        if self.fmi_version == 3 and self._api.terminate.value:
+            raise self._terminated(t, h)
+
+    def _asked_to_terminate(self, status: int) -> bool:
+        """A discarded FMI 2.0 doStep with ``fmi2Terminated`` set: the FMU
+        asks to end the simulation (FMI 2.0 §4.2.3)."""
+        if self.fmi_version != 2 or status != 2 or self.interface != "CoSimulation":
+            return False
+        from fmpy.fmi2 import fmi2Terminated
+
+        try:
+            return bool(self._slave.getBooleanStatus(fmi2Terminated))
+        except FMICallException:  # an FMU that cannot tell did not ask
+            return False
+
+    def _terminated(self, t: float, h: float) -> SimulationTerminated:
+        """The run's end at ``t`` that this FMU asked for in the step to ``t + h``."""
+        log = "; ".join(self.messages)
+        return SimulationTerminated(self.name, self.path, t, f"asked to terminate the simulation in the step from "
+                                    f"t = {t!r} s to {t + h!r} s; the run ends at t = {t!r} s"
+                                    + (f" (FMU log: {log})" if log else ""))
 
     def _clocked_step(self, t: float, h: float) -> None:
         """Event Mode at the tick t: compute it; to t + h (Co-Simulation: doStep;
@@ -1031,7 +1060,9 @@ class FmuComponent:
                 event = next_defined and abs(next_tick - (t + h)) <= 1e-9 * h
             else:
                 s.enterStepMode()
-                event, _, _, _ = s.doStep(t, h)
+                event, terminate, _, _ = s.doStep(t, h)
+                if terminate:
+                    raise self._terminated(t, h)
             s.enterEventMode()
         except FMICallException as exc:
             raise self._call_failure(Call.STEP, exc, t, h) from None

@@ -41,11 +41,13 @@ static int get_outputs(KernelFmu *f) {
                            : ((get3_t)f->get)(f->component, f->out_vr, n, f->y, n);
 }
 
-static int do_step(KernelFmu *f, double t, double h) {
+/* FMI 2.0 says it wants to stop by discarding the step (the Python side asks
+ * fmi2GetBooleanStatus); FMI 3.0 by its terminateSimulation flag. */
+static int do_step(KernelFmu *f, double t, double h, _Bool *terminate) {
     if (f->version == 2) return ((step2_t)f->step)(f->component, t, h, 1);
-    _Bool event = 0, terminate = 0, early = 0;
+    _Bool event = 0, early = 0;
     double last = t;
-    return ((step3_t)f->step)(f->component, t, h, 1, &event, &terminate, &early, &last);
+    return ((step3_t)f->step)(f->component, t, h, 1, &event, terminate, &early, &last);
 }
 
 #define FAIL(which, code, was_recorded)                                       \
@@ -87,8 +89,14 @@ int cosim_kernel_run(KernelRun *run, int64_t first, int64_t last, KernelStop *st
             KernelFmu *f = &fmus[i];
             if (f->n_in && !f->direct && (status = set_inputs(f, signals)) > 1) FAIL(i, CALL_SET, 1);
         }
-        for (int64_t i = 0; i < run->n_fmus; i++)
-            if ((status = do_step(&fmus[i], t, h)) > 1) FAIL(i, CALL_STEP, 1);
+        for (int64_t i = 0; i < run->n_fmus; i++) {
+            _Bool terminate = 0;
+            if ((status = do_step(&fmus[i], t, h, &terminate)) > 1) FAIL(i, CALL_STEP, 1);
+            if (terminate) {  /* the run ends at t_n, as in the Python loop */
+                stop->n = n; stop->fmu = i; stop->recorded = 1;
+                return KERNEL_TERMINATE;
+            }
+        }
         for (int64_t i = 0; i < run->n_fmus; i++)
             if (fmus[i].n_out && (status = get_outputs(&fmus[i])) > 1) FAIL(i, CALL_GET, 1);
     }

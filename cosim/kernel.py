@@ -45,6 +45,7 @@ class Stop(enum.IntEnum):
     OK = 0  # the block of points ran
     GUARD = 1  # a guarded signal left its envelope (or is not finite)
     FMU = 2  # an FMI call failed (KernelStop says which FMU, which call, which status)
+    TERMINATE = 3  # an FMI 3.0 FMU's doStep asked to terminate the simulation (KernelStop says which, when)
 
 
 class Call(enum.IntEnum):

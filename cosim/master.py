@@ -45,7 +45,7 @@ import numpy as np
 
 from .component import PythonComponent, typed_value
 from .connection import Connection, check_connections, parse_connections
-from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError
+from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError, SimulationTerminated
 from .limits import SEED_LIMIT
 from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
@@ -120,7 +120,10 @@ class RunResult:
     types: tuple[str, ...] = ()
     objects: dict[str, np.ndarray] = field(default_factory=dict)
     python_loop: tuple[str, ...] = ()
-    """``types``: each column's signal type (docs/cosim.md, "Signal types");
+    terminated: str | None = None
+    """``terminated``: an FMU asked to end the simulation
+    (:class:`~cosim.errors.SimulationTerminated`): the run ended early, at
+    its last row, status ok; the message says which FMU and when. ``types``: each column's signal type (docs/cosim.md, "Signal types");
     ``objects``: the columns of Int64, UInt64, String and Binary signals, as
     object arrays of ``int``, ``str`` and ``bytes`` (their ``data`` column is
     NaN); ``python_loop``: why the plan cannot run in the compiled loop
@@ -262,7 +265,7 @@ class Master:
         phase_times: dict[str, float] = {}
         started: dict[str, dict[str, Any]] = {}
         taken: list[Snapshot] = []
-        status, error = "ok", None
+        status, error, terminated = "ok", None, None
         wall0 = _time.perf_counter()
         try:
             for comp in self.python:
@@ -285,6 +288,8 @@ class Master:
         try:
             take = self._snapshot_taker(snap_steps, t0, started, taken)
             self._loop(t0, n_steps, recorder, progress, phase_times if profile else None, take, snap_steps)
+        except SimulationTerminated as exc:  # the FMU's own end of the simulation: not a failure
+            terminated = str(exc)
         except DivergenceError as exc:
             status, error, failure = "diverged", str(exc), exc
         except (FmuCallError, CosimError) as exc:
@@ -292,11 +297,13 @@ class Master:
         except BaseException as exc:  # the partial result is saved even on Ctrl-C
             recorder.close("failed", f"{type(exc).__name__}: {exc}")
             raise
+        if terminated is not None:
+            recorder.meta["terminated"] = terminated
         recorder.close(status, error)
         result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
                            status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
                            recorder.path, seed, dict(parameters or {}), taken, self.plan.record_types,
-                           recorder.object_columns(), self.plan.python_loop)
+                           recorder.object_columns(), self.plan.python_loop, terminated)
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure
@@ -559,6 +566,8 @@ class Master:
                 t = t0 + int(stop.n) * h
                 if code == kernel.Stop.GUARD:
                     self.guard.raise_violation(t, signals[self.plan.watch_slots])
+                if code == kernel.Stop.TERMINATE:
+                    raise self.fmus[int(stop.fmu)]._terminated(t, h)
                 raise self.fmus[int(stop.fmu)].kernel_failure(int(stop.call), int(stop.status), t, h)
             recorder.n_rows = last + 1
             if (last + 1) % block == 0:

@@ -130,7 +130,8 @@ def _cmd_run(args) -> int:
     write_json(out / "summary.json", summary)
     simulated = result.time[-1] - result.time[0] if summary["rows"] else 0.0
     lines = [f"# Run of {scenario.name}", "", scenario.description, "",
-             f"- status: {summary['status']}" + (f" ({summary['error']})" if summary["error"] else ""),
+             f"- status: {summary['status']}" + (f" ({summary['error']})" if summary["error"] else "")
+             + (f", ended early: {summary['terminated']}" if summary.get("terminated") else ""),
              f"- seed: {summary['seed']}, controller: {summary['variant']}",
              f"- simulated {simulated:.2f} s in {summary['wall_time_s']:.3f} s "
              f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
