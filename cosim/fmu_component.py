@@ -352,6 +352,7 @@ class FmuComponent:
         self._owns_unzipdir = False
         self._initialized_once = False
         self._initializing = False
+        self._kernel_exception: BaseException | None = None
         self._initial_parameters: dict[str, Any] = {}
         self._u_set: np.ndarray | None = None  # Model Exchange: the inputs last set (the solver restarts on a change)
         self._t = 0.0
@@ -694,7 +695,13 @@ class FmuComponent:
             self._n_in, self._n_out = len(input_names), len(output_names)
             self.u = np.zeros(max(self._n_in, 1))
             self.y = y if y is not None else np.zeros(max(self._n_out, 1))
+            # the compiled loop gathers the float inputs into u and calls this component (kernel_entry)
+            self._u_ptr = self.u.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+            self._y_ptr = self.y.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+            self._in_vr = self._out_vr = (ctypes.c_uint32 * 1)()  # its typed calls take their own references
+            self._u_set = None
             return
+
         def vrs(names):
             missing = [n for n in names if n not in self.variables]
             if missing:
@@ -822,19 +829,54 @@ class FmuComponent:
             flat = [x for v in variables for x in arrays[id(v)]]
             self._calls(port_type)[1]([v.valueReference for v in variables], flat)
 
-    def kernel_entry(self, direct: bool, in_idx: np.ndarray) -> KernelFmu:
+    def kernel_entry(self, direct: bool, in_idx: np.ndarray, python: bool = False,
+                     time: np.ndarray | None = None) -> KernelFmu:
         """This FMU as the compiled loop sees it (:mod:`cosim.kernel`):
         function pointers, value references and buffers as :meth:`bind` set
         them; ``in_idx``, the signal slots of the inputs' sources, is kept
-        alive with this component."""
+        alive with this component.
+
+        ``python``: an FMU whose calls the compiled loop cannot make itself
+        (:meth:`python_loop_reason`): its set, get and step are this
+        component's :meth:`write_inputs`, :meth:`read_outputs` and
+        :meth:`do_step` behind C callbacks (``time[0]``, the signal array's
+        time slot, says when), so only this FMU takes the Python path; an
+        exception there is kept and raised by :meth:`kernel_failure`."""
         api = self._api
         address = lambda f: ctypes.cast(f, ctypes.c_void_p).value  # noqa: E731
         vrs = lambda refs: ctypes.cast(refs, ctypes.POINTER(ctypes.c_uint32))  # noqa: E731
         self._kernel_in_idx = np.ascontiguousarray(in_idx, dtype=np.int64)
-        return KernelFmu(self.fmi_version, api._component.value, address(api._set), address(api._get),
-                         address(api._step), vrs(self._in_vr), self._n_in,
-                         self._kernel_in_idx.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), self._u_ptr,
-                         vrs(self._out_vr), self._n_out, self._y_ptr, int(direct))
+        self._kernel_exception = None
+        version, component, calls = self.fmi_version, api._component.value, (api._set, api._get, api._step)
+        if python:
+            version, component, calls = 2, None, self._python_calls(time)  # the callbacks take FMI 2.0's shape
+        entry = KernelFmu(version, component, *map(address, calls), vrs(self._in_vr), self._n_in,
+                          self._kernel_in_idx.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), self._u_ptr,
+                          vrs(self._out_vr), self._n_out, self._y_ptr, int(direct))
+        entry.python = int(python)
+        return entry
+
+    def _python_calls(self, time: np.ndarray):
+        """C callbacks (FMI 2.0 signatures) over this component's loop calls;
+        kept alive with it. Each returns fmi2Error after keeping the exception."""
+        def guarded(work):
+            def call(*args):
+                try:
+                    work(*args)
+                    return 0
+                except BaseException as exc:  # raised again by kernel_failure, in the master's thread
+                    self._kernel_exception = exc
+                    return 3
+            return call
+
+        u32p, f64p = ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(ctypes.c_double)
+        values = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, u32p, ctypes.c_size_t, f64p)
+        step = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)
+        self._callbacks_kept = (
+            values(guarded(lambda c, vr, n, v: self.write_inputs(float(time[0])))),
+            values(guarded(lambda c, vr, n, v: self.read_outputs(float(time[0])))),
+            step(guarded(lambda c, t, h, flag: self.do_step(t, h))))
+        return self._callbacks_kept
 
     def _call_failure(self, call: Call, exc: FMICallException, t: float, h: float = 0.0) -> FmuCallError:
         """The error of a failed loop call: what was asked, with the inputs' values when setting them."""
@@ -846,7 +888,11 @@ class FmuComponent:
         return self._fail(f"doStep from t = {t!r} by {h!r} s", exc, t)
 
     def kernel_failure(self, call: Call, status: int, t: float, h: float) -> FmuCallError:
-        """The error the Python path raises for the same failed call."""
+        """The error the Python path raises for the same failed call (for an
+        FMU driven through its Python calls, the very exception it raised)."""
+        if self._kernel_exception is not None:
+            exc, self._kernel_exception = self._kernel_exception, None
+            return exc
         call = Call(call)
         if call == Call.STEP and self._asked_to_terminate(status):
             return self._terminated(t, h)

@@ -68,8 +68,8 @@ int cosim_kernel_run(KernelRun *run, int64_t first, int64_t last, KernelStop *st
         signals[0] = t;
         for (int64_t k = 0; k < run->n_order; k++) {  /* FMUs with direct feedthrough, in topological order */
             KernelFmu *f = &fmus[run->order[k]];
-            if (f->n_in && (status = set_inputs(f, signals)) > 1) FAIL(run->order[k], CALL_SET, 0);
-            if (f->n_out && (status = get_outputs(f)) > 1) FAIL(run->order[k], CALL_GET, 0);
+            if ((f->n_in || f->python) && (status = set_inputs(f, signals)) > 1) FAIL(run->order[k], CALL_SET, 0);
+            if ((f->n_out || f->python) && (status = get_outputs(f)) > 1) FAIL(run->order[k], CALL_GET, 0);
         }
         for (int64_t j = 0; j < run->n_derived; j++)  /* converted inputs recorded or bounded */
             signals[run->derived_slot[j]] = run->derived_factor[j] * signals[run->derived_source[j]]
@@ -87,7 +87,7 @@ int cosim_kernel_run(KernelRun *run, int64_t first, int64_t last, KernelStop *st
         if (n == run->n_steps) break;
         for (int64_t i = 0; i < run->n_fmus; i++) {
             KernelFmu *f = &fmus[i];
-            if (f->n_in && !f->direct && (status = set_inputs(f, signals)) > 1) FAIL(i, CALL_SET, 1);
+            if ((f->n_in || f->python) && !f->direct && (status = set_inputs(f, signals)) > 1) FAIL(i, CALL_SET, 1);
         }
         for (int64_t i = 0; i < run->n_fmus; i++) {
             _Bool terminate = 0;
@@ -98,7 +98,7 @@ int cosim_kernel_run(KernelRun *run, int64_t first, int64_t last, KernelStop *st
             }
         }
         for (int64_t i = 0; i < run->n_fmus; i++)
-            if (fmus[i].n_out && (status = get_outputs(&fmus[i])) > 1) FAIL(i, CALL_GET, 1);
+            if ((fmus[i].n_out || fmus[i].python) && (status = get_outputs(&fmus[i])) > 1) FAIL(i, CALL_GET, 1);
     }
     stop->n = last;
     return KERNEL_OK;

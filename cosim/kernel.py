@@ -82,6 +82,7 @@ _FMU_FIELDS = (
     ("conv_idx", _i64p, "their indices among the bound inputs"),
     ("conv_factor", _f64p, "u = factor * source + offset"),
     ("conv_offset", _f64p, ""),
+    ("python", _i64, "driven by Python calls (Plan.python_calls): set, get and step called even with nothing bound"),
 )
 
 
@@ -225,7 +226,9 @@ def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, 
             t0: float, h: float, n_steps: int) -> KernelRun:
     """The :class:`KernelRun` of ``plan`` for the bound ``fmus`` (the master's,
     in the plan's order); it holds the arrays it points into."""
-    entries = (KernelFmu * len(fmus))(*(fmu.kernel_entry(b.direct, b.sources) for fmu, b in zip(fmus, plan.fmus)))
+    entries = (KernelFmu * len(fmus))(*(fmu.kernel_entry(b.direct, b.sources, python=b.name in plan.python_calls,
+                                                         time=signals)
+                                        for fmu, b in zip(fmus, plan.fmus)))
     order = _array([b.index for b in plan.at_tn], np.int64)
     record, guard = _array(plan.record_slots, np.int64), _array(plan.watch_slots, np.int64)
     low, high = _array(low, np.float64), _array(high, np.float64)

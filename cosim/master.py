@@ -121,13 +121,17 @@ class RunResult:
     objects: dict[str, np.ndarray] = field(default_factory=dict)
     python_loop: tuple[str, ...] = ()
     terminated: str | None = None
-    """``terminated``: an FMU asked to end the simulation
-    (:class:`~cosim.errors.SimulationTerminated`): the run ended early, at
-    its last row, status ok; the message says which FMU and when. ``types``: each column's signal type (docs/cosim.md, "Signal types");
+    python_calls: dict[str, str] = field(default_factory=dict)
+    """``types``: each column's signal type (docs/cosim.md, "Signal types");
     ``objects``: the columns of Int64, UInt64, String and Binary signals, as
     object arrays of ``int``, ``str`` and ``bytes`` (their ``data`` column is
     NaN); ``python_loop``: why the plan cannot run in the compiled loop
-    (:attr:`cosim.plan.Plan.python_loop`, empty when it can)."""
+    (:attr:`cosim.plan.Plan.python_loop`, empty when it can);
+    ``python_calls``: the FMUs it drives through their Python calls
+    (:attr:`cosim.plan.Plan.python_calls`), with the reason;
+    ``terminated``: an FMU asked to end the simulation
+    (:class:`~cosim.errors.SimulationTerminated`): the run ended early, at
+    its last row, status ok; the message says which FMU and when."""
 
     @property
     def time(self) -> np.ndarray:
@@ -303,7 +307,8 @@ class Master:
         result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
                            status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
                            recorder.path, seed, dict(parameters or {}), taken, self.plan.record_types,
-                           recorder.object_columns(), self.plan.python_loop, terminated)
+                           recorder.object_columns(), self.plan.python_loop, terminated,
+                           dict(self.plan.python_calls))
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure

@@ -139,10 +139,14 @@ class Plan:
     ordering. ``initialization``: every connection from an FMU into an FMU,
     per destination FMU, made in Initialization Mode (FMI 2.0 §3.2.3 / FMI
     3.0 §2.3.4: connected inputs set before the initial unknowns are
-    computed) until the FMUs' outputs settle. ``python_loop``: why the compiled loop cannot run the plan,
-    one reason per component (a Python component, an FMU whose
-    :meth:`~cosim.fmu_component.FmuComponent.python_loop_reason` names
-    one); empty when it can (:attr:`compiled`). ``conversion_of``:
+    computed) until the FMUs' outputs settle. ``python_loop``: why the
+    compiled loop cannot run the plan (a Python component, recorded signals
+    held as objects); empty when it can (:attr:`compiled`).
+    ``python_calls``: FMU name -> why the compiled loop drives it through its Python
+    calls (set, get and step: :meth:`~cosim.fmu_component.FmuComponent.kernel_entry`),
+    each with its reason (:meth:`~cosim.fmu_component.FmuComponent.python_loop_reason`:
+    Model Exchange, a clock, signals of other types than Float64 scalars);
+    the others it calls in C. ``conversion_of``:
     destination -> ``(factor, offset)`` of every converted connection;
     ``derived``: ``(slot, source slot, factor, offset)``, the converted
     inputs recorded or bounded, computed before each row is recorded.
@@ -164,6 +168,7 @@ class Plan:
     bounds: Mapping[str, tuple[float, float]]
 
     python_loop: tuple[str, ...] = ()
+    python_calls: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
     initialization: tuple[Transfer, ...] = ()
     object_slots: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
     object_start_values: tuple[tuple[int, Any], ...] = ()
@@ -183,8 +188,8 @@ class Plan:
     @property
     def compiled(self) -> bool:
         """The compiled kernel can run the plan: nothing in
-        :attr:`python_loop`, the reasons (one per component, naming it) the
-        plan takes the Python loop instead."""
+        :attr:`python_loop`, the reasons the plan takes the Python loop
+        instead (an FMU in :attr:`python_calls` does not stop it)."""
         return not self.python_loop
 
     @property
@@ -453,15 +458,17 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
     initialization = tuple(t for t in transfers(lambda c: c.source.component in fmu_names)
                            if t.inputs or t.object_inputs)
 
-    # what the compiled loop cannot do (it makes set, get and doStep calls of Float64 values only)
-    python_loop = tuple(f"Python component {c.name}" for c in python if c.name in at_tn)
-    for f, b in zip(fmus, fmu_blocks):
-        why = f.python_loop_reason(b.inputs + b.object_inputs + b.reads + b.object_reads)
-        if why is not None:
-            python_loop += (f"{f.name}: {why}",)
     columns = ("time",) + tuple(record)
     watched = tuple(s for s in slots if s != "time")
     sourced = [resolved(s) for s in columns]  # a converted input recorded: its own slot
+    # what the compiled loop cannot do: Python components' steps, objects' rows; an FMU whose calls it cannot
+    # make itself (it calls set, get and doStep of Float64 scalars) it makes through the FMU's Python calls
+    python_loop = tuple(f"Python component {c.name}" for c in python if c.name in at_tn)
+    held = [s for s in sourced if s in objects]
+    if held:
+        python_loop += (f"recorded signals held as objects ({', '.join(held)}): each row written by Python",)
+    python_calls = {f.name: why for f, b in zip(fmus, fmu_blocks)
+                    if (why := f.python_loop_reason(b.inputs + b.object_inputs + b.reads + b.object_reads))}
     return Plan(
         ordering=ordering, slots=MappingProxyType(slots), start_values=tuple(start_values),
         source_of=MappingProxyType(source_of),
@@ -470,7 +477,7 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         record_units=("s",) + tuple(signal_port(components, s).unit for s in record),
         record_slots=_indices(slots.get(s, 0) for s in sourced), watched=watched,
         watch_slots=_indices(slots[s] for s in watched), python_loop=python_loop,
-        initialization=initialization,
+        python_calls=MappingProxyType(python_calls), initialization=initialization,
         bounds=MappingProxyType({resolved(s): (float(b[0]), float(b[1])) for s, b in bounds.items()}),
         object_slots=MappingProxyType(objects), object_start_values=tuple(object_start_values),
         record_types=("Float64",) + tuple(types[source_of.get(s, s)] for s in columns[1:]),

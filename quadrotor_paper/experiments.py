@@ -83,6 +83,7 @@ def run_summary(scenario: Scenario, result) -> dict[str, Any]:
     if result.phase_times:
         summary["cost_per_step_us"] = {k: v / max(result.n_steps, 1) * 1e6 for k, v in result.phase_times.items()}
         summary["python_loop"] = list(result.python_loop)  # why the compiled loop could not run it (empty: it could)
+        summary["python_calls"] = [f"{name}: {why}" for name, why in result.python_calls.items()]
     position, reference = metric_signals(scenario)
     if position and len(result.time):
         e = euclidean_error(result, position, reference)

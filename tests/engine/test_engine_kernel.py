@@ -12,11 +12,13 @@ import ctypes
 import os
 import shutil
 import subprocess
+from pathlib import Path
 
 from cosim import kernel
 from cosim.errors import DivergenceError, FmuCallError
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
+from cosim.model_exchange import SolverSettings
 from cosim.recorder import read_results
 from toy_models import lag_fmu_path, sum_fmu_path
 
@@ -160,3 +162,38 @@ def test_the_c_header_lays_the_structures_out_as_ctypes_does(tmp_path):
     expected.update({f"{s.__name__}.{name}": getattr(s, name).offset for s in structures for name, _ in s._fields_})
     assert {k: int(v) for k, v in printed.items()} == expected
     assert "enum { CALL_SET = 0, CALL_GET = 1, CALL_STEP = 2 };" in kernel.header()
+
+
+REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
+
+
+@pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
+def test_fmus_the_kernel_cannot_call_are_driven_through_their_python_calls(monkeypatch):
+    """VanDerPol as Model Exchange (integrated by the master), Stair as Model
+    Exchange with an Int32 output (it ends the simulation at 9 s) and
+    Feedthrough taking an Int32: the compiled loop calls them through
+    their Python calls and Dahlquist in C; the run is the Python loop's, bit
+    for bit, ended at the same row."""
+    def build() -> Master:
+        fmus = [FmuComponent("V", REFERENCE / "fmi3" / "VanDerPol.fmu", interface="ModelExchange",
+                             solver=SolverSettings(relative_tolerance=1e-8)),
+                FmuComponent("S", REFERENCE / "fmi2" / "Stair.fmu", interface="ModelExchange"),
+                FmuComponent("F", REFERENCE / "fmi3" / "Feedthrough.fmu"),
+                FmuComponent("D", REFERENCE / "fmi2" / "Dahlquist.fmu")]
+        return Master(fmus, [], ["V.x0 -> F.Float64_continuous_input", "S.counter -> F.Int32_input"], 0.05,
+                      ["V.x0", "S.counter", "F.Float64_continuous_output", "F.Int32_output", "D.x"])
+
+    runs = []
+    for compiled in (True, False):
+        monkeypatch.setenv("COSIM_PYTHON_LOOP", "" if compiled else "1")
+        kernel.load.cache_clear()
+        with build() as master:
+            assert master.plan.compiled and set(master.plan.python_calls) == {"V", "S", "F"}
+            runs.append(master.run(10.0))
+    kernel.load.cache_clear()
+    fast, slow = runs
+    np.testing.assert_array_equal(fast.data, slow.data)
+    assert fast.terminated == slow.terminated and "S (" in fast.terminated
+    assert fast.time[-1] == pytest.approx(8.95) and fast["S.counter"][-1] == 9
+    np.testing.assert_array_equal(fast["F.Int32_output"], fast["S.counter"])  # through F, at the same instant
+    assert np.ptp(fast["V.x0"]) > 3  # the oscillator ran

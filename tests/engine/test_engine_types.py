@@ -166,9 +166,12 @@ signals = {[f"Feedthrough.{n}" for n in outputs]}
 """.replace("'", '"'))
     ours_header, ours = run_cli(toml, tmp_path / "out", "--profile")
     assert len(ours) == len(rows)
-    told = json.loads((tmp_path / "out" / "summary.json").read_text())["python_loop"]
-    assert told[0] == "Python component inputs"  # --profile names why the compiled loop could not run it
-    assert told[1].startswith("Feedthrough: signals of type Int32 (Int32_input), String (String_input)")
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    told = summary["python_loop"]  # --profile names why the compiled loop could not run it
+    assert told[0] == "Python component inputs"
+    assert told[1].startswith("recorded signals held as objects (Feedthrough.Int64_output") or version == 2
+    assert summary["python_calls"][0].startswith("Feedthrough: signals of type Int32 (Int32_input), "
+                                                 "String (String_input)")
     times = [float(r[0]) for r in in_rows]
     follows = {n.replace("_input", "_output"): n for n in driven}
     changed = 0
@@ -246,19 +249,19 @@ def test_a_boolean_output_into_a_float64_input_is_refused_naming_both_types():
     assert "\n" not in str(info.value)
 
 
-def test_the_plan_names_the_fmu_and_the_types_that_take_the_python_loop():
+def test_the_plan_names_the_fmus_the_compiled_loop_drives_through_python_calls():
     raw = {"connections": ["A.Int32_output -> B.Int32_input", "A.Float64_continuous_output -> "
                            "B.Float64_continuous_input"],
            "fmus": {"A": {"path": str(fmu(2, "Feedthrough"))}, "B": {"path": str(fmu(2, "Feedthrough"))}},
            "record": {"signals": ["B.Float64_continuous_output"]}}
-    with build_master(parse_scenario(raw)) as master:
-        assert not master.plan.compiled
-        assert master.plan.python_loop == (
-            "A: signals of type Int32 (Int32_output): the compiled loop carries Float64 scalars only",
-            "B: signals of type Int32 (Int32_input): the compiled loop carries Float64 scalars only")
+    with build_master(parse_scenario(raw)) as master:  # the compiled loop, A and B through their Python calls
+        assert master.plan.compiled and master.plan.python_loop == ()
+        assert dict(master.plan.python_calls) == {
+            "A": "signals of type Int32 (Int32_output): the compiled loop carries Float64 scalars only",
+            "B": "signals of type Int32 (Int32_input): the compiled loop carries Float64 scalars only"}
     raw["connections"] = raw["connections"][1:]
-    with build_master(parse_scenario(raw)) as master:  # Float64 scalars only: the compiled loop
-        assert master.plan.compiled
+    with build_master(parse_scenario(raw)) as master:  # Float64 scalars only: the compiled loop calls them in C
+        assert master.plan.compiled and not master.plan.python_calls
 
 
 # ---- StateSpace: FMI 3.0 arrays -----------------------------------------------------------------
