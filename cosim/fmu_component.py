@@ -13,9 +13,10 @@ instantiation and status checking (every failed call raises fmpy's
   step is one ``set`` of all inputs, one ``doStep`` and one ``get`` of all
   outputs, the values passing through preallocated numpy buffers with no
   per-step allocation;
-* the FMU's own log: it is instantiated with logging on and its log
-  categories chosen by the level of the Python logger ``cosim.fmu.<instance>``
-  (:func:`fmu_log`, ``fnn-cosim run --fmu-log debug``); its messages go to
+* the FMU's own log: it is instantiated with logging on, filtered by the
+  level of the Python logger ``cosim.fmu.<instance>`` (:func:`fmu_log`,
+  ``fnn-cosim run --fmu-log debug``, which also asks the FMU for every log
+  category); its messages go to
   that logger, the last ones are kept (:attr:`FmuComponent.messages`, every
   message of status warning or worse whatever the level), and a failed call
   becomes an :class:`~cosim.errors.FmuCallError` quoting them; no message
@@ -88,8 +89,8 @@ PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
 _TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit float
 
 # ---- the FMU's own log ---------------------------------------------------------------------------
-# Every instance logs to the logger "cosim.fmu.<instance>"; its effective level chooses what the FMU is
-# asked to log (FmuComponent._apply_log_level). A library logs nowhere by itself: the NullHandler keeps
+# Every instance logs to the logger "cosim.fmu.<instance>"; its effective level chooses what is kept and
+# shown (FmuComponent._log) and, at debug, asks the FMU for every category (FmuComponent._apply_log_level). A library logs nowhere by itself: the NullHandler keeps
 # Python's last-resort handler from printing FMU warnings a run did not ask to see (fmu_log does).
 FMU_LOGGER = "cosim.fmu"
 logging.getLogger(FMU_LOGGER).addHandler(logging.NullHandler())
@@ -97,11 +98,6 @@ LOG_LEVELS = {"error": logging.ERROR, "warning": logging.WARNING, "info": loggin
 # FMI status (fmi2Status, fmi3Status: OK, Warning, Discard, Error, Fatal, and FMI 2.0's Pending) -> label, level
 _STATUS_LABEL = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
 _STATUS_LEVEL = (logging.INFO, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
-# The log categories the standard names (FMI 2.0 section 2.2.4, FMI 3.0 section 2.4.5 "LogCategories"):
-# those of the status an FMU logs at warning or worse, asked for at every level (an error quotes them),
-# and the informational ones, asked for from level info; level debug asks for every category.
-_STATUS_CATEGORIES = ("logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal", "logStatusPending")
-_INFO_CATEGORIES = ("logEvents", "logSingularLinearSystems", "logNonlinearSystems", "logDynamicStateSelection")
 
 
 class _InstanceFormatter(logging.Formatter):
@@ -113,8 +109,8 @@ class _InstanceFormatter(logging.Formatter):
 def fmu_log(level: str, instance: str | None = None, stream=None) -> None:
     """Show the FMUs' own log messages of ``level`` (``error``,
     ``warning``, ``info``, ``debug``) and worse on ``stream`` (stderr), for
-    every FMU instance or only ``instance``; instances made afterwards ask
-    their FMU for the categories of that level (``debug``: all of them).
+    every FMU instance or only ``instance``; at ``debug``, instances made
+    afterwards ask their FMU for every log category.
 
     The level is the Python logger's (``cosim.fmu`` or
     ``cosim.fmu.<instance>``): an application that configures logging
@@ -503,23 +499,21 @@ class FmuComponent:
             self.logger.log(level, " ".join(text.split()))
 
     def _apply_log_level(self) -> None:
-        """Ask the FMU for the log categories of the logger's level
-        (``fmiXSetDebugLogging``, FMI 2.0 section 2.1.5, FMI 3.0 section
-        2.3.2), out of those its modelDescription declares: at every level the
-        categories of status warning and worse, from ``info`` the standard
-        informational ones, at ``debug`` every category (none named: all). An
-        FMU that declares none of the wanted ones has its debug logging
-        switched off (what it logs regardless, errors, is still heard)."""
-        if self._log_level <= logging.DEBUG:
-            on, categories = True, []
-        else:
-            wanted = _STATUS_CATEGORIES + (_INFO_CATEGORIES if self._log_level <= logging.INFO else ())
-            categories = [c.name for c in self.model_description.logCategories if c.name in wanted]
-            on = bool(categories)
+        """At level ``debug``, ask the FMU for every log category
+        (``fmiXSetDebugLogging(loggingOn, 0 categories)``: all of those its
+        LogCategories declare, FMI 2.0 section 2.1.5, FMI 3.0 section 2.3.2).
+        Below it the FMU logs as instantiated with logging on, and the level
+        filters in Python (:meth:`_log`): asking for fewer categories would
+        lose what some FMUs log under none (PythonFMU 0.7 reports a failed
+        step's exception without a category, and drops it once categories are
+        named), and an error must quote every message of status warning or
+        worse."""
+        if self._log_level > logging.DEBUG:
+            return
         try:
-            self._slave.setDebugLogging(on, categories)
+            self._slave.setDebugLogging(True, [])
         except FMICallException as exc:  # a log refused is no reason to refuse the run: said, not raised
-            self.logger.warning("fmiSetDebugLogging(%s, %s) refused (%s)", on, categories or "all", exc)
+            self.logger.warning("fmiSetDebugLogging(all categories) refused (%s)", exc)
 
     def instantiate(self) -> None:
         """Extract (once, within the limits of :func:`cosim.files.extract_zip`)
