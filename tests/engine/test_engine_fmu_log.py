@@ -234,6 +234,24 @@ def test_only_the_fmu_component_and_the_file_guard_import_fmpys_fmi_layers_or_ex
     assert not offenders, offenders
 
 
+def test_the_tool_runs_no_fmu_through_fmpys_own_simulation():
+    """The tool's modules (not the benchmarks, which time fmpy as a
+    reference) never hand an FMU to fmpy's ``simulate_fmu`` or
+    ``simulate_ssp``, which extract and instantiate it their own way."""
+    offenders = []
+    for folder in ("cosim", "quadrotor_paper", "fmu_models", "fnn_controller"):
+        for path in (REPO / folder).rglob("*.py"):
+            tree = ast.parse(path.read_text(), str(path))
+            for node in ast.walk(tree):
+                used = (node.attr if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                        and node.value.id == "fmpy" else None)
+                if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("fmpy"):
+                    used = next((a.name for a in node.names if a.name.startswith("simulate")), None)
+                if used and used.startswith("simulate"):
+                    offenders.append(f"{path.relative_to(REPO).as_posix()}: fmpy {used}")
+    assert not offenders, offenders
+
+
 def test_the_linearizer_extracts_within_the_same_limits_as_the_master(tmp_path):
     """docs/security.md: "the same checks guard every FMU the tool extracts".
     An FMU with an entry that expands like a zip bomb is refused by the
