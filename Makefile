@@ -26,6 +26,7 @@ benchmark: $(VENV)/.installed
 	$(BIN)/python benchmarks/controller_speed.py
 	$(BIN)/python benchmarks/cosim_speed.py
 	$(BIN)/python benchmarks/loop_speed.py
+	$(BIN)/python benchmarks/model_exchange.py
 	$(BIN)/python benchmarks/study_efficiency.py --seeds 8
 	$(BIN)/python benchmarks/ssp_importers.py
 

@@ -64,7 +64,7 @@ import weakref
 import zipfile
 from collections import deque
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from lxml import etree
@@ -180,6 +180,54 @@ def stream_seed(seed: int, stream: int) -> int:
     return int(state) >> 11  # 64 - 11 = 53 bits: exact as a double parameter
 
 
+def start_value_rule(variable) -> str | None:
+    """Why ``variable`` takes no start value from an importer, or ``None``
+    if it does: an input, or a variable that is not a constant and whose
+    ``initial`` is ``exact`` or ``approx`` (FMI 2.0 §2.2.7, FMI 3.0 §2.4.7.5;
+    fmpy's ``settable_in_instantiated``), or one the standard lets an
+    importer set in Initialization Mode (``settable_in_initialization_mode``)."""
+    from fmpy.simulation import settable_in_initialization_mode, settable_in_instantiated
+
+    if variable is None:
+        return "is no variable of the FMU"
+    if settable_in_instantiated(variable) or settable_in_initialization_mode(variable):
+        return None
+    if variable.variability == "constant":
+        return "is a constant: the standard lets no importer set it"
+    return (f"is a{'n' if variable.causality[0] in 'aeiou' else ''} {variable.causality} with initial = "
+            f"{variable.initial}: the standard lets an importer set only inputs and variables whose initial is "
+            f"exact or approx")
+
+
+_INT_TYPES = {"Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
+
+
+def _typed_setter(instance, variable, version: int):
+    """``set(value)`` of one variable by its type (FMI 2.0 Real, Integer,
+    Enumeration, Boolean, String; FMI 3.0 Float32/64, [U]Int8..64,
+    Enumeration, Boolean, String), the value checked for its type first."""
+    vr, kind = [variable.valueReference], variable.type
+    if kind in ("Real", "Float64", "Float32"):
+        call = instance.setReal if version == 2 else getattr(instance, f"set{kind}")
+        return lambda value: call(vr, [float(value)])
+    if kind in _INT_TYPES:
+        def set_int(value):
+            if isinstance(value, bool) or float(value) != int(float(value)):
+                raise ValueError(f"{value!r} is not an integer")
+            name = "setInteger" if version == 2 else ("setInt64" if kind == "Enumeration" else f"set{kind}")
+            getattr(instance, name)(vr, [int(value)])
+        return set_int
+    if kind == "Boolean":
+        def set_bool(value):
+            if value not in (0, 1, True, False):
+                raise ValueError(f"{value!r} is not a Boolean (true/false, 1/0)")
+            instance.setBoolean(vr, [bool(value)])
+        return set_bool
+    if kind == "String":
+        return lambda value: instance.setString(vr, [str(value)])
+    raise ValueError(f"a start value of type {kind} cannot be set")
+
+
 def _port(variable) -> Port:
     return Port(variable.name, variable.unit or None, _TYPE.get(variable.type, variable.type),
                 variable.description or "")
@@ -220,15 +268,14 @@ class _Api:
     get, step), each raising fmpy's ``FMICallException`` on an error status
     as fmpy's own wrappers do."""
 
-    def __init__(self, slave, version: int):
+    def __init__(self, slave, version: int, co_simulation: bool = True):
         self.slave, self.version = slave, version
         self._component = ctypes.c_void_p(slave.component)
         names = ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep") if version == 2 else \
             ("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep")
         self._names = names  # indexed by Call
-        self._set, self._get = _bare(slave, names[0]), _bare(slave, names[1])
-        # a Model Exchange instance has no doStep; its fast path sets and gets
-        self._step = _bare(slave, names[2]) if names[2] in slave._functions else None
+        self._set, self._get = (_bare(slave, n) for n in names[:2])
+        self._step = _bare(slave, names[2]) if co_simulation else None  # Model Exchange: the master integrates
         if version == 2:
             self._step_tail = (ctypes.c_int(1),)  # noSetFMUStatePriorToCurrentPoint
         else:
@@ -273,16 +320,15 @@ class FmuComponent:
         components).
     seed_stream : which of the run's random streams seeds it
         (:func:`stream_seed`; 0: the run's seed itself).
-    interface : ``"CoSimulation"`` (the default) or ``"ModelExchange"``,
-        which only a clocked FMI 3.0 FMU without continuous states may use:
-        its ticks are time events, and there is nothing to integrate between
-        them (docs/cosim.md, "Clocked FMUs").
-    evaluated : bool
-        ``True``: an instance its user evaluates and never steps (a
-        linearizer: states and inputs set, derivatives and outputs read,
-        :meth:`continuous_states` and the other Model Exchange calls), so
-        ``interface="ModelExchange"`` is open to any FMU that has Model
-        Exchange.
+    interface : ``"CoSimulation"`` or ``"ModelExchange"``; by default
+        Co-Simulation where the FMU has it, else Model Exchange. A Model
+        Exchange instance is integrated between communication points by the
+        master's solver (:mod:`cosim.model_exchange`); a clocked FMI 3.0 FMU
+        without continuous states in Model Exchange has its ticks as time
+        events and nothing to integrate (docs/cosim.md, "Clocked FMUs").
+    solver : :class:`~cosim.model_exchange.SolverSettings` of a Model
+        Exchange instance (default: CVODE at the tolerance of the FMU's
+        default experiment, else 1e-5).
 
     Attributes
     ----------
@@ -297,10 +343,9 @@ class FmuComponent:
 
     def __init__(self, name: str, path: str | Path, validate: bool = False,
                  parameters: Mapping[str, float] | None = None, seed_parameter: str | None = None,
-                 seed_stream: int = 0, interface: str = "CoSimulation", evaluated: bool = False):
+                 seed_stream: int = 0, interface: str | None = None, solver=None):
         self.name = name
         self.path = Path(path)
-        self.interface = interface  # before the binary is looked for: the interface names it
         self.base_parameters = dict(parameters or {})
         self.seed_parameter = seed_parameter
         self.seed_stream = seed_stream
@@ -308,11 +353,23 @@ class FmuComponent:
         self.fmi_version = int(md.fmiVersion.split(".")[0])
         if self.fmi_version not in (2, 3):
             raise FmuLoadError(name, self.path, f"FMI {md.fmiVersion} is not supported (2.0 or 3.0)")
-        if md.coSimulation is None and not (evaluated and interface == "ModelExchange"):
-            raise FmuLoadError(name, self.path, "the FMU has no Co-Simulation interface")
-        if interface == "ModelExchange" and md.modelExchange is None:
-            raise FmuLoadError(name, self.path, "the FMU has no Model Exchange interface",
+        if interface is None:
+            interface = "CoSimulation" if md.coSimulation is not None else "ModelExchange"
+        if interface not in ("CoSimulation", "ModelExchange"):
+            raise FmuLoadError(name, self.path, "expected 'CoSimulation' or 'ModelExchange'",
                                setting=("interface", interface))
+        self.interface = interface
+        self.kind = md.coSimulation if interface == "CoSimulation" else md.modelExchange
+        if md.coSimulation is None and md.modelExchange is None:
+            raise FmuLoadError(name, self.path, "the FMU has neither Co-Simulation nor Model Exchange (Scheduled "
+                               "Execution only: the master does not drive it; docs/fmi-support.md)")
+        if self.kind is None:
+            has = "Model Exchange" if md.modelExchange is not None else "Co-Simulation"
+            raise FmuLoadError(name, self.path, f"the FMU has no {'Co-Simulation' if interface == 'CoSimulation' else 'Model Exchange'} "
+                               f"interface (it has {has} only)", setting=("interface", interface))
+        from .model_exchange import SolverSettings
+
+        self.solver = (solver if solver is not None else SolverSettings()).for_fmu(md)
         self._check_binary()
         groups = fmu_ports(md)
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
@@ -320,12 +377,8 @@ class FmuComponent:
         self.variables = {v.name: v for v in md.modelVariables}
         self.sample_period = self._declared_period()
         self.clock = self._input_clock()
-        if interface not in ("CoSimulation", "ModelExchange"):
-            raise FmuLoadError(name, self.path, "expected 'CoSimulation' or 'ModelExchange'",
-                               setting=("interface", interface))
-        if interface == "ModelExchange" and not evaluated and (self.clock is None or md.derivatives):
-            raise FmuLoadError(name, self.path, "the master drives Model Exchange only for a clocked FMI 3.0 FMU "
-                               "without continuous states", setting=("interface", interface))
+        self.model_exchange = interface == "ModelExchange" and self.clock is None  # integrated by the master
+        self._integrator = None
         self._tick_pending = False  # clocked: in Event Mode at a tick whose clock is not yet activated
         if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
@@ -338,6 +391,10 @@ class FmuComponent:
         self._unzipdir: Path | None = None
         self._owns_unzipdir = False
         self._initialized_once = False
+        self._initializing = False
+        self._initial_parameters: dict[str, Any] = {}
+        self._u_set: np.ndarray | None = None  # Model Exchange: the inputs last set (the solver restarts on a change)
+        self._t = 0.0
         self.bind((), ())
 
     def python_loop_reason(self) -> str | None:
@@ -347,6 +404,8 @@ class FmuComponent:
         if it can."""
         if self.clock is not None:
             return "a clocked FMU: its ticks are Event Mode calls"
+        if self.model_exchange:
+            return f"Model Exchange: integrated by the master's solver ({self.solver.method})"
         return None
 
     def _feedthrough(self, md) -> dict[str, frozenset[str]]:
@@ -423,11 +482,6 @@ class FmuComponent:
                                                                                 no_network=True))
         return root
 
-    def _interface_description(self):
-        """fmpy's description of the interface this instance uses (Co-Simulation or Model Exchange)."""
-        md = self.model_description
-        return md.modelExchange if self.interface == "ModelExchange" else md.coSimulation
-
     @property
     def provides_directional_derivatives(self) -> bool:
         """The interface's flag (FMI 2.0 ``providesDirectionalDerivative``,
@@ -435,7 +489,7 @@ class FmuComponent:
         under FMI 2.0's singular name and so reports False: for FMI 3.0 the
         attribute is read from the XML."""
         if self.fmi_version == 2:
-            return bool(self._interface_description().providesDirectionalDerivative)
+            return bool(self.kind.providesDirectionalDerivative)
         node = self._extras().find(self.interface)
         return node is not None and node.get("providesDirectionalDerivatives") == "true"
 
@@ -461,7 +515,7 @@ class FmuComponent:
         """Refuse, before any extraction, an FMU with no binary where fmpy
         will look for one on this platform; name the platforms it has."""
         folder = platform if self.fmi_version == 2 else platform_tuple
-        wanted = f"binaries/{folder}/{self._interface_description().modelIdentifier}{sharedLibraryExtension}"
+        wanted = f"binaries/{folder}/{self.kind.modelIdentifier}{sharedLibraryExtension}"
         names = self._file_names()
         if wanted in names:
             return
@@ -539,7 +593,7 @@ class FmuComponent:
             self._hidden = tuple(sorted(forms.items(), key=lambda kv: -len(kv[0])))  # the URI before the path
         md = self.model_description
         common = dict(guid=md.guid, unzipDirectory=str(self._unzipdir),
-                      modelIdentifier=self._interface_description().modelIdentifier, instanceName=self.name)
+                      modelIdentifier=self.kind.modelIdentifier, instanceName=self.name)
         self.messages.clear()
         self._log_level = self.logger.getEffectiveLevel()
         model_exchange = self.interface == "ModelExchange"
@@ -566,7 +620,7 @@ class FmuComponent:
             self.close()
             raise FmuLoadError(self.name, self.path, f"instantiation failed: {reason}") from None
         self._slave = slave
-        self._api = _Api(slave, self.fmi_version)
+        self._api = _Api(slave, self.fmi_version, self.interface == "CoSimulation")
         self._apply_log_level()
 
     def close(self) -> None:
@@ -581,6 +635,7 @@ class FmuComponent:
             except Exception:
                 pass
             self._slave = None
+            self._integrator = None
         if self._owns_unzipdir and self._unzipdir is not None:
             shutil.rmtree(self._unzipdir, ignore_errors=True)
             self._unzipdir = None
@@ -605,47 +660,99 @@ class FmuComponent:
                                               f"{log or '(the FMU logged nothing)'}"),
                             variable, value, log)
 
-    def start(self, t0: float, parameters: Mapping[str, float] | None = None) -> None:
-        """Reset (after the first run), set ``parameters``, initialize at ``t0``
-        and read the bound outputs at ``t0`` into :attr:`y`.
+    def start(self, t0: float, parameters: Mapping[str, float] | None = None,
+              inputs: Mapping[str, float] | None = None) -> None:
+        """Reset (after the first run), set ``parameters`` (start values of
+        any variable the standard lets an importer set, :func:`start_value_rule`),
+        initialize at ``t0`` with ``inputs`` set in Initialization Mode, and
+        read the bound outputs at ``t0`` into :attr:`y`: :meth:`enter_initialization`
+        then :meth:`exit_initialization`, which a master calls apart to set
+        connected inputs in between."""
+        self.enter_initialization(t0, parameters)
+        if inputs:
+            self.set_inputs(inputs, t0)
+        self.exit_initialization(t0)
 
-        Parameters are set one by one, so a refusal names the parameter
+    def enter_initialization(self, t0: float, parameters: Mapping[str, float] | None = None) -> None:
+        """Reset (after the first run), set the start values ``parameters``
+        in the state the standard allows for each (FMI 2.0 §3.2.3 / §4.2.4,
+        FMI 3.0 §2.3.4: Instantiated, else Initialization Mode) and enter
+        Initialization Mode at ``t0``; the outputs are read into :attr:`y`
+        (the initial unknowns, computed from the start values and the inputs
+        set so far).
+
+        Values are set one by one, so a refusal names the variable
         (:attr:`FmuCallError.variable`) and quotes the FMU's reason.
         """
         self.instantiate()
         s = self._slave
         self.messages.clear()
+        self._integrator = None  # a Model Exchange instance gets its solver when it leaves Initialization Mode
+        self._tick_pending = False  # a clocked FMU ticks from Event Mode on, after initialization
         parameters = dict(parameters or {})
-        for key in parameters:
-            var = self.variables.get(key)
-            if var is None or var.causality not in ("parameter", "input"):
-                raise FmuCallError(self.name, self.path, f"{key!r} is not a parameter or input of this FMU", key,
-                                   parameters[key])
-        set_float = self.real_calls()[1]
+        for key, value in parameters.items():
+            why = start_value_rule(self.variables.get(key))
+            if why:
+                raise FmuCallError(self.name, self.path, f"{key!r} {why}", key, value)
         try:
             if self._initialized_once:
                 s.reset()
         except FMICallException as exc:
             raise self._fail("reset", exc) from None
         self._initialized_once = True  # from here on, parameters may be set: the next start resets
-        for key, value in parameters.items():
-            try:
-                set_float([self.variables[key].valueReference], [float(value)])
-            except FMICallException as exc:
-                raise self._fail(f"setting parameter {key} = {value!r}", exc, variable=key, value=value) from None
+        from fmpy.simulation import settable_in_instantiated
+
+        later = {k: v for k, v in parameters.items() if not settable_in_instantiated(self.variables[k])}
+        self._set_start_values({k: v for k, v in parameters.items() if k not in later})
+        self._initial_parameters = parameters
         try:
             if self.fmi_version == 2:
                 s.setupExperiment(startTime=t0)
                 s.enterInitializationMode()
-                s.exitInitializationMode()
             else:
                 s.enterInitializationMode(startTime=t0)
-                s.exitInitializationMode()  # a clocked FMU: in Event Mode at its first tick
         except FMICallException as exc:
             raise self._fail("initialization with " + (repr(parameters) if parameters else "default parameters"),
                              exc) from None
+        self._set_start_values(later)
+        self._initializing = True
+        self.read_outputs(t0)
+
+    def exit_initialization(self, t0: float) -> None:
+        """Leave Initialization Mode at ``t0`` (a Model Exchange instance: the
+        initial event iteration, Continuous-Time Mode, its solver at ``t0``;
+        a clocked FMU: Event Mode at its first tick) and read the outputs."""
+        s = self._slave
+        try:
+            s.exitInitializationMode()
+        except FMICallException as exc:
+            parameters = self._initial_parameters
+            raise self._fail("initialization with " + (repr(parameters) if parameters else "default parameters"),
+                             exc) from None
+        self._initializing = False
+        if self.model_exchange:
+            from .model_exchange import Integrator
+
+            md = self.model_description
+            self._integrator = Integrator(s, self.fmi_version, md.numberOfContinuousStates,
+                                          md.numberOfEventIndicators, bool(self.kind.needsCompletedIntegratorStep),
+                                          self.solver)
+            self._integrate(lambda: self._integrator.start(t0), t0)
+            self._t = t0
+            self._u_set = None  # inputs set at t0 count as changed: the solver starts there anyway
         self._tick_pending = self.clock is not None
         self.read_outputs(t0)
+
+    def _set_start_values(self, values: Mapping[str, Any]) -> None:
+        for key, value in values.items():
+            var = self.variables[key]
+            try:
+                _typed_setter(self._slave, var, self.fmi_version)(value)
+            except FMICallException as exc:
+                what = "parameter" if var.causality == "parameter" else "the start value of"
+                raise self._fail(f"setting {what} {key} = {value!r}", exc, variable=key, value=value) from None
+            except (TypeError, ValueError) as exc:
+                raise FmuCallError(self.name, self.path, f"{key!r} is {var.type}: {exc}", key, value) from None
 
     # ---- fast path -----------------------------------------------------------
 
@@ -678,6 +785,9 @@ class FmuComponent:
         else:
             self.y = np.zeros(max(self._n_out, 1))
         self._u_ptr = self.u.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        # Model Exchange: a discrete input changes only in Event Mode (FMI 2.0 §3.2.3, FMI 3.0 §3.2.1)
+        self._discrete_in = np.array([self.variables[n].variability != "continuous" for n in self.input_names], bool)
+        self._u_set = None
         self._y_ptr = self.y.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
     def kernel_entry(self, direct: bool, in_idx: np.ndarray) -> KernelFmu:
@@ -719,14 +829,51 @@ class FmuComponent:
 
     def write_inputs(self, t: float) -> None:
         """Set all bound inputs from :attr:`u` in one call (a clocked FMU's
-        clock activated first: the inputs are its tick's)."""
+        clock activated first: the inputs are its tick's; a Model Exchange
+        instance: only when they changed, in Event Mode if a discrete one did)."""
         if self._tick_pending:
             self._activate_clock(t)
+        if self._n_in and self._integrator is not None:
+            return self._write_inputs_me(t)
         if self._n_in:
             try:
                 self._api.set(self._in_vr, self._c_in, self._u_ptr)
             except FMICallException as exc:
                 raise self._call_failure(Call.SET, exc, t) from None
+
+    def _write_inputs_me(self, t: float) -> None:
+        """Model Exchange: the inputs of ``t_n``, held over the step. Unchanged
+        inputs are not set again (the solver goes on); a changed continuous
+        input is set in Continuous-Time Mode and restarts the solver; a
+        changed discrete input is set in Event Mode, followed by the event
+        iteration (an input event, as fmpy's ``simulateME`` handles one)."""
+        u = self.u[:self._n_in]
+        before = self._u_set
+        if before is not None and np.array_equal(u, before):
+            return
+        changed = np.ones(self._n_in, bool) if before is None else u != before
+        set_all = lambda: self._api.set(self._in_vr, self._c_in, self._u_ptr)  # noqa: E731
+        try:
+            if (changed & self._discrete_in).any():
+                self._integrate(lambda: self._integrator.handle_event(t, set_all), t)
+            else:
+                set_all()
+                self._integrator.restart()
+        except FMICallException as exc:
+            raise self._call_failure(Call.SET, exc, t) from None
+        self._u_set = u.copy()
+
+    def _integrate(self, work, t: float) -> None:
+        """Run ``work`` (a call into the Model Exchange integrator); its failure
+        becomes an :class:`~cosim.errors.FmuCallError` naming the time and the FMU."""
+        from .model_exchange import IntegrationError
+
+        try:
+            work()
+        except IntegrationError as exc:
+            raise self._fail(f"Model Exchange integration ({self.solver.method})", exc, exc.time) from None
+        except FMICallException as exc:
+            raise self._fail(f"Model Exchange integration ({self.solver.method}) from t = {t!r} s", exc, t) from None
 
     def serialize_state(self) -> bytes:
         """The FMU's state, serialized (FMI getFMUState + serializeFMUState)."""
@@ -761,6 +908,9 @@ class FmuComponent:
             raise self._fail("restoring a serialized FMU state", exc) from None
         if self.clock is not None:  # a state this component saved: at a tick, in Event Mode
             self._tick_pending = True
+        if self._integrator is not None:  # new states: an event there gives the next time event; the solver restarts
+            self._integrate(lambda: self._integrator.handle_event(self._t), self._t)
+            self._u_set = None
 
     def set_inputs(self, values: Mapping[str, float], t: float) -> None:
         """Set some inputs by name (the slow path, outside the step loop)."""
@@ -769,8 +919,17 @@ class FmuComponent:
         if self._tick_pending:
             self._activate_clock(t)
         vrs = [self.variables[name].valueReference for name in values]
+        set_values = lambda: self.real_calls()[1](vrs, [float(v) for v in values.values()])  # noqa: E731
         try:
-            self.real_calls()[1](vrs, [float(v) for v in values.values()])
+            if self._integrator is not None:  # Model Exchange after initialization: as _write_inputs_me
+                if any(self.variables[name].variability != "continuous" for name in values):
+                    self._integrate(lambda: self._integrator.handle_event(t, set_values), t)
+                else:
+                    set_values()
+                    self._integrator.restart()
+                self._u_set = None
+                return
+            set_values()
         except FMICallException as exc:
             shown = ", ".join(f"{n} = {float(v)!r}" for n, v in values.items())
             raise self._fail(f"setting inputs ({shown})", exc, t) from None
@@ -860,7 +1019,7 @@ class FmuComponent:
 
     # ---- Model Exchange: what a linearizer evaluates -------------------------------------------------
     # (FMI 2.0 section 3.2.1, FMI 3.0 section 3.2: the Model Exchange calls on an instance made with
-    # interface="ModelExchange"; sizes from the modelDescription's ModelStructure)
+    # interface="ModelExchange", after start(), in Continuous-Time Mode; sizes from the ModelStructure)
 
     @property
     def state_names(self) -> list[str]:
@@ -884,24 +1043,6 @@ class FmuComponent:
             except FMICallException as exc:
                 raise self._fail(what, exc) from None
         return out
-
-    def enter_continuous_time_mode(self) -> None:
-        """After :meth:`start` of a Model Exchange instance (in Event Mode):
-        the event iteration (FMI 2.0 ``fmi2NewDiscreteStates`` until no new
-        discrete states are needed, FMI 3.0 ``fmi3UpdateDiscreteStates``),
-        then Continuous-Time Mode, where states are set and derivatives read."""
-        s = self._slave
-        try:
-            for _ in range(1000):  # an FMU that asks for new discrete states for ever is refused below
-                needed = (s.newDiscreteStates() if self.fmi_version == 2 else s.updateDiscreteStates())[0]
-                if not needed:
-                    break
-            else:
-                raise FMICallException(function="event iteration (1000 rounds, still new discrete states)",
-                                       status=3)
-            s.enterContinuousTimeMode()
-        except FMICallException as exc:
-            raise self._fail("entering Continuous-Time Mode", exc) from None
 
     def continuous_states(self) -> np.ndarray:
         return self._vector(self._slave.getContinuousStates, "getting the continuous states")
@@ -947,6 +1088,10 @@ class FmuComponent:
         tick at ``t`` first, and must meet its next tick at ``t + h``."""
         if self.clock is not None:
             return self._clocked_step(t, h)
+        if self._integrator is not None:
+            self._integrate(lambda: self._integrator.advance(t, t + h), t)
+            self._t = t + h
+            return
         try:
             self._api.do_step(t, h)
         except FMICallException as exc:

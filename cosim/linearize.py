@@ -200,23 +200,22 @@ def _component(path: Path, interface: str) -> FmuComponent:
     never stepped) where asked, or, for ``auto``, where the FMU has it and has
     continuous states; else Co-Simulation."""
     def make(which):
-        return FmuComponent("linearize", path, interface=which, evaluated=True)
-
-    if interface == "cs":
-        comp = make("CoSimulation")
-    else:
         try:
-            comp = make("ModelExchange")
+            return FmuComponent("linearize", path, interface=which)
         except FmuLoadError as exc:
-            if exc.setting != ("interface", "ModelExchange"):
+            if exc.setting != ("interface", which):  # a file that is no usable FMU: the master's one line
                 raise
-            if interface == "me":
-                raise LinearizationError(f"{path.name}: no Model Exchange interface") from None
-            return make("CoSimulation")
-        if interface == "me" or comp.state_names:
+            return None
+
+    if interface != "cs":
+        comp = make("ModelExchange")
+        if comp is None and interface == "me":
+            raise LinearizationError(f"{path.name}: no Model Exchange interface")
+        if comp is not None and (interface == "me" or comp.state_names):
             return comp
-        comp = make("CoSimulation")  # a clocked FMI 3.0 FMU: Model Exchange without continuous states
-    if comp.model_description.coSimulation is None:
+        # no Model Exchange, or a clocked FMI 3.0 FMU's: no continuous state to linearize
+    comp = make("CoSimulation")
+    if comp is None:
         raise LinearizationError(f"{path.name}: no Co-Simulation interface")
     return comp
 
@@ -264,9 +263,8 @@ def _linearize_me(path, comp: FmuComponent, start, inputs, parameters, t, method
     _check_states(start, variables, state_names, "continuous")
     in_names, out_names = _reals(md, "input"), _reals(md, "output")
     nx = len(state_names)
-    try:  # the inputs given are set with the parameters, before initialization (as start values)
-        comp.start(t, parameters | inputs)
-        comp.enter_continuous_time_mode()
+    try:  # the inputs given are set in Initialization Mode; start() ends in Continuous-Time Mode
+        comp.start(t, parameters, inputs)
     except FmuCallError as exc:
         raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
     x = comp.continuous_states()

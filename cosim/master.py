@@ -249,11 +249,14 @@ class Master:
             for comp in self.python:
                 comp.set_parameters(split[comp.name])
                 comp.start(t0, h, n_steps, seed)
-            for fmu in self.fmus:  # reads the outputs at t0 into the signal array
+            for fmu in self.fmus:  # reads the initial outputs at t0 into the signal array
                 seeded = {fmu.seed_parameter: stream_seed(seed, fmu.seed_stream)} if fmu.seed_parameter else {}
                 started[fmu.name] = {**fmu.base_parameters, **self.fmu_parameters.get(fmu.name, {}), **seeded,
                                      **split[fmu.name]}
-                fmu.start(t0, started[fmu.name])
+                fmu.enter_initialization(t0, started[fmu.name])
+            self._initialize_inputs(t0)
+            for fmu in self.fmus:  # reads the outputs at t0
+                fmu.exit_initialization(t0)
                 if fmu.name in restore:
                     fmu.restore_state(restore[fmu.name])
                     fmu.read_outputs(t0)
@@ -278,6 +281,35 @@ class Master:
             failure.result = result
             raise failure
         return result
+
+    def _initialize_inputs(self, t0: float, passes: int = 100) -> None:
+        """Initialization Mode at ``t0``: every FMU's inputs connected to
+        another FMU's outputs are set (:attr:`Plan.initialization`) and its
+        initial outputs read again, pass after pass, until no output changes
+        by more than 1e-12 of its size (a chain settles in one pass per link;
+        an algebraic loop through feedthrough FMUs is a fixed-point
+        iteration); one line naming the connections that still change after
+        ``passes`` passes. Python components have no outputs before their
+        first step: their connections are set at t0 by the loop."""
+        transfers = self.plan.initialization
+        if not transfers:
+            return
+        signals = self.signals
+        for _ in range(passes):
+            before = signals.copy()
+            for tr in transfers:
+                fmu = self.fmus[tr.index]
+                fmu.set_inputs(dict(zip(tr.inputs, signals[tr.sources].tolist())), t0)
+                fmu.read_outputs(t0)
+            change = np.abs(signals - before)
+            if np.all((change <= 1e-12 * np.maximum(np.abs(signals), 1.0)) | (signals == before)):
+                return
+        moving = [f"{src} -> {dst}" for dst, src in self.source_of.items() if src in self.slots
+                  and not abs(signals[self.slots[src]] - before[self.slots[src]]) <= 1e-12 * max(abs(signals[self.slots[src]]), 1.0)
+                  and dst.partition(".")[0] in {self.fmus[tr.index].name for tr in transfers}]
+        raise ConnectionCheckError(f"initialization at t0 = {t0!r} s: the FMUs' outputs did not settle after {passes} "
+                                   f"passes through the connections (an algebraic loop at t0 through "
+                                   f"{', '.join(moving) or 'the feedthrough FMUs'}): break it with a delay")
 
     def _snapshot_steps(self, times: Sequence[float], t0: float, n_steps: int) -> frozenset[int]:
         h, steps = self.step, set()

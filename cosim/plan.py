@@ -104,7 +104,10 @@ class Plan:
     feedthroughs is consistent at t0; ``first_transfer`` the part of it
     whose sources are FMUs, made before the Python components' first step
     (their outputs do not exist yet). Both are empty in the feedthrough
-    ordering. ``python_loop``: why the compiled loop cannot run the plan,
+    ordering. ``initialization``: every connection from an FMU into an FMU,
+    per destination FMU, made in Initialization Mode (FMI 2.0 §3.2.3 / FMI
+    3.0 §2.3.4: connected inputs set before the initial unknowns are
+    computed) until the FMUs' outputs settle. ``python_loop``: why the compiled loop cannot run the plan,
     one reason per component (a Python component, an FMU whose
     :meth:`~cosim.fmu_component.FmuComponent.python_loop_reason` names
     one); empty when it can (:attr:`compiled`).
@@ -126,6 +129,7 @@ class Plan:
     bounds: Mapping[str, tuple[float, float]]
 
     python_loop: tuple[str, ...] = ()
+    initialization: tuple[Transfer, ...] = ()
 
     @property
     def fmus_only(self) -> bool:
@@ -295,20 +299,21 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
                                          _indices(slots[source_of.get(n, n)] for n in names), blocks[comp.name],
                                          published.get(comp.name), ordering == "exchange" and bool(comp.inputs))
 
+    fmu_names = {f.name for f in fmus}
+
+    def transfers(keep) -> tuple[Transfer, ...]:
+        out = []
+        for b in fmu_blocks:
+            ins = [c for c in connections if c.destination.component == b.name and keep(c)]
+            out.append(Transfer(b.index, tuple(c.destination.variable for c in ins),
+                                _indices(slots[str(c.source)] for c in ins)))
+        return tuple(out)
+
     transfer = first_transfer = ()
     if ordering == "exchange":
-        fmu_names = {f.name for f in fmus}
-
-        def transfers(keep) -> tuple[Transfer, ...]:
-            out = []
-            for b in fmu_blocks:
-                ins = [c for c in connections if c.destination.component == b.name and keep(c)]
-                out.append(Transfer(b.index, tuple(c.destination.variable for c in ins),
-                                    _indices(slots[str(c.source)] for c in ins)))
-            return tuple(out)
-
         transfer = transfers(lambda c: True)
         first_transfer = transfers(lambda c: c.source.component in fmu_names)
+    initialization = tuple(t for t in transfers(lambda c: c.source.component in fmu_names) if t.inputs)
 
     # what the compiled loop cannot do (it makes set, get and doStep calls of Float64 values only)
     python_loop = tuple(f"Python component {c.name}" for c in python if c.name in at_tn)
@@ -323,4 +328,5 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
         record_units=("s",) + tuple(signal_port(components, s).unit for s in record),
         record_slots=_indices(slots[source_of.get(s, s)] for s in columns), watched=watched,
         watch_slots=_indices(slots[s] for s in watched), python_loop=python_loop,
+        initialization=initialization,
         bounds=MappingProxyType({source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in bounds.items()}))

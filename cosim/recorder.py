@@ -52,7 +52,7 @@ class Recorder:
 
     def __init__(self, columns: Sequence[str], units: Sequence[str | None], n_rows: int,
                  path: str | Path | None = None, block_rows: int = 100, meta: dict | None = None,
-                 digits: int = 10):
+                 digits: int | None = None):
         if block_rows < 1:
             raise ValueError(f"block_rows = {block_rows} must be at least 1")
         self.columns, self.units = tuple(columns), tuple(units)
@@ -68,7 +68,9 @@ class Recorder:
         self.meta = dict(meta or {})
         self._flushed = 0
         self._told = time.monotonic()
-        self._fmt = ",".join([f"%.{digits}g"] * len(self.columns)) + "\n"
+        # default: each value as the shortest text that reads back to the same double (Python's repr), so a
+        # results file is the run, to the last bit; ``digits``: that many significant digits
+        self._fmt = ",".join(["%r" if digits is None else f"%.{digits}g"] * len(self.columns)) + "\n"
         self._file = None
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)

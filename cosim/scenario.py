@@ -30,6 +30,7 @@ from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag,
 
 from . import registry
 from .errors import CosimError, FmuError, ScenarioError
+from .fmu_component import start_value_rule
 from .files import read_toml
 from .limits import MAX_STEPS
 from .limits import MAX_RECORD_BYTES
@@ -77,6 +78,24 @@ class Simulation(Table):
         return self
 
 
+INTERFACES = ("CoSimulation", "ModelExchange")
+
+
+class Solver(Table):
+    """``[fmus.<Name>.solver]``: how the master integrates a Model Exchange
+    FMU between communication points (:mod:`cosim.model_exchange`)."""
+
+    method: one_of(("cvode", "euler")) = Field("cvode", description="'cvode' (variable step BDF with root finding, "
+                                                                    "SUNDIALS) or 'euler' (fixed step)")
+    relative_tolerance: Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0, lt=1)] = Field(
+        None, description="CVODE's relative tolerance (default: the FMU's default experiment's, else 1e-5); each "
+                          "state's absolute tolerance is it times the state's nominal")
+    step: Positive = Field(None, description="Euler's step [s] (a whole fraction of the communication step; default: "
+                                             "the communication step), or CVODE's largest step")
+    max_events: Count = Field(1000, description="events allowed in one communication step before the model is taken "
+                                                "to chatter")
+
+
 def _source(info) -> Path | None:
     return (info.context or {}).get("source")
 
@@ -89,6 +108,12 @@ class FmuSpec(Table):
     fmi_version: one_of((2, 3), "expected 2 or 3", int) = Field(
         None, description="2 or 3: the version built (a model, default 2) or the version the file must have")
     parameters: dict[str, Number] = Field(default_factory=dict, description="start values of parameters and inputs")
+    start: dict[str, Union[bool, Number]] = Field(
+        default_factory=dict, description="start values of the other variables the standard lets an importer set "
+                                          "(initial = exact or approx: a state's initial value, ...)")
+    interface: one_of(INTERFACES) = Field(None, description="the FMI interface it runs with; default: Co-Simulation "
+                                                            "where the FMU has it, else Model Exchange")
+    solver: Solver = Field(None, description="Model Exchange: how the master integrates it")
     seed_parameter: str = Field(None, description="a parameter set to the run's seed at every start")
     seed_stream: NonNegativeInt = Field(None, description="with seed_parameter: the run's random stream k")
 
@@ -96,6 +121,13 @@ class FmuSpec(Table):
     def _one_source(self, info):
         if (self.model is None) == (self.path is None):
             raise refuse("give exactly one of 'model' (a registered model) or 'path' (an FMU file)")
+        both = sorted(set(self.parameters) & set(self.start))
+        if both:
+            raise refuse(f"{both[0]!r} is given in both 'parameters' and 'start': a parameter goes in 'parameters', "
+                         f"any other variable in 'start'", key="start")
+        if self.solver is not None and self.interface == "CoSimulation":
+            raise refuse("a solver is for an FMU run as Model Exchange; this one has interface = 'CoSimulation'",
+                         key="solver")
         if self.seed_stream is not None and self.seed_parameter is None:
             raise refuse("only an FMU with a seed_parameter is seeded", key="seed_stream", value=self.seed_stream)
         if self.model is not None:
@@ -374,6 +406,12 @@ class Scenario:
                 entry["seed_parameter"] = spec.seed_parameter
             if spec.seed_stream is not None:
                 entry["seed_stream"] = spec.seed_stream
+            if spec.start:
+                entry["start"] = dict(document["fmus"][instance]["start"])
+            if spec.interface is not None:
+                entry["interface"] = spec.interface
+            if spec.solver is not None:
+                entry["solver"] = _plain(spec.solver)
             fmus[instance] = entry
         components: dict[str, dict[str, Any]] = {}
         for alias, kinds in registry.aliases().items():
@@ -521,6 +559,19 @@ def check_fmu_file(scenario: Scenario, fmu) -> None:
         if not low <= float(value) <= high:
             raise ScenarioError(f"fmus.{fmu.name}.parameters.{key} = {value!r}: outside the range [{low:g}, {high:g}] "
                                 f"the FMU file {fmu.path} declares")
+    for key, value in spec.get("start", {}).items():
+        var = fmu.variables.get(key)
+        why = "is a parameter: give it in 'parameters'" if getattr(var, "causality", None) == "parameter" else \
+            start_value_rule(var)
+        if why:
+            raise ScenarioError(f"fmus.{fmu.name}.start.{key} = {value!r}: {key!r} {why} (the FMU file {fmu.path})")
+    if fmu.model_exchange:
+        try:
+            fmu.solver.substeps(scenario.step)
+        except ValueError as exc:
+            raise ScenarioError(f"fmus.{fmu.name}.solver.step = {fmu.solver.step!r}: {exc}") from None
+    elif "solver" in spec:
+        raise ScenarioError(f"fmus.{fmu.name}.solver: the FMU runs in {fmu.interface}; a solver is for Model Exchange")
     _check_sample_period(fmu, spec["parameters"], scenario.step, f"fmus.{fmu.name}.parameters")
 
 
@@ -564,12 +615,14 @@ def fmu_error_in_scenario(scenario: Scenario, exc: FmuError) -> ScenarioError:
 
 def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
     from .fmu_component import FmuComponent
+    from .model_exchange import SolverSettings
 
     fmus = []
     try:
         for name, spec in scenario.fmus.items():
+            solver = SolverSettings(**spec["solver"]) if "solver" in spec else None
             fmu = FmuComponent(name, fmu_files.get(name) or fmu_file(spec), seed_parameter=spec.get("seed_parameter"),
-                               seed_stream=spec.get("seed_stream", 0))
+                               seed_stream=spec.get("seed_stream", 0), interface=spec.get("interface"), solver=solver)
             fmus.append(fmu)
             fmu.instantiate()  # a file that cannot run is refused now, before anything is written
             check_fmu_file(scenario, fmu)
@@ -637,7 +690,7 @@ def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None
             fmu.instantiate()
             _check_sample_period(fmu, fmu.base_parameters, scenario.step, fmu.name)  # the kind set its parameters
         return Master(fmus, python, scenario.connections, scenario.step, scenario.record, scenario.envelope,
-                      {name: spec["parameters"] for name, spec in scenario.fmus.items()},
+                      {name: {**spec["parameters"], **spec.get("start", {})} for name, spec in scenario.fmus.items()},
                       ordering=scenario.ordering)
     except BaseException:
         for fmu in fmus:

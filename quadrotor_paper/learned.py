@@ -100,15 +100,15 @@ def state_of(fmu: FmuComponent, variant: str) -> np.ndarray:
 
 
 class LearnedControllerFmu(FmuComponent):
-    """A controller FMU that starts from a saved state: after each start
-    (initialization), ``state`` is set into it by name."""
+    """A controller FMU that starts from a saved state: after each
+    initialization, ``state`` is set into it by name."""
 
     def __init__(self, *args, variant: str, state: np.ndarray | None = None, **kwargs):
         super().__init__(*args, **kwargs)
         self.variant, self.learned = variant, state
 
-    def start(self, t0, parameters=None) -> None:
-        super().start(t0, parameters)
+    def exit_initialization(self, t0) -> None:
+        super().exit_initialization(t0)  # start() and the master's initialization both end here
         if self.learned is None:
             return
         self.set_reals(dict(zip(_names(self.variant), map(float, self.learned))), t0,

@@ -385,8 +385,8 @@ def test_reset_between_runs_gives_identical_results(lag):
     ({"nope.x": 1.0}, ConnectionCheckError, "parameter 'nope.x': expected 'component.name'"),
     ({"lag": 1.0}, ConnectionCheckError, "parameter 'lag': expected 'component.name'"),
     ({"ctrl.ki": 1.0}, KeyError, "component 'ctrl' has no parameter"),
-    ({"lag.nope": 1.0}, FmuCallError, "'nope' is not a parameter or input of this FMU"),
-    ({"lag.y": 1.0}, FmuCallError, "'y' is not a parameter or input of this FMU"),
+    ({"lag.nope": 1.0}, FmuCallError, "'nope' is no variable of the FMU"),
+    ({"lag.y": 1.0}, FmuCallError, "'y' is an output with initial = calculated: the standard lets an importer set only inputs"),
     ({"lag.tau": 0.0}, FmuCallError, "setting parameter tau = 0.0 failed"),
 ])
 def test_refused_run_parameters_raise_and_the_next_run_works(lag, tmp_path, parameters, error, message):

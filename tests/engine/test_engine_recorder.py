@@ -51,7 +51,7 @@ def test_blocks_are_flushed_every_block_rows_rows(tmp_path):
     assert rec.n_rows == 25
     rec.close("ok")
     assert len(data_lines(path)) == 25  # the last, partial block on close
-    assert data_lines(path)[:3] == ["0,0", "1,2", "2,4"]
+    assert data_lines(path)[:3] == ["0.0,0.0", "1.0,2.0", "2.0,4.0"]  # each double as its shortest exact text
     info = sidecar(path)
     assert info["status"] == "ok" and info["error"] is None and info["rows"] == 25
 
@@ -91,17 +91,29 @@ def test_a_second_close_changes_nothing(tmp_path):
     assert (sidecar(path)["status"], sidecar(path)["error"]) == ("failed", "first")
 
 
-def test_values_are_written_with_ten_significant_digits(tmp_path):
+def test_values_are_written_to_the_last_bit(tmp_path):
+    """Each double as the shortest text that reads back to it (Python's repr):
+    a results file is the run itself."""
     path = tmp_path / "results.csv"
     rec = Recorder(["time", "a", "b"], ["s", "m", "m"], 2, path)
     rec.data[0] = [0.0, 1 / 3, -2.5e-12]
     rec.data[1] = [0.1, math.nan, 123456789012.0]
     rec.commit(2)
     rec.close()
-    assert data_lines(path) == ["0,0.3333333333,-2.5e-12", "0.1,nan,1.23456789e+11"]
+    assert data_lines(path) == ["0.0,0.3333333333333333,-2.5e-12", "0.1,nan,123456789012.0"]
     columns, data = read_results(path)
     assert columns == ["time", "a", "b"]
-    assert data[0, 1] == 0.3333333333 and math.isnan(data[1, 1]) and data[1, 2] == 123456789000.0
+    assert data[0, 1] == 1 / 3 and math.isnan(data[1, 1]) and data[1, 2] == 123456789012.0
+
+
+def test_values_can_be_written_with_fewer_digits(tmp_path):
+    path = tmp_path / "results.csv"
+    rec = Recorder(["time", "a", "b"], ["s", "m", "m"], 2, path, digits=10)
+    rec.data[0] = [0.0, 1 / 3, -2.5e-12]
+    rec.data[1] = [0.1, math.nan, 123456789012.0]
+    rec.commit(2)
+    rec.close()
+    assert data_lines(path) == ["0,0.3333333333,-2.5e-12", "0.1,nan,1.23456789e+11"]
 
 
 def test_column_gives_the_rows_written_so_far():

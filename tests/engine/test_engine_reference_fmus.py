@@ -1,0 +1,190 @@
+"""FMUs we did not write: the Modelica Association's Reference FMUs
+(``../shared/reference-fmus/``), flown through ``fnn-cosim run`` of a
+scenario, in Co-Simulation and in Model Exchange, against their published
+results and against fmpy's own runs.
+
+* Co-Simulation at the default experiment: the published ``_out.csv`` to 1e-9
+  (fmpy's ``simulate_fmu`` gives it exactly).
+* Model Exchange, fixed-step Euler at the model's internal step
+  (``FIXED_SOLVER_STEP`` of the Reference FMUs' sources, the integrator of
+  their own Co-Simulation): the published ``_out.csv`` to 1e-12.
+* Model Exchange, CVODE: within 1e-6 (relative to the signal's largest
+  value) of fmpy's own CVode run at the same tolerance, the bounces of
+  BouncingBall in the same communication step; Roberts (stiff chemistry)
+  too, where its three concentrations keep adding up to one.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import read_model_description, simulate_fmu
+
+from quadrotor_paper.cli import main
+
+REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
+pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE} "
+                                                                "(a copy of the project outside its workplace)")
+
+# FIXED_SOLVER_STEP of each model's config.h: the step of the Reference FMUs' own forward Euler
+EULER_STEP = {"BouncingBall": 1e-3, "Dahlquist": 0.1, "VanDerPol": 0.01, "Stair": 0.2}
+CONTINUOUS = ["BouncingBall", "Dahlquist", "VanDerPol"]
+CVODE_TOLERANCE = 1e-10  # relative; at 1e-8 two correct CVODE runs (ours stops at every point) differ by ~2e-6
+
+
+def fmu(version: int, model: str) -> Path:
+    return REFERENCE / f"fmi{version}" / f"{model}.fmu"
+
+
+def experiment(version: int, model: str) -> tuple[float, float]:
+    """(step, stop time) of the model's default experiment."""
+    de = read_model_description(str(fmu(version, model))).defaultExperiment
+    return float(de.stepSize), float(de.stopTime)
+
+
+def outputs(version: int, model: str) -> list[str]:
+    return [v.name for v in read_model_description(str(fmu(version, model))).modelVariables if v.causality == "output"]
+
+
+def published(model: str) -> np.ndarray:
+    return np.genfromtxt(REFERENCE / "results" / f"{model}_out.csv", delimiter=",", names=True)
+
+
+def toml_value(value) -> str:
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{json.dumps(k)} = {toml_value(v)}" for k, v in value.items()) + " }"
+    return json.dumps(value)
+
+
+def fly(tmp_path: Path, version: int, model: str, step: float, stop: float, **fmu_keys) -> dict[str, np.ndarray]:
+    """``fnn-cosim run`` of a one-FMU scenario recording every output; the columns of its results.csv."""
+    names = outputs(version, model)
+    lines = ["[simulation]", f"duration = {stop!r}", f"step = {step!r}", "", f"[fmus.{model}]",
+             f"path = {json.dumps(str(fmu(version, model)))}"]
+    lines += [f"{key} = {toml_value(value)}" for key, value in fmu_keys.items()]
+    lines += ["", "[record]", f"signals = {json.dumps([f'{model}.{n}' for n in names])}"]
+    scenario = tmp_path / f"{model}.toml"
+    scenario.parent.mkdir(parents=True, exist_ok=True)
+    scenario.write_text("connections = []\n\n" + "\n".join(lines) + "\n")
+    out = tmp_path / "out"
+    assert main(["run", str(scenario), "--out", str(out), "--no-plots", "--quiet"]) == 0
+    header = (out / "results.csv").read_text().split("\n", 1)[0].split(",")
+    rows = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1, ndmin=2)
+    columns = dict(zip(header, rows.T))
+    return {"time": columns["time"], **{n: columns[f"{model}.{n}"] for n in names}}
+
+
+def worst(ours: dict[str, np.ndarray], theirs, names=None) -> float:
+    """The largest difference of any output (of those in ``theirs``), relative
+    to that output's largest magnitude."""
+    names = names or [n for n in theirs.dtype.names if n != "time"]
+    return max(float(np.max(np.abs(ours[n] - theirs[n])) / max(np.max(np.abs(theirs[n])), 1e-300)) for n in names)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("model", CONTINUOUS)
+def test_co_simulation_gives_the_published_results(tmp_path, version, model):
+    step, stop = experiment(version, model)
+    ours, theirs = fly(tmp_path, version, model, step, stop), published(model)
+    np.testing.assert_allclose(ours["time"], theirs["time"], rtol=0, atol=1e-12)  # theirs: summed steps
+    assert worst(ours, theirs) <= 1e-9
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("model", CONTINUOUS)
+def test_model_exchange_with_their_euler_step_gives_the_published_results(tmp_path, version, model):
+    """The published results are the FMUs' own forward Euler: the master's
+    Euler at the same step, handling the same events, lands on them."""
+    step, stop = experiment(version, model)
+    ours = fly(tmp_path, version, model, step, stop, interface="ModelExchange",
+               solver={"method": "euler", "step": EULER_STEP[model]})
+    assert worst(ours, published(model)) <= 1e-12
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("model", CONTINUOUS)
+def test_model_exchange_with_cvode_lands_on_fmpys_cvode_run(tmp_path, version, model):
+    step, stop = experiment(version, model)
+    ours = fly(tmp_path, version, model, step, stop, interface="ModelExchange",
+               solver={"relative_tolerance": CVODE_TOLERANCE})
+    theirs = simulate_fmu(str(fmu(version, model)), fmi_type="ModelExchange", solver="CVode",
+                          relative_tolerance=CVODE_TOLERANCE, output_interval=step, stop_time=stop,
+                          record_events=False)
+    np.testing.assert_allclose(ours["time"], theirs["time"], rtol=0, atol=1e-12)
+    assert worst(ours, theirs) <= 1e-6
+    if model == "BouncingBall":  # a bounce (v from falling to rising) in the same communication step
+        bounces = lambda v: np.flatnonzero((v[:-1] < 0) & (v[1:] > 0))  # noqa: E731
+        assert bounces(ours["v"]).size >= 5
+        np.testing.assert_array_equal(bounces(ours["v"]), bounces(theirs["v"]))
+
+
+def test_roberts_is_solved_as_a_stiff_ode(tmp_path):
+    """Robertson's chemistry (rates from 0.04 to 3e7): CVODE's BDF as fmpy runs
+    it; its default experiment spans 1e-5 to 1e8 s on a log scale, which a
+    fixed communication step cannot sample, so 40 s at 0.1 s are flown."""
+    ours = fly(tmp_path, 3, "Roberts", 0.1, 40.0, interface="ModelExchange",
+               solver={"relative_tolerance": CVODE_TOLERANCE})
+    theirs = simulate_fmu(str(fmu(3, "Roberts")), fmi_type="ModelExchange", solver="CVode", start_time=0.0,
+                          relative_tolerance=CVODE_TOLERANCE, output_interval=0.1, stop_time=40.0, record_events=False)
+    assert worst(ours, theirs, ["y1", "y2", "y3"]) <= 1e-6
+    np.testing.assert_allclose(ours["y1"] + ours["y2"] + ours["y3"], 1.0, rtol=0, atol=1e-12)
+    assert ours["y2"].max() > 3e-5 and ours["y1"][-1] < 0.8  # the fast transient and the slow decay, both seen
+
+
+def test_a_start_value_of_a_state_is_set_by_the_standard(tmp_path):
+    """BouncingBall's height is a state with initial = "exact": a start
+    value, set before initialization in both interfaces."""
+    for interface in ("CoSimulation", "ModelExchange"):
+        ours = fly(tmp_path / interface, 3, "BouncingBall", 0.01, 1.0, interface=interface, start={"h": 2.0})
+        assert ours["h"][0] == 2.0 and ours["h"][1] < 2.0
+
+
+@pytest.mark.parametrize("start, message", [
+    ({"der(h)": 1.0}, "fmus.BouncingBall.start.der(h) = 1.0: 'der(h)' is a local with initial = calculated: the "
+                      "standard lets an importer set only inputs and variables whose initial is exact or approx"),
+    ({"g": -3.0}, "fmus.BouncingBall.start.g = -3.0: 'g' is a parameter: give it in 'parameters'"),
+    ({"nope": 1.0}, "fmus.BouncingBall.start.nope = 1.0: 'nope' is no variable of the FMU"),
+])
+def test_a_start_value_the_standard_forbids_is_one_line(tmp_path, capsys, start, message):
+    scenario = tmp_path / "ball.toml"
+    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.BouncingBall]\n'
+                        f'path = {json.dumps(str(fmu(3, "BouncingBall")))}\nstart = {toml_value(start)}\n')
+    assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_an_fmu_that_chatters_is_stopped_naming_the_time_and_the_fmu(tmp_path, capsys):
+    """More events in one communication step than the solver allows (here
+    one, with BouncingBall's bounces coming ever faster): one line with the
+    FMU, the time and the reason; the rows before it are kept."""
+    scenario = tmp_path / "ball.toml"
+    scenario.write_text(f'connections = []\n[simulation]\nduration = 3.0\nstep = 0.5\n[fmus.Ball]\n'
+                        f'path = {json.dumps(str(fmu(2, "BouncingBall")))}\ninterface = "ModelExchange"\n'
+                        f'solver = {{ max_events = 1 }}\n[record]\nsignals = ["Ball.h"]\n')
+    assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "Ball" in err and "more than 1 events in one communication step" in err and "at t = " in err
+    rows = np.genfromtxt(tmp_path / "out" / "results.csv", delimiter=",", names=True)
+    assert rows.size >= 2 and rows["time"][0] == 0.0
+
+
+def test_an_euler_step_that_does_not_divide_the_communication_step_is_refused(tmp_path, capsys):
+    scenario = tmp_path / "ball.toml"
+    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Ball]\n'
+                        f'path = {json.dumps(str(fmu(2, "BouncingBall")))}\ninterface = "ModelExchange"\n'
+                        f'solver = {{ method = "euler", step = 0.003 }}\n')
+    assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
+    assert ("fmus.Ball.solver.step = 0.003: the Euler step 0.003 s does not divide the communication step 0.01 s"
+            in capsys.readouterr().err)
+
+
+def test_scheduled_execution_only_is_refused_by_name(tmp_path, capsys):
+    scenario = tmp_path / "clocks.toml"
+    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Clocks]\n'
+                        f'path = {json.dumps(str(fmu(3, "Clocks")))}\n')
+    assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
+    assert "neither Co-Simulation nor Model Exchange (Scheduled Execution only" in capsys.readouterr().err
