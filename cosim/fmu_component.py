@@ -90,14 +90,33 @@ _TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit fl
 
 # ---- the FMU's own log ---------------------------------------------------------------------------
 # Every instance logs to the logger "cosim.fmu.<instance>"; its effective level chooses what is kept and
-# shown (FmuComponent._log) and, at debug, asks the FMU for every category (FmuComponent._apply_log_level). A library logs nowhere by itself: the NullHandler keeps
-# Python's last-resort handler from printing FMU warnings a run did not ask to see (fmu_log does).
+# shown (FmuComponent._log) and, at debug, asks the FMU for every category (FmuComponent._apply_log_level).
+# A library logs nowhere by itself: the NullHandler keeps Python's last-resort handler from printing FMU
+# warnings a run did not ask to see (fmu_log does).
 FMU_LOGGER = "cosim.fmu"
 logging.getLogger(FMU_LOGGER).addHandler(logging.NullHandler())
 LOG_LEVELS = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO, "debug": logging.DEBUG}
 # FMI status (fmi2Status, fmi3Status: OK, Warning, Discard, Error, Fatal, and FMI 2.0's Pending) -> label, level
 _STATUS_LABEL = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
 _STATUS_LEVEL = (logging.INFO, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
+
+
+class _Stderr(logging.StreamHandler):
+    """A handler writing to the ``sys.stderr`` of the moment (a test or an
+    application may replace it after the handler is made)."""
+
+    def __init__(self):
+        super().__init__()
+
+    @property
+    def stream(self):
+        import sys
+
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):  # StreamHandler.__init__ sets it; the property always answers sys.stderr
+        pass
 
 
 class _InstanceFormatter(logging.Formatter):
@@ -116,15 +135,16 @@ def fmu_log(level: str, instance: str | None = None, stream=None) -> None:
     ``cosim.fmu.<instance>``): an application that configures logging
     itself sets the same level on the same logger.
     """
-    import sys
-
     if level not in LOG_LEVELS:
         raise ScenarioError(f"FMU log level {level!r}: expected one of {', '.join(LOG_LEVELS)}")
     logging.getLogger(FMU_LOGGER if instance is None else f"{FMU_LOGGER}.{instance}").setLevel(LOG_LEVELS[level])
     root = logging.getLogger(FMU_LOGGER)
-    if not any(isinstance(h.formatter, _InstanceFormatter) for h in root.handlers):
-        handler = logging.StreamHandler(stream or sys.stderr)
+    shown = [h for h in root.handlers if isinstance(h.formatter, _InstanceFormatter)]
+    if stream is not None or not shown:
+        handler = logging.StreamHandler(stream) if stream is not None else _Stderr()
         handler.setFormatter(_InstanceFormatter())
+        for old in shown:  # one place the messages are shown
+            root.removeHandler(old)
         root.addHandler(handler)
 
 _FMI2_LOGGER = None

@@ -85,6 +85,9 @@ def broken(talker) -> Path:
     return target
 
 
+_SCENARIO = 'connections = []\n\n[simulation]\nduration = 0.2\nstep = 0.1\n\n[fmus.{name}]\npath = "{path}"\n'
+
+
 def _no_temporary_folder(text: str) -> None:
     """No ``fmu-`` + random letters (tempfile.mkdtemp's 8) under the temporary folder, as a path or a URI."""
     assert not re.search(re.escape(tempfile.gettempdir()) + r"/fmu-\w{8}", text), text
@@ -106,7 +109,7 @@ def test_the_cli_refuses_it_in_one_line_quoting_the_fmus_reason(broken, tmp_path
     from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 
     scenario = tmp_path / "broken.toml"
-    scenario.write_text(f'connections = []\n\n[simulation]\nduration = 0.2\nstep = 0.1\n\n[fmus.B]\npath = "{broken}"\n')
+    scenario.write_text(_SCENARIO.format(name="B", path=broken))
     code = main(["run", str(scenario), "--out", str(tmp_path / "out"), "--quiet", "--no-plots"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == EXIT_BAD_INPUT and len(err) == 1, err
@@ -184,7 +187,7 @@ def test_the_cli_takes_the_level_per_run(talker, tmp_path, capsys):
     from quadrotor_paper.cli import main
 
     scenario = tmp_path / "talker.toml"
-    scenario.write_text(f'connections = []\n\n[simulation]\nduration = 0.2\nstep = 0.1\n\n[fmus.T]\npath = "{talker}"\n')
+    scenario.write_text(_SCENARIO.format(name="T", path=talker))
     root = logging.getLogger("cosim.fmu")
     handlers, level = list(root.handlers), root.level
     try:
