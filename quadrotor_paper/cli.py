@@ -489,10 +489,13 @@ def fmu_log_option(parser) -> None:
 
 
 def _apply_fmu_log(values: Sequence[str]) -> None:
-    from cosim.fmu_component import fmu_log
+    from cosim.errors import ScenarioError
+    from cosim.fmu_component import LOG_LEVELS, fmu_log
 
     for value in values:
         instance, _, level = value.rpartition("=")
+        if level.strip() not in LOG_LEVELS:
+            raise ScenarioError(f"--fmu-log {value}: expected [INSTANCE=]LEVEL, LEVEL one of {', '.join(LOG_LEVELS)}")
         fmu_log(level.strip(), instance.strip() or None)
 
 

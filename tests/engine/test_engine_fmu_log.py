@@ -183,8 +183,8 @@ def test_fmu_log_shows_an_instances_messages_on_a_stream_and_refuses_an_unknown_
 
 def test_the_cli_takes_the_level_per_run(talker, tmp_path, capsys):
     """``--fmu-log debug`` shows every FMU's messages on stderr; without it a
-    run prints none of them."""
-    from quadrotor_paper.cli import main
+    run prints none of them; a level that is none is one line, exit 2."""
+    from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 
     scenario = tmp_path / "talker.toml"
     scenario.write_text(_SCENARIO.format(name="T", path=talker))
@@ -196,6 +196,10 @@ def test_the_cli_takes_the_level_per_run(talker, tmp_path, capsys):
         assert main(["run", str(scenario), "--out", str(tmp_path / "b"), "--quiet", "--no-plots",
                      "--fmu-log", "debug"]) == 0
         assert "fnn-cosim: fmu T: info: chatter at t = 0.1" in capsys.readouterr().err
+        code = main(["run", str(scenario), "--out", str(tmp_path / "c"), "--quiet", "--fmu-log", "T=loud"])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == EXIT_BAD_INPUT and err == ["fnn-cosim: error: --fmu-log T=loud: expected [INSTANCE=]LEVEL, "
+                                                  "LEVEL one of error, warning, info, debug"], err
     finally:
         root.handlers[:] = handlers
         root.setLevel(level)
