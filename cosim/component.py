@@ -26,30 +26,154 @@ Two optional parts of the contract:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
-__all__ = ["Port", "PythonComponent", "ports"]
+if TYPE_CHECKING:
+    from .units import Unit
+
+__all__ = ["Port", "PythonComponent", "ports", "TYPES", "FLOAT_HELD", "element_ports", "element_of", "typed_value"]
+
+# The signal types (docs/cosim.md, "Signal types"): FMI 3.0's names (FMI 3.0
+# section 2.4.7.4); FMI 2.0's Real, Integer, Boolean, String and Enumeration
+# are read as Float64, Int32 (an fmi2Integer is a 32-bit int), Boolean,
+# String, Enumeration. A Clock is no signal.
+TYPES = ("Float64", "Float32", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64",
+         "Boolean", "String", "Binary", "Enumeration")
+# Held in the master's float64 signal array: every value of these types is a
+# double exactly (Float32 widens exactly; the integers have at most 32 bits;
+# an Enumeration's values are its declared items, refused beyond 2^53 when
+# read). Int64 and UInt64 (beyond 2^53 a double rounds), String and Binary are
+# held as Python objects (int, str, bytes) in the master's object array.
+FLOAT_HELD = frozenset(TYPES) - {"Int64", "UInt64", "String", "Binary"}
+_INT_RANGE = {"Int8": (-2 ** 7, 2 ** 7 - 1), "UInt8": (0, 2 ** 8 - 1), "Int16": (-2 ** 15, 2 ** 15 - 1),
+              "UInt16": (0, 2 ** 16 - 1), "Int32": (-2 ** 31, 2 ** 31 - 1), "UInt32": (0, 2 ** 32 - 1),
+              "Int64": (-2 ** 63, 2 ** 63 - 1), "UInt64": (0, 2 ** 64 - 1), "Enumeration": (-2 ** 53, 2 ** 53)}
 
 
 @dataclass(frozen=True)
 class Port:
-    """One scalar input or output of a component.
+    """One input or output of a component: a scalar, or an array of ``shape``.
 
-    ``type`` follows the FMI 3.0 names (``Float64``, ``Int32``, ``Boolean``);
-    FMI 2.0 ``Real`` is read as ``Float64``. ``unit`` is ``None`` when the
+    ``type`` is one of :data:`TYPES` (the FMI 3.0 names: ``Float64``,
+    ``Int32``, ``Boolean``, ...); FMI 2.0 ``Real`` is read as ``Float64``,
+    ``Integer`` as ``Int32``. ``shape`` is ``()`` for a scalar, else the
+    sizes of an FMI 3.0 array variable (row-major, FMI 3.0 section 2.4.6.2):
+    its elements are signals named ``name[i]`` (``name[i,j]``), 1-based as
+    FMI and Modelica count (:func:`element_ports`). ``unit`` is ``None`` when the
     component declares none (the unit check is then skipped). An input with
     a ``start`` value may be left unconnected: it then holds that value, as
     an FMU's input holds its start value; an input without one must be
-    connected.
+    connected. ``unit_definition`` is the meaning of ``unit`` the
+    component's own description gives (an FMU's ``UnitDefinitions``, read by
+    :mod:`cosim.units`), ``None`` when it gives none: the name is then read
+    by pint.
     """
 
     name: str
     unit: str | None = None
     type: str = "Float64"
     description: str = ""
-    start: float | None = None
+    start: float | tuple | None = None  # an array's: one value per element, row-major
+    shape: tuple[int, ...] = ()
+    unit_definition: "Unit | None" = None  # the unit's definition in the FMU's modelDescription
+
+    @property
+    def size(self) -> int:
+        """Number of scalar signals (1 for a scalar)."""
+        n = 1
+        for k in self.shape:
+            n *= k
+        return n
+
+
+def _index_names(shape: tuple[int, ...]) -> list[str]:
+    names = [""]
+    for k in shape:
+        names = [f"{head},{i}" if head else str(i) for head in names for i in range(1, k + 1)]
+    return names
+
+
+def element_ports(ports_: tuple[Port, ...]) -> tuple[Port, ...]:
+    """The scalar signals of ``ports_``: a scalar port itself, an array port's
+    elements in row-major order, named ``name[i]`` or ``name[i,j]`` (1-based)."""
+    out = []
+    for p in ports_:
+        if not p.shape:
+            out.append(p)
+            continue
+        starts = p.start if isinstance(p.start, (tuple, list)) else None
+        for k, index in enumerate(_index_names(p.shape)):
+            start = starts[k] if starts is not None and k < len(starts) else None
+            out.append(Port(f"{p.name}[{index}]", p.unit, p.type, p.description, start,
+                            unit_definition=p.unit_definition))
+    return tuple(out)
+
+
+def element_of(name: str) -> tuple[str, tuple[int, ...] | None]:
+    """``"y[2]"`` -> ``("y", (2,))``, ``"A[1,2]"`` -> ``("A", (1, 2))``; a name
+    without an index -> ``(name, None)``; a malformed index -> ``(name, None)``."""
+    if not name.endswith("]") or "[" not in name:
+        return name, None
+    base, _, index = name[:-1].rpartition("[")
+    try:
+        return base, tuple(int(i) for i in index.split(","))
+    except ValueError:
+        return name, None
+
+
+def typed_value(type_: str, value, what: str):
+    """``value`` as a value of the signal type ``type_`` (a float for the
+    Float types, an int for the integers and Enumeration, a bool, a str,
+    bytes), or ``ValueError`` naming ``what``: an integer out of its type's
+    range, a fraction where an integer is due, are refused, never rounded."""
+    if type_ in ("Float64", "Float32"):
+        try:
+            if isinstance(value, bytes):
+                raise ValueError
+            return float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{what} = {value!r}: expected a number ({type_})") from None
+    if type_ == "Boolean":
+        if isinstance(value, str):
+            text = value.strip().lower()
+            if text in ("true", "1"):
+                return True
+            if text in ("false", "0"):
+                return False
+            raise ValueError(f"{what} = {value!r}: expected true/false or 1/0 (Boolean)")
+        if value in (0, 1):  # 0, 1, 0.0, 1.0, False, True
+            return bool(value)
+        raise ValueError(f"{what} = {value!r}: expected true/false or 1/0 (Boolean)")
+    if type_ == "String":
+        if not isinstance(value, str):
+            raise ValueError(f"{what} = {value!r}: expected a string (String)")
+        return value
+    if type_ == "Binary":
+        if isinstance(value, str):
+            try:
+                return bytes.fromhex(value)
+            except ValueError:
+                raise ValueError(f"{what} = {value!r}: expected hexadecimal digits (Binary)") from None
+        if not isinstance(value, (bytes, bytearray)):
+            raise ValueError(f"{what} = {value!r}: expected bytes or hexadecimal digits (Binary)")
+        return bytes(value)
+    low, high = _INT_RANGE[type_]
+    if isinstance(value, str):
+        try:
+            number = int(value.strip())
+        except ValueError:
+            raise ValueError(f"{what} = {value!r}: expected a whole number ({type_})") from None
+    elif isinstance(value, (float, np.floating)):
+        if not float(value).is_integer():
+            raise ValueError(f"{what} = {value!r}: expected a whole number ({type_})")
+        number = int(value)
+    else:
+        number = int(value)
+    if not low <= number <= high:
+        raise ValueError(f"{what} = {value!r}: outside the range [{low}, {high}] of {type_}")
+    return number
 
 
 def ports(*spec: tuple[str, str | None] | str) -> tuple[Port, ...]:

@@ -10,7 +10,7 @@ import math
 from pathlib import Path
 
 __all__ = ["CosimError", "ConnectionCheckError", "ScenarioError", "DivergenceError", "FmuError", "FmuLoadError",
-           "FmuCallError", "one_line"]
+           "FmuCallError", "SimulationTerminated", "one_line"]
 
 
 def one_line(text: str) -> str:
@@ -83,3 +83,16 @@ class FmuCallError(FmuError):
                  value: float | None = None, log: str = ""):
         super().__init__(instance, path, reason)
         self.variable, self.value, self.log = variable, value, one_line(log)
+
+
+class SimulationTerminated(FmuError):
+    """An FMU asked to end the simulation: FMI 2.0 ``fmi2Terminated`` after a
+    ``doStep`` it discarded, FMI 3.0 ``terminateSimulation``, or a Model
+    Exchange FMU's event iteration or ``completedIntegratorStep``. Not a
+    failure: the run ends at ``time``, the last communication point every
+    FMU completed (its rows kept, status ok, the message in
+    ``RunResult.terminated``)."""
+
+    def __init__(self, instance: str, path: str | Path | None, time: float, reason: str):
+        self.time = time
+        super().__init__(instance, path, reason)

@@ -6,8 +6,9 @@ instantiation and status checking (every failed call raises fmpy's
 
 * the FMU is extracted once and instantiated once per :class:`FmuComponent`;
   :meth:`FmuComponent.start` resets it between runs (``fmiXReset``);
-* ports read from the modelDescription (name, causality, type, unit), so the
-  master can check connections before the first step;
+* ports read from the modelDescription (name, causality, type, unit and its
+  ``UnitDefinitions`` meaning, :mod:`cosim.units`), so the master can check
+  connections before the first step;
 * a per-step fast path: the value references of the connected inputs and of
   the wanted outputs are bound once (:meth:`bind`) into ctypes arrays, and each
   step is one ``set`` of all inputs, one ``doStep`` and one ``get`` of all
@@ -71,10 +72,11 @@ from lxml import etree
 from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 
-from .component import Port
-from .errors import FmuCallError, FmuLoadError, ScenarioError
+from .component import TYPES, Port, element_of, typed_value
+from .errors import FmuCallError, FmuLoadError, ScenarioError, SimulationTerminated
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
+from .units import Unit, definitions as unit_definitions
 
 __all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "fmu_log", "LOG_LEVELS", "PERIOD_ANNOTATION"]
 
@@ -86,7 +88,9 @@ __all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "fmu_lo
 # here: the engine reads a declaration, it imports no exporter.
 PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
 
-_TYPE = {"Real": "Float64", "Float64": "Float64"}  # FMI 2.0 Real is a 64-bit float
+# FMI 2.0's types by their FMI 3.0 names: Real is a 64-bit float, Integer a
+# 32-bit int (fmi2Integer); the FMI 3.0 names are themselves (cosim.component.TYPES)
+_TYPE = {"Real": "Float64", "Integer": "Int32", **{t: t for t in TYPES}}
 
 # ---- the FMU's own log ---------------------------------------------------------------------------
 # Every instance logs to the logger "cosim.fmu.<instance>"; its effective level chooses what is kept and
@@ -248,9 +252,26 @@ def _typed_setter(instance, variable, version: int):
     raise ValueError(f"a start value of type {kind} cannot be set")
 
 
-def _port(variable) -> Port:
-    return Port(variable.name, variable.unit or None, _TYPE.get(variable.type, variable.type),
-                variable.description or "")
+def _shape(variable) -> tuple[int, ...]:
+    """An FMI 3.0 array variable's sizes (``<Dimension start=..>`` or the
+    start value of the structural parameter its ``valueReference`` names,
+    FMI 3.0 section 2.4.7.8: the shape the FMU has when it is not configured
+    otherwise); ``()`` for a scalar."""
+    shape = []
+    for d in getattr(variable, "dimensions", None) or ():
+        size = d.start if d.start is not None else getattr(d.variable, "start", None)
+        shape.append(int(size) if size is not None else 0)
+    return tuple(shape)
+
+
+def _port(variable, units: Mapping[str, "Unit"] | None = None) -> Port:
+    """A variable as a port; its unit is its own ``unit`` or, failing that,
+    its ``declaredType``'s (FMI 2.0 section 2.2.3, FMI 3.0 section 2.4.4),
+    with the modelDescription's definition of it (``units``, by name)."""
+    declared = getattr(variable, "declaredType", None)
+    unit = getattr(variable, "unit", None) or getattr(declared, "unit", None) or None
+    return Port(variable.name, unit, _TYPE.get(variable.type, variable.type), variable.description or "",
+                shape=_shape(variable), unit_definition=(units or {}).get(unit) if unit else None)
 
 
 def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
@@ -262,15 +283,16 @@ def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
     ``other`` (the rest: derivatives, independent, calculated parameters).
     """
     derivatives = {d.variable.name for d in model_description.derivatives}
+    units = unit_definitions(model_description)
     groups: dict[str, list[Port]] = {"input": [], "output": [], "parameter": [], "local": [], "other": []}
     for v in model_description.modelVariables:
         if v.type == "Clock":  # a clock is no signal: the component activates it (FmuComponent.clock)
-            groups["other"].append(_port(v))
+            key = "other"
         elif v.causality == "local":
             key = "local" if v.name not in derivatives and _TYPE.get(v.type) == "Float64" else "other"
         else:
             key = v.causality if v.causality in groups else "other"
-        groups[key].append(_port(v))
+        groups[key].append(_port(v, units))
     return {k: tuple(v) for k, v in groups.items()}
 
 
@@ -299,8 +321,9 @@ class _Api:
         if version == 2:
             self._step_tail = (ctypes.c_int(1),)  # noSetFMUStatePriorToCurrentPoint
         else:
-            self._step_tail = (ctypes.c_bool(True), *(ctypes.byref(ctypes.c_bool()) for _ in range(3)),
-                               ctypes.byref(ctypes.c_double()))
+            self.terminate = ctypes.c_bool()  # fmi3DoStep's terminateSimulation, read after each step
+            self._step_tail = (ctypes.c_bool(True), ctypes.byref(ctypes.c_bool()), ctypes.byref(self.terminate),
+                               ctypes.byref(ctypes.c_bool()), ctypes.byref(ctypes.c_double()))
 
     def _check(self, status: int, which: Call) -> None:
         if status > 1:  # fmiWarning is fine; discard, error, fatal are not
@@ -417,15 +440,30 @@ class FmuComponent:
         self._t = 0.0
         self.bind((), ())
 
-    def python_loop_reason(self) -> str | None:
+    def python_loop_reason(self, signals: Sequence[str] = ()) -> str | None:
         """Why the master's compiled loop, which makes set, get and doStep
-        calls of Float64 values only, cannot drive this FMU (the plan then
+        calls of Float64 scalars only, cannot drive this FMU (the plan then
         takes the Python loop: :attr:`cosim.plan.Plan.python_loop`); ``None``
-        if it can."""
+        if it can. ``signals``: the inputs set and outputs read in the run
+        (elements ``y[i]`` of arrays): one of another type than Float64, or
+        an array's, is a reason."""
         if self.clock is not None:
             return "a clocked FMU: its ticks are Event Mode calls"
         if self.model_exchange:
             return f"Model Exchange: integrated by the master's solver ({self.solver.method})"
+        types, arrays = {}, []
+        for name in signals:
+            var = self.variables[element_of(name)[0]]
+            port_type = _TYPE.get(var.type, var.type)
+            if port_type != "Float64":
+                types.setdefault(port_type, name)
+            elif var.dimensions and var.name not in arrays:
+                arrays.append(var.name)
+        if types:
+            told = ", ".join(f"{t} ({n})" for t, n in types.items())
+            return f"signals of type {told}: the compiled loop carries Float64 scalars only"
+        if arrays:
+            return f"array variable(s) {', '.join(arrays)}: the compiled loop carries Float64 scalars only"
         return None
 
     def _feedthrough(self, md) -> dict[str, frozenset[str]]:
@@ -777,7 +815,9 @@ class FmuComponent:
     # ---- fast path -----------------------------------------------------------
 
     def bind(self, input_names: Sequence[str], output_names: Sequence[str],
-             y: np.ndarray | None = None) -> None:
+             y: np.ndarray | None = None, objects: np.ndarray | None = None,
+             object_inputs: tuple[Sequence[str], np.ndarray] = ((), ()),
+             object_reads: tuple[Sequence[str], slice] = ((), slice(0, 0))) -> None:
         """Fix the inputs set and the outputs read every step, in this order.
 
         Afterwards :attr:`u` (inputs) and :attr:`y` (outputs) are float64
@@ -785,7 +825,33 @@ class FmuComponent:
         :meth:`do_step` and :meth:`read_outputs` move them through the FMU.
         ``y`` may be given: a contiguous float64 array (e.g. a slice of the
         master's signal array) the outputs are then read straight into.
+
+        Signals of other types (docs/cosim.md, "Signal types"): names may be
+        elements of FMI 3.0 arrays (``y[2]``); inputs and outputs of the
+        types a double holds exactly pass through :attr:`u` and :attr:`y`
+        too; those of Int64, UInt64, String and Binary are taken from and
+        read into the master's object slots ``objects``
+        (``object_inputs``: names and their source slots; ``object_reads``:
+        names and the slice they are read into). Any of these makes the
+        calls typed (:meth:`_get_typed`, :meth:`_set_typed`: one get or set
+        per type, an array in one call with ``nValues``); Float64 scalars
+        alone keep the one-call fast path.
         """
+        names = list(input_names) + list(output_names) + list(object_inputs[0]) + list(object_reads[0])
+        self._objects = objects
+        self._object_inputs = (tuple(object_inputs[0]), np.asarray(object_inputs[1], dtype=np.intp))
+        self._object_reads = (tuple(object_reads[0]),
+                              objects[object_reads[1]] if objects is not None and object_reads[0] else None)
+        self._typed = any(n not in self.variables or self.variables[n].dimensions
+                          or _TYPE.get(self.variables[n].type) != "Float64" for n in names)
+        if self._typed:
+            for n in names:
+                self._element(n)  # a name that is none is refused now
+            self.input_names, self.output_names = tuple(input_names), tuple(output_names)
+            self._n_in, self._n_out = len(input_names), len(output_names)
+            self.u = np.zeros(max(self._n_in, 1))
+            self.y = y if y is not None else np.zeros(max(self._n_out, 1))
+            return
         def vrs(names):
             missing = [n for n in names if n not in self.variables]
             if missing:
@@ -809,6 +875,109 @@ class FmuComponent:
         self._discrete_in = np.array([self.variables[n].variability != "continuous" for n in self.input_names], bool)
         self._u_set = None
         self._y_ptr = self.y.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+    # ---- typed values (docs/cosim.md, "Signal types") ---------------------------------------------
+
+    def _element(self, name: str) -> tuple[object, int]:
+        """``(variable, k)``: the variable a signal name is (``k`` = -1) or
+        the element ``k`` (0-based, row-major) of an array it names."""
+        var = self.variables.get(name)
+        if var is not None:
+            return var, -1
+        base, index = element_of(name)
+        var = self.variables.get(base)
+        shape = _shape(var) if var is not None else ()
+        if var is None or index is None or len(index) != len(shape) or \
+                not all(1 <= i <= k for i, k in zip(index, shape)):
+            raise KeyError(f"{self.name} has no variable(s) {[name]}")
+        k = 0
+        for i, size in zip(index, shape):
+            k = k * size + (i - 1)
+        return var, k
+
+    def _calls(self, port_type: str):
+        """``(get, set)`` of the instance for values of ``port_type``: FMI 2.0
+        getReal/Integer/Boolean/String (an Enumeration is an Integer), FMI
+        3.0 getFloat32 .. getBinary (an Enumeration is an Int64, section
+        2.2.6.1), each taking ``nValues`` for arrays."""
+        s = self._slave
+        if self.fmi_version == 2:
+            name = {"Float64": "Real", "Int32": "Integer", "Enumeration": "Integer"}.get(port_type, port_type)
+            get, set_ = getattr(s, "get" + name), getattr(s, "set" + name)
+            return (lambda vrs, n: get(vrs)), set_
+        name = "Int64" if port_type == "Enumeration" else port_type
+        return getattr(s, "get" + name), getattr(s, "set" + name)
+
+    def _array_start(self, var) -> list:
+        """The start values of an array variable (its modelDescription's, one
+        per element, row-major), the values of elements no connection sets."""
+        port_type = _TYPE.get(var.type, var.type)
+        tokens = str(var.start).split() if var.start is not None else []
+        size = int(np.prod(_shape(var))) if _shape(var) else 1
+        zero = {"String": "", "Binary": b"", "Boolean": False}.get(port_type, 0)
+        values = [typed_value(port_type, t, f"{self.name}.{var.name} start") for t in tokens[:size]]
+        return values + [zero] * (size - len(values))
+
+    def _get_typed(self, names: Sequence[str]) -> list:
+        """The values of ``names`` (variables or array elements) as Python
+        values (:func:`cosim.component.typed_value`), one get call per type."""
+        wanted = [self._element(n) for n in names]
+        by_type: dict[str, list] = {}
+        for var, _ in wanted:
+            group = by_type.setdefault(_TYPE.get(var.type, var.type), [])
+            if var not in group:
+                group.append(var)
+        got: dict[int, list] = {}
+        for port_type, variables in by_type.items():
+            sizes = [int(np.prod(_shape(v))) if v.dimensions else 1 for v in variables]
+            values = self._calls(port_type)[0]([v.valueReference for v in variables], sum(sizes))
+            offset = 0
+            for v, size in zip(variables, sizes):
+                got[id(v)] = values[offset:offset + size]
+                offset += size
+        out = []
+        for (var, k), name in zip(wanted, names):
+            value = got[id(var)][max(k, 0)]
+            port_type = _TYPE.get(var.type, var.type)
+            if isinstance(value, bytes) and port_type == "String":  # fmpy's FMI 2.0 getString
+                value = value.decode("utf-8", "replace")
+            elif port_type == "Binary" and value is None:
+                value = b""
+            elif port_type == "Enumeration" and abs(int(value)) > 2 ** 53:
+                raise FmuCallError(self.name, self.path, f"Enumeration {name} = {int(value)}: beyond 2^53, no "
+                                   f"double holds it exactly (the master holds an Enumeration as a double)")
+            out.append(value)
+        return out
+
+    def _set_typed(self, values: Mapping[str, object]) -> None:
+        """Set ``values`` (by variable or array element name) with one set
+        call per type, an array whole: its elements not given keep their
+        start values. A value the type cannot hold is refused in one line
+        (:func:`cosim.component.typed_value`), never rounded."""
+        arrays: dict[int, list] = {}
+        by_type: dict[str, list] = {}
+        for name, value in values.items():
+            var, k = self._element(name)
+            port_type = _TYPE.get(var.type, var.type)
+            try:
+                value = typed_value(port_type, value, f"{self.name}.{name}")
+            except ValueError as exc:
+                raise FmuCallError(self.name, self.path, str(exc), name, value) from None
+            group = by_type.setdefault(port_type, [])
+            if var not in group:
+                group.append(var)
+            if var.dimensions:
+                if id(var) not in arrays:
+                    arrays[id(var)] = self._array_start(var)
+                if k < 0:
+                    raise FmuCallError(self.name, self.path, f"{name}: an array variable is set by its elements",
+                                       name, value)
+                arrays[id(var)][k] = value
+            else:
+                arrays[id(var)] = [value]
+        for port_type, variables in by_type.items():
+            flat = [x for v in variables for x in arrays[id(v)]]
+            self._calls(port_type)[1]([v.valueReference for v in variables], flat)
 
     def kernel_entry(self, direct: bool, in_idx: np.ndarray) -> KernelFmu:
         """This FMU as the compiled loop sees it (:mod:`cosim.kernel`):
@@ -836,6 +1005,8 @@ class FmuComponent:
     def kernel_failure(self, call: Call, status: int, t: float, h: float) -> FmuCallError:
         """The error the Python path raises for the same failed call."""
         call = Call(call)
+        if call == Call.STEP and self._asked_to_terminate(status):
+            return self._terminated(t, h)
         return self._call_failure(call, FMICallException(function=self._api._names[call], status=status), t, h)
 
     def _activate_clock(self, t: float) -> None:
@@ -850,9 +1021,19 @@ class FmuComponent:
     def write_inputs(self, t: float) -> None:
         """Set all bound inputs from :attr:`u` in one call (a clocked FMU's
         clock activated first: the inputs are its tick's; a Model Exchange
-        instance: only when they changed, in Event Mode if a discrete one did)."""
+        instance: only when they changed, in Event Mode if a discrete one
+        did); typed inputs (:meth:`bind`) one call per type."""
         if self._tick_pending:
             self._activate_clock(t)
+        if self._typed:
+            names, sources = self._object_inputs
+            values = dict(zip(self.input_names, self.u.tolist()))
+            if names:
+                values.update(zip(names, self._objects[sources]))
+            if values and (self._integrator is None or values != self._u_set):  # Model Exchange: when they change
+                self._set_values(values, t)
+                self._u_set = values
+            return
         if self._n_in and self._integrator is not None:
             return self._write_inputs_me(t)
         if self._n_in:
@@ -891,6 +1072,9 @@ class FmuComponent:
         try:
             work()
         except IntegrationError as exc:
+            if exc.terminate:
+                raise SimulationTerminated(self.name, self.path, t, f"asked to terminate the simulation at t = "
+                                           f"{exc.time!r} s; the run ends at t = {t!r} s") from None
             raise self._fail(f"Model Exchange integration ({self.solver.method})", exc, exc.time) from None
         except FMICallException as exc:
             raise self._fail(f"Model Exchange integration ({self.solver.method}) from t = {t!r} s", exc, t) from None
@@ -933,26 +1117,46 @@ class FmuComponent:
             self._u_set = None
 
     def set_inputs(self, values: Mapping[str, float], t: float) -> None:
-        """Set some inputs by name (the slow path, outside the step loop)."""
+        """Set some inputs by name (the slow path, outside the step loop);
+        elements of arrays (``u[2]``) and values of any type (docs/cosim.md,
+        "Signal types") by their typed calls."""
         if not values:
             return
         if self._tick_pending:
             self._activate_clock(t)
+        if any(n not in self.variables or self.variables[n].dimensions
+               or _TYPE.get(self.variables[n].type) != "Float64" for n in values):
+            return self._set_values(values, t)
         vrs = [self.variables[name].valueReference for name in values]
         set_values = lambda: self.real_calls()[1](vrs, [float(v) for v in values.values()])  # noqa: E731
         try:
-            if self._integrator is not None:  # Model Exchange after initialization: as _write_inputs_me
-                if any(self.variables[name].variability != "continuous" for name in values):
-                    self._integrate(lambda: self._integrator.handle_event(t, set_values), t)
-                else:
-                    set_values()
-                    self._integrator.restart()
-                self._u_set = None
-                return
-            set_values()
+            self._set_in_mode(set_values, values, t)
         except FMICallException as exc:
             shown = ", ".join(f"{n} = {float(v)!r}" for n, v in values.items())
             raise self._fail(f"setting inputs ({shown})", exc, t) from None
+
+    def _set_values(self, values: Mapping[str, object], t: float) -> None:
+        """:meth:`_set_typed`, a refusal of the FMU told with the values set."""
+        try:
+            self._set_in_mode(lambda: self._set_typed(values), values, t)
+        except FMICallException as exc:
+            shown = ", ".join(f"{n} = {v!r}" for n, v in values.items())
+            raise self._fail(f"setting inputs ({shown})", exc, t) from None
+
+    def _set_in_mode(self, setter, names, t: float) -> None:
+        """``setter()`` (setting the inputs ``names``) in the mode the standard
+        asks: a Model Exchange instance out of initialization sets a discrete
+        input in Event Mode, followed by the event iteration (an input
+        event), and a continuous one in Continuous-Time Mode, restarting
+        its solver (FMI 2.0 §3.2.3, FMI 3.0 §3.2.1); any other instance at once."""
+        if self._integrator is None:
+            return setter()
+        if any(self.variables[element_of(n)[0]].variability != "continuous" for n in names):
+            self._integrate(lambda: self._integrator.handle_event(t, setter), t)
+        else:
+            setter()
+            self._integrator.restart()
+        self._u_set = None
 
     def real_calls(self):
         """``(get, set)``: the instance's calls for Real (FMI 2.0) or Float64
@@ -1115,7 +1319,30 @@ class FmuComponent:
         try:
             self._api.do_step(t, h)
         except FMICallException as exc:
+            if self._asked_to_terminate(exc.status):
+                raise self._terminated(t, h) from None
             raise self._call_failure(Call.STEP, exc, t, h) from None
+        if self.fmi_version == 3 and self._api.terminate.value:
+            raise self._terminated(t, h)
+
+    def _asked_to_terminate(self, status: int) -> bool:
+        """A discarded FMI 2.0 doStep with ``fmi2Terminated`` set: the FMU
+        asks to end the simulation (FMI 2.0 §4.2.3)."""
+        if self.fmi_version != 2 or status != 2 or self.interface != "CoSimulation":
+            return False
+        from fmpy.fmi2 import fmi2Terminated
+
+        try:
+            return bool(self._slave.getBooleanStatus(fmi2Terminated))
+        except FMICallException:  # an FMU that cannot tell did not ask
+            return False
+
+    def _terminated(self, t: float, h: float) -> SimulationTerminated:
+        """The run's end at ``t`` that this FMU asked for in the step to ``t + h``."""
+        log = "; ".join(self.messages)
+        return SimulationTerminated(self.name, self.path, t, f"asked to terminate the simulation in the step from "
+                                    f"t = {t!r} s to {t + h!r} s; the run ends at t = {t!r} s"
+                                    + (f" (FMU log: {log})" if log else ""))
 
     def _clocked_step(self, t: float, h: float) -> None:
         """Event Mode at the tick t: compute it; to t + h (Co-Simulation: doStep;
@@ -1133,7 +1360,9 @@ class FmuComponent:
                 event = next_defined and abs(next_tick - (t + h)) <= 1e-9 * h
             else:
                 s.enterStepMode()
-                event, _, _, _ = s.doStep(t, h)
+                event, terminate, _, _ = s.doStep(t, h)
+                if terminate:
+                    raise self._terminated(t, h)
             s.enterEventMode()
         except FMICallException as exc:
             raise self._call_failure(Call.STEP, exc, t, h) from None
@@ -1143,7 +1372,21 @@ class FmuComponent:
         self._tick_pending = True
 
     def read_outputs(self, t: float) -> None:
-        """Get all bound outputs into :attr:`y` in one call."""
+        """Get all bound outputs into :attr:`y` in one call; typed outputs
+        (:meth:`bind`) one call per type, those held as objects into the
+        master's object slots."""
+        if self._typed:
+            names, target = self._object_reads
+            try:
+                values = self._get_typed(self.output_names + names)
+            except FMICallException as exc:
+                raise self._call_failure(Call.GET, exc, t) from None
+            n = self._n_out
+            if n:
+                self.y[:n] = [float(v) for v in values[:n]]  # held exactly (cosim.component.FLOAT_HELD)
+            if names:
+                target[:] = [int(v) if isinstance(v, int) else v for v in values[n:]]
+            return
         if self._n_out:
             try:
                 self._api.get(self._out_vr, self._c_out, self._y_ptr)

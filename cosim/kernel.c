@@ -26,6 +26,10 @@ typedef int (*step3_t)(void *, double, double, _Bool, _Bool *, _Bool *, _Bool *,
 
 static int set_inputs(KernelFmu *f, const double *signals) {
     for (int64_t i = 0; i < f->n_in; i++) f->u[i] = signals[f->in_idx[i]];
+    for (int64_t j = 0; j < f->n_conv; j++) {  /* unit conversions: only the inputs that have one */
+        const int64_t i = f->conv_idx[j];
+        f->u[i] = f->conv_factor[j] * f->u[i] + f->conv_offset[j];
+    }
     size_t n = (size_t)f->n_in;
     return f->version == 2 ? ((set2_t)f->set)(f->component, f->in_vr, n, f->u)
                            : ((set3_t)f->set)(f->component, f->in_vr, n, f->u, n);
@@ -37,11 +41,13 @@ static int get_outputs(KernelFmu *f) {
                            : ((get3_t)f->get)(f->component, f->out_vr, n, f->y, n);
 }
 
-static int do_step(KernelFmu *f, double t, double h) {
+/* FMI 2.0 says it wants to stop by discarding the step (the Python side asks
+ * fmi2GetBooleanStatus); FMI 3.0 by its terminateSimulation flag. */
+static int do_step(KernelFmu *f, double t, double h, _Bool *terminate) {
     if (f->version == 2) return ((step2_t)f->step)(f->component, t, h, 1);
-    _Bool event = 0, terminate = 0, early = 0;
+    _Bool event = 0, early = 0;
     double last = t;
-    return ((step3_t)f->step)(f->component, t, h, 1, &event, &terminate, &early, &last);
+    return ((step3_t)f->step)(f->component, t, h, 1, &event, terminate, &early, &last);
 }
 
 #define FAIL(which, code, was_recorded)                                       \
@@ -65,6 +71,9 @@ int cosim_kernel_run(KernelRun *run, int64_t first, int64_t last, KernelStop *st
             if (f->n_in && (status = set_inputs(f, signals)) > 1) FAIL(run->order[k], CALL_SET, 0);
             if (f->n_out && (status = get_outputs(f)) > 1) FAIL(run->order[k], CALL_GET, 0);
         }
+        for (int64_t j = 0; j < run->n_derived; j++)  /* converted inputs recorded or bounded */
+            signals[run->derived_slot[j]] = run->derived_factor[j] * signals[run->derived_source[j]]
+                                            + run->derived_offset[j];
         double *row = run->data + n * run->n_columns;
         for (int64_t j = 0; j < run->n_columns; j++) row[j] = signals[run->record_idx[j]];
         for (int64_t j = 0; j < run->n_guard; j++) {
@@ -80,8 +89,14 @@ int cosim_kernel_run(KernelRun *run, int64_t first, int64_t last, KernelStop *st
             KernelFmu *f = &fmus[i];
             if (f->n_in && !f->direct && (status = set_inputs(f, signals)) > 1) FAIL(i, CALL_SET, 1);
         }
-        for (int64_t i = 0; i < run->n_fmus; i++)
-            if ((status = do_step(&fmus[i], t, h)) > 1) FAIL(i, CALL_STEP, 1);
+        for (int64_t i = 0; i < run->n_fmus; i++) {
+            _Bool terminate = 0;
+            if ((status = do_step(&fmus[i], t, h, &terminate)) > 1) FAIL(i, CALL_STEP, 1);
+            if (terminate) {  /* the run ends at t_n, as in the Python loop */
+                stop->n = n; stop->fmu = i; stop->recorded = 1;
+                return KERNEL_TERMINATE;
+            }
+        }
         for (int64_t i = 0; i < run->n_fmus; i++)
             if (fmus[i].n_out && (status = get_outputs(&fmus[i])) > 1) FAIL(i, CALL_GET, 1);
     }

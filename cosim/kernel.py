@@ -45,6 +45,7 @@ class Stop(enum.IntEnum):
     OK = 0  # the block of points ran
     GUARD = 1  # a guarded signal left its envelope (or is not finite)
     FMU = 2  # an FMI call failed (KernelStop says which FMU, which call, which status)
+    TERMINATE = 3  # an FMI 3.0 FMU's doStep asked to terminate the simulation (KernelStop says which, when)
 
 
 class Call(enum.IntEnum):
@@ -77,6 +78,10 @@ _FMU_FIELDS = (
     ("n_out", _i64, "how many"),
     ("y", _f64p, "their slots in the signal array (contiguous)"),
     ("direct", _i64, "evaluated at t_n (feedthrough ordering), else its inputs are set at the exchange"),
+    ("n_conv", _i64, "inputs with a unit conversion (FmuBlock.converted)"),
+    ("conv_idx", _i64p, "their indices among the bound inputs"),
+    ("conv_factor", _f64p, "u = factor * source + offset"),
+    ("conv_offset", _f64p, ""),
 )
 
 
@@ -102,6 +107,11 @@ _RUN_FIELDS = (
     ("guard_idx", _i64p, "their slots"),
     ("low", _f64p, "their inclusive bounds (finite)"),
     ("high", _f64p, ""),
+    ("n_derived", _i64, "converted inputs recorded or bounded (Plan.derived)"),
+    ("derived_slot", _i64p, "their own slots"),
+    ("derived_source", _i64p, "the slots of their sources"),
+    ("derived_factor", _f64p, "slot = factor * source + offset, before each row is recorded"),
+    ("derived_offset", _f64p, ""),
 )
 
 
@@ -191,8 +201,10 @@ def load():
             os.close(fd)
             with tempfile.TemporaryDirectory() as include:
                 Path(include, _HEADER).write_bytes(abi)
-                result = subprocess.run([cc, "-O2", "-std=c99", "-Wall", "-Werror", "-shared", "-fPIC",
-                                         f"-I{include}", "-o", tmp, str(_SOURCE)], capture_output=True, text=True)
+                # -ffp-contract=off: u = factor * v + offset rounds twice, as numpy does in the Python loop
+                result = subprocess.run([cc, "-O2", "-std=c99", "-ffp-contract=off", "-Wall", "-Werror", "-shared",
+                                         "-fPIC", f"-I{include}", "-o", tmp, str(_SOURCE)],
+                                        capture_output=True, text=True)
             if result.returncode != 0:  # our own source that does not compile: a bug, never a silent fallback
                 os.unlink(tmp)
                 raise RuntimeError(f"compiling {_SOURCE} with {cc} failed: {result.stderr.strip()}")
@@ -221,8 +233,21 @@ def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, 
     def p(array, kind):
         return array.ctypes.data_as(kind)
 
+    kept = []  # the conversions' arrays, alive as long as the run
+    for entry, b in zip(entries, plan.fmus):
+        if b.converted:
+            index, factor, offset = (_array(column, kind) for column, kind in
+                                     zip(zip(*b.converted), (np.int64, np.float64, np.float64)))
+            entry.n_conv, entry.conv_idx = len(index), p(index, _i64p)
+            entry.conv_factor, entry.conv_offset = p(factor, _f64p), p(offset, _f64p)
+            kept += [index, factor, offset]
+    slot, source, factor, offset = (_array(column, kind) for column, kind in
+                                    zip(zip(*plan.derived) if plan.derived else ((),) * 4,
+                                        (np.int64, np.int64, np.float64, np.float64)))
+    kept += [slot, source, factor, offset]
     run = KernelRun(entries, len(fmus), p(order, _i64p), len(order), p(signals, _f64p), float(t0), float(h),
                     int(n_steps), p(data, _f64p), len(record), p(record, _i64p), len(guard), p(guard, _i64p),
-                    p(low, _f64p), p(high, _f64p))
-    run.arrays = (entries, order, record, guard, low, high, signals, data)  # alive as long as the run
+                    p(low, _f64p), p(high, _f64p), len(slot), p(slot, _i64p), p(source, _i64p),
+                    p(factor, _f64p), p(offset, _f64p))
+    run.arrays = (entries, order, record, guard, low, high, signals, data, kept)  # alive as long as the run
     return run

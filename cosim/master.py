@@ -43,9 +43,9 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .component import PythonComponent
+from .component import PythonComponent, typed_value
 from .connection import Connection, check_connections, parse_connections
-from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError
+from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError, SimulationTerminated
 from .limits import SEED_LIMIT
 from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
@@ -77,7 +77,8 @@ class Snapshot:
     serializeFMUState); ``parameters``: FMU name -> the values it was
     started with (base, scenario, seed, run); ``outputs``: ``component.name``
     -> value at ``t_n`` of every signal the master holds (the outputs in
-    use, published internals); ``inputs``: the same for every connected
+    use, published internals; an Int64, UInt64, String or Binary signal as
+    its Python value); ``inputs``: the same for every connected
     input. Python components are not part of a snapshot: a run resumed from
     it (``Master.run(..., t0=time, restore=snapshot.states)``) starts them
     afresh."""
@@ -86,8 +87,8 @@ class Snapshot:
     step: int
     states: dict[str, bytes]
     parameters: dict[str, dict[str, Any]]
-    outputs: dict[str, float]
-    inputs: dict[str, float]
+    outputs: dict[str, Any]
+    inputs: dict[str, Any]
 
     def inputs_of(self, component: str) -> dict[str, float]:
         """The values at ``t_n`` of ``component``'s inputs in :attr:`inputs`, by variable name."""
@@ -116,12 +117,27 @@ class RunResult:
     seed: int = 0
     parameters: dict[str, Any] = field(default_factory=dict)
     snapshots: list[Snapshot] = field(default_factory=list)
+    types: tuple[str, ...] = ()
+    objects: dict[str, np.ndarray] = field(default_factory=dict)
+    python_loop: tuple[str, ...] = ()
+    terminated: str | None = None
+    """``terminated``: an FMU asked to end the simulation
+    (:class:`~cosim.errors.SimulationTerminated`): the run ended early, at
+    its last row, status ok; the message says which FMU and when. ``types``: each column's signal type (docs/cosim.md, "Signal types");
+    ``objects``: the columns of Int64, UInt64, String and Binary signals, as
+    object arrays of ``int``, ``str`` and ``bytes`` (their ``data`` column is
+    NaN); ``python_loop``: why the plan cannot run in the compiled loop
+    (:attr:`cosim.plan.Plan.python_loop`, empty when it can)."""
 
     @property
     def time(self) -> np.ndarray:
         return self.data[:, 0]
 
     def __getitem__(self, name: str) -> np.ndarray:
+        """A recorded column: float64 values, or the objects of an Int64,
+        UInt64, String or Binary column (:attr:`objects`)."""
+        if name in self.objects:
+            return self.objects[name]
         try:
             return self.data[:, self.columns.index(name)]
         except ValueError:
@@ -181,8 +197,13 @@ class Master:
         self.signals = np.zeros(len(plan.slots))
         for slot, value in plan.start_values:
             self.signals[slot] = value
+        self.values = np.full(len(plan.object_slots), None, dtype=object)  # Int64, UInt64, String, Binary
+        for slot, value in plan.object_start_values:
+            self.values[slot] = value
         for fmu, b in zip(self.fmus, plan.fmus):
-            fmu.bind(b.inputs, b.reads, self.signals[b.block] if b.reads else None)
+            fmu.bind(b.inputs, b.reads, self.signals[b.block] if b.reads else None,
+                     objects=self.values, object_inputs=(b.object_inputs, b.object_sources),
+                     object_reads=(b.object_reads, b.object_block))
         self.record_columns, self.record_units = plan.record, plan.record_units
         self.guard = Guard(plan.watched, plan.bounds)
 
@@ -239,11 +260,12 @@ class Master:
             raise ConnectionCheckError(f"restore: no FMU named {', '.join(map(repr, unknown))}; the FMUs are "
                                        f"{', '.join(f.name for f in self.fmus)}")
         recorder = Recorder(self.record_columns, self.record_units, n_steps + 1, csv_path, block_rows,
-                            meta={"step": h, "t0": t0, "seed": seed})
+                            meta={"step": h, "t0": t0, "seed": seed}, types=self.plan.record_types,
+                            objects=self.plan.record_objects)
         phase_times: dict[str, float] = {}
         started: dict[str, dict[str, Any]] = {}
         taken: list[Snapshot] = []
-        status, error = "ok", None
+        status, error, terminated = "ok", None, None
         wall0 = _time.perf_counter()
         try:
             for comp in self.python:
@@ -266,6 +288,8 @@ class Master:
         try:
             take = self._snapshot_taker(snap_steps, t0, started, taken)
             self._loop(t0, n_steps, recorder, progress, phase_times if profile else None, take, snap_steps)
+        except SimulationTerminated as exc:  # the FMU's own end of the simulation: not a failure
+            terminated = str(exc)
         except DivergenceError as exc:
             status, error, failure = "diverged", str(exc), exc
         except (FmuCallError, CosimError) as exc:
@@ -273,10 +297,13 @@ class Master:
         except BaseException as exc:  # the partial result is saved even on Ctrl-C
             recorder.close("failed", f"{type(exc).__name__}: {exc}")
             raise
+        if terminated is not None:
+            recorder.meta["terminated"] = terminated
         recorder.close(status, error)
         result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
                            status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
-                           recorder.path, seed, dict(parameters or {}), taken)
+                           recorder.path, seed, dict(parameters or {}), taken, self.plan.record_types,
+                           recorder.object_columns(), self.plan.python_loop, terminated)
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure
@@ -294,22 +321,26 @@ class Master:
         transfers = self.plan.initialization
         if not transfers:
             return
-        signals = self.signals
+        signals, objects = self.signals, self.values
+
+        def still(before: np.ndarray) -> np.ndarray:  # the float slots still moving
+            return ~((np.abs(signals - before) <= 1e-12 * np.maximum(np.abs(signals), 1.0)) | (signals == before))
+
         for _ in range(passes):
-            before = signals.copy()
+            before, objects_before = signals.copy(), list(objects)
             for tr in transfers:
                 fmu = self.fmus[tr.index]
-                fmu.set_inputs(dict(zip(tr.inputs, signals[tr.sources].tolist())), t0)
+                fmu.set_inputs(self._transferred(tr), t0)
                 fmu.read_outputs(t0)
-            change = np.abs(signals - before)
-            if np.all((change <= 1e-12 * np.maximum(np.abs(signals), 1.0)) | (signals == before)):
+            if not still(before).any() and list(objects) == objects_before:
                 return
-        moving = [f"{src} -> {dst}" for dst, src in self.source_of.items() if src in self.slots
-                  and not abs(signals[self.slots[src]] - before[self.slots[src]]) <= 1e-12 * max(abs(signals[self.slots[src]]), 1.0)
-                  and dst.partition(".")[0] in {self.fmus[tr.index].name for tr in transfers}]
+        moving = still(before)
+        fed = {self.fmus[tr.index].name for tr in transfers}
+        loop = [f"{src} -> {dst}" for dst, src in self.source_of.items()
+                if dst.partition(".")[0] in fed and (src in self.slots and moving[self.slots[src]])]
         raise ConnectionCheckError(f"initialization at t0 = {t0!r} s: the FMUs' outputs did not settle after {passes} "
                                    f"passes through the connections (an algebraic loop at t0 through "
-                                   f"{', '.join(moving) or 'the feedthrough FMUs'}): break it with a delay")
+                                   f"{', '.join(loop) or 'the feedthrough FMUs'}): break it with a delay")
 
     def _snapshot_steps(self, times: Sequence[float], t0: float, n_steps: int) -> frozenset[int]:
         h, steps = self.step, set()
@@ -326,16 +357,28 @@ class Master:
         if ``n`` is one of ``steps``; ``None`` without snapshots."""
         if not steps:
             return None
-        outputs = [name for name in self.slots if name != "time"]
-        inputs = list(self.source_of.items())
+        conversion_of = self.plan.conversion_of
+        outputs = [name for name in self.slots if name != "time" and name not in conversion_of]
+        inputs = [(dst, src, conversion_of.get(dst)) for dst, src in self.source_of.items()]
 
         def take(n: int) -> None:
             if n in steps:
                 values = {name: float(self.signals[self.slots[name]]) for name in outputs}
+                values.update((name, self.values[slot]) for name, slot in self.plan.object_slots.items())
                 taken.append(Snapshot(t0 + n * self.step, n, {f.name: f.serialize_state() for f in self.fmus},
                                       {k: dict(v) for k, v in started.items()}, values,
-                                      {dst: values[src] for dst, src in inputs}))
+                                      {dst: values[src] if conv is None else conv[0] * values[src] + conv[1]
+                                       for dst, src, conv in inputs}))
         return take
+
+    def _transferred(self, tr) -> dict[str, Any]:
+        """The values a :class:`~cosim.plan.Transfer` sets now: its sources'
+        (float and object slots), its connections' unit conversions applied."""
+        floats = self.signals[tr.sources]
+        for i, factor, offset in tr.converted:
+            floats[i] = factor * floats[i] + offset
+        return {**dict(zip(tr.inputs, floats.tolist())),
+                **dict(zip(tr.object_inputs, self.values[tr.object_sources]))}
 
     def _initial_transfer(self, transfers, t0: float) -> None:
         """Exchange ordering, at t0 only (the plan's ``transfer`` or
@@ -343,11 +386,10 @@ class Master:
         gets the values its inputs are connected to at t0 and its outputs are
         read again, once per FMU, so a chain of direct feedthroughs is
         consistent at t0."""
-        signals = self.signals
         for _ in self.fmus:
             for tr in transfers:
                 fmu = self.fmus[tr.index]
-                fmu.set_inputs(dict(zip(tr.inputs, signals[tr.sources])), t0)
+                fmu.set_inputs(self._transferred(tr), t0)
                 fmu.read_outputs(t0)
 
     # ---- the loop and its phases -------------------------------------------------
@@ -358,6 +400,8 @@ class Master:
         offers them), step it, store its outputs and published internals --
         into ``held`` instead of the signal array when the outputs are
         delayed (exchange ordering)."""
+        if b.typed is not None:
+            return self._py_typed_phase(b)
         comp = self.python[b.index]
         in_idx, out_block, published = b.sources, b.block, b.published
         signals, take, step = self.signals, np.take, comp.step
@@ -373,6 +417,7 @@ class Master:
             edges = np.cumsum([0] + sizes)
             targets = [(in_idx[a:z], buf) for a, z, buf in zip(edges[:-1], edges[1:], buffers)]
             u = None
+        step = _converting(step, [buf for _, buf in targets], b.converted)
 
         if held is not None:
             def phase(n: int, t: float) -> None:
@@ -399,12 +444,51 @@ class Master:
                 signals[slots] = internal_values()[which]
         return phase
 
+    def _py_typed_phase(self, b: PythonBlock) -> Callable[[int, float], None]:
+        """A Python component with ports of other types than Float64 at
+        ``t_n``: ``step`` receives its inputs as a list of Python values (in
+        port order, an array's elements in row-major order: float, int, bool,
+        str, bytes as :func:`~cosim.component.typed_value` makes them) and
+        returns its outputs in the same form; each is checked against its
+        port's type (a value the type cannot hold is refused, never rounded)."""
+        from .component import element_ports
+
+        comp = self.python[b.index]
+        signals, values, step = self.signals, self.values, comp.step
+        in_types = [p.type for p in element_ports(tuple(comp.inputs))]
+        outputs = element_ports(tuple(comp.outputs))
+        sources, targets = b.typed
+
+        def value_of(in_objects: bool, slot: int, type_: str):
+            if in_objects:
+                return values[slot]
+            value = float(signals[slot])
+            if type_ in ("Float64", "Float32"):
+                return value
+            return bool(value) if type_ == "Boolean" else int(value)  # held exactly (FLOAT_HELD)
+
+        def phase(n: int, t: float) -> None:
+            u = [value_of(o, slot, ty) for (o, slot), ty in zip(sources, in_types)]
+            y = step(n, t, u)
+            if len(y) != len(outputs):
+                raise CosimError(f"{comp.name}.step returned {len(y)} values for its {len(outputs)} outputs")
+            for (in_objects, slot), port, value in zip(targets, outputs, y):
+                try:
+                    value = typed_value(port.type, value, f"{comp.name}.{port.name}")
+                except ValueError as exc:
+                    raise CosimError(f"at t = {t!r} s: {exc}") from None
+                if in_objects:
+                    values[slot] = value
+                else:
+                    signals[slot] = value
+        return phase
+
     def _fmu_eval_phase(self, b: FmuBlock) -> Callable[[int, float], None]:
         """An FMU with direct feedthrough at ``t_n`` (feedthrough ordering): its
         inputs at ``t_n`` set, its outputs at ``t_n`` read (it steps at the exchange)."""
         fmu = self.fmus[b.index]
         signals, take, in_idx, u = self.signals, np.take, b.sources, fmu.u[:len(b.sources)]
-        write, read = fmu.write_inputs, fmu.read_outputs
+        write, read = _converting(fmu.write_inputs, [u], b.converted), fmu.read_outputs
 
         def phase(n: int, t: float) -> None:
             take(signals, in_idx, out=u)
@@ -418,10 +502,13 @@ class Master:
         outputs at ``t_{n+1}``; then the held outputs of delayed Python
         components become the values at ``t_{n+1}``."""
         signals, take, h = self.signals, np.take, self.step
-        writes = [(self.fmus[b.index].write_inputs, b.sources, self.fmus[b.index].u[:len(b.sources)])
-                  for b in self.plan.exchanged]
+        writes = []
+        for b in self.plan.exchanged:
+            fmu = self.fmus[b.index]
+            u = fmu.u[:len(b.sources)]
+            writes.append((_converting(fmu.write_inputs, [u], b.converted), b.sources, u))
         do_steps = [f.do_step for f in self.fmus]
-        reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads]
+        reads = [self.fmus[b.index].read_outputs for b in self.plan.fmus if b.reads or b.object_reads]
 
         def phase(n: int, t: float) -> None:
             for write, in_idx, u in writes:
@@ -479,6 +566,8 @@ class Master:
                 t = t0 + int(stop.n) * h
                 if code == kernel.Stop.GUARD:
                     self.guard.raise_violation(t, signals[self.plan.watch_slots])
+                if code == kernel.Stop.TERMINATE:
+                    raise self.fmus[int(stop.fmu)]._terminated(t, h)
                 raise self.fmus[int(stop.fmu)].kernel_failure(int(stop.call), int(stop.status), t, h)
             recorder.n_rows = last + 1
             if (last + 1) % block == 0:
@@ -497,13 +586,21 @@ class Master:
         guard_ok, guard_idx, guard = self.guard.ok, plan.watch_slots, self.guard
         block = recorder.block_rows
 
+        record_objects = recorder.record_objects if plan.record_objects else None
+        values = self.values
+
         def record(n: int, t: float) -> None:
             take(signals, rec_idx, out=data[n])
+            if record_objects is not None:  # Int64, UInt64, String, Binary columns
+                record_objects(n, values)
             recorder.n_rows = n + 1
             if (n + 1) % block == 0:
                 recorder.commit(n + 1)
                 if progress is not None:
                     progress(n, n_steps)
+
+        if plan.derived:  # converted inputs recorded or bounded: their values before the row is recorded
+            record = _deriving(record, signals, plan.derived)
 
         def check(n: int, t: float) -> None:
             values = signals[guard_idx]
@@ -554,6 +651,41 @@ class Master:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _converting(call: Callable, buffers: Sequence[np.ndarray], converted) -> Callable:
+    """``call`` preceded by the unit conversions ``converted`` (``(i, factor,
+    offset)``: input ``i`` becomes ``factor * input + offset``) of the inputs
+    just gathered into ``buffers`` (in port order); ``call`` itself when
+    there are none, so an input without a conversion is never touched (not
+    even ``x * 1 + 0``, which would turn -0.0 into +0.0)."""
+    fixes, first = [], 0
+    for buf in buffers:
+        mine = [(i - first, f, o) for i, f, o in converted if first <= i < first + buf.size]
+        if mine:
+            index, factor, offset = (np.array(column) for column in zip(*mine))
+            fixes.append((buf, index.astype(np.intp), factor, offset))
+        first += buf.size
+    if not fixes:
+        return call
+
+    def converting(*args):
+        for buf, index, factor, offset in fixes:
+            buf[index] = factor * buf[index] + offset
+        return call(*args)
+    return converting
+
+
+def _deriving(record: Callable[[int, float], None], signals: np.ndarray, derived) -> Callable[[int, float], None]:
+    """``record`` preceded by the plan's ``derived`` slots (a converted input
+    recorded or bounded: ``slot = factor * source + offset``)."""
+    slot, source, factor, offset = (np.array(column) for column in zip(*derived))
+    slot, source = slot.astype(np.intp), source.astype(np.intp)
+
+    def deriving(n: int, t: float) -> None:
+        signals[slot] = factor * signals[source] + offset
+        record(n, t)
+    return deriving
 
 
 def _timed(phase: Callable[[int, float], None], totals: dict[str, float], name: str) -> Callable[[int, float], None]:

@@ -48,9 +48,9 @@ MAX_EVENT_ITERATIONS = 1000  # newDiscreteStates calls at one event instant
 class IntegrationError(RuntimeError):
     """The integration of a Model Exchange FMU cannot go on at ``time``."""
 
-    def __init__(self, time: float, reason: str):
+    def __init__(self, time: float, reason: str, terminate: bool = False):
         super().__init__(f"at t = {time!r} s: {reason}")
-        self.time, self.reason = time, reason
+        self.time, self.reason, self.terminate = time, reason, terminate
 
 
 @dataclass(frozen=True)
@@ -156,7 +156,7 @@ class Integrator:
         for _ in range(MAX_EVENT_ITERATIONS):
             needed, terminate, _, _, defined, next_time = update()
             if terminate:
-                raise IntegrationError(t, "the FMU asked to terminate the simulation at an event")
+                raise IntegrationError(t, "the FMU asked to terminate the simulation at an event", terminate=True)
             if not needed:
                 self.next_event_time = float(next_time) if defined else None
                 return
@@ -241,7 +241,7 @@ class Integrator:
             if self.needs_completed_step:
                 step_event, terminate = self.model.completedIntegratorStep()
                 if terminate:
-                    raise IntegrationError(reached, "the FMU asked to terminate the simulation")
+                    raise IntegrationError(reached, "the FMU asked to terminate the simulation", terminate=True)
             t = reached
             if time_event or state_event or step_event:
                 if self.events - events_before >= self.settings.max_events:

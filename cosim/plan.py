@@ -10,7 +10,13 @@ master's two loops, the Python one and the compiled kernel
   internal signals recorded or bounded: contiguous, so one get call writes
   them in place), each Python component's outputs (one slice assignment), the
   internal signals it publishes, and its unconnected inputs that hold a start
-  value;
+  value. A signal is a scalar: an FMI 3.0 array is its elements
+  (``y[1]``, ..., :func:`cosim.component.element_ports`). Every type a double
+  holds exactly (:data:`cosim.component.FLOAT_HELD`: Float32, the integers up
+  to 32 bits, Boolean as 0/1, Enumeration) lives there too; Int64, UInt64,
+  String and Binary live in the **object slots** (``object_slots``, an array
+  of Python ``int``/``str``/``bytes``), laid out the same way (docs/cosim.md,
+  "Signal types");
 * **the blocks evaluated at t_n**, in topological order of their connections
   (:class:`PythonBlock`; in the feedthrough ordering also the FMUs with
   direct feedthrough, :class:`FmuBlock` with ``direct``): a cycle among them
@@ -23,20 +29,26 @@ master's two loops, the Python one and the compiled kernel
   values of t_{n+1}, as an FMU's do;
 * **the initial transfers** of the exchange ordering (:class:`Transfer`);
 * **what is recorded** (columns, units, slots) **and what is guarded** (every
-  slot but the time, with the envelope of the bounded ones).
+  slot but the time, with the envelope of the bounded ones);
+* **the unit conversions** of the connections that carry one
+  (:class:`~cosim.connection.Connection` ``conversion``): per block, the
+  inputs converted after they are gathered (``converted``: index, factor,
+  offset; no other input is touched, so a run without conversions is the
+  same bit for bit), and a slot of its own for a converted input that is
+  recorded or bounded (``derived``), so it is recorded in its own unit.
 
 Nothing here runs a component: the plan reads ports (``inputs``, ``outputs``,
 ``internals``) and, of an FMU, its ModelStructure (``feedthrough``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Mapping, Sequence, Union
 
 import numpy as np
 
-from .component import Port
+from .component import FLOAT_HELD, Port, element_of, element_ports
 from .connection import Connection
 from .errors import ConnectionCheckError
 
@@ -55,6 +67,11 @@ class FmuBlock:
     bounded) are read in one call into the slots ``block``; ``direct``: it
     is evaluated at t_n (feedthrough ordering: a used output depends directly
     on a connected input), else its inputs are set at the exchange.
+    ``object_inputs``/``object_sources`` and ``object_reads``/``object_block``
+    are the same for its signals held in the object slots (set and read by
+    the component with its other inputs and outputs); ``converted``:
+    ``(i, factor, offset)``, float-held input ``i`` receives ``factor *
+    source + offset`` (a unit conversion of its connection).
     """
 
     index: int
@@ -64,6 +81,11 @@ class FmuBlock:
     reads: tuple[str, ...]
     block: slice
     direct: bool
+    object_inputs: tuple[str, ...] = ()
+    object_sources: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    object_reads: tuple[str, ...] = ()
+    object_block: slice = field(default_factory=lambda: slice(0, 0))
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +94,11 @@ class PythonBlock:
     ``sources`` (in port order), its outputs stored in ``block``, the internal
     signals it publishes (``published``: their indices in
     ``internal_values()`` and their slots, or ``None``); ``held``: exchange
-    ordering, its outputs are held and become the values of t_{n+1}."""
+    ordering, its outputs are held and become the values of t_{n+1}.
+    ``typed``: a component with a port of another type than Float64, its
+    inputs (in port order) and outputs as ``(in_objects, slot)`` pairs (the
+    slot in the object slots when ``in_objects``), ``None`` for the others;
+    ``converted`` as :class:`FmuBlock`'s, by index in ``sources``."""
 
     index: int
     name: str
@@ -80,16 +106,22 @@ class PythonBlock:
     block: slice
     published: tuple[np.ndarray, np.ndarray] | None
     held: bool
+    typed: tuple[tuple[tuple[bool, int], ...], tuple[tuple[bool, int], ...]] | None = None
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
 class Transfer:
     """At t0 (exchange ordering): FMU ``index`` gets ``inputs`` from the
-    slots ``sources``, then its outputs are read again."""
+    slots ``sources`` (``converted`` as :class:`FmuBlock`'s), then its
+    outputs are read again."""
 
     index: int
     inputs: tuple[str, ...]
     sources: np.ndarray
+    object_inputs: tuple[str, ...] = ()
+    object_sources: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    converted: tuple[tuple[int, float, float], ...] = ()
 
 
 Block = Union[FmuBlock, PythonBlock]
@@ -110,7 +142,10 @@ class Plan:
     computed) until the FMUs' outputs settle. ``python_loop``: why the compiled loop cannot run the plan,
     one reason per component (a Python component, an FMU whose
     :meth:`~cosim.fmu_component.FmuComponent.python_loop_reason` names
-    one); empty when it can (:attr:`compiled`).
+    one); empty when it can (:attr:`compiled`). ``conversion_of``:
+    destination -> ``(factor, offset)`` of every converted connection;
+    ``derived``: ``(slot, source slot, factor, offset)``, the converted
+    inputs recorded or bounded, computed before each row is recorded.
     """
 
     ordering: str
@@ -130,6 +165,15 @@ class Plan:
 
     python_loop: tuple[str, ...] = ()
     initialization: tuple[Transfer, ...] = ()
+    object_slots: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
+    object_start_values: tuple[tuple[int, Any], ...] = ()
+    record_types: tuple[str, ...] = ()
+    record_objects: tuple[tuple[int, int], ...] = ()
+    """``record_types``: the type of each column; ``record_objects``: the
+    columns held in the object slots, as ``(column, object slot)`` (their
+    ``record_slots`` entry is 0, the time, overwritten by the recorder)."""
+    conversion_of: Mapping[str, tuple[float, float]] = field(default_factory=lambda: MappingProxyType({}))
+    derived: tuple[tuple[int, int, float, float], ...] = ()
 
     @property
     def fmus_only(self) -> bool:
@@ -146,7 +190,7 @@ class Plan:
     @property
     def exchanged(self) -> tuple[FmuBlock, ...]:
         """The FMUs whose inputs are set at the exchange (not at t_n)."""
-        return tuple(b for b in self.fmus if b.inputs and not b.direct)
+        return tuple(b for b in self.fmus if (b.inputs or b.object_inputs) and not b.direct)
 
 
 def _internals(comp) -> tuple[Port, ...]:
@@ -155,8 +199,9 @@ def _internals(comp) -> tuple[Port, ...]:
 
 def signal_port(components: Mapping[str, Any], signal: str) -> Port:
     """The port a signal (``component.variable``: an output, an internal
-    signal, or an input, recorded as the value its source gives it) names;
-    a one-line :class:`ConnectionCheckError` otherwise."""
+    signal, or an input, recorded as the value its source gives it; a whole
+    array or an element ``variable[i]``) names; a one-line
+    :class:`ConnectionCheckError` otherwise."""
     comp_name, _, var = signal.partition(".")
     comp = components.get(comp_name)
     if comp is None:
@@ -169,9 +214,36 @@ def signal_port(components: Mapping[str, Any], signal: str) -> Port:
     for port in comp.outputs + internals + comp.inputs:
         if port.name == var:
             return port
+    base, index = element_of(var)
+    if index is not None:
+        for port in comp.outputs + internals + comp.inputs:
+            if port.name == base and port.shape:
+                for element in element_ports((port,)):
+                    if element.name == var:
+                        return element
+                raise ConnectionCheckError(f"signal {signal!r}: index {list(index)} outside {base}'s shape "
+                                           f"{port.shape} (indices count from 1)")
     known = ", ".join(p.name for p in comp.outputs + comp.inputs + internals)
     kinds = "output, input or internal signal" if internals else "output or input"
     raise ConnectionCheckError(f"signal {signal!r}: {comp_name} has no {kinds} {var!r}; it has: {known}")
+
+
+def scalar_signals(components: Mapping[str, Any], signals) -> list[str]:
+    """``signals`` with every whole array named as its elements (``y`` ->
+    ``y[1]``, ``y[2]``, ...), each checked (:func:`signal_port`)."""
+    out = []
+    for s in signals:
+        port = signal_port(components, s)
+        if port.shape:
+            comp = s.partition(".")[0]
+            out.extend(f"{comp}.{e.name}" for e in element_ports((port,)))
+        else:
+            out.append(s)
+    return out
+
+
+def _elements(comp, group: str) -> tuple[Port, ...]:
+    return element_ports(tuple(getattr(comp, group, ())))
 
 
 def _direct_fmus(fmus: Sequence, connections: Sequence[Connection], used: set[str], ordering: str) -> set[str]:
@@ -182,8 +254,9 @@ def _direct_fmus(fmus: Sequence, connections: Sequence[Connection], used: set[st
     direct = set()
     for fmu in fmus:
         connected = {c.destination.variable for c in connections if c.destination.component == fmu.name}
-        if any(fmu.feedthrough.get(p.name, frozenset()) & connected
-               for p in fmu.outputs if f"{fmu.name}.{p.name}" in used):
+        connected = {element_of(v)[0] for v in connected}  # an array's element: the array's dependencies
+        if any(fmu.feedthrough.get(element_of(p.name)[0], frozenset()) & connected
+               for p in _elements(fmu, "outputs") if f"{fmu.name}.{p.name}" in used):
             direct.add(fmu.name)
     return direct
 
@@ -200,7 +273,7 @@ def _order(blocks: Sequence[str], components: Mapping[str, Any], connections: Se
         src, dst = c.source.component, c.destination.component
         if src not in deps or dst not in deps or ordering != "feedthrough":
             continue
-        if src not in direct or components[src].feedthrough.get(c.source.variable):
+        if src not in direct or components[src].feedthrough.get(element_of(c.source.variable)[0]):
             deps[dst].add(src)
     order: list[str] = []
     state: dict[str, int] = {}
@@ -234,33 +307,53 @@ def _indices(values) -> np.ndarray:
 def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection], ordering: str,
               record: Sequence[str], bounds: Mapping[str, tuple[float, float]]) -> Plan:
     """The :class:`Plan` of a run of ``fmus`` and ``python`` components joined
-    by ``connections`` (already checked) in the ``ordering`` (one of
-    :data:`ORDERINGS`, checked by the master), recording ``record`` and guarding
-    ``bounds`` (signal -> (low, high)); one-line
+    by ``connections`` (already checked: arrays as their elements) in the
+    ``ordering`` (one of :data:`ORDERINGS`, checked by the master), recording
+    ``record`` and guarding ``bounds`` (signal -> (low, high); a whole array
+    stands for its elements); one-line
     :class:`~cosim.errors.ConnectionCheckError` for what cannot run."""
     components = {c.name: c for c in list(fmus) + list(python)}
-    record = list(record)
+    record = scalar_signals(components, record)
+    bounds = {e: b for s, b in bounds.items() for e in scalar_signals(components, [s])}
+    types = {f"{c.name}.{p.name}": p.type for c in components.values()
+             for p in _elements(c, "outputs") + _elements(c, "inputs") + element_ports(_internals(c))}
     source_of = {str(c.destination): str(c.source) for c in connections}
     for s in record + list(bounds):
         signal_port(components, s)
         comp, _, var = source_of.get(s, s).partition(".")
-        if var not in {p.name for p in components[comp].outputs + _internals(components[comp])}:
+        sources = _elements(components[comp], "outputs") + element_ports(_internals(components[comp]))
+        if var not in {p.name for p in sources}:
             raise ConnectionCheckError(f"signal {s!r} is an input that nothing feeds; record its source")
+    for s in bounds:
+        if types[s] not in FLOAT_HELD:
+            raise ConnectionCheckError(f"envelope of {s!r}: a {types[s]} signal; an envelope bounds numbers held "
+                                       f"as doubles (Float32/64, Int8..UInt32, Boolean, Enumeration)")
     used = {str(c.source) for c in connections}
     used |= {source_of.get(s, s) for s in record + list(bounds)}
 
     slots: dict[str, int] = {"time": 0}
+    objects: dict[str, int] = {}  # the object slots: Int64, UInt64, String, Binary
     reads: dict[str, tuple[str, ...]] = {}
+    object_reads: dict[str, tuple[str, ...]] = {}
     blocks: dict[str, slice] = {}
-    for comp in fmus:  # used outputs, then used internals: one get call
-        names = tuple(p.name for p in comp.outputs + _internals(comp) if f"{comp.name}.{p.name}" in used)
-        first = len(slots)
-        slots.update((f"{comp.name}.{n}", first + i) for i, n in enumerate(names))
-        reads[comp.name], blocks[comp.name] = names, slice(first, len(slots))
-    for comp in python:  # every output: one slice assignment
-        first = len(slots)
-        slots.update((f"{comp.name}.{p.name}", first + i) for i, p in enumerate(comp.outputs))
-        blocks[comp.name] = slice(first, len(slots))
+    object_blocks: dict[str, slice] = {}
+
+    def place(comp_name: str, names: Sequence[str]) -> None:
+        """``names`` of ``comp_name`` in contiguous slots: the float-held ones
+        in one block, the others in one block of the object slots."""
+        floats = tuple(n for n in names if types[f"{comp_name}.{n}"] in FLOAT_HELD)
+        others = tuple(n for n in names if types[f"{comp_name}.{n}"] not in FLOAT_HELD)
+        first, first_object = len(slots), len(objects)
+        slots.update((f"{comp_name}.{n}", first + i) for i, n in enumerate(floats))
+        objects.update((f"{comp_name}.{n}", first_object + i) for i, n in enumerate(others))
+        reads[comp_name], object_reads[comp_name] = floats, others
+        blocks[comp_name], object_blocks[comp_name] = slice(first, len(slots)), slice(first_object, len(objects))
+
+    for comp in fmus:  # used outputs, then used internals: one get call per type
+        place(comp.name, [p.name for p in _elements(comp, "outputs") + element_ports(_internals(comp))
+                          if f"{comp.name}.{p.name}" in used])
+    for comp in python:  # every output: one slice assignment (per kind of slot)
+        place(comp.name, [p.name for p in _elements(comp, "outputs")])
     published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for comp in python:
         picked = [(i, f"{comp.name}.{p.name}") for i, p in enumerate(comp.internals)
@@ -271,62 +364,115 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
             published[comp.name] = (_indices(i for i, _ in picked), _indices(slots[n] for _, n in picked))
     # Unconnected Python inputs that declare a start value: one slot each,
     # written once before the run and by nothing after, so they hold it.
-    start_values = []
+    start_values, object_start_values = [], []
     for comp in python:
-        for p in comp.inputs:
+        for p in _elements(comp, "inputs"):
             name = f"{comp.name}.{p.name}"
             if name not in source_of and p.start is not None:
-                slots[name] = len(slots)
-                start_values.append((slots[name], float(p.start)))
+                if p.type in FLOAT_HELD:
+                    slots[name] = len(slots)
+                    start_values.append((slots[name], float(p.start)))
+                else:
+                    objects[name] = len(objects)
+                    object_start_values.append((objects[name], p.start))
+
+    def split(ins: Sequence[Connection]) -> tuple[tuple[str, ...], np.ndarray, tuple[str, ...], np.ndarray]:
+        """Connections into one FMU: the float-held inputs and their source
+        slots, the object-held ones and their object slots."""
+        floats = [c for c in ins if types[str(c.destination)] in FLOAT_HELD]
+        others = [c for c in ins if types[str(c.destination)] not in FLOAT_HELD]
+        return (tuple(c.destination.variable for c in floats), _indices(slots[str(c.source)] for c in floats),
+                tuple(c.destination.variable for c in others), _indices(objects[str(c.source)] for c in others))
+
+    # A converted input recorded or bounded: a slot of its own, its source's value converted
+    conversion_of = {str(c.destination): c.conversion for c in connections if c.conversion is not None}
+    derived = []
+    for s in dict.fromkeys(record + list(bounds)):
+        if s in conversion_of:
+            slots[s] = len(slots)
+            derived.append((slots[s], slots[source_of[s]], *conversion_of[s]))
+
+    def resolved(s: str) -> str:
+        return s if s in conversion_of and s in slots else source_of.get(s, s)
+
+    def converted(names: Sequence[str]) -> tuple[tuple[int, float, float], ...]:
+        return tuple((k, *conversion_of[n]) for k, n in enumerate(names) if n in conversion_of)
 
     direct = _direct_fmus(fmus, connections, used, ordering)
     fmu_blocks = []
     for i, fmu in enumerate(fmus):
-        ins = [c for c in connections if c.destination.component == fmu.name]
-        fmu_blocks.append(FmuBlock(i, fmu.name, tuple(c.destination.variable for c in ins),
-                                   _indices(slots[str(c.source)] for c in ins), reads[fmu.name], blocks[fmu.name],
-                                   fmu.name in direct))
+        inputs, sources, obj_inputs, obj_sources = split(
+            [c for c in connections if c.destination.component == fmu.name])
+        fmu_blocks.append(FmuBlock(i, fmu.name, inputs, sources, reads[fmu.name], blocks[fmu.name],
+                                   fmu.name in direct, obj_inputs, obj_sources, object_reads[fmu.name],
+                                   object_blocks[fmu.name], converted([f"{fmu.name}.{n}" for n in inputs])))
     at_tn = _order([c.name for c in python] + [f.name for f in fmus if f.name in direct], components, connections,
                    direct, ordering)
     by_name: dict[str, Block] = {b.name: b for b in fmu_blocks}
     index = {c.name: j for j, c in enumerate(python)}
+
+    def where(name: str) -> tuple[bool, int]:
+        return (False, slots[name]) if name in slots else (True, objects[name])
+
     for comp in (components[n] for n in at_tn if n in index):
-        names = [f"{comp.name}.{p.name}" for p in comp.inputs]
-        missing = [p.name for p, name in zip(comp.inputs, names) if name not in source_of and name not in slots]
+        elements = _elements(comp, "inputs")
+        names = [f"{comp.name}.{p.name}" for p in elements]
+        missing = [p.name for p, name in zip(elements, names)
+                   if name not in source_of and name not in slots and name not in objects]
         if missing:
             raise ConnectionCheckError(f"inputs of {comp.name} not connected: {', '.join(missing)}")
+        held = ordering == "exchange" and bool(comp.inputs)
+        typed = None
+        if any(p.type != "Float64" for p in elements + _elements(comp, "outputs")):
+            if held:
+                raise ConnectionCheckError(f"{comp.name}: a Python component with inputs and a port of another "
+                                           f"type than Float64 runs in the feedthrough ordering only")
+            typed = (tuple(where(source_of.get(n, n)) for n in names),
+                     tuple(where(f"{comp.name}.{p.name}") for p in _elements(comp, "outputs")))
         by_name[comp.name] = PythonBlock(index[comp.name], comp.name,
-                                         _indices(slots[source_of.get(n, n)] for n in names), blocks[comp.name],
-                                         published.get(comp.name), ordering == "exchange" and bool(comp.inputs))
+                                         _indices(slots[source_of.get(n, n)] for n in names
+                                                  if source_of.get(n, n) in slots), blocks[comp.name],
+                                         published.get(comp.name), held, typed,
+                                         converted([n for n in names if source_of.get(n, n) in slots]))
 
     fmu_names = {f.name for f in fmus}
 
     def transfers(keep) -> tuple[Transfer, ...]:
         out = []
         for b in fmu_blocks:
-            ins = [c for c in connections if c.destination.component == b.name and keep(c)]
-            out.append(Transfer(b.index, tuple(c.destination.variable for c in ins),
-                                _indices(slots[str(c.source)] for c in ins)))
+            inputs, sources, obj_inputs, obj_sources = split(
+                [c for c in connections if c.destination.component == b.name and keep(c)])
+            out.append(Transfer(b.index, inputs, sources, obj_inputs, obj_sources,
+                                converted([f"{b.name}.{n}" for n in inputs])))
         return tuple(out)
 
     transfer = first_transfer = ()
     if ordering == "exchange":
         transfer = transfers(lambda c: True)
         first_transfer = transfers(lambda c: c.source.component in fmu_names)
-    initialization = tuple(t for t in transfers(lambda c: c.source.component in fmu_names) if t.inputs)
+    initialization = tuple(t for t in transfers(lambda c: c.source.component in fmu_names)
+                           if t.inputs or t.object_inputs)
 
     # what the compiled loop cannot do (it makes set, get and doStep calls of Float64 values only)
     python_loop = tuple(f"Python component {c.name}" for c in python if c.name in at_tn)
-    python_loop += tuple(f"{f.name}: {why}" for f in fmus if (why := f.python_loop_reason()) is not None)
+    for f, b in zip(fmus, fmu_blocks):
+        why = f.python_loop_reason(b.inputs + b.object_inputs + b.reads + b.object_reads)
+        if why is not None:
+            python_loop += (f"{f.name}: {why}",)
     columns = ("time",) + tuple(record)
     watched = tuple(s for s in slots if s != "time")
+    sourced = [resolved(s) for s in columns]  # a converted input recorded: its own slot
     return Plan(
         ordering=ordering, slots=MappingProxyType(slots), start_values=tuple(start_values),
         source_of=MappingProxyType(source_of),
         fmus=tuple(fmu_blocks), at_tn=tuple(by_name[n] for n in at_tn), transfer=transfer,
         first_transfer=first_transfer, record=columns,
         record_units=("s",) + tuple(signal_port(components, s).unit for s in record),
-        record_slots=_indices(slots[source_of.get(s, s)] for s in columns), watched=watched,
+        record_slots=_indices(slots.get(s, 0) for s in sourced), watched=watched,
         watch_slots=_indices(slots[s] for s in watched), python_loop=python_loop,
         initialization=initialization,
-        bounds=MappingProxyType({source_of.get(s, s): (float(b[0]), float(b[1])) for s, b in bounds.items()}))
+        bounds=MappingProxyType({resolved(s): (float(b[0]), float(b[1])) for s, b in bounds.items()}),
+        object_slots=MappingProxyType(objects), object_start_values=tuple(object_start_values),
+        record_types=("Float64",) + tuple(types[source_of.get(s, s)] for s in columns[1:]),
+        record_objects=tuple((k, objects[s]) for k, s in enumerate(sourced) if s in objects),
+        conversion_of=MappingProxyType(conversion_of), derived=tuple(derived))

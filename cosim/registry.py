@@ -254,3 +254,23 @@ def scoped():
             table.update(before)
         _SCENARIO_FOLDERS[:] = saved[4]
         _VERSION[0] += 1
+
+
+def _register_engine_kinds() -> None:
+    """The engine's own component kind: the signal table (:mod:`cosim.table`),
+    imported only when a scenario builds or declares one."""
+    def build(name: str, parameters: Mapping[str, Any], context: BuildContext) -> Any:
+        from .table import build as build_table
+
+        return build_table(name, parameters, context)
+
+    def parameters() -> type:
+        from .table import TableSpec
+
+        return TableSpec
+
+    register_component_kind(ComponentKind("signal_table", build, parameters,
+                                          "a CSV signal table played as outputs (docs/cosim.md, 'The signal table')"))
+
+
+_register_engine_kinds()

@@ -39,7 +39,7 @@ from .limits import SEED_LIMIT
 from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, json_schema, one_of, refuse,
                      scenario_error, where)
 
-__all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "scenario_model", "scenario_json_schema", "load_scenario",
+__all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "ConnectionTable", "scenario_model", "scenario_json_schema", "load_scenario",
            "parse_scenario", "shipped_scenarios", "scenario_path", "apply_overrides", "build_master", "fmu_file",
            "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "ORDERINGS"]
 
@@ -94,6 +94,34 @@ class Solver(Table):
                                              "the communication step), or CVODE's largest step")
     max_events: Count = Field(1000, description="events allowed in one communication step before the model is taken "
                                                 "to chatter")
+
+
+class ConnectionTable(Table):
+    """A connection written as a table (``connections`` entry): its
+    ``connect`` string and either a unit conversion or the unchecked marker
+    (docs/cosim.md, "Units")."""
+
+    connect: Annotated[str, Field(strict=True)] = Field(..., description="'A.out -> B.in' (brace groups expand)")
+    factor: Number = Field(None, description="destination = factor * source + offset (default 1)")
+    offset: Number = Field(None, description="destination = factor * source + offset (default 0)")
+    units: one_of(("unchecked",)) = Field(None, description="'unchecked': the units are not compared")
+
+    @model_validator(mode="after")
+    def _conversion_or_unchecked(self):
+        converts = self.factor is not None or self.offset is not None
+        if converts == (self.units is not None):
+            raise refuse("give a conversion (factor, offset) or units = 'unchecked', not both and not neither")
+        if self.factor == 0:
+            raise refuse("a conversion's factor must not be 0", key="factor", value=self.factor)
+        return self
+
+
+def _connection_tag(value: Any) -> str | None:
+    return "table" if isinstance(value, (Mapping, ConnectionTable)) else "string" if isinstance(value, str) else None
+
+
+ConnectionEntry = Annotated[Union[Annotated[Annotated[str, Field(strict=True)], Tag("string")],
+                                  Annotated[ConnectionTable, Tag("table")]], Discriminator(_connection_tag)]
 
 
 def _source(info) -> Path | None:
@@ -287,8 +315,10 @@ def scenario_model() -> type[Table]:
         fields: dict[str, Any] = {
             "name": (Annotated[str, Field(strict=True)], Field(None, description="default: the file's name")),
             "description": (Annotated[str, Field(strict=True)], ""),
-            "connections": (Strings, Field(..., description="'A.out -> B.in' strings; brace groups expand: "
-                                                            "'A.{x,y} -> B.{x,y}'")),
+            "connections": (list[ConnectionEntry], Field(default_factory=list, description=(
+                "'A.out -> B.in' strings (brace groups expand: 'A.{x,y} -> B.{x,y}'), or tables "
+                "{ connect = 'A.out -> B.in', factor = .., offset = .. } (a unit conversion) or "
+                "{ connect = .., units = 'unchecked' }"))),
             "simulation": (Simulation, Field(default_factory=Simulation)),
             "fmus": (dict[str, FmuSpec], Field(default_factory=dict, description="the FMU instances")),
             "components": (dict[str, _component_union(kinds)], Field(default_factory=dict,
@@ -321,6 +351,12 @@ def _validated(raw: Mapping[str, Any], source: Path | None):
         return scenario_model().model_validate(dict(raw), context={"source": source})
     except ValidationError as exc:
         err = dict(exc.errors(include_url=False)[0])
+        if err["loc"][:1] == ("connections",) and len(err["loc"]) > 1:
+            if err["type"] in ("union_tag_invalid", "union_tag_not_found"):
+                raise ScenarioError(f"{where(err['loc'])} = {err.get('input')!r}: expected a string "
+                                    f"'A.out -> B.in' or a table {{ connect = 'A.out -> B.in', ... }}") from None
+            err["loc"] = err["loc"][:2] + err["loc"][3:]  # the entry's form (string, table) is no key
+            raise scenario_error(err) from None
         if err["type"] in ("union_tag_invalid", "union_tag_not_found"):
             raise _kind_error(err) from None
         loc = list(err["loc"])
@@ -432,7 +468,8 @@ class Scenario:
         set_(self, "fmus", _frozen(fmus))
         set_(self, "components", _frozen(components))
         set_(self, "sections", _frozen(sections))
-        set_(self, "connections", tuple(model.connections))
+        set_(self, "connections", tuple(c if isinstance(c, str) else MappingProxyType(c.model_dump(exclude_none=True))
+                                        for c in model.connections))
         set_(self, "record", tuple(model.record.signals))
         need = record_bytes(self.n_steps + 1, len(self.record) + 1)  # the rows a run keeps: refused when read
         if need > MAX_RECORD_BYTES:

@@ -50,11 +50,12 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from io import BytesIO
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Mapping, Sequence
 
 from lxml import etree
 
-from . import registry
+from . import registry, units
 from .connection import check_connections, parse_connections
 from .errors import CosimError, FmuError, ScenarioError, one_line
 from .files import extract_zip, regular_file, safe_name, zip_members
@@ -232,14 +233,42 @@ def _ssd_class():
 
         def __write__(self):
             super().__write__()
-            units = self.root.find("ssd:Units", NS)
+            defined = self.root.find("ssd:Units", NS)
             experiment = self.root.find("ssd:DefaultExperiment", NS)
-            if units is not None and experiment is not None:
-                experiment.addprevious(units)
+            if defined is not None and experiment is not None:
+                experiment.addprevious(defined)
+            _write_conversions(self.root, getattr(self, "conversions", {}))
             etree.cleanup_namespaces(self.root, top_nsmap={"ssv": NS["ssv"], "osp": OSP_NAMESPACE,
                                                            "cosim": COSIM_NAMESPACE})
 
     return OrderedSSD
+
+
+def _connection_key(start_element, start_connector, end_element, end_connector) -> tuple[str, str, str, str]:
+    return start_element, start_connector, end_element, end_connector
+
+
+def _write_conversions(root: etree._Element, conversions: Mapping[tuple[str, str, str, str], Any]) -> None:
+    """A connection the scenario states a conversion for, or marks unchecked,
+    the SSP 1.0 way (SystemStructureDescription, ssd:Connection;
+    SystemStructureCommon, ssc:LinearTransformation): ``suppressUnitConversion
+    = "true"`` (the stated conversion replaces the one the connectors' units
+    would give; unchecked: none at all) and, for a conversion,
+    ``<ssc:LinearTransformation factor offset>`` (target = factor * source +
+    offset) as its first child. A conversion the units give is written as
+    the connectors' units (and ``ssd:Units``): the importing tool converts."""
+    for element in root.iterfind("ssd:System/ssd:Connections/ssd:Connection", NS):
+        key = _connection_key(*(element.get(a) for a in ("startElement", "startConnector", "endElement",
+                                                          "endConnector")))
+        if key not in conversions:
+            continue
+        element.set("suppressUnitConversion", "true")
+        conversion = conversions[key]
+        if conversion is not None:
+            transformation = etree.Element(_q("ssc", "LinearTransformation"), nsmap={"ssc": NS["ssc"]})
+            transformation.set("factor", _num(conversion[0]))
+            transformation.set("offset", _num(conversion[1]))
+            element.insert(0, transformation)
 
 
 def _write_ssd(scenario: Scenario, parts: list[_Part], path: Path) -> None:
@@ -271,10 +300,15 @@ def _write_ssd(scenario: Scenario, parts: list[_Part], path: Path) -> None:
                 values.append(Parameter(name=name, type_name=type_, type_value=parameter_type))
             component.parameter_bindings = [ParameterBinding(ssv=SSVElem(name=part.name, parameters=values))]
         system.elements.append(component)
+    conversions = {}  # stated conversions (factor, offset) and unchecked connections (None)
     for c in parse_connections(scenario.connections):
         system.connections.append(Connection(start_element=c.source.component, start_connector=c.source.variable,
                                              end_element=c.destination.component,
                                              end_connector=c.destination.variable))
+        if c.conversion is not None or c.unchecked:
+            key = _connection_key(c.source.component, c.source.variable, c.destination.component,
+                                  c.destination.variable)
+            conversions[key] = c.conversion
     annotation = Annotation(COSIM_ANNOTATION)
     annotation.add_element(_cosim_annotation(scenario))
     system.annotations.add_annotation(annotation)
@@ -293,12 +327,18 @@ def _write_ssd(scenario: Scenario, parts: list[_Part], path: Path) -> None:
         ssd.top_level_metadata.generationDateAndTime = datetime.now(timezone.utc).replace(microsecond=0).isoformat()
         ssd.system = system
         ssd.default_experiment = experiment
+        ssd.conversions = conversions
         for part in parts:
             for unit, base in part.units.items():
-                if base is None or unit in ssd.units:
-                    continue  # a unit the modelDescription does not define stays a bare name
-                exponents = {k: getattr(base, k) for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
-                             if getattr(base, k)}
+                if unit in ssd.units:
+                    continue
+                if base is None:  # a unit the modelDescription does not define: as pint reads its name, so
+                    base = units.parse(unit)  # that an importer converts as our master does (cosim.units)
+                    if base is None:
+                        continue  # a name nothing knows stays a bare name
+                    base = SimpleNamespace(**dict(zip(units.BASE_UNITS, base.exponents)), factor=base.factor,
+                                           offset=base.offset)
+                exponents = {k: getattr(base, k) for k in units.BASE_UNITS if getattr(base, k)}
                 if base.factor != 1.0:
                     exponents["factor"] = base.factor
                 if base.offset != 0.0:
@@ -386,7 +426,7 @@ class _System:
     stop: float | None
     step: float | None
     components: dict[str, dict[str, Any]]  # name -> {"path": Path, "parameters": {...}, "connectors": {name: kind}}
-    connections: list[str]
+    connections: list[str | dict[str, Any]]  # strings, or tables with a conversion or the unchecked marker
     seed: int | None = None
     block_rows: int | None = None
     ordering: str | None = None
@@ -519,15 +559,41 @@ def _component(where: str, element: etree._Element, folder: Path) -> tuple[str, 
     if not source:
         raise ScenarioError(f"{at}: no source attribute")
     connectors: dict[str, str] = {}
+    units: dict[str, str] = {}
     for i, connector in enumerate(element.findall("ssd:Connectors/ssd:Connector", NS), 1):
         if not connector.get("name"):
             raise ScenarioError(f"{at}: ssd:Connector {i}: no name attribute")
         connectors[connector.get("name")] = connector.get("kind", "")
+        real = connector.find("ssc:Real", NS)
+        if real is not None and real.get("unit"):
+            units[connector.get("name")] = real.get("unit")
     return name, {"path": _source_path(at, source, folder), "parameters": _bindings(at, element, folder),
-                  "connectors": connectors}
+                  "connectors": connectors, "units": units}
 
 
-def _connection(where: str, element: etree._Element, components: Mapping[str, dict[str, Any]]) -> str:
+def _ssd_units(root: etree._Element) -> dict[str, Any]:
+    """The SSD's ``ssd:Units`` (SystemStructureCommon ``ssc:Unit``/``ssc:BaseUnit``,
+    the FMI form) as :class:`cosim.units.Unit`, by name."""
+    out = {}
+    for unit in root.iterfind("ssd:Units/ssc:Unit", NS):
+        base = unit.find("ssc:BaseUnit", NS)
+        if unit.get("name") and base is not None:
+            where = f"ssd:Units: ssc:Unit {unit.get('name')!r}"
+            exponents = tuple(_integer(where, base.get(b, "0"), b) for b in units.BASE_UNITS)
+            out[unit.get("name")] = units.Unit(unit.get("name"), exponents,
+                                               _number(where, base.get("factor", "1"), "factor"),
+                                               _number(where, base.get("offset", "0"), "offset"))
+    return out
+
+
+def _connection(where: str, element: etree._Element, components: Mapping[str, dict[str, Any]],
+                ssd_units: Mapping[str, Any] | None = None) -> str | dict[str, Any]:
+    """One ``ssd:Connection`` as the scenario's connection: a string, or a
+    table with the conversion it states (``ssc:LinearTransformation``) or
+    ``units = "unchecked"`` (``suppressUnitConversion = "true"`` without
+    one). A transformation without ``suppressUnitConversion`` applies after
+    the conversion the connectors' units give (SSP 1.0,
+    SystemStructureCommon): the two are composed into one."""
     ends = []
     for side in ("start", "end"):
         comp, conn = element.get(f"{side}Element"), element.get(f"{side}Connector")
@@ -542,10 +608,39 @@ def _connection(where: str, element: etree._Element, components: Mapping[str, di
         if conn not in components[comp]["connectors"]:
             raise ScenarioError(f"{where}: {side}Connector {conn!r} is no connector of {comp!r}")
         ends.append(f"{comp}.{conn}")
-    if len(element):
-        raise ScenarioError(f"{where}: {etree.QName(element[0]).localname}: transformations and other connection "
-                            f"contents are not supported")
-    return f"{ends[0]} -> {ends[1]}"
+    text = f"{ends[0]} -> {ends[1]}"
+    suppress = element.get("suppressUnitConversion", "false")
+    if suppress not in ("true", "false", "1", "0"):
+        raise ScenarioError(f"{where}: suppressUnitConversion = {suppress!r}: expected true or false")
+    transformation = None
+    for child in element:
+        if not isinstance(child.tag, str):
+            continue
+        if child.tag == _q("ssc", "LinearTransformation") and transformation is None:
+            transformation = (_number(f"{where}: ssc:LinearTransformation", child.get("factor", "1"), "factor"),
+                              _number(f"{where}: ssc:LinearTransformation", child.get("offset", "0"), "offset"))
+        elif child.tag not in (_q("ssd", "ConnectionGeometry"), _q("ssd", "Annotations")):
+            raise ScenarioError(f"{where}: {etree.QName(child).localname}: not supported (of the "
+                                f"transformations, a connection may carry one ssc:LinearTransformation)")
+    if suppress in ("true", "1"):
+        if transformation is None:
+            return {"connect": text, "units": "unchecked"}
+        return {"connect": text, "factor": transformation[0], "offset": transformation[1]}
+    if transformation is None:
+        return text
+    # the connectors' units convert first, then the transformation: target = f (u_f source + u_o) + o
+    (start, start_connector), (end, end_connector) = (e.split(".", 1) for e in ends)
+    source_unit = components[start].get("units", {}).get(start_connector)
+    target_unit = components[end].get("units", {}).get(end_connector)
+    unit_factor, unit_offset = 1.0, 0.0
+    if source_unit and target_unit and source_unit != target_unit:
+        try:
+            unit_factor, unit_offset = units.conversion(units.unit_of(source_unit, ssd_units) or source_unit,
+                                                        units.unit_of(target_unit, ssd_units) or target_unit)
+        except CosimError as exc:
+            raise ScenarioError(f"{where}: {exc}") from None
+    factor, offset = transformation
+    return {"connect": text, "factor": factor * unit_factor, "offset": factor * unit_offset + offset}
 
 
 def _annotations(parent: etree._Element, type_: str) -> list[etree._Element]:
@@ -576,7 +671,8 @@ def _read_ssd(ssd_path: Path) -> _System:
         components[name] = entry
     if not components:
         raise ScenarioError(f"ssd:System {system.get('name')!r}: no ssd:Component (an FMU) in its ssd:Elements")
-    connections = [_connection(f"ssd:Connection {i}", c, components)
+    ssd_units = _ssd_units(root)
+    connections = [_connection(f"ssd:Connection {i}", c, components, ssd_units)
                    for i, c in enumerate(system.findall("ssd:Connections/ssd:Connection", NS), 1)]
 
     start = stop = step = None

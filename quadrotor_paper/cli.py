@@ -130,7 +130,8 @@ def _cmd_run(args) -> int:
     write_json(out / "summary.json", summary)
     simulated = result.time[-1] - result.time[0] if summary["rows"] else 0.0
     lines = [f"# Run of {scenario.name}", "", scenario.description, "",
-             f"- status: {summary['status']}" + (f" ({summary['error']})" if summary["error"] else ""),
+             f"- status: {summary['status']}" + (f" ({summary['error']})" if summary["error"] else "")
+             + (f", ended early: {summary['terminated']}" if summary.get("terminated") else ""),
              f"- seed: {summary['seed']}, controller: {summary['variant']}",
              f"- simulated {simulated:.2f} s in {summary['wall_time_s']:.3f} s "
              f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
@@ -545,7 +546,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
     r.add_argument("--variant", choices=variant_names(), help="controller variant")
     r.add_argument("--no-plots", action="store_true")
-    r.add_argument("--profile", action="store_true", help="time each phase of the loop (summary.json: cost_per_step_us)")
+    r.add_argument("--profile", action="store_true",
+                   help="time each phase of the loop (summary.json: cost_per_step_us; python_loop: why the "
+                        "compiled loop cannot run the plan)")
     r.add_argument("--save-learned", metavar="FILE", help="write the controller's learned state after the run")
     r.add_argument("--load-learned", metavar="FILE",
                    help="start the controller from a saved learned state (resume learning)")

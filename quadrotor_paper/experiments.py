@@ -78,8 +78,11 @@ def run_summary(scenario: Scenario, result) -> dict[str, Any]:
         "wall_time_s": result.wall_time,
         "real_time_factor": (result.time[-1] - result.time[0]) / result.wall_time if len(result.time) > 1 else None,
     }
+    if result.terminated is not None:  # an FMU ended the simulation early (not a failure)
+        summary["terminated"] = result.terminated
     if result.phase_times:
         summary["cost_per_step_us"] = {k: v / max(result.n_steps, 1) * 1e6 for k, v in result.phase_times.items()}
+        summary["python_loop"] = list(result.python_loop)  # why the compiled loop could not run it (empty: it could)
     position, reference = metric_signals(scenario)
     if position and len(result.time):
         e = euclidean_error(result, position, reference)

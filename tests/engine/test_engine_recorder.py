@@ -34,7 +34,7 @@ def test_header_and_running_sidecar_are_written_at_once(tmp_path):
     path = tmp_path / "deep" / "dir" / "results.csv"  # parents are made
     rec = Recorder(["time", "a"], ["s", "m"], 5, path, block_rows=2, meta={"step": 0.1, "seed": 4})
     assert path.read_text() == "time,a\n"
-    assert sidecar(path) == {"columns": ["time", "a"], "units": ["s", "m"], "rows": 0, "status": "running",
+    assert sidecar(path) == {"columns": ["time", "a"], "units": ["s", "m"], "types": ["Float64", "Float64"], "rows": 0, "status": "running",
                              "error": None, "step": 0.1, "seed": 4}
     rec.close()
 

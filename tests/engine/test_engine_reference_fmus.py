@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description, simulate_fmu
 
+from cosim.recorder import read_results
 from quadrotor_paper.cli import main
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
@@ -39,13 +40,21 @@ def fmu(version: int, model: str) -> Path:
 
 
 def experiment(version: int, model: str) -> tuple[float, float]:
-    """(step, stop time) of the model's default experiment."""
+    """(step, stop time) of the model's default experiment; a step it does
+    not give is the spacing of the published results."""
     de = read_model_description(str(fmu(version, model))).defaultExperiment
-    return float(de.stepSize), float(de.stopTime)
+    step = float(de.stepSize) if de.stepSize else float(np.diff(published(model)["time"][:2])[0])
+    return step, float(de.stopTime)
 
 
 def outputs(version: int, model: str) -> list[str]:
-    return [v.name for v in read_model_description(str(fmu(version, model))).modelVariables if v.causality == "output"]
+    """The model's outputs as recorded signals (an array's elements, 1-based)."""
+    names = []
+    for v in read_model_description(str(fmu(version, model))).modelVariables:
+        if v.causality == "output":
+            size = int(v.dimensions[0].start or v.dimensions[0].variable.start) if v.dimensions else 0
+            names += [f"{v.name}[{i}]" for i in range(1, size + 1)] if size else [v.name]
+    return names
 
 
 def published(model: str) -> np.ndarray:
@@ -58,28 +67,31 @@ def toml_value(value) -> str:
     return json.dumps(value)
 
 
-def fly(tmp_path: Path, version: int, model: str, step: float, stop: float, **fmu_keys) -> dict[str, np.ndarray]:
-    """``fnn-cosim run`` of a one-FMU scenario recording every output; the columns of its results.csv."""
-    names = outputs(version, model)
+def fly(tmp_path: Path, version: int, model: str, step: float, stop: float, names=None,
+        **fmu_keys) -> dict[str, np.ndarray]:
+    """``fnn-cosim run`` of a one-FMU scenario recording ``names`` (default:
+    every output); the columns of its results.csv, and its summary."""
+    names = names or outputs(version, model)
     lines = ["[simulation]", f"duration = {stop!r}", f"step = {step!r}", "", f"[fmus.{model}]",
              f"path = {json.dumps(str(fmu(version, model)))}"]
     lines += [f"{key} = {toml_value(value)}" for key, value in fmu_keys.items()]
     lines += ["", "[record]", f"signals = {json.dumps([f'{model}.{n}' for n in names])}"]
     scenario = tmp_path / f"{model}.toml"
     scenario.parent.mkdir(parents=True, exist_ok=True)
-    scenario.write_text("connections = []\n\n" + "\n".join(lines) + "\n")
+    scenario.write_text("\n".join(lines) + "\n")
     out = tmp_path / "out"
     assert main(["run", str(scenario), "--out", str(out), "--no-plots", "--quiet"]) == 0
-    header = (out / "results.csv").read_text().split("\n", 1)[0].split(",")
-    rows = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1, ndmin=2)
+    header, rows = read_results(out / "results.csv")
     columns = dict(zip(header, rows.T))
-    return {"time": columns["time"], **{n: columns[f"{model}.{n}"] for n in names}}
+    return {"time": columns["time"], **{n: columns[f"{model}.{n}"] for n in names},
+            "summary": json.loads((out / "summary.json").read_text())}
 
 
 def worst(ours: dict[str, np.ndarray], theirs, names=None) -> float:
     """The largest difference of any output (of those in ``theirs``), relative
     to that output's largest magnitude."""
     names = names or [n for n in theirs.dtype.names if n != "time"]
+    theirs = {n: np.asarray(theirs[n], dtype=float) for n in names}
     return max(float(np.max(np.abs(ours[n] - theirs[n])) / max(np.max(np.abs(theirs[n])), 1e-300)) for n in names)
 
 
@@ -149,7 +161,7 @@ def test_a_start_value_of_a_state_is_set_by_the_standard(tmp_path):
 ])
 def test_a_start_value_the_standard_forbids_is_one_line(tmp_path, capsys, start, message):
     scenario = tmp_path / "ball.toml"
-    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.BouncingBall]\n'
+    scenario.write_text(f'[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.BouncingBall]\n'
                         f'path = {json.dumps(str(fmu(3, "BouncingBall")))}\nstart = {toml_value(start)}\n')
     assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
@@ -161,7 +173,7 @@ def test_an_fmu_that_chatters_is_stopped_naming_the_time_and_the_fmu(tmp_path, c
     one, with BouncingBall's bounces coming ever faster): one line with the
     FMU, the time and the reason; the rows before it are kept."""
     scenario = tmp_path / "ball.toml"
-    scenario.write_text(f'connections = []\n[simulation]\nduration = 3.0\nstep = 0.5\n[fmus.Ball]\n'
+    scenario.write_text(f'[simulation]\nduration = 3.0\nstep = 0.5\n[fmus.Ball]\n'
                         f'path = {json.dumps(str(fmu(2, "BouncingBall")))}\ninterface = "ModelExchange"\n'
                         f'solver = {{ max_events = 1 }}\n[record]\nsignals = ["Ball.h"]\n')
     assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 1
@@ -174,7 +186,7 @@ def test_an_fmu_that_chatters_is_stopped_naming_the_time_and_the_fmu(tmp_path, c
 
 def test_an_euler_step_that_does_not_divide_the_communication_step_is_refused(tmp_path, capsys):
     scenario = tmp_path / "ball.toml"
-    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Ball]\n'
+    scenario.write_text(f'[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Ball]\n'
                         f'path = {json.dumps(str(fmu(2, "BouncingBall")))}\ninterface = "ModelExchange"\n'
                         f'solver = {{ method = "euler", step = 0.003 }}\n')
     assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
@@ -184,7 +196,67 @@ def test_an_euler_step_that_does_not_divide_the_communication_step_is_refused(tm
 
 def test_scheduled_execution_only_is_refused_by_name(tmp_path, capsys):
     scenario = tmp_path / "clocks.toml"
-    scenario.write_text(f'connections = []\n[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Clocks]\n'
+    scenario.write_text(f'[simulation]\nduration = 1.0\nstep = 0.01\n[fmus.Clocks]\n'
                         f'path = {json.dumps(str(fmu(3, "Clocks")))}\n')
     assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
     assert "neither Co-Simulation nor Model Exchange (Scheduled Execution only" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("interface", ["CoSimulation", "ModelExchange"])
+def test_integer_outputs_and_resources_give_the_published_results(tmp_path, version, interface):
+    """Resource reads its output from a file in the FMU's resources folder;
+    Stair counts with time events (Model Exchange: Euler at its 0.2 s step)
+    and asks to end the simulation at 9 s, in the step from 8.8 s: the run
+    ends, status ok, at 8.8 s, where fmpy's Model Exchange run ends too
+    (fmpy's Co-Simulation records one more row, at 9 s)."""
+    keys = {"interface": interface}
+    step, stop = experiment(version, "Resource")
+    ours = fly(tmp_path / "resource", version, "Resource", step, stop, **keys)
+    assert worst(ours, published("Resource")) == 0.0
+    step, stop = experiment(version, "Stair")
+    if interface == "ModelExchange":
+        keys["solver"] = {"method": "euler", "step": EULER_STEP["Stair"]}
+    ours, theirs = fly(tmp_path / "stair", version, "Stair", step, stop, **keys), published("Stair")
+    assert ours["summary"]["status"] == "ok" and "asked to terminate the simulation" in ours["summary"]["terminated"]
+    assert ours["time"][-1] == pytest.approx(8.8) and len(ours["time"]) == len(theirs) - 1
+    np.testing.assert_array_equal(ours["counter"], theirs["counter"][:-1])
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("solver", ["CVode", "Euler"])
+def test_stairs_counter_steps_at_fmpys_times(tmp_path, version, solver):
+    step, stop = experiment(version, "Stair")
+    ours = fly(tmp_path, version, "Stair", step, stop, interface="ModelExchange",
+               solver={"method": solver.lower(), "step": EULER_STEP["Stair"]} if solver == "Euler" else {})
+    theirs = simulate_fmu(str(fmu(version, "Stair")), fmi_type="ModelExchange", solver=solver, output_interval=step,
+                          stop_time=stop, record_events=False)
+    np.testing.assert_allclose(ours["time"], theirs["time"], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(ours["counter"], theirs["counter"])
+
+
+def test_state_space_arrays_in_model_exchange_land_on_fmpys_cvode_run(tmp_path):
+    """StateSpace (FMI 3.0): arrays sized by structural parameters, its
+    state vector integrated by the master, every element recorded."""
+    step, stop = experiment(3, "StateSpace")
+    ours = fly(tmp_path, 3, "StateSpace", step, stop, interface="ModelExchange",
+               solver={"relative_tolerance": CVODE_TOLERANCE})
+    theirs = simulate_fmu(str(fmu(3, "StateSpace")), fmi_type="ModelExchange", solver="CVode",
+                          relative_tolerance=CVODE_TOLERANCE, output_interval=step, stop_time=stop, record_events=False)
+    names = outputs(3, "StateSpace")
+    assert names == ["y[1]", "y[2]", "y[3]"]
+    flat = {f"y[{i + 1}]": theirs["y"][:, i] for i in range(3)}
+    assert max(float(np.max(np.abs(ours[n] - flat[n])) / np.max(np.abs(flat[n]))) for n in names) <= 1e-6
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_feedthrough_in_model_exchange_gives_its_published_numbers(tmp_path, version):
+    """Every numeric output of Feedthrough (no input connected: its start
+    values) read from a Model Exchange instance, as published."""
+    theirs = published("Feedthrough")
+    names = [n for n in outputs(version, "Feedthrough") if n in theirs.dtype.names
+             and not n.startswith(("String", "Binary", "Boolean"))]
+    assert len(names) >= 3
+    step, stop = experiment(version, "Feedthrough")
+    ours = fly(tmp_path, version, "Feedthrough", step, stop, names=names, interface="ModelExchange")
+    assert worst(ours, theirs, names) == 0.0

@@ -319,8 +319,11 @@ BAD_SSDS = [
     (lambda r: _connection(r, 1).set("endConnector", "w"), "ssd:Connection 1: endConnector 'w' is no connector of 'B'"),
     (lambda r: _connection(r, 1).attrib.pop("startElement"),
      "ssd:Connection 1: no startElement: connections to the system's own connectors are not supported"),
-    (lambda r: _add(_connection(r, 2), "ssc", "LinearTransformation", factor="2"),
-     "ssd:Connection 2: LinearTransformation: transformations and other connection contents are not supported"),
+    (lambda r: _add(_connection(r, 2), "ssc", "BooleanMappingTransformation"),
+     "ssd:Connection 2: BooleanMappingTransformation: not supported (of the transformations, a connection may "
+     "carry one ssc:LinearTransformation)"),
+    (lambda r: _add(_connection(r, 2), "ssc", "LinearTransformation", factor="x"),
+     "ssd:Connection 2: ssc:LinearTransformation: factor = 'x' is not a number"),
     (lambda r: _component(r, "B").set("source", "resources/Missing.fmu"),
      "ssd:Component 'B': source 'resources/Missing.fmu': no such file in the archive"),
     (lambda r: _component(r, "B").set("source", "https://example.org/B.fmu"),

@@ -127,7 +127,8 @@ def test_fmu_outputs_reach_python_components_at_the_same_time(fmus):
     ("Quadrotor.wind_x -> Quadrotor.wind_y", "source Quadrotor.wind_x is an input, not an output"),
     ("WindGust.v_wind_x -> Quadrotor.x", "destination Quadrotor.x is an output, not an input"),
     ("WindGust.v_wind_x -> Quadrotor.m", "destination Quadrotor.m is a parameter, not an input"),
-    ("WindGust.v_wind_x -> Quadrotor.Omega_1", "unit mismatch, WindGust.v_wind_x is in m/s but Quadrotor.Omega_1 is in rad/s"),
+    ("WindGust.v_wind_x -> Quadrotor.Omega_1", "unit mismatch, WindGust.v_wind_x is in m/s (SI m.s-1) but "
+                                               "Quadrotor.Omega_1 is in rad/s (SI s-1.rad), not one quantity"),
     ("WindGust.v_wind_x", "must be a string 'A.out -> B.in'"),
 ])
 def test_bad_connection_is_refused_naming_it(fmus, connection, message):
