@@ -384,6 +384,8 @@ class FmuComponent:
         ticks at every communication point; ``None`` for an FMU without one.
     """
 
+    _abandoned: list = []  # instances that returned fmiFatal, never freed (close), with what they call back
+
     def __init__(self, name: str, path: str | Path, validate: bool = False,
                  parameters: Mapping[str, float] | None = None, seed_parameter: str | None = None,
                  seed_stream: int = 0, interface: str | None = None, solver=None):
@@ -430,6 +432,7 @@ class FmuComponent:
         self.logger = logging.getLogger(f"{FMU_LOGGER}.{name}")
         self._log_level = logging.WARNING  # the logger's, read at instantiation
         self._hidden: tuple[tuple[str, str], ...] = ()  # (the extraction folder as written, what stands for it)
+        self._fatal = False  # the FMU returned fmiFatal: no call may follow
         self._slave = None
         self._unzipdir: Path | None = None
         self._owns_unzipdir = False
@@ -682,16 +685,23 @@ class FmuComponent:
         self._apply_log_level()
 
     def close(self) -> None:
-        """Free the instance and remove what :meth:`instantiate` extracted."""
+        """Free the instance and remove what :meth:`instantiate` extracted.
+        An instance that returned ``fmiFatal`` is left alone: after it the
+        standard allows no call, ``fmiXFreeInstance`` included (FMI 2.0
+        section 2.1.3, FMI 3.0 section 2.2.3), and a PythonFMU freed then
+        corrupts the embedded interpreter; its library stays loaded."""
         if self._slave is not None:
-            try:
-                self._slave.terminate()
-            except Exception:
-                pass
-            try:
-                self._slave.freeInstance()
-            except Exception:
-                pass
+            if not self._fatal:
+                try:
+                    self._slave.terminate()
+                except Exception:
+                    pass
+                try:
+                    self._slave.freeInstance()
+                except Exception:
+                    pass
+            else:
+                self._abandoned.append((self._slave, getattr(self, "_callbacks", None)))  # its callbacks stay valid
             self._slave = None
             self._integrator = None
         if self._owns_unzipdir and self._unzipdir is not None:
@@ -711,6 +721,8 @@ class FmuComponent:
         or what a caller found wrong) becomes this tool's exception: an
         :class:`~cosim.errors.FmuCallError` saying what was asked, and
         quoting the FMU's own log."""
+        if getattr(exc, "status", None) == 4:  # fmiFatal: no further call (close)
+            self._fatal = True
         when = f"at t = {t:.4f} s: " if t is not None else ""
         log = "; ".join(self.messages)
         return FmuCallError(self.name, self.path,

@@ -50,9 +50,10 @@ class Talker(Fmi2Slave):
         self.log(f"chatter at t = {current_time:g}")  # status OK
         if self.u > 10.0:
             self.log(f"u = {self.u:g} is large", Fmi2Status.warning)
-        if self.u < 0.0:  # refused with a message (an exception's text PythonFMU 0.7 does not pass on)
-            self.log(f"u = {self.u:g}: no row for it in {Path(__file__).parent / 'table.csv'}", Fmi2Status.error)
-            return False
+        if self.u < 0.0:  # an error: logged first (PythonFMU 0.7 does not pass an exception's text on)
+            message = f"u = {self.u:g}: no row for it in {Path(__file__).parent / 'table.csv'}"
+            self.log(message, Fmi2Status.error)
+            raise RuntimeError(message)
         self.y = 2.0 * self.u
         return True
 '''
