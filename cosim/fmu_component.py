@@ -14,8 +14,28 @@ instantiation and status checking (every failed call raises fmpy's
   step is one ``set`` of all inputs, one ``doStep`` and one ``get`` of all
   outputs, the values passing through preallocated numpy buffers with no
   per-step allocation;
-* the FMU's log messages are collected, and a failed call becomes an
-  :class:`~cosim.errors.FmuCallError` quoting them;
+* the FMU's own log: it is instantiated with logging on, filtered by the
+  level of the Python logger ``cosim.fmu.<instance>`` (:func:`fmu_log`,
+  ``fnn-cosim run --fmu-log debug``, which also asks the FMU for every log
+  category); its messages go to
+  that logger, the last ones are kept (:attr:`FmuComponent.messages`, every
+  message of status warning or worse whatever the level), and a failed call
+  becomes an :class:`~cosim.errors.FmuCallError` quoting them; no message
+  shows the temporary folder the FMU was extracted to (the FMU file's name
+  stands for it);
+* the one place FMI status codes become exceptions of this tool: fmpy's
+  ``FMICallException`` (raised by its wrappers and by the fast path, one
+  check) is turned into an :class:`~cosim.errors.FmuCallError` by
+  :meth:`FmuComponent._fail`, which every call of this module goes through;
+  no other module catches fmpy's exceptions or imports ``fmpy.fmi2``,
+  ``fmpy.fmi3`` or ``fmpy.extract``;
+* the one reader of the modelDescription's extras fmpy does not read
+  (annotations, the FMI 3.0 directional-derivative flag):
+  :meth:`FmuComponent._extras`;
+* the Model Exchange calls a linearizer needs (continuous states,
+  derivatives, nominals, event indicators, directional derivatives) and
+  the editing of a serialized FMU state on the live instance
+  (:meth:`FmuComponent.state_values`, :meth:`FmuComponent.state_with`);
 * a file that is no usable FMU (not a zip archive, a broken
   modelDescription.xml, no binary for this platform, an instantiation the FMU
   refuses) is an :class:`~cosim.errors.FmuLoadError` that names the file and
@@ -37,6 +57,7 @@ from __future__ import annotations
 
 import ctypes
 import itertools
+import logging
 import os
 import shutil
 import tempfile
@@ -57,7 +78,7 @@ from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
 from .units import Unit, definitions as unit_definitions
 
-__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "state_values", "state_with", "PERIOD_ANNOTATION"]
+__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "fmu_log", "LOG_LEVELS", "PERIOD_ANNOTATION"]
 
 # A sampled-data FMU declares the parameter that is its period, the one
 # communication step it takes (docs/fmi-export.md, "Sampled-data period"):
@@ -70,6 +91,65 @@ PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
 # FMI 2.0's types by their FMI 3.0 names: Real is a 64-bit float, Integer a
 # 32-bit int (fmi2Integer); the FMI 3.0 names are themselves (cosim.component.TYPES)
 _TYPE = {"Real": "Float64", "Integer": "Int32", **{t: t for t in TYPES}}
+
+# ---- the FMU's own log ---------------------------------------------------------------------------
+# Every instance logs to the logger "cosim.fmu.<instance>"; its effective level chooses what is kept and
+# shown (FmuComponent._log) and, at debug, asks the FMU for every category (FmuComponent._apply_log_level).
+# A library logs nowhere by itself: the NullHandler keeps Python's last-resort handler from printing FMU
+# warnings a run did not ask to see (fmu_log does).
+FMU_LOGGER = "cosim.fmu"
+logging.getLogger(FMU_LOGGER).addHandler(logging.NullHandler())
+LOG_LEVELS = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO, "debug": logging.DEBUG}
+# FMI status (fmi2Status, fmi3Status: OK, Warning, Discard, Error, Fatal, and FMI 2.0's Pending) -> label, level
+_STATUS_LABEL = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
+_STATUS_LEVEL = (logging.INFO, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
+
+
+class _Stderr(logging.StreamHandler):
+    """A handler writing to the ``sys.stderr`` of the moment (a test or an
+    application may replace it after the handler is made)."""
+
+    def __init__(self):
+        super().__init__()
+
+    @property
+    def stream(self):
+        import sys
+
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):  # StreamHandler.__init__ sets it; the property always answers sys.stderr
+        pass
+
+
+class _InstanceFormatter(logging.Formatter):
+    def format(self, record: logging.LogRecord) -> str:
+        instance = record.name.removeprefix(FMU_LOGGER + ".")
+        return f"fnn-cosim: fmu {instance}: {record.levelname.lower()}: {record.getMessage()}"
+
+
+def fmu_log(level: str, instance: str | None = None, stream=None) -> None:
+    """Show the FMUs' own log messages of ``level`` (``error``,
+    ``warning``, ``info``, ``debug``) and worse on ``stream`` (stderr), for
+    every FMU instance or only ``instance``; at ``debug``, instances made
+    afterwards ask their FMU for every log category.
+
+    The level is the Python logger's (``cosim.fmu`` or
+    ``cosim.fmu.<instance>``): an application that configures logging
+    itself sets the same level on the same logger.
+    """
+    if level not in LOG_LEVELS:
+        raise ScenarioError(f"FMU log level {level!r}: expected one of {', '.join(LOG_LEVELS)}")
+    logging.getLogger(FMU_LOGGER if instance is None else f"{FMU_LOGGER}.{instance}").setLevel(LOG_LEVELS[level])
+    root = logging.getLogger(FMU_LOGGER)
+    shown = [h for h in root.handlers if isinstance(h.formatter, _InstanceFormatter)]
+    if stream is not None or not shown:
+        handler = logging.StreamHandler(stream) if stream is not None else _Stderr()
+        handler.setFormatter(_InstanceFormatter())
+        for old in shown:  # one place the messages are shown
+            root.removeHandler(old)
+        root.addHandler(handler)
 
 _FMI2_LOGGER = None
 _FMI2_LOG_RECEIVERS: dict[int, weakref.WeakMethod] = {}
@@ -304,6 +384,8 @@ class FmuComponent:
         ticks at every communication point; ``None`` for an FMU without one.
     """
 
+    _abandoned: list = []  # instances that returned fmiFatal, never freed (close), with what they call back
+
     def __init__(self, name: str, path: str | Path, validate: bool = False,
                  parameters: Mapping[str, float] | None = None, seed_parameter: str | None = None,
                  seed_stream: int = 0, interface: str | None = None, solver=None):
@@ -347,6 +429,10 @@ class FmuComponent:
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
         self.feedthrough = self._feedthrough(md)
         self.messages: deque[str] = deque(maxlen=20)
+        self.logger = logging.getLogger(f"{FMU_LOGGER}.{name}")
+        self._log_level = logging.WARNING  # the logger's, read at instantiation
+        self._hidden: tuple[tuple[str, str], ...] = ()  # (the extraction folder as written, what stands for it)
+        self._fatal = False  # the FMU returned fmiFatal: no call may follow
         self._slave = None
         self._unzipdir: Path | None = None
         self._owns_unzipdir = False
@@ -430,12 +516,7 @@ class FmuComponent:
         (:data:`PERIOD_ANNOTATION`), or ``None`` for an FMU that declares
         none. fmpy does not read annotations, so the modelDescription (which
         fmpy has read already) is parsed here, entities and network off."""
-        if self.path.is_dir():
-            xml = (self.path / "modelDescription.xml").read_bytes()
-        else:
-            with zipfile.ZipFile(self.path) as archive:
-                xml = archive.read("modelDescription.xml")
-        root = etree.fromstring(xml, etree.XMLParser(resolve_entities=False, no_network=True))
+        root = self._extras()
         annotation = (f"VendorAnnotations/Tool[@name='{PERIOD_ANNOTATION}']" if self.fmi_version == 2 else
                       f"Annotations/Annotation[@type='{PERIOD_ANNOTATION}']")
         declaration = root.find(f"{annotation}/SampledData")
@@ -446,6 +527,33 @@ class FmuComponent:
             raise FmuLoadError(self.name, self.path, f"its {PERIOD_ANNOTATION} annotation declares "
                                f"periodParameter = {name!r}, which is no parameter of the FMU")
         return name
+
+    def _extras(self):
+        """The modelDescription's XML root, for what fmpy does not read
+        (annotations, FMI 3.0's ``providesDirectionalDerivatives``): the one
+        reader of these extras, parsed once, entities and network off (the
+        file's size was checked by :meth:`_read_model_description`)."""
+        root = getattr(self, "_extras_root", None)
+        if root is None:
+            if self.path.is_dir():
+                xml = (self.path / "modelDescription.xml").read_bytes()
+            else:
+                with zipfile.ZipFile(self.path) as archive:
+                    xml = archive.read("modelDescription.xml")
+            root = self._extras_root = etree.fromstring(xml, etree.XMLParser(resolve_entities=False,
+                                                                                no_network=True))
+        return root
+
+    @property
+    def provides_directional_derivatives(self) -> bool:
+        """The interface's flag (FMI 2.0 ``providesDirectionalDerivative``,
+        FMI 3.0 ``providesDirectionalDerivatives``). fmpy 0.3 reads FMI 3.0's
+        under FMI 2.0's singular name and so reports False: for FMI 3.0 the
+        attribute is read from the XML."""
+        if self.fmi_version == 2:
+            return bool(self.kind.providesDirectionalDerivative)
+        node = self._extras().find(self.interface)
+        return node is not None and node.get("providesDirectionalDerivatives") == "true"
 
     def _input_clock(self) -> int | None:
         """The input clock of a clocked FMI 3.0 FMU: one periodic input clock,
@@ -483,13 +591,52 @@ class FmuComponent:
 
     # ---- lifecycle ---------------------------------------------------------
 
+    def _hide_folder(self, text: str) -> str:
+        """``text`` with the temporary extraction folder (a path or a file
+        URI, as the FMU was given it) replaced by the FMU file's name: a
+        message never shows a temporary folder (docs/security.md)."""
+        for shown, name in self._hidden:
+            if shown in text:
+                text = text.replace(shown, name)
+        return text
+
     def _log(self, status: int, message: bytes | str) -> None:
-        text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
-        label = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][status] if 0 <= status < 6 else str(status)
-        self.messages.append(f"[{label}] {text}")
+        """One message of the FMU's own log: to the instance's logger, and
+        kept for the errors that quote it (every message of status warning or
+        worse; those of status OK only at level info or debug, when asked
+        for, so that chatter never pushes the reason out)."""
+        text = self._hide_folder(message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message))
+        known = 0 <= status < len(_STATUS_LABEL)
+        label = _STATUS_LABEL[status] if known else str(status)
+        level = _STATUS_LEVEL[status] if known else logging.ERROR
+        if level >= logging.WARNING or self._log_level <= logging.INFO:
+            self.messages.append(f"[{label}] {text}")
+        if self.logger.isEnabledFor(level):
+            self.logger.log(level, " ".join(text.split()))
+
+    def _apply_log_level(self) -> None:
+        """At level ``debug``, ask the FMU for every log category
+        (``fmiXSetDebugLogging(loggingOn, 0 categories)``: all of those its
+        LogCategories declare, FMI 2.0 section 2.1.5, FMI 3.0 section 2.3.2).
+        Below it the FMU logs as instantiated with logging on, and the level
+        filters in Python (:meth:`_log`): asking for fewer categories would
+        lose what some FMUs log under none (PythonFMU 0.7 reports a failed
+        step's exception without a category, and drops it once categories are
+        named), and an error must quote every message of status warning or
+        worse."""
+        if self._log_level > logging.DEBUG:
+            return
+        try:
+            self._slave.setDebugLogging(True, [])
+        except FMICallException as exc:  # a log refused is no reason to refuse the run: said, not raised
+            self.logger.warning("fmiSetDebugLogging(all categories) refused (%s)", exc)
 
     def instantiate(self) -> None:
-        """Extract (once) and instantiate the FMU; idempotent."""
+        """Extract (once, within the limits of :func:`cosim.files.extract_zip`)
+        and instantiate the FMU with logging on, then set its log categories
+        (:meth:`_apply_log_level`); idempotent. An instantiation the FMU
+        refuses is an :class:`~cosim.errors.FmuLoadError` quoting what the FMU
+        logged (e.g. a PythonFMU's ``ModuleNotFoundError``)."""
         if self._slave is not None:
             return
         if self.path.is_dir():
@@ -502,45 +649,60 @@ class FmuComponent:
             except ScenarioError as exc:
                 raise FmuLoadError(self.name, self.path, f"cannot extract the archive: {exc}") from None
             self._owns_unzipdir = True
+            folder = Path(self._unzipdir)
+            forms = {folder.as_uri(): self.path.name, str(folder): self.path.name,
+                     folder.resolve().as_uri(): self.path.name, str(folder.resolve()): self.path.name}
+            self._hidden = tuple(sorted(forms.items(), key=lambda kv: -len(kv[0])))  # the URI before the path
         md = self.model_description
         common = dict(guid=md.guid, unzipDirectory=str(self._unzipdir),
                       modelIdentifier=self.kind.modelIdentifier, instanceName=self.name)
         self.messages.clear()
+        self._log_level = self.logger.getEffectiveLevel()
+        model_exchange = self.interface == "ModelExchange"
         try:
             if self.fmi_version == 2:
                 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
-                slave = (FMU2Slave if self.interface == "CoSimulation" else FMU2Model)(**common)
+                slave = (FMU2Model if model_exchange else FMU2Slave)(**common)
                 self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
-                slave.instantiate(callbacks=self._callbacks)
+                slave.instantiate(callbacks=self._callbacks, loggingOn=True)
             else:
                 from fmpy.fmi3 import FMU3Model, FMU3Slave
 
                 log = lambda env, status, category, message: self._log(status, message)  # noqa: E731
-                if self.interface == "ModelExchange":
+                if model_exchange:
                     slave = FMU3Model(**common)
-                    slave.instantiate(logMessage=log)
+                    slave.instantiate(loggingOn=True, logMessage=log)
                 else:
                     slave = FMU3Slave(**common)
-                    slave.instantiate(eventModeUsed=self.clock is not None, logMessage=log)
+                    slave.instantiate(loggingOn=True, eventModeUsed=self.clock is not None, logMessage=log)
         except Exception as exc:  # fmpy raises plain Exceptions here; the FMU's log says why
-            self.close()
             said = "; ".join(self.messages)
-            raise FmuLoadError(self.name, self.path, f"instantiation failed: {said or exc}") from None
+            reason = self._hide_folder(said or str(exc))
+            self.close()
+            raise FmuLoadError(self.name, self.path, f"instantiation failed: {reason}") from None
         self._slave = slave
         self._api = _Api(slave, self.fmi_version, self.interface == "CoSimulation")
+        self._apply_log_level()
 
     def close(self) -> None:
-        """Free the instance and remove what :meth:`instantiate` extracted."""
+        """Free the instance and remove what :meth:`instantiate` extracted.
+        An instance that returned ``fmiFatal`` is left alone: after it the
+        standard allows no call, ``fmiXFreeInstance`` included (FMI 2.0
+        section 2.1.3, FMI 3.0 section 2.2.3), and a PythonFMU freed then
+        corrupts the embedded interpreter; its library stays loaded."""
         if self._slave is not None:
-            try:
-                self._slave.terminate()
-            except Exception:
-                pass
-            try:
-                self._slave.freeInstance()
-            except Exception:
-                pass
+            if not self._fatal:
+                try:
+                    self._slave.terminate()
+                except Exception:
+                    pass
+                try:
+                    self._slave.freeInstance()
+                except Exception:
+                    pass
+            else:
+                self._abandoned.append((self._slave, getattr(self, "_callbacks", None)))  # its callbacks stay valid
             self._slave = None
             self._integrator = None
         if self._owns_unzipdir and self._unzipdir is not None:
@@ -556,10 +718,17 @@ class FmuComponent:
 
     def _fail(self, what: str, exc: Exception, t: float | None = None, variable: str | None = None,
               value: float | None = None) -> FmuCallError:
+        """The one place an FMI call's error status (fmpy's ``FMICallException``,
+        or what a caller found wrong) becomes this tool's exception: an
+        :class:`~cosim.errors.FmuCallError` saying what was asked, and
+        quoting the FMU's own log."""
+        if getattr(exc, "status", None) == 4:  # fmiFatal: no further call (close)
+            self._fatal = True
         when = f"at t = {t:.4f} s: " if t is not None else ""
         log = "; ".join(self.messages)
         return FmuCallError(self.name, self.path,
-                            f"{when}{what} failed ({exc}); FMU log: {log or '(the FMU logged nothing)'}",
+                            self._hide_folder(f"{when}{what} failed ({exc}); FMU log: "
+                                              f"{log or '(the FMU logged nothing)'}"),
                             variable, value, log)
 
     def start(self, t0: float, parameters: Mapping[str, float] | None = None,
@@ -1053,6 +1222,149 @@ class FmuComponent:
         s = self._slave
         return (s.getReal, s.setReal) if self.fmi_version == 2 else (s.getFloat64, s.setFloat64)
 
+    # ---- values by name, FMU states on the live instance -----------------------------------------
+
+    def _references(self, names) -> list[int]:
+        missing = [n for n in names if n not in self.variables]
+        if missing:
+            raise KeyError(f"{self.path.name} has no variable(s) {missing}")
+        return [self.variables[n].valueReference for n in names]
+
+    def get_reals(self, names: Sequence[str], t: float | None = None) -> dict[str, float]:
+        """The Real/Float64 values of ``names`` (one get; a refusal is an
+        :class:`~cosim.errors.FmuCallError` quoting the FMU)."""
+        names = list(names)
+        if not names:
+            return {}
+        refs = self._references(names)
+        try:
+            return dict(zip(names, map(float, self.real_calls()[0](refs))))
+        except FMICallException as exc:
+            raise self._fail(f"getting {', '.join(names)}", exc, t) from None
+
+    def set_reals(self, values: Mapping[str, float], t: float | None = None, where: str = "") -> None:
+        """Set Real/Float64 variables by name, one by one so that a refusal
+        (an :class:`~cosim.errors.FmuCallError`) names the variable and the
+        value and quotes the FMU's reason; ``where`` says when (e.g. "in a
+        restored state")."""
+        refs = self._references(list(values))
+        set_real = self.real_calls()[1]
+        for ref, (name, value) in zip(refs, values.items()):
+            try:
+                set_real([ref], [float(value)])
+            except FMICallException as exc:
+                raise self._fail(f"setting {name} = {value!r}{' ' + where if where else ''}", exc, t, name,
+                                 value) from None
+
+    def in_state(self, fmu_state: bytes, work):
+        """``work()`` with the serialized ``fmu_state`` restored into this live
+        instance, whose own state is saved before and set back after
+        (``fmiXGetFMUState`` / ``fmiXSetFMUState``, FMI 2.0 section 2.1.8,
+        FMI 3.0 section 2.2.6): the instance goes on as if nothing happened, and
+        no other instance is made."""
+        if self._slave is None:
+            raise RuntimeError(f"{self.name}: start the instance before reading or editing an FMU state with it")
+        s = self._slave
+        self.messages.clear()
+        try:
+            saved = s.getFMUState()
+        except FMICallException as exc:
+            raise self._fail("saving the FMU state", exc) from None
+        tick = self._tick_pending
+        try:
+            self.restore_state(fmu_state)
+            return work()
+        finally:
+            try:
+                s.setFMUState(saved)
+                s.freeFMUState(saved)
+            except FMICallException as exc:
+                raise self._fail("setting back the FMU state it had", exc) from None
+            self._tick_pending = tick
+
+    def state_values(self, fmu_state: bytes, names: Sequence[str], t: float | None = None) -> dict[str, float]:
+        """The values of ``names`` in a serialized FMU state of this FMU (e.g.
+        a :class:`~cosim.master.Snapshot`'s), read on this live (started)
+        instance, which keeps its own state."""
+        return self.in_state(fmu_state, lambda: self.get_reals(names, t))
+
+    def state_with(self, fmu_state: bytes, values: Mapping[str, float], t: float | None = None) -> bytes:
+        """A serialized FMU state: ``fmu_state`` with ``values`` set (variables
+        the FMU lets an importer set, e.g. this project's discrete states),
+        serialized again, on this live instance, which keeps its own state. A
+        value the FMU refuses is an :class:`~cosim.errors.FmuCallError` naming
+        it."""
+        def edit():
+            self.set_reals(values, t, "in a restored state")
+            return self.serialize_state()
+        return self.in_state(fmu_state, edit)
+
+    # ---- Model Exchange: what a linearizer evaluates -------------------------------------------------
+    # (FMI 2.0 section 3.2.1, FMI 3.0 section 3.2: the Model Exchange calls on an instance made with
+    # interface="ModelExchange", after start(), in Continuous-Time Mode; sizes from the ModelStructure)
+
+    @property
+    def state_names(self) -> list[str]:
+        """The continuous states, in the order of the FMU's state vector."""
+        return [d.variable.derivative.name for d in self.model_description.derivatives]
+
+    @property
+    def derivative_names(self) -> list[str]:
+        return [d.variable.name for d in self.model_description.derivatives]
+
+    @property
+    def event_indicator_count(self) -> int:
+        return int(self.model_description.numberOfEventIndicators or 0)
+
+    def _vector(self, call, what: str, n: int | None = None) -> np.ndarray:
+        n = len(self.state_names) if n is None else n
+        out = np.zeros(n)
+        if n:
+            try:
+                call(out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), n)
+            except FMICallException as exc:
+                raise self._fail(what, exc) from None
+        return out
+
+    def continuous_states(self) -> np.ndarray:
+        return self._vector(self._slave.getContinuousStates, "getting the continuous states")
+
+    def set_continuous_states(self, x: np.ndarray) -> None:
+        x = np.ascontiguousarray(x, dtype=float)
+        if x.size:
+            try:
+                self._slave.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), x.size)
+            except FMICallException as exc:
+                raise self._fail("setting the continuous states", exc) from None
+
+    def derivatives(self) -> np.ndarray:
+        """The state derivatives at the states and inputs set."""
+        s = self._slave
+        return self._vector(s.getDerivatives if self.fmi_version == 2 else s.getContinuousStateDerivatives,
+                            "getting the state derivatives")
+
+    def nominals(self) -> np.ndarray:
+        """The nominal values of the continuous states (the FMU's, at this point)."""
+        return self._vector(self._slave.getNominalsOfContinuousStates, "getting the states' nominal values")
+
+    def event_indicators(self) -> np.ndarray:
+        s = self._slave
+        return self._vector(s.getEventIndicators, "getting the event indicators", self.event_indicator_count)
+
+    def directional_derivatives(self, unknowns: Sequence[str], knowns: Sequence[str]) -> np.ndarray:
+        """The Jacobian d unknowns / d knowns at the current point, one column
+        per known (``fmiXGetDirectionalDerivative`` with seed 1 on it: FMI 2.0
+        section 2.1.9, FMI 3.0 section 2.2.10), exact to round-off; requires
+        :attr:`provides_directional_derivatives`."""
+        out_refs, in_refs = self._references(unknowns), self._references(knowns)
+        columns = []
+        for ref, name in zip(in_refs, knowns):
+            try:
+                columns.append(self._slave.getDirectionalDerivative(out_refs, [ref], [1.0]))
+            except FMICallException as exc:
+                raise self._fail(f"the directional derivative along {name}", exc) from None
+        return np.array(columns, dtype=float).reshape(len(in_refs), len(out_refs)).T
+
     def do_step(self, t: float, h: float) -> None:
         """Advance the FMU from ``t`` to ``t + h``; a clocked FMU computes the
         tick at ``t`` first, and must meet its next tick at ``t + h``."""
@@ -1138,47 +1450,4 @@ class FmuComponent:
                 self._api.get(self._out_vr, self._c_out, self._y_ptr)
             except FMICallException as exc:
                 raise self._call_failure(Call.GET, exc, t) from None
-
-
-def _with_state(path: str | Path, fmu_state: bytes, parameters: Mapping[str, float] | None, t: float, work):
-    """``work(component, get_real, set_real)`` on a Co-Simulation instance of
-    ``path`` started with ``parameters`` at ``t``, ``fmu_state`` restored."""
-    comp = FmuComponent("state", path)
-    try:
-        comp.start(t, parameters)
-        comp.restore_state(fmu_state)
-        return work(comp, *comp.real_calls())
-    finally:
-        comp.close()
-
-
-def state_values(path: str | Path, fmu_state: bytes, names: Sequence[str],
-                 parameters: Mapping[str, float] | None = None, t: float = 0.0) -> dict[str, float]:
-    """The values of ``names`` in a serialized FMU state (e.g. a
-    :class:`~cosim.master.Snapshot`'s), read through an instance of ``path``
-    started with ``parameters`` (those the state was taken with)."""
-    def read(comp, get_real, set_real):
-        missing = [n for n in names if n not in comp.variables]
-        if missing:
-            raise KeyError(f"{comp.path.name} has no variable(s) {missing}")
-        return dict(zip(names, map(float, get_real([comp.variables[n].valueReference for n in names]))))
-    return _with_state(path, fmu_state, parameters, t, read)
-
-
-def state_with(path: str | Path, fmu_state: bytes, values: Mapping[str, float],
-               parameters: Mapping[str, float] | None = None, t: float = 0.0) -> bytes:
-    """A serialized FMU state: ``fmu_state`` with ``values`` set (variables the
-    FMU lets an importer set between steps, e.g. this project's discrete
-    states), serialized again. A value the FMU refuses is an
-    :class:`~cosim.errors.FmuCallError` naming it."""
-    def edit(comp, get_real, set_real):
-        for name, value in values.items():
-            try:
-                set_real([comp.variables[name].valueReference], [float(value)])
-            except KeyError:
-                raise KeyError(f"{comp.path.name} has no variable {name!r}") from None
-            except FMICallException as exc:
-                raise comp._fail(f"setting {name} = {value!r} in a restored state", exc, t, name, value) from None
-        return comp.serialize_state()
-    return _with_state(path, fmu_state, parameters, t, edit)
 

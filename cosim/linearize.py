@@ -30,19 +30,15 @@ the method used and an estimate of its error.
 """
 from __future__ import annotations
 
-import ctypes
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import control
 import numpy as np
-from fmpy import extract, read_model_description
-from fmpy.fmi1 import FMICallException
 
-from .errors import FmuCallError
-from .fmu_component import FmuComponent, state_values
+from .errors import FmuCallError, FmuLoadError
+from .fmu_component import FmuComponent
 
 __all__ = ["Linearization", "LinearizationError", "linearize_fmu", "save_linearization", "METHODS"]
 
@@ -144,7 +140,7 @@ def _central(evaluate, base: np.ndarray, scales: np.ndarray) -> tuple[np.ndarray
 def linearize_fmu(path: str | Path, *, start: Mapping[str, float] | None = None,
                   inputs: Mapping[str, float] | None = None, parameters: Mapping[str, float] | None = None,
                   fmu_state: bytes | None = None, t: float = 0.0, method: str = "auto",
-                  interface: str = "auto") -> Linearization:
+                  interface: str = "auto", instance: FmuComponent | None = None) -> Linearization:
     """Linearize the FMU at ``path`` at an operating point.
 
     ``parameters`` are set before initialization; ``start`` sets continuous
@@ -156,54 +152,91 @@ def linearize_fmu(path: str | Path, *, start: Mapping[str, float] | None = None,
     operating point is then the run's. For a sampled-data FMU it is restored
     and stepped; for Model Exchange a Co-Simulation instance restores it and
     its continuous states' values are read from it (``start`` may still
-    override some). ``method``:
+    override some). ``instance``: a live, started Co-Simulation instance of
+    the same FMU (e.g. a master's, :class:`~cosim.fmu_component.FmuComponent`)
+    that restores ``fmu_state`` instead of a new one, and is left in its own
+    state. ``method``:
     ``"auto"`` (directional derivatives where the FMU provides them),
     ``"derivatives"`` or ``"differences"``. ``interface``: ``"auto"`` (Model
     Exchange if the FMU has it and has continuous states, else
     Co-Simulation: a clocked sampled-data FMI 3.0 FMU also
     declares Model Exchange, where its ticks are time events and it has no
     continuous state to linearize), ``"me"`` or ``"cs"``.
+
+    Every instance is an :class:`~cosim.fmu_component.FmuComponent`: the FMU
+    is extracted within the limits of :mod:`cosim.files` (an archive beyond
+    them is refused in one line, an :class:`~cosim.errors.FmuLoadError`),
+    and a refused call quotes the FMU's own log.
     """
     path = Path(path)
     if method not in METHODS:
         raise LinearizationError(f"method {method!r}: not one of {', '.join(METHODS)}")
     if not np.isfinite(t):
         raise LinearizationError(f"time t = {t!r}: not a finite number")
-    try:
-        md = read_model_description(str(path))
-    except Exception as exc:  # not a zip, broken XML: fmpy's message says which
-        raise LinearizationError(f"{path}: not a readable FMU ({type(exc).__name__}: {exc})") from None
-    variables = {v.name: v for v in md.modelVariables}
-    start, inputs, parameters = dict(start or {}), dict(inputs or {}), dict(parameters or {})
-    _check_values("input", inputs, variables, ("input",))
-    _check_values("parameter", parameters, variables, ("parameter",))
     if interface not in ("auto", "me", "cs"):
         raise LinearizationError(f"interface {interface!r}: not one of auto, me, cs")
-    if interface == "auto":
-        continuous = bool(md.derivatives)
-        interface = "me" if md.modelExchange is not None and continuous else "cs"
-    if interface == "me":
-        if md.modelExchange is None:
+    comp = _component(path, interface)
+    try:
+        variables = comp.variables
+        start, inputs, parameters = dict(start or {}), dict(inputs or {}), dict(parameters or {})
+        _check_values("input", inputs, variables, ("input",))
+        _check_values("parameter", parameters, variables, ("parameter",))
+        if comp.interface == "ModelExchange":
+            if fmu_state is not None:
+                start = _values_in_state(path, parameters, fmu_state, t, comp.state_names, instance) | start
+            return _linearize_me(path, comp, start, inputs, parameters, t, method)
+        if instance is not None and fmu_state is not None:  # the lent instance, left in its own state after
+            return instance.in_state(fmu_state, lambda: _linearize_sampled(path, instance, start, inputs, parameters,
+                                                                           None, t, method))
+        return _linearize_sampled(path, comp, start, inputs, parameters, fmu_state, t, method)
+    except FmuCallError as exc:
+        raise LinearizationError(f"{path.name}: an FMU call failed while linearizing ({exc})") from None
+    finally:
+        comp.close()
+
+
+def _component(path: Path, interface: str) -> FmuComponent:
+    """The instance to linearize with: Model Exchange (an instance evaluated,
+    never stepped) where asked, or, for ``auto``, where the FMU has it and has
+    continuous states; else Co-Simulation."""
+    def make(which):
+        try:
+            return FmuComponent("linearize", path, interface=which)
+        except FmuLoadError as exc:
+            if exc.setting != ("interface", which):  # a file that is no usable FMU: the master's one line
+                raise
+            return None
+
+    if interface != "cs":
+        comp = make("ModelExchange")
+        if comp is None and interface == "me":
             raise LinearizationError(f"{path.name}: no Model Exchange interface")
-        if fmu_state is not None:
-            names = [d.variable.derivative.name for d in md.derivatives]
-            start = _values_in_state(path, md, parameters, fmu_state, t, names) | start
-        return _linearize_me(path, md, variables, start, inputs, parameters, t, method)
-    if md.coSimulation is None:
+        if comp is not None and (interface == "me" or comp.state_names):
+            return comp
+        # no Model Exchange, or a clocked FMI 3.0 FMU's: no continuous state to linearize
+    comp = make("CoSimulation")
+    if comp is None:
         raise LinearizationError(f"{path.name}: no Co-Simulation interface")
-    return _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state, t, method)
+    return comp
 
 
-def _values_in_state(path: Path, md, parameters, fmu_state: bytes, t: float, names) -> dict[str, float]:
-    """``names``' values in a serialized Co-Simulation FMU state (a
-    Co-Simulation instance started with ``parameters``, the state restored)."""
-    if md.coSimulation is None or not md.coSimulation.canGetAndSetFMUstate:
+def _values_in_state(path: Path, parameters, fmu_state: bytes, t: float, names,
+                     instance: FmuComponent | None) -> dict[str, float]:
+    """``names``' values in a serialized Co-Simulation FMU state, read on
+    ``instance`` or on a Co-Simulation instance started with ``parameters``."""
+    cs = instance or FmuComponent("state", path)
+    if not cs.model_description.coSimulation or not cs.model_description.coSimulation.canGetAndSetFMUstate:
         raise LinearizationError(f"{path.name}: an FMU state is read through Co-Simulation, and this FMU cannot "
                                  "set its FMU state there")
     try:
-        return state_values(path, fmu_state, names, parameters, t)
+        if instance is None:
+            cs.start(t, parameters)
+        return cs.state_values(fmu_state, names, t)
     except FmuCallError as exc:
         raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
+    finally:
+        if instance is None:
+            cs.close()
 
 
 def _units(names, variables) -> dict[str, str]:
@@ -214,126 +247,52 @@ def _system(A, B, C, D, states, ins, outs, dt=0) -> control.StateSpace:
     return control.ss(A, B, C, D, dt, states=list(states), inputs=list(ins), outputs=list(outs))
 
 
-def _provides_derivatives(path: Path, version: int, me) -> bool:
-    """The Model Exchange interface's directional-derivative flag. fmpy
-    (0.3.x) reads FMI 3.0's ``providesDirectionalDerivatives`` under FMI
-    2.0's singular name and so reports False: read the attribute itself."""
-    if version == 2:
-        return bool(me.providesDirectionalDerivative)
-    import zipfile
-
-    from lxml import etree
-
-    if path.is_dir():
-        xml = (path / "modelDescription.xml").read_bytes()
-    else:
-        with zipfile.ZipFile(path) as archive:
-            xml = archive.read("modelDescription.xml")
-    node = etree.fromstring(xml, etree.XMLParser(resolve_entities=False, no_network=True)).find("ModelExchange")
-    return node is not None and node.get("providesDirectionalDerivatives") == "true"
+def _reals(md, causality: str) -> list[str]:
+    return [v.name for v in md.modelVariables if v.causality == causality and v.type in ("Real", "Float64")]
 
 
 # ---- Model Exchange ---------------------------------------------------------------------------
 
-def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> Linearization:
-    version = int(md.fmiVersion.split(".")[0])
-    me = md.modelExchange
-    provides = _provides_derivatives(path, version, me)
+def _linearize_me(path, comp: FmuComponent, start, inputs, parameters, t, method) -> Linearization:
+    md, variables = comp.model_description, comp.variables
+    provides = comp.provides_directional_derivatives
     if method == "derivatives" and not provides:
         raise LinearizationError(f"{path.name}: provides no directional derivatives (use differences)")
     use_dd = provides and method != "differences"
-    states = [d.variable.derivative for d in md.derivatives]
-    state_names = [s.name for s in states]
+    state_names = comp.state_names
     _check_states(start, variables, state_names, "continuous")
-    in_names = [v.name for v in md.modelVariables if v.causality == "input" and v.type in ("Real", "Float64")]
-    out_names = [v.name for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")]
-    vr = {n: v.valueReference for n, v in variables.items()}
-    der_vrs = [d.variable.valueReference for d in md.derivatives]
-    nx = len(states)
+    in_names, out_names = _reals(md, "input"), _reals(md, "output")
+    nx = len(state_names)
+    try:  # the inputs given are set in Initialization Mode; start() ends in Continuous-Time Mode
+        comp.start(t, parameters, inputs)
+    except FmuCallError as exc:
+        raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
+    x = comp.continuous_states()
+    for i, n in enumerate(state_names):
+        if n in start:
+            x[i] = float(start[n])
+    held = comp.get_reals([n for n in in_names if n not in inputs])
+    u = np.array([float(inputs[n]) if n in inputs else held[n] for n in in_names])
 
-    unzip = extract(str(path))
-    common = dict(guid=md.guid, unzipDirectory=unzip, modelIdentifier=me.modelIdentifier, instanceName="linearize")
-    fmu = None
-    try:
-        try:
-            if version == 2:
-                from fmpy.fmi2 import FMU2Model
-                fmu = FMU2Model(**common)
-                fmu.instantiate()
-                fmu.setupExperiment(startTime=t)
-                set_real, get_real = fmu.setReal, fmu.getReal
-            else:
-                from fmpy.fmi3 import FMU3Model
-                fmu = FMU3Model(**common)
-                fmu.instantiate()
-                set_real, get_real = fmu.setFloat64, fmu.getFloat64
-        except Exception as exc:  # fmpy raises plain Exceptions: no binary, a refused instantiation
-            fmu = None
-            raise LinearizationError(f"{path.name}: cannot instantiate it for Model Exchange ({exc})") from None
-        try:
-            for name, value in parameters.items():
-                set_real([vr[name]], [float(value)])
-            if version == 2:
-                fmu.enterInitializationMode()
-            else:
-                fmu.enterInitializationMode(startTime=t)
-            if inputs:
-                set_real([vr[n] for n in inputs], [float(v) for v in inputs.values()])
-            fmu.exitInitializationMode()
-            fmu.enterContinuousTimeMode()
-        except FMICallException as exc:
-            raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
-        x = np.zeros(nx)
-        if nx:
-            fmu.getContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), nx)
-        for i, n in enumerate(state_names):
-            if n in start:
-                x[i] = float(start[n])
-        u = np.array([float(inputs.get(n, get_real([vr[n]])[0])) for n in in_names])
+    def put(xv, uv):
+        comp.set_continuous_states(xv)
+        comp.set_reals(dict(zip(in_names, uv)))
 
-        def put(xv, uv):
-            xc = np.ascontiguousarray(xv, dtype=float)
-            if nx:
-                fmu.setContinuousStates(xc.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), nx)
-            if in_names:
-                set_real([vr[n] for n in in_names], [float(v) for v in uv])
-
+    put(x, u)
+    point = dict(zip(state_names, x)) | dict(zip(in_names, u)) | parameters
+    y0 = comp.get_reals(out_names)
+    if use_dd:
+        J = comp.directional_derivatives(comp.derivative_names + out_names, state_names + in_names)
+        error, how = 0.0, "directional derivatives"
+    else:
+        def evaluate(v):
+            put(v[:nx], v[nx:])
+            return np.concatenate([comp.derivatives(), np.fromiter(comp.get_reals(out_names).values(), float)])
+        base = np.concatenate([x, u])
+        scales = np.array([_scale(variables[n], b) for n, b in zip(state_names + in_names, base)])
+        J, error = _central(evaluate, base, scales)
         put(x, u)
-        point = dict(zip(state_names, x)) | dict(zip(in_names, u)) | parameters
-        y0 = dict(zip(out_names, map(float, get_real([vr[n] for n in out_names])))) if out_names else {}
-        if use_dd:
-            unknowns = der_vrs + [vr[n] for n in out_names]
-            knowns = [s.valueReference for s in states] + [vr[n] for n in in_names]
-            cols = [fmu.getDirectionalDerivative(unknowns, [k], [1.0]) for k in knowns]
-            J = np.array(cols, dtype=float).reshape(len(knowns), len(unknowns)).T
-            error, how = 0.0, "directional derivatives"
-        else:
-            def evaluate(v):
-                put(v[:nx], v[nx:])
-                dx = np.zeros(nx)
-                if nx:
-                    ptr = dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-                    if version == 2:
-                        fmu.getDerivatives(ptr, nx)
-                    else:
-                        fmu.getContinuousStateDerivatives(ptr, nx)
-                y = np.array(get_real([vr[n] for n in out_names])) if out_names else np.zeros(0)
-                return np.concatenate([dx, y])
-            base = np.concatenate([x, u])
-            scales = np.array([_scale(variables[n], b) for n, b in zip(state_names + in_names, base)])
-            J, error = _central(evaluate, base, scales)
-            put(x, u)
-            how = "central differences"
-    except FMICallException as exc:
-        raise LinearizationError(f"{path.name}: an FMU call failed while linearizing ({exc})") from None
-    finally:
-        if fmu is not None:
-            for release in (fmu.terminate, fmu.freeInstance):
-                try:
-                    release()
-                except Exception:  # an instance that failed to instantiate has nothing to release
-                    pass
-        shutil.rmtree(unzip, ignore_errors=True)
+        how = "central differences"
     A, B = J[:nx, :nx], J[:nx, nx:]
     C, D = J[nx:, :nx], J[nx:, nx:]
     system = _system(A, B, C, D, state_names, in_names, out_names)
@@ -342,69 +301,60 @@ def _linearize_me(path, md, variables, start, inputs, parameters, t, method) -> 
 
 # ---- Co-Simulation, sampled data ---------------------------------------------------------------
 
-def _linearize_sampled(path, md, variables, start, inputs, parameters, fmu_state, t, method) -> Linearization:
+def _linearize_sampled(path, comp: FmuComponent, start, inputs, parameters, fmu_state, t,
+                       method) -> Linearization:
+    """The one-period map on ``comp``: started here with ``parameters`` (and
+    ``fmu_state`` restored) unless it is a live instance already in the
+    state to linearize at (``fmu_state`` None and ``comp`` started)."""
     if method == "derivatives":
         raise LinearizationError(f"{path.name}: a Co-Simulation step has no directional derivatives here "
                                  "(use differences)")
-    cs = md.coSimulation
-    if not cs.canGetAndSetFMUstate:
+    md, variables = comp.model_description, comp.variables
+    if not md.coSimulation.canGetAndSetFMUstate:
         raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: it cannot get and "
                                  "set its FMU state")
-    comp = FmuComponent("linearize", path)
-    try:
-        if comp.sample_period is None:
-            raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: it declares no "
-                                     "sample period (a black-box Co-Simulation FMU, and no Model Exchange)")
-        z_names = [v.name for v in md.modelVariables if v.causality == "local" and v.variability == "discrete"
-                   and v.type in ("Real", "Float64")]
-        _check_states(start, variables, z_names, "discrete")
-        in_names = [v.name for v in md.modelVariables if v.causality == "input" and v.type in ("Real", "Float64")]
-        out_names = [v.name for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")]
+    if comp.sample_period is None:
+        raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: it declares no "
+                                 "sample period (a black-box Co-Simulation FMU, and no Model Exchange)")
+    z_names = [v.name for v in md.modelVariables if v.causality == "local" and v.variability == "discrete"
+               and v.type in ("Real", "Float64")]
+    _check_states(start, variables, z_names, "discrete")
+    in_names, out_names = _reals(md, "input"), _reals(md, "output")
+    if comp._slave is None:  # a new instance (not a live one lent by the caller)
         try:
             comp.start(t, parameters)
             if fmu_state is not None:
                 comp.restore_state(fmu_state)
         except FmuCallError as exc:
             raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
-        get_real, set_real = comp.real_calls()
-        vr = {n: v.valueReference for n, v in variables.items()}
-        period = float(parameters.get(comp.sample_period, get_real([vr[comp.sample_period]])[0]))
-        z = np.array(get_real([vr[n] for n in z_names])) if z_names else np.zeros(0)
-        for i, n in enumerate(z_names):
-            if n in start:
-                z[i] = float(start[n])
-        u = np.array([float(inputs.get(n, get_real([vr[n]])[0])) for n in in_names])
-        if z_names:
-            try:
-                set_real([vr[n] for n in z_names], list(z))
-            except FMICallException:
-                said = "; ".join(comp.messages)
-                raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: its discrete "
-                                         f"states cannot be set ({said or 'refused'}) and it provides no "
-                                         "derivatives of its step") from None
-        base_state = comp.serialize_state()
-        nz = len(z_names)
+    period = float(parameters.get(comp.sample_period, comp.get_reals([comp.sample_period])[comp.sample_period]))
+    z = np.fromiter(comp.get_reals(z_names).values(), float, len(z_names))
+    for i, n in enumerate(z_names):
+        if n in start:
+            z[i] = float(start[n])
+    held = comp.get_reals([n for n in in_names if n not in inputs])
+    u = np.array([float(inputs[n]) if n in inputs else held[n] for n in in_names])
+    try:
+        comp.set_reals(dict(zip(z_names, z)))
+    except FmuCallError:
+        said = "; ".join(comp.messages)
+        raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: its discrete "
+                                 f"states cannot be set ({said or 'refused'}) and it provides no "
+                                 "derivatives of its step") from None
+    base_state = comp.serialize_state()
+    nz = len(z_names)
 
-        def evaluate(v):
-            comp.restore_state(base_state)
-            if nz:
-                set_real([vr[n] for n in z_names], list(v[:nz]))
-            if in_names:
-                set_real([vr[n] for n in in_names], list(v[nz:]))
-            y = np.array(get_real([vr[n] for n in out_names])) if out_names else np.zeros(0)
-            comp.do_step(t, period)
-            z_next = np.array(get_real([vr[n] for n in z_names])) if nz else np.zeros(0)
-            return np.concatenate([z_next, y])
+    def evaluate(v):
+        comp.restore_state(base_state)
+        comp.set_reals(dict(zip(z_names, v[:nz])) | dict(zip(in_names, v[nz:])))
+        y = np.fromiter(comp.get_reals(out_names).values(), float, len(out_names))
+        comp.do_step(t, period)
+        return np.concatenate([np.fromiter(comp.get_reals(z_names).values(), float, nz), y])
 
-        base = np.concatenate([z, u])
-        scales = np.array([_scale(variables[n], b) for n, b in zip(z_names + in_names, base)])
-        try:
-            y0 = dict(zip(out_names, map(float, evaluate(base)[nz:])))
-            J, error = _central(evaluate, base, scales)
-        except (FMICallException, FmuCallError) as exc:
-            raise LinearizationError(f"{path.name}: an FMU call failed while linearizing ({exc})") from None
-    finally:
-        comp.close()
+    base = np.concatenate([z, u])
+    scales = np.array([_scale(variables[n], b) for n, b in zip(z_names + in_names, base)])
+    y0 = dict(zip(out_names, map(float, evaluate(base)[nz:])))
+    J, error = _central(evaluate, base, scales)
     A, B = J[:nz, :nz], J[:nz, nz:]
     C, D = J[nz:, :nz], J[nz:, nz:]
     point = dict(zip(z_names, z)) | dict(zip(in_names, u)) | parameters

@@ -3,7 +3,7 @@
 Subcommands::
 
     fnn-cosim run SCENARIO|FILE.ssp [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots]
-                 [--profile] [--save-learned FILE] [--load-learned FILE]
+                 [--profile] [--save-learned FILE] [--load-learned FILE] [--fmu-log [INSTANCE=]LEVEL]
     fnn-cosim export-ssp SCENARIO --out FILE.ssp [--set KEY=VALUE ...]
     fnn-cosim table2 [--out DIR] [--seeds 10] [--winds 1,3,5] [--duration S] [--workers 2] [--scheduler ADDRESS]
     fnn-cosim table3 [--out DIR] [--seeds 10] [--duration S] [--workers 2] [--scheduler ADDRESS]
@@ -479,6 +479,27 @@ def _worker_timeout(parser) -> None:
                              f"'forever': wait)")
 
 
+def fmu_log_option(parser) -> None:
+    """``--fmu-log [INSTANCE=]LEVEL`` (repeatable): show the FMUs' own log
+    messages of LEVEL and worse on stderr, and ask the FMUs for the log
+    categories of that level (:func:`cosim.fmu_component.fmu_log`)."""
+    parser.add_argument("--fmu-log", action="append", default=[], metavar="[INSTANCE=]LEVEL",
+                        help="show the FMUs' own log (error, warning, info, debug; default: none shown, errors "
+                             "quote it), for every FMU or one instance (repeatable); with --workers > 1 it "
+                             "applies to the FMUs run in this process")
+
+
+def _apply_fmu_log(values: Sequence[str]) -> None:
+    from cosim.errors import ScenarioError
+    from cosim.fmu_component import LOG_LEVELS, fmu_log
+
+    for value in values:
+        instance, _, level = value.rpartition("=")
+        if level.strip() not in LOG_LEVELS:
+            raise ScenarioError(f"--fmu-log {value}: expected [INSTANCE=]LEVEL, LEVEL one of {', '.join(LOG_LEVELS)}")
+        fmu_log(level.strip(), instance.strip() or None)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with its refusals in the tool's one line (exit 2: nothing ran)."""
 
@@ -498,6 +519,7 @@ def _parser() -> argparse.ArgumentParser:
 
     def common(sp, seeds=True):
         sp.add_argument("--out", help="output directory (default: under results/)")
+        fmu_log_option(sp)
         sp.add_argument("--quiet", action="store_true", help="no progress bar")
         if seeds:
             sp.add_argument("--seeds", type=int, help="runs per cell of the variants' rows, seeds 0..N-1 "
@@ -598,6 +620,7 @@ def _parser() -> argparse.ArgumentParser:
     lz.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="override a value of --scenario (repeatable)")
     lz.add_argument("--out", default=None, help="output directory (default results/linearize)")
+    fmu_log_option(lz)
     lz.set_defaults(func=_cmd_linearize)
 
     # the subcommand's own module: argparse only; python-control loads when it runs
@@ -612,6 +635,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     args = _parser().parse_args(argv)
     try:
+        _apply_fmu_log(getattr(args, "fmu_log", ()))
         return args.func(args)
     except CosimError as exc:
         if args.debug:

@@ -10,16 +10,13 @@ One file format for both forms of the controller, a JSON document::
 (:func:`fnn_controller.step.state_ports`: the learned parameters of
 each axis, then the velocity controller's previous R*). The Python fast path
 reads and writes the state directly. The controller FMU is read and written
-**through FMU state serialization**: after initialization its serialized
-state is taken, the saved values are written into it at the offsets of
-their value references, and it is restored (the FMU's own parameters, seed
-and clock untouched); after a run its serialized state is read the same way.
-The serialized state of this project's FMUs ends with every variable's value
-in value-reference order (``fmu_core.h``, ``CoreState``), which is what makes
-the offsets known. The FMU checks a restored state like any input (its
-model, its size, its values: ``docs/fmi-export.md``); a state it refuses is
-a one-line :class:`~cosim.errors.FmuCallError` quoting its log
-(:meth:`~cosim.fmu_component.FmuComponent.restore_state`).
+**through FMI calls on the live instance**: after initialization the saved
+values are set by name (its learned state is made of local variables an
+importer may set between steps, docs/stability.md "Discrete states"; the
+FMU's own parameters, seed and clock untouched); after a run they are read
+by name. The FMU checks a value set like any input (``docs/fmi-export.md``);
+a value it refuses is a one-line :class:`~cosim.errors.FmuCallError` naming
+it and quoting its log (:meth:`~cosim.fmu_component.FmuComponent.set_reals`).
 """
 from __future__ import annotations
 
@@ -93,43 +90,29 @@ def load_learned(path: str | Path, variant: str) -> np.ndarray:
     return np.asarray(doc.state, dtype=float)
 
 
-# ---- the FMU form: through its serialized state ---------------------------------------------------
-
-def _offsets(fmu: FmuComponent, size: int, names: list[str]) -> np.ndarray:
-    """Byte offsets of ``names`` in ``fmu``'s serialized state (its values are
-    the last 8 N bytes, N the number of Float64 variables, in value-reference
-    order; an FMI 3.0 clock's value reference comes after them)."""
-    n_variables = max(v.valueReference for v in fmu.variables.values() if v.type != "Clock") + 1
-    header = size - 8 * n_variables
-    if header < 0:
-        raise ScenarioError(f"{fmu.name} ({fmu.path}): its serialized state is no state of this project's FMUs")
-    return np.array([header + 8 * fmu.variables[n].valueReference for n in names])
-
+# ---- the FMU form: by FMI calls on the live instance ---------------------------------------------
 
 def state_of(fmu: FmuComponent, variant: str) -> np.ndarray:
-    """The controller state of a controller FMU, read from its serialized state."""
+    """The controller state of a (started) controller FMU, read by name."""
     names = _names(variant)
-    blob = fmu.serialize_state()
-    return np.array([np.frombuffer(blob, dtype="<f8", count=1, offset=int(o))[0]
-                     for o in _offsets(fmu, len(blob), names)])
+    values = fmu.get_reals(names)
+    return np.array([values[n] for n in names])
 
 
 class LearnedControllerFmu(FmuComponent):
     """A controller FMU that starts from a saved state: after each
-    initialization, ``state`` is written into its serialized FMU state."""
+    initialization, ``state`` is set into it by name."""
 
     def __init__(self, *args, variant: str, state: np.ndarray | None = None, **kwargs):
         super().__init__(*args, **kwargs)
         self.variant, self.learned = variant, state
 
     def exit_initialization(self, t0) -> None:
-        super().exit_initialization(t0)
+        super().exit_initialization(t0)  # start() and the master's initialization both end here
         if self.learned is None:
             return
-        blob = bytearray(self.serialize_state())
-        for offset, value in zip(_offsets(self, len(blob), _names(self.variant)), self.learned):
-            blob[int(offset):int(offset) + 8] = np.float64(value).astype("<f8").tobytes()
-        self.restore_state(bytes(blob))
+        self.set_reals(dict(zip(_names(self.variant), map(float, self.learned))), t0,
+                       "from the learned state")
         self.read_outputs(t0)
 
 

@@ -48,18 +48,29 @@ def _save(fig, path: Path) -> Path:
 
 def wind_series(scenario, speeds=(1.0, 3.0, 5.0)) -> dict[float, np.ndarray]:
     """The WindGust FMU of ``scenario`` simulated alone for each speed:
-    ``speed -> array (n, 4)`` of t, v_wind_x, v_wind_y, v_wind_z."""
-    import fmpy
-
+    ``speed -> array (n, 4)`` of t, v_wind_x, v_wind_y, v_wind_z (one
+    instance, :class:`cosim.fmu_component.FmuComponent`, the tool's one FMU
+    lifecycle, reset between speeds)."""
+    from cosim.fmu_component import FmuComponent
     from cosim.scenario import fmu_file
 
-    spec = scenario.fmus[scenario.sections["wind"]["fmu"]]
+    name = scenario.sections["wind"]["fmu"]
+    spec = scenario.fmus[name]
+    h, n = scenario.step, scenario.n_steps
     out = {}
-    for v in speeds:
-        r = fmpy.simulate_fmu(str(fmu_file(spec)), stop_time=scenario.duration, output_interval=scenario.step,
-                              start_values={**spec["parameters"], "v_w": v}, validate=False,
-                              output=["v_wind_x", "v_wind_y", "v_wind_z"])
-        out[v] = np.column_stack([r["time"], r["v_wind_x"], r["v_wind_y"], r["v_wind_z"]])
+    with FmuComponent(name, fmu_file(spec)) as fmu:
+        fmu.bind((), ("v_wind_x", "v_wind_y", "v_wind_z"))
+        for v in speeds:
+            t0 = scenario.start_time
+            rows = np.empty((n + 1, 4))
+            fmu.start(t0, {**spec["parameters"], "v_w": v})
+            rows[0] = t0, *fmu.y
+            for k in range(n):
+                t = t0 + k * h
+                fmu.do_step(t, h)
+                fmu.read_outputs(t + h)
+                rows[k + 1] = t0 + (k + 1) * h, *fmu.y
+            out[v] = rows
     return out
 
 

@@ -29,7 +29,11 @@ at its state then, plus ``delta`` for the second), and the growth of the
 plant-state difference is compared with the linear loop's prediction
 ``C A^n (delta, 0)``, both as a rate ln(gain)/check (1/s). A second check
 perturbs along the loop's least stable mode (its eigenvector, learned state
-included, set in the controller's FMU state: :func:`cosim.fmu_component.state_with`)
+included, set in the controller's FMU state:
+:meth:`cosim.fmu_component.FmuComponent.state_with`). Every FMU state is
+read, edited and linearized on the master's own live instances (each left
+in its state): the only instance made per frozen point is the plant's Model
+Exchange instance the linearizer evaluates.
 and compares the growth of the whole state's difference with ``A^n``'s.
 
 The study is one :mod:`cosim.study` per mission (cases: variant x law), run
@@ -154,11 +158,12 @@ class AlongFlight:
         points = []
         master = build_master(scenario)
         try:
-            paths = {f.name: f.path for f in master.fmus}
+            fmus = {f.name: f for f in master.fmus}
             for snap in result.snapshots:
-                loop = snapshot_loop(snap, paths[_PLANT], paths[_CONTROLLER], _PLANT, _CONTROLLER)
+                loop = snapshot_loop(snap, fmus[_PLANT].path, fmus[_CONTROLLER].path, _PLANT, _CONTROLLER,
+                                     instances=fmus)
                 tau_c = [abs(loop.controller.outputs[f"tau_c_{a}"]) for a in "xyz"]
-                rates = self._check(master, snap, loop, result.seed, paths) if self.check > 0 else (math.nan,) * 4
+                rates = self._check(master, snap, loop, result.seed, fmus) if self.check > 0 else (math.nan,) * 4
                 points.append(FlightPoint(snap.time, loop.spectral_radius,
                                           float(np.max(np.abs(loop.poles_holding(held)))),
                                           _relative_error(loop), float(min(tau_c)), *rates))
@@ -166,12 +171,11 @@ class AlongFlight:
             master.close()
         return {"along_flight": FlightRadius(scenario.name, variant, phi, result.status, result.error, tuple(points))}
 
-    def _check(self, master, snap, loop: FmuLoop, seed: int, paths) -> tuple[float, float, float, float]:
+    def _check(self, master, snap, loop: FmuLoop, seed: int, fmus) -> tuple[float, float, float, float]:
         """(linear, nonlinear) rates over ``check`` s of the perturbation
         ``delta`` of the plant state, then of a perturbation along the least
-        stable mode."""
-        from cosim.fmu_component import state_values, state_with
-
+        stable mode; FMU states read and edited on the master's instances
+        ``fmus`` (name -> :class:`~cosim.fmu_component.FmuComponent`)."""
         h = master.step
         n = int(round(self.check / h))
         start = {k: v for k, v in loop.plant.operating_point.items() if k in loop.plant.system.state_labels}
@@ -191,10 +195,10 @@ class AlongFlight:
             if run.status != "ok" or not run.snapshots:
                 return dict.fromkeys(names, math.nan)
             last = run.snapshots[-1]
-            out = {f"plant_{k}": v for k, v in state_values(paths[_PLANT], last.states[_PLANT], plant_names,
-                                                            last.parameters[_PLANT], end).items()}
-            return out | {f"controller_{k}": v for k, v in state_values(
-                paths[_CONTROLLER], last.states[_CONTROLLER], ctrl_names, last.parameters[_CONTROLLER], end).items()}
+            out = {f"plant_{k}": v for k, v in fmus[_PLANT].state_values(last.states[_PLANT], plant_names,
+                                                                          end).items()}
+            return out | {f"controller_{k}": v for k, v in fmus[_CONTROLLER].state_values(
+                last.states[_CONTROLLER], ctrl_names, end).items()}
 
         def gap(a: dict[str, float], b: dict[str, float], keys) -> float:
             return float(np.linalg.norm([a[k] - b[k] for k in keys]))
@@ -213,13 +217,12 @@ class AlongFlight:
         v = np.real(V[:, int(np.argmax(np.abs(w)))])
         v = MODE_SIZE * v / np.linalg.norm(v)
         mode = dict(zip(names, v))
-        now = state_values(paths[_CONTROLLER], snap.states[_CONTROLLER], ctrl_names, snap.parameters[_CONTROLLER],
-                           snap.time)
+        now = fmus[_CONTROLLER].state_values(snap.states[_CONTROLLER], ctrl_names, snap.time)
         grown = []
         for sign in (1.0, -1.0):  # both ways along the mode: a bound (a width's floor) may stop one side only
-            ctrl_state = state_with(paths[_CONTROLLER], snap.states[_CONTROLLER],
-                                    {k: now[k] + sign * mode[f"controller_{k}"] for k in ctrl_names},
-                                    snap.parameters[_CONTROLLER], snap.time)
+            ctrl_state = fmus[_CONTROLLER].state_with(snap.states[_CONTROLLER],
+                                                      {k: now[k] + sign * mode[f"controller_{k}"] for k in ctrl_names},
+                                                      snap.time)
             moved = resume({k: sign * mode[f"plant_{k}"] for k in plant_names}, ctrl_state)
             grown.append(gap(moved, nominal, names) / MODE_SIZE)
         linear_mode = np.linalg.norm(np.linalg.matrix_power(A, n) @ v) / MODE_SIZE

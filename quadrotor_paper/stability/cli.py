@@ -44,6 +44,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "stability", help="linear stability analysis of the PD baseline, checked against the co-simulation",
         description=_DESCRIPTION)
     _arguments(parser)
+    from ..cli import fmu_log_option
+
+    fmu_log_option(parser)
     parser.set_defaults(func=run)
     return parser
 
@@ -112,8 +115,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from ..cli import _apply_fmu_log, fmu_log_option
+
     parser = _arguments(argparse.ArgumentParser(prog="fnn-cosim stability", description=_DESCRIPTION))
-    return run(parser.parse_args(argv))
+    fmu_log_option(parser)
+    args = parser.parse_args(argv)
+    _apply_fmu_log(args.fmu_log)
+    return run(args)
 
 
 if __name__ == "__main__":

@@ -146,7 +146,7 @@ def fmu_closed_loop(op: OperatingPoint, variant: str = "pd", fmi_version: int = 
 
 
 def snapshot_loop(snapshot, plant_fmu: str | Path, controller_fmu: str | Path, plant: str = "Quadrotor",
-                  controller: str = "controller") -> FmuLoop:
+                  controller: str = "controller", instances: Mapping | None = None) -> FmuLoop:
     """The sampled closed loop of a run frozen at ``snapshot.time``
     (:class:`cosim.master.Snapshot`, taken by ``Master.run(snapshots=...)``):
     the controller's one-period map from its FMU state with its inputs at
@@ -154,15 +154,19 @@ def snapshot_loop(snapshot, plant_fmu: str | Path, controller_fmu: str | Path, p
     at its state then (read from its FMU state) with its inputs then (the
     wind as it blew, the rotor commands given at that time). ``plant_fmu``,
     ``controller_fmu``: the FMU files the run flew, instances ``plant`` and
-    ``controller``."""
+    ``controller``; ``instances``: the run's live instances by name (the
+    master's :class:`~cosim.fmu_component.FmuComponent`), on which the
+    snapshot's FMU states are then read and stepped (each left in its own
+    state) instead of new ones."""
+    instances = instances or {}
     for name in (plant, controller):
         if name not in snapshot.states:
             raise ValueError(f"the snapshot at t = {snapshot.time:g} s has no FMU {name!r}; it has "
                              f"{', '.join(snapshot.states)}")
     ctrl = linearize_fmu(controller_fmu, inputs=snapshot.inputs_of(controller),
                          parameters=snapshot.parameters[controller], fmu_state=snapshot.states[controller],
-                         t=snapshot.time)
+                         t=snapshot.time, instance=instances.get(controller))
     plant_lin = linearize_fmu(plant_fmu, inputs=snapshot.inputs_of(plant),
                               parameters=snapshot.parameters[plant], fmu_state=snapshot.states[plant],
-                              t=snapshot.time, interface="me")
+                              t=snapshot.time, interface="me", instance=instances.get(plant))
     return join_loop(plant_lin, ctrl)

@@ -9,6 +9,7 @@ one period, dt on the StateSpace.
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -142,3 +143,39 @@ def test_a_black_box_co_simulation_step_is_refused_in_one_line():
     with pytest.raises(LinearizationError, match="declares no sample period") as info:
         linearize_fmu(lag_fmu_path(2), interface="cs")
     assert "\n" not in str(info.value)
+
+
+# ---- the component's Model Exchange calls, on the Modelica Association's Reference FMUs -------------
+
+_REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
+
+
+@pytest.mark.skipif(not _REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {_REFERENCE}")
+@pytest.mark.parametrize("version", [2, 3])
+def test_the_components_model_exchange_calls_on_the_reference_fmus(version):
+    """What the linearizer evaluates, against the models' equations:
+    BouncingBall (der(h) = v, der(v) = -g; one event indicator, h) and
+    VanDerPol (der(x0) = x1, der(x1) = mu (1 - x0^2) x1 - x0; directional
+    derivatives, FMI 3.0's flag read from the XML, fmpy 0.3 misreads it)."""
+    from cosim.fmu_component import FmuComponent
+
+    with FmuComponent("ball", _REFERENCE / f"fmi{version}" / "BouncingBall.fmu", interface="ModelExchange") as ball:
+        ball.start(0.0)
+        assert ball.state_names == ["h", "v"] and ball.event_indicator_count == 1
+        np.testing.assert_array_equal(ball.continuous_states(), [1.0, 0.0])
+        g = ball.get_reals(["g"])["g"]
+        ball.set_continuous_states(np.array([0.5, -2.0]))
+        np.testing.assert_array_equal(ball.derivatives(), [-2.0, g])
+        np.testing.assert_array_equal(ball.event_indicators(), [0.5])
+        np.testing.assert_array_equal(ball.nominals(), [1.0, 1.0])
+    with FmuComponent("vdp", _REFERENCE / f"fmi{version}" / "VanDerPol.fmu", interface="ModelExchange") as vdp:
+        vdp.start(0.0, {"mu": 1.5})
+        assert vdp.provides_directional_derivatives
+        x0, x1 = 2.0, 0.5
+        vdp.set_continuous_states(np.array([x0, x1]))
+        J = vdp.directional_derivatives(vdp.derivative_names, vdp.state_names)
+        np.testing.assert_allclose(J, [[0.0, 1.0], [-2 * 1.5 * x0 * x1 - 1.0, 1.5 * (1 - x0 ** 2)]], rtol=1e-15)
+        lin = linearize_fmu(_REFERENCE / f"fmi{version}" / "VanDerPol.fmu", parameters={"mu": 1.5},
+                            start={"x0": x0, "x1": x1})
+        assert lin.method == "directional derivatives"
+        np.testing.assert_allclose(lin.A, J, rtol=1e-15)

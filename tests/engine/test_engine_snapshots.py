@@ -102,20 +102,21 @@ def test_bad_snapshot_times_and_restores_are_refused_in_one_line():
             master.run(0.1, restore={"A": sum_state})
 
 
-def test_a_snapshots_state_is_read_and_edited_through_the_fmu():
-    """state_values reads a variable out of a serialized state; state_with
-    sets one (a discrete state, which this project's FMUs accept between
-    steps) and serializes again: a run resumed from the edited state starts
-    from it."""
-    from cosim.fmu_component import state_values, state_with
-
-    path = sum_fmu_path(2)
+def test_a_snapshots_state_is_read_and_edited_on_the_live_instance():
+    """FmuComponent.state_values reads a variable out of a serialized state;
+    state_with sets one (a discrete state, which this project's FMUs accept
+    between steps) and serializes again: a run resumed from the edited state
+    starts from it. Both work on the master's own instance, which keeps its
+    state (no other instance is made)."""
     with _master() as master:
         snap = master.run(1.0, snapshots=[0.5]).snapshots[0]
-        s = state_values(path, snap.states["S"], ["s"], snap.parameters["S"], snap.time)["s"]
+        live = master.components["S"]
+        before = live.serialize_state()
+        s = live.state_values(snap.states["S"], ["s"], snap.time)["s"]
         assert s == pytest.approx(snap.outputs["S.y"] - snap.inputs["S.u"], abs=1e-12) and s != 0.0
-        edited = state_with(path, snap.states["S"], {"s": 5.0}, snap.parameters["S"], snap.time)
+        edited = live.state_with(snap.states["S"], {"s": 5.0}, snap.time)
+        assert live.serialize_state() == before and edited != snap.states["S"]
         resumed = master.run(0.5, t0=0.5, restore=snap.states | {"S": edited})
         assert resumed.data[0, RECORD.index("S.y") + 1] == pytest.approx(5.0 + snap.inputs["S.u"], abs=1e-12)
-        with pytest.raises(KeyError, match="has no variable 'nope'"):
-            state_with(path, snap.states["S"], {"nope": 1.0}, snap.parameters["S"], snap.time)
+        with pytest.raises(KeyError, match="has no variable"):
+            live.state_with(snap.states["S"], {"nope": 1.0}, snap.time)

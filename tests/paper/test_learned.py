@@ -1,6 +1,6 @@
 """Save a trained controller and resume learning: one file format, read and
 written by the Python fast path directly and by the controller FMU through
-its serialized FMU state; the two forms save the same state and resume alike."""
+FMI calls on its live instance; the two forms save the same state and resume alike."""
 from __future__ import annotations
 
 import json
@@ -72,9 +72,10 @@ def test_a_file_that_cannot_serve_is_refused_in_one_line(saved, tmp_path, capsys
 
 
 @pytest.mark.parametrize("version", [2, 3])
-def test_a_value_the_controller_fmu_refuses_in_its_restored_state_is_one_line_quoting_it(version):
-    """The FMU checks the state a learned state is written into like any
-    input (here a non-finite value the file reader would have refused)."""
+def test_a_learned_value_the_controller_fmu_refuses_is_one_line_naming_it_and_quoting_the_fmu(version):
+    """The learned state is set into the live FMU by name, and the FMU checks
+    each value like any input (here a non-finite value the file reader would
+    have refused)."""
     from cosim.errors import FmuCallError
     from fmu_models.export.build import cached_fmu
     from fnn_controller.controller_fmu import controller_model
@@ -90,4 +91,5 @@ def test_a_value_the_controller_fmu_refuses_in_its_restored_state_is_one_line_qu
         with pytest.raises(FmuCallError) as info:
             fmu.start(0.0)
     assert "\n" not in str(info.value)
-    assert info.value.log == f"[ERROR] deserialize FMU state: {names[3]} = inf refused: not a finite number"
+    assert info.value.log == f"[ERROR] {names[3]} = inf refused: not a finite number"
+    assert info.value.variable == names[3] and f"setting {names[3]} = inf from the learned state" in str(info.value)
