@@ -39,6 +39,8 @@ import tomllib
 from pathlib import Path
 from typing import Any, Sequence
 
+from .fmu_log_option import apply_fmu_log, fmu_log_option
+
 __all__ = ["main"]
 
 DEFAULT_OUT = Path("results")
@@ -479,27 +481,6 @@ def _worker_timeout(parser) -> None:
                              f"'forever': wait)")
 
 
-def fmu_log_option(parser) -> None:
-    """``--fmu-log [INSTANCE=]LEVEL`` (repeatable): show the FMUs' own log
-    messages of LEVEL and worse on stderr, and ask the FMUs for the log
-    categories of that level (:func:`cosim.fmu_component.fmu_log`)."""
-    parser.add_argument("--fmu-log", action="append", default=[], metavar="[INSTANCE=]LEVEL",
-                        help="show the FMUs' own log (error, warning, info, debug; default: none shown, errors "
-                             "quote it), for every FMU or one instance (repeatable); with --workers > 1 it "
-                             "applies to the FMUs run in this process")
-
-
-def _apply_fmu_log(values: Sequence[str]) -> None:
-    from cosim.errors import ScenarioError
-    from cosim.fmu_component import LOG_LEVELS, fmu_log
-
-    for value in values:
-        instance, _, level = value.rpartition("=")
-        if level.strip() not in LOG_LEVELS:
-            raise ScenarioError(f"--fmu-log {value}: expected [INSTANCE=]LEVEL, LEVEL one of {', '.join(LOG_LEVELS)}")
-        fmu_log(level.strip(), instance.strip() or None)
-
-
 class _Parser(argparse.ArgumentParser):
     """argparse with its refusals in the tool's one line (exit 2: nothing ran)."""
 
@@ -635,7 +616,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     args = _parser().parse_args(argv)
     try:
-        _apply_fmu_log(getattr(args, "fmu_log", ()))
+        apply_fmu_log(getattr(args, "fmu_log", ()))
         return args.func(args)
     except CosimError as exc:
         if args.debug:

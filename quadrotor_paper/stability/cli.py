@@ -44,7 +44,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "stability", help="linear stability analysis of the PD baseline, checked against the co-simulation",
         description=_DESCRIPTION)
     _arguments(parser)
-    from ..cli import fmu_log_option
+    from ..fmu_log_option import fmu_log_option
 
     fmu_log_option(parser)
     parser.set_defaults(func=run)
@@ -115,12 +115,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from ..cli import _apply_fmu_log, fmu_log_option
+    from ..fmu_log_option import apply_fmu_log, fmu_log_option
 
     parser = _arguments(argparse.ArgumentParser(prog="fnn-cosim stability", description=_DESCRIPTION))
     fmu_log_option(parser)
     args = parser.parse_args(argv)
-    _apply_fmu_log(args.fmu_log)
+    apply_fmu_log(args.fmu_log)
     return run(args)
 
 

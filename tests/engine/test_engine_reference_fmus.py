@@ -260,3 +260,20 @@ def test_feedthrough_in_model_exchange_gives_its_published_numbers(tmp_path, ver
     step, stop = experiment(version, "Feedthrough")
     ours = fly(tmp_path, version, "Feedthrough", step, stop, names=names, interface="ModelExchange")
     assert worst(ours, theirs, names) == 0.0
+
+
+def test_fmi_1_0_is_refused_in_one_line(tmp_path):
+    """An FMI 1.0 FMU (its modelDescription is enough to tell) is refused
+    naming the version and what the master takes (docs/fmi-support.md)."""
+    import zipfile
+
+    from cosim.errors import FmuLoadError
+    from cosim.fmu_component import FmuComponent
+
+    path = tmp_path / "Old.fmu"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("modelDescription.xml", '<?xml version="1.0"?><fmiModelDescription fmiVersion="1.0" '
+                         'modelName="Old" modelIdentifier="Old" guid="{0}" numberOfContinuousStates="0" '
+                         'numberOfEventIndicators="0"><ModelVariables/></fmiModelDescription>')
+    with pytest.raises(FmuLoadError, match=r"FMI 1.0 is not supported \(2.0 or 3.0\)"):
+        FmuComponent("Old", path)
