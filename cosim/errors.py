@@ -10,7 +10,30 @@ import math
 from pathlib import Path
 
 __all__ = ["CosimError", "ConnectionCheckError", "ScenarioError", "DivergenceError", "FmuError", "FmuLoadError",
-           "FmuCallError", "SimulationTerminated", "one_line"]
+           "FmuCallError", "SimulationTerminated", "one_line", "show_folder_as"]
+
+# A temporary folder the tool extracted an archive to -> what a message shows
+# instead (the archive): a message never shows a temporary folder
+# (docs/security.md). Entries leave with their folder (show_folder_as's undo).
+_SHOWN: dict[str, str] = {}
+
+
+def show_folder_as(folder, label: str):
+    """Messages show ``label`` where they would show ``folder`` (a temporary
+    extraction folder); returns the function that forgets it again."""
+    key = str(folder).rstrip("/")
+    _SHOWN[key] = label
+
+    def forget() -> None:
+        _SHOWN.pop(key, None)
+    return forget
+
+
+def _shown(text: str) -> str:
+    for folder, label in _SHOWN.items():
+        if folder in text:
+            text = text.replace(folder, label)
+    return text
 
 
 def one_line(text: str) -> str:
@@ -19,7 +42,11 @@ def one_line(text: str) -> str:
 
 
 class CosimError(Exception):
-    """Base class of every error the master raises on purpose."""
+    """Base class of every error the master raises on purpose; its message
+    shows no temporary folder (:func:`show_folder_as`, applied when it is made)."""
+
+    def __init__(self, *args):
+        super().__init__(*(_shown(a) if isinstance(a, str) else a for a in args))
 
 
 class ConnectionCheckError(CosimError):

@@ -57,7 +57,7 @@ from lxml import etree
 
 from . import registry, units
 from .connection import check_connections, parse_connections
-from .errors import CosimError, FmuError, ScenarioError, one_line
+from .errors import CosimError, FmuError, ScenarioError, one_line, show_folder_as
 from .files import extract_zip, regular_file, safe_name, zip_members
 from .limits import MAX_DOCUMENT_BYTES
 from .scenario import Scenario, apply_overrides, fmu_error_in_scenario, fmu_file, parse_scenario
@@ -836,6 +836,8 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
     path = Path(path)
     ssd_path, temporary = _open(path, extract_to)
     label = f"{path}: {SSD_NAME}" if path.suffix.lower() != ".ssd" else str(path)
+    # messages name the archive, not the folder it was extracted to
+    forget = show_folder_as(temporary, str(path)) if temporary is not None else (lambda: None)
     try:
         try:
             system = _read_ssd(ssd_path)
@@ -878,11 +880,16 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
                                 f"SSP archive holds FMUs only")
     except BaseException:
         if temporary is not None:
-            shutil.rmtree(temporary, ignore_errors=True)
+            _remove_extraction(str(temporary), forget)
         raise
     if temporary is not None:
-        weakref.finalize(scenario, shutil.rmtree, str(temporary), ignore_errors=True)
+        weakref.finalize(scenario, _remove_extraction, str(temporary), forget)
     return scenario
+
+
+def _remove_extraction(folder: str, forget) -> None:
+    shutil.rmtree(folder, ignore_errors=True)
+    forget()
 
 
 # ---- libcosim ---------------------------------------------------------------------------------

@@ -209,6 +209,21 @@ def test_the_temporary_extraction_lives_as_long_as_the_scenario(archive):
     assert not folder.exists()
 
 
+def test_an_error_about_a_packed_fmu_names_the_archive_not_the_temporary_folder(archive, tmp_path):
+    """A broken FMU inside an archive: the one-line error names it as
+    ``archive/resources/B.fmu``, never the folder it was extracted to."""
+    broken = tmp_path / "broken.ssp"
+    with zipfile.ZipFile(archive) as source, zipfile.ZipFile(broken, "w") as target:
+        for entry in source.infolist():
+            target.writestr(entry, b"no zip" if entry.filename == "resources/B.fmu" else source.read(entry))
+    loaded = load_ssp(broken)
+    with pytest.raises(ScenarioError) as info:
+        build_master(loaded)
+    message = str(info.value)
+    assert f"{broken}/resources/B.fmu" in message and "not an FMU" in message
+    assert str(loaded.source.parent) not in message and "ssp-broken-" not in message
+
+
 def test_overrides_and_fallbacks(archive, tmp_path):
     loaded = load_ssp(archive, overrides={"simulation.duration": 0.5, "fmus.B.parameters.tau": 0.75})
     assert loaded.duration == 0.5 and loaded.fmus["B"]["parameters"]["tau"] == 0.75
