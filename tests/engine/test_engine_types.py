@@ -480,15 +480,18 @@ def test_a_snapshot_holds_typed_signals_as_their_values(tmp_path):
     assert shot.outputs["F.Int64_output"] == 2 ** 60 and shot.outputs["F.String_output"] == "first"
 
 
+@pytest.mark.parametrize("interface", ["CoSimulation", "ModelExchange"])
 @pytest.mark.parametrize("version", [2, 3])
-def test_the_table_feeds_the_fmu_as_fmpy_simulate_fmu_does(version):
+def test_the_table_feeds_the_fmu_as_fmpy_simulate_fmu_does(version, interface):
     """fmpy's ``simulate_fmu`` (Co-Simulation, ``input=`` a table) sets at
     each communication point t_n the discrete inputs' last row at or before
     t_n and the continuous inputs' linear interpolation, then steps and
     records the outputs at t_{n+1}: the master's exchange ordering does the
     same, so with the table's Float64_continuous_input ``linear`` and the
-    rest ``hold``, every row equals fmpy's. (fmpy sets no String input:
-    that column is left out here; the CLI test drives it.)"""
+    rest ``hold``, every row equals fmpy's. As Model Exchange (fmpy: the
+    inputs of t_n set, a discrete one in Event Mode, the outputs of t_n
+    read) the feedthrough ordering does the same. (fmpy sets no String
+    input: that column is left out here; the CLI test drives it.)"""
     from fmpy import simulate_fmu
 
     in_header, in_rows = published("Feedthrough_in.csv")
@@ -499,10 +502,13 @@ def test_the_table_feeds_the_fmu_as_fmpy_simulate_fmu_does(version):
                        dtype=dtype)
     outputs = [c.replace("_input", "_output") for c in columns]
     theirs = simulate_fmu(str(fmu(version, "Feedthrough")), start_time=t0, stop_time=stop, output_interval=h,
-                          input=signals, output=outputs)
+                          input=signals, output=outputs, fmi_type=interface, record_events=False)
     raw = {"connections": [f"inputs.{{{','.join(columns)}}} -> F.{{{','.join(columns)}}}"],
-           "simulation": {"start_time": t0, "duration": stop - t0, "step": h, "ordering": "exchange"},
-           "fmus": {"F": {"path": str(fmu(version, "Feedthrough"))}},
+           # fmpy's Co-Simulation reads y(t_n+1) from the inputs of t_n: the exchange ordering; its Model
+           # Exchange reads y(t_n) = u(t_n), the FMU evaluated at t_n: the feedthrough ordering
+           "simulation": {"start_time": t0, "duration": stop - t0, "step": h,
+                          "ordering": "exchange" if interface == "CoSimulation" else "feedthrough"},
+           "fmus": {"F": {"path": str(fmu(version, "Feedthrough")), "interface": interface}},
            "components": {"inputs": {"kind": "signal_table", "file": str(RESULTS / "Feedthrough_in.csv"),
                                      "columns": {"Int32_input": {"type": "Int32"},
                                                  "String_input": {"type": "String"},
