@@ -1,21 +1,29 @@
-"""A co-simulation FMU as a component: a thin, fast wrapper over fmpy's slaves.
+"""An FMU as a component of the master: a thin, fast wrapper over fmpy's
+instances, Co-Simulation (``FMU2Slave``, ``FMU3Slave``) or Model Exchange
+(``FMU2Model``, ``FMU3Model``, integrated by :mod:`cosim.model_exchange`).
 
-fmpy's ``FMU2Slave`` (FMI 2.0) and ``FMU3Slave`` (FMI 3.0) do the loading,
-instantiation and status checking (every failed call raises fmpy's
-``FMICallException`` in one place). This module adds what the master needs:
+fmpy's classes do the loading, instantiation and status checking (every
+failed call raises fmpy's ``FMICallException`` in one place). This module
+adds what the master needs:
 
 * the FMU is extracted once and instantiated once per :class:`FmuComponent`;
   :meth:`FmuComponent.start` resets it between runs (``fmiXReset``);
-* ports read from the modelDescription (name, causality, type, unit and its
-  ``UnitDefinitions`` meaning, :mod:`cosim.units`), so the master can check
-  connections before the first step;
+* ports read from the modelDescription (:mod:`cosim.fmu_description`: name,
+  causality, type, shape, unit and its ``UnitDefinitions`` meaning), so the
+  master can check connections before the first step;
+* initialization by the standard: start values each set in the state the
+  standard allows (:func:`~cosim.fmu_description.start_value_rule`), and
+  Initialization Mode entered and left apart
+  (:meth:`FmuComponent.enter_initialization`,
+  :meth:`FmuComponent.exit_initialization`) so a master sets connected
+  inputs there;
 * a per-step fast path: the value references of the connected inputs and of
   the wanted outputs are bound once (:meth:`bind`) into ctypes arrays, and each
   step is one ``set`` of all inputs, one ``doStep`` and one ``get`` of all
   outputs, the values passing through preallocated numpy buffers with no
   per-step allocation;
 * the FMU's own log: it is instantiated with logging on, filtered by the
-  level of the Python logger ``cosim.fmu.<instance>`` (:func:`fmu_log`,
+  level of the Python logger ``cosim.fmu.<instance>`` (:func:`cosim.fmu_log.fmu_log`,
   ``fnn-cosim run --fmu-log debug``, which also asks the FMU for every log
   category); its messages go to
   that logger, the last ones are kept (:attr:`FmuComponent.messages`, every
@@ -72,84 +80,14 @@ from lxml import etree
 from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 
-from .component import TYPES, Port, element_of, typed_value
+from .component import element_of, typed_value
+from .fmu_description import TYPE_OF, PERIOD_ANNOTATION, shape_of, fmu_ports, start_value_rule
+from .fmu_log import STATUS_LABEL, STATUS_LEVEL, FMU_LOGGER, LOG_LEVELS, fmu_log
 from .errors import FmuCallError, FmuLoadError, ScenarioError, SimulationTerminated
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
-from .units import Unit, definitions as unit_definitions
 
-__all__ = ["FmuComponent", "fmu_ports", "fmi2_callbacks", "stream_seed", "fmu_log", "LOG_LEVELS", "PERIOD_ANNOTATION"]
-
-# A sampled-data FMU declares the parameter that is its period, the one
-# communication step it takes (docs/fmi-export.md, "Sampled-data period"):
-#   FMI 2.0  <VendorAnnotations><Tool name="fnn-cosim.sampled-data"><SampledData periodParameter="dt"/>
-#   FMI 3.0  <Annotations><Annotation type="fnn-cosim.sampled-data"><SampledData periodParameter="dt"/>
-# The name is the exporter's (fmu_models.export.model_description), repeated
-# here: the engine reads a declaration, it imports no exporter.
-PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
-
-# FMI 2.0's types by their FMI 3.0 names: Real is a 64-bit float, Integer a
-# 32-bit int (fmi2Integer); the FMI 3.0 names are themselves (cosim.component.TYPES)
-_TYPE = {"Real": "Float64", "Integer": "Int32", **{t: t for t in TYPES}}
-
-# ---- the FMU's own log ---------------------------------------------------------------------------
-# Every instance logs to the logger "cosim.fmu.<instance>"; its effective level chooses what is kept and
-# shown (FmuComponent._log) and, at debug, asks the FMU for every category (FmuComponent._apply_log_level).
-# A library logs nowhere by itself: the NullHandler keeps Python's last-resort handler from printing FMU
-# warnings a run did not ask to see (fmu_log does).
-FMU_LOGGER = "cosim.fmu"
-logging.getLogger(FMU_LOGGER).addHandler(logging.NullHandler())
-LOG_LEVELS = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO, "debug": logging.DEBUG}
-# FMI status (fmi2Status, fmi3Status: OK, Warning, Discard, Error, Fatal, and FMI 2.0's Pending) -> label, level
-_STATUS_LABEL = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
-_STATUS_LEVEL = (logging.INFO, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
-
-
-class _Stderr(logging.StreamHandler):
-    """A handler writing to the ``sys.stderr`` of the moment (a test or an
-    application may replace it after the handler is made)."""
-
-    def __init__(self):
-        super().__init__()
-
-    @property
-    def stream(self):
-        import sys
-
-        return sys.stderr
-
-    @stream.setter
-    def stream(self, value):  # StreamHandler.__init__ sets it; the property always answers sys.stderr
-        pass
-
-
-class _InstanceFormatter(logging.Formatter):
-    def format(self, record: logging.LogRecord) -> str:
-        instance = record.name.removeprefix(FMU_LOGGER + ".")
-        return f"fnn-cosim: fmu {instance}: {record.levelname.lower()}: {record.getMessage()}"
-
-
-def fmu_log(level: str, instance: str | None = None, stream=None) -> None:
-    """Show the FMUs' own log messages of ``level`` (``error``,
-    ``warning``, ``info``, ``debug``) and worse on ``stream`` (stderr), for
-    every FMU instance or only ``instance``; at ``debug``, instances made
-    afterwards ask their FMU for every log category.
-
-    The level is the Python logger's (``cosim.fmu`` or
-    ``cosim.fmu.<instance>``): an application that configures logging
-    itself sets the same level on the same logger.
-    """
-    if level not in LOG_LEVELS:
-        raise ScenarioError(f"FMU log level {level!r}: expected one of {', '.join(LOG_LEVELS)}")
-    logging.getLogger(FMU_LOGGER if instance is None else f"{FMU_LOGGER}.{instance}").setLevel(LOG_LEVELS[level])
-    root = logging.getLogger(FMU_LOGGER)
-    shown = [h for h in root.handlers if isinstance(h.formatter, _InstanceFormatter)]
-    if stream is not None or not shown:
-        handler = logging.StreamHandler(stream) if stream is not None else _Stderr()
-        handler.setFormatter(_InstanceFormatter())
-        for old in shown:  # one place the messages are shown
-            root.removeHandler(old)
-        root.addHandler(handler)
+__all__ = ["FmuComponent", "fmi2_callbacks", "stream_seed"]
 
 _FMI2_LOGGER = None
 _FMI2_LOG_RECEIVERS: dict[int, weakref.WeakMethod] = {}
@@ -202,98 +140,6 @@ def stream_seed(seed: int, stream: int) -> int:
         return int(seed)
     state = np.random.SeedSequence(int(seed), spawn_key=(int(stream),)).generate_state(1, np.uint64)[0]
     return int(state) >> 11  # 64 - 11 = 53 bits: exact as a double parameter
-
-
-def start_value_rule(variable) -> str | None:
-    """Why ``variable`` takes no start value from an importer, or ``None``
-    if it does: an input, or a variable that is not a constant and whose
-    ``initial`` is ``exact`` or ``approx`` (FMI 2.0 §2.2.7, FMI 3.0 §2.4.7.5;
-    fmpy's ``settable_in_instantiated``), or one the standard lets an
-    importer set in Initialization Mode (``settable_in_initialization_mode``)."""
-    from fmpy.simulation import settable_in_initialization_mode, settable_in_instantiated
-
-    if variable is None:
-        return "is no variable of the FMU"
-    if settable_in_instantiated(variable) or settable_in_initialization_mode(variable):
-        return None
-    if variable.variability == "constant":
-        return "is a constant: the standard lets no importer set it"
-    return (f"is a{'n' if variable.causality[0] in 'aeiou' else ''} {variable.causality} with initial = "
-            f"{variable.initial}: the standard lets an importer set only inputs and variables whose initial is "
-            f"exact or approx")
-
-
-_INT_TYPES = {"Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
-
-
-def _typed_setter(instance, variable, version: int):
-    """``set(value)`` of one variable by its type (FMI 2.0 Real, Integer,
-    Enumeration, Boolean, String; FMI 3.0 Float32/64, [U]Int8..64,
-    Enumeration, Boolean, String), the value checked for its type first."""
-    vr, kind = [variable.valueReference], variable.type
-    if kind in ("Real", "Float64", "Float32"):
-        call = instance.setReal if version == 2 else getattr(instance, f"set{kind}")
-        return lambda value: call(vr, [float(value)])
-    if kind in _INT_TYPES:
-        def set_int(value):
-            if isinstance(value, bool) or float(value) != int(float(value)):
-                raise ValueError(f"{value!r} is not an integer")
-            name = "setInteger" if version == 2 else ("setInt64" if kind == "Enumeration" else f"set{kind}")
-            getattr(instance, name)(vr, [int(value)])
-        return set_int
-    if kind == "Boolean":
-        def set_bool(value):
-            if value not in (0, 1, True, False):
-                raise ValueError(f"{value!r} is not a Boolean (true/false, 1/0)")
-            instance.setBoolean(vr, [bool(value)])
-        return set_bool
-    if kind == "String":
-        return lambda value: instance.setString(vr, [str(value)])
-    raise ValueError(f"a start value of type {kind} cannot be set")
-
-
-def _shape(variable) -> tuple[int, ...]:
-    """An FMI 3.0 array variable's sizes (``<Dimension start=..>`` or the
-    start value of the structural parameter its ``valueReference`` names,
-    FMI 3.0 section 2.4.7.8: the shape the FMU has when it is not configured
-    otherwise); ``()`` for a scalar."""
-    shape = []
-    for d in getattr(variable, "dimensions", None) or ():
-        size = d.start if d.start is not None else getattr(d.variable, "start", None)
-        shape.append(int(size) if size is not None else 0)
-    return tuple(shape)
-
-
-def _port(variable, units: Mapping[str, "Unit"] | None = None) -> Port:
-    """A variable as a port; its unit is its own ``unit`` or, failing that,
-    its ``declaredType``'s (FMI 2.0 section 2.2.3, FMI 3.0 section 2.4.4),
-    with the modelDescription's definition of it (``units``, by name)."""
-    declared = getattr(variable, "declaredType", None)
-    unit = getattr(variable, "unit", None) or getattr(declared, "unit", None) or None
-    return Port(variable.name, unit, _TYPE.get(variable.type, variable.type), variable.description or "",
-                shape=_shape(variable), unit_definition=(units or {}).get(unit) if unit else None)
-
-
-def fmu_ports(model_description) -> dict[str, tuple[Port, ...]]:
-    """The variables of a modelDescription as ports, by causality.
-
-    Keys: ``input``, ``output``, ``parameter`` (FMI 2.0 and 3.0 parameters,
-    tunable or not), ``local`` (the local variables of type Float64 but the
-    state derivatives, which are what a Model Exchange importer integrates),
-    ``other`` (the rest: derivatives, independent, calculated parameters).
-    """
-    derivatives = {d.variable.name for d in model_description.derivatives}
-    units = unit_definitions(model_description)
-    groups: dict[str, list[Port]] = {"input": [], "output": [], "parameter": [], "local": [], "other": []}
-    for v in model_description.modelVariables:
-        if v.type == "Clock":  # a clock is no signal: the component activates it (FmuComponent.clock)
-            key = "other"
-        elif v.causality == "local":
-            key = "local" if v.name not in derivatives and _TYPE.get(v.type) == "Float64" else "other"
-        else:
-            key = v.causality if v.causality in groups else "other"
-        groups[key].append(_port(v, units))
-    return {k: tuple(v) for k, v in groups.items()}
 
 
 def _bare(slave, name: str):
@@ -458,7 +304,7 @@ class FmuComponent:
         types, arrays = {}, []
         for name in signals:
             var = self.variables[element_of(name)[0]]
-            port_type = _TYPE.get(var.type, var.type)
+            port_type = TYPE_OF.get(var.type, var.type)
             if port_type != "Float64":
                 types.setdefault(port_type, name)
             elif var.dimensions and var.name not in arrays:
@@ -606,9 +452,9 @@ class FmuComponent:
         worse; those of status OK only at level info or debug, when asked
         for, so that chatter never pushes the reason out)."""
         text = self._hide_folder(message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message))
-        known = 0 <= status < len(_STATUS_LABEL)
-        label = _STATUS_LABEL[status] if known else str(status)
-        level = _STATUS_LEVEL[status] if known else logging.ERROR
+        known = 0 <= status < len(STATUS_LABEL)
+        label = STATUS_LABEL[status] if known else str(status)
+        level = STATUS_LEVEL[status] if known else logging.ERROR
         if level >= logging.WARNING or self._log_level <= logging.INFO:
             self.messages.append(f"[{label}] {text}")
         if self.logger.isEnabledFor(level):
@@ -815,17 +661,14 @@ class FmuComponent:
         self.read_outputs(t0)
 
     def _set_start_values(self, values: Mapping[str, Any]) -> None:
+        """Each start value by its type's set call (:meth:`_set_typed`), one by
+        one, so a refusal names the variable and quotes the FMU."""
         for key, value in values.items():
-            var = self.variables[key]
             try:
-                _typed_setter(self._slave, var, self.fmi_version)(value)
+                self._set_typed({key: value})
             except FMICallException as exc:
-                what = "parameter" if var.causality == "parameter" else "the start value of"
+                what = "parameter" if self.variables[key].causality == "parameter" else "the start value of"
                 raise self._fail(f"setting {what} {key} = {value!r}", exc, variable=key, value=value) from None
-            except (TypeError, ValueError) as exc:
-                raise FmuCallError(self.name, self.path, f"{key!r} is {var.type}: {exc}", key, value) from None
-
-    # ---- fast path -----------------------------------------------------------
 
     def bind(self, input_names: Sequence[str], output_names: Sequence[str],
              y: np.ndarray | None = None, objects: np.ndarray | None = None,
@@ -856,7 +699,7 @@ class FmuComponent:
         self._object_reads = (tuple(object_reads[0]),
                               objects[object_reads[1]] if objects is not None and object_reads[0] else None)
         self._typed = any(n not in self.variables or self.variables[n].dimensions
-                          or _TYPE.get(self.variables[n].type) != "Float64" for n in names)
+                          or TYPE_OF.get(self.variables[n].type) != "Float64" for n in names)
         if self._typed:
             for n in names:
                 self._element(n)  # a name that is none is refused now
@@ -905,7 +748,7 @@ class FmuComponent:
             return var, -1
         base, index = element_of(name)
         var = self.variables.get(base)
-        shape = _shape(var) if var is not None else ()
+        shape = shape_of(var) if var is not None else ()
         if var is None or index is None or len(index) != len(shape) or \
                 not all(1 <= i <= k for i, k in zip(index, shape)):
             raise KeyError(f"{self.name} has no variable(s) {[name]}")
@@ -930,9 +773,9 @@ class FmuComponent:
     def _array_start(self, var) -> list:
         """The start values of an array variable (its modelDescription's, one
         per element, row-major), the values of elements no connection sets."""
-        port_type = _TYPE.get(var.type, var.type)
+        port_type = TYPE_OF.get(var.type, var.type)
         tokens = str(var.start).split() if var.start is not None else []
-        size = int(np.prod(_shape(var))) if _shape(var) else 1
+        size = int(np.prod(shape_of(var))) if shape_of(var) else 1
         zero = {"String": "", "Binary": b"", "Boolean": False}.get(port_type, 0)
         values = [typed_value(port_type, t, f"{self.name}.{var.name} start") for t in tokens[:size]]
         return values + [zero] * (size - len(values))
@@ -943,12 +786,12 @@ class FmuComponent:
         wanted = [self._element(n) for n in names]
         by_type: dict[str, list] = {}
         for var, _ in wanted:
-            group = by_type.setdefault(_TYPE.get(var.type, var.type), [])
+            group = by_type.setdefault(TYPE_OF.get(var.type, var.type), [])
             if var not in group:
                 group.append(var)
         got: dict[int, list] = {}
         for port_type, variables in by_type.items():
-            sizes = [int(np.prod(_shape(v))) if v.dimensions else 1 for v in variables]
+            sizes = [int(np.prod(shape_of(v))) if v.dimensions else 1 for v in variables]
             values = self._calls(port_type)[0]([v.valueReference for v in variables], sum(sizes))
             offset = 0
             for v, size in zip(variables, sizes):
@@ -957,7 +800,7 @@ class FmuComponent:
         out = []
         for (var, k), name in zip(wanted, names):
             value = got[id(var)][max(k, 0)]
-            port_type = _TYPE.get(var.type, var.type)
+            port_type = TYPE_OF.get(var.type, var.type)
             if isinstance(value, bytes) and port_type == "String":  # fmpy's FMI 2.0 getString
                 value = value.decode("utf-8", "replace")
             elif port_type == "Binary" and value is None:
@@ -977,7 +820,7 @@ class FmuComponent:
         by_type: dict[str, list] = {}
         for name, value in values.items():
             var, k = self._element(name)
-            port_type = _TYPE.get(var.type, var.type)
+            port_type = TYPE_OF.get(var.type, var.type)
             try:
                 value = typed_value(port_type, value, f"{self.name}.{name}")
             except ValueError as exc:
@@ -1183,7 +1026,7 @@ class FmuComponent:
         if self._tick_pending:
             self._activate_clock(t)
         if any(n not in self.variables or self.variables[n].dimensions
-               or _TYPE.get(self.variables[n].type) != "Float64" for n in values):
+               or TYPE_OF.get(self.variables[n].type) != "Float64" for n in values):
             return self._set_values(values, t)
         vrs = [self.variables[name].valueReference for name in values]
         set_values = lambda: self.real_calls()[1](vrs, [float(v) for v in values.values()])  # noqa: E731

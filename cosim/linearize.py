@@ -16,7 +16,7 @@ the method used and an estimate of its error.
   the FMU's tolerance does not enter); the error estimate is the largest
   difference between the Jacobians at ``h`` and ``2 h``.
 * **Co-Simulation, sampled data** (an FMU declaring its period,
-  :data:`cosim.fmu_component.PERIOD_ANNOTATION`): the discrete-time map over
+  :data:`cosim.fmu_description.PERIOD_ANNOTATION`): the discrete-time map over
   one period, ``z+ = A z + B u``, ``y = C z + D u``, ``dt`` the period. The
   discrete states ``z`` are the FMU's local Real variables of variability
   ``discrete``; they must be readable and settable between communication

@@ -30,7 +30,7 @@ from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag,
 
 from . import registry
 from .errors import CosimError, FmuError, ScenarioError
-from .fmu_component import start_value_rule
+from .fmu_description import start_value_rule
 from .files import read_toml
 from .limits import MAX_STEPS
 from .limits import MAX_RECORD_BYTES

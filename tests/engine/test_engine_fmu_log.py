@@ -24,7 +24,8 @@ from pathlib import Path
 import pytest
 
 from cosim.errors import FmuCallError, FmuLoadError, ScenarioError
-from cosim.fmu_component import FmuComponent, fmu_log
+from cosim.fmu_component import FmuComponent
+from cosim.fmu_log import fmu_log
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -16,7 +16,8 @@ from cosim import kernel
 from cosim.component import Port, ports
 from cosim.connection import check_connections, parse_connections
 from cosim.errors import ConnectionCheckError, ScenarioError
-from cosim.fmu_component import FmuComponent, fmu_ports
+from cosim.fmu_component import FmuComponent
+from cosim.fmu_description import fmu_ports
 from cosim.master import Master
 from cosim.scenario import build_master, parse_scenario
 from cosim.units import BASE_UNITS, Unit, conversion, definitions, parse, unit_of
