@@ -41,7 +41,7 @@ from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, js
 
 __all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "ConnectionTable", "scenario_model", "scenario_json_schema", "load_scenario",
            "parse_scenario", "shipped_scenarios", "scenario_path", "apply_overrides", "build_master", "fmu_file",
-           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "ORDERINGS"]
+           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "ORDERINGS"]
 
 ORDERINGS = ("feedthrough", "exchange")  # the master's (docs/cosim.md)
 
@@ -650,16 +650,22 @@ def fmu_error_in_scenario(scenario: Scenario, exc: FmuError) -> ScenarioError:
     return ScenarioError(f"fmus.{exc.instance}.path = {str(exc.path)!r}: {exc.reason}")
 
 
-def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
+def fmu_component(name: str, spec: Mapping[str, Any], path: Path):
+    """The :class:`~cosim.fmu_component.FmuComponent` of an ``[fmus.X]``
+    entry (its seeding, interface and solver) for the FMU file ``path``."""
     from .fmu_component import FmuComponent
     from .model_exchange import SolverSettings
 
+    solver = SolverSettings(**spec["solver"]) if "solver" in spec else None
+    return FmuComponent(name, path, seed_parameter=spec.get("seed_parameter"), seed_stream=spec.get("seed_stream", 0),
+                        interface=spec.get("interface"), solver=solver)
+
+
+def _make_fmus(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list:
     fmus = []
     try:
         for name, spec in scenario.fmus.items():
-            solver = SolverSettings(**spec["solver"]) if "solver" in spec else None
-            fmu = FmuComponent(name, fmu_files.get(name) or fmu_file(spec), seed_parameter=spec.get("seed_parameter"),
-                               seed_stream=spec.get("seed_stream", 0), interface=spec.get("interface"), solver=solver)
+            fmu = fmu_component(name, spec, fmu_files.get(name) or fmu_file(spec))
             fmus.append(fmu)
             fmu.instantiate()  # a file that cannot run is refused now, before anything is written
             check_fmu_file(scenario, fmu)

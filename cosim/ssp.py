@@ -60,7 +60,7 @@ from .connection import check_connections, parse_connections
 from .errors import CosimError, FmuError, ScenarioError, one_line, show_folder_as
 from .files import extract_zip, regular_file, safe_name, zip_members
 from .limits import MAX_DOCUMENT_BYTES
-from .scenario import Scenario, apply_overrides, fmu_error_in_scenario, fmu_file, parse_scenario
+from .scenario import Scenario, apply_overrides, fmu_component, fmu_error_in_scenario, fmu_file, parse_scenario
 from .scenario import check_fmu_file
 
 __all__ = ["export_ssp", "load_ssp", "is_ssp", "run_libcosim", "ssd_schema_errors", "SSD_NAME", "FMU_TYPE",
@@ -126,7 +126,7 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     :func:`~cosim.scenario.build_master` would (without instantiating)."""
     from .fmu_component import FmuComponent, stream_seed
 
-    components: dict[str, FmuComponent] = {}
+    components: dict[str, FmuComponent] = {}  # as build_master makes them (fmu_component), not instantiated
     values: dict[str, dict[str, Any]] = {}
     try:
         for name, spec in scenario.fmus.items():
@@ -135,8 +135,7 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
                 # the scenario's seed (of the FMU's stream), so that another SSP tool runs with it; our
                 # master sets the run's
                 params[spec["seed_parameter"]] = stream_seed(scenario.seed, spec.get("seed_stream", 0))
-            components[name] = FmuComponent(name, fmu_files.get(name) or _self_contained(name, spec, params),
-                                            seed_parameter=spec.get("seed_parameter"))
+            components[name] = fmu_component(name, spec, fmu_files.get(name) or _self_contained(name, spec, params))
     except FmuError as exc:
         raise fmu_error_in_scenario(scenario, exc) from None
     parts = []
@@ -206,6 +205,12 @@ def _cosim_annotation(scenario: Scenario) -> etree._Element:
             element = etree.SubElement(root, q("SeedParameter"), component=name, parameter=spec["seed_parameter"])
             if spec.get("seed_stream"):
                 element.set("stream", str(spec["seed_stream"]))
+    for name, spec in scenario.fmus.items():  # what SSP 1.0 has no place for: how our master runs the FMU
+        settings = {k: json.dumps(dict(spec[k])) for k in ("start", "solver") if spec.get(k)}
+        if spec.get("interface") is not None:
+            settings["interface"] = spec["interface"]
+        if settings:
+            etree.SubElement(root, q("Fmu"), component=name, **settings)
     for signal in scenario.record:
         etree.SubElement(root, q("Record"), signal=signal)
     for signal, (low, high) in scenario.envelope.items():
@@ -432,6 +437,7 @@ class _System:
     ordering: str | None = None
     seed_parameters: dict[str, str] = field(default_factory=dict)  # component -> parameter
     seed_streams: dict[str, int] = field(default_factory=dict)  # component -> its stream, where not 0
+    fmu_settings: dict[str, dict[str, Any]] = field(default_factory=dict)  # component -> interface, solver, start
     record: list[str] = field(default_factory=list)
     envelope: dict[str, list[float]] = field(default_factory=dict)
     sections: dict[str, Any] = field(default_factory=dict)  # an application's own tables, by name
@@ -711,6 +717,19 @@ def _read_ssd(ssd_path: Path) -> _System:
                 if item.get("stream") is not None:
                     out.seed_streams[component] = _integer(f"{where}: SeedParameter {component!r}", item.get("stream"),
                                                            "stream")
+            elif tag == "Fmu":  # validated with the rest of the scenario ([fmus.X] keys)
+                component = item.get("component")
+                if component not in components:
+                    raise ScenarioError(f"{where}: Fmu: component {component!r} is no component")
+                settings = out.fmu_settings.setdefault(component, {})
+                if item.get("interface") is not None:
+                    settings["interface"] = item.get("interface")
+                for key in ("start", "solver"):
+                    if item.get(key) is not None:
+                        try:
+                            settings[key] = json.loads(item.get(key))
+                        except json.JSONDecodeError as exc:
+                            raise ScenarioError(f"{where}: Fmu {component!r}: {key} is not JSON ({exc})") from None
             elif tag == "Envelope":
                 signal = item.get("signal", "")
                 out.envelope[signal] = [_number(f"{where}: Envelope {signal!r}", item.get(k), k)
@@ -865,7 +884,8 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
                          "parameters": {k: v for k, v in entry["parameters"].items()
                                         if k != system.seed_parameters.get(c)},
                          **({"seed_parameter": system.seed_parameters[c]} if c in system.seed_parameters else {}),
-                         **({"seed_stream": system.seed_streams[c]} if c in system.seed_streams else {})}
+                         **({"seed_stream": system.seed_streams[c]} if c in system.seed_streams else {}),
+                         **system.fmu_settings.get(c, {})}
                      for c, entry in system.components.items()},
             "record": {"signals": record, **({"block_rows": system.block_rows} if system.block_rows is not None else {})},
             "envelope": dict(system.envelope),

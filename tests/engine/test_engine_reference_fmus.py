@@ -296,3 +296,27 @@ def test_a_model_exchange_run_resumes_from_its_snapshot(version):
             resumed = master.run(1.0, t0=1.0, restore=whole.snapshots[0].states)
         assert np.max(np.abs(resumed.data[:, 1:] - whole.data[100:, 1:])) <= within
         assert np.count_nonzero(np.diff(np.sign(resumed["B.v"])) > 0) >= 2  # bounces after the snapshot
+
+
+def test_an_archive_keeps_how_the_master_runs_an_fmu(tmp_path):
+    """An exported archive carries each FMU's interface, solver and start
+    values (SSP 1.0 has no place for them: this engine's annotation), and
+    the archive read back flies the same run."""
+    from cosim.scenario import build_master, parse_scenario
+    from cosim.ssp import export_ssp, load_ssp
+
+    raw = {"simulation": {"duration": 2.0, "step": 0.01},
+           "fmus": {"Ball": {"path": str(fmu(3, "BouncingBall")), "interface": "ModelExchange",
+                             "solver": {"method": "euler", "step": 0.001}, "start": {"h": 2.0}}},
+           "record": {"signals": ["Ball.h", "Ball.v"]}}
+    scenario = parse_scenario(raw)
+    loaded = load_ssp(export_ssp(scenario, tmp_path / "ball.ssp"))
+    spec = loaded.fmus["Ball"]
+    assert (spec["interface"], dict(spec["solver"]), dict(spec["start"])) == (
+        "ModelExchange", {"method": "euler", "step": 0.001}, {"h": 2.0})
+    runs = []
+    for each in (scenario, loaded):
+        with build_master(each) as master:
+            runs.append(master.run(2.0))
+    np.testing.assert_array_equal(runs[0].data, runs[1].data)
+    assert runs[0].data[0, 1] == 2.0
