@@ -48,7 +48,7 @@ from .position_parameters import PositionParams
 from .variants import Variant, variant as lookup
 
 __all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "PSI_REF",
-           "ACCELERATION_INPUTS", "FNN_SEED"]
+           "ACCELERATION_INPUTS", "FNN_SEED", "seed_parameter_name"]
 
 _AXES = "xyz"
 REFERENCE_INPUTS = (
@@ -65,6 +65,12 @@ ACCELERATION_INPUTS = tuple((f"a{a}_ref", "m/s2", f"reference acceleration d2{a}
 
 # numpy's default_rng(seed) draws f_ij(0) in the FMU as in the Python path
 FNN_SEED = seed_parameter("seed", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)")
+
+
+def seed_parameter_name(variant: str) -> str | None:
+    """The FMU's seed parameter for ``variant`` (``None`` when the variant
+    draws nothing at reset), known without building the model."""
+    return FNN_SEED.name if lookup(variant).n_random else None
 
 
 def fmu_identifier(variant: str) -> str:
@@ -113,7 +119,7 @@ def step_model(identifier: str, description: str, inputs: Sequence, arguments: S
 
     return FmuModel(identifier=identifier, description=description, variables=variables,
                     sampled=Sampled(update=update, initial=initial_states, n_random=n_random,
-                                    seed="seed" if n_random else None, sample_period="dt"))
+                                    seed=FNN_SEED.name if n_random else None, sample_period="dt"))
 
 
 @lru_cache(maxsize=None)

@@ -1,0 +1,88 @@
+"""A built FMU found by the sources that define it, without building its model.
+
+:func:`fmu_models.export.build.cached_fmu` finds an FMU by the content of
+its generated sources: to know which FMU a model is, it builds the model's
+CasADi functions and generates their C (tens of milliseconds a model, and
+CasADi imported). A run of already-built FMUs needs none of that.
+:func:`built_fmu` keeps, beside the cache, an index from a *recipe* to the
+FMU ``cached_fmu`` returned for it: the model's identifier, the FMI version,
+the CasADi and fmpy versions (the generated C, the FMI headers) and the bytes
+of every source file that can change the model or its FMU (the packages
+``fmu_models`` and ``fnn_controller``, where every model and controller
+variant of the project is defined, and any ``extra`` file, such as a module
+that registered a controller variant of its own). Any change of any of these
+gives another recipe, so the index can only miss, never point to a stale
+FMU: on a miss the model is loaded and built by ``cached_fmu`` as before.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from functools import lru_cache
+from importlib.metadata import version as _version
+from pathlib import Path
+from typing import Callable, Iterable
+
+__all__ = ["built_fmu", "cache_root"]
+
+_PACKAGES = (Path(__file__).resolve().parent, Path(__file__).resolve().parents[1] / "fnn_controller")
+_SUFFIXES = {".py", ".c", ".h"}
+
+
+def cache_root() -> Path:
+    """Where built FMUs are kept: $FNN_COSIM_CACHE, else build/ in a source
+    checkout, else ~/.cache/fnn-cosim (:func:`fmu_models.export.build.cache_root`'s rule)."""
+    if os.environ.get("FNN_COSIM_CACHE"):
+        return Path(os.environ["FNN_COSIM_CACHE"])
+    repo = Path(__file__).resolve().parents[1]
+    if (repo / "pyproject.toml").exists():
+        return repo / "build" / "fmu-cache"
+    return Path.home() / ".cache" / "fnn-cosim"
+
+
+def _digest_files(digest, files: Iterable[Path], root: Path | None = None) -> None:
+    for path in files:
+        digest.update(str(path.relative_to(root) if root else path).encode() + b"\0")
+        digest.update(path.read_bytes())
+
+
+@lru_cache(maxsize=None)
+def _sources_digest() -> bytes:
+    """The digest of the tools and of every source file of the packages that define the models (once a process)."""
+    digest = hashlib.sha256(f"casadi {_version('casadi')} fmpy {_version('fmpy')}".encode())
+    for package in _PACKAGES:
+        files = sorted(p for p in package.rglob("*") if p.suffix in _SUFFIXES and p.is_file())
+        _digest_files(digest, files, package.parent)
+    return digest.digest()
+
+
+def _recipe(identifier: str, fmi_version: int, extra: Iterable[Path]) -> str:
+    digest = hashlib.sha256(_sources_digest())
+    digest.update(f"{identifier} fmi{fmi_version}".encode())
+    _digest_files(digest, sorted({Path(p).resolve() for p in extra}))
+    return digest.hexdigest()[:32]
+
+
+def built_fmu(identifier: str, fmi_version: int, load: Callable[[], object], extra: Iterable[Path] = ()) -> Path:
+    """The FMU of the model ``load()`` returns (``identifier``, FMI
+    ``fmi_version``): the one the index holds for its recipe if that file
+    still exists, else ``cached_fmu(load(), fmi_version)``, then recorded.
+    ``extra``: source files beyond ``fmu_models`` and ``fnn_controller``
+    that define the model."""
+    entry = cache_root() / "index" / _recipe(identifier, fmi_version, extra)
+    try:
+        known = Path(entry.read_text())
+        if known.is_file():
+            return known
+    except OSError:
+        pass  # not yet recorded, or the cache moved: build (or find) it as cached_fmu does
+    from .export.build import cached_fmu
+
+    path = cached_fmu(load(), fmi_version)
+    entry.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=entry.parent, suffix=".part")  # parallel runs never read half an entry
+    with os.fdopen(fd, "w") as f:
+        f.write(str(path.resolve()))
+    os.replace(tmp, entry)
+    return path
