@@ -104,6 +104,13 @@ def _controller_kind() -> registry.ComponentKind:
                                   alias="controller", instance=CONTROLLER_INSTANCE)
 
 
+def _split_model(which: str, *args):
+    """A loop of the split controller (:mod:`fnn_controller.split`), imported when first asked for."""
+    from fnn_controller import split
+
+    return getattr(split, which)(*args)
+
+
 _registered = False
 
 
@@ -116,7 +123,7 @@ def register() -> None:
     from fmu_models.catalog import MODEL_NAMES, model as catalog_model
     from fnn_controller.variants import variant_names
 
-    from fnn_controller.split import INNER_IDENTIFIER, inner_model, outer_identifier, outer_model
+    from fnn_controller.fmu_names import INNER_IDENTIFIER, outer_identifier
 
     from .missions import Metrics, Wind, apply_metrics, apply_wind
     from .trajectories import TRAJECTORIES
@@ -125,9 +132,9 @@ def register() -> None:
         registry.register_fmu_model(fmu_model(identifier, partial(catalog_model, identifier)))
     for name in variant_names():  # the controller of each variant as an FMU, whole and as its outer loop
         registry.register_fmu_model(controller_fmu_model(name))
-        registry.register_fmu_model(fmu_model(outer_identifier(name), partial(outer_model, name),
+        registry.register_fmu_model(fmu_model(outer_identifier(name), partial(_split_model, "outer_model", name),
                                               partial(variant_sources, name)))
-    registry.register_fmu_model(fmu_model(INNER_IDENTIFIER, inner_model))  # its inner loop, for every variant
+    registry.register_fmu_model(fmu_model(INNER_IDENTIFIER, partial(_split_model, "inner_model")))  # its inner loop, for every variant
     for name in TRAJECTORIES:
         registry.register_component_kind(_trajectory_kind(name))
     registry.register_component_kind(_controller_kind())

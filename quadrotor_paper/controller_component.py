@@ -266,7 +266,7 @@ class ControllerComponent(PythonComponent):
         parameters set to this component's, ``psi_ref`` (a parameter, held for
         the run), its seed parameter (if its variant
         draws f_ij(0)) bound to the run's seed."""
-        from fnn_controller.controller_fmu import fmu_identifier, seed_parameter_name
+        from fnn_controller.fmu_names import fmu_identifier, seed_parameter_name
         from fnn_controller.parametric import parameter_table
 
         values = {p.name: p.default for p in parameter_table(self.variant, self.position, self.geometric)}

@@ -62,6 +62,12 @@ def variant_sources(name: str) -> list[Path]:
 
 def controller_fmu_model(name: str) -> registry.RegisteredModel:
     """The controller FMU of variant ``name`` as a registered model (built on demand)."""
-    from fnn_controller.controller_fmu import controller_model, fmu_identifier
+    from fnn_controller.fmu_names import fmu_identifier
 
-    return fmu_model(fmu_identifier(name), partial(controller_model, name), partial(variant_sources, name))
+    return fmu_model(fmu_identifier(name), partial(_controller_model, name), partial(variant_sources, name))
+
+
+def _controller_model(name: str):
+    from fnn_controller.controller_fmu import controller_model  # CasADi: only to build the FMU
+
+    return controller_model(name)
