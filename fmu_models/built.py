@@ -6,7 +6,8 @@ CasADi functions and generates their C (tens of milliseconds a model, and
 CasADi imported). A run of already-built FMUs needs none of that.
 :func:`built_fmu` keeps, beside the cache, an index from a *recipe* to the
 FMU ``cached_fmu`` returned for it: the model's identifier, the FMI version,
-the CasADi and fmpy versions (the generated C, the FMI headers) and the bytes
+the installed CasADi and fmpy (the generated C, the FMI headers: where each
+is installed, its ``__init__.py``'s size and modification time) and the bytes
 of every source file that can change the model or its FMU (the packages
 ``fmu_models`` and ``fnn_controller``, where every model and controller
 variant of the project is defined, and any ``extra`` file, such as a module
@@ -20,7 +21,7 @@ import hashlib
 import os
 import tempfile
 from functools import lru_cache
-from importlib.metadata import version as _version
+from importlib.util import find_spec
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -47,13 +48,29 @@ def _digest_files(digest, files: Iterable[Path], root: Path | None = None) -> No
         digest.update(path.read_bytes())
 
 
+def _installed(package: str) -> str:
+    """Where ``package`` is installed and the size and modification time of
+    its ``__init__.py``, which installing another version rewrites (read
+    without importing the package, and faster than its distribution's metadata)."""
+    origin = Path(find_spec(package).origin)
+    stat = origin.stat()
+    return f"{origin}:{stat.st_size}:{stat.st_mtime_ns}"
+
+
+def _source_files(package: Path) -> list[Path]:
+    files = []
+    for folder, subfolders, names in os.walk(package):
+        subfolders[:] = [d for d in subfolders if d != "__pycache__"]
+        files += [Path(folder, name) for name in names if Path(name).suffix in _SUFFIXES]
+    return sorted(files)
+
+
 @lru_cache(maxsize=None)
 def _sources_digest() -> bytes:
     """The digest of the tools and of every source file of the packages that define the models (once a process)."""
-    digest = hashlib.sha256(f"casadi {_version('casadi')} fmpy {_version('fmpy')}".encode())
+    digest = hashlib.sha256(f"{_installed('casadi')}\n{_installed('fmpy')}\n".encode())
     for package in _PACKAGES:
-        files = sorted(p for p in package.rglob("*") if p.suffix in _SUFFIXES and p.is_file())
-        _digest_files(digest, files, package.parent)
+        _digest_files(digest, _source_files(package), package.parent)
     return digest.digest()
 
 
