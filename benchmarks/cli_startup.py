@@ -46,8 +46,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=9)
     args = p.parse_args(argv)
     if os.environ.get("PYTHONDONTWRITEBYTECODE"):
-        print("note: PYTHONDONTWRITEBYTECODE is set: every process compiles the project's sources "
-              "(PYTHONPYCACHEPREFIX=DIR keeps the bytecode out of the tree)")
+        print("note: PYTHONDONTWRITEBYTECODE is set: a module with no bytecode cached yet is compiled in "
+              "every process (PYTHONPYCACHEPREFIX=DIR keeps the bytecode out of the tree instead)")
 
     with tempfile.TemporaryDirectory(prefix="cli-startup-") as tmp:
         pairs = {  # label -> command: each command, then its reference
