@@ -41,7 +41,7 @@ from fmu_models.export.model import FmuModel, Sampled
 from fmu_models.export.variables import discrete, input_, output, parameter
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
-from .fmu_names import FNN_SEED, fmu_identifier, seed_parameter_name
+from .fmu_names import FNN_SEED, fmu_identifier  # re-exported: where the controller FMU's users found them
 from .step import OUTPUTS, state_ports
 from .geometric import GeometricParams
 from .parametric import initial_state_function, parameter_table, parametric_step_function, structure
@@ -49,7 +49,7 @@ from .position_parameters import PositionParams
 from .variants import Variant, variant as lookup
 
 __all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "PSI_REF",
-           "ACCELERATION_INPUTS", "FNN_SEED", "seed_parameter_name"]
+           "ACCELERATION_INPUTS", "FNN_SEED"]
 
 _AXES = "xyz"
 REFERENCE_INPUTS = (
