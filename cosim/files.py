@@ -24,7 +24,7 @@ from typing import Any
 from .errors import ScenarioError, one_line
 from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_RATIO
 
-__all__ = ["regular_file", "read_text", "read_toml", "read_json", "safe_name", "output_folder", "output_file",
+__all__ = ["regular_file", "read_text", "read_toml", "read_json", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder", "output_file",
            "zip_members", "extract_zip"]
 
 
@@ -188,3 +188,36 @@ def extract_zip(path: str | Path, target: str | Path, what: str, only: set[str] 
             shutil.rmtree(target, ignore_errors=True)
         raise ScenarioError(f"{what}: a broken archive ({type(exc).__name__}: {one_line(str(exc))})") from None
     return target
+
+
+def write_json(path: str | Path, data: Any) -> Path:
+    """``data`` as JSON at ``path``, written whole or not at all (a temporary file renamed)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.partial")
+    tmp.write_text(json.dumps(data, indent=1, default=_json_default))
+    os.replace(tmp, path)
+    return path
+
+
+def _json_default(obj):
+    import numpy as np
+
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
+
+
+SSD_NAME = "SystemStructure.ssd"  # the system structure at an SSP archive's root (the name SSP 1.0 fixes)
+
+
+def is_ssp(path: str | Path) -> bool:
+    """Whether ``path`` names an SSP archive for :func:`cosim.ssp.load_ssp` rather than a
+    TOML scenario: a ``.ssp`` or ``.ssd`` file, or a folder holding
+    ``SystemStructure.ssd`` (an extracted archive)."""
+    path = Path(path)
+    if path.is_dir():
+        return (path / SSD_NAME).is_file()
+    return path.suffix.lower() in (".ssp", ".ssd")

@@ -18,6 +18,7 @@ naming the key and the value, in one line.
 from __future__ import annotations
 
 import copy
+import functools
 import importlib
 import json
 import math
@@ -253,8 +254,11 @@ class FactoryComponent(Table):
 
 # ---- the whole scenario, assembled from the registry -------------------------------------------
 
+@functools.lru_cache(maxsize=None)
 def _kind_table(kind: registry.ComponentKind, tag_required: bool) -> type[Table]:
-    """A component table of ``kind``: its parameters and its ``kind`` key."""
+    """A component table of ``kind``: its parameters and its ``kind`` key
+    (built once per kind: the components' union and a short section's type
+    share it)."""
     kind_field = (one_of((kind.name,)), ... if tag_required else kind.name)
     model = create_model(f"Component_{_identifier(kind.name)}", __base__=kind.parameters(),
                          __doc__=kind.description or None, kind=kind_field)

@@ -58,7 +58,7 @@ from lxml import etree
 from . import registry, units
 from .connection import check_connections, parse_connections
 from .errors import CosimError, FmuError, ScenarioError, one_line, show_folder_as
-from .files import extract_zip, regular_file, safe_name, zip_members
+from .files import SSD_NAME, extract_zip, is_ssp, regular_file, safe_name, zip_members
 from .limits import MAX_DOCUMENT_BYTES
 from .scenario import Scenario, apply_overrides, fmu_component, fmu_error_in_scenario, fmu_file, parse_scenario
 from .scenario import check_fmu_file
@@ -66,7 +66,6 @@ from .scenario import check_fmu_file
 __all__ = ["export_ssp", "load_ssp", "is_ssp", "run_libcosim", "ssd_schema_errors", "SSD_NAME", "FMU_TYPE",
            "OSP_NAMESPACE", "OSP_ANNOTATION", "COSIM_NAMESPACE", "COSIM_ANNOTATION"]
 
-SSD_NAME = "SystemStructure.ssd"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -816,16 +815,6 @@ def _open(path: Path, extract_to: str | Path | None) -> tuple[Path, Path | None]
             shutil.rmtree(temporary, ignore_errors=True)
         raise
     return folder / SSD_NAME, temporary
-
-
-def is_ssp(path: str | Path) -> bool:
-    """Whether ``path`` names an SSP archive for :func:`load_ssp` rather than a
-    TOML scenario: a ``.ssp`` or ``.ssd`` file, or a folder holding
-    ``SystemStructure.ssd`` (an extracted archive)."""
-    path = Path(path)
-    if path.is_dir():
-        return (path / SSD_NAME).is_file()
-    return path.suffix.lower() in (".ssp", ".ssd")
 
 
 def load_ssp(path: str | Path, *, step: float | None = None, duration: float | None = None,

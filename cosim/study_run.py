@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from .errors import ScenarioError, one_line
+from .files import write_json  # noqa: F401  (where the study writers have always found it)
 from .scenario import apply_overrides, parse_scenario
 from .study import Study, count, runs
 from .limits import WORKER_TIMEOUT
@@ -136,26 +137,6 @@ def write_parquet(csv_path: Path, path: Path) -> Path:
     table = pcsv.read_csv(csv_path, convert_options=pcsv.ConvertOptions(strings_can_be_null=True))
     pq.write_table(table, path)
     return path
-
-
-def write_json(path: str | Path, data: Any) -> Path:
-    """``data`` as JSON at ``path``, written whole or not at all (a temporary file renamed)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(json.dumps(data, indent=1, default=_json_default))
-    os.replace(tmp, path)
-    return path
-
-
-def _json_default(obj):
-    import numpy as np
-
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
 
 
 # ---- the folder ---------------------------------------------------------------------------------

@@ -18,16 +18,43 @@ The laws take a :class:`Variant`; a variant's name is resolved once, by
 
 Values the paper leaves open are documented in ``docs/controller.md``.
 """
-from .fast import FastFunction, QuadrotorController
-from .fnn import FnnInit, fnn_output, firing_strength, membership, normalized_firing_strength
-from .geometric import (GeometricParams, VehicleParams, initial_velocity_state, velocity_controller,
-                        velocity_controller_function)
-from .learning import LearningBounds, learning_step, lm_f_rate, smc_f_rate
-from .parametric import bound_step_function, parametric_step_function
-from .position import FNN_STATE_SIZE, initial_fnn_state, pd_law, position_controller, position_controller_function
-from .position_parameters import PositionParams
-from .step import STATE_SIZE, initial_state, state_size
-from .variants import DEFAULT_VARIANT, Variant, register_variant, variant, variant_names, variants
+from importlib import import_module
+
+# name -> the module that defines it: imported when the name is first asked for
+# (PEP 562), so that what needs no law (a variant's metadata, the parameter
+# dataclasses) is read without building or importing what the laws need.
+_WHERE = {
+    **dict.fromkeys(("FastFunction", "QuadrotorController"), "fast"),
+    **dict.fromkeys(("FnnInit", "fnn_output", "firing_strength", "membership", "normalized_firing_strength"), "fnn"),
+    **dict.fromkeys(("GeometricParams", "VehicleParams", "initial_velocity_state", "velocity_controller",
+                     "velocity_controller_function"), "geometric"),
+    **dict.fromkeys(("LearningBounds", "learning_step", "lm_f_rate", "smc_f_rate"), "learning"),
+    **dict.fromkeys(("bound_step_function", "parametric_step_function"), "parametric"),
+    **dict.fromkeys(("FNN_STATE_SIZE", "initial_fnn_state", "pd_law", "position_controller",
+                     "position_controller_function"), "position"),
+    "PositionParams": "position_parameters",
+    **dict.fromkeys(("STATE_SIZE", "initial_state", "state_size"), "step"),
+    **dict.fromkeys(("DEFAULT_VARIANT", "Variant", "register_variant", "variant", "variant_names", "variants"),
+                    "variants"),
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value  # found once
+        return value
+    try:  # a submodule, e.g. fnn_controller.step
+        return import_module(f".{name}", __name__)
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__name__}.{name}":
+            raise
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
 
 __all__ = [
     "STATE_SIZE", "FastFunction", "QuadrotorController", "parametric_step_function", "bound_step_function",

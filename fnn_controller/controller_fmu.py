@@ -38,9 +38,10 @@ from typing import Any, Callable, Sequence
 import casadi as ca
 
 from fmu_models.export.model import FmuModel, Sampled
-from fmu_models.export.variables import discrete, input_, output, parameter, seed_parameter
+from fmu_models.export.variables import discrete, input_, output, parameter
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
+from .fmu_names import FNN_SEED, fmu_identifier  # re-exported: where the controller FMU's users found them
 from .step import OUTPUTS, state_ports
 from .geometric import GeometricParams
 from .parametric import initial_state_function, parameter_table, parametric_step_function, structure
@@ -61,15 +62,6 @@ PSI_REF = parameter("psi_ref", "rad", "commanded yaw psi*, held for the run", 0.
 # After the plant states, start 0: unconnected they leave the paper's law as it is.
 ACCELERATION_INPUTS = tuple((f"a{a}_ref", "m/s2", f"reference acceleration d2{a}*/dt2 "
                              "(fed forward with accel_feedforward)") for a in _AXES)
-
-
-# numpy's default_rng(seed) draws f_ij(0) in the FMU as in the Python path
-FNN_SEED = seed_parameter("seed", "seed of numpy's default_rng that draws f_ij(0) (section 5.1)")
-
-
-def fmu_identifier(variant: str) -> str:
-    """``ControllerPDLM`` for ``pd+lm``: the FMU's model identifier (a C name)."""
-    return "Controller" + "".join(ch for ch in variant.upper() if ch.isalnum())
 
 
 def _discrete_states(variant: Variant) -> tuple:
@@ -113,7 +105,7 @@ def step_model(identifier: str, description: str, inputs: Sequence, arguments: S
 
     return FmuModel(identifier=identifier, description=description, variables=variables,
                     sampled=Sampled(update=update, initial=initial_states, n_random=n_random,
-                                    seed="seed" if n_random else None, sample_period="dt"))
+                                    seed=FNN_SEED.name if n_random else None, sample_period="dt"))
 
 
 @lru_cache(maxsize=None)

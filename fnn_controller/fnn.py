@@ -29,12 +29,13 @@ PRIMED     1        1 once a step has been taken since reset, else 0
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import casadi as ca
 import numpy as np
 
-from .parameters import check_ranges, param
+# the layout of the axis state and the initial values: declared without CasADi (what a run reads)
+from .axis_state import (ALPHA, AXIS_STATE_PORTS, AXIS_STATE_SIZE, C1, C2, F, N_MF, N_RULES, PRIMED, SIGMA1, SIGMA2,
+                         X1_PREV, X2_PREV)
+from .position_parameters import FnnInit
 
 __all__ = [
     "N_MF", "N_RULES", "AXIS_STATE_SIZE", "AXIS_STATE_PORTS",
@@ -43,48 +44,6 @@ __all__ = [
     "normalized_firing_strength", "fnn_output", "initial_axis_state", "initial_axis_expression",
 ]
 
-N_MF = 3  # I = J, membership functions per input
-N_RULES = N_MF * N_MF  # I * J rules
-
-C1 = slice(0, 3)
-C2 = slice(3, 6)
-SIGMA1 = slice(6, 9)
-SIGMA2 = slice(9, 12)
-F = slice(12, 21)
-ALPHA = 21
-X1_PREV = 22
-X2_PREV = 23
-PRIMED = 24
-AXIS_STATE_SIZE = 25
-
-# Name and unit of every element of the axis state, in layout order: how the
-# learned parameters are published (``f_12`` is the rule of MF 1 of x1 and MF
-# 2 of x2; the co-simulation component appends the axis, ``f_12_x``).
-AXIS_STATE_PORTS: tuple[tuple[str, str], ...] = (
-    *((f"c1_{i}", "m") for i in range(1, N_MF + 1)),
-    *((f"c2_{j}", "m/s") for j in range(1, N_MF + 1)),
-    *((f"sigma1_{i}", "m") for i in range(1, N_MF + 1)),
-    *((f"sigma2_{j}", "m/s") for j in range(1, N_MF + 1)),
-    *((f"f_{i}{j}", "m/s") for j in range(1, N_MF + 1) for i in range(1, N_MF + 1)),  # k = j * I + i
-    ("alpha", "m/s2"), ("x1_prev", "m"), ("x2_prev", "m/s"), ("primed", "1"),
-)
-assert len(AXIS_STATE_PORTS) == AXIS_STATE_SIZE
-
-
-@dataclass(frozen=True)
-class FnnInit:
-    """Initial values of the FNN of one axis (section 5.1)."""
-
-    c1: tuple[float, float, float] = param((-3.0, 1e-4, 3.0), "m", "initial centres of the MFs of x1 = e")
-    c2: tuple[float, float, float] = param((-30.0, 1e-4, 30.0), "m/s", "initial centres of the MFs of x2 = de/dt")
-    sigma1: float = param(1.5, "m", "initial width of every MF of x1", min=1e-9)
-    sigma2: float = param(15.0, "m/s", "initial width of every MF of x2", min=1e-9)
-    alpha: float = param(1e-3, "m/s2", "initial adaptive learning rate (rate of tau_n in eq. 37; see learning.py)",
-                         min=0.0)
-    f_high: float = param(1e-3, "m/s", "f_ij(0) ~ U[0, f_high]", min=0.0)
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
 
 
 def membership(x, c, sigma):

@@ -43,15 +43,15 @@ PRIMED     1        1 once a step has been taken since reset, else 0
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import casadi as ca
 import numpy as np
 
-from .fnn import (ALPHA, AXIS_STATE_PORTS, AXIS_STATE_SIZE, C1, C2, F, N_MF, N_RULES, SIGMA1, SIGMA2, FnnInit,
-                  firing_strength, normalized_firing_strength)
+from .axis_state import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, IT2_AXIS_STATE_PORTS, IT2_AXIS_STATE_SIZE, N_MF,
+                         N_RULES, SIGMA1, SIGMA2)
+from .axis_state import IT2_PRIMED as PRIMED, IT2_Q as Q, IT2_X1_PREV as X1_PREV, IT2_X2_PREV as X2_PREV
+from .fnn import FnnInit, firing_strength, normalized_firing_strength
 from .learning import RULES, LearningBounds, parameters_step, project, switching
-from .parameters import check_ranges, param
+from .position_parameters import IT2Params
 
 __all__ = [
     "C1", "C2", "SIGMA1", "SIGMA2", "F", "ALPHA", "Q", "X1_PREV", "X2_PREV", "PRIMED",
@@ -60,31 +60,6 @@ __all__ = [
     "it2_regressor", "q_rate", "it2_learning_step", "it2_initial_axis_expression", "it2_axis_state_bounds",
 ]
 
-# The type-1 layout (fnn.py) with q inserted after alpha.
-Q = ALPHA + 1
-X1_PREV, X2_PREV, PRIMED = Q + 1, Q + 2, Q + 3
-IT2_AXIS_STATE_SIZE = AXIS_STATE_SIZE + 1
-
-IT2_AXIS_STATE_PORTS: tuple[tuple[str, str], ...] = (
-    *AXIS_STATE_PORTS[:Q], ("q", "1"), *AXIS_STATE_PORTS[Q:],
-)
-assert len(IT2_AXIS_STATE_PORTS) == IT2_AXIS_STATE_SIZE
-
-
-@dataclass(frozen=True)
-class IT2Params:
-    """Parameters of the interval type-2 FNN, the nested field
-    ``PositionParams.it2`` (read by the variants ``pd+it2-*`` only)."""
-
-    spread: float = param(0.2, "1", "width uncertainty d: upper MF width (1 + d) sigma, lower MF width sigma",
-                          min=0.0, max=10.0)
-    q0: float = param(0.5, "1", "initial weight q of the lower firing strengths in the type reduction",
-                      min=0.0, max=1.0)
-    gamma_q: float = param(0.5, "1/m", "gain of the q law q_dot = -gamma_q (y_lower - y_upper) sgn(tau_c) "
-                           "(0: q held at q0)", min=0.0)
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
 
 
 IT2_DEFAULTS = IT2Params()

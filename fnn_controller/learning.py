@@ -33,13 +33,10 @@ Lyapunov function of Theorem 3 (eq. 63) has no alpha term.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import casadi as ca
 
-from .fnn import ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV
-from .parameters import check_ranges, param
+from .axis_state import ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV
+from .position_parameters import LearningBounds
 
 __all__ = [
     "LearningBounds", "sgn", "switching", "sigma_rate", "smc_f_rate", "alpha_rate", "lm_delta",
@@ -47,31 +44,6 @@ __all__ = [
 ]
 
 RULES = ("smc", "lm")
-
-
-@dataclass(frozen=True)
-class LearningBounds:
-    """Bounds of eqs. (27)-(29) and the floor of eqs. (35)-(36) (not in the paper)."""
-
-    # Every bound is positive: at least 1e-9 in its unit (FMI ranges are inclusive).
-    x1_max: float = param(20.0, "m", "B_x for x1 = e (eq. 27); the FNN input is clipped to +-x1_max", min=1e-9)
-    x2_max: float = param(50.0, "m/s", "B_x for x2 = de/dt (eq. 27); the FNN input is clipped to +-x2_max",
-                          min=1e-9)
-    c1_max: float = param(50.0, "m", "B_c for each element of c1 (eq. 28)", min=1e-9)
-    c2_max: float = param(150.0, "m/s", "B_c for each element of c2 (eq. 28)", min=1e-9)
-    sigma1_min: float = param(0.05, "m", "smallest width of an MF of x1", min=1e-9)
-    sigma1_max: float = param(15.0, "m", "B_sigma for each element of sigma1 (eq. 28)", min=1e-9)
-    sigma2_min: float = param(0.5, "m/s", "smallest width of an MF of x2", min=1e-9)
-    sigma2_max: float = param(150.0, "m/s", "B_sigma for each element of sigma2 (eq. 28)", min=1e-9)
-    f_max: float = param(10.0, "m/s", "B_f of eq. 29 for each f_ij", min=1e-9)
-    alpha_max: float = param(10.0, "m/s2", "upper bound of the adaptive learning rate alpha", min=1e-9)
-    a_min: float = param(0.5, "1", "floor of |A| = |x - c| / sigma in eqs. 35-36 / 59-60", min=1e-9)
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
-        for low, high in (("sigma1_min", "sigma1_max"), ("sigma2_min", "sigma2_max")):
-            if not getattr(self, low) < getattr(self, high) < math.inf:
-                raise ValueError(f"LearningBounds needs 0 < {low} < {high} < inf")
 
 
 def sgn(x):

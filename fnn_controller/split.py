@@ -33,6 +33,7 @@ from fmu_models.export.model import FmuModel
 from fmu_models.export.variables import discrete, input_
 from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 
+from .fmu_names import INNER_IDENTIFIER, outer_identifier
 from .step import OUTPUTS, state_ports
 from .controller_fmu import ACCELERATION_INPUTS, PARAMETERS, PSI_REF, REFERENCE_INPUTS, STATE, step_model
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
@@ -52,13 +53,7 @@ A_REF_PORTS = tuple((f"a_ref_{a}", "m/s2", f"acceleration fed forward to the vel
                      "accel_feedforward d2p*/dt2 (0 with the option off)") for a in "xyz")
 OUTER_OUTPUTS = tuple(o for o in OUTPUTS if o[0].startswith(("v_ref_", "tau_c_", "tau_n_"))) + A_REF_PORTS
 INNER_OUTPUTS = tuple(o for o in OUTPUTS if o not in OUTER_OUTPUTS)
-INNER_IDENTIFIER = "VelocityController"
 _AXES = "xyz"
-
-
-def outer_identifier(variant: str) -> str:
-    """``PositionControllerPDLM`` for ``pd+lm``: the outer FMU's model identifier."""
-    return "PositionController" + "".join(ch for ch in variant.upper() if ch.isalnum())
 
 
 def outer_parameter_table(variant: str, position: PositionParams = PositionParams()) -> tuple[Parameter, ...]:

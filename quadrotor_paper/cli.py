@@ -82,14 +82,13 @@ def _workers(n: int | None) -> int:
 
 def _cmd_run(args) -> int:
     from cosim.scenario import load_scenario
-    from cosim.study_run import write_json
+    from cosim.files import write_json
 
     from .experiments import run_once
     from .progress import progress_bar
 
     from cosim.errors import ScenarioError
-    from cosim.files import output_file, output_folder, safe_name
-    from cosim.ssp import is_ssp, load_ssp
+    from cosim.files import is_ssp, output_file, output_folder, safe_name
 
     overrides = _overrides(args.set)
     if args.seed is not None:
@@ -99,6 +98,8 @@ def _cmd_run(args) -> int:
             if value:
                 raise ScenarioError(f"{flag} {value}: an SSP archive's controller is an FMU it holds, with its "
                                     f"own model and state; give it to a TOML scenario's [controller]")
+        from cosim.ssp import load_ssp
+
         scenario = load_ssp(args.scenario, overrides=overrides)
     else:
         if args.variant:

@@ -25,40 +25,12 @@ from typing import Any, Mapping
 from cosim import registry
 from cosim.errors import ScenarioError
 
+from .models import controller_fmu_model, fmu_model, variant_sources
+
 __all__ = ["register", "fmu_entry", "TRAJECTORY_INSTANCE", "CONTROLLER_INSTANCE"]
 
 TRAJECTORY_INSTANCE = "reference"
 CONTROLLER_INSTANCE = "controller"
-
-
-def _fmu_model(identifier: str, load) -> registry.RegisteredModel:
-    """The model ``load()`` returns, registered as ``identifier``; imported
-    (and built) only when a scenario checks one of its parameters or needs
-    its FMU."""
-
-    def build(version: int):
-        from fmu_models.export.build import cached_fmu
-
-        return cached_fmu(load(), version)
-
-    def check_parameter(name: str, value: float) -> None:
-        model = load()
-        try:
-            var = model.variable(name)
-        except KeyError:
-            known = ", ".join(v.name for v in model.parameters + model.inputs)
-            raise KeyError(f"{model.identifier} has no parameter {name!r}; parameters and inputs: {known}") from None
-        if var.causality not in ("parameter", "input"):
-            article = "an" if var.causality[0] in "aeiou" else "a"
-            raise KeyError(f"{name!r} is {article} {var.causality} of {model.identifier}, not a parameter")
-        var.check(value)
-
-    def build_with(values: Mapping[str, float], version: int):
-        from fmu_models.export.build import cached_fmu
-
-        return cached_fmu(load().with_defaults(values), version)
-
-    return registry.RegisteredModel(identifier, build, check_parameter, build_with)
 
 
 def _trajectory_table(name: str):
@@ -132,6 +104,13 @@ def _controller_kind() -> registry.ComponentKind:
                                   alias="controller", instance=CONTROLLER_INSTANCE)
 
 
+def _split_model(which: str, *args):
+    """A loop of the split controller (:mod:`fnn_controller.split`), imported when first asked for."""
+    from fnn_controller import split
+
+    return getattr(split, which)(*args)
+
+
 _registered = False
 
 
@@ -144,18 +123,18 @@ def register() -> None:
     from fmu_models.catalog import MODEL_NAMES, model as catalog_model
     from fnn_controller.variants import variant_names
 
-    from fnn_controller.controller_fmu import controller_model, fmu_identifier
-    from fnn_controller.split import INNER_IDENTIFIER, inner_model, outer_identifier, outer_model
+    from fnn_controller.fmu_names import INNER_IDENTIFIER, outer_identifier
 
     from .missions import Metrics, Wind, apply_metrics, apply_wind
     from .trajectories import TRAJECTORIES
 
     for identifier in MODEL_NAMES:
-        registry.register_fmu_model(_fmu_model(identifier, partial(catalog_model, identifier)))
+        registry.register_fmu_model(fmu_model(identifier, partial(catalog_model, identifier)))
     for name in variant_names():  # the controller of each variant as an FMU, whole and as its outer loop
-        registry.register_fmu_model(_fmu_model(fmu_identifier(name), partial(controller_model, name)))
-        registry.register_fmu_model(_fmu_model(outer_identifier(name), partial(outer_model, name)))
-    registry.register_fmu_model(_fmu_model(INNER_IDENTIFIER, inner_model))  # its inner loop, for every variant
+        registry.register_fmu_model(controller_fmu_model(name))
+        registry.register_fmu_model(fmu_model(outer_identifier(name), partial(_split_model, "outer_model", name),
+                                              partial(variant_sources, name)))
+    registry.register_fmu_model(fmu_model(INNER_IDENTIFIER, partial(_split_model, "inner_model")))  # its inner loop, for every variant
     for name in TRAJECTORIES:
         registry.register_component_kind(_trajectory_kind(name))
     registry.register_component_kind(_controller_kind())

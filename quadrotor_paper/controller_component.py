@@ -266,11 +266,11 @@ class ControllerComponent(PythonComponent):
         parameters set to this component's, ``psi_ref`` (a parameter, held for
         the run), its seed parameter (if its variant
         draws f_ij(0)) bound to the run's seed."""
-        from fnn_controller.controller_fmu import controller_model, fmu_identifier
+        from fnn_controller.fmu_names import fmu_identifier, seed_parameter_name
         from fnn_controller.parametric import parameter_table
 
         values = {p.name: p.default for p in parameter_table(self.variant, self.position, self.geometric)}
-        seed = controller_model(self.variant).sampled.seed
+        seed = seed_parameter_name(self.variant)
         return {"model": fmu_identifier(self.variant), "fmi_version": fmi_version,
                 "parameters": {**values, "psi_ref": self.psi_ref}, **({"seed_parameter": seed} if seed else {})}
 
@@ -278,13 +278,11 @@ class ControllerComponent(PythonComponent):
         """This controller as its FMU (:meth:`fmu_entry`; the same parametric
         step compiled, :func:`fnn_controller.controller_fmu.controller_model`),
         starting from :attr:`learned` if set."""
-        from fmu_models.export.build import cached_fmu
-        from fnn_controller.controller_fmu import controller_model
-
+        from .models import controller_fmu_model
         from .learned import LearnedControllerFmu
 
         entry = self.fmu_entry(fmi_version)
-        return LearnedControllerFmu(self.name, cached_fmu(controller_model(self.variant), fmi_version),
+        return LearnedControllerFmu(self.name, controller_fmu_model(self.variant).build(fmi_version),
                                     parameters=entry["parameters"], seed_parameter=entry.get("seed_parameter"),
                                     variant=self.variant, state=self.learned, interface=interface)
 

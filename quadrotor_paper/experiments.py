@@ -11,13 +11,15 @@ between the ``[metrics]`` signals). :func:`run_once` is the single run of
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from cosim.errors import FmuError, ScenarioError
 from cosim.scenario import Scenario, build_master, fmu_error_in_scenario
-from cosim.study import Study
 from cosim.limits import WORKER_TIMEOUT
-from cosim.study_run import StudyResult, run_study
+
+if TYPE_CHECKING:
+    from cosim.study import Study
+    from cosim.study_run import StudyResult
 
 import numpy as np
 
@@ -190,6 +192,8 @@ def measure(study: Study, out_dir: str | Path | None = None, *, workers: int = 1
     measuring each row with ``metrics`` and recording only what they read
     (``record``, default :func:`lean_signals`); ``metric_names`` default
     :func:`study_metric_names` of the study's scenario."""
+    from cosim.study_run import run_study  # the study machinery: not loaded by a single run
+
     return run_study(study, out_dir, workers=workers, scheduler=scheduler, metrics=metrics,
                      metric_names=study_metric_names(study.scenario) if metric_names is None else metric_names,
                      record=record if record is not None else (lean_signals(study.scenario) or None),

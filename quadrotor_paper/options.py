@@ -77,7 +77,7 @@ class VariantCase(Case):
     def applied_to(self, raw: Mapping[str, Any]) -> dict[str, Any]:
         out = super().applied_to(raw)
         if "controller" not in raw:
-            from fnn_controller.split import outer_identifier
+            from fnn_controller.fmu_names import outer_identifier
             from fnn_controller.variants import variant_names
 
             outer = {outer_identifier(v) for v in variant_names()}

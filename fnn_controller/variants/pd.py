@@ -5,7 +5,7 @@ variant draws the same f_ij(0) from a seed and shares one state layout.
 """
 from __future__ import annotations
 
-from ..fnn import AXIS_STATE_PORTS, AXIS_STATE_SIZE
+from ..axis_state import AXIS_STATE_PORTS, AXIS_STATE_SIZE
 from .registry import Variant, register_variant
 from .type1 import TYPE1_RANDOM, type1_axis_state_bounds, type1_initial_axis
 

@@ -2,7 +2,7 @@
 docs/controller.md: eqs. 33-38 with the IT2 regressor W_bar_q, and a learned q)."""
 from __future__ import annotations
 
-from ..it2 import IT2_AXIS_STATE_PORTS, IT2_AXIS_STATE_SIZE
+from ..axis_state import IT2_AXIS_STATE_PORTS, IT2_AXIS_STATE_SIZE
 from .it2 import IT2_PARAMETERS, IT2_RANDOM, it2_axis_law, it2_axis_state_bounds, it2_initial_axis
 from .registry import Variant, register_variant
 

@@ -1,7 +1,7 @@
 """PD + type-1 FNN trained by the sliding-mode laws of Theorem 1 (eqs. 33-38)."""
 from __future__ import annotations
 
-from ..fnn import AXIS_STATE_PORTS, AXIS_STATE_SIZE
+from ..axis_state import AXIS_STATE_PORTS, AXIS_STATE_SIZE
 from .registry import Variant, register_variant
 from .type1 import TYPE1_RANDOM, type1_axis_law, type1_axis_state_bounds, type1_initial_axis
 

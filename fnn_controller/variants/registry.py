@@ -35,7 +35,6 @@ import re
 from dataclasses import dataclass
 from typing import Any, Callable
 
-import casadi as ca
 import numpy as np
 
 from ..position_parameters import PositionParams
@@ -102,6 +101,8 @@ def variant(name: str) -> Variant:
 def initial_axis_state(v: Variant, rng, params):
     """One axis's state at reset, as numbers: ``v.initial_axis(params, r)``
     with ``r = rng.random(v.n_random)``."""
+    import casadi as ca  # the law's expression evaluated (the registry itself needs no CasADi)
+
     state = np.array(ca.DM(v.initial_axis(params, rng.random(v.n_random)))).ravel()
     if state.shape != (v.axis_state_size,):
         raise ValueError(f"variant {v.name!r}: initial axis state of shape {state.shape}, "

@@ -1,13 +1,14 @@
 """The type-1 TSK FNN of §4.1 in parallel with the PD, trained online by a
 learning rule of :mod:`fnn_controller.learning`: the part the SMC and LM
-variants share (eqs. 24-25, inputs clipped to the box of eq. 27)."""
+variants share (eqs. 24-25, inputs clipped to the box of eq. 27).
+
+The laws' modules (CasADi) are imported when a law is first built: a
+variant is registered, and its metadata read, without them."""
 from __future__ import annotations
 
 import numpy as np
 
-from ..fnn import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, N_RULES, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV,
-                   fnn_output, initial_axis_expression, normalized_firing_strength)
-from ..learning import clip_inputs, learning_step
+from ..axis_state import ALPHA, AXIS_STATE_SIZE, C1, C2, F, N_RULES, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV
 
 
 TYPE1_RANDOM = N_RULES  # uniform numbers drawn per axis: one per f_ij(0)
@@ -15,6 +16,8 @@ TYPE1_RANDOM = N_RULES  # uniform numbers drawn per axis: one per f_ij(0)
 
 def type1_initial_axis(params, r):
     """§5.1's initial values, ``f_ij(0) = f_high r_ij``."""
+    from ..fnn import initial_axis_expression
+
     return initial_axis_expression(params.init, r)
 
 
@@ -36,6 +39,9 @@ def type1_axis_law(rule: str, gamma_field: str):
     ``"lm"``), its gain gamma read from the ``PositionParams`` field ``gamma_field``."""
 
     def axis_law(e, e_dot, tau_c, axis_state, axis, params):
+        from ..fnn import fnn_output, normalized_firing_strength
+        from ..learning import clip_inputs, learning_step
+
         x1, x2 = clip_inputs(e, e_dot, params.bounds)
         w_bar = normalized_firing_strength(x1, x2, axis_state[C1], axis_state[C2],
                                            axis_state[SIGMA1], axis_state[SIGMA2])
