@@ -524,6 +524,15 @@ def _section_along_flight(study) -> list[str]:
                     "perturbation check (plant state)", "least stable mode"], rows), ""]
 
 
+def _section_not_run(study) -> list[str]:
+    """Without the learning laws' part (the command's default): one line saying how to get it."""
+    if study.runs or study.along_flight:
+        return []
+    return ["The learning laws are not in this report: their finite-time claims on recorded runs and the "
+            "learning loop along the flight take minutes, not seconds; `fnn-cosim stability --along-flight` "
+            "adds them (docs/stability.md).", ""]
+
+
 def _section_figures(figures: dict[str, Path]) -> list[str]:
     """The list of figure files; the gain sweep and the steps shown inline."""
     return (["## Figures", ""]
@@ -535,7 +544,7 @@ def _section_figures(figures: dict[str, Path]) -> list[str]:
 
 _SECTIONS = (_section_title, _section_loop_structure, _section_operating_points, _section_poles,
              _section_margins, _section_gain_sweep, _section_ramp, _section_feedforward, _section_cosim_steps, _section_cosim_gains,
-             _section_finite_time, _section_along_flight)
+             _section_finite_time, _section_along_flight, _section_not_run)
 
 
 def _markdown(study, figures: dict[str, Path]) -> str:

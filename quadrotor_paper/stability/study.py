@@ -1,7 +1,9 @@
 """The whole stability study in one call: every analysis of the package at
-the default operating points, checked against the co-simulation, and the
-learning laws' finite-time claims on recorded runs (those come from
-:mod:`quadrotor_paper.learning_claims`, outside this package).
+the default operating points, checked against the co-simulation and, on
+request (``along_flight=True``, ``fnn-cosim stability --along-flight``), the
+learning laws: their finite-time claims on recorded runs (those come from
+:mod:`quadrotor_paper.learning_claims`, outside this package) and the
+learning loop along the flight (:mod:`.along_flight`).
 
 >>> from quadrotor_paper.stability import run_stability_analysis
 >>> study = run_stability_analysis("results/stability")   # doctest: +SKIP
@@ -74,7 +76,8 @@ class StabilityStudy:
 def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.01, kp: float | None = None,
                     kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
                     geometric: GeometricParams = GeometricParams(), feedforward: float = 0.0,
-                    feedforward_gains=(0.0, 1.0), along_every: float = 1.0, workers: int = 1) -> StabilityStudy:
+                    feedforward_gains=(0.0, 1.0), along_flight: bool = False, along_every: float = 1.0,
+                    workers: int = 1, show_progress: bool = False) -> StabilityStudy:
     """Run every analysis.
 
     Parameters
@@ -88,11 +91,17 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
         the paper's law; ``PositionParams.feedforward``).
     feedforward_gains : the gains compared side by side (poles, margins,
         ramp and circle error; with ``cosim`` the co-simulated ramp lag too).
-    cosim : also run the co-simulation checks (steps, gains, ramp, mission),
-        the finite-time runs of :mod:`quadrotor_paper.learning_claims` and the
-        learning loop along the missions (:mod:`.along_flight`, frozen every
-        ``along_every`` s; 0 skips it).
+    cosim : also run the co-simulation checks of the PD (steps, gains, ramp,
+        mission).
+    along_flight : with ``cosim``, also the learning laws (minutes, not
+        seconds: docs/stability.md, "What the command costs"): the finite-time
+        runs of :mod:`quadrotor_paper.learning_claims` and the learning loop
+        along the missions (:mod:`.along_flight`, frozen every ``along_every``
+        s; 0 skips it).
     workers : Dask worker processes of the studies (1: in this process).
+    show_progress : print the along-flight study's plan and estimated time
+        (:func:`~.along_flight.along_flight_plan`) before it starts, and draw its
+        progress bar (stderr).
     sweep_kp, sweep_kd : the grid of the gain sweep.
     """
     position = PositionParams()
@@ -118,18 +127,29 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
                              for f in GAIN_FACTORS]
         study.ramp_nonlinear = ramp_lag(hover, speed, dt=dt)[0]
         study.mission_rmse = pd_mission_rmse()
+    if cosim and along_flight:
         study.runs = default_runs(kp=kp, kd=kd, workers=workers)
         study.finite_time = [evaluate_claims(run, a) for run in study.runs for a in range(3)]
         if along_every > 0:
-            from cosim.scenario import load_scenario
-
-            from .along_flight import MISSIONS, AlongFlight, along_flight_study, flight_events
-
-            gains = {f"controller.position.{k}": float(v) for k, v in (("kp", kp), ("kd", kd)) if v is not None}
-            study.along_flight = along_flight_study(metric=AlongFlight(every=along_every), workers=workers,
-                                                    overrides=gains)
-            study.flight_events = {m: flight_events(load_scenario(m)) for m in MISSIONS}
+            _along_flight(study, kp, kd, along_every, workers, show_progress)
     return study
+
+
+def _along_flight(study: StabilityStudy, kp: float | None, kd: float | None, every: float, workers: int,
+                  show_progress: bool) -> None:
+    """The learning loop along the missions into ``study`` (its plan printed first when ``show_progress``)."""
+    from cosim.scenario import load_scenario
+
+    from ..progress import progress_bar
+    from .along_flight import MISSIONS, AlongFlight, along_flight_plan, along_flight_study, flight_events
+
+    gains = {f"controller.position.{k}": float(v) for k, v in (("kp", kp), ("kd", kd)) if v is not None}
+    metric = AlongFlight(every=every)
+    if show_progress:
+        print(along_flight_plan(metric=metric, workers=workers, overrides=gains), flush=True)
+    with progress_bar("along the flight", enabled=show_progress) as bar:
+        study.along_flight = along_flight_study(metric=metric, workers=workers, overrides=gains, progress=bar)
+    study.flight_events = {m: flight_events(load_scenario(m)) for m in MISSIONS}
 
 
 def run_stability_analysis(out_dir: str | Path = "results/stability", **kwargs) -> StabilityStudy:
