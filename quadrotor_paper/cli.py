@@ -15,7 +15,7 @@ Subcommands::
     fnn-cosim linearize FMU|MODEL [--fmi 2|3] [--parameter N=V ...] [--input N=V ...] [--start N=V ...]
                  [--method auto|derivatives|differences] [--interface auto|me|cs] [--bode IN:OUT ...] [--out DIR]
     fnn-cosim linearize INSTANCE --scenario SCENARIO --time T [--set KEY=VALUE ...] [--bode IN:OUT ...] [--out DIR]
-    fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim] [--along-every S]
+    fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim] [--along-flight [--along-every S]]
                  [--workers N]
 
 SCENARIO is a TOML file or the name of a shipped scenario (``circles``, ``circles_sensors``,

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -55,8 +55,9 @@ from ..missions import controller_variant
 from .fmu_loop import FmuLoop, snapshot_loop
 from .operating_points import STATE_NAMES
 
-__all__ = ["FlightPoint", "FlightRadius", "AlongFlight", "along_flight", "along_flight_study", "flight_events", "verdict", "write_points",
-           "learned_state_names", "VARIANTS", "BOUNDARY_LAYER", "MISSIONS", "DELTA", "NEUTRAL_RATE"]
+__all__ = ["FlightPoint", "FlightRadius", "AlongFlight", "along_flight", "along_flight_study", "along_flight_plan",
+           "AlongFlightPlan", "flight_events", "verdict", "write_points", "learned_state_names", "VARIANTS",
+           "BOUNDARY_LAYER", "MISSIONS", "DELTA", "NEUTRAL_RATE", "SECONDS_PER_POINT"]
 
 VARIANTS = ("pd", "pd+smc", "pd+lm", "pd+it2-smc", "pd+it2-lm")
 MISSIONS = ("circles", "figure8")
@@ -68,6 +69,10 @@ DELTA = {"u": 0.05, "phi": 0.02}
 # to stay linear after a growth of e^4 over the 1 s check
 MODE_SIZE = 1e-4
 _PLANT, _CONTROLLER = "Quadrotor", "controller"
+# s of one worker per frozen point, its perturbation checks and its share of the flight included:
+# the whole study (972 points, 1 s checks) took about 3 min on 2 workers of an idle 2-core
+# machine (docs/stability.md, "What the command costs"); the estimate printed before the study
+SECONDS_PER_POINT = 0.37
 
 
 @dataclass(frozen=True)
@@ -249,25 +254,73 @@ def along_flight(scenario: Scenario, metric: AlongFlight = AlongFlight()) -> Fli
     return metric(scenario, result)["along_flight"]
 
 
+def _cases(variants: Sequence[str], phis: Sequence[float],
+           overrides: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
+    """The cases of one mission's study: variant x law, the ``overrides`` set in each."""
+    from fnn_controller.variants import variant as lookup
+
+    # a variant that learns nothing (the PD) does not depend on the boundary layer
+    return {f"{v} / phi {phi:g}": {"set": {**dict(overrides or {}), "controller.variant": v,
+                                          "controller.position.phi": [float(phi)] * 3}}
+            for v in variants for phi in (phis if lookup(v).learns else phis[:1])}
+
+
+@dataclass(frozen=True)
+class AlongFlightPlan:
+    """What :func:`along_flight_study` will do: ``runs`` flights, ``points``
+    frozen moments, and an estimate of its wall time ``seconds`` on
+    ``workers`` workers (:data:`SECONDS_PER_POINT`)."""
+
+    runs: int
+    points: int
+    workers: int
+    seconds: float
+
+    def __str__(self) -> str:
+        minutes = f"{self.seconds / 60:.1f} min" if self.seconds >= 90 else f"{self.seconds:.0f} s"
+        return (f"along the flight: {self.runs} runs, {self.points} frozen points, about {minutes} on "
+                f"{self.workers} worker{'s' if self.workers > 1 else ''} (estimate)")
+
+
+def along_flight_plan(missions: Sequence[str] = MISSIONS, variants: Sequence[str] = VARIANTS,
+                      phis: Sequence[float] = (0.0, BOUNDARY_LAYER), metric: AlongFlight = AlongFlight(),
+                      workers: int = 1, overrides: dict[str, Any] | None = None) -> AlongFlightPlan:
+    """The runs, frozen points and estimated time of :func:`along_flight_study`
+    with the same arguments, counted from the scenarios before anything runs
+    (the estimate: points x :data:`SECONDS_PER_POINT` / the workers that get a run)."""
+    from cosim.scenario import load_scenario
+
+    runs = points = 0
+    for mission in missions:
+        cases = _cases(variants, phis, overrides)
+        times = metric.snapshot_times(load_scenario(mission, overrides=overrides or None))
+        runs += len(cases)
+        points += len(cases) * len(times)
+    busy = max(1, min(workers, runs))
+    return AlongFlightPlan(runs, points, busy, points * SECONDS_PER_POINT / busy)
+
+
 def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[str] = VARIANTS,
                        phis: Sequence[float] = (0.0, BOUNDARY_LAYER), metric: AlongFlight = AlongFlight(),
-                       workers: int = 1, overrides: dict[str, Any] | None = None) -> list[FlightRadius]:
+                       workers: int = 1, overrides: dict[str, Any] | None = None,
+                       progress: Callable[[int, int], None] | None = None) -> list[FlightRadius]:
     """Every mission x variant x law (``phis``, m/s; 0 the sign law), one study per
     mission run by :func:`~quadrotor_paper.experiments.measure`; ``overrides``
-    (dotted keys) set for every run, e.g. a shorter ``simulation.duration``."""
+    (dotted keys) set for every run, e.g. a shorter ``simulation.duration``;
+    ``progress(done, total)`` counts the runs of all missions together."""
     from cosim.study import parse_study
-    from fnn_controller.variants import variant as lookup
 
     from ..experiments import measure
 
     out = []
+    total = sum(len(_cases(variants, phis, overrides)) for _ in missions)
+    done = 0
     for mission in missions:
-        # a variant that learns nothing (the PD) does not depend on the boundary layer
-        cases = {f"{v} / phi {phi:g}": {"set": {**dict(overrides or {}), "controller.variant": v,
-                                               "controller.position.phi": [float(phi)] * 3}}
-                 for v in variants for phi in (phis if lookup(v).learns else phis[:1])}
+        cases = _cases(variants, phis, overrides)
         study = parse_study({"scenario": mission, "name": f"along_flight_{mission}", "cases": cases})
-        rows = measure(study, workers=workers, metrics=metric, metric_names=()).rows
+        step = None if progress is None else (lambda n, _, before=done: progress(before + n, total))
+        rows = measure(study, workers=workers, metrics=metric, metric_names=(), progress=step).rows
+        done += len(cases)
         order = {name: i for i, name in enumerate(cases)}
         rows = sorted(rows, key=lambda r: order[r["case"]])
         for row in rows:

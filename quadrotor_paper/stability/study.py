@@ -1,7 +1,9 @@
 """The whole stability study in one call: every analysis of the package at
-the default operating points, checked against the co-simulation, and the
-learning laws' finite-time claims on recorded runs (those come from
-:mod:`quadrotor_paper.learning_claims`, outside this package).
+the default operating points, checked against the co-simulation and, on
+request (``along_flight=True``, ``fnn-cosim stability --along-flight``), the
+learning laws: their finite-time claims on recorded runs (those come from
+:mod:`quadrotor_paper.learning_claims`, outside this package) and the
+learning loop along the flight (:mod:`.along_flight`).
 
 >>> from quadrotor_paper.stability import run_stability_analysis
 >>> study = run_stability_analysis("results/stability")   # doctest: +SKIP
@@ -74,7 +76,8 @@ class StabilityStudy:
 def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.01, kp: float | None = None,
                     kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
                     geometric: GeometricParams = GeometricParams(), feedforward: float = 0.0,
-                    feedforward_gains=(0.0, 1.0), along_every: float = 1.0, workers: int = 1) -> StabilityStudy:
+                    feedforward_gains=(0.0, 1.0), along_flight: bool = False, along_every: float = 1.0,
+                    workers: int = 1, show_progress: bool = False, on_analyses=None) -> StabilityStudy:
     """Run every analysis.
 
     Parameters
@@ -88,11 +91,19 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
         the paper's law; ``PositionParams.feedforward``).
     feedforward_gains : the gains compared side by side (poles, margins,
         ramp and circle error; with ``cosim`` the co-simulated ramp lag too).
-    cosim : also run the co-simulation checks (steps, gains, ramp, mission),
-        the finite-time runs of :mod:`quadrotor_paper.learning_claims` and the
-        learning loop along the missions (:mod:`.along_flight`, frozen every
-        ``along_every`` s; 0 skips it).
+    cosim : also run the co-simulation checks of the PD (steps, gains, ramp,
+        mission).
+    along_flight : with ``cosim``, also the learning laws (minutes, not
+        seconds: docs/stability.md, "What the command costs"): the finite-time
+        runs of :mod:`quadrotor_paper.learning_claims` and the learning loop
+        along the missions (:mod:`.along_flight`, frozen every ``along_every``
+        s; 0 skips it).
     workers : Dask worker processes of the studies (1: in this process).
+    show_progress : print the along-flight study's plan and estimated time
+        (:func:`~.along_flight.along_flight_plan`) before it starts, and draw its
+        progress bar (stderr).
+    on_analyses : called with the operating points' analyses as soon as they
+        are done (:func:`run_stability_analysis` starts drawing their figures).
     sweep_kp, sweep_kd : the grid of the gain sweep.
     """
     position = PositionParams()
@@ -101,6 +112,8 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
     geometric = replace(geometric, dt=dt)
     ops = default_operating_points(speed, wind_speed, position=position, geometric=geometric)
     analyses = [analyze(op, dt) for op in ops]
+    if on_analyses is not None:
+        on_analyses(analyses)
     sweeps = [gain_sweep(ops[0], sweep_kp, sweep_kd, None), gain_sweep(ops[0], sweep_kp, sweep_kd, dt),
               gain_sweep(ops[0], sweep_kp, sweep_kd, dt, 1), gain_sweep(ops[-1], sweep_kp, sweep_kd, dt)]
     bases = {"continuous": (None, 0), "discrete": (dt, 0), "discrete+1": (dt, 1)}
@@ -118,26 +131,40 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
                              for f in GAIN_FACTORS]
         study.ramp_nonlinear = ramp_lag(hover, speed, dt=dt)[0]
         study.mission_rmse = pd_mission_rmse()
+    if cosim and along_flight:
         study.runs = default_runs(kp=kp, kd=kd, workers=workers)
         study.finite_time = [evaluate_claims(run, a) for run in study.runs for a in range(3)]
         if along_every > 0:
-            from cosim.scenario import load_scenario
-
-            from .along_flight import MISSIONS, AlongFlight, along_flight_study, flight_events
-
-            gains = {f"controller.position.{k}": float(v) for k, v in (("kp", kp), ("kd", kd)) if v is not None}
-            study.along_flight = along_flight_study(metric=AlongFlight(every=along_every), workers=workers,
-                                                    overrides=gains)
-            study.flight_events = {m: flight_events(load_scenario(m)) for m in MISSIONS}
+            _along_flight(study, kp, kd, along_every, workers, show_progress)
     return study
+
+
+def _along_flight(study: StabilityStudy, kp: float | None, kd: float | None, every: float, workers: int,
+                  show_progress: bool) -> None:
+    """The learning loop along the missions into ``study`` (its plan printed first when ``show_progress``)."""
+    from cosim.scenario import load_scenario
+
+    from ..progress import progress_bar
+    from .along_flight import MISSIONS, AlongFlight, along_flight_plan, along_flight_study, flight_events
+
+    gains = {f"controller.position.{k}": float(v) for k, v in (("kp", kp), ("kd", kd)) if v is not None}
+    metric = AlongFlight(every=every)
+    if show_progress:
+        print(along_flight_plan(metric=metric, workers=workers, overrides=gains), flush=True)
+    with progress_bar("along the flight", enabled=show_progress) as bar:
+        study.along_flight = along_flight_study(metric=metric, workers=workers, overrides=gains, progress=bar)
+    study.flight_events = {m: flight_events(load_scenario(m)) for m in MISSIONS}
 
 
 def run_stability_analysis(out_dir: str | Path = "results/stability", **kwargs) -> StabilityStudy:
     """:func:`stability_study` (same keyword arguments), then write
     ``out_dir/stability.md`` and the PNG figures; returns the study with
     ``report_path`` and ``figures`` set."""
-    from .report import write_report
+    from .report import start_point_figures, write_report
 
-    study = stability_study(**kwargs)
-    write_report(study, out_dir)
+    workers = kwargs.get("workers", 1)
+    started = []  # the operating points' figures, drawn in a forked process while the study goes on
+    study = stability_study(**kwargs, on_analyses=lambda analyses: started.append(
+        start_point_figures(analyses, out_dir, workers)))
+    write_report(study, out_dir, workers=workers, started=started[0] if started else None)
     return study

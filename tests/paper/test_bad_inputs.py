@@ -101,6 +101,7 @@ def test_a_fifo_is_no_study(sandbox, capsys):
     (["stability", "--wind", "inf", "--no-cosim"], "--wind = inf: expected a finite number"),
     (["stability", "--along-every", "-1", "--no-cosim"], "--along-every = -1.0: must not be negative"),
     (["stability", "--workers", "0", "--no-cosim"], "--workers = 0: must be at least 1"),
+    (["stability", "--along-every", "2", "--no-cosim"], "--along-every 2: applies only with --along-flight"),
     (["run", "circles", "--set", "simulation.duration"], "--set 'simulation.duration': expected KEY=VALUE"),
     (["run", "circles", "--set", 'envelope."Quadrotor.phi=[1'], "not a dotted key"),
     (["run", "circles", "--seed", "-1"], "simulation.seed = -1: must not be negative"),

@@ -12,8 +12,8 @@ import pytest
 
 from cosim.scenario import build_master, load_scenario
 from quadrotor_paper.stability import hover
-from quadrotor_paper.stability.along_flight import (AlongFlight, along_flight, along_flight_study, flight_events,
-                                                    learned_state_names)
+from quadrotor_paper.stability.along_flight import (SECONDS_PER_POINT, AlongFlight, along_flight, along_flight_plan,
+                                                    along_flight_study, flight_events, learned_state_names)
 from quadrotor_paper.stability.fmu_loop import fmu_closed_loop, snapshot_loop
 
 HOVER = {"trajectory": {"kind": "hover", "x": 0.0, "y": 0.0, "z": -15.0}, "wind.speed": 0.0,
@@ -62,9 +62,16 @@ def test_learning_on_and_learning_held_are_two_readings_of_the_same_loop():
 
 
 def test_the_study_runs_every_case_through_the_study_runner_in_case_order():
-    flights = along_flight_study(missions=("circles",), variants=("pd", "pd+lm"), phis=(0.0, 0.2),
-                                 metric=AlongFlight(every=2.0, check=0.0), overrides={"simulation.duration": 4.0})
+    arguments = dict(missions=("circles",), variants=("pd", "pd+lm"), phis=(0.0, 0.2),
+                     metric=AlongFlight(every=2.0, check=0.0), overrides={"simulation.duration": 4.0})
+    calls = []
+    flights = along_flight_study(**arguments, progress=lambda done, total: calls.append((done, total)))
     assert [(f.variant, f.phi) for f in flights] == [("pd", 0.0), ("pd+lm", 0.0), ("pd+lm", 0.2)]
+    assert calls[0] == (0, 3) and calls[-1] == (3, 3) and [d for d, _ in calls] == sorted(d for d, _ in calls)
+    plan = along_flight_plan(**arguments, workers=2)  # counted before anything runs: what the study then did
+    assert (plan.runs, plan.points) == (len(flights), sum(len(f.points) for f in flights)) == (3, 6)
+    assert plan.seconds == pytest.approx(6 * SECONDS_PER_POINT / 2)
+    assert str(plan).startswith("along the flight: 3 runs, 6 frozen points, about ") and "on 2 workers" in str(plan)
     for f in flights:
         assert f.status == "ok" and [p.time for p in f.points] == [2.0, 4.0]
         assert all(math.isnan(p.linear_rate) for p in f.points)  # check = 0: no perturbation check

@@ -243,8 +243,41 @@ def test_command_writes_the_report_and_figures(tmp_path, capsys):
     for name in ("gain_sweep", "bode_outer_hover", "nyquist_outer_forward_wind", "pzmap_forward"):
         png = tmp_path / f"{name}.png"
         assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the default is the PD baseline: the learning laws' sections only with --along-flight, and a line saying so
+    assert "## The learning loop along the flight" not in text and "## The learning laws' finite-time" not in text
+    assert "`fnn-cosim stability --along-flight` adds them" in text
+    assert not (tmp_path / "along_flight.csv").exists() and not (tmp_path / "along_flight.png").exists()
     out = capsys.readouterr().out
-    assert "hover: stable" in out and "report:" in out
+    assert "hover: stable" in out and "report:" in out and "fnn-cosim stability --along-flight" in out
+
+
+def test_along_flight_flag_writes_the_learning_laws_sections(tmp_path, capsys, monkeypatch):
+    """``--along-flight`` adds the finite-time claims and the learning loop along the flight, its plan
+    printed before it starts and a progress bar on stderr; the smallest study: the circles only, the PD
+    and PD+LM, frozen once (every 40 s), one learning law's recorded runs."""
+    from functools import partial
+    from importlib import import_module
+
+    from quadrotor_paper.cli import main
+    from quadrotor_paper.learning_claims import default_runs
+
+    # the modules (the package's name along_flight is the function of that module)
+    af, study = (import_module(f"quadrotor_paper.stability.{m}") for m in ("along_flight", "study"))
+
+    small = {"missions": ("circles",), "variants": ("pd", "pd+lm"), "phis": (0.0,)}
+    monkeypatch.setattr(af, "along_flight_study", partial(af.along_flight_study, **small))
+    monkeypatch.setattr(af, "along_flight_plan", partial(af.along_flight_plan, **small))
+    monkeypatch.setattr(study, "default_runs", partial(default_runs, variants=("pd+lm",)))
+    assert main(["stability", "--out", str(tmp_path), "--along-flight", "--along-every", "40", "--workers", "1"]) == 0
+    text = (tmp_path / "stability.md").read_text()
+    assert "## The learning loop along the flight" in text and "## The learning laws' finite-time" in text
+    assert "| circles | pd | sign law | 1 | stable at all 1 points" in text and "| circles | pd+lm | sign law | 1 |" in text
+    assert "--along-flight` adds them" not in text
+    assert len((tmp_path / "along_flight.csv").read_text().splitlines()) == 3  # header, one point per run
+    captured = capsys.readouterr()
+    assert "along the flight: 2 runs, 2 frozen points, about" in captured.out
+    assert "along circles, pd, sign law: learning held stable" in captured.out
+    assert "along the flight" in captured.err and "2/2" in captured.err  # the progress bar, both runs done
 
 
 def test_feed_forward_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fmu):
