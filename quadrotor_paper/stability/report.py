@@ -9,7 +9,6 @@ One function per figure (``_figure_*``) and one per report section
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 import matplotlib
@@ -255,96 +254,34 @@ def _figure_perturbation(study):
     return fig
 
 
-def _point_jobs(analyses) -> list[tuple[str, object]]:
-    """The figures of each operating point, in the report's order: (name, a callable drawing it)."""
-    jobs = []
-    for a in analyses:
-        name, dt = a.op.name, a.dt
-        loops = lambda a=a: [a.models["discrete"].outer_loop(ax) for ax in AXES]  # noqa: E731
-        jobs += [(f"bode_outer_{name}", lambda a=a, loops=loops, dt=dt: _figure_bode_outer(a, loops(), dt)),
-                 (f"bode_inner_{name}", lambda a=a, dt=dt: _figure_bode_inner(a, dt)),
-                 (f"nyquist_outer_{name}", lambda a=a, loops=loops: _figure_nyquist_outer(a, loops())),
-                 (f"pzmap_{name}", lambda a=a, dt=dt: _figure_pzmap(a, dt))]
-    return jobs
-
-
-def _figure_jobs(study) -> list[tuple[str, object]]:
-    """Every figure of the report in its order: (name, a callable drawing it)."""
-    jobs = _point_jobs(study.analyses)
-    jobs.append(("gain_sweep", lambda: _figure_gain_sweep(study)))
-    if study.step_checks:
-        jobs.append(("steps_linear_vs_nonlinear", lambda: _figure_steps(study)))
-    if study.gain_checks:
-        jobs.append(("gains_across_the_boundary", lambda: _figure_gains(study)))
-    if study.runs:
-        jobs.append(("finite_time", lambda: _figure_finite_time(study)))
-    if any(f.points for f in study.along_flight):
-        jobs.append(("along_flight", lambda: _figure_along_flight(study)))
-        jobs.append(("perturbation_check", lambda: _figure_perturbation(study)))
-    return jobs
-
-
-def _draw(jobs, out: Path) -> None:
-    for name, draw in jobs:
-        _save(draw(), out, name, {})
-
-
-class Drawing:
-    """Figures drawn by a process forked from this one (Linux), while this one
-    goes on: the child reads what it draws from the memory it was forked with
-    and only writes files, so nothing is sent back. :meth:`finish` waits for it;
-    a child that failed leaves its figures to this process (the same files)."""
-
-    def __init__(self, jobs, out: Path):
-        import multiprocessing
-
-        self.jobs, self.out = jobs, out
-        self.names = {name for name, _ in jobs}
-        self.process = multiprocessing.get_context("fork").Process(target=_draw, args=(jobs, out), daemon=True)
-        self.process.start()
-
-    def finish(self) -> None:
-        self.process.join()
-        if self.process.exitcode != 0:
-            _draw(self.jobs, self.out)
-
-
-def _forks(workers: int) -> bool:
-    return workers > 1 and sys.platform == "linux"
-
-
-def start_point_figures(analyses, out_dir: str | Path, workers: int = 1) -> Drawing | None:
-    """With ``workers`` > 1 on Linux, start drawing the figures of each operating
-    point (:func:`~.analysis.analyze`'s results are all they read) in a forked
-    process, to overlap them with the rest of the study; else None (drawn by
-    :func:`make_figures`)."""
-    if not _forks(workers):
-        return None
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    return Drawing(_point_jobs(analyses), out)
-
-
-def make_figures(study, out_dir: Path, workers: int = 1, started: Drawing | None = None) -> dict[str, Path]:
-    """Write every figure into ``out_dir``; returns name -> path, in the report's order.
+def make_figures(study, out_dir: Path) -> dict[str, Path]:
+    """Write every figure into ``out_dir``; returns name -> path.
 
     Per operating point the outer-loop Bode, inner-loop Bode, Nyquist and
     pole-zero plots; then the gain sweep and, when the study ran them, the
-    step checks, the gain checks and the finite-time runs. ``started``: figures
-    already being drawn (:func:`start_point_figures`). The rest is shared by
-    ``workers`` processes (:class:`Drawing`; one less while ``started`` runs),
-    or drawn here. The files are those one process writes (the same code draws them)."""
+    step checks, the gain checks and the finite-time runs.
+    """
     out = Path(out_dir)
-    jobs = _figure_jobs(study)
-    todo = [job for job in jobs if started is None or job[0] not in started.names]
-    free = max(1, workers - (started is not None))
-    shares = [todo[i::free] for i in range(max(1, min(free, len(todo))))]
-    children = [Drawing(share, out) for share in shares[1:]] if _forks(workers) else []
-    for share in shares[:1] if children else shares:
-        _draw(share, out)
-    for child in children + ([started] if started is not None else []):
-        child.finish()
-    return {name: out / f"{name}.png" for name, _ in jobs}
+    figures: dict[str, Path] = {}
+    dt = study.dt
+    for a in study.analyses:
+        name = a.op.name
+        loops = [a.models["discrete"].outer_loop(ax) for ax in AXES]
+        _save(_figure_bode_outer(a, loops, dt), out, f"bode_outer_{name}", figures)
+        _save(_figure_bode_inner(a, dt), out, f"bode_inner_{name}", figures)
+        _save(_figure_nyquist_outer(a, loops), out, f"nyquist_outer_{name}", figures)
+        _save(_figure_pzmap(a, dt), out, f"pzmap_{name}", figures)
+    _save(_figure_gain_sweep(study), out, "gain_sweep", figures)
+    if study.step_checks:
+        _save(_figure_steps(study), out, "steps_linear_vs_nonlinear", figures)
+    if study.gain_checks:
+        _save(_figure_gains(study), out, "gains_across_the_boundary", figures)
+    if study.runs:
+        _save(_figure_finite_time(study), out, "finite_time", figures)
+    if any(f.points for f in study.along_flight):
+        _save(_figure_along_flight(study), out, "along_flight", figures)
+        _save(_figure_perturbation(study), out, "perturbation_check", figures)
+    return figures
 
 
 # ---- markdown --------------------------------------------------------------------------
@@ -616,13 +553,12 @@ def _markdown(study, figures: dict[str, Path]) -> str:
     return "\n".join(md + _section_figures(figures))
 
 
-def write_report(study, out_dir: str | Path, workers: int = 1, started: Drawing | None = None) -> Path:
-    """Write the figures (:func:`make_figures`, ``workers`` processes, ``started``
-    those already being drawn) and ``stability.md`` into ``out_dir`` (created);
+def write_report(study, out_dir: str | Path) -> Path:
+    """Write the figures and ``stability.md`` into ``out_dir`` (created);
     sets ``study.figures`` and ``study.report_path``; returns the path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    study.figures = make_figures(study, out, workers, started)
+    study.figures = make_figures(study, out)
     if study.along_flight:
         from .along_flight import write_points
 

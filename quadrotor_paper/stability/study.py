@@ -77,7 +77,7 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
                     kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
                     geometric: GeometricParams = GeometricParams(), feedforward: float = 0.0,
                     feedforward_gains=(0.0, 1.0), along_flight: bool = False, along_every: float = 1.0,
-                    workers: int = 1, show_progress: bool = False, on_analyses=None) -> StabilityStudy:
+                    workers: int = 1, show_progress: bool = False) -> StabilityStudy:
     """Run every analysis.
 
     Parameters
@@ -102,8 +102,6 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
     show_progress : print the along-flight study's plan and estimated time
         (:func:`~.along_flight.along_flight_plan`) before it starts, and draw its
         progress bar (stderr).
-    on_analyses : called with the operating points' analyses as soon as they
-        are done (:func:`run_stability_analysis` starts drawing their figures).
     sweep_kp, sweep_kd : the grid of the gain sweep.
     """
     position = PositionParams()
@@ -112,8 +110,6 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
     geometric = replace(geometric, dt=dt)
     ops = default_operating_points(speed, wind_speed, position=position, geometric=geometric)
     analyses = [analyze(op, dt) for op in ops]
-    if on_analyses is not None:
-        on_analyses(analyses)
     sweeps = [gain_sweep(ops[0], sweep_kp, sweep_kd, None), gain_sweep(ops[0], sweep_kp, sweep_kd, dt),
               gain_sweep(ops[0], sweep_kp, sweep_kd, dt, 1), gain_sweep(ops[-1], sweep_kp, sweep_kd, dt)]
     bases = {"continuous": (None, 0), "discrete": (dt, 0), "discrete+1": (dt, 1)}
@@ -160,11 +156,8 @@ def run_stability_analysis(out_dir: str | Path = "results/stability", **kwargs) 
     """:func:`stability_study` (same keyword arguments), then write
     ``out_dir/stability.md`` and the PNG figures; returns the study with
     ``report_path`` and ``figures`` set."""
-    from .report import start_point_figures, write_report
+    from .report import write_report
 
-    workers = kwargs.get("workers", 1)
-    started = []  # the operating points' figures, drawn in a forked process while the study goes on
-    study = stability_study(**kwargs, on_analyses=lambda analyses: started.append(
-        start_point_figures(analyses, out_dir, workers)))
-    write_report(study, out_dir, workers=workers, started=started[0] if started else None)
+    study = stability_study(**kwargs)
+    write_report(study, out_dir)
     return study
