@@ -251,6 +251,7 @@ def test_command_writes_the_report_and_figures(tmp_path, capsys):
     assert "hover: stable" in out and "report:" in out and "fnn-cosim stability --along-flight" in out
 
 
+@pytest.mark.slow  # the whole report with its learning-law parts: ~20 s even on the smallest study
 def test_along_flight_flag_writes_the_learning_laws_sections(tmp_path, capsys, monkeypatch):
     """``--along-flight`` adds the finite-time claims and the learning loop along the flight, its plan
     printed before it starts and a progress bar on stderr; the smallest study: the circles only, the PD
