@@ -133,7 +133,7 @@ def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
     compile_flags = [f for f in CFLAGS if f != "-shared"]
     digest = hashlib.sha256(" ".join([cc, *compile_flags]).encode())
     for path in sorted(sources.iterdir()):
-        if path.is_file() and path.name not in specific:
+        if path.suffix in (".c", ".h") and path.name not in specific:  # not buildDescription.xml (FMI 3.0 only)
             digest.update(path.name.encode())
             digest.update(path.read_bytes())
     shared_dir = cache_root() / "objects" / digest.hexdigest()[:16]
