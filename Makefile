@@ -15,8 +15,10 @@ $(VENV)/.installed: pyproject.toml
 reproduce: $(VENV)/.installed
 	$(BIN)/fnn-cosim reproduce
 
+# Two processes (pytest-xdist): the tests are independent and share only the
+# FMU cache, whose files are written beside their name and renamed into place.
 test: $(VENV)/.installed
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2
 
 fmu: $(VENV)/.installed
 	$(BIN)/fnn-cosim build-fmu --out build/fmus

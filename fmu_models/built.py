@@ -33,7 +33,8 @@ _SUFFIXES = {".py", ".c", ".h"}
 
 def cache_root() -> Path:
     """Where built FMUs are kept: $FNN_COSIM_CACHE, else build/ in a source
-    checkout, else ~/.cache/fnn-cosim (:func:`fmu_models.export.build.cache_root`'s rule)."""
+    checkout, else ~/.cache/fnn-cosim (here, where a run finds them without
+    importing the builder; :mod:`fmu_models.export.build` builds there)."""
     if os.environ.get("FNN_COSIM_CACHE"):
         return Path(os.environ["FNN_COSIM_CACHE"])
     repo = Path(__file__).resolve().parents[1]
