@@ -25,22 +25,12 @@ from importlib.util import find_spec
 from pathlib import Path
 from typing import Callable, Iterable
 
-__all__ = ["built_fmu", "cache_root"]
+from .cache import cache_root
+
+__all__ = ["built_fmu"]
 
 _PACKAGES = (Path(__file__).resolve().parent, Path(__file__).resolve().parents[1] / "fnn_controller")
 _SUFFIXES = {".py", ".c", ".h"}
-
-
-def cache_root() -> Path:
-    """Where built FMUs are kept: $FNN_COSIM_CACHE, else build/ in a source
-    checkout, else ~/.cache/fnn-cosim (here, where a run finds them without
-    importing the builder; :mod:`fmu_models.export.build` builds there)."""
-    if os.environ.get("FNN_COSIM_CACHE"):
-        return Path(os.environ["FNN_COSIM_CACHE"])
-    repo = Path(__file__).resolve().parents[1]
-    if (repo / "pyproject.toml").exists():
-        return repo / "build" / "fmu-cache"
-    return Path.home() / ".cache" / "fnn-cosim"
 
 
 def _digest_files(digest, files: Iterable[Path], root: Path | None = None) -> None:

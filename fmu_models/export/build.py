@@ -21,7 +21,7 @@ from typing import Callable
 
 import fmpy
 
-from ..built import cache_root
+from ..cache import cache_root
 from .codegen import GENERIC_C_DIR, GENERIC_C_FILES, generate_sources
 from .model import FmuModel
 from .model_description import fmi2_model_description, fmi3_build_description, fmi3_model_description
