@@ -733,8 +733,6 @@ class FmuComponent:
         else:
             self.y = np.zeros(max(self._n_out, 1))
         self._u_ptr = self.u.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        # Model Exchange: a discrete input changes only in Event Mode (FMI 2.0 §3.2.3, FMI 3.0 §3.2.1)
-        self._discrete_in = np.array([self.variables[n].variability != "continuous" for n in self.input_names], bool)
         self._u_set = None
         self._y_ptr = self.y.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
@@ -953,14 +951,9 @@ class FmuComponent:
         before = self._u_set
         if before is not None and np.array_equal(u, before):
             return
-        changed = np.ones(self._n_in, bool) if before is None else u != before
-        set_all = lambda: self._api.set(self._in_vr, self._c_in, self._u_ptr)  # noqa: E731
+        changed = self.input_names if before is None else [n for n, c in zip(self.input_names, u != before) if c]
         try:
-            if (changed & self._discrete_in).any():
-                self._integrate(lambda: self._integrator.handle_event(t, set_all), t)
-            else:
-                set_all()
-                self._integrator.restart()
+            self._set_in_mode(lambda: self._api.set(self._in_vr, self._c_in, self._u_ptr), changed, t)
         except FMICallException as exc:
             raise self._call_failure(Call.SET, exc, t) from None
         self._u_set = u.copy()

@@ -32,6 +32,7 @@ from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag,
 from . import registry
 from .errors import CosimError, FmuError, ScenarioError
 from .fmu_description import start_value_rule
+from .model_exchange import METHODS
 from .files import read_toml
 from .limits import MAX_STEPS
 from .limits import MAX_RECORD_BYTES
@@ -86,7 +87,7 @@ class Solver(Table):
     """``[fmus.<Name>.solver]``: how the master integrates a Model Exchange
     FMU between communication points (:mod:`cosim.model_exchange`)."""
 
-    method: one_of(("cvode", "euler")) = Field("cvode", description="'cvode' (variable step BDF with root finding, "
+    method: one_of(METHODS) = Field("cvode", description="'cvode' (variable step BDF with root finding, "
                                                                     "SUNDIALS) or 'euler' (fixed step)")
     relative_tolerance: Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0, lt=1)] = Field(
         None, description="CVODE's relative tolerance (default: the FMU's default experiment's, else 1e-5); each "
