@@ -54,7 +54,7 @@ class Table(BaseModel):
     ``known_in_order``)."""
 
     model_config = ConfigDict(strict=True, extra="forbid", frozen=True, allow_inf_nan=False,
-                              populate_by_name=True, validate_default=False)
+                              populate_by_name=True, validate_default=False, defer_build=True)
     selector: ClassVar[str | None] = None  # a key that picks the table's kind, allowed but no parameter
     known_in_order: ClassVar[bool] = False  # list the known keys as declared (a parameter dataclass's order)
 

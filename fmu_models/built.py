@@ -21,7 +21,7 @@ import hashlib
 import os
 import tempfile
 from functools import lru_cache
-from importlib.util import find_spec
+from importlib.machinery import PathFinder
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -43,7 +43,7 @@ def _installed(package: str) -> str:
     """Where ``package`` is installed and the size and modification time of
     its ``__init__.py``, which installing another version rewrites (read
     without importing the package, and faster than its distribution's metadata)."""
-    origin = Path(find_spec(package).origin)
+    origin = Path(PathFinder.find_spec(package).origin)  # sys.path, not sys.modules: a lazily loaded module stays unloaded
     stat = origin.stat()
     return f"{origin}:{stat.st_size}:{stat.st_mtime_ns}"
 

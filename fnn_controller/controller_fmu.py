@@ -35,7 +35,7 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Any, Callable, Sequence
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from fmu_models.export.model import FmuModel, Sampled
 from fmu_models.export.variables import discrete, input_, output, parameter

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from .geometric import GeometricParams

@@ -29,7 +29,7 @@ PRIMED     1        1 once a step has been taken since reset, else 0
 """
 from __future__ import annotations
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 # the layout of the axis state and the initial values: declared without CasADi (what a run reads)

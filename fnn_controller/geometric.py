@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR, rotation_matrix

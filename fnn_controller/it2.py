@@ -43,7 +43,7 @@ PRIMED     1        1 once a step has been taken since reset, else 0
 """
 from __future__ import annotations
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from .axis_state import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, IT2_AXIS_STATE_PORTS, IT2_AXIS_STATE_SIZE, N_MF,

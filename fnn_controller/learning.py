@@ -33,7 +33,7 @@ Lyapunov function of Theorem 3 (eq. 63) has no alpha term.
 """
 from __future__ import annotations
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from .axis_state import ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV
 from .position_parameters import LearningBounds

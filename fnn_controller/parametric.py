@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from .geometric import GeometricParams, initial_velocity_state

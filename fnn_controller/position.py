@@ -23,7 +23,7 @@ The position-controller state ``fnn_state`` is the three axis states
 """
 from __future__ import annotations
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from .fnn import AXIS_STATE_SIZE

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from fmu_models.export.model import FmuModel
 from fmu_models.export.variables import discrete, input_

@@ -49,7 +49,7 @@ itself (a name is resolved where it enters).
 """
 from __future__ import annotations
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from fmu_models.models.quadrotor import STATE_NAMES

@@ -65,7 +65,7 @@ import math
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from fnn_controller import PositionParams

@@ -11,7 +11,7 @@ import hashlib
 import math
 from pathlib import Path
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from .model import FmuModel
 

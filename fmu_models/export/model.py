@@ -39,8 +39,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Callable, Mapping
 
-import casadi as ca
-
+from ..lazy_casadi import ca
 from .variables import SEED_MAX, Variable, parameter
 
 __all__ = ["FmuModel", "INTERNAL_STEP"]
@@ -56,7 +55,8 @@ INTERNAL_STEP = parameter(
     1e-3, min=1e-6,
 )
 
-Equations = Callable[[ca.SX, Mapping[str, ca.SX]], tuple[Mapping[str, ca.SX], Mapping[str, ca.SX]]]
+# strings: reading ca.SX here would load CasADi (fmu_models.lazy_casadi)
+Equations = Callable[["ca.SX", Mapping[str, "ca.SX"]], tuple[Mapping[str, "ca.SX"], Mapping[str, "ca.SX"]]]
 
 
 @dataclass(frozen=True)

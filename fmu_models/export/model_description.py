@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from xml.sax.saxutils import quoteattr
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from .. import __version__
 from .codegen import value_references

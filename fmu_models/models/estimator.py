@@ -30,7 +30,7 @@ controller reading the estimate at t_n flies on the measurements of t_n.
 """
 from __future__ import annotations
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter

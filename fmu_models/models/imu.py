@@ -38,7 +38,7 @@ data sheets' numbers unchanged.
 """
 from __future__ import annotations
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter, seed_parameter

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel
 from .rotor import thrust_and_torques

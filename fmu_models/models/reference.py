@@ -51,10 +51,10 @@ import math
 from dataclasses import replace
 from typing import Mapping
 
-import casadi as ca
 import numpy as np
 
 from ..export.model import FmuModel
+from ..lazy_casadi import ca
 from ..export.variables import Variable, output, parameter
 
 __all__ = ["REFERENCE_HOVER", "REFERENCE_TWO_CIRCLES", "REFERENCE_FIGURE_EIGHT", "REFERENCE_MODELS",
@@ -89,6 +89,12 @@ def _position(name, description, start):
 
 def _speed(name, description, start):
     return parameter(name, "m/s", description, start, min=SPEED_RANGE[0], max=SPEED_RANGE[1])
+
+
+def _sqrt(x):
+    """sqrt of a float (math's: the same correctly rounded double as CasADi's)
+    or of a CasADi expression: timing a mission of built FMUs loads no CasADi."""
+    return math.sqrt(x) if isinstance(x, (int, float)) else ca.sqrt(x)
 
 
 def _outputs(p, v) -> dict[str, ca.SX]:
@@ -151,7 +157,7 @@ def two_circles_timing(radius, speed, climb):
     slope = climb / (2 * math.pi * radius)
     # products, not ** 2: CasADi squares by multiplying, Python's float ** calls pow,
     # which rounds differently in about 1 case in 1000
-    horizontal_speed = speed / ca.sqrt(1 + slope * slope)
+    horizontal_speed = speed / _sqrt(1 + slope * slope)
     path_time = 4 * math.pi * radius / horizontal_speed
     return slope, horizontal_speed, path_time
 
@@ -211,7 +217,7 @@ def figure_eight_timing(max_speed, half_length, half_width):
     Works on floats and on CasADi symbols alike.
     """
     width = 2 * half_width
-    omega = max_speed / ca.sqrt(half_length * half_length + width * width)
+    omega = max_speed / _sqrt(half_length * half_length + width * width)
     return omega, 2 * math.pi / omega
 
 

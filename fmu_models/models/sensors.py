@@ -56,7 +56,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter, seed_parameter

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel
 from ..export.variables import output, parameter

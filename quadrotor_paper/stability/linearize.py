@@ -31,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR

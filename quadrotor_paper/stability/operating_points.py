@@ -33,7 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Mapping
 
-import casadi as ca
+from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR, hover_rotor_speed
