@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-__all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind",
+__all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
            "register_section", "register_fmu_model", "register_scenarios", "register_case", "component_kinds",
            "sections", "fmu_models", "cases", "aliases", "scenario_folders", "scoped", "with_connections", "version",
            "PLUGIN_GROUP"]
@@ -180,6 +180,26 @@ def register_section(section: Section) -> Section:
 def register_fmu_model(model: RegisteredModel) -> RegisteredModel:
     _register(_MODELS, model.name, model, "FMU model")
     return model
+
+
+def build_fmu_models(fmi_versions: Sequence[int]) -> list[tuple[str, int, Path]]:
+    """Build every registered model in each of ``fmi_versions``, side by side:
+    ``(name, version, path)`` in registration order, each version's FMUs
+    after the previous version's (the second links the objects the first
+    compiled).
+
+    One thread per core: while one thread's Python generates a model's C,
+    the others' compilers run (a builder runs one compiler per core in all),
+    so a first build takes about the compilers' time over the cores, not the
+    sum of every FMU's. ``fnn-cosim build-fmu`` and the test session's first
+    build (tests/conftest.py) use it."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    builds = [(name, model, version) for version in fmi_versions for name, model in fmu_models().items()]
+    with ThreadPoolExecutor(max(1, os.cpu_count() or 1)) as pool:
+        paths = list(pool.map(lambda b: b[1].build(b[2]), builds))
+    return [(name, version, path) for (name, _, version), path in zip(builds, paths)]
 
 
 def register_case(case: Case) -> Case:

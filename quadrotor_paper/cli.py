@@ -298,8 +298,9 @@ def _cmd_scenarios(args) -> int:
 
 def _cmd_build_fmu(args) -> int:
     """Build every registered model (the plant, the wind, the references, the
-    controller of every variant) in every FMI version the exporter supports;
-    print the path of each FMU written, one per line."""
+    controller of every variant) in every FMI version the exporter supports,
+    side by side (:func:`cosim.registry.build_fmu_models`); print the path
+    of each FMU written, one per line."""
     import shutil
 
     from cosim import registry
@@ -308,12 +309,11 @@ def _cmd_build_fmu(args) -> int:
     from cosim.files import output_folder
 
     out = output_folder(args.out)
-    for name, model in registry.fmu_models().items():
-        for version in sorted(FMI_VERSIONS):
-            target = out / f"fmi{version}" / f"{name}.fmu"
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(model.build(version), target)
-            print(target)
+    for name, version, path in registry.build_fmu_models(sorted(FMI_VERSIONS)):
+        target = out / f"fmi{version}" / f"{name}.fmu"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, target)
+        print(target)
     return 0
 
 

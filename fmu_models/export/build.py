@@ -10,14 +10,18 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import tempfile
+import threading
 import uuid
 import zipfile
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import fmpy
 
@@ -29,7 +33,7 @@ from .model_description import fmi2_model_description, fmi3_build_description, f
 __all__ = ["build_fmu", "cached_fmu", "FmuBuildError", "FMI_VERSIONS"]
 
 _FMPY_HEADERS = Path(fmpy.__file__).parent / "c-code"
-CFLAGS = ("-shared", "-fPIC", "-O2", "-std=gnu11", "-fvisibility=hidden", "-Wall", "-Wno-unused-function")
+CFLAGS = ("-shared", "-fPIC", "-O1", "-std=gnu11", "-fvisibility=hidden", "-Wall", "-Wno-unused-function")
 
 
 class FmuBuildError(RuntimeError):
@@ -91,28 +95,71 @@ def _stage(model: FmuModel, fmi_version: int, root: Path) -> Path:
     return root
 
 
-def _version_specific() -> set[str]:
-    """Names of the source files that differ between FMI versions (the API
-    layer and its headers); every other source file is the same in both."""
-    return {name for f in FMI_VERSIONS.values() for name in (f.api_source, *f.headers)}
+_INCLUDE = re.compile(rb'^\s*#\s*include\s*"([^"]+)"', re.MULTILINE)
+
+
+def _object_digest(c_file: Path, compiler: list[str]) -> str:
+    """What compiling ``c_file`` depends on: the compiler and its flags, the
+    file and every header of its folder it includes, directly or not. Two
+    builds whose file and headers are the same get the same object: a
+    model's second FMI version compiles its API layer only, a model built
+    with other start values (a new ``model_config.h``) its core and API
+    layer only, never its generated C again."""
+    digest = hashlib.sha256(" ".join(compiler).encode() + b"\0")
+    seen, pending = set(), [c_file.name]
+    while pending:
+        name = pending.pop()
+        path = c_file.parent / name
+        if name in seen or not path.is_file():  # a system header, or one the compiler finds elsewhere
+            continue
+        seen.add(name)
+        text = path.read_bytes()
+        digest.update(name.encode() + b"\0" + hashlib.sha256(text).digest())
+        pending += [m.decode() for m in _INCLUDE.findall(text)]
+    return digest.hexdigest()[:16]
+
+
+# One compiler per core in the whole process, however many builds run at once
+# (``fnn-cosim build-fmu`` builds every FMU on a thread of its own): a thread
+# waiting for a slot holds none, so builds never wait on each other.
+_COMPILER_SLOTS = threading.BoundedSemaphore(max(1, os.cpu_count() or 1))
+
+
+def _compile_one(cmd: list[str]) -> subprocess.CompletedProcess:
+    with _COMPILER_SLOTS:
+        return subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
 def _run_compilers(commands: list[tuple[list[str], str]]) -> None:
-    """Run the compiler commands concurrently, at most one per core (a build
-    uses every core); raise naming the first that failed with its output."""
-    jobs = max(1, os.cpu_count() or 1)
-    pending, running, failed = list(commands), [], []
-    while pending or running:
-        while pending and len(running) < jobs:
-            cmd, what = pending.pop(0)
-            running.append((subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True),
-                            cmd, what))
-        proc, cmd, what = running.pop(0)
-        output = proc.communicate()[0]
-        if proc.returncode != 0 and not failed:
-            failed.append(f"compiling {what} failed:\n{' '.join(cmd)}\n{output}")
-    if failed:
-        raise FmuBuildError(failed[0])
+    """Run the compiler commands concurrently, at most one per core across
+    every build of this process; raise naming the first that failed with its output."""
+    if not commands:
+        return
+    with ThreadPoolExecutor(len(commands)) as pool:
+        results = list(pool.map(_compile_one, [cmd for cmd, _ in commands]))
+    for (cmd, what), result in zip(commands, results):
+        if result.returncode != 0:
+            raise FmuBuildError(f"compiling {what} failed:\n{' '.join(cmd)}\n{result.stdout}")
+
+
+@contextmanager
+def _exclusive(folder: Path) -> Iterator[None]:
+    """Hold ``folder``'s lock: one builder (thread or process) compiles an
+    object while the others wait, then find it compiled. Where
+    there are no POSIX file locks the builders compile side by side (each
+    object still renamed into place whole)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    with open(folder / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
@@ -120,51 +167,41 @@ def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
 
     Each C file is compiled to an object (``-c``) and the objects linked in
     the order of the file names, exactly what one ``cc *.c`` does, so the
-    machine code is the same. The objects of the files both FMI versions
-    share (the generated model, the core; all but the API layer) are kept in
-    the cache under a digest of the compiler, the flags and every shared
-    source file: the FMI 3.0 build of a model links the objects its FMI 2.0
-    build compiled (the generated C of the largest model takes most of a
-    minute at -O2). Objects are written beside their name and renamed, so
-    concurrent builders never see half of one."""
+    machine code is the same. Every object is kept in the cache under the
+    digest of what it was compiled from (:func:`_object_digest`) and
+    compiled only if no build made it before: the generated C of the
+    largest model takes most of the time of a first build. One builder at a
+    time compiles a missing object (a lock in its folder: the other threads
+    and processes wait, then link what it compiled), and each object is
+    written beside its name and renamed, so no builder ever sees half of one."""
     sources = root / "sources"
-    c_files = sorted(sources.glob("*.c"))
-    specific = _version_specific()
     cc = _compiler()
-    compile_flags = [f for f in CFLAGS if f != "-shared"]
-    digest = hashlib.sha256(" ".join([cc, *compile_flags]).encode())
-    for path in sorted(sources.iterdir()):
-        if path.suffix in (".c", ".h") and path.name not in specific:  # not buildDescription.xml (FMI 3.0 only)
-            digest.update(path.name.encode())
-            digest.update(path.read_bytes())
-    shared_dir = cache_root() / "objects" / digest.hexdigest()[:16]
-    with tempfile.TemporaryDirectory(prefix=f"{model.identifier}-objects-") as tmp:
-        objects, commands, renames = [], [], []
-        for c_file in c_files:
-            if c_file.name in specific:
-                obj = Path(tmp) / f"{c_file.stem}.o"
-            else:
-                obj = shared_dir / f"{c_file.stem}.o"
-                if obj.exists():
-                    objects.append(obj)
-                    continue
-                shared_dir.mkdir(parents=True, exist_ok=True)
+    compile_flags = [cc, *(f for f in CFLAGS if f != "-shared")]
+    objects = {c_file: cache_root() / "objects" / _object_digest(c_file, compile_flags) / f"{c_file.stem}.o"
+               for c_file in sorted(sources.glob("*.c"))}
+    missing = sorted((obj, c_file) for c_file, obj in objects.items() if not obj.exists())
+    with ExitStack() as locks:
+        for obj, _ in missing:  # always in the same order: two builders never wait on each other
+            locks.enter_context(_exclusive(obj.parent))
+        commands, renames = [], []
+        for obj, c_file in missing:
+            if obj.exists():  # compiled by the builder that held the lock before us
+                continue
             part = obj.with_name(f"{obj.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.o.part")
             renames.append((part, obj))
-            commands.append(([cc, *compile_flags, f"-I{sources}", "-c", str(c_file), "-o", str(part)],
+            commands.append(([*compile_flags, f"-I{sources}", "-c", str(c_file), "-o", str(part)],
                              f"{c_file.name} of {model.identifier} (FMI {fmi_version})"))
-            objects.append(obj)
         _run_compilers(commands)
         for part, obj in renames:
             os.replace(part, obj)
-        binary_dir = root / "binaries" / FMI_VERSIONS[fmi_version].binary_dir
-        binary_dir.mkdir(parents=True, exist_ok=True)
-        out = binary_dir / f"{model.identifier}{fmpy.sharedLibraryExtension}"
-        cmd = [cc, *CFLAGS, *(str(o) for o in objects), "-o", str(out), "-lm"]
-        result = subprocess.run(cmd, capture_output=True, text=True)
-        if result.returncode != 0:
-            raise FmuBuildError(f"linking {model.identifier} (FMI {fmi_version}) failed:\n"
-                                f"{' '.join(cmd)}\n{result.stderr}")
+    binary_dir = root / "binaries" / FMI_VERSIONS[fmi_version].binary_dir
+    binary_dir.mkdir(parents=True, exist_ok=True)
+    out = binary_dir / f"{model.identifier}{fmpy.sharedLibraryExtension}"
+    cmd = [cc, *CFLAGS, *(str(o) for o in objects.values()), "-o", str(out), "-lm"]
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise FmuBuildError(f"linking {model.identifier} (FMI {fmi_version}) failed:\n"
+                            f"{' '.join(cmd)}\n{result.stderr}")
 
 
 def _zip(root: Path, target: Path) -> None:

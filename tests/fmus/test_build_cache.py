@@ -1,15 +1,18 @@
-"""The builder's shared objects (docs/fmi-export.md, "How a build spends its time"):
-a model's second FMI version compiles only its API layer, and compiling file by file
-then linking makes the very shared library one compiler call over every file makes."""
+"""The builder's objects (docs/fmi-export.md, "How a build spends its time"): each C
+file is compiled once for what it includes, so a model's second FMI version compiles
+only its API layer and new start values never compile the generated model again; and
+compiling file by file then linking makes the very shared library one compiler call
+over every file makes."""
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import zipfile
 from pathlib import Path
 
 import fmpy
 import pytest
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 
 from fmu_models.export import build
 from fmu_models.export.model import FmuModel
@@ -65,10 +68,18 @@ def test_the_second_fmi_version_compiles_only_its_api_layer(private_cache, compi
     assert result["y"][0] == 1.0 and 0.0 < result["y"][-1] < 1.0  # decays towards u = 0
 
 
-def test_a_changed_model_compiles_its_shared_files_again(private_cache, compiled):
+def test_new_start_values_compile_the_core_again_but_not_the_generated_model(private_cache, compiled):
     build.cached_fmu(_toy(), 2)
     build.cached_fmu(_toy().with_defaults({"tau": 0.5}), 3)  # another variable table: another model_config.h
-    assert compiled[1] == {"fmi3_functions.c", "fmu_core.c", "model_generated.c", "numpy_random.c"}
+    assert compiled[1] == {"fmi3_functions.c", "fmu_core.c"}
+
+
+def test_new_equations_compile_the_generated_model_again(private_cache, compiled):
+    build.cached_fmu(_toy(), 2)
+    faster = dataclasses.replace(_toy(), equations=lambda t, v: ({"y": 2 * (v["u"] - v["y"]) / v["tau"]},
+                                                                 {"rate": 2 * (v["u"] - v["y"]) / v["tau"]}))
+    build.cached_fmu(faster, 2)
+    assert compiled[1] == {"fmi2_functions.c", "fmu_core.c", "model_generated.c"}  # the GUID is in model_config.h
 
 
 @pytest.mark.parametrize("version", sorted(build.FMI_VERSIONS))

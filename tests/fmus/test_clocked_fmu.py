@@ -15,7 +15,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model_description import CLOCK_NAME, clock_reference

@@ -10,7 +10,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 
 import fnn_controller as fc
 from cosim.fmu_component import fmi2_callbacks

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 import pytest
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.estimator import ESTIMATOR, ESTIMATED_STATES

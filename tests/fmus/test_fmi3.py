@@ -14,7 +14,6 @@ from pathlib import Path
 from xml.etree import ElementTree
 
 import fmpy
-import fmpy.validation
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
@@ -22,6 +21,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
 
 from fmu_models.export.build import cached_fmu
+from tests.fmu_validation import validate_fmu
 from fmu_models.export.codegen import value_references
 from fmu_models.export.model_description import SOURCE_FILES_FMI3
 from fmu_models.models.quadrotor import QUADROTOR, hover_rotor_speed
@@ -132,7 +132,7 @@ def run_cs(fmu, inputs: np.ndarray, t0: float = 0.0) -> np.ndarray:
 # ---- the FMU as a file ------------------------------------------------------------------
 
 def test_validate_fmu_finds_no_problems(fmu3):
-    assert fmpy.validation.validate_fmu(str(fmu3)) == []
+    assert validate_fmu(str(fmu3)) == []
 
 
 def test_source_fmu_layout(fmu3, description):

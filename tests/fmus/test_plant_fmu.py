@@ -11,7 +11,7 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2CoSimulation
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel

@@ -9,7 +9,7 @@ import fmpy
 import numpy as np
 import pytest
 from fmpy import read_model_description
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 
 from cosim.errors import FmuCallError
 from cosim.fmu_component import FmuComponent

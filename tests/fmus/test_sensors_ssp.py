@@ -9,7 +9,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 from lxml import etree
 
 from cosim.fmu_component import stream_seed

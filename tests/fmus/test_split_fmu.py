@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from fmpy import read_model_description
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 
 import fnn_controller as fc
 from fmu_models.export.build import cached_fmu

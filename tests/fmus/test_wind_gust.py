@@ -6,7 +6,7 @@ import math
 import fmpy
 import numpy as np
 import pytest
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.wind_gust import WIND_GUST, gust_speed_factor

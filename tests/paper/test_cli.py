@@ -56,7 +56,7 @@ def test_scenarios_lists_the_shipped_missions(capsys):
 
 
 def test_build_fmu_writes_the_plant_wind_references_and_every_controller(tmp_path, capsys):
-    from fmpy.validation import validate_fmu
+    from tests.fmu_validation import validate_fmu
 
     from fmu_models.catalog import MODEL_NAMES
     from fmu_models.export.build import FMI_VERSIONS

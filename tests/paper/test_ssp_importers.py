@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import read_model_description
-from fmpy.validation import validate_fmu
+from tests.fmu_validation import validate_fmu
 from lxml import etree
 
 import quadrotor_paper
