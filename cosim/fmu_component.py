@@ -67,6 +67,7 @@ import ctypes
 import itertools
 import logging
 import os
+import posixpath
 import shutil
 import tempfile
 import weakref
@@ -412,6 +413,15 @@ class FmuComponent:
                                f"ticking at the period its {PERIOD_ANNOTATION} annotation declares, is supported")
         return clocks[0].valueReference
 
+    def _run_time_files(self) -> set[str]:
+        """The entries an instance can use: all but ``sources/`` and
+        ``documentation/``, which no FMU reads at run time (it finds its
+        files under ``resources/``, its libraries under ``binaries/``).
+        Leaving the C sources in the archive makes a run's extraction several
+        times faster (ours carry up to 0.6 MB of them)."""
+        names = {posixpath.normpath(n.replace("\\", "/")) for n in self._file_names() if not n.endswith("/")}
+        return {n for n in names if not n.startswith(("sources/", "documentation/"))}
+
     def _file_names(self) -> list[str]:
         if self.path.is_dir():
             return [Path(root, f).relative_to(self.path).as_posix()
@@ -491,7 +501,8 @@ class FmuComponent:
             from .files import extract_zip
 
             try:
-                self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"), "the archive")
+                self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"), "the archive",
+                                             only=self._run_time_files())
             except ScenarioError as exc:
                 raise FmuLoadError(self.name, self.path, f"cannot extract the archive: {exc}") from None
             self._owns_unzipdir = True
