@@ -18,7 +18,7 @@ import tempfile
 from pathlib import Path
 
 import fmpy
-from tests.fmu_validation import validate_fmu as _fmpy_validate_fmu
+from fmpy.validation import validate_fmu as _fmpy_validate_fmu
 
 from fmu_models.cache import cache_root
 
