@@ -273,8 +273,7 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
             if progress is not None:
                 progress(0, total - skipped)
             for n, rec in enumerate(fly(base, todo(), workers=workers, scheduler=scheduler, metrics=metrics,
-                                               worker_timeout=worker_timeout),
-                                    1):
+                                        worker_timeout=worker_timeout, total=total - skipped), 1):
                 run = pending.pop(rec["key"])
                 # every metric the function gave stays in a row kept in memory (an analysis may return
                 # more than numbers); the metric_names are the table's columns
