@@ -120,15 +120,23 @@ class MasterCache:
         self.masters: OrderedDict[tuple[str, int], _Built] = OrderedDict()
         self._extracted: dict[str, Path] = {}
         self._tmp: Path | None = None
-        self._scenarios: OrderedDict[str, Scenario] = OrderedDict()
+        self._scenarios: OrderedDict[str, Scenario] = OrderedDict()  # of the base document last seen
         self._scenario_size = scenarios
+        self._raw: Any = None
+        self._raw_text: str | None = None
         self._serial = 0
 
     def scenario(self, raw: Mapping[str, Any], source: str | None, overrides: Mapping[str, Any]) -> Scenario:
         """The base document ``raw`` with ``overrides`` applied, validated
         (:func:`~cosim.scenario.parse_scenario`): once per document and
         overrides; a refusal is raised every time."""
-        key = json.dumps([source, raw, overrides], sort_keys=True, default=repr)
+        if raw is not self._raw:  # a new task's copy: compared once, as JSON (1 and 1.0 are two documents)
+            text = json.dumps([source, raw], sort_keys=True, default=repr)
+            if text != self._raw_text:
+                self._scenarios.clear()
+                self._raw_text = text
+            self._raw = raw
+        key = json.dumps(list(overrides.items()), default=repr)  # in order: a later key may set into an earlier
         scenario = self._scenarios.get(key)
         if scenario is None:
             scenario = parse_scenario(apply_overrides(dict(raw), overrides), source=Path(source) if source else None)
@@ -201,6 +209,7 @@ class MasterCache:
             self._tmp = None
         self._extracted.clear()
         self._scenarios.clear()
+        self._raw = self._raw_text = None
 
 
 LOG_LENGTH = 100  # entries of the local scheduler's diagnostic logs (see _client)
