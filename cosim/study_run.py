@@ -6,7 +6,7 @@
 every study, tables included (``docs/studies.md``)::
 
     <out>/study.json     what the folder holds: the study's definition, its fingerprint, progress
-    <out>/runs.csv       one row per run, appended and flushed as each run finishes
+    <out>/runs.csv       one row per run, appended and flushed as each run (on Dask, its batch) finishes
     <out>/runs.parquet   the same table (pyarrow), written at the end
     <out>/summary.json   per cell (case, grid point): counts and, per metric, n, mean, std, 95 % interval
     <out>/box_<m>.png, line_<m>.png   with ``plots``
