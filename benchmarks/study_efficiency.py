@@ -1,57 +1,80 @@
-"""Efficiency and driver memory of a study on a local Dask cluster, measured in one run.
+"""A study at the loop's cost: Table 2's overhead per run and wall time against the ideal, measured in one run.
 
-Prints, for a study of the circles mission (every registered variant x five
-wind speeds x --seeds seeds, 200 runs by default) on a LocalCluster of
---workers processes:
+Prints, for Table 2 (the shipped study ``table2``: 186 runs of the 50 s
+circles, every variant and option row at 1, 3 and 5 m/s):
 
-* the wall time of the study, and the sum of the runs' own times (each row's
-  ``wall_time_s``, measured inside the worker around the run);
-* the parallel efficiency, sum of run times / (workers x wall time): 1 when
-  the cluster adds nothing; target >= 0.8 on 2 workers;
-* Dask's overhead per task, (workers x wall - sum of run times) / runs,
-  which includes the cluster's start-up and the workers' first FMU loads;
+* **one run's loop time** ``L``: the mean of the runs' own times (each
+  row's ``wall_time_s``: ``Master.run``, which starts the FMUs -- reset,
+  parameters, initialization -- and flies the 5000 steps, as
+  ``benchmarks/loop_speed.py`` times a run), measured here by flying the
+  study in this process (``--workers 1``, no Dask);
+* **the overhead per run** in this process, (wall - sum of the runs' times)
+  / runs, and as a share of ``L``: what a run costs besides its loop (its
+  scenario, its master when it needs a new one, its metrics, its row, the
+  summary);
+* **Table 2 on a LocalCluster** of ``--workers`` processes (``measure``,
+  cluster start and stop included) and the whole command ``fnn-cosim table2
+  --workers N`` (a new process: imports included), each against the ideal,
+  ``runs x L / workers``: target ``fnn-cosim table2`` <= 1.6x on 2 workers;
+  and the Dask overhead per run, (workers x wall - sum of the runs' times) /
+  runs, as a share of ``L``;
 * the driver's peak Python memory (tracemalloc) for a study of 200 and of
   800 one-second runs: the rows are streamed to runs.csv, not held, and the
   local scheduler's logs are kept short (cosim/dask_runner.py), so the ratio
   should stay near 1 (with Dask's default logs it was 2.3 for 50 -> 200 runs).
 
 Printed, never asserted: a slow or busy machine changes the figures, not
-the verdict of the test suite.
+the verdict of the test suite. On a shared machine, repeat (``--repeats``):
+the Dask figures are the median of the repeats.
 
-    .venv/bin/python benchmarks/study_efficiency.py [--workers 2] [--seeds 8] [--json out.json]
+    .venv/bin/python benchmarks/study_efficiency.py [--workers 2] [--repeats 1] [--no-memory] [--json out.json]
 """
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
+import subprocess
+import sys
 import tempfile
 import time
 import tracemalloc
 from pathlib import Path
 
-WINDS = [1.0, 2.0, 3.0, 4.0, 5.0]
+
+def _table2():
+    from quadrotor_paper.report import table_study
+
+    return table_study(2)
 
 
-def _study(seeds: int, duration: float | None = None, winds=WINDS):
-    from cosim.study import parse_study
+def _memory_study(seeds: int):
     from cosim.scenario import scenario_path
+    from cosim.study import parse_study
     from fnn_controller.variants import variant_names
 
-    raw = {"scenario": str(scenario_path("circles")), "name": "efficiency",
-           "sweep": {"seeds": seeds, "grid": {"controller.variant": list(variant_names()), "wind.speed": winds}}}
-    if duration:
-        raw["set"] = {"simulation.duration": duration}
+    raw = {"scenario": str(scenario_path("circles")), "name": "efficiency", "set": {"simulation.duration": 1.0},
+           "sweep": {"seeds": seeds, "grid": {"controller.variant": list(variant_names()), "wind.speed": [1.0]}}}
     return parse_study(raw)
 
 
-def _run(study, out: Path, workers: int):
+def _run(study, out: Path, workers: int) -> tuple[float, list[float]]:
+    """Wall time of ``measure`` (s) and the runs' own times."""
     from cosim.study_run import read_runs
     from quadrotor_paper.experiments import measure
 
     t = time.perf_counter()
     measure(study, out, workers=workers)
     wall = time.perf_counter() - t
-    return wall, read_runs(out / "runs.csv")
+    return wall, [float(r["wall_time_s"]) for r in read_runs(out / "runs.csv") if r["wall_time_s"]]
+
+
+def _command(out: Path, workers: int) -> float:
+    """Wall time (s) of ``fnn-cosim table2`` in a new process."""
+    t = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "quadrotor_paper.cli", "table2", "--out", str(out), "--quiet",
+                    "--workers", str(workers)], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - t
 
 
 def _driver_peak_bytes(study, out: Path, workers: int) -> int:
@@ -66,37 +89,59 @@ def _driver_peak_bytes(study, out: Path, workers: int) -> int:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--seeds", type=int, default=8, help="seeds per cell (default 8: 5 variants x 5 winds x 8 = 200 runs)")
+    p.add_argument("--repeats", type=int, default=1, help="Dask runs of Table 2 (median; default 1)")
+    p.add_argument("--no-memory", action="store_true", help="skip the driver-memory studies")
     p.add_argument("--json", help="also write the figures to this JSON file")
     args = p.parse_args()
 
+    study = _table2()
     with tempfile.TemporaryDirectory() as tmp:
-        study = _study(args.seeds)
-        wall, rows = _run(study, Path(tmp) / "study", args.workers)
-        run_times = sum(float(r["wall_time_s"]) for r in rows)
-        efficiency = run_times / (args.workers * wall)
-        overhead = (args.workers * wall - run_times) / len(rows)
+        here_wall, here_times = _run(study, Path(tmp) / "here", 1)
+        runs = len(here_times)
+        loop = sum(here_times) / runs
+        ideal = runs * loop / args.workers
+        dask_walls, dask_sums, commands = [], [], []
+        for i in range(args.repeats):
+            wall, times = _run(study, Path(tmp) / f"dask{i}", args.workers)
+            dask_walls.append(wall)
+            dask_sums.append(sum(times))
+            commands.append(_command(Path(tmp) / f"command{i}", args.workers))
+        dask_wall, dask_sum, command = (statistics.median(x) for x in (dask_walls, dask_sums, commands))
+        if not args.no_memory:
+            small, large = _memory_study(40), _memory_study(160)
+            peak_small = _driver_peak_bytes(small, Path(tmp) / "small", args.workers)
+            peak_large = _driver_peak_bytes(large, Path(tmp) / "large", args.workers)
 
-        small, large = _study(40, duration=1.0, winds=[1.0]), _study(160, duration=1.0, winds=[1.0])
-        peak_small = _driver_peak_bytes(small, Path(tmp) / "small", args.workers)
-        peak_large = _driver_peak_bytes(large, Path(tmp) / "large", args.workers)
-
+    here_overhead = (here_wall - sum(here_times)) / runs
+    dask_overhead = (args.workers * dask_wall - dask_sum) / runs
     figures = {
-        "runs": len(rows), "workers": args.workers, "wall_s": wall, "sum_of_run_times_s": run_times,
-        "efficiency": efficiency, "overhead_per_task_ms": overhead * 1e3,
-        "driver_peak_small_MB": peak_small / 1e6, "driver_peak_large_MB": peak_large / 1e6,
-        "driver_memory_ratio_4x_runs": peak_large / peak_small,
-        "runs_small": len(small.grid["controller.variant"]) * 40,
-        "runs_large": len(large.grid["controller.variant"]) * 160,
+        "runs": runs, "workers": args.workers, "loop_s": loop,
+        "in_process_wall_s": here_wall, "in_process_overhead_per_run_ms": here_overhead * 1e3,
+        "in_process_overhead_share_of_loop": here_overhead / loop,
+        "dask_wall_s": dask_wall, "dask_walls_s": dask_walls, "dask_sum_of_run_times_s": dask_sum,
+        "dask_overhead_per_run_ms": dask_overhead * 1e3, "dask_overhead_share_of_loop": dask_overhead / loop,
+        "efficiency": dask_sum / (args.workers * dask_wall), "ideal_s": ideal,
+        "dask_wall_over_ideal": dask_wall / ideal, "command_wall_s": command, "command_walls_s": commands,
+        "command_wall_over_ideal": command / ideal,
     }
-    print(f"study: {figures['runs']} runs of the 50 s circles on a LocalCluster of {args.workers} workers")
-    print(f"  wall time                      {wall:8.2f} s")
-    print(f"  sum of the runs' own times     {run_times:8.2f} s")
-    print(f"  efficiency                     {efficiency:8.2f}   (target >= 0.8)")
-    print(f"  Dask overhead per task         {overhead * 1e3:8.1f} ms (cluster start and first FMU loads included)")
-    print(f"driver peak Python memory: {figures['runs_small']} runs {peak_small / 1e6:.2f} MB, "
-          f"{figures['runs_large']} runs {peak_large / 1e6:.2f} MB, ratio {peak_large / peak_small:.2f} "
-          "(flat: ~1)")
+    print(f"Table 2: {runs} runs of the 50 s circles")
+    print(f"  one run's loop time L (mean Master.run)      {loop * 1e3:8.1f} ms")
+    print(f"  in this process: wall                        {here_wall:8.2f} s")
+    print(f"    overhead per run                           {here_overhead * 1e3:8.1f} ms = "
+          f"{here_overhead / loop:5.0%} of L")
+    print(f"  on {args.workers} Dask workers (median of {args.repeats}): wall  {dask_wall:8.2f} s   "
+          f"(cluster start and stop included)")
+    print(f"    overhead per run (workers x wall - runs)   {dask_overhead * 1e3:8.1f} ms = "
+          f"{dask_overhead / loop:5.0%} of L;  efficiency {figures['efficiency']:.2f}")
+    print(f"  ideal, runs x L / workers                    {ideal:8.2f} s")
+    print(f"  measure on Dask / ideal                      {dask_wall / ideal:8.2f} x")
+    print(f"  fnn-cosim table2 (a new process) / ideal     {command / ideal:8.2f} x   ({command:.2f} s; "
+          f"target <= 1.6 on 2 workers)")
+    if not args.no_memory:
+        figures.update({"driver_peak_small_MB": peak_small / 1e6, "driver_peak_large_MB": peak_large / 1e6,
+                        "driver_memory_ratio_4x_runs": peak_large / peak_small})
+        print(f"driver peak Python memory: 200 one-second runs {peak_small / 1e6:.2f} MB, 800 runs "
+              f"{peak_large / 1e6:.2f} MB, ratio {peak_large / peak_small:.2f} (flat: ~1)")
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=2))
 

@@ -21,23 +21,37 @@ Engines: ``workers = 1`` and no ``scheduler`` runs every run in this
 process, one after the other (no Dask at all). Otherwise a
 ``dask.distributed`` client: a ``LocalCluster`` of ``workers`` processes
 with one thread each, or the running cluster at ``scheduler`` (an address
-such as ``tcp://127.0.0.1:8786``). Runs are submitted in a bounded window
-(a few per worker thread) and collected as they finish, so memory
-stays flat however many runs a study has.
+such as ``tcp://127.0.0.1:8786``). A Dask task flies a **batch** of
+consecutive runs of the plan (:func:`execute_batch`) and returns their
+records together; its size adapts (:func:`batch_size`): about
+:data:`BATCH_SECONDS` of work, a share of the runs left that shrinks toward
+the end so that no worker idles while another finishes a long batch, and
+one run while nothing has been timed yet (or when runs are long: a study of
+long runs is flown run by run, as before). A few batches per worker thread
+are in flight, collected as they finish, so memory stays flat however many
+runs a study has. A batch whose worker died is flown again run by run, so
+the run that killed it fails alone.
 
 Each worker process keeps a small cache of built masters (:class:`MasterCache`),
-keyed by everything in the scenario a build depends on (FMUs and their
-parameters, components, connections, record, envelope, step, ordering), i.e.
-all but the seed, the duration and the start time, which are run-level. A
-run whose scenario differs from a cached one only in those reuses its master
-(FMUs extracted and instantiated once); any other difference builds a new
-master (the components may read FMU parameters when built, e.g. a
-controller's nominal model from the plant's). FMU archives are extracted
-once per worker process and shared by its masters.
+keyed by everything in the scenario a build depends on (FMUs, components,
+connections, record, envelope, step, ordering): not the seed, the duration
+and the start time, which are run-level, nor the parameters and start
+values of an FMU no component read while it was built (a wind speed,
+a plant parameter the controller does not take as its nominal model),
+which the master sets at the start of the run, after the FMU's reset, as a
+new master would. A run whose scenario differs from a cached one only in
+those reuses its master (FMUs extracted and instantiated once); any other
+difference builds a new master (the components may read FMU parameters when
+built, e.g. a controller's nominal model from the plant's:
+:func:`~cosim.scenario.build_master` notes which). FMU archives are
+extracted once per worker process and shared by its masters, and a worker
+parses the scenario of a set of overrides once (the seeds of one cell share
+it).
 """
 from __future__ import annotations
 
 import atexit
+import itertools
 import json
 import logging
 import os
@@ -51,17 +65,20 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 
 from .errors import CosimError, ScenarioError, one_line
 from .limits import WORKER_TIMEOUT
-from .scenario import Scenario, apply_overrides, build_master, fmu_file, parse_scenario
+from .scenario import Scenario, apply_overrides, build_master, check_fmu_file, fmu_file, fmu_values, parse_scenario
 from .study import Run
 
-__all__ = ["MasterCache", "fly", "execute", "structure_key"]
+__all__ = ["MasterCache", "fly", "execute", "execute_batch", "batch_size", "structure_key", "BATCH_SECONDS"]
 
 Metrics = Callable[[Scenario, Any], Mapping[str, Any]]
 
 
 def structure_key(scenario: Scenario) -> str:
-    """What a built master depends on: the scenario but its seed, duration and start time."""
-    fmus = {name: {k: (str(v) if isinstance(v, Path) else v) for k, v in spec.items()}
+    """What a built master depends on: the scenario but its seed, duration
+    and start time, and its FMUs' parameters and start values (a master
+    keeps those of the FMUs its components read: :class:`MasterCache`)."""
+    fmus = {name: {k: (str(v) if isinstance(v, Path) else v) for k, v in spec.items()
+                   if k not in ("parameters", "start")}
             for name, spec in scenario.fmus.items()}
     return json.dumps({"fmus": fmus, "components": scenario.components, "connections": scenario.connections,
                        "record": scenario.record, "envelope": scenario.envelope, "step": scenario.step,
@@ -69,15 +86,65 @@ def structure_key(scenario: Scenario) -> str:
                       sort_keys=True, default=repr)
 
 
+class _Built:
+    """A cached master, the ``[fmus]`` instances its components read when it
+    was built and their values then (it serves another scenario of its
+    structure whose values of those are the same)."""
+
+    def __init__(self, master, reads: set[str], values: dict[str, dict[str, Any]]):
+        self.master, self.reads = master, frozenset(reads)
+        self.values = {name: values[name] for name in self.reads if name in values}
+
+    def serves(self, values: Mapping[str, Mapping[str, Any]]) -> bool:
+        return all(_same(values.get(name), value) for name, value in self.values.items())
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal as a scenario means them: same keys in the same order, same values of the same types."""
+    return json.dumps(a, default=repr) == json.dumps(b, default=repr)
+
+
 class MasterCache:
     """Built masters by :func:`structure_key` (least recently used dropped
-    beyond ``size``), with FMU archives extracted once."""
+    beyond ``size``), with FMU archives extracted once and parsed scenarios
+    by their overrides (least recently used dropped beyond ``scenarios``).
 
-    def __init__(self, size: int = 8):
+    :meth:`get` returns a master ready for a scenario: one built for it, or
+    one built for a scenario of the same structure whose components read
+    the same FMU values; its FMUs' values (:func:`~cosim.scenario.fmu_values`)
+    become the scenario's, checked against the FMU files as a build checks
+    them. The next run resets the FMUs and sets them, as on a new master."""
+
+    def __init__(self, size: int = 8, scenarios: int = 16):
         self.size = size
-        self.masters: OrderedDict[str, Any] = OrderedDict()
+        self.masters: OrderedDict[tuple[str, int], _Built] = OrderedDict()
         self._extracted: dict[str, Path] = {}
         self._tmp: Path | None = None
+        self._scenarios: OrderedDict[str, Scenario] = OrderedDict()  # of the base document last seen
+        self._scenario_size = scenarios
+        self._raw: Any = None
+        self._raw_text: str | None = None
+        self._serial = 0
+
+    def scenario(self, raw: Mapping[str, Any], source: str | None, overrides: Mapping[str, Any]) -> Scenario:
+        """The base document ``raw`` with ``overrides`` applied, validated
+        (:func:`~cosim.scenario.parse_scenario`): once per document and
+        overrides; a refusal is raised every time."""
+        if raw is not self._raw:  # a new task's copy: compared once, as JSON (1 and 1.0 are two documents)
+            text = json.dumps([source, raw], sort_keys=True, default=repr)
+            if text != self._raw_text:
+                self._scenarios.clear()
+                self._raw_text = text
+            self._raw = raw
+        key = json.dumps(list(overrides.items()), default=repr)  # in order: a later key may set into an earlier
+        scenario = self._scenarios.get(key)
+        if scenario is None:
+            scenario = parse_scenario(apply_overrides(dict(raw), overrides), source=Path(source) if source else None)
+            self._scenarios[key] = scenario
+            while len(self._scenarios) > self._scenario_size:
+                self._scenarios.popitem(last=False)
+        self._scenarios.move_to_end(key)
+        return scenario
 
     def _fmu_dirs(self, scenario: Scenario) -> dict[str, Path]:
         from .files import extract_zip
@@ -101,29 +168,48 @@ class MasterCache:
                 dirs[name] = self._extracted[archive]
         return dirs
 
+    def _find(self, structure: str, values: Mapping[str, Any]) -> tuple[str, int] | None:
+        for key, built in self.masters.items():
+            if key[0] == structure and built.serves(values):
+                return key
+        return None
+
     def get(self, scenario: Scenario):
-        key = structure_key(scenario)
-        master = self.masters.get(key)
-        if master is None:
-            master = build_master(scenario, self._fmu_dirs(scenario))
-            self.masters[key] = master
+        structure, values = structure_key(scenario), fmu_values(scenario)
+        key = self._find(structure, values)
+        if key is None:
+            reads: set[str] = set()
+            master = build_master(scenario, self._fmu_dirs(scenario), reads=reads)
+            self._serial += 1
+            key = (structure, self._serial)
+            self.masters[key] = _Built(master, reads, values)
             while len(self.masters) > self.size:
-                self.masters.popitem(last=False)[1].close()
+                self.masters.popitem(last=False)[1].master.close()
+        else:
+            master = self.masters[key].master
+            if not _same(master.fmu_parameters, values):
+                for name in scenario.fmus:  # what a build checks of the values (ranges, the period)
+                    check_fmu_file(scenario, master.components[name])
+                master.fmu_parameters = values
         self.masters.move_to_end(key)
         return master
 
-    def drop(self, scenario: Scenario) -> None:
-        master = self.masters.pop(structure_key(scenario), None)
-        if master is not None:
-            master.close()
+    def drop(self, master) -> None:
+        """Close ``master`` and forget it (a run could not start on it)."""
+        for key, built in list(self.masters.items()):
+            if built.master is master:
+                del self.masters[key]
+        master.close()
 
     def close(self) -> None:
         while self.masters:
-            self.masters.popitem()[1].close()
+            self.masters.popitem()[1].master.close()
         if self._tmp is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
             self._tmp = None
         self._extracted.clear()
+        self._scenarios.clear()
+        self._raw = self._raw_text = None
 
 
 LOG_LENGTH = 100  # entries of the local scheduler's diagnostic logs (see _client)
@@ -151,8 +237,7 @@ def execute(raw: Mapping[str, Any], source: str | None, run: Run, metrics: Metri
     record = _failed(run, None, os.getpid())
     cache = cache or _worker_cache()
     try:
-        scenario = parse_scenario(apply_overrides(dict(raw), run.overrides),
-                                  source=Path(source) if source else None)
+        scenario = cache.scenario(raw, source, run.overrides)
     except Exception as exc:  # a value the scenario refuses: this run's failure, not the study's
         record["error"] = f"invalid scenario: {_message(exc)}"
         return record
@@ -169,7 +254,7 @@ def execute(raw: Mapping[str, Any], source: str | None, run: Run, metrics: Metri
         result = master.run(scenario.duration, seed=seed, t0=scenario.start_time, raise_on_error=False,
                             snapshots=wanted(scenario) if wanted is not None else ())
     except Exception as exc:  # could not start, or a component raised mid-run
-        cache.drop(scenario)
+        cache.drop(master)
         record["error"] = _message(exc)
         return record
     record.update(status=result.status, error=result.error, wall_time_s=result.wall_time)
@@ -181,21 +266,56 @@ def execute(raw: Mapping[str, Any], source: str | None, run: Run, metrics: Metri
     return record
 
 
+def execute_batch(raw: Mapping[str, Any], source: str | None, runs: list[Run], metrics: Metrics | None = None,
+                  cache: MasterCache | None = None) -> tuple[list[dict[str, Any]], float]:
+    """Fly ``runs`` one after the other (:func:`execute`, a Dask task's
+    work): their records, in order, and the seconds the batch took."""
+    started = time.perf_counter()
+    records = [execute(raw, source, run, metrics, cache) for run in runs]
+    return records, time.perf_counter() - started
+
+
 def _failed(run: Run, error: str | None, pid: int | None = None) -> dict[str, Any]:
     """A run's record as it stands when it failed (or before it flew): the one record layout."""
     return {"key": run.index, "status": "failed", "error": error, "seed": run.seed, "wall_time_s": None,
             "metrics": {}, "pid": pid}
 
 
+BATCH_SECONDS = 1.0  # s of runs a batch aims at (batch_size)
+SHARE = 4  # a batch takes at most 1 / (SHARE x worker threads) of the runs not yet submitted
+
+
+def batch_size(left: int | None, threads: int, per_run: float | None, seconds: float = BATCH_SECONDS) -> int:
+    """How many runs the next Dask task flies: about ``seconds`` of work at
+    ``per_run`` s a run (the last batch's, a worker's builds included: a
+    worker's first batch, which imports and loads, is soon forgotten; one
+    run while nothing has been timed), and at most a ``1 / (SHARE x
+    threads)`` share of the ``left`` runs not yet submitted (when known),
+    so the batches shrink toward the end of a study (guided
+    self-scheduling) and the workers finish together. A batch's records
+    come back when it ends: a driver stopped mid-study loses the batches in
+    flight, a few seconds of work per worker thread, which a resumed study
+    flies again."""
+    if per_run is None:
+        return 1
+    n = max(1, int(seconds / max(per_run, 1e-9)))
+    if left is not None:
+        n = min(n, -(-left // (SHARE * max(1, threads))))
+    return max(1, n)
+
+
 def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: str | None = None,
-        metrics: Metrics | None = None, window: int = 4,
-        worker_timeout: float | None = WORKER_TIMEOUT) -> Iterator[dict[str, Any]]:
+        metrics: Metrics | None = None, window: int = 2,
+        worker_timeout: float | None = WORKER_TIMEOUT, total: int | None = None) -> Iterator[dict[str, Any]]:
     """Fly every run of ``scenario`` (its document and file); yield each
-    record as its run finishes. ``workers = 1`` without ``scheduler``: in
-    this process; else on Dask (see the module's docstring). On Dask, when
-    the cluster has had no worker for ``worker_timeout`` seconds (``None``:
-    wait for ever), a :class:`~cosim.errors.CosimError` says so and the
-    flight stops (the records yielded so far are kept by the caller)."""
+    record as its run (in this process) or its batch (on Dask) finishes.
+    ``workers = 1`` without ``scheduler``: in this process; else on Dask
+    (see the module's docstring), ``window`` batches in flight per worker
+    thread; ``total``, the number of ``runs`` if known, lets the batches
+    shrink toward the end (:func:`batch_size`). On Dask, when the cluster
+    has had no worker for ``worker_timeout`` seconds (``None``: wait for
+    ever), a :class:`~cosim.errors.CosimError` says so and the flight stops
+    (the records yielded so far are kept by the caller)."""
     raw, source = scenario.raw, str(scenario.source) if scenario.source else None
     if scheduler is None and workers <= 1:
         cache = MasterCache()
@@ -205,7 +325,7 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
         finally:
             cache.close()
         return
-    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout)
+    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total)
 
 
 def _client(workers: int, scheduler: str | None):
@@ -231,23 +351,41 @@ def _client(workers: int, scheduler: str | None):
 
 
 def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
-              worker_timeout: float | None) -> Iterator[dict[str, Any]]:
+              worker_timeout: float | None, total: int | None) -> Iterator[dict[str, Any]]:
     from dask.distributed import wait
 
     client, cluster = _client(workers, scheduler)
     try:
-        slots = max(1, sum(client.nthreads().values())) * max(1, window)
         pending = iter(runs)
+        again: list[Run] = []  # the runs of a batch whose worker died: flown again one by one
         raw = dict(raw)
-        submitted: dict[Any, Run] = {}
+        submitted: dict[Any, list[Run]] = {}
+        taken = 0  # runs taken from the plan so far
+        per_run: float | None = None  # s a run of the batch that finished last took (its builds included)
 
-        def submit(run: Run):
-            # pure=False: two runs are never the same task to Dask, even if equal
-            fut = client.submit(execute, raw, source, run, metrics, pure=False)
-            submitted[fut.key] = run
-            return fut
+        def threads() -> int:
+            return max(1, sum(client.nthreads().values()))
 
-        flying = {submit(t) for _, t in zip(range(slots), pending)}
+        def top_up(flying: set) -> None:
+            """Submit batches until ``window`` per worker thread are in flight (or no run is left)."""
+            nonlocal taken
+            n = threads()
+            while len(flying) < n * max(1, window):
+                if again:
+                    batch = [again.pop(0)]
+                else:
+                    left = None if total is None else max(0, total - taken)
+                    batch = list(itertools.islice(pending, batch_size(left, n, per_run)))
+                    taken += len(batch)
+                if not batch:
+                    return
+                # pure=False: two batches are never the same task to Dask, even if equal
+                fut = client.submit(execute_batch, raw, source, batch, metrics, pure=False)
+                submitted[fut.key] = batch
+                flying.add(fut)
+
+        flying: set = set()
+        top_up(flying)
         alone_since = None  # when the cluster was last seen without a worker
         while flying:
             try:
@@ -255,16 +393,19 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
             except TimeoutError:  # nothing finished within POLL: look at the cluster
                 done = set()
             for fut in done:
-                run = submitted.pop(fut.key)
+                batch = submitted.pop(fut.key)
                 try:
-                    record = fut.result()
+                    records, seconds = fut.result()
+                    per_run = seconds / len(records)
                 except Exception as exc:  # the worker died (e.g. a crash inside an FMU) or the task was lost
-                    record = _failed(run, f"worker: {_message(exc)}")
+                    if len(batch) > 1:  # which run killed it is unknown: each alone, the others get their rows
+                        again.extend(batch)
+                        records = []
+                    else:
+                        records = [_failed(batch[0], f"worker: {_message(exc)}")]
                 fut.release()
-                yield record
-                nxt = next(pending, None)
-                if nxt is not None:
-                    flying.add(submit(nxt))
+                yield from records
+            top_up(flying)
             if done or client.nthreads():
                 alone_since = None
                 continue
@@ -275,8 +416,9 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
                     + (f"if none comes within {worker_timeout:g} s" if worker_timeout is not None else "never"))
             alone_since = alone_since or now
             if worker_timeout is not None and now - alone_since >= worker_timeout:
+                in_flight = sum(len(b) for b in submitted.values())
                 raise CosimError(f"no Dask worker for {worker_timeout:g} s ({scheduler or 'the local cluster'} lost "
-                                 f"them all): the study stops with {len(submitted)} runs in flight; its table keeps "
+                                 f"them all): the study stops with {in_flight} runs in flight; its table keeps "
                                  f"every run that finished, and running it again resumes it")
     finally:
         client.close()

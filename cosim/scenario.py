@@ -43,7 +43,8 @@ from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, js
 
 __all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "ConnectionTable", "scenario_model", "scenario_json_schema", "load_scenario",
            "parse_scenario", "shipped_scenarios", "scenario_path", "apply_overrides", "build_master", "fmu_file",
-           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "ORDERINGS"]
+           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "fmu_values",
+           "ORDERINGS"]
 
 ORDERINGS = ("feedthrough", "exchange")  # the master's (docs/cosim.md)
 
@@ -714,14 +715,58 @@ def _make_component(name: str, spec: Mapping[str, Any], context: registry.BuildC
     return component
 
 
-def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None):
+def fmu_values(scenario: Scenario) -> dict[str, dict[str, Any]]:
+    """What a run sets on each ``[fmus]`` instance before it starts: its
+    parameters, then its start values (the master's ``fmu_parameters``)."""
+    return {name: {**spec["parameters"], **spec.get("start", {})} for name, spec in scenario.fmus.items()}
+
+
+class _WatchedScenario:
+    """``scenario`` as a component factory sees it (:class:`registry.BuildContext`),
+    noting in ``reads`` the ``[fmus]`` instances whose entry it looked at (all
+    of them for the document or the sections, which hold their values)."""
+
+    def __init__(self, scenario: Scenario, reads: set[str]):
+        self._scenario, self._reads = scenario, reads
+
+    def __getattr__(self, key: str) -> Any:
+        if key in ("raw", "sections"):
+            self._reads.update(self._scenario.fmus)
+        value = getattr(self._scenario, key)
+        return _WatchedFmus(value, self._reads) if key == "fmus" else value
+
+
+class _WatchedFmus(Mapping):
+    def __init__(self, fmus: Mapping[str, Any], reads: set[str]):
+        self._fmus, self._reads = fmus, reads
+
+    def __getitem__(self, name: str) -> Any:
+        value = self._fmus[name]  # a missing name reads nothing
+        self._reads.add(name)
+        return value
+
+    def __iter__(self):
+        self._reads.update(self._fmus)  # a loop may read any entry
+        return iter(self._fmus)
+
+    def __len__(self) -> int:
+        return len(self._fmus)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._fmus
+
+
+def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None, reads: set[str] | None = None):
     """A :class:`~cosim.master.Master` for ``scenario`` (FMUs built on demand
     and instantiated at once, so a file that cannot run is refused here). A
     component kind may build an :class:`~cosim.fmu_component.FmuComponent` (with its
     ``parameters`` and ``seed_parameter``); it then runs as an FMU.
 
     ``fmu_files`` may give, per instance, an FMU file or an extracted FMU
-    directory to use instead (sweeps extract once and share it).
+    directory to use instead (sweeps extract once and share it). ``reads``,
+    if given, collects the ``[fmus]`` instances whose entry (parameters,
+    start values) a component factory read: the master serves the values of
+    the others as they come (:class:`cosim.dask_runner.MasterCache`).
     """
     from .master import Master
 
@@ -729,7 +774,8 @@ def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None
 
     fmus = _make_fmus(scenario, dict(fmu_files or {}))
     try:
-        context = registry.BuildContext(scenario, {f.name: f for f in fmus})
+        seen = _WatchedScenario(scenario, reads) if reads is not None else scenario
+        context = registry.BuildContext(seen, {f.name: f for f in fmus})
         built = [_make_component(name, spec, context) for name, spec in scenario.components.items()]
         # a kind may build its component as an FMU (e.g. a controller in FMU form)
         python = [c for c in built if not isinstance(c, FmuComponent)]
@@ -738,8 +784,7 @@ def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None
             fmu.instantiate()
             _check_sample_period(fmu, fmu.base_parameters, scenario.step, fmu.name)  # the kind set its parameters
         return Master(fmus, python, scenario.connections, scenario.step, scenario.record, scenario.envelope,
-                      {name: {**spec["parameters"], **spec.get("start", {})} for name, spec in scenario.fmus.items()},
-                      ordering=scenario.ordering)
+                      fmu_values(scenario), ordering=scenario.ordering)
     except BaseException:
         for fmu in fmus:
             fmu.close()

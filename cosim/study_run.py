@@ -6,7 +6,7 @@
 every study, tables included (``docs/studies.md``)::
 
     <out>/study.json     what the folder holds: the study's definition, its fingerprint, progress
-    <out>/runs.csv       one row per run, appended and flushed as each run finishes
+    <out>/runs.csv       one row per run, appended and flushed as each run (on Dask, its batch) finishes
     <out>/runs.parquet   the same table (pyarrow), written at the end
     <out>/summary.json   per cell (case, grid point): counts and, per metric, n, mean, std, 95 % interval
     <out>/box_<m>.png, line_<m>.png   with ``plots``
@@ -273,8 +273,7 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
             if progress is not None:
                 progress(0, total - skipped)
             for n, rec in enumerate(fly(base, todo(), workers=workers, scheduler=scheduler, metrics=metrics,
-                                               worker_timeout=worker_timeout),
-                                    1):
+                                        worker_timeout=worker_timeout, total=total - skipped), 1):
                 run = pending.pop(rec["key"])
                 # every metric the function gave stays in a row kept in memory (an analysis may return
                 # more than numbers); the metric_names are the table's columns

@@ -25,9 +25,11 @@ MAX_ERRORS = 5  # messages kept per cell: the first ones in plan order
 
 
 def _t975(dof: int) -> float:
-    from scipy.stats import t
+    """``scipy.stats.t.ppf(0.975, dof)``, bit for bit: the function it calls,
+    without importing ``scipy.stats`` (about 0.7 s at the end of every study)."""
+    from scipy.special import stdtrit
 
-    return float(t.ppf(0.975, dof))
+    return float(stdtrit(dof, 0.975))
 
 
 def interval95(values: Sequence[float]) -> tuple[float, float] | None:

@@ -1,0 +1,260 @@
+"""The runner of studies (cosim.dask_runner) at the loop's cost, on the toy
+loop: batches of runs give the records of runs flown one by one; a worker's
+master serves other values of the FMU parameters no component read (the
+FMUs reset, then set), to the same bits as a new master, and a master whose
+component read them is not reused; a value refused on a reused master is
+refused in the words of a new build; the overrides of a set of runs are
+parsed once, a refused one every time in the same words; a batch whose
+worker died is flown again run by run, so the run that killed it fails alone
+and every other run is a row, once. No clock is read: how fast is
+benchmarks/study_efficiency.py's to say."""
+from __future__ import annotations
+
+import re
+import tomllib
+from typing import Any
+
+import pytest
+
+import toy_models
+from cosim import dask_runner, registry
+from cosim.dask_runner import MasterCache, batch_size, execute, execute_batch, fly
+from cosim.registry import BuildContext
+from cosim.scenario import apply_overrides, parse_scenario
+from cosim.study import Run
+
+pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
+
+SCENARIO = """
+name = "toy_loop"
+connections = ["source.out -> ctrl.r", "Lag.y -> ctrl.y", "ctrl.u -> Lag.u"]
+
+[simulation]
+duration = 1.0
+step = 0.1
+
+[fmus.Lag]
+model = "toy_FirstOrderLag"
+
+[toy_source]
+kind = "toy_constant"
+value = 1.0
+
+[toy_controller]
+kp = 1.5
+
+[toy_lag]
+fmu = "Lag"
+time_constant = 0.25
+
+[record]
+signals = ["Lag.y", "ctrl.u"]
+"""
+
+BY_PATH = """
+name = "toy_loop_by_path"
+connections = ["source.out -> ctrl.r", "Lag.y -> ctrl.y", "ctrl.u -> Lag.u"]
+[simulation]
+duration = 1.0
+step = 0.1
+[fmus.Lag]
+path = "{lag}"
+parameters = {{ tau = 0.25 }}
+[components.source]
+factory = "toy_models:Constant"
+[components.ctrl]
+factory = "toy_models:PController"
+kp = 1.5
+[record]
+signals = ["Lag.y"]
+"""
+
+
+def trace(scenario, result) -> dict[str, Any]:
+    """Every recorded value of the run, to compare bit for bit."""
+    return {"data": result.data.tolist()}
+
+
+@pytest.fixture
+def base(tmp_path):
+    return parse_scenario(tomllib.loads(SCENARIO), source=tmp_path / "toy.toml")
+
+
+def _run(index: int, overrides: dict[str, Any], seed: int = 3) -> Run:
+    return Run(index, None, (), None, seed, {}, overrides)
+
+
+def _fresh(base, run: Run, metrics=trace) -> dict[str, Any]:
+    cache = MasterCache()
+    try:
+        return execute(base.raw, str(base.source), run, metrics, cache)
+    finally:
+        cache.close()
+
+
+def _same_record(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    """The same record but for the wall time, the process and the folder a cache extracted the FMU to."""
+    def keep(r):
+        error = re.sub(r"cosim-worker-fmus-\w+", "<extracted>", r["error"]) if r["error"] else r["error"]
+        return {**{k: v for k, v in r.items() if k not in ("wall_time_s", "pid")}, "error": error}
+    return keep(a) == keep(b)
+
+
+# ---- the batch size ------------------------------------------------------------------------------
+
+def test_the_batch_size_aims_at_a_second_of_work_and_shrinks_toward_the_end():
+    assert batch_size(1000, 2, None) == 1  # nothing timed yet: one run
+    assert batch_size(None, 2, 0.01, seconds=1.0) == 100  # a second of 10 ms runs
+    assert batch_size(10_000, 2, 0.01, seconds=1.0) == 100
+    assert batch_size(80, 2, 0.01, seconds=1.0) == 10  # a 1 / (4 x 2) share of what is left
+    assert batch_size(3, 2, 0.01) == 1
+    assert batch_size(0, 2, 0.01) == 1
+    assert batch_size(1000, 2, 60.0) == 1  # long runs: one a task, as before
+
+
+def test_a_batch_gives_the_records_of_its_runs_flown_one_by_one(base):
+    runs = [_run(i, {"toy_controller.kp": kp}, seed) for i, (kp, seed) in
+            enumerate([(0.5, 1), (0.5, 2), (1.5, 1), (-1.0, 1)])]
+    cache = MasterCache()
+    try:
+        records, seconds = execute_batch(base.raw, str(base.source), runs, trace, cache)
+    finally:
+        cache.close()
+    assert seconds >= 0 and [r["key"] for r in records] == [0, 1, 2, 3]
+    assert all(_same_record(r, _fresh(base, run)) for r, run in zip(records, runs))
+
+
+# ---- a worker's masters -------------------------------------------------------------------------
+
+def test_a_master_serves_other_values_of_fmu_parameters_no_component_read_to_the_same_bits(base):
+    runs = [_run(i, {"toy_lag.time_constant": tau, "toy_lag.gain": k})
+            for i, (tau, k) in enumerate([(0.2, 2.0), (0.4, 3.0), (0.2, 2.0), (0.3, 1.0)])]
+    cache = MasterCache()
+    try:
+        records = [execute(base.raw, str(base.source), run, trace, cache) for run in runs]
+        assert len(cache.masters) == 1  # the lag's values are set at each start, after its reset
+    finally:
+        cache.close()
+    assert [r["status"] for r in records] == ["ok"] * 4
+    assert records[0]["metrics"] != records[1]["metrics"]
+    assert all(_same_record(r, _fresh(base, run)) for r, run in zip(records, runs))
+
+
+def _reading_controller(name: str, params, context: BuildContext):
+    """A P controller whose gain is the lag's static gain (read when built, as
+    a controller takes its nominal model from the plant's parameters)."""
+    k = context.scenario.fmus["Lag"]["parameters"].get("k", toy_models.LAG_K)
+    return toy_models.PController(name, kp=float(params.get("kp", 1.0)) / float(k))
+
+
+def test_a_master_whose_component_read_the_fmu_values_is_not_reused_for_others(base):
+    with registry.scoped():
+        registry.register_component_kind(registry.ComponentKind(
+            "toy_reading_controller", _reading_controller, lambda: toy_models._numbers_only(toy_models.PController),
+            "a P controller that reads the lag's gain"))
+        raw = apply_overrides(base.raw, {"components.ctrl": {"kind": "toy_reading_controller", "kp": 1.5}})
+        del raw["toy_controller"]
+        reading = parse_scenario(raw, source=base.source)
+        runs = [_run(i, {"toy_lag.gain": k}) for i, k in enumerate([2.0, 4.0, 2.0])]
+        cache = MasterCache()
+        try:
+            records = [execute(reading.raw, str(reading.source), run, trace, cache) for run in runs]
+            assert len(cache.masters) == 2  # one per gain: the controller was built from it
+        finally:
+            cache.close()
+        assert all(_same_record(r, _fresh(reading, run)) for r, run in zip(records, runs))
+        assert records[0]["metrics"] != records[1]["metrics"]
+
+
+def test_a_value_refused_on_a_reused_master_is_refused_in_the_words_of_a_new_build(tmp_path):
+    by_path = parse_scenario(tomllib.loads(BY_PATH.format(lag=toy_models.lag_fmu_path(2))),
+                             source=tmp_path / "toy.toml")
+    bad = _run(1, {"fmus.Lag.parameters.tau": 1e-4})  # below the file's declared minimum, 1e-3
+    new = _fresh(by_path, bad)
+    assert new["status"] == "failed" and new["error"].startswith("could not build: fmus.Lag.parameters.tau = 0.0001: "
+                                                                  "outside the range [0.001, inf]")
+    cache = MasterCache()
+    try:
+        assert execute(by_path.raw, str(by_path.source), _run(0, {"fmus.Lag.parameters.tau": 0.3}), trace,
+                       cache)["status"] == "ok"
+        assert _same_record(execute(by_path.raw, str(by_path.source), bad, trace, cache), new)
+        again = _run(2, {"fmus.Lag.parameters.tau": 0.4})  # the master still serves the good values
+        assert _same_record(execute(by_path.raw, str(by_path.source), again, trace, cache), _fresh(by_path, again))
+    finally:
+        cache.close()
+
+
+# ---- parsing a run's scenario ----------------------------------------------------------------
+
+def test_the_overrides_of_a_set_of_runs_are_parsed_once_and_a_refused_one_every_time(base, monkeypatch):
+    parsed = []
+    real = dask_runner.parse_scenario
+    monkeypatch.setattr(dask_runner, "parse_scenario", lambda *a, **k: parsed.append(1) or real(*a, **k))
+    good = {"toy_controller.kp": 0.5}
+    bad = {"toy_controller.kp": "fast"}
+    with pytest.raises(Exception) as direct:
+        real(apply_overrides(base.raw, bad), source=base.source)
+    cache = MasterCache()
+    try:
+        raw = base.raw
+        records = [execute(raw, str(base.source), _run(i, o, seed), None, cache)
+                   for i, (o, seed) in enumerate([(good, 1), (good, 2), (bad, 1), (bad, 2)])]
+    finally:
+        cache.close()
+    assert [r["status"] for r in records] == ["ok", "ok", "failed", "failed"]
+    assert records[2]["error"] == records[3]["error"] == f"invalid scenario: {direct.value}"
+    assert len(parsed) == 3  # the good overrides once, the refused ones each time
+
+
+# ---- a worker that dies --------------------------------------------------------------------------
+
+class _Died(Exception):
+    pass
+
+
+class _Future:
+    def __init__(self, key: int, batch: list[Run], outcome):
+        self.key, self.batch, self._outcome = key, batch, outcome
+
+    def result(self):
+        if isinstance(self._outcome, Exception):
+            raise self._outcome
+        return self._outcome
+
+    def release(self) -> None:
+        pass
+
+
+class _Cluster:
+    """A client whose worker dies on any batch holding the run ``killer``
+    (as Dask reports it: the task's error); the others run here."""
+
+    def __init__(self, killer: int):
+        self.killer, self.tasks = killer, []
+
+    def nthreads(self) -> dict[str, int]:
+        return {"worker": 1}
+
+    def submit(self, fn, raw, source, batch, metrics, pure=False):
+        self.tasks.append([run.index for run in batch])
+        died = any(run.index == self.killer for run in batch)
+        return _Future(len(self.tasks), batch, _Died("KilledWorker: the worker died") if died else
+                       fn(raw, source, batch, metrics, MasterCache()))
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_batch_whose_worker_died_is_flown_again_run_by_run_and_only_its_killer_fails(base, monkeypatch):
+    cluster = _Cluster(killer=2)
+    monkeypatch.setattr(dask_runner, "_client", lambda workers, scheduler: (cluster, None))
+    monkeypatch.setattr("dask.distributed.wait", lambda futures, timeout, return_when: (set(futures), set()))
+    monkeypatch.setattr(dask_runner, "batch_size", lambda left, threads, per_run: 5)
+    runs = [_run(i, {"toy_controller.kp": 0.5 + i}) for i in range(7)]
+    records = list(fly(base, runs, workers=2, metrics=trace, total=len(runs)))
+    assert sorted(r["key"] for r in records) == list(range(7))  # every run once
+    assert {r["key"]: r["status"] for r in records} == {**{i: "ok" for i in range(7)}, 2: "failed"}
+    assert next(r for r in records if r["key"] == 2)["error"] == "worker: _Died: KilledWorker: the worker died"
+    assert cluster.tasks[:2] == [[0, 1, 2, 3, 4], [5, 6]]
+    assert sorted(cluster.tasks[2:]) == [[0], [1], [2], [3], [4]]  # the dead batch, run by run
+    assert all(_same_record(r, _fresh(base, runs[r["key"]])) for r in records if r["key"] != 2)
