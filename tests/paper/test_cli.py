@@ -99,7 +99,7 @@ def test_the_command_line_loads_no_analysis_or_plotting_library_it_does_not_use(
 # What a run of already-built FMUs has no use for: the studies' cluster and
 # statistics, plots (--no-plots), the linear analysis, the FMU builder, the
 # in-process controller's CasADi function, the split controller, SSP archives.
-NOT_FOR_A_RUN = ("dask", "distributed", "matplotlib", "control", "scipy", "fmu_models.export.build",
+NOT_FOR_A_RUN = ("dask", "distributed", "matplotlib", "control", "scipy", "casadi.casadi", "fmu_models.export.build",
                  "fmu_models.export.codegen", "fnn_controller.fast", "fnn_controller.split", "cosim.study",
                  "cosim.study_run", "cosim.ssp")
 
