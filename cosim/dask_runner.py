@@ -50,7 +50,6 @@ it).
 """
 from __future__ import annotations
 
-import atexit
 import itertools
 import json
 import logging
@@ -59,7 +58,9 @@ import shutil
 import tempfile
 import threading
 import time
+import zipfile
 from collections import OrderedDict
+from multiprocessing.util import Finalize
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping
 
@@ -147,7 +148,7 @@ class MasterCache:
         return scenario
 
     def _fmu_dirs(self, scenario: Scenario) -> dict[str, Path]:
-        from .files import extract_zip
+        from .files import extract_zip, run_time_entries
 
         dirs = {}
         for name, spec in scenario.fmus.items():
@@ -160,8 +161,10 @@ class MasterCache:
                         self._tmp = Path(tempfile.mkdtemp(prefix="cosim-worker-fmus-"))
                     target = self._tmp / str(len(self._extracted))
                     try:
-                        extract_zip(archive, target, f"FMU {archive}")
-                    except ScenarioError:  # the build says why, in the scenario's words
+                        with zipfile.ZipFile(archive) as zf:
+                            runs = run_time_entries(zf.namelist())
+                        extract_zip(archive, target, f"FMU {archive}", only=runs)
+                    except (ScenarioError, OSError, zipfile.BadZipFile):  # the build says why, in the scenario's words
                         continue
                     self._extracted[archive] = target
             if archive in self._extracted:
@@ -222,7 +225,9 @@ def _worker_cache() -> MasterCache:
     cache = getattr(_LOCAL, "cache", None)
     if cache is None:
         cache = _LOCAL.cache = MasterCache()
-        atexit.register(cache.close)
+        # not atexit: a Dask worker is a multiprocessing child, which leaves by os._exit after
+        # running multiprocessing's finalizers only (its extracted FMUs stayed in /tmp)
+        Finalize(cache, cache.close, exitpriority=10)
     return cache
 
 

@@ -19,7 +19,7 @@ import stat
 import tomllib
 import zipfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 from .errors import ScenarioError, one_line
 from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_RATIO
@@ -149,6 +149,16 @@ def zip_members(archive: zipfile.ZipFile, what: str) -> dict[str, zipfile.ZipInf
     if total > MAX_ARCHIVE_BYTES:
         raise ScenarioError(f"{what}: {total} bytes uncompressed; at most {MAX_ARCHIVE_BYTES} are extracted")
     return members
+
+
+def run_time_entries(names: Iterable[str]) -> set[str]:
+    """The entries of an FMU an instance can use, of all its ``names``:
+    all but ``sources/`` and ``documentation/``, which no FMU reads at run
+    time (it finds its files under ``resources/``, its libraries under
+    ``binaries/``). Leaving the C sources in the archive makes extracting
+    one of ours several times faster (they carry up to 0.6 MB of them)."""
+    normal = {posixpath.normpath(n.replace("\\", "/")) for n in names if not n.endswith("/")}
+    return {n for n in normal if not n.startswith(("sources/", "documentation/"))}
 
 
 def extract_zip(path: str | Path, target: str | Path, what: str, only: set[str] | None = None) -> Path:

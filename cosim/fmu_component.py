@@ -67,7 +67,6 @@ import ctypes
 import itertools
 import logging
 import os
-import posixpath
 import shutil
 import tempfile
 import weakref
@@ -414,13 +413,9 @@ class FmuComponent:
         return clocks[0].valueReference
 
     def _run_time_files(self) -> set[str]:
-        """The entries an instance can use: all but ``sources/`` and
-        ``documentation/``, which no FMU reads at run time (it finds its
-        files under ``resources/``, its libraries under ``binaries/``).
-        Leaving the C sources in the archive makes a run's extraction several
-        times faster (ours carry up to 0.6 MB of them)."""
-        names = {posixpath.normpath(n.replace("\\", "/")) for n in self._file_names() if not n.endswith("/")}
-        return {n for n in names if not n.startswith(("sources/", "documentation/"))}
+        from .files import run_time_entries
+
+        return run_time_entries(self._file_names())
 
     def _file_names(self) -> list[str]:
         if self.path.is_dir():
