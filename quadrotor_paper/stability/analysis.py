@@ -367,9 +367,14 @@ class OperatingPointAnalysis:
 TIME_BASES = ("continuous", "discrete", "discrete+1")
 
 
-def analyze(op: OperatingPoint, dt: float = 0.01, time_bases=TIME_BASES) -> OperatingPointAnalysis:
-    """Closed-loop poles and the margins of every broken loop of
-    :meth:`LoopModel.loops` at ``op``, in each of ``time_bases``."""
+def analyze(op: OperatingPoint, dt: float = 0.01, time_bases=TIME_BASES,
+            every_loop=TIME_BASES) -> OperatingPointAnalysis:
+    """Closed-loop poles and the margins of the broken loops of
+    :meth:`LoopModel.loops` at ``op``, in each of ``time_bases``: every loop
+    in the time bases of ``every_loop``, the outer loops (``outer x/y/z``)
+    only in the others (the report shows the inner loops in the sampled loop
+    alone: :func:`~quadrotor_paper.stability.study.stability_study` asks for
+    ``every_loop=("discrete",)``)."""
     result = OperatingPointAnalysis(op, dt)
     lin = None
     for key in time_bases:
@@ -381,7 +386,9 @@ def analyze(op: OperatingPoint, dt: float = 0.01, time_bases=TIME_BASES) -> Oper
         lin = model.lin
         result.models[key] = model
         result.poles[key] = closed_loop_poles(model.closed_loop())
-        result.margins[key] = [loop_margins(L, name) for name, L in model.loops().items()]
+        loops = (model.loops() if key in every_loop else
+                 {f"outer {a}": model.outer_loop(a) for a in ("x", "y", "z")})
+        result.margins[key] = [loop_margins(L, name) for name, L in loops.items()]
     return result
 
 
@@ -405,21 +412,33 @@ class FeedForwardCase:
 
 
 def feedforward_comparison(ops: list[OperatingPoint], dt: float = 0.01, speed: float = 2.5,
-                           gains=(0.0, 1.0)) -> list[FeedForwardCase]:
+                           gains=(0.0, 1.0), analyses: list[OperatingPointAnalysis] | None = None
+                           ) -> list[FeedForwardCase]:
     """The PD baseline at each velocity feed-forward gain of ``gains``, at the
     operating points ``ops`` (the first is hover, the second forward flight
     at ``speed``, as :func:`~quadrotor_paper.stability.operating_points.default_operating_points`
     gives them). The feed-forward path ``v* += ff dp*/dt`` reads the
     reference only, so the poles and margins come out the same for every
-    gain; what changes is the ramp and circle error (V/kp of lag gone)."""
+    gain; what changes is the ramp and circle error (V/kp of lag gone).
+
+    ``analyses``: :func:`analyze` of ``ops`` at ``dt``, if already computed;
+    the gain the points were trimmed for then takes its poles and outer
+    margins from them instead of computing them again (every other gain is
+    computed)."""
+    done = {a.op: a for a in analyses or () if a.dt == dt and "discrete" in a.margins}
     cases = []
     for ff in gains:
         points = [op.with_feedforward(ff) for op in ops]
         stable, radius, gm, pm = {}, {}, {}, {}
-        for op in points:
-            model = LoopModel(op, dt)
-            poles = closed_loop_poles(model.closed_loop())
-            outer = [loop_margins(model.outer_loop(a), f"outer {a}") for a in ("x", "y", "z")]
+        for op, given in zip(points, ops):
+            a = done.get(given) if ff == given.position.feedforward else None
+            if a is None:
+                model = LoopModel(op, dt)
+                poles = closed_loop_poles(model.closed_loop())
+                outer = [loop_margins(model.outer_loop(ax), f"outer {ax}") for ax in ("x", "y", "z")]
+            else:
+                poles = a.poles["discrete"]
+                outer = [m for m in a.margins["discrete"] if m.loop.startswith("outer")]
             stable[op.name], radius[op.name] = poles.stable, poles.stability_measure
             gm[op.name] = min(m.gain_margin for m in outer)
             pm[op.name] = min(m.phase_margin for m in outer)
