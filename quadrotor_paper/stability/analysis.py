@@ -120,11 +120,12 @@ def frequency_response(sys: ct.StateSpace, omega) -> np.ndarray:
     slycot, as here) one frequency at a time in Python; here one batched
     ``numpy.linalg.solve``, the same LAPACK call per frequency, so the same
     numbers to the bit (test) in a tenth of the time. A singular ``x I - A``
-    (``x`` a pole) goes back to python-control, which handles it per point.
+    (``x`` a pole), a transfer function or fewer than two states go to
+    python-control, which handles them.
     """
     omega = np.asarray(omega, float)
     x = np.exp(1j * omega * sys.dt) if sys.isdtime(strict=True) else 1j * omega
-    if sys.nstates < 2:
+    if not isinstance(sys, ct.StateSpace) or sys.nstates < 2:  # python-control's own cases
         return sys(x, squeeze=False)
     try:
         X = np.linalg.solve(x[:, None, None] * np.eye(sys.nstates) - sys.A, sys.B)

@@ -271,8 +271,9 @@ def point_figures(analyses, out_dir: Path) -> dict[str, Path]:
     """Per operating point (``analyses``: the study's
     :class:`~quadrotor_paper.stability.analysis.OperatingPointAnalysis`) the
     outer-loop Bode, inner-loop Bode, Nyquist and pole-zero plots into
-    ``out_dir``; returns name -> path."""
+    ``out_dir`` (created); returns name -> path."""
     out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     figures: dict[str, Path] = {}
     for a in analyses:
         name, dt = a.op.name, a.dt
@@ -295,7 +296,6 @@ def point_figures_aside(analyses, out_dir: Path):
     import sys
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     if "fork" not in multiprocessing.get_all_start_methods():
         figures = point_figures(analyses, out)
         return lambda: figures
