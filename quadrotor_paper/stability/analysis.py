@@ -17,10 +17,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import control as ct
 import numpy as np
 
+from .linearize import linearize_plant
 from .loops import LoopModel
 from .operating_points import OperatingPoint
 
@@ -28,7 +30,7 @@ __all__ = [
     "PoleReport", "LoopMargins", "GainSweep", "RampError", "CircleError",
     "closed_loop_poles", "loop_margins", "affine_closed_loop", "gain_sweep", "critical_gain_factor",
     "ramp_error", "circle_error", "analyze", "OperatingPointAnalysis", "TIME_BASES",
-    "FeedForwardCase", "feedforward_comparison",
+    "FeedForwardCase", "feedforward_comparison", "frequency_response",
 ]
 
 
@@ -107,14 +109,41 @@ def _frequencies(sys: ct.StateSpace, n: int = 1000) -> np.ndarray:
     return np.logspace(-3, math.log10(top), n)
 
 
+def frequency_response(sys: ct.StateSpace, omega) -> np.ndarray:
+    """``sys`` at the frequencies ``omega`` (rad/s), shape (outputs, inputs,
+    frequencies):
+
+    .. math:: G(x) = C\\,(x I - A)^{-1} B + D, \\quad x = e^{j\\omega h}
+              \\text{ (discrete, step } h\\text{)}, \\; x = j\\omega \\text{ (continuous)}.
+
+    The formula python-control's ``StateSpace.__call__`` evaluates (without
+    slycot, as here) one frequency at a time in Python; here one batched
+    ``numpy.linalg.solve``, the same LAPACK call per frequency, so the same
+    numbers to the bit (test) in a tenth of the time. A singular ``x I - A``
+    (``x`` a pole), a transfer function or fewer than two states go to
+    python-control, which handles them.
+    """
+    omega = np.asarray(omega, float)
+    x = np.exp(1j * omega * sys.dt) if sys.isdtime(strict=True) else 1j * omega
+    if not isinstance(sys, ct.StateSpace) or sys.nstates < 2:  # python-control's own cases
+        return sys(x, squeeze=False)
+    try:
+        X = np.linalg.solve(x[:, None, None] * np.eye(sys.nstates) - sys.A, sys.B)
+    except np.linalg.LinAlgError:
+        return sys(x, squeeze=False)
+    return np.moveaxis(sys.C @ X + sys.D, 0, -1)
+
+
 def loop_margins(L: ct.StateSpace, name: str = "", n_freq: int = 1000) -> LoopMargins:
     """Gain, phase and stability margins of the loop transfer ``L`` (negative
     feedback convention), by ``control.stability_margins`` on its frequency
-    response from 1e-3 rad/s to 1e4 rad/s (continuous) or to just below the
-    Nyquist frequency pi/dt (discrete), plus, in discrete time, the phase
-    crossover at the Nyquist frequency itself (z = -1), which
-    ``stability_margins`` does not report."""
-    F = ct.frd(L, _frequencies(L, n_freq), smooth=True)
+    response (:func:`frequency_response`) from 1e-3 rad/s to 1e4 rad/s
+    (continuous) or to just below the Nyquist frequency pi/dt (discrete),
+    plus, in discrete time, the phase crossover at the Nyquist frequency
+    itself (z = -1), which ``stability_margins`` does not report."""
+    omega = _frequencies(L, n_freq)
+    # stability_margins fits its own interpolating spline to the data (smooth=True)
+    F = ct.frd(frequency_response(L, omega), omega, dt=L.dt)
     gm, pm, sm, wpc, wgc, wms = (float(v) for v in ct.stability_margins(F))
     if L.isdtime(strict=True):
         # python-control misses a phase crossover at the Nyquist frequency
@@ -132,6 +161,7 @@ def loop_margins(L: ct.StateSpace, name: str = "", n_freq: int = 1000) -> LoopMa
 
 # ---- gain sweep ----------------------------------------------------------------------
 
+@lru_cache(maxsize=16)
 def affine_closed_loop(op: OperatingPoint, dt: float | None = None, delay_steps: int = 0):
     """``(A0, Akp, Akd)`` with ``A_cl(kp, kd) = A0 + kp Akp + kd Akd`` exactly.
 
@@ -139,14 +169,18 @@ def affine_closed_loop(op: OperatingPoint, dt: float | None = None, delay_steps:
     algebraic loop (the plant has no feedthrough), so the closed-loop state
     matrix is affine in the gains; the three matrices come from
     ``LoopModel(...).closed_loop()`` at (kp, kd) = (1, 0), (2, 0), (1, 1).
+    Computed once per operating point and time base (the sweep and the
+    critical factor ask for the same ones); the arrays are read-only.
     """
-    base = LoopModel(op, dt, delay_steps)
-    kw = dict(dt=dt, delay_steps=delay_steps, plant=base.lin)
+    kw = dict(dt=dt, delay_steps=delay_steps, plant=linearize_plant(op))
     A10 = LoopModel(op, kp=1.0, kd=0.0, **kw).closed_loop().A
     A20 = LoopModel(op, kp=2.0, kd=0.0, **kw).closed_loop().A
     A11 = LoopModel(op, kp=1.0, kd=1.0, **kw).closed_loop().A
     Akp, Akd = A20 - A10, A11 - A10
-    return A10 - Akp, Akp, Akd
+    matrices = (A10 - Akp, Akp, Akd)
+    for m in matrices:
+        m.setflags(write=False)
+    return matrices
 
 
 @dataclass(frozen=True, eq=False)
@@ -188,16 +222,19 @@ class GainSweep:
         return float(self.kp[-1] if bad.size == 0 else self.kp[bad[0] - 1])
 
 
-def _measure(A: np.ndarray, dt: float | None) -> float:
+def _measure(A: np.ndarray, dt: float | None) -> np.ndarray | float:
+    """Spectral abscissa (``dt`` None) or radius of ``A``, or of each matrix of a stack ``A[..., n, n]``."""
     ev = np.linalg.eigvals(A)
-    return float(np.max(ev.real)) if dt is None else float(np.max(np.abs(ev)))
+    measure = ev.real.max(axis=-1) if dt is None else np.abs(ev).max(axis=-1)
+    return measure if measure.ndim else float(measure)
 
 
 def gain_sweep(op: OperatingPoint, kp, kd, dt: float | None = None, delay_steps: int = 0) -> GainSweep:
-    """Map the stable region of (kp, kd) at ``op`` (see :class:`GainSweep`)."""
+    """Map the stable region of (kp, kd) at ``op`` (see :class:`GainSweep`):
+    one eigenvalue problem per grid point, solved as one stack."""
     A0, Akp, Akd = affine_closed_loop(op, dt, delay_steps)
     kp, kd = np.asarray(kp, float), np.asarray(kd, float)
-    measure = np.array([[_measure(A0 + p * Akp + d * Akd, dt) for p in kp] for d in kd])
+    measure = _measure(A0 + kp[None, :, None, None] * Akp + kd[:, None, None, None] * Akd, dt)
     return GainSweep(kp, kd, measure, dt, delay_steps, op.name)
 
 
@@ -331,9 +368,14 @@ class OperatingPointAnalysis:
 TIME_BASES = ("continuous", "discrete", "discrete+1")
 
 
-def analyze(op: OperatingPoint, dt: float = 0.01, time_bases=TIME_BASES) -> OperatingPointAnalysis:
-    """Closed-loop poles and the margins of every broken loop of
-    :meth:`LoopModel.loops` at ``op``, in each of ``time_bases``."""
+def analyze(op: OperatingPoint, dt: float = 0.01, time_bases=TIME_BASES,
+            every_loop=TIME_BASES) -> OperatingPointAnalysis:
+    """Closed-loop poles and the margins of the broken loops of
+    :meth:`LoopModel.loops` at ``op``, in each of ``time_bases``: every loop
+    in the time bases of ``every_loop``, the outer loops (``outer x/y/z``)
+    only in the others (the report shows the inner loops in the sampled loop
+    alone: :func:`~quadrotor_paper.stability.study.stability_study` asks for
+    ``every_loop=("discrete",)``)."""
     result = OperatingPointAnalysis(op, dt)
     lin = None
     for key in time_bases:
@@ -345,7 +387,9 @@ def analyze(op: OperatingPoint, dt: float = 0.01, time_bases=TIME_BASES) -> Oper
         lin = model.lin
         result.models[key] = model
         result.poles[key] = closed_loop_poles(model.closed_loop())
-        result.margins[key] = [loop_margins(L, name) for name, L in model.loops().items()]
+        loops = (model.loops() if key in every_loop else
+                 {f"outer {a}": model.outer_loop(a) for a in ("x", "y", "z")})
+        result.margins[key] = [loop_margins(L, name) for name, L in loops.items()]
     return result
 
 
@@ -369,21 +413,33 @@ class FeedForwardCase:
 
 
 def feedforward_comparison(ops: list[OperatingPoint], dt: float = 0.01, speed: float = 2.5,
-                           gains=(0.0, 1.0)) -> list[FeedForwardCase]:
+                           gains=(0.0, 1.0), analyses: list[OperatingPointAnalysis] | None = None
+                           ) -> list[FeedForwardCase]:
     """The PD baseline at each velocity feed-forward gain of ``gains``, at the
     operating points ``ops`` (the first is hover, the second forward flight
     at ``speed``, as :func:`~quadrotor_paper.stability.operating_points.default_operating_points`
     gives them). The feed-forward path ``v* += ff dp*/dt`` reads the
     reference only, so the poles and margins come out the same for every
-    gain; what changes is the ramp and circle error (V/kp of lag gone)."""
+    gain; what changes is the ramp and circle error (V/kp of lag gone).
+
+    ``analyses``: :func:`analyze` of ``ops`` at ``dt``, if already computed;
+    the gain the points were trimmed for then takes its poles and outer
+    margins from them instead of computing them again (every other gain is
+    computed)."""
+    done = {a.op: a for a in analyses or () if a.dt == dt and "discrete" in a.margins}
     cases = []
     for ff in gains:
         points = [op.with_feedforward(ff) for op in ops]
         stable, radius, gm, pm = {}, {}, {}, {}
-        for op in points:
-            model = LoopModel(op, dt)
-            poles = closed_loop_poles(model.closed_loop())
-            outer = [loop_margins(model.outer_loop(a), f"outer {a}") for a in ("x", "y", "z")]
+        for op, given in zip(points, ops):
+            a = done.get(given) if ff == given.position.feedforward else None
+            if a is None:
+                model = LoopModel(op, dt)
+                poles = closed_loop_poles(model.closed_loop())
+                outer = [loop_margins(model.outer_loop(ax), f"outer {ax}") for ax in ("x", "y", "z")]
+            else:
+                poles = a.poles["discrete"]
+                outer = [m for m in a.margins["discrete"] if m.loop.startswith("outer")]
             stable[op.name], radius[op.name] = poles.stable, poles.stability_measure
             gm[op.name] = min(m.gain_margin for m in outer)
             pm[op.name] = min(m.phase_margin for m in outer)

@@ -39,7 +39,9 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         help=f"with --along-flight: freeze the learning loop every this many seconds of each mission "
                              f"(default {ALONG_EVERY:g}; 0 skips it)")
     parser.add_argument("--workers", type=int, default=None,
-                        help="Dask worker processes for the runs (default: one per core; 1 runs in this process)")
+                        help="processes: Dask workers for the runs, and with 2 or more the operating points' "
+                             "figures drawn in a second process while the study goes on (default: one per core; "
+                             "1 runs everything in this process)")
     return parser
 
 

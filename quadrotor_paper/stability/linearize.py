@@ -29,6 +29,7 @@ composition.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 from fmu_models.lazy_casadi import ca
@@ -114,22 +115,43 @@ def linearize_plant_fmu(fmu_path: str | Path, op: OperatingPoint) -> PlantLinear
     return PlantLinearization(A=A, B=B)
 
 
-def _jacobian(f: ca.Function, output: str, inputs: list[str], values: dict) -> list[np.ndarray]:
-    """d f[output] / d f[input] for each input, evaluated at ``values``."""
+def _jacobian_function(f: ca.Function, output: str, inputs: tuple[str, ...]) -> ca.Function:
+    """The CasADi function ``(f's inputs) -> d f[output] / d f[input]`` for each of ``inputs``."""
     sym = [ca.SX.sym(n, f.size_in(n)) for n in f.name_in()]
     out = f.call(dict(zip(f.name_in(), sym)))[output]
-    jac = ca.Function(f"{f.name()}_jacobian", sym, [ca.densify(ca.jacobian(out, sym[f.index_in(n)])) for n in inputs])
+    return ca.Function(f"{f.name()}_jacobian", sym,
+                       [ca.densify(ca.jacobian(out, sym[f.index_in(n)])) for n in inputs])
+
+
+def _jacobian(f: ca.Function, output: str, inputs: list[str], values: dict) -> list[np.ndarray]:
+    """d f[output] / d f[input] for each input, evaluated at ``values``."""
+    jac = _jacobian_function(f, output, tuple(inputs))
     return [np.array(m) for m in jac(*[values[n] for n in f.name_in()])]
+
+
+# The Jacobian functions depend on the controller's parameters only, not on the
+# operating point: built once per parameter set (a sweep or a study linearizes
+# the same controller at many points and gains; building one costs ~10 ms).
+@lru_cache(maxsize=64)
+def _velocity_jacobian(geometric) -> tuple[ca.Function, tuple[str, ...]]:
+    f = velocity_controller_function(geometric)
+    return _jacobian_function(f, "Omega", ("v_ref", "v", "euler", "omega_b")), tuple(f.name_in())
+
+
+@lru_cache(maxsize=64)
+def _position_jacobian(position) -> tuple[ca.Function, tuple[str, ...]]:
+    f = position_controller_function(PD, position)
+    return _jacobian_function(f, "v_ref", ("e", "e_dot")), tuple(f.name_in())
 
 
 def linearize_velocity_controller(op: OperatingPoint) -> tuple[np.ndarray, np.ndarray]:
     """``K_r = d Omega/d v*`` (4 x 3) and ``K_x = d Omega/d x`` (4 x 12) of
     ``velocity_controller_function(op.geometric)`` at ``op``."""
     _check_geometric(op.geometric)
-    f = velocity_controller_function(op.geometric)
+    jac, names = _velocity_jacobian(op.geometric)
     values = {"v_ref": op.v_ref, "v": op.x[3:6], "euler": op.x[6:9], "omega_b": op.x[9:12],
               "psi_ref": op.psi_ref, "vel_state": initial_velocity_state()}
-    K_r, K_v, K_euler, K_rates = _jacobian(f, "Omega", ["v_ref", "v", "euler", "omega_b"], values)
+    K_r, K_v, K_euler, K_rates = (np.array(m) for m in jac(*[values[n] for n in names]))
     K_x = np.zeros((4, _N_X))
     K_x[:, 3:6], K_x[:, 6:9], K_x[:, 9:12] = K_v, K_euler, K_rates
     return K_r, K_x
@@ -138,10 +160,10 @@ def linearize_velocity_controller(op: OperatingPoint) -> tuple[np.ndarray, np.nd
 def linearize_position_controller(op: OperatingPoint) -> tuple[np.ndarray, np.ndarray]:
     """``K_e = d v*/d e`` and ``K_edot = d v*/d(de/dt)`` (3 x 3 each) of
     ``position_controller_function(PD, op.position)`` at ``op``."""
-    f = position_controller_function(PD, op.position)
+    jac, names = _position_jacobian(op.position)
     values = {"e": op.position_error, "e_dot": op.p_ref_dot - op.x[3:6],
-              "fnn_state": np.zeros(f.numel_in(2))}
-    K_e, K_edot = _jacobian(f, "v_ref", ["e", "e_dot"], values)
+              "fnn_state": np.zeros(fnn_state_size(PD))}
+    K_e, K_edot = (np.array(m) for m in jac(*[values[n] for n in names]))
     return K_e, K_edot
 
 

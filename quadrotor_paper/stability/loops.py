@@ -31,7 +31,7 @@ with every other loop closed, so that ``feedback(L, 1)`` is the closed loop.
 """
 from __future__ import annotations
 
-from functools import cached_property
+from functools import cached_property, wraps
 
 import control as ct
 import numpy as np
@@ -61,8 +61,26 @@ def _static(D, inputs, outputs, name, dt):
                  inputs=list(inputs), outputs=list(outputs), name=name, dt=dt)
 
 
+def _built_once(method):
+    """Cache an interconnection on its model, per argument: the report asks
+    for the same loop up to three times (margins, Bode, Nyquist, pole-zero
+    map) and ``control.interconnect`` costs 10-20 ms a loop."""
+
+    @wraps(method)
+    def built(self, *args):
+        key = (method.__name__, *args)
+        if key not in self._built:
+            self._built[key] = method(self, *args)
+        return self._built[key]
+
+    return built
+
+
 class LoopModel:
     """The linearized loops at one operating point.
+
+    The interconnected systems (``closed_loop()``, the broken loops) are
+    built once per model and shared by every caller: treat them as read-only.
 
     Parameters
     ----------
@@ -105,6 +123,7 @@ class LoopModel:
         self.delay_steps = int(delay_steps)
         self.lin = plant or linearize_plant(op)
         self.gains = controller or linearize_controller(op)
+        self._built: dict[tuple, ct.StateSpace] = {}
 
     # ---- blocks ----------------------------------------------------------------
 
@@ -174,6 +193,7 @@ class LoopModel:
             inputs=[s.split(".")[1] for s in inputs], outputs=[s.split(".")[1] for s in outputs],
             check_unused=False, name=name)
 
+    @_built_once
     def closed_loop(self) -> ct.StateSpace:
         """The whole loop (PD + velocity controller + plant).
 
@@ -185,6 +205,7 @@ class LoopModel:
         outs = [f"plant.{s}" for s in STATE_NAMES] + [f"pd.{t}" for t in _TAU_C] + [f"hold.{r}" for r in _ROTORS]
         return ct.ss(self._connect(blocks, inputs=ins, outputs=outs, name="closed_loop"))
 
+    @_built_once
     def inner_loop(self) -> ct.StateSpace:
         """Plant + velocity controller: inputs ``v_ref_x..z wind_x..z``;
         outputs the 12 states and ``Omega_1..4``."""
@@ -193,6 +214,7 @@ class LoopModel:
         outs = [f"plant.{s}" for s in STATE_NAMES] + [f"hold.{r}" for r in _ROTORS]
         return ct.ss(self._connect(blocks, inputs=ins, outputs=outs, name="inner_loop"))
 
+    @_built_once
     def outer_loop(self, axis: str) -> ct.StateSpace:
         """Loop transfer of the PD loop of ``axis`` broken at the PD output
         (the desired velocity v*_axis), the other two axes and the inner
@@ -203,6 +225,7 @@ class LoopModel:
                           outputs=[f"pd.{_TAU_C[a]}"], name=f"L_outer_{AXES[a]}")
         return -ct.ss(L)
 
+    @_built_once
     def velocity_loop(self, axis: str) -> ct.StateSpace:
         """Inner loop alone (outer loop open), broken at the measured velocity
         of ``axis`` where the velocity controller reads it: ``L = -v_a / v_a,in``."""
@@ -213,6 +236,7 @@ class LoopModel:
                           name=f"L_velocity_{AXES[a]}")
         return -ct.ss(L)
 
+    @_built_once
     def rotor_loop(self, rotor: int) -> ct.StateSpace:
         """Inner loop alone (outer loop open), broken at the command of rotor
         ``rotor`` (1..4) at the plant input, the other rotors closed."""

@@ -77,7 +77,7 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
                     kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
                     geometric: GeometricParams = GeometricParams(), feedforward: float = 0.0,
                     feedforward_gains=(0.0, 1.0), along_flight: bool = False, along_every: float = 1.0,
-                    workers: int = 1, show_progress: bool = False) -> StabilityStudy:
+                    workers: int = 1, show_progress: bool = False, analysed=None) -> StabilityStudy:
     """Run every analysis.
 
     Parameters
@@ -103,20 +103,25 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
         (:func:`~.along_flight.along_flight_plan`) before it starts, and draw its
         progress bar (stderr).
     sweep_kp, sweep_kd : the grid of the gain sweep.
+    analysed : called with the operating points' analyses as soon as they are
+        computed, before the rest of the study (:func:`run_stability_analysis`
+        starts drawing their figures there).
     """
     position = PositionParams()
     position = replace(position, kp=position.kp if kp is None else kp, kd=position.kd if kd is None else kd, dt=dt,
                        feedforward=feedforward)
     geometric = replace(geometric, dt=dt)
     ops = default_operating_points(speed, wind_speed, position=position, geometric=geometric)
-    analyses = [analyze(op, dt) for op in ops]
+    analyses = [analyze(op, dt, every_loop=("discrete",)) for op in ops]  # what the report shows
+    if analysed is not None:
+        analysed(analyses)
     sweeps = [gain_sweep(ops[0], sweep_kp, sweep_kd, None), gain_sweep(ops[0], sweep_kp, sweep_kd, dt),
               gain_sweep(ops[0], sweep_kp, sweep_kd, dt, 1), gain_sweep(ops[-1], sweep_kp, sweep_kd, dt)]
     bases = {"continuous": (None, 0), "discrete": (dt, 0), "discrete+1": (dt, 1)}
     critical = {op.name: {k: critical_gain_factor(op, s, d) for k, (s, d) in bases.items()} for op in ops}
     study = StabilityStudy(dt, position, ops, analyses, sweeps, critical,
                            ramp_error(ops[0], ops[1], speed, dt), circle_error(ops[0], dt=dt))
-    study.feedforward_cases = feedforward_comparison(ops, dt, speed, feedforward_gains)
+    study.feedforward_cases = feedforward_comparison(ops, dt, speed, feedforward_gains, analyses)
     if cosim:
         study.feedforward_ramp_nonlinear = {float(g): ramp_lag(ops[0].with_feedforward(g), speed, dt=dt)[0]
                                             for g in feedforward_gains}
@@ -155,9 +160,15 @@ def _along_flight(study: StabilityStudy, kp: float | None, kd: float | None, eve
 def run_stability_analysis(out_dir: str | Path = "results/stability", **kwargs) -> StabilityStudy:
     """:func:`stability_study` (same keyword arguments), then write
     ``out_dir/stability.md`` and the PNG figures; returns the study with
-    ``report_path`` and ``figures`` set."""
-    from .report import write_report
+    ``report_path`` and ``figures`` set. With ``workers`` > 1 the operating
+    points' figures are drawn in a second process while the study goes on
+    (:func:`~quadrotor_paper.stability.report.point_figures_aside`); the
+    files are the same."""
+    from .report import point_figures_aside, write_report
 
+    aside = []
+    if kwargs.get("workers", 1) > 1:
+        kwargs["analysed"] = lambda analyses: aside.append(point_figures_aside(analyses, out_dir))
     study = stability_study(**kwargs)
-    write_report(study, out_dir)
+    write_report(study, out_dir, aside[0]() if aside else None)
     return study

@@ -292,3 +292,17 @@ def test_feed_forward_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fm
     trim = forward_flight(2.5, position=PositionParams(feedforward=1.0)).position_error[0]
     assert lag == pytest.approx(trim, abs=1e-4)
     assert lag < 0.06 * ramp_lag(op, 2.5, duration=15.0, fmu=fmu)[0]
+
+
+def test_operating_point_figures_drawn_aside_are_the_same_files(tmp_path):
+    """The forked process of ``run_stability_analysis(workers > 1)`` writes what one process writes."""
+    from quadrotor_paper.stability.analysis import analyze
+    from quadrotor_paper.stability.operating_points import hover
+    from quadrotor_paper.stability.report import point_figures, point_figures_aside
+
+    analyses = [analyze(hover(), 0.01, time_bases=("discrete",))]
+    here = point_figures(analyses, tmp_path / "here")
+    aside = point_figures_aside(analyses, tmp_path / "aside")()
+    assert list(aside) == list(here) == ["bode_outer_hover", "bode_inner_hover", "nyquist_outer_hover", "pzmap_hover"]
+    for name, path in here.items():
+        assert aside[name].read_bytes() == path.read_bytes(), name

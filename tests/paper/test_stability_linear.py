@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import astuple
 
 import casadi as ca
 import control as ct
@@ -266,6 +267,27 @@ def test_margins_on_the_frequency_response_match_the_polynomial_route(ops):
     assert m.stability_margin == pytest.approx(sm, rel=1e-6)
 
 
+def test_batched_frequency_response_is_python_controls_to_the_bit(ops):
+    """One batched solve gives what ``StateSpace.__call__`` gives one frequency at a time."""
+    from quadrotor_paper.stability.analysis import frequency_response
+
+    w = np.logspace(-3, 2.4, 200)
+    for L in (LoopModel(ops["forward_wind"], H, 1).outer_loop("y"), LoopModel(ops["hover"]).rotor_loop(2)):
+        x = np.exp(1j * w * L.dt) if L.isdtime(strict=True) else 1j * w
+        assert np.array_equal(frequency_response(L, w), L(x, squeeze=False))
+    tf = ct.tf([2.5 * H], [1, -1], H)  # not a state-space system: python-control evaluates it
+    assert np.array_equal(frequency_response(tf, w), tf(np.exp(1j * w * H), squeeze=False))
+
+
+def test_the_study_takes_every_loop_in_the_sampled_loop_and_the_outer_loops_elsewhere(ops):
+    res = analyze(ops["hover"], H, every_loop=("discrete",))
+    assert [m.loop for m in res.margins["discrete"]] == list(res.models["discrete"].loops())
+    assert [m.loop for m in res.margins["continuous"]] == ["outer x", "outer y", "outer z"]
+    full = analyze(ops["hover"], H, time_bases=("continuous",))
+    np.testing.assert_array_equal([astuple(m) for m in full.margins["continuous"][:3]],
+                                  [astuple(m) for m in res.margins["continuous"]])  # to the bit
+
+
 def test_margins_known_answers_for_the_ideal_outer_loop():
     """Perfect velocity loop: L = kp/s has PM 90 deg, no phase crossover; its
     ZOH version L = kp h/(z - 1) crosses -180 deg at z = -1 with GM 2/(kp h)."""
@@ -332,6 +354,10 @@ def test_feed_forward_leaves_poles_and_margins_and_removes_the_v_over_kp_ramp_la
         np.testing.assert_array_equal(A[0.0], A[1.0])
     paper, ff = feedforward_comparison(list(ops.values()), H, 2.5)
     assert paper.outer_gain_margin == ff.outer_gain_margin and paper.outer_phase_margin == ff.outer_phase_margin
+    analyses = [analyze(op, H, time_bases=("discrete",)) for op in ops.values()]  # as the study passes them
+    reused = feedforward_comparison(list(ops.values()), H, 2.5, analyses=analyses)[0]
+    for field in ("stable", "spectral_radius", "outer_gain_margin", "outer_phase_margin", "ramp", "circle"):
+        assert getattr(reused, field) == getattr(paper, field), field
     drag_share = 2.5 * DEFAULTS["k_drag_lin"] / (DEFAULTS["m"] * GeometricParams().k_v * 2.5)
     assert ff.ramp.ideal == 0.0 and paper.ramp.ideal == pytest.approx(1.0)
     assert ff.ramp.linear_discrete == pytest.approx(drag_share, abs=1e-5)
