@@ -22,7 +22,7 @@ reproduce: $(VENV)/.installed
 # in a fresh interpreter) compiles the package again, and pytest rewrites
 # every test module on every run (measured: 121.6 s against 133-141 s warm).
 test: $(VENV)/.installed
-	PYTHONDONTWRITEBYTECODE= PYTHONPYCACHEPREFIX=$(CURDIR)/build/pycache $(BIN)/python -m pytest -q -n 2
+	PYTHONDONTWRITEBYTECODE= PYTHONPYCACHEPREFIX=$(CURDIR)/build/pycache $(BIN)/python -m pytest -q -n 2 --dist worksteal
 
 fmu: $(VENV)/.installed
 	$(BIN)/fnn-cosim build-fmu --out build/fmus
