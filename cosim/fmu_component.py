@@ -64,6 +64,7 @@ adds what the master needs:
 from __future__ import annotations
 
 import ctypes
+import functools
 import itertools
 import logging
 import os
@@ -88,6 +89,16 @@ from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
 
 __all__ = ["FmuComponent", "fmi2_callbacks", "stream_seed"]
+
+
+@functools.lru_cache(maxsize=64)
+def _parsed_model_description(path: str, size: int, mtime_ns: int, validate: bool):
+    """fmpy's parse of the FMU at ``path`` as it is now (its size and time of
+    change in the key: a rewritten file is read again). A study's worker
+    builds a master per case over the same FMU files: each was parsed again
+    (lxml, about 3.5 ms each, a fifth of a master's build). Nothing changes
+    the parsed description; a failure is not kept."""
+    return read_model_description(path, validate=validate)
 
 _FMI2_LOGGER = None
 _FMI2_LOG_RECEIVERS: dict[int, weakref.WeakMethod] = {}
@@ -346,7 +357,9 @@ class FmuComponent:
         except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, EOFError, ValueError) as exc:
             raise FmuLoadError(self.name, self.path, f"not an FMU: not a zip archive ({exc})") from None
         try:
-            return read_model_description(str(self.path), validate=validate)
+            where = self.path / "modelDescription.xml" if self.path.is_dir() else self.path
+            stat = where.stat()
+            return _parsed_model_description(str(self.path), stat.st_size, stat.st_mtime_ns, validate)
         except zipfile.BadZipFile as exc:
             reason = f"not an FMU: not a zip archive ({exc})"
         except KeyError:
