@@ -33,6 +33,7 @@ from . import registry
 from .errors import CosimError, FmuError, ScenarioError
 from .fmu_description import start_value_rule
 from .model_exchange import METHODS
+from .plan import ORDERINGS  # the master's (docs/cosim.md)
 from .files import read_toml
 from .limits import MAX_STEPS
 from .limits import MAX_RECORD_BYTES
@@ -43,10 +44,8 @@ from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, js
 
 __all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "ConnectionTable", "scenario_model", "scenario_json_schema", "load_scenario",
            "parse_scenario", "shipped_scenarios", "scenario_path", "apply_overrides", "build_master", "fmu_file",
-           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "fmu_values",
-           "ORDERINGS"]
+           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "fmu_values"]
 
-ORDERINGS = ("feedthrough", "exchange")  # the master's (docs/cosim.md)
 
 
 # ---- the generic tables -----------------------------------------------------------------------
