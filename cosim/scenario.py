@@ -44,7 +44,7 @@ from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, js
 
 __all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "ConnectionTable", "scenario_model", "scenario_json_schema", "load_scenario",
            "parse_scenario", "shipped_scenarios", "scenario_path", "apply_overrides", "build_master", "fmu_file",
-           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "fmu_values"]
+           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "fmu_values", "runs_at"]
 
 
 
@@ -617,6 +617,15 @@ def check_fmu_file(scenario: Scenario, fmu) -> None:
     _check_sample_period(fmu, spec["parameters"], scenario.step, f"fmus.{fmu.name}.parameters")
 
 
+def runs_at(step: float, period: float) -> bool:
+    """Whether a master's communication ``step`` (s) is a sampled-data
+    model's ``period`` (s): equal within 1e-9 of the period, the tolerance
+    of our FMUs' own check (``fmu_core.c``, ``sampled_step``). The one rule
+    for every sampled-data part (an FMU's period parameter, the
+    controller's ``position.dt``)."""
+    return abs(step - period) <= 1e-9 * abs(period)
+
+
 def _check_sample_period(fmu, parameters: Mapping[str, Any], step: float, where: str) -> None:
     """A sampled-data FMU (one that declares its period parameter,
     :attr:`~cosim.fmu_component.FmuComponent.sample_period`) takes one
@@ -631,7 +640,7 @@ def _check_sample_period(fmu, parameters: Mapping[str, Any], step: float, where:
     if value is None:  # no value to compare: the FMU's own doStep is the check
         return
     period = float(value)
-    if abs(step - period) > 1e-9 * period:  # the tolerance of our FMUs' own check (fmu_core.c, sampled_step)
+    if not runs_at(step, period):
         told = f"{value!r}" if given else f"{period!r} (the file's start value)"
         raise ScenarioError(f"{where}.{name} = {told}: a sampled-data FMU runs at its period; the communication "
                             f"step is {step!r} s")

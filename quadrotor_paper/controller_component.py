@@ -186,8 +186,11 @@ def controller_table() -> type[Table]:
 
 
 def _check_period(name: str, dt: float, step: float) -> None:
-    """The controller computes once per ``position.dt``: a master takes no other communication step."""
-    if abs(step - dt) > 1e-12:
+    """The controller computes once per ``position.dt``: a master takes no
+    other communication step (the rule of every sampled-data part, :func:`cosim.scenario.runs_at`)."""
+    from cosim.scenario import runs_at
+
+    if not runs_at(step, dt):
         raise ScenarioError(f"{name}.position.dt = {dt!r}: the controller's period must equal the communication "
                             f"step simulation.step = {step!r} s")
 
