@@ -74,6 +74,7 @@ from fnn_controller.it2 import Q, it2_normalized_firing_strengths, it2_regressor
 from fnn_controller.learning import LearningBounds, clip_inputs, lm_delta, lm_f_rate
 from fnn_controller.position import axis_slice
 from fnn_controller.variants import variant as _variant
+from fnn_controller.variants import variants as _variants
 
 from .controller_component import internal_ports
 from .missions import controller_variant
@@ -83,7 +84,7 @@ __all__ = ["Recording", "AxisClaims", "record_run", "recorded", "evaluate_claims
 
 _AXES = ("x", "y", "z")
 # the learning variants the claims cover, by law: the type-1 FNN (eq. 25) and the interval type-2 FNN (IT-5)
-_SMC, _LM = ("pd+smc", "pd+it2-smc"), ("pd+lm", "pd+it2-lm")
+_SMC, _LM = (tuple(v.name for v in _variants().values() if v.training == law) for law in ("smc", "lm"))
 CLAIM_VARIANTS = (*_SMC, *_LM)
 
 
@@ -156,7 +157,7 @@ def record_run(name: str, variant: str, scenario: str = "circles", overrides: di
 
 
 def _is_it2(variant: str) -> bool:
-    return variant in ("pd+it2-smc", "pd+it2-lm")
+    return _variant(variant).fnn == "it2"
 
 
 def _regressor(x1, x2, s, variant: str, position: PositionParams):

@@ -12,6 +12,7 @@ import sys
 import numpy as np
 
 from cosim.study import Study, parse_study
+from fnn_controller.variants import variants
 
 from .experiments import measure
 from .metrics import oscillation_period, pd_share, rmse
@@ -20,7 +21,8 @@ __all__ = ["study", "limit_cycle", "main", "FIGURES"]
 
 _POSITION = ["Quadrotor.x", "Quadrotor.y", "Quadrotor.z"]
 _REFERENCE = ["reference.x", "reference.y", "reference.z"]
-VARIANTS = ("pd+smc", "pd+lm")
+# the type-1 FNN's learning variants (the paper's two)
+VARIANTS = tuple(v.name for v in variants().values() if v.fnn == "type1" and v.training is not None)
 PHIS = (0.0, 0.05, 0.1, 0.2)  # m/s, on every axis
 LATE = 20.0  # s: the limit cycle's window, the end of the mission
 FIGURES = ("rmse_m", "period_s", "autocorrelation", "e_z_amplitude_m", "tau_n_z_peak_to_peak",

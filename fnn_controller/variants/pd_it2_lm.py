@@ -15,4 +15,5 @@ PD_IT2_LM = register_variant(Variant(
     initial_axis=it2_initial_axis, n_random=IT2_RANDOM,
     axis_state_size=IT2_AXIS_STATE_SIZE, axis_state_bounds=it2_axis_state_bounds,
     axis_state_ports=IT2_AXIS_STATE_PORTS, parameters=("gamma_lm", "alpha_bar", *IT2_PARAMETERS),
+    training="lm", fnn="it2",
 ))

@@ -14,4 +14,5 @@ PD_IT2_SMC = register_variant(Variant(
     initial_axis=it2_initial_axis, n_random=IT2_RANDOM,
     axis_state_size=IT2_AXIS_STATE_SIZE, axis_state_bounds=it2_axis_state_bounds,
     axis_state_ports=IT2_AXIS_STATE_PORTS, parameters=("gamma_smc", "nu", *IT2_PARAMETERS),
+    training="smc", fnn="it2",
 ))

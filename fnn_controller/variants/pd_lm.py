@@ -12,4 +12,5 @@ PD_LM = register_variant(Variant(
     initial_axis=type1_initial_axis, n_random=TYPE1_RANDOM,
     axis_state_size=AXIS_STATE_SIZE, axis_state_bounds=type1_axis_state_bounds,
     axis_state_ports=AXIS_STATE_PORTS, parameters=("gamma_lm", "alpha_bar", "init", "bounds", "phi"),
+    training="lm", fnn="type1",
 ))

@@ -55,9 +55,15 @@ class Variant:
     axis_state_ports: tuple[tuple[str, str], ...]
     parameters: tuple[str, ...] = ()
     learns: bool = True
+    # what an analysis asks of a variant, never of its name: its learning laws' family ("smc": eqs. 33-38,
+    # "lm": eqs. 57-62; None: it does not learn) and its FNN ("type1": §4.1, "it2": interval type-2)
+    training: str | None = None
+    fnn: str | None = None
 
 
 _VARIANTS: dict[str, Variant] = {}
+TRAININGS = (None, "smc", "lm")
+FNNS = (None, "type1", "it2")
 
 
 def register_variant(v: Variant) -> Variant:
@@ -67,6 +73,9 @@ def register_variant(v: Variant) -> Variant:
     if len(v.axis_state_ports) != v.axis_state_size:
         raise ValueError(f"variant {v.name!r}: {len(v.axis_state_ports)} axis state ports for a state of "
                          f"{v.axis_state_size}")
+    if v.training not in TRAININGS or v.fnn not in FNNS:
+        raise ValueError(f"variant {v.name!r}: training = {v.training!r}, fnn = {v.fnn!r}; expected one of "
+                         f"{TRAININGS} and of {FNNS}")
     fields = set(PositionParams.__dataclass_fields__)
     unknown = [p for p in v.parameters if p not in fields]
     if unknown:

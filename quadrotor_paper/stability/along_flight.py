@@ -50,7 +50,10 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from cosim.scenario import Scenario, build_master
+from fnn_controller.variants import variant_names
 
+from ..components import CONTROLLER_INSTANCE
+from ..controller_component import DEFAULT_PLANT
 from ..missions import controller_variant
 from .fmu_loop import FmuLoop, snapshot_loop
 from .operating_points import STATE_NAMES
@@ -59,7 +62,7 @@ __all__ = ["FlightPoint", "FlightRadius", "AlongFlight", "along_flight", "along_
            "AlongFlightPlan", "flight_events", "verdict", "write_points", "learned_state_names", "VARIANTS",
            "BOUNDARY_LAYER", "MISSIONS", "DELTA", "NEUTRAL_RATE", "SECONDS_PER_POINT"]
 
-VARIANTS = ("pd", "pd+smc", "pd+lm", "pd+it2-smc", "pd+it2-lm")
+VARIANTS = variant_names()  # every registered variant, in the registry's order
 MISSIONS = ("circles", "figure8")
 # m/s: the layer docs/results.md found to remove the z limit cycle (docs/stability.md)
 BOUNDARY_LAYER = 0.2
@@ -68,7 +71,7 @@ DELTA = {"u": 0.05, "phi": 0.02}
 # the size of the perturbation along the least stable mode (its state's units): small enough
 # to stay linear after a growth of e^4 over the 1 s check
 MODE_SIZE = 1e-4
-_PLANT, _CONTROLLER = "Quadrotor", "controller"
+_PLANT, _CONTROLLER = DEFAULT_PLANT, CONTROLLER_INSTANCE
 # s of one worker per frozen point, its perturbation checks and its share of the flight included:
 # the whole study (972 points, 1 s checks) took about 3 min on 2 workers of an idle 2-core
 # machine (docs/stability.md, "What the command costs"); the estimate printed before the study
