@@ -24,6 +24,11 @@ each axis state in (its projections), which the contract test checks;
 ``axis_state_ports`` names each element with its unit (how the learned
 parameters are published and recorded).
 
+``training`` (``"smc"``: eqs. 33-38, ``"lm"``: eqs. 57-62, ``None``: it
+does not learn) and ``fnn`` (``"type1"``, ``"it2"``) say what an analysis
+needs to know of a variant (which learning laws' claims apply, which
+regressor); nothing tests a variant's name for it.
+
 The laws take a :class:`Variant`, never a name: a name (from a scenario, the
 command line, a saved state) is resolved once by :func:`variant` where it
 enters, and the object is passed on. The registry reads the parameters
