@@ -141,7 +141,9 @@ def learned_variant(component, where: str) -> str:
         raise ScenarioError(f"{where}: the controller is the FMU {component.path} ({identifier}), not one of this "
                             f"tool's controller FMUs ({fmu_identifier(variant_names()[0])}, ...): it has no learned "
                             f"state to save")
-    if isinstance(getattr(component, "variant", None), str) and hasattr(component, "state"):
+    from .controller_component import ControllerComponent
+
+    if isinstance(component, ControllerComponent):
         return component.variant
     raise ScenarioError(f"{where}: the controller ({type(component).__name__}) has no learned state to save")
 
