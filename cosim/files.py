@@ -4,7 +4,8 @@ A scenario, a study, a learned state, an SSP archive: a file from anyone is
 data (``docs/security.md``). Reading one refuses in one line what is not a
 regular file of reasonable size in UTF-8 (a folder, ``/dev/zero``, a FIFO,
 a 1 GB "scenario", bytes that are no text, integers of thousands of digits,
-nesting deep enough to exhaust the interpreter); an output folder or file is
+nesting beyond ``MAX_NESTING`` levels, TOML's dates and times, an archive's
+entry that does not decompress); an output folder or file is
 checked before anything runs, so a run is never lost for want of a place to
 write it; a name taken from a file becomes one path component.
 """

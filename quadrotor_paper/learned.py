@@ -141,10 +141,8 @@ def learned_variant(component, where: str) -> str:
         raise ScenarioError(f"{where}: the controller is the FMU {component.path} ({identifier}), not one of this "
                             f"tool's controller FMUs ({fmu_identifier(variant_names()[0])}, ...): it has no learned "
                             f"state to save")
-    from .controller_component import ControllerComponent
-
-    if isinstance(component, ControllerComponent):
-        return component.variant
+    if isinstance(getattr(component, "variant", None), str) and hasattr(type(component), "state"):
+        return component.variant  # the Python controller (its state is there after the run)
     raise ScenarioError(f"{where}: the controller ({type(component).__name__}) has no learned state to save")
 
 
