@@ -10,7 +10,7 @@ import math
 from pathlib import Path
 
 __all__ = ["CosimError", "ConnectionCheckError", "ScenarioError", "DivergenceError", "FmuError", "FmuLoadError",
-           "FmuCallError", "SimulationTerminated", "one_line", "show_folder_as"]
+           "FmuCallError", "SimulationTerminated", "one_line", "shown_text", "show_folder_as"]
 
 # A temporary folder the tool extracted an archive to -> what a message shows
 # instead (the archive): a message never shows a temporary folder
@@ -39,6 +39,12 @@ def _shown(text: str) -> str:
 def one_line(text: str) -> str:
     """``text`` with its line breaks and runs of blanks folded into single spaces."""
     return " ".join(str(text).split())
+
+
+def shown_text(text: str, limit: int = 80) -> str:
+    """``text`` on one line, cut to about ``limit`` characters (a key or value a message quotes, however long)."""
+    text = one_line(text)
+    return text if len(text) <= limit else f"{text[:limit - 3]}... ({len(text)} characters)"
 
 
 class CosimError(Exception):

@@ -4,12 +4,14 @@ A scenario, a study, a learned state, an SSP archive: a file from anyone is
 data (``docs/security.md``). Reading one refuses in one line what is not a
 regular file of reasonable size in UTF-8 (a folder, ``/dev/zero``, a FIFO,
 a 1 GB "scenario", bytes that are no text, integers of thousands of digits,
-nesting deep enough to exhaust the interpreter); an output folder or file is
+nesting beyond ``MAX_NESTING`` levels, TOML's dates and times, an archive's
+entry that does not decompress); an output folder or file is
 checked before anything runs, so a run is never lost for want of a place to
 write it; a name taken from a file becomes one path component.
 """
 from __future__ import annotations
 
+import datetime
 import json
 import os
 import posixpath
@@ -18,14 +20,15 @@ import shutil
 import stat
 import tomllib
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Iterable
 
-from .errors import ScenarioError, one_line
-from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_RATIO
+from .errors import ScenarioError, one_line, shown_text
+from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_NESTING, MAX_RATIO
 
-__all__ = ["regular_file", "read_text", "read_toml", "read_json", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder", "output_file",
-           "zip_members", "extract_zip"]
+__all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder", "output_file",
+           "zip_members", "read_entry", "extract_zip"]
 
 
 
@@ -63,26 +66,107 @@ def read_text(path: str | Path, what: str = "file", limit: int = MAX_DOCUMENT_BY
 
 
 def read_toml(path: str | Path, what: str = "scenario") -> dict[str, Any]:
-    """A TOML file as a mapping, or a one-line :class:`ScenarioError` naming the file and the fault."""
+    """A TOML file as a mapping, or a one-line :class:`ScenarioError` naming the file and the fault
+    (:func:`check_document`: what a document may hold)."""
     text = read_text(path, what)
     try:
-        return tomllib.loads(text)
+        doc = _loads_toml(text, str(path), lines=True)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {one_line(str(exc))}") from None
-    except (ValueError, RecursionError) as exc:  # an integer of thousands of digits, nesting without end
-        raise ScenarioError(f"{path}: not a document this tool reads: {one_line(str(exc))[:200]}") from None
+    check_document(doc, str(path))
+    return doc
+
+
+def toml_value(text: str, where: str, depth: int = 0) -> Any:
+    """The value ``text`` as TOML writes one (``--set KEY=VALUE``'s VALUE: a
+    number, a quoted string, an array, an inline table), or ``text`` itself
+    when it is no TOML value (``--set controller.form=fmu``); checked as a
+    document's values are (:func:`check_document`): ``where`` names it in a
+    refusal (``--set KEY``), ``depth`` is how deep in a document it goes (the
+    key's parts)."""
+    try:
+        value = _loads_toml(f"v = {text}", where, lines=False)["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+    check_document(value, where, depth)
+    return value
+
+
+_INT_LIMIT = re.compile(r"limit \((\d+) digits\).*has (\d+) digits")
+
+
+def _loads_toml(text: str, where: str, lines: bool) -> dict[str, Any]:
+    """``tomllib.loads``, its faults other than TOML syntax one line each:
+    an integer beyond Python's conversion limit (no physical value has
+    thousands of digits), nesting that exhausts the parser."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        raise
+    except ValueError as exc:  # int("1" * 5000): Python's limit of digits in an int-string conversion
+        found = _INT_LIMIT.search(str(exc))
+        if found is None:
+            raise ScenarioError(f"{where}: not a document this tool reads: {one_line(str(exc))[:200]}") from None
+        limit, digits = int(found[1]), int(found[2])
+        at = re.search(rf"[0-9][0-9_]{{{limit},}}", text) if lines else None
+        line = f": line {text.count(chr(10), 0, at.start()) + 1}" if at else ""
+        raise ScenarioError(f"{where}{line}: an integer of {digits} digits; at most {limit}") from None
+    except RecursionError:
+        raise ScenarioError(f"{where}: nested too deep to read; at most {MAX_NESTING} levels") from None
+
+
+def _place(where: str, keys: tuple) -> str:
+    """Where a value is, as a message names it: ``where``, then its key path
+    (dotted, ``[i]`` for an array's item, a long one cut)."""
+    if not keys:
+        return where
+    text = "".join(f"[{k}]" if isinstance(k, int) else ("." if i else "") + str(k) for i, k in enumerate(keys[:12]))
+    return f"{where}: {shown_text(text)}" + ("..." if len(keys) > 12 else "")
+
+
+def check_document(data: Any, where: str, depth: int = 0) -> None:
+    """Refuse, in one line naming ``where`` and the key, what a parsed document
+    (TOML, JSON) may hold that this tool reads from no file: nesting deeper
+    than :data:`~cosim.limits.MAX_NESTING` levels (the keys and array items
+    on the path to a value; ``data`` itself sits ``depth`` levels deep, e.g.
+    the value of a ``--set`` key of that many parts), and TOML's dates and
+    times (a document is JSON data: it is copied, fingerprinted and written as
+    JSON). Walks without recursion."""
+    deepest, path = depth, ()
+    stack = [(data, (), depth)]
+    while stack:
+        node, at, level = stack.pop()
+        if level > deepest:
+            deepest, path = level, at
+        if isinstance(node, dict):
+            children = node.items()
+        elif isinstance(node, list):
+            children = enumerate(node)
+        else:
+            if isinstance(node, (datetime.date, datetime.time)):  # a datetime is a date too
+                shown = node.isoformat()[:40]
+                raise ScenarioError(f"{_place(where, at)} = {shown}: a date or time; expected a number, a string "
+                                    f"(quote it: \"{shown}\"), a boolean, an array or a table")
+            continue
+        for key, child in children:  # a path stops growing past the limit: its depth still counts
+            stack.append((child, at + (key,) if level <= MAX_NESTING else at, level + 1))
+    if deepest > MAX_NESTING:
+        raise ScenarioError(f"{_place(where, path)}: nested {deepest} levels deep; at most {MAX_NESTING}")
 
 
 def read_json(path: str | Path, what: str) -> Any:
-    """A JSON file as Python data, or a one-line :class:`ScenarioError`."""
+    """A JSON file as Python data, or a one-line :class:`ScenarioError`
+    (:func:`check_document`: what a document may hold)."""
     text = read_text(path, what)
     try:
-        return json.loads(text)
+        doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ScenarioError(f"{what} {str(path)!r}: not JSON ({exc.msg}, line {exc.lineno})") from None
     except (ValueError, RecursionError) as exc:
         raise ScenarioError(f"{what} {str(path)!r}: not a document this tool reads: "
                             f"{one_line(str(exc))[:200]}") from None
+    check_document(doc, f"{what} {str(path)!r}")
+    return doc
 
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
@@ -161,13 +245,37 @@ def run_time_entries(names: Iterable[str]) -> set[str]:
     return {n for n in normal if not n.startswith(("sources/", "documentation/"))}
 
 
+# What reading an entry's data may raise when the data is corrupt: a bad CRC, a deflate stream that
+# does not decompress (zlib's "Error -3"), data that ends early, an unsupported compression.
+_CORRUPT = (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError, ValueError, OSError)
+
+
+def _corrupt(what: str, info: zipfile.ZipInfo, exc: BaseException) -> ScenarioError:
+    entry = f"{what}: entry {shown_text(info.filename)!r}"
+    if isinstance(exc, NotImplementedError):
+        return ScenarioError(f"{entry}: a compression this tool does not read ({shown_text(str(exc), 200)})")
+    kind = "zlib.error" if isinstance(exc, zlib.error) else type(exc).__name__
+    return ScenarioError(f"{entry} is corrupt ({kind}: {shown_text(str(exc), 200)})")
+
+
+def read_entry(archive: zipfile.ZipFile, info: zipfile.ZipInfo, what: str) -> bytes:
+    """The data of one entry (already checked by :func:`zip_members`) of
+    ``archive``; corrupt data is a one-line :class:`ScenarioError` naming
+    ``what`` (the archive) and the entry."""
+    try:
+        return archive.read(info)
+    except _CORRUPT as exc:
+        raise _corrupt(what, info, exc) from None
+
+
 def extract_zip(path: str | Path, target: str | Path, what: str, only: set[str] | None = None) -> Path:
     """Extract the zip archive ``path`` (all its entries, or the names in
     ``only``) into the folder ``target``, checking each entry
     (:func:`zip_members`) and counting the bytes written (a header may lie);
-    a corrupt archive (not a zip, a bad CRC, an unsupported compression) is
-    a one-line :class:`ScenarioError`. The folder is left as it was found
-    (removed if this made it) when extraction fails."""
+    a corrupt archive (not a zip, an unsupported compression) or entry (a
+    bad CRC, data that does not decompress) is a one-line
+    :class:`ScenarioError` naming the archive, and the entry. The folder is
+    left as it was found (removed if this made it) when extraction fails."""
     path, target = Path(path), Path(target)
     regular_file(path, what)
     made = not target.exists()
@@ -182,18 +290,25 @@ def extract_zip(path: str | Path, target: str | Path, what: str, only: set[str] 
                 destination = target / name
                 destination.parent.mkdir(parents=True, exist_ok=True)
                 written = 0
-                with archive.open(info) as source, open(destination, "wb") as sink:
-                    while chunk := source.read(2 ** 20):
-                        written += len(chunk)
-                        if written > info.file_size or written > MAX_ENTRY_BYTES:
-                            raise ScenarioError(f"{what}: entry {info.filename!r} is larger than its header says")
-                        sink.write(chunk)
+                with open(destination, "wb") as sink:
+                    try:
+                        with archive.open(info) as source:
+                            while chunk := source.read(2 ** 20):
+                                written += len(chunk)
+                                if written > info.file_size or written > MAX_ENTRY_BYTES:
+                                    raise ScenarioError(f"{what}: entry {info.filename!r} is larger than its header "
+                                                        f"says")
+                                sink.write(chunk)
+                    except _CORRUPT as exc:
+                        if isinstance(exc, OSError) and exc.errno is not None:  # the disk, not the archive
+                            raise
+                        raise _corrupt(what, info, exc) from None
     except ScenarioError:
         if made:
             shutil.rmtree(target, ignore_errors=True)
         raise
     except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, RuntimeError, EOFError, OSError,
-            ValueError) as exc:
+            ValueError, zlib.error) as exc:
         if made:
             shutil.rmtree(target, ignore_errors=True)
         raise ScenarioError(f"{what}: a broken archive ({type(exc).__name__}: {one_line(str(exc))})") from None

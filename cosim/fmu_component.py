@@ -341,7 +341,7 @@ class FmuComponent:
         """fmpy's reading of the modelDescription, its failures told in one
         line; an archive is looked at first (a regular file, every entry within
         the limits of :mod:`cosim.files`): an FMU file is data from anyone."""
-        from .files import regular_file, zip_members
+        from .files import read_entry, regular_file, zip_members
         from .limits import MAX_DOCUMENT_BYTES
 
         try:
@@ -349,9 +349,11 @@ class FmuComponent:
                 regular_file(self.path, "FMU")
                 with zipfile.ZipFile(self.path) as archive:
                     entry = zip_members(archive, "the archive").get("modelDescription.xml")
-                if entry is not None and entry.file_size > 4 * MAX_DOCUMENT_BYTES:
-                    raise FmuLoadError(self.name, self.path, f"modelDescription.xml is {entry.file_size} bytes; at "
-                                                             f"most {4 * MAX_DOCUMENT_BYTES} are read")
+                    if entry is not None and entry.file_size > 4 * MAX_DOCUMENT_BYTES:
+                        raise FmuLoadError(self.name, self.path, f"modelDescription.xml is {entry.file_size} bytes; "
+                                                                 f"at most {4 * MAX_DOCUMENT_BYTES} are read")
+                    if entry is not None:  # corrupt data is told here, naming the entry (read again by fmpy)
+                        self._description_xml = read_entry(archive, entry, "the archive")
         except ScenarioError as exc:
             raise FmuLoadError(self.name, self.path, str(exc).removeprefix(f"FMU {str(self.path)!r}: ")) from None
         except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, EOFError, ValueError) as exc:
@@ -397,8 +399,12 @@ class FmuComponent:
             if self.path.is_dir():
                 xml = (self.path / "modelDescription.xml").read_bytes()
             else:
-                with zipfile.ZipFile(self.path) as archive:
-                    xml = archive.read("modelDescription.xml")
+                xml = getattr(self, "_description_xml", None)  # read, and checked, by _read_model_description
+                if xml is None:
+                    from .files import read_entry
+
+                    with zipfile.ZipFile(self.path) as archive:
+                        xml = read_entry(archive, archive.getinfo("modelDescription.xml"), str(self.path))
             root = self._extras_root = etree.fromstring(xml, etree.XMLParser(resolve_entities=False,
                                                                                 no_network=True))
         return root
@@ -509,10 +515,10 @@ class FmuComponent:
             from .files import extract_zip
 
             try:
-                self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"), "the archive",
+                self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"), "cannot extract the archive",
                                              only=self._run_time_files())
             except ScenarioError as exc:
-                raise FmuLoadError(self.name, self.path, f"cannot extract the archive: {exc}") from None
+                raise FmuLoadError(self.name, self.path, str(exc)) from None
             self._owns_unzipdir = True
             folder = Path(self._unzipdir)
             forms = {folder.as_uri(): self.path.name, str(folder): self.path.name,

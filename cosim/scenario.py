@@ -30,12 +30,12 @@ from typing import Annotated, Any, Mapping, Union
 from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag, ValidationError, create_model, model_validator
 
 from . import registry
-from .errors import CosimError, FmuError, ScenarioError
+from .errors import CosimError, FmuError, ScenarioError, shown_text
 from .fmu_description import start_value_rule
 from .model_exchange import METHODS
 from .plan import ORDERINGS  # the master's (docs/cosim.md)
 from .files import read_toml
-from .limits import MAX_STEPS
+from .limits import MAX_NESTING, MAX_STEPS
 from .limits import MAX_RECORD_BYTES
 from .recorder import record_bytes
 from .limits import SEED_LIMIT
@@ -501,22 +501,32 @@ class Scenario:
         return f"Scenario({self.name!r}, source={str(self.source) if self.source else None!r})"
 
 
-def dotted_key(dotted: str) -> list[str]:
+def dotted_key(dotted: str, where: str | None = None) -> list[str]:
     """The parts of a dotted key as TOML writes one: ``simulation.duration``,
-    ``envelope."Quadrotor.phi"`` (a part holding a dot is quoted)."""
+    ``envelope."Quadrotor.phi"`` (a part holding a dot is quoted); at most
+    :data:`~cosim.limits.MAX_NESTING` of them. ``where`` names the key in a
+    refusal (default: ``key '...'``)."""
+    where = where or f"key {shown_text(dotted)!r}"
     if '"' not in dotted and "'" not in dotted:
         parts = dotted.split(".")
         if all(parts):
-            return [p.strip() for p in parts]
+            parts = [p.strip() for p in parts]
+            return _few_parts(parts, where)
     try:
         node: Any = tomllib.loads(f"{dotted} = 0")
-    except (tomllib.TOMLDecodeError, ValueError):
-        raise ScenarioError(f"key {dotted!r}: not a dotted key (parts joined by dots; a part holding a dot or a "
+    except (tomllib.TOMLDecodeError, ValueError, RecursionError):
+        raise ScenarioError(f"{where}: not a dotted key (parts joined by dots; a part holding a dot or a "
                             f"space is quoted: envelope.\"Quadrotor.phi\")") from None
     parts = []
     while isinstance(node, dict) and len(node) == 1:
         key, node = next(iter(node.items()))
         parts.append(key)
+    return _few_parts(parts, where)
+
+
+def _few_parts(parts: list[str], where: str) -> list[str]:
+    if len(parts) > MAX_NESTING:
+        raise ScenarioError(f"{where}: {len(parts)} parts; at most {MAX_NESTING}")
     return parts
 
 

@@ -58,7 +58,7 @@ from lxml import etree
 from . import registry, units
 from .connection import check_connections, parse_connections
 from .errors import CosimError, FmuError, ScenarioError, one_line, show_folder_as
-from .files import SSD_NAME, extract_zip, is_ssp, regular_file, safe_name, zip_members
+from .files import SSD_NAME, check_document, extract_zip, is_ssp, read_entry, regular_file, safe_name, zip_members
 from .limits import MAX_DOCUMENT_BYTES
 from .scenario import Scenario, apply_overrides, fmu_component, fmu_error_in_scenario, fmu_file, parse_scenario
 from .scenario import check_fmu_file
@@ -729,6 +729,10 @@ def _read_ssd(ssd_path: Path) -> _System:
                             settings[key] = json.loads(item.get(key))
                         except json.JSONDecodeError as exc:
                             raise ScenarioError(f"{where}: Fmu {component!r}: {key} is not JSON ({exc})") from None
+                        except (ValueError, RecursionError) as exc:
+                            raise ScenarioError(f"{where}: Fmu {component!r}: {key}: not a document this tool "
+                                                f"reads ({one_line(str(exc))[:200]})") from None
+                        check_document(settings[key], f"{where}: Fmu {component!r}: {key}", 3)
             elif tag == "Envelope":
                 signal = item.get("signal", "")
                 out.envelope[signal] = [_number(f"{where}: Envelope {signal!r}", item.get(k), k)
@@ -745,6 +749,10 @@ def _read_ssd(ssd_path: Path) -> _System:
                     out.sections[name] = json.loads(item.text or "")
                 except json.JSONDecodeError as exc:
                     raise ScenarioError(f"{where}: Section {name!r}: not JSON ({exc})") from None
+                except (ValueError, RecursionError) as exc:
+                    raise ScenarioError(f"{where}: Section {name!r}: not a document this tool reads "
+                                        f"({one_line(str(exc))[:200]})") from None
+                check_document(out.sections[name], f"{where}: Section {name!r}", 1)
     return out
 
 
@@ -800,7 +808,7 @@ def _open(path: Path, extract_to: str | Path | None) -> tuple[Path, Path | None]
             if members[SSD_NAME].file_size > MAX_DOCUMENT_BYTES:
                 raise ScenarioError(f"{path}: {SSD_NAME} is {members[SSD_NAME].file_size} bytes; at most "
                                     f"{MAX_DOCUMENT_BYTES} are read")
-            referenced = {n for n in _referenced(archive.read(members[SSD_NAME])) if n in members}
+            referenced = {n for n in _referenced(read_entry(archive, members[SSD_NAME], str(path))) if n in members}
     except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, EOFError, ValueError) as exc:
         raise ScenarioError(f"{label}: not a zip archive ({one_line(str(exc))})") from None
     temporary = None

@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tomllib
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -48,22 +47,22 @@ EXIT_RUN_FAILED = 1  # a run diverged or an FMU failed mid-run (partial results 
 EXIT_BAD_INPUT = 2  # a scenario, connection or FMU file is wrong: refused before anything ran
 
 
-def _value(text: str) -> Any:
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
-
-
 def _overrides(pairs: Sequence[str]) -> dict[str, Any]:
-    from cosim.errors import ScenarioError
+    """``--set KEY=VALUE`` pairs as dotted keys and values, each checked as a
+    document's key and value are (:func:`cosim.scenario.dotted_key`,
+    :func:`cosim.files.toml_value`): a bare word is text."""
+    from cosim.errors import ScenarioError, shown_text
+    from cosim.files import toml_value
+    from cosim.scenario import dotted_key
 
     out = {}
     for pair in pairs:
         key, eq, value = pair.partition("=")
         if not eq or not key.strip():
-            raise ScenarioError(f"--set {pair!r}: expected KEY=VALUE, e.g. --set wind.speed=5")
-        out[key.strip()] = _value(value.strip())
+            raise ScenarioError(f"--set {shown_text(pair)!r}: expected KEY=VALUE, e.g. --set wind.speed=5")
+        key = key.strip()
+        parts = dotted_key(key, f"--set {shown_text(key)!r}")
+        out[key] = toml_value(value.strip(), f"--set {shown_text(key)}", len(parts))
     return out
 
 
@@ -87,7 +86,7 @@ def _cmd_run(args) -> int:
     from .experiments import run_once
     from .progress import progress_bar
 
-    from cosim.errors import ScenarioError
+    from cosim.errors import CosimError, ScenarioError, one_line
     from cosim.files import is_ssp, output_file, output_folder, safe_name
 
     overrides = _overrides(args.set)
@@ -113,17 +112,23 @@ def _cmd_run(args) -> int:
         # every place a result goes is checked before the run: nothing computed is lost for want of it
         out = output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}")
         learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
-        if learned_file is not None and "controller" not in master.components:
-            raise ScenarioError(f"--save-learned {learned_file}: the scenario has no controller")
+        if learned_file is not None:
+            from .learned import learned_variant, save_learned
+
+            if "controller" not in master.components:
+                raise ScenarioError(f"--save-learned {learned_file}: the scenario has no controller")
+            learned_variant(master.components["controller"], f"--save-learned {learned_file}")
         with progress_bar(f"run {scenario.name}", enabled=not args.quiet, unit="step") as bar:
             result, summary = run_once(scenario, out, progress=bar, master=master, profile=args.profile)
         if args.load_learned:
             summary["resumed_from"] = str(args.load_learned)
         write_json(out / "summary.json", summary)  # the run's results first; the optional parts after
+        learned_error = None
         if learned_file is not None:
-            from .learned import save_learned
-
-            summary["learned_state"] = str(save_learned(master.components["controller"], learned_file))
+            try:  # a state that cannot be saved (not finite after a diverged run) loses nothing else
+                summary["learned_state"] = str(save_learned(master.components["controller"], learned_file))
+            except (CosimError, ValueError, OSError) as exc:
+                learned_error = summary["learned_state_error"] = f"--save-learned {learned_file}: {one_line(str(exc))}"
     figures = []
     if not args.no_plots and summary["rows"] > 1:
         from .plots import run_figures  # matplotlib only when there is something to draw
@@ -145,12 +150,15 @@ def _cmd_run(args) -> int:
                      "{nees_attitude:.2f}, wind {nees_wind:.2f} (3 each when consistent); NIS fix {nis_fix:.2f} "
                      "(6); RMSE position {est_rmse_position_m:.4f} m, wind once steady "
                      "{est_rmse_wind_settled_mps:.3f} m/s".format(**summary))
+    if learned_error:
+        lines.append(f"- learned state not saved: {learned_error}")
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]
     (out / "summary.md").write_text("\n".join(lines))
     print("\n".join(lines[4:-2]))
     print(f"results: {out}")
-    if summary["status"] != "ok":
-        print(f"fnn-cosim: error: {summary['error']}", file=sys.stderr)
+    failure = summary["error"] if summary["status"] != "ok" else learned_error  # the run's own first
+    if failure:
+        print(f"fnn-cosim: error: {failure}", file=sys.stderr)
         return EXIT_RUN_FAILED
     return 0
 
@@ -323,7 +331,7 @@ def _named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
     """``NAME=VALUE`` pairs of ``option``, every value a finite number (one line otherwise)."""
     import math
 
-    from cosim.errors import ScenarioError
+    from cosim.errors import ScenarioError, shown_text
 
     out = {}
     for pair in pairs:
@@ -333,7 +341,7 @@ def _named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
         except ValueError:
             value = math.nan
         if not eq or not name.strip() or not math.isfinite(value):
-            raise ScenarioError(f"{option} {pair!r}: expected NAME=VALUE with a finite number, e.g. {option} m=1.2")
+            raise ScenarioError(f"{option} {shown_text(pair)!r}: expected NAME=VALUE with a finite number, e.g. {option} m=1.2")
         out[name.strip()] = value
     return out
 

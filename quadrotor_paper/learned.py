@@ -35,7 +35,7 @@ from cosim.limits import MAX_STATE
 from cosim.schema import Number, Strings, Table, one_of, validate
 from cosim.fmu_component import FmuComponent
 
-__all__ = ["FORMAT", "save_learned", "load_learned", "LearnedControllerFmu", "state_of", "write_learned"]
+__all__ = ["FORMAT", "save_learned", "learned_variant", "load_learned", "LearnedControllerFmu", "state_of", "write_learned"]
 
 FORMAT = "fnn-cosim learned state"
 VERSION = 1
@@ -52,8 +52,11 @@ def write_learned(path: str | Path, variant: str, state: np.ndarray, source: str
     """Write the learned-state file (the controller state of ``variant``)."""
     names = _names(variant)
     state = np.asarray(state, dtype=float)
-    if state.shape != (len(names),) or not np.all(np.isfinite(state)):
+    if state.shape != (len(names),):
         raise ValueError(f"a {variant} controller state is {len(names)} finite numbers, got shape {state.shape}")
+    if not np.all(np.isfinite(state)):
+        at = int(np.flatnonzero(~np.isfinite(state))[0])
+        raise ValueError(f"the {variant} controller's state is not finite ({names[at]} = {float(state[at])!r}): not saved")
     path = output_file(path, "learned state")
     path.write_text(json.dumps({"format": FORMAT, "version": VERSION, "variant": variant, "source": source,
                                 "names": names, "state": state.tolist()}, indent=1))
@@ -116,8 +119,37 @@ class LearnedControllerFmu(FmuComponent):
         self.read_outputs(t0)
 
 
-def save_learned(component, path: str | Path) -> Path:
-    """Write the state of a scenario's controller after a run, Python or FMU form."""
+def learned_variant(component, where: str) -> str:
+    """The variant whose learned state ``component`` (a scenario's
+    controller) holds, known before the run, or a one-line
+    :class:`~cosim.errors.ScenarioError` naming ``where``: the Python
+    controller and the FMU a TOML scenario builds say it; an FMU from
+    elsewhere (an SSP archive's) is one of this tool's controller FMUs if its
+    model identifier is a variant's (``ControllerPDLM``) and it has every
+    variable of that variant's state, which is then read by name like the
+    FMU form's (a third party's FMU of another kind has no state to save)."""
     if isinstance(component, LearnedControllerFmu):
-        return write_learned(path, component.variant, state_of(component, component.variant), "fmu")
-    return write_learned(path, component.variant, component.state, "python")
+        return component.variant
+    if isinstance(component, FmuComponent):
+        from fnn_controller.fmu_names import fmu_identifier
+        from fnn_controller.variants import variant_names
+
+        identifier = component.kind.modelIdentifier
+        for name in variant_names():
+            if fmu_identifier(name) == identifier and all(n in component.variables for n in _names(name)):
+                return name
+        raise ScenarioError(f"{where}: the controller is the FMU {component.path} ({identifier}), not one of this "
+                            f"tool's controller FMUs ({fmu_identifier(variant_names()[0])}, ...): it has no learned "
+                            f"state to save")
+    if isinstance(getattr(component, "variant", None), str) and hasattr(type(component), "state"):
+        return component.variant  # the Python controller (its state is there after the run)
+    raise ScenarioError(f"{where}: the controller ({type(component).__name__}) has no learned state to save")
+
+
+def save_learned(component, path: str | Path) -> Path:
+    """Write the state of a scenario's controller after a run: the Python
+    controller's, or an FMU's read by name (:func:`learned_variant`)."""
+    variant = learned_variant(component, f"--save-learned {path}")
+    if isinstance(component, FmuComponent):
+        return write_learned(path, variant, state_of(component, variant), "fmu")
+    return write_learned(path, variant, component.state, "python")

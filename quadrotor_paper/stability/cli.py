@@ -80,8 +80,11 @@ def _checked(args: argparse.Namespace) -> None:
 
     names = ("kp", "kd", "feedforward", "speed", "wind", "along_every", "workers")
     given = {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
+    from .study import check_pd_gains
+
     try:
         validate(Arguments, given)
+        check_pd_gains(given.get("kp", 0.0), given.get("kd", 0.0))  # their bounds (the study checks them too)
     except ScenarioError as exc:  # named as the command line names them
         raise ScenarioError(f"--{str(exc).replace('along_every', 'along-every')}") from None
     if args.along_every is not None and not args.along_flight:

@@ -16,6 +16,7 @@ also writes the markdown report and the PNG figures
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -29,7 +30,10 @@ from ..learning_claims import AxisClaims, Recording, default_runs, evaluate_clai
 from .operating_points import OperatingPoint, default_operating_points
 from .validation import GainCheck, StepCheck, check_gains, check_step, pd_mission_rmse, ramp_lag
 
-__all__ = ["StabilityStudy", "stability_study", "run_stability_analysis", "SWEEP_KP", "SWEEP_KD", "STEP_CHECKS"]
+__all__ = ["StabilityStudy", "stability_study", "run_stability_analysis", "check_pd_gains", "DT", "SWEEP_KP",
+           "SWEEP_KD", "STEP_CHECKS"]
+
+DT = 0.01  # s: the controller and communication step the study analyses (the paper's)
 
 SWEEP_KP = np.linspace(0.05, 25.0, 126)  # 1/s
 SWEEP_KD = np.linspace(-1.5, 8.0, 96)  # 1
@@ -39,6 +43,33 @@ SWEEP_KD = np.linspace(-1.5, 8.0, 96)  # 1
 STEP_CHECKS = (("position", "x", 0.02), ("position", "y", 0.02), ("position", "z", 0.1),
                ("velocity", "x", 0.05), ("velocity", "y", 0.05), ("velocity", "z", 0.05))
 GAIN_FACTORS = (0.85, 1.07, 1.3)  # gain pairs checked: these multiples of the critical factor
+
+
+def check_pd_gains(kp: float, kd: float, dt: float = DT, geometric: GeometricParams = GeometricParams()) -> None:
+    """Refuse PD gains (eq. 19) no sampled controller at step ``dt`` (s)
+    realises, in one line naming the gain and its bound: no loop faster than
+    the Nyquist frequency pi/dt (rad/s). The position loop's crossover is
+    kp (1/s): kp <= pi/dt. The derivative term feeds the velocity error back
+    through the velocity loop (eqs. 13-18), whose gain k_v becomes
+    k_v (1 + kd): kd <= pi/(k_v dt) - 1. At the paper's 0.01 s and
+    k_v = 5 1/s: kp <= 314 1/s, kd <= 61.8 (the gain sweep ends at 25 and
+    8). Within them an unstable pair is an answer of the study; beyond, its
+    numbers are no longer finite (kp = 1e308: no trim of the PD).
+
+    Raises
+    ------
+    cosim.errors.ScenarioError
+        ``kp = 1e+308: must be at most 314.2 1/s (...)``.
+    """
+    from cosim.errors import ScenarioError
+
+    nyquist = math.pi / dt
+    why = f"pi/dt, the Nyquist frequency of the controller's {dt:g} s step"
+    if kp > nyquist:
+        raise ScenarioError(f"kp = {kp!r}: must be at most {nyquist:.4g} 1/s ({why}: no faster position loop)")
+    if geometric.k_v > 0 and kd > nyquist / geometric.k_v - 1.0:
+        raise ScenarioError(f"kd = {kd!r}: must be at most {nyquist / geometric.k_v - 1.0:.4g} ({why}: the velocity "
+                            f"loop's gain k_v (1 + kd), k_v = {geometric.k_v:g} 1/s, no faster)")
 
 
 @dataclass(eq=False)
@@ -73,7 +104,7 @@ class StabilityStudy:
         raise KeyError(f"no operating point {name!r}; have {[a.op.name for a in self.analyses]}")
 
 
-def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.01, kp: float | None = None,
+def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = DT, kp: float | None = None,
                     kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
                     geometric: GeometricParams = GeometricParams(), feedforward: float = 0.0,
                     feedforward_gains=(0.0, 1.0), along_flight: bool = False, along_every: float = 1.0,
@@ -111,6 +142,7 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = 0.0
     position = replace(position, kp=position.kp if kp is None else kp, kd=position.kd if kd is None else kd, dt=dt,
                        feedforward=feedforward)
     geometric = replace(geometric, dt=dt)
+    check_pd_gains(position.kp, position.kd, dt, geometric)
     ops = default_operating_points(speed, wind_speed, position=position, geometric=geometric)
     analyses = [analyze(op, dt, every_loop=("discrete",)) for op in ops]  # what the report shows
     if analysed is not None:

@@ -1,4 +1,4 @@
-"""Every bad input of issue 17 gets one line and the right exit status (2:
+"""Every bad input of issues 17 and 28 gets one line and the right exit status (2:
 nothing ran; 1: a run failed), no traceback, nothing written outside the
 output folder, and no run lost; each on a file the test makes
 (``docs/security.md`` states what each kind of file may do)."""
@@ -61,10 +61,16 @@ def sandbox(tmp_path, monkeypatch):
 @pytest.mark.parametrize("make, message", [
     (lambda p: p.mkdir(), "a folder, not a file"),
     (lambda p: p.write_bytes(b"name = \"x\"\n\xff\xfe\n"), "not UTF-8 text"),
-    (lambda p: p.write_text("x = 1" + "0" * 5000 + "\n"), "not a document this tool reads"),
+    (lambda p: p.write_text("x = 1" + "0" * 5000 + "\n"), "s.toml: line 1: an integer of 5001 digits; at most 4300"),
     (lambda p: p.write_text(scenario_path("circles").read_text().replace("seed = 0 ", "seed = 1" + "0" * 400 + " ")),
      "simulation.seed = 100000000000... (401 digits): must be at most"),
-    (lambda p: p.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n"), "not a document this tool reads"),
+    (lambda p: p.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n"), "nested too deep to read; at most 32 levels"),
+    (lambda p: p.write_text("[" + ".".join(["a"] * 500) + "]\nx = 1\n"),  # tomllib reads it; nothing after could
+     "s.toml: a.a.a.a.a.a.a.a.a.a.a.a...: nested 501 levels deep; at most 32"),
+    (lambda p: p.write_text("a = " + "[" * 40 + "]" * 40 + "\n"), "s.toml: a[0][0][0]"),
+    (lambda p: p.write_text(scenario_path("circles").read_text().replace('name = "circles"', "name = 1979-05-27")),
+     "s.toml: name = 1979-05-27: a date or time; expected a number, a string (quote it: \"1979-05-27\")"),
+    (lambda p: p.write_text("[simulation]\nx = [{ t = 07:32:00 }]\n"), "s.toml: simulation.x[0].t = 07:32:00: a date or time"),
 ])
 def test_a_scenario_that_is_no_document_is_one_line(sandbox, capsys, make, message):
     path = sandbox / "s.toml"
@@ -117,6 +123,20 @@ def test_a_fifo_is_no_study(sandbox, capsys):
     (["run", "circles", "--set", "simulation.start_time=1e300"], "a step of 0.01 s is lost in rounding"),
     (["run", "circles", "--set", "simulation.step=1e-12", "--set", "simulation.duration=1.0"],
      "1000000000000 steps of 1e-12 s"),
+    # issue 28: what was an "internal error"
+    (["run", "circles", "--set", "simulation.duration=" + "1" * 5001],
+     "--set simulation.duration: an integer of 5001 digits; at most 4300"),
+    (["run", "circles", "--set", "name=1979-05-27"], "--set name = 1979-05-27: a date or time; expected a number, a "
+                                                     "string (quote it: \"1979-05-27\")"),
+    (["run", "circles", "--set", "wind.x=[1979-05-27T07:32:00Z]"], "--set wind.x: [0] = 1979-05-27T07:32:00+00:00: a "
+                                                                   "date or time"),
+    (["run", "circles", "--set", ".".join(["a"] * 20_000) + "=1"], "20000 parts; at most 32"),
+    (["run", "circles", "--set", "a.b=" + "[" * 40 + "]" * 40], "--set a.b: [0][0][0][0][0][0][0][0][0][0][0][0]...: "
+                                                                "nested 41 levels deep; at most 32"),
+    (["stability", "--kp", "1e308", "--no-cosim"], "--kp = 1e+308: must be at most 314.2 1/s (pi/dt, the Nyquist "
+                                                   "frequency of the controller's 0.01 s step"),
+    (["stability", "--kd", "1e308", "--no-cosim"], "--kd = 1e+308: must be at most 61.83"),
+    (["linearize", "Quadrotor", "--parameter", "m=" + "1" * 5001], "--parameter 'm=1111111111111"),
 ])
 def test_bad_arguments_are_one_line_and_nothing_runs(sandbox, capsys, args, message):
     code, line = cli(capsys, *args)
@@ -195,6 +215,20 @@ def test_a_malformed_line_of_runs_csv_is_one_line(sandbox, capsys):
     assert code == EXIT_BAD_INPUT and "runs.csv: line 2: 5 fields where the header has" in line
 
 
+@pytest.mark.parametrize("text, message", [
+    ('scenario = "circles"\ndate = 1979-05-27\n', "s.toml: date = 1979-05-27: a date or time"),
+    ('scenario = "circles"\n[set]\n"simulation.seed" = 2024-01-01T00:00:00\n',
+     "s.toml: set.simulation.seed = 2024-01-01T00:00:00: a date or time"),
+    ('scenario = "circles"\n[set]\n"' + ".".join(["a"] * 40) + '" = 1\n', "40 parts; at most 32"),
+    ('scenario = "circles"\nn = 1' + "0" * 5000 + "\n", "s.toml: line 2: an integer of 5001 digits; at most 4300"),
+])
+def test_a_study_with_dates_deep_keys_or_huge_integers_is_one_line(sandbox, capsys, text, message):
+    """Issue 28: a study is read as a scenario is (``cosim.files.read_toml``): the same refusals."""
+    (sandbox / "s.toml").write_text(text)
+    code, line = cli(capsys, "sweep", str(sandbox / "s.toml"), "--out", str(sandbox / "out"), "--quiet")
+    assert code == EXIT_BAD_INPUT and message in line, line
+
+
 def test_non_utf8_study_and_learned_files_are_one_line(sandbox, capsys):
     (sandbox / "s.toml").write_bytes(b"scenario = \"circles\"\n# \xff\n")
     code, line = cli(capsys, "sweep", str(sandbox / "s.toml"), "--quiet")
@@ -210,6 +244,7 @@ def test_non_utf8_study_and_learned_files_are_one_line(sandbox, capsys):
     ({"format": "fnn-cosim learned state", "version": 1, "variant": "pd+lm", "source": "python",
       "names": ["a"], "state": [[[[[[1.0]]]]]]}, "state[0] = [[[[[1.0]]]]]: expected a number"),
     ("[" * 100_000 + "]" * 100_000, "not a document this tool reads"),
+    ("[" * 40 + "]" * 40, "[0][0][0][0][0][0][0][0][0][0][0][0]...: nested 39 levels deep; at most 32"),
 ])
 def test_a_learned_file_with_strings_or_deep_nesting_is_one_line(sandbox, capsys, doc, message):
     path = sandbox / "l.json"
@@ -256,9 +291,10 @@ def test_an_archive_extracts_only_what_its_ssd_names(archive, sandbox, capsys):
 
 
 @pytest.mark.parametrize("corrupt, message", [
-    ("crc", "a broken archive"),
+    ("crc", "entry 'resources/reference.fmu' is corrupt (BadZipFile: Bad CRC-32"),
     ("encrypted", "is encrypted"),
-    ("method", "a broken archive"),
+    ("method", "entry 'resources/reference.fmu': a compression this tool does not read"),
+    ("deflate", "entry 'resources/reference.fmu' is corrupt (zlib.error: Error -3 while decompressing data"),
 ])
 def test_a_corrupt_archive_is_one_line_and_leaves_no_folder(archive, sandbox, capsys, corrupt, message):
     data = bytearray(archive.read_bytes())
@@ -274,10 +310,12 @@ def test_a_corrupt_archive_is_one_line_and_leaves_no_folder(archive, sandbox, ca
         start = data.find(info.filename.encode(), data.find(b"PK\x01\x02")) - 46
         flags = struct.unpack_from("<H", data, start + 8)[0] | 0x1
         struct.pack_into("<H", data, start + 8, flags)
-    else:
+    elif corrupt == "method":
         start = data.find(info.filename.encode(), data.find(b"PK\x01\x02")) - 46
         struct.pack_into("<H", data, start + 10, 99)  # AES / an unknown method
         struct.pack_into("<H", data, offset + 8, 99)
+    else:
+        _garble(data, info)
     bad = sandbox / "bad.ssp"
     bad.write_bytes(bytes(data))
     before = _temporary_folders()
@@ -306,6 +344,85 @@ def test_an_archive_reader_takes_whole_numbers_only(archive, sandbox, capsys):
 
     code, line = cli(capsys, "run", str(_edited(archive, sandbox / "b.ssp", seed)), "--quiet")
     assert code == EXIT_BAD_INPUT and "seed = '1.5' is not an integer" in line
+
+
+def _garble(data: bytearray, info: zipfile.ZipInfo) -> None:
+    """Overwrite the start of an entry's compressed data: it no longer decompresses (zlib's "Error -3")."""
+    names, extra = struct.unpack_from("<HH", data, info.header_offset + 26)
+    start = info.header_offset + 30 + names + extra
+    data[start:start + 64] = b"\xff" * 64
+
+
+def test_a_corrupt_ssd_entry_is_one_line(archive, sandbox, capsys):
+    data = bytearray(archive.read_bytes())
+    with zipfile.ZipFile(archive) as z:
+        _garble(data, z.getinfo("SystemStructure.ssd"))
+    (sandbox / "bad.ssp").write_bytes(bytes(data))
+    before = _temporary_folders()
+    code, line = cli(capsys, "run", str(sandbox / "bad.ssp"), "--quiet")
+    assert code == EXIT_BAD_INPUT and "bad.ssp: entry 'SystemStructure.ssd' is corrupt (zlib.error: Error -3" in line
+    assert _temporary_folders() == before
+
+
+@pytest.mark.parametrize("entry", ["modelDescription.xml", "binaries/linux64/Quadrotor.so"])
+def test_an_fmu_with_a_corrupt_entry_is_one_line(archive, sandbox, capsys, entry):
+    """An FMU's entry whose data does not decompress: refused naming the FMU and the entry, whether
+    fmpy would read it (the modelDescription) or the extraction would (its binary)."""
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the binary's entry is named for linux64")
+    fmu = sandbox / "Quadrotor.fmu"
+    with zipfile.ZipFile(archive) as z:
+        fmu.write_bytes(z.read("resources/Quadrotor.fmu"))
+    data = bytearray(fmu.read_bytes())
+    with zipfile.ZipFile(fmu) as z:
+        _garble(data, z.getinfo(entry))
+    fmu.write_bytes(bytes(data))
+    code, line = cli(capsys, "linearize", str(fmu))
+    assert code == EXIT_BAD_INPUT and f"Quadrotor.fmu" in line and f"entry '{entry}' is corrupt (zlib.error" in line
+
+
+def test_an_archive_saves_its_controllers_learned_state(archive, sandbox, capsys):
+    """Issue 28: ``--save-learned`` on an SSP archive whose controller is one of ours (``ControllerPDLM``)
+    reads its state by name, as for a TOML scenario's controller FMU; the file resumes a TOML scenario."""
+    learned = sandbox / "l.json"
+    code, _ = cli(capsys, "run", str(archive), "--save-learned", str(learned), "--out", str(sandbox / "out"),
+                  "--quiet", "--no-plots")
+    assert code == 0 and (sandbox / "out" / "summary.md").is_file()
+    doc = json.loads(learned.read_text())
+    assert (doc["variant"], doc["source"]) == ("pd+lm", "fmu") and len(doc["state"]) == len(doc["names"])
+    assert json.loads((sandbox / "out" / "summary.json").read_text())["learned_state"] == str(learned)
+    code, _ = cli(capsys, "run", "circles", "--load-learned", str(learned), *SHORT, "--out", str(sandbox / "again"))
+    assert code == 0
+
+
+def test_save_learned_refuses_before_the_run_a_controller_that_is_none_of_ours():
+    from cosim.scenario import build_master, load_scenario
+    from quadrotor_paper.learned import learned_variant
+
+    sc = load_scenario("circles", {"simulation.duration": 0.1})
+    with build_master(sc) as master:
+        assert learned_variant(master.components["controller"], "--save-learned x") == "pd+lm"
+        with pytest.raises(ScenarioError, match=r"^--save-learned x: the controller is the FMU .*Quadrotor.fmu "
+                                                r"\(Quadrotor\), not one of this tool's controller FMUs "
+                                                r"\(ControllerPD, \.\.\.\): it has no learned state to save$"):
+            learned_variant(master.components["Quadrotor"], "--save-learned x")
+
+
+def test_a_learned_state_that_cannot_be_saved_after_the_run_keeps_the_run(archive, sandbox, capsys, monkeypatch):
+    """The run flew: its results and summary.md stay; the status is 1 and the one line names --save-learned."""
+    import numpy as np
+
+    import quadrotor_paper.learned as learned
+
+    monkeypatch.setattr(learned, "state_of", lambda fmu, variant: np.full(len(learned._names(variant)), np.nan))
+    out = sandbox / "out"
+    code, line = cli(capsys, "run", str(archive), "--save-learned", str(sandbox / "l.json"), "--out", str(out),
+                     "--quiet", "--no-plots")
+    assert code == EXIT_RUN_FAILED and "--save-learned" in line and "state is not finite (c1_1_x = nan)" in line
+    assert (out / "results.csv").is_file() and "learned state not saved" in (out / "summary.md").read_text()
+    assert not (sandbox / "l.json").exists()
 
 
 def test_an_archive_takes_no_load_learned(archive, sandbox, capsys):

@@ -14,11 +14,13 @@ default 2000), and prints their figures (``-s``).
 """
 from __future__ import annotations
 
+import datetime
 import io
 import json
 import math
 import os
 import resource
+import struct
 import tempfile
 import zipfile
 from collections import Counter
@@ -94,7 +96,19 @@ def sandbox(tmp_path_factory):
 
 # ---- documents as TOML -------------------------------------------------------------------------------
 
+class Written(str):
+    """A value written into the TOML as it is (an integer of 5001 digits, arrays 40 deep: issue 28)."""
+
+
+HUGE_INTEGER = Written("1" + "0" * 5000)
+DEEP_ARRAY = Written("[" * 40 + "1" + "]" * 40)
+
+
 def toml_value(value) -> str:
+    if isinstance(value, Written):
+        return str(value)
+    if isinstance(value, (datetime.date, datetime.time)):  # TOML's dates and times (issue 28)
+        return value.isoformat()
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -120,6 +134,12 @@ scalars = st.one_of(
 values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=4),
                                                        st.dictionaries(st.text(max_size=8), inner, max_size=4)),
                       max_leaves=12)
+# what TOML writes and JSON does not (issue 28): dates and times, an integer of 5001 digits, arrays 40 deep
+toml_values = st.recursive(st.one_of(scalars, st.dates(), st.times(), st.datetimes(), st.just(HUGE_INTEGER),
+                                     st.just(DEEP_ARRAY)),
+                           lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                                   st.dictionaries(st.text(max_size=8), inner, max_size=4)),
+                           max_leaves=12)
 
 
 def _paths(doc, prefix=()):
@@ -131,8 +151,8 @@ def _paths(doc, prefix=()):
 
 
 @st.composite
-def mutated(draw, base: dict, keep_short: bool = True) -> dict:
-    """``base`` with a few keys replaced, deleted or added (a short run kept short)."""
+def mutated(draw, base: dict, keep_short: bool = True, pool=toml_values) -> dict:
+    """``base`` with a few keys replaced, deleted or added (values drawn from ``pool``; a short run kept short)."""
     doc = json.loads(json.dumps(base))
     for _ in range(draw(st.integers(1, 4))):
         paths = list(_paths(doc))
@@ -144,11 +164,11 @@ def mutated(draw, base: dict, keep_short: bool = True) -> dict:
         for key in path[:-1]:
             node = node[key]
         if action == "replace":
-            node[path[-1]] = draw(values)
+            node[path[-1]] = draw(pool)
         elif action == "delete":
             node.pop(path[-1], None)
         elif isinstance(node.get(path[-1]), dict):
-            node[path[-1]][draw(st.text(min_size=1, max_size=8))] = draw(values)
+            node[path[-1]][draw(st.text(min_size=1, max_size=8))] = draw(pool)
     if keep_short and isinstance(doc.get("simulation"), dict) and "duration" not in doc["simulation"]:
         doc["simulation"]["duration"] = 0.1  # a valid document must not fly 50 s per case
     return doc
@@ -204,7 +224,7 @@ def learned_files(draw) -> str:
     doc = {"format": "fnn-cosim learned state", "version": 1, "variant": "pd+lm", "source": "python",
            "names": ["c1_1_x"], "state": [0.0]}
     if draw(st.booleans()):
-        doc = draw(mutated(doc, keep_short=False))
+        doc = draw(mutated(doc, keep_short=False, pool=values))  # JSON: no dates
     else:
         doc = draw(values)
     text = json.dumps(doc, allow_nan=True)
@@ -312,14 +332,31 @@ def archives(draw) -> list[tuple[str, bytes]]:
         out.append((name, data))
     if draw(st.integers(0, 5)) == 0:
         out.append((draw(st.sampled_from(["junk.bin", "resources/extra.fmu"])), b"\0" * draw(st.integers(0, 4096))))
+    if draw(st.integers(0, 4)) == 0:  # an entry's compressed data overwritten: it no longer decompresses (issue 28)
+        out.append((GARBLE, bytes([draw(st.integers(0, 255)), draw(st.integers(0, 255))])))
     return out
+
+
+GARBLE = "#garble"  # not an entry: which entry's data to overwrite, and where
 
 
 def _archive_case(sandbox, capsys, entries):
     path = sandbox / "a.ssp"
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
         for name, data in entries:
-            z.writestr(name, data)
+            if name != GARBLE:
+                z.writestr(name, data)
+    for name, (which, where) in ((n, d) for n, d in entries if n == GARBLE):
+        raw = bytearray(path.read_bytes())
+        with zipfile.ZipFile(path) as z:
+            infos = [i for i in z.infolist() if i.compress_size > 0]
+        if infos:
+            info = infos[which % len(infos)]
+            names, extra = struct.unpack_from("<HH", raw, info.header_offset + 26)
+            start = info.header_offset + 30 + names + extra + where % info.compress_size
+            raw[start:start + 16] = b"\xff" * min(16, info.header_offset + 30 + names + extra + info.compress_size
+                                                  - start)
+            path.write_bytes(bytes(raw))
     check(["run", str(path), "--out", str(sandbox / "out"), "--quiet", "--no-plots"], sandbox, capsys)
 
 
