@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from .fmu_log_option import apply_fmu_log, fmu_log_option
+from .workers_option import default_workers, worker_count
 
 __all__ = ["main"]
 
@@ -74,7 +75,8 @@ def _out_folder(given: str | None, default: Path) -> Path:
 
 
 def _workers(n: int | None) -> int:
-    return max(1, min(n or 1, os.cpu_count() or 1))
+    """A table's workers: as given, else 2 (or the one core of a one-core machine)."""
+    return n if n is not None else min(2, os.cpu_count() or 1)
 
 
 # ---- run ------------------------------------------------------------------------------
@@ -248,7 +250,7 @@ def _cmd_sweep(args) -> int:
 
     study = load_study(_study_path(args.study))
     out = _out_folder(args.out, DEFAULT_OUT / f"study-{safe_name(study.name)}")
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    workers = default_workers(args.workers)
     with progress_bar(f"sweep {study.name}", enabled=not args.quiet) as bar:
         result = measure(study, out, workers=max(1, workers), scheduler=args.scheduler, progress=bar,
                          plots=not args.no_plots, worker_timeout=args.worker_timeout)
@@ -515,7 +517,8 @@ def _parser() -> argparse.ArgumentParser:
             sp.add_argument("--seeds", type=int, help="runs per cell of the variants' rows, seeds 0..N-1 "
                                                       "(default: the study's, 10)")
             sp.add_argument("--duration", type=float, help="override the missions' duration (s)")
-            sp.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 1: in this process)")
+            sp.add_argument("--workers", type=worker_count, help="worker processes, 1 to the cores (default 2; 1: in "
+                                                                 "this process)")
             sp.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS instead")
             _worker_timeout(sp)
             sp.add_argument("--variants", type=_variant_list,
@@ -566,7 +569,8 @@ def _parser() -> argparse.ArgumentParser:
 
     sw = sub.add_parser("sweep", help="a study: a scenario over a grid and/or random samples of its keys")
     sw.add_argument("study", help="study TOML file (docs/studies.md) or a shipped study's name")
-    sw.add_argument("--workers", type=int, help="local worker processes (default: one per core; 1: in this process)")
+    sw.add_argument("--workers", type=worker_count, help="local worker processes, 1 to the cores (default: one per "
+                                                        "core; 1: in this process)")
     sw.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (e.g. tcp://host:8786)")
     _worker_timeout(sw)
     sw.add_argument("--no-plots", action="store_true")

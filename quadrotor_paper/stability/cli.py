@@ -9,6 +9,8 @@ import argparse
 import sys
 from typing import Sequence
 
+from ..workers_option import default_workers, worker_count
+
 __all__ = ["add_parser", "run", "main"]
 
 DEFAULT_OUT = "results/stability"
@@ -38,7 +40,7 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--along-every", type=float, default=None,
                         help=f"with --along-flight: freeze the learning loop every this many seconds of each mission "
                              f"(default {ALONG_EVERY:g}; 0 skips it)")
-    parser.add_argument("--workers", type=int, default=None,
+    parser.add_argument("--workers", type=worker_count, default=None,
                         help="processes: Dask workers for the runs, and with 2 or more the operating points' "
                              "figures drawn in a second process while the study goes on (default: one per core; "
                              "1 runs everything in this process)")
@@ -97,9 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from .study import run_stability_analysis
 
     _checked(args)
-    import os
-
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    workers = default_workers(args.workers)
     along_every = ALONG_EVERY if args.along_every is None else args.along_every
     study = run_stability_analysis(args.out, speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
                                    cosim=not args.no_cosim, feedforward=args.feedforward,

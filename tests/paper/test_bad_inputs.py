@@ -106,7 +106,11 @@ def test_a_fifo_is_no_study(sandbox, capsys):
     (["stability", "--speed", "nan", "--no-cosim"], "--speed = nan: expected a finite number"),
     (["stability", "--wind", "inf", "--no-cosim"], "--wind = inf: expected a finite number"),
     (["stability", "--along-every", "-1", "--no-cosim"], "--along-every = -1.0: must not be negative"),
-    (["stability", "--workers", "0", "--no-cosim"], "--workers = 0: must be at least 1"),
+    (["stability", "--workers", "0", "--no-cosim"], "argument --workers: '0': expected a whole number from 1 to"),
+    # issue 28: a worker count that means nothing, or more processes than cores, was taken quietly
+    (["sweep", "robustness", "--workers", "-2"], "argument --workers: '-2': expected a whole number from 1 to"),
+    (["sweep", "robustness", "--workers", "100000"], "argument --workers: '100000': expected a whole number"),
+    (["table2", "--workers", "0"], "argument --workers: '0': expected a whole number from 1 to"),
     (["stability", "--along-every", "2", "--no-cosim"], "--along-every 2: applies only with --along-flight"),
     (["run", "circles", "--set", "simulation.duration"], "--set 'simulation.duration': expected KEY=VALUE"),
     (["run", "circles", "--set", 'envelope."Quadrotor.phi=[1'], "not a dotted key"),
