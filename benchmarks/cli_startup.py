@@ -22,28 +22,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-
-def _wall(command: list[str]) -> tuple[float, float]:
-    """Wall time and CPU time (user + system) of one process."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t = time.perf_counter()
-    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
-    wall = time.perf_counter() - t
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-
-
-def _cli(*args: str) -> list[str]:
-    script = Path(sys.executable).with_name("fnn-cosim")
-    return [str(script), *args] if script.exists() else [sys.executable, "-m", "quadrotor_paper.cli", *args]
+from processes import cli, timed
 
 
 def main(argv=None) -> int:
@@ -56,18 +40,18 @@ def main(argv=None) -> int:
 
     with tempfile.TemporaryDirectory(prefix="cli-startup-") as tmp:
         pairs = {  # label -> command: each command, then its reference
-            "fnn-cosim --help": _cli("--help"),
+            "fnn-cosim --help": cli("--help"),
             'python -c "import numpy, casadi, fmpy"': [sys.executable, "-c", "import numpy, casadi, fmpy"],
-            "fnn-cosim run circles --no-plots --quiet": _cli("run", "circles", "--no-plots", "--quiet",
+            "fnn-cosim run circles --no-plots --quiet": cli("run", "circles", "--no-plots", "--quiet",
                                                              "--out", str(Path(tmp) / "run")),
             'python -c "import numpy, fmpy"': [sys.executable, "-c", "import numpy, fmpy"],
         }
         for command in pairs.values():  # builds the FMUs (first run) and warms the file cache
-            _wall(command)
+            timed(command)
         times: dict[str, list[tuple[float, float]]] = {label: [] for label in pairs}
         for _ in range(args.repeats):
             for label, command in pairs.items():
-                times[label].append(_wall(command))
+                times[label].append(timed(command))
 
     wall = {label: statistics.median(w for w, _ in values) for label, values in times.items()}
     cpu = {label: statistics.median(c for _, c in values) for label, values in times.items()}

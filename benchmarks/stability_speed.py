@@ -20,28 +20,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-
-def _cli(*args: str) -> list[str]:
-    script = Path(sys.executable).with_name("fnn-cosim")
-    return [str(script), *args] if script.exists() else [sys.executable, "-m", "quadrotor_paper.cli", *args]
-
-
-def _timed(command: list[str]) -> tuple[float, float]:
-    """Wall time and CPU time (user + sys of the finished children) of ``command``, s."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t = time.perf_counter()
-    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
-    wall = time.perf_counter() - t
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+from processes import cli, timed
 
 
 def main(argv=None) -> int:
@@ -51,15 +35,15 @@ def main(argv=None) -> int:
 
     with tempfile.TemporaryDirectory(prefix="stability-speed-") as tmp:
         commands = {
-            "fnn-cosim stability": _cli("stability", "--out", str(Path(tmp) / "default")),
-            "fnn-cosim stability --workers 1": _cli("stability", "--workers", "1", "--out", str(Path(tmp) / "one")),
+            "fnn-cosim stability": cli("stability", "--out", str(Path(tmp) / "default")),
+            "fnn-cosim stability --workers 1": cli("stability", "--workers", "1", "--out", str(Path(tmp) / "one")),
         }
-        _timed(next(iter(commands.values())))  # builds the FMUs if needed, warms the caches
+        timed(next(iter(commands.values())))  # builds the FMUs if needed, warms the caches
         load = os.getloadavg()[0]
         times: dict[str, list[tuple[float, float]]] = {label: [] for label in commands}
         for _ in range(args.repeats):
             for label, command in commands.items():
-                times[label].append(_timed(command))
+                times[label].append(timed(command))
         load_after = os.getloadavg()[0]
 
     print(f"fnn-cosim stability, whole process, median of {args.repeats} alternating runs "

@@ -367,29 +367,10 @@ def test_an_unwritable_or_file_out_is_refused_before_any_run(folder, tmp_path):
 
 # ---- Dask ---------------------------------------------------------------------------------------
 
-DASK_SCENARIO = """
-name = "toy_loop_by_path"
-connections = ["source.out -> ctrl.r", "Lag.y -> ctrl.y", "ctrl.u -> Lag.u"]
-[simulation]
-duration = 1.0
-step = 0.1
-[fmus.Lag]
-path = "{lag}"
-parameters = {{ tau = 0.25 }}
-[components.source]
-factory = "toy_models:Constant"
-[components.ctrl]
-factory = "toy_models:PController"
-kp = 1.5
-[record]
-signals = ["Lag.y"]
-"""
-
-
 def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, monkeypatch):
     """The engine's Dask path on toy models: the workers (separate processes)
     find the toy components by their factory on PYTHONPATH and the FMU by path."""
-    (folder / "toy_by_path.toml").write_text(DASK_SCENARIO.format(lag=toy_models.lag_fmu_path(2)))
+    (folder / "toy_by_path.toml").write_text(toy_models.LOOP_BY_PATH.format(lag=toy_models.lag_fmu_path(2)))
     body = ('scenario = "toy_by_path.toml"\n[sweep]\nseeds = 2\n[sweep.grid]\n"components.ctrl.kp" = [0.5, 1.5]\n'
             '[sweep.random]\nsamples = 2\n"fmus.Lag.parameters.tau" = { uniform = [0.2, 0.4] }\n')
     (folder / "dask.toml").write_text(body)

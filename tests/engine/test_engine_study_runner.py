@@ -51,24 +51,6 @@ time_constant = 0.25
 signals = ["Lag.y", "ctrl.u"]
 """
 
-BY_PATH = """
-name = "toy_loop_by_path"
-connections = ["source.out -> ctrl.r", "Lag.y -> ctrl.y", "ctrl.u -> Lag.u"]
-[simulation]
-duration = 1.0
-step = 0.1
-[fmus.Lag]
-path = "{lag}"
-parameters = {{ tau = 0.25 }}
-[components.source]
-factory = "toy_models:Constant"
-[components.ctrl]
-factory = "toy_models:PController"
-kp = 1.5
-[record]
-signals = ["Lag.y"]
-"""
-
 
 def trace(scenario, result) -> dict[str, Any]:
     """Every recorded value of the run, to compare bit for bit."""
@@ -167,7 +149,7 @@ def test_a_master_whose_component_read_the_fmu_values_is_not_reused_for_others(b
 
 
 def test_a_value_refused_on_a_reused_master_is_refused_in_the_words_of_a_new_build(tmp_path):
-    by_path = parse_scenario(tomllib.loads(BY_PATH.format(lag=toy_models.lag_fmu_path(2))),
+    by_path = parse_scenario(tomllib.loads(toy_models.LOOP_BY_PATH.format(lag=toy_models.lag_fmu_path(2))),
                              source=tmp_path / "toy.toml")
     bad = _run(1, {"fmus.Lag.parameters.tau": 1e-4})  # below the file's declared minimum, 1e-3
     new = _fresh(by_path, bad)

@@ -330,3 +330,26 @@ def register_toys() -> None:
     registry.register_section(registry.Section("toy_lag", lambda: ToyLag, _apply_toy_lag,
                                                "toy shorthand for the lag's parameters"))
     registry.register_fmu_model(registry.RegisteredModel("toy_FirstOrderLag", _build_lag, _check_lag_parameter))
+
+
+# ---- a scenario of the toys ---------------------------------------------------------------------
+
+# the P loop of the toy models as a scenario whose FMU is given by path (format it with lag=...):
+# what a Dask worker finds without the test's registry (the components by factory)
+LOOP_BY_PATH = """
+name = "toy_loop_by_path"
+connections = ["source.out -> ctrl.r", "Lag.y -> ctrl.y", "ctrl.u -> Lag.u"]
+[simulation]
+duration = 1.0
+step = 0.1
+[fmus.Lag]
+path = "{lag}"
+parameters = {{ tau = 0.25 }}
+[components.source]
+factory = "toy_models:Constant"
+[components.ctrl]
+factory = "toy_models:PController"
+kp = 1.5
+[record]
+signals = ["Lag.y"]
+"""
