@@ -195,6 +195,19 @@ def output_folder(path: str | Path, what: str = "--out") -> Path:
     return path
 
 
+STUDY_SIDECAR = "study.json"  # what marks a study's folder (cosim.study_run): its definition and progress
+
+
+def not_a_study_folder(path: Path, what: str = "--out") -> Path:
+    """``path``, refused if it holds a study's results: a single run's files
+    (``summary.json`` among them) would overwrite the study's, even while the
+    study runs (its lock keeps out other studies only)."""
+    if (path / STUDY_SIDECAR).exists():
+        raise ScenarioError(f"{what} {path}: holds a study's results ({STUDY_SIDECAR}); a run would overwrite its "
+                            f"summary: choose another folder")
+    return path
+
+
 def output_file(path: str | Path, what: str) -> Path:
     """A file that can be written (its folder made, the name no folder), checked before anything runs."""
     path = Path(path)

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from .errors import ScenarioError, one_line
+from .files import STUDY_SIDECAR as SIDECAR
 from .files import write_json  # noqa: F401  (where the study writers have always found it)
 from .scenario import apply_overrides, parse_scenario
 from .study import Study, count, runs
@@ -40,7 +41,6 @@ from .summary import STATUSES, summarize
 __all__ = ["run_study", "StudyResult", "read_runs", "columns", "write_json", "FIXED_COLUMNS", "summary_of"]
 
 FIXED_COLUMNS = ("run", "case", "sample", "seed")
-SIDECAR = "study.json"
 LOCK = ".study.lock"
 FORMAT = "fnn-cosim study"
 

@@ -471,3 +471,14 @@ def test_a_controller_period_that_is_not_the_step_is_refused_before_anything_is_
     code, line = cli(capsys, "run", "circles", "--set", "controller.geometric.dt=0.02", "--quiet")
     assert code == EXIT_BAD_INPUT and "controller.geometric.dt = 0.02: the position and the velocity controller" \
                                       " run in one step" in line
+
+
+def test_a_run_into_a_studys_folder_is_refused_and_the_study_kept(tmp_path, capsys):
+    """issue 28: ``run --out <a study's folder>`` overwrote the study's summary.json."""
+    study = tmp_path / "study"
+    study.mkdir()
+    (study / "study.json").write_text('{"study": "s"}')
+    (study / "summary.json").write_text('{"kept": true}')
+    code, line = cli(capsys, "run", "circles", "--set", "simulation.duration=0.1", "--out", str(study))
+    assert code == EXIT_BAD_INPUT and "holds a study's results (study.json)" in line
+    assert (study / "summary.json").read_text() == '{"kept": true}' and not (study / "results.csv").exists()
