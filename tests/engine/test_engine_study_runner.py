@@ -25,29 +25,7 @@ from cosim.study import Run
 
 pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
 
-SCENARIO = """
-name = "toy_loop"
-connections = ["source.out -> ctrl.r", "Lag.y -> ctrl.y", "ctrl.u -> Lag.u"]
-
-[simulation]
-duration = 1.0
-step = 0.1
-
-[fmus.Lag]
-model = "toy_FirstOrderLag"
-
-[toy_source]
-kind = "toy_constant"
-value = 1.0
-
-[toy_controller]
-kp = 1.5
-
-[toy_lag]
-fmu = "Lag"
-time_constant = 0.25
-
-[record]
+SCENARIO = toy_models.LOOP + """[record]
 signals = ["Lag.y", "ctrl.u"]
 """
 

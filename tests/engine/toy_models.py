@@ -334,6 +334,31 @@ def register_toys() -> None:
 
 # ---- a scenario of the toys ---------------------------------------------------------------------
 
+# the P loop of the toy models by their registered kinds (the test's registry), its [record] to add
+LOOP = """
+name = "toy_loop"
+connections = ["source.out -> ctrl.r", "Lag.y -> ctrl.y", "ctrl.u -> Lag.u"]
+
+[simulation]
+duration = 1.0
+step = 0.1
+
+[fmus.Lag]
+model = "toy_FirstOrderLag"
+
+[toy_source]
+kind = "toy_constant"
+value = 1.0
+
+[toy_controller]
+kp = 1.5
+
+[toy_lag]
+fmu = "Lag"
+time_constant = 0.25
+
+"""
+
 # the P loop of the toy models as a scenario whose FMU is given by path (format it with lag=...):
 # what a Dask worker finds without the test's registry (the components by factory)
 LOOP_BY_PATH = """
