@@ -32,6 +32,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from .errors import ScenarioError, one_line
 from .files import STUDY_SIDECAR as SIDECAR
+from .files import output_folder
 from .files import write_json  # noqa: F401  (where the study writers have always found it)
 from .scenario import apply_overrides, parse_scenario
 from .study import Study, count, runs
@@ -164,20 +165,6 @@ class _Lock:
         self.file.close()  # releases the lock
 
 
-def _folder(out_dir: str | Path) -> Path:
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ScenarioError(f"--out {out}: not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / f".{LOCK}.probe"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise ScenarioError(f"--out {out}: cannot write there ({exc.strerror or exc})") from None
-    return out
-
-
 def _check_sidecar(out: Path, study: Study) -> None:
     path = out / SIDECAR
     if not path.exists():
@@ -237,7 +224,7 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
         base = parse_scenario(apply_overrides(base.raw, {"record.signals": list(record)}), source=base.source)
     header = columns(study, metric_names)
     total = count(study)
-    out = _folder(out_dir) if out_dir is not None else None
+    out = output_folder(out_dir) if out_dir is not None else None
     with (_Lock(out) if out is not None else contextlib.nullcontext()):
         done = bytearray((total + 7) // 8)
         runs_csv = None

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from .fmu_log_option import apply_fmu_log, fmu_log_option
-from .workers_option import default_workers, worker_count
+from .workers_option import TABLE_WORKERS, default_workers, worker_count
 
 __all__ = ["main"]
 
@@ -72,11 +72,6 @@ def _out_folder(given: str | None, default: Path) -> Path:
     from cosim.files import output_folder
 
     return output_folder(given or default)
-
-
-def _workers(n: int | None) -> int:
-    """A table's workers: as given, else 2 (or the one core of a one-core machine)."""
-    return n if n is not None else min(2, os.cpu_count() or 1)
 
 
 # ---- run ------------------------------------------------------------------------------
@@ -183,7 +178,8 @@ def _cmd_table2(args) -> int:
     from .report import table2
 
     out = _out_folder(args.out, DEFAULT_OUT / "table2")
-    summary = table2(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+    workers = default_workers(args.workers, TABLE_WORKERS)
+    summary = table2(out, workers=workers, scheduler=args.scheduler, show_progress=not args.quiet,
                      worker_timeout=args.worker_timeout,
                      **_table_changes(args))
     return _print_table(summary, out / "table2.md", out)
@@ -193,7 +189,8 @@ def _cmd_table3(args) -> int:
     from .report import table3
 
     out = _out_folder(args.out, DEFAULT_OUT / "table3")
-    summary = table3(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+    workers = default_workers(args.workers, TABLE_WORKERS)
+    summary = table3(out, workers=workers, scheduler=args.scheduler, show_progress=not args.quiet,
                      worker_timeout=args.worker_timeout,
                      **_table_changes(args))
     return _print_table(summary, out / "table3.md", out)
@@ -210,7 +207,8 @@ def _cmd_reproduce(args) -> int:
     from .report import reproduce
 
     out = _out_folder(args.out, DEFAULT_OUT)
-    path = reproduce(out, workers=_workers(args.workers), scheduler=args.scheduler, show_progress=not args.quiet,
+    workers = default_workers(args.workers, TABLE_WORKERS)
+    path = reproduce(out, workers=workers, scheduler=args.scheduler, show_progress=not args.quiet,
                      worker_timeout=args.worker_timeout,
                      **_table_changes(args))
     print(f"report: {path}")
@@ -517,8 +515,8 @@ def _parser() -> argparse.ArgumentParser:
             sp.add_argument("--seeds", type=int, help="runs per cell of the variants' rows, seeds 0..N-1 "
                                                       "(default: the study's, 10)")
             sp.add_argument("--duration", type=float, help="override the missions' duration (s)")
-            sp.add_argument("--workers", type=worker_count, help="worker processes, 1 to the cores (default 2; 1: in "
-                                                                 "this process)")
+            sp.add_argument("--workers", type=worker_count, help=f"worker processes, 1 to the cores (default "
+                                                                 f"{TABLE_WORKERS}; 1: in this process)")
             sp.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS instead")
             _worker_timeout(sp)
             sp.add_argument("--variants", type=_variant_list,

@@ -14,7 +14,9 @@ from __future__ import annotations
 import argparse
 import os
 
-__all__ = ["worker_count", "default_workers"]
+__all__ = ["worker_count", "default_workers", "TABLE_WORKERS"]
+
+TABLE_WORKERS = 2  # the tables' and reproduce's default: their runs are short, two workers keep them busy
 
 
 def _cores() -> int:
@@ -22,7 +24,7 @@ def _cores() -> int:
 
 
 def _most() -> int:
-    return max(2, _cores())
+    return max(TABLE_WORKERS, _cores())
 
 
 def worker_count(text: str) -> int:
@@ -39,6 +41,9 @@ def worker_count(text: str) -> int:
     return n
 
 
-def default_workers(wanted: int | None = None) -> int:
-    """``wanted`` (checked by :func:`worker_count`), else one per core."""
-    return wanted if wanted is not None else _cores()
+def default_workers(wanted: int | None, default: int | None = None) -> int:
+    """``wanted`` (checked by :func:`worker_count`), else ``default`` (at most
+    the cores), else one per core."""
+    if wanted is not None:
+        return wanted
+    return min(default, _cores()) if default is not None else _cores()
