@@ -75,6 +75,11 @@ def test_the_study_runs_every_case_through_the_study_runner_in_case_order():
     for f in flights:
         assert f.status == "ok" and [p.time for p in f.points] == [2.0, 4.0]
         assert all(math.isnan(p.linear_rate) for p in f.points)  # check = 0: no perturbation check
+        # each case's settings reached its run: the study's points are those of the case flown alone
+        alone = load_scenario("circles", overrides={**arguments["overrides"], "controller.variant": f.variant,
+                                                    "controller.position.phi": [f.phi] * 3})
+        assert along_flight(alone, arguments["metric"]).points == f.points
+    assert flights[1].points != flights[2].points  # the boundary layer changes what pd+lm learns
 
 
 def test_flight_events_and_learned_state_names():
