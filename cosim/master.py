@@ -46,24 +46,13 @@ import numpy as np
 from .component import PythonComponent, typed_value
 from .connection import Connection, check_connections, parse_connections
 from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError, SimulationTerminated
-from .limits import SEED_LIMIT
+from .time_grid import communication_point, seed_error, whole_steps
 from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
 from .plan import ORDERINGS, FmuBlock, PythonBlock, make_plan
 from .recorder import Recorder
 
-__all__ = ["Master", "RunResult", "Snapshot", "ORDERINGS", "communication_point"]
-
-
-def communication_point(t: float, t0: float, h: float, n_steps: int) -> int | None:
-    """``n`` with ``t = t0 + n h`` (to 1e-9 relative) and ``0 <= n <= n_steps``:
-    the step of a run at which time ``t`` is a communication point; ``None``
-    if it is none."""
-    t = float(t)
-    if not np.isfinite(t):
-        return None
-    n = round((t - t0) / h)
-    return n if 0 <= n <= n_steps and abs(t0 + n * h - t) <= 1e-9 * max(1.0, abs(t)) else None
+__all__ = ["Master", "RunResult", "Snapshot", "ORDERINGS"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,6 +151,12 @@ class Master:
     bounds : ``signal -> (low, high)``, the envelope (inclusive); every
         signal the master holds (the FMU outputs in use, every Python output,
         the internal signals recorded) is also checked to be finite.
+    fmu_parameters : ``{fmu name: {parameter: value}}``, the base values set
+        at every run's start (a run's ``parameters`` override them).
+    ordering : ``"feedthrough"`` (default: the blocks with direct
+        feedthrough evaluated at ``t_n``) or ``"exchange"`` (every block sees
+        the others' values of the previous step, as Jacobi masters do);
+        :data:`cosim.plan.ORDERINGS`, docs/cosim.md.
     """
 
     def __init__(self, fmus: Sequence[FmuComponent], components: Sequence[PythonComponent],
@@ -231,7 +226,13 @@ class Master:
             restore: Mapping[str, bytes] | None = None) -> RunResult:
         """Run from ``t0`` for ``duration`` seconds (a whole number of steps).
 
-        ``parameters`` overrides, for this run only, FMU parameters and Python
+        ``seed`` (an integer in [0, 2^53]) goes to every Python component's
+        ``start`` and to every FMU's seed parameter (its stream's seed,
+        :func:`cosim.fmu_component.stream_seed`). ``csv_path``: the recorded
+        rows are also streamed there as they are produced, ``block_rows`` rows
+        at a time, with a JSON sidecar (:mod:`cosim.recorder`); a failed run
+        keeps what it wrote. ``progress(done_steps, n_steps)`` is called
+        as the run advances (at each written block). ``parameters`` overrides, for this run only, FMU parameters and Python
         component parameters by ``component.name``. With ``raise_on_error``
         (default) a divergence or FMU failure raises after the partial result
         is saved (the exception carries it as ``.result``); otherwise the
@@ -249,12 +250,11 @@ class Master:
         starts from its parameters, so a run can resume with some FMUs put
         in another state (a perturbed plant, a linearization's check).
         """
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= SEED_LIMIT:
-            # one range in every form: an FMU's seed parameter is a double, exact to 2^53
-            raise ScenarioError(f"seed = {seed!r}: expected an integer in [0, 2^53 = {SEED_LIMIT}]")
+        if (why := seed_error(seed)) is not None:
+            raise ScenarioError(f"seed = {seed!r}: {why}")
         h = self.step
-        n_steps = int(round(duration / h))
-        if n_steps < 1 or abs(n_steps * h - duration) > 1e-9 * max(1.0, abs(duration)):
+        n_steps = whole_steps(duration, h)
+        if n_steps is None:
             raise ValueError(f"duration = {duration!r} s is not a positive whole number of steps of {h!r} s")
         split = self._split_parameters(parameters or {})
         snap_steps = self._snapshot_steps(snapshots, t0, n_steps)

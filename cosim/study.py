@@ -375,6 +375,9 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
 
 
 def load_study(path: str | Path, base: Scenario | None = None) -> Study:
+    """The study file at ``path``, read and checked against its scenario
+    (the file's ``scenario``, or ``base`` when given: a command's scenario
+    with its overrides)."""
     path = Path(path)
     return parse_study(read_toml(path, "study"), source=path, base=base)
 

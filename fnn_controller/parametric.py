@@ -35,7 +35,7 @@ import numpy as np
 
 from .geometric import GeometricParams, initial_velocity_state
 from .parameters import parameter_info
-from .position_parameters import PositionParams
+from .position_parameters import PositionParams, check_one_step
 from .step import STEP_INPUT_NAMES, Y_PARTS, controller_step, state_size, step_symbols
 from .variants import Variant, variant as lookup
 from .variants.registry import identifier
@@ -90,9 +90,7 @@ def parameter_table(variant: str, position: PositionParams = PositionParams(),
     the geometric controller and its nominal vehicle. ``geometric.dt`` is
     no parameter of its own (``dt`` is the step of both loops), so it must
     equal ``position.dt``."""
-    if abs(position.dt - geometric.dt) > 1e-15:
-        raise ValueError(f"position.dt = {position.dt} s and geometric.dt = {geometric.dt} s must agree: "
-                         "outer and inner loop run in the same step")
+    check_one_step(position.dt, geometric.dt)
     own = {"kp", "kd", "dt", "feedforward", "accel_feedforward", *lookup(variant).parameters}
     table = [Parameter(name, ("position",) + path, value, info.unit, info.description, info.min, info.max)
              for name, path, value, info in _scalars(position, "", (), own)]

@@ -123,10 +123,6 @@ def controller_step(variant: Variant, position: PositionParams, geometric: Geome
     here from the plant state.
     """
     n_fnn = fnn_state_size(variant)
-    numeric = not isinstance(position.dt, ca.SX)  # a parametric build shares one dt symbol
-    if numeric and abs(position.dt - geometric.dt) > 1e-15:
-        raise ValueError(f"position.dt = {position.dt} s and geometric.dt = {geometric.dt} s must agree: "
-                         "outer and inner loop run in the same step")
     pos, vel = x[0:3], x[3:6]
     outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position, p_ref_dot,
                                 p_ref_ddot=p_ref_ddot)

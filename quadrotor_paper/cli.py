@@ -352,7 +352,7 @@ def _operating_point_of_run(args) -> tuple[Path, dict[str, Any]]:
     (its FMU state, its inputs and parameters then, as keyword arguments of
     ``linearize_fmu``)."""
     from cosim.errors import ScenarioError
-    from cosim.master import communication_point
+    from cosim.time_grid import communication_point
     from cosim.scenario import build_master, load_scenario
 
     if args.parameter:
