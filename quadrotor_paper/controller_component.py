@@ -59,7 +59,8 @@ from cosim.errors import DivergenceError, ScenarioError
 from cosim.schema import Number, ParameterTable, Table, dataclass_table, one_of, refuse, validate
 from fnn_controller.variants import DEFAULT_VARIANT
 
-__all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT", "internal_ports"]
+__all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS",
+           "DEFAULT_PLANT", "internal_ports"]
 
 DEFAULT_PLANT = "Quadrotor"
 FORMS = ("python", "fmu")
@@ -371,3 +372,35 @@ class ControllerComponent(PythonComponent):
         state) the control at t_n was computed with, as the FMU form's
         local variables read at t_n."""
         return self._fast.state[:self._n_internal]
+
+
+@dataclasses.dataclass(frozen=True)
+class ControllerSettings:
+    """What a scenario's controller flies, validated: its instance name, the
+    FMU it flies (``plant``, whose parameters are its nominal vehicle; ``""``
+    for none), its variant and its position controller's parameters
+    (:class:`fnn_controller.PositionParams`)."""
+
+    instance: str
+    plant: str
+    variant: str
+    position: Any
+
+
+def controller_settings(scenario, instance: str | None = None) -> ControllerSettings | None:
+    """The settings of ``scenario``'s controller ``instance`` (default: its one
+    ``fnn_controller`` component), ``None`` without one: the one way the
+    application reads a controller's settings (the scenario's table
+    validated as a run builds it, its defaults included)."""
+    found = [name for name, spec in scenario.components.items() if spec.get("kind") == "fnn_controller"]
+    if instance is None:
+        if len(found) > 1:
+            raise ScenarioError(f"the scenario has {len(found)} controllers ({', '.join(found)}): name one")
+        instance = found[0] if found else None
+    if instance not in found:
+        return None
+    parameters = scenario.components[instance]["parameters"]
+    table = validate(controller_table(), parameters, instance)
+    component = ControllerComponent.from_parameters(instance, parameters)
+    plant = table.plant if table.plant in scenario.fmus or "plant" in table.model_fields_set else ""
+    return ControllerSettings(instance, plant, component.variant, component.position)

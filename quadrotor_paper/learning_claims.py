@@ -119,9 +119,9 @@ def _signals(variant: str) -> list[str]:
 
 def _position(scenario) -> PositionParams:
     """The position controller's parameters of ``scenario``'s controller."""
-    from .controller_component import ControllerComponent
+    from .controller_component import controller_settings
 
-    return ControllerComponent.from_parameters("controller", scenario.components["controller"]["parameters"]).position
+    return controller_settings(scenario).position
 
 
 def recorded(scenario, result) -> dict[str, Recording]:

@@ -32,7 +32,8 @@ from fnn_controller import FastFunction, GeometricParams, velocity_controller_fu
 from fnn_controller.geometric import initial_velocity_state
 
 from cosim.component import Port, PythonComponent
-from ..controller_component import ControllerComponent
+from ..components import CONTROLLER_INSTANCE
+from ..controller_component import DEFAULT_PLANT, ControllerComponent
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from ..trajectories import Hover, ReferenceComponent
@@ -47,7 +48,7 @@ __all__ = [
 
 _STATE_GROUP = "{" + ",".join(STATE_NAMES) + "}"
 # flipping over or falling out of the sky ends a run as "diverged"
-ENVELOPE = {"Quadrotor.phi": (-1.2, 1.2), "Quadrotor.theta": (-1.2, 1.2), "Quadrotor.z": (-100.0, 0.0)}
+ENVELOPE = {f"{DEFAULT_PLANT}.phi": (-1.2, 1.2), f"{DEFAULT_PLANT}.theta": (-1.2, 1.2), f"{DEFAULT_PLANT}.z": (-100.0, 0.0)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,14 +134,14 @@ def _start_parameters(op: OperatingPoint) -> dict[str, float]:
 
 def _run(op: OperatingPoint, python: list[PythonComponent], controller: str, duration: float, dt: float,
          fmu: Path | None) -> Response:
-    connections = [f"Quadrotor.{_STATE_GROUP} -> {controller}.{_STATE_GROUP}",
-                   f"{controller}.Omega_{{1,2,3,4}} -> Quadrotor.Omega_{{1,2,3,4}}"]
+    connections = [f"{DEFAULT_PLANT}.{_STATE_GROUP} -> {controller}.{_STATE_GROUP}",
+                   f"{controller}.Omega_{{1,2,3,4}} -> {DEFAULT_PLANT}.Omega_{{1,2,3,4}}"]
     if any(c.name == "reference" for c in python):
         connections.append("reference.{x,y,z,vx,vy,vz} -> controller.{x_ref,y_ref,z_ref,vx_ref,vy_ref,vz_ref}")
-    plant = FmuComponent("Quadrotor", fmu or plant_fmu_path())
-    record = [f"Quadrotor.{n}" for n in STATE_NAMES]
+    plant = FmuComponent(DEFAULT_PLANT, fmu or plant_fmu_path())
+    record = [f"{DEFAULT_PLANT}.{n}" for n in STATE_NAMES]
     with Master([plant], python, connections, dt, record, ENVELOPE,
-                {"Quadrotor": _start_parameters(op)}) as master:
+                {DEFAULT_PLANT: _start_parameters(op)}) as master:
         result = master.run(duration, raise_on_error=False)
     return Response(result.time, result.data[:, 1:] - op.x, result.status, result.error)
 
@@ -158,7 +159,7 @@ def position_step(op: OperatingPoint, step=(0.1, 0.0, 0.0), duration: float = 5.
     p = op.x[0:3] + np.asarray(step, float)
     python = [ReferenceComponent(Hover(*p)),
               ControllerComponent("pd", asdict(position), asdict(replace(op.geometric, dt=dt)), op.psi_ref)]
-    return _run(op, python, "controller", duration, dt, fmu)
+    return _run(op, python, CONTROLLER_INSTANCE, duration, dt, fmu)
 
 
 def velocity_step(op: OperatingPoint, step=(0.1, 0.0, 0.0), duration: float = 3.0, dt: float = 0.01,
@@ -201,7 +202,7 @@ def ramp_lag(op: OperatingPoint, speed: float = 2.5, duration: float = 15.0, dt:
     python = [ReferenceComponent(Ramp(speed, 0.0, *p)),
               ControllerComponent("pd", asdict(replace(op.position, dt=dt)), asdict(replace(op.geometric, dt=dt)),
                                   op.psi_ref)]
-    run = _run(op, python, "controller", duration, dt, fmu)
+    run = _run(op, python, CONTROLLER_INSTANCE, duration, dt, fmu)
     return float(speed * run.t[-1] - run.x[-1, 0]), run
 
 
