@@ -12,7 +12,7 @@ compared one to one.
   of the position reference (master with :class:`~quadrotor_paper.controller_component.ControllerComponent`);
 * :func:`velocity_step` -- the inner loop alone after a step of the desired
   velocity (master with :class:`VelocityCommandComponent`, which runs
-  ``velocity_controller_function`` -- the law inside the full controller);
+  the step's inner loop, ``bound_inner_function`` -- the law inside the full controller);
 * :func:`ramp_lag` -- the PD's steady lag behind a ramp (master with a
   :class:`Ramp` reference);
 * :func:`growth_rate` -- how fast an oscillation grows or decays, to compare a
@@ -28,7 +28,8 @@ import control as ct
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR
-from fnn_controller import FastFunction, GeometricParams, velocity_controller_function
+from fnn_controller import FastFunction, GeometricParams
+from fnn_controller.parametric import INNER_Y, bound_inner_function
 from fnn_controller.geometric import initial_velocity_state
 
 from cosim.component import Port, PythonComponent
@@ -92,7 +93,8 @@ class Ramp:
 class VelocityCommandComponent(PythonComponent):
     """The geometric velocity controller alone, at a constant desired
     velocity: plant state in, rotor speeds out (eqs. 13-18, evaluated by
-    ``velocity_controller_function`` through its fast buffer path)."""
+    the inner loop the step runs, ``bound_inner_function``, through its fast
+    buffer path)."""
 
     inputs = tuple(Port(v.name, v.unit, description="plant state")
                    for v in (QUADROTOR.variable(name) for name in STATE_NAMES))
@@ -103,19 +105,19 @@ class VelocityCommandComponent(PythonComponent):
         super().__init__(name)
         self.v_ref = np.asarray(v_ref, float)
         self.psi_ref = float(psi_ref)
-        self._f = FastFunction(velocity_controller_function(geometric), state=("vel_state", "vel_state_next"))
+        self._f = FastFunction(bound_inner_function(geometric), state=("state", "state_next"))
 
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
         self._f.state[:] = initial_velocity_state()
         self._f.inputs["v_ref"][:] = self.v_ref
         self._f.inputs["psi_ref"][0] = self.psi_ref
+        self._f.inputs["a_ref"][:] = 0.0
 
     def step(self, n: int, t: float, u: np.ndarray) -> np.ndarray:
-        ins = self._f.inputs
-        ins["v"][:], ins["euler"][:], ins["omega_b"][:] = u[3:6], u[6:9], u[9:12]
+        self._f.inputs["x"][:] = u[3:12]  # u v w phi theta psi p q r
         self._f.evaluate()
         self._f.commit()
-        return self._f.outputs["Omega"]
+        return self._f.outputs["y"][INNER_Y["Omega"]]
 
 
 def plant_fmu_path(fmi_version: int = 2) -> Path:
