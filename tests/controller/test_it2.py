@@ -17,7 +17,7 @@ from fnn_controller.it2 import (ALPHA, C1, C2, F, IT2_AXIS_STATE_SIZE, IT2_DEFAU
                                 X1_PREV, X2_PREV, IT2Params, it2_firing_strengths, it2_learning_step,
                                 it2_membership, it2_normalized_firing_strengths, it2_regressor, q_rate,
                                 type_reduction)
-from fnn_controller.learning import LearningBounds, learning_step
+from fnn_controller.learning import AxisGains, LearningBounds, learning_step
 from fnn_controller.position import initial_fnn_state, position_controller_function
 from fnn_controller.position_parameters import PositionParams
 from fnn_controller.variants import variant
@@ -130,7 +130,7 @@ def _sym_step(rule, spread, gamma, nu, alpha_bar, gamma_q, phi):
     state = ca.SX.sym("state", IT2_AXIS_STATE_SIZE)
     xs1, xs2, tc = ca.SX.sym("x1"), ca.SX.sym("x2"), ca.SX.sym("tau_c")
     wl, wu = it2_normalized_firing_strengths(xs1, xs2, state[C1], state[C2], state[SIGMA1], state[SIGMA2], spread)
-    nxt = it2_learning_step(rule, state, xs1, xs2, tc, wl, wu, DT, gamma, nu, alpha_bar, gamma_q, BOUNDS, phi)
+    nxt = it2_learning_step(AxisGains(rule, DT, gamma, nu, alpha_bar, BOUNDS, phi), gamma_q, state, xs1, xs2, tc, wl, wu)
     return ca.Function("step", [state, xs1, xs2, tc], [nxt])
 
 
@@ -203,7 +203,7 @@ def test_without_uncertainty_the_learning_step_is_the_type1_step(rule):
     t1 = ca.SX.sym("s", AXIS_STATE_SIZE)
     xs1, xs2, tc = ca.SX.sym("x1"), ca.SX.sym("x2"), ca.SX.sym("tau_c")
     w_bar = normalized_firing_strength(xs1, xs2, t1[0:3], t1[3:6], t1[6:9], t1[9:12])
-    type1 = ca.Function("t1", [t1, xs1, xs2, tc], [learning_step(rule, t1, xs1, xs2, tc, w_bar, DT, 1.5, 0.85, 1.1)])
+    type1 = ca.Function("t1", [t1, xs1, xs2, tc], [learning_step(AxisGains(rule, DT, 1.5, 0.85, 1.1), t1, xs1, xs2, tc, w_bar)])
     for _ in range(10):
         state = _random_state(rng)
         x1v, x2v, tau_c = rng.uniform(-4, 4), rng.uniform(-40, 40), rng.uniform(-2, 2)
