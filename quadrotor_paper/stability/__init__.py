@@ -36,7 +36,7 @@ _EXPORTS = {
     "loops": ("LoopModel",),
     "operating_points": ("OperatingPoint", "default_operating_points", "forward_flight", "hover", "operating_point",
                          "trim_closed_loop", "trim_plant"),
-    "study": ("StabilityStudy", "run_stability_analysis", "stability_study"),
+    "study": ("StabilityStudy", "StabilitySettings", "run_stability_analysis", "stability_study"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
