@@ -49,37 +49,20 @@ import numpy as np
 from .axis_state import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, IT2_AXIS_STATE_PORTS, IT2_AXIS_STATE_SIZE, N_MF,
                          N_RULES, SIGMA1, SIGMA2)
 from .axis_state import IT2_PRIMED as PRIMED, IT2_Q as Q, IT2_X1_PREV as X1_PREV, IT2_X2_PREV as X2_PREV
-from .fnn import FnnInit, firing_strength, normalized_firing_strength
+from .fnn import FnnInit, normalized_firing_strength
 from .learning import AxisGains, LearningBounds, parameters_step, project, switching
 from .position_parameters import IT2Params
 
 __all__ = [
     "C1", "C2", "SIGMA1", "SIGMA2", "F", "ALPHA", "Q", "X1_PREV", "X2_PREV", "PRIMED",
     "IT2_AXIS_STATE_SIZE", "IT2_AXIS_STATE_PORTS", "IT2Params", "IT2_DEFAULTS",
-    "it2_membership", "it2_firing_strengths", "it2_normalized_firing_strengths", "type_reduction",
-    "it2_regressor", "q_rate", "it2_learning_step", "it2_initial_axis_expression", "it2_axis_state_bounds",
+    "it2_normalized_firing_strengths", "type_reduction",
+    "it2_regressor", "q_rate", "it2_learning_step", "it2_initial_axis_expression", "it2_state_box",
 ]
 
 
 
 IT2_DEFAULTS = IT2Params()
-
-
-def it2_membership(x, c, sigma, spread):
-    """Lower and upper membership grades of one input (uncertain width).
-
-    Returns ``(mu_lower, mu_upper)``, each of length I, with
-    ``mu_lower = exp(-((x - c) / sigma)^2)`` (eqs. 21-22) and
-    ``mu_upper = exp(-((x - c) / ((1 + d) sigma))^2)``; ``0 < mu_lower <= mu_upper <= 1``.
-    """
-    return ca.exp(-((x - c) / sigma) ** 2), ca.exp(-((x - c) / ((1 + spread) * sigma)) ** 2)
-
-
-def it2_firing_strengths(x1, x2, c1, c2, sigma1, sigma2, spread):
-    """Lower and upper firing strengths ``(W_lower, W_upper)`` of the I*J rules,
-    product T-norm (eqs. 20, 23 for each bound), rule k = j * I + i."""
-    return (firing_strength(x1, x2, c1, c2, sigma1, sigma2),
-            firing_strength(x1, x2, c1, c2, (1 + spread) * sigma1, (1 + spread) * sigma2))
 
 
 def it2_normalized_firing_strengths(x1, x2, c1, c2, sigma1, sigma2, spread):
@@ -161,7 +144,7 @@ def it2_initial_axis_expression(init: FnnInit, it2: IT2Params, r):
                       init.alpha, it2.q0, 0.0, 0.0, 0.0)
 
 
-def it2_axis_state_bounds(bounds: LearningBounds):
+def it2_state_box(bounds: LearningBounds):
     """``(low, high)``: the projection box of eqs. 27-29 per element of the IT2
     axis state, q in [0, 1]."""
     b = bounds

@@ -22,9 +22,9 @@ def it2_initial_axis(params, r):
 
 def it2_axis_state_bounds(params):
     """The projection box of the IT2 axis state (eqs. 27-29, q in [0, 1])."""
-    from ..it2 import it2_axis_state_bounds as _bounds
+    from ..it2 import it2_state_box
 
-    return _bounds(params.bounds)
+    return it2_state_box(params.bounds)
 
 
 def it2_axis_law(rule: str, gamma_field: str):

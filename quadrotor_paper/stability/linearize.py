@@ -63,14 +63,6 @@ class PlantLinearization:
     A: np.ndarray
     B: np.ndarray
 
-    @property
-    def B_omega(self) -> np.ndarray:
-        return self.B[:, :4]
-
-    @property
-    def B_wind(self) -> np.ndarray:
-        return self.B[:, 4:7]
-
 
 @dataclass(frozen=True, eq=False)
 class ControllerLinearization:

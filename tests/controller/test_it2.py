@@ -12,11 +12,10 @@ import numpy as np
 import pytest
 
 from fnn_controller.fast import FastFunction
-from fnn_controller.fnn import fnn_output, normalized_firing_strength
+from fnn_controller.fnn import firing_strength, fnn_output, normalized_firing_strength
 from fnn_controller.it2 import (ALPHA, C1, C2, F, IT2_AXIS_STATE_SIZE, IT2_DEFAULTS, PRIMED, Q, SIGMA1, SIGMA2,
-                                X1_PREV, X2_PREV, IT2Params, it2_firing_strengths, it2_learning_step,
-                                it2_membership, it2_normalized_firing_strengths, it2_regressor, q_rate,
-                                type_reduction)
+                                X1_PREV, X2_PREV, IT2Params, it2_learning_step, it2_normalized_firing_strengths,
+                                it2_regressor, q_rate, type_reduction)
 from fnn_controller.learning import AxisGains, LearningBounds, learning_step
 from fnn_controller.position import initial_fnn_state, position_controller_function
 from fnn_controller.position_parameters import PositionParams
@@ -30,6 +29,24 @@ BOUNDS = LearningBounds()
 DT = PARAMS.dt
 
 # ------------------------------------------------------------- symbolic forward
+
+def it2_membership(x, c, sigma, spread):
+    """The definition the tests check the law against: lower and upper membership grades of one input (uncertain width).
+
+    Returns ``(mu_lower, mu_upper)``, each of length I, with
+    ``mu_lower = exp(-((x - c) / sigma)^2)`` (eqs. 21-22) and
+    ``mu_upper = exp(-((x - c) / ((1 + d) sigma))^2)``; ``0 < mu_lower <= mu_upper <= 1``.
+    """
+    return ca.exp(-((x - c) / sigma) ** 2), ca.exp(-((x - c) / ((1 + spread) * sigma)) ** 2)
+
+
+def it2_firing_strengths(x1, x2, c1, c2, sigma1, sigma2, spread):
+    """The definition the tests check the law against: lower and upper firing strengths ``(W_lower, W_upper)`` of the I*J rules,
+    product T-norm (eqs. 20, 23 for each bound), rule k = j * I + i."""
+    return (firing_strength(x1, x2, c1, c2, sigma1, sigma2),
+            firing_strength(x1, x2, c1, c2, (1 + spread) * sigma1, (1 + spread) * sigma2))
+
+
 
 x1, x2, d, q = ca.SX.sym("x1"), ca.SX.sym("x2"), ca.SX.sym("d"), ca.SX.sym("q")
 c1, c2 = ca.SX.sym("c1", 3), ca.SX.sym("c2", 3)
