@@ -45,7 +45,7 @@ from .step import STEP_INPUT_NAMES, Y_PARTS, state_size, step_symbols
 from .variants import Variant, variant as lookup
 from .variants.registry import identifier
 
-__all__ = ["Parameter", "parameter_table", "parametric_step_function", "parameter_vector", "structure",
+__all__ = ["Parameter", "parameter_table", "parametric_step_function", "parameter_vector", "geometric_structure",
            "outer_parameter_table", "inner_parameter_table", "outer_step_function", "inner_step_function",
            "outer_initial_function", "OUTER_Y", "INNER_Y", "bound_function", "bound_outer_function", "bound_inner_function",
            "parametric_step", "bound_step_function", "initial_state_function", "initial_fnn_expression", "PER_AXIS"]
@@ -228,7 +228,7 @@ def parametric_step_function(variant: str, position: PositionParams = PositionPa
     both fed the same ``dt``. ``position`` and ``geometric`` give the
     structural choices (``desired_rate``) and the constants of the fields
     that are no parameter of ``variant`` (which its laws do not read); a run
-    builds it on :func:`structure` alone."""
+    builds it on :func:`geometric_structure` alone."""
     v = lookup(variant)
     table = parameter_table(variant, position, geometric)
     p = ca.SX.sym("p", len(table))
@@ -255,7 +255,7 @@ def parameter_vector(variant: str, position: PositionParams = PositionParams(),
     return np.array([p.default for p in parameter_table(variant, position, geometric)])
 
 
-def structure(geometric: GeometricParams = GeometricParams()) -> GeometricParams:
+def geometric_structure(geometric: GeometricParams = GeometricParams()) -> GeometricParams:
     """The structural choice of ``geometric`` (``desired_rate``, the form of
     eq. 17) with every parameter at its default: what a run's step function
     is built on, the parameters going in through ``p``, so one build serves
@@ -266,9 +266,9 @@ def structure(geometric: GeometricParams = GeometricParams()) -> GeometricParams
 def parametric_step(variant: str, position: PositionParams = PositionParams(),
                     geometric: GeometricParams = GeometricParams()) -> tuple[ca.Function, np.ndarray]:
     """The step a run with these parameters evaluates: the one function of
-    ``variant`` (:func:`parametric_step_function` on :func:`structure`,
+    ``variant`` (:func:`parametric_step_function` on :func:`geometric_structure`,
     cached) and the parameter vector ``p`` to feed it."""
-    return (parametric_step_function(variant, PositionParams(), structure(geometric)),
+    return (parametric_step_function(variant, PositionParams(), geometric_structure(geometric)),
             parameter_vector(variant, position, geometric))
 
 
@@ -306,7 +306,7 @@ def bound_inner_function(geometric: GeometricParams = GeometricParams()) -> ca.F
     """Fixed gains: the inner loop of :func:`inner_step_function` with ``p``
     bound to the values of ``geometric``: ``(v_ref, x[9], psi_ref, state,
     a_ref) -> (y, state_next, check)``."""
-    return bound_function(inner_step_function(structure(geometric)),
+    return bound_function(inner_step_function(geometric_structure(geometric)),
                           np.array([e.default for e in inner_parameter_table(geometric)]))
 
 

@@ -39,7 +39,7 @@ from .step import OUTPUTS, state_ports
 from .controller_fmu import ACCELERATION_INPUTS, PARAMETERS, PSI_REF, REFERENCE_INPUTS, STATE, step_model
 from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state
 from .parametric import (inner_parameter_table, inner_step_function, outer_initial_function,
-                         outer_parameter_table, outer_step_function, structure)
+                         outer_parameter_table, outer_step_function, geometric_structure)
 from .position import fnn_state_size
 from .position_parameters import PositionParams
 from .variants import variant as lookup
@@ -97,6 +97,6 @@ def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
         INNER_IDENTIFIER,
         "geometric SE(3) velocity controller of the LM-FNN paper (eqs. 13-18) with rotor-speed inversion, the "
         "inner loop alone (on board): tracks v*; sampled at dt, z axis down",
-        inputs, arguments, inner_step_function(structure(geometric)),
+        inputs, arguments, inner_step_function(geometric_structure(geometric)),
         INNER_OUTPUTS, inner_parameter_table(geometric), states,
         lambda p, r: ca.DM(initial_velocity_state()))  # R*_prev = identity, not primed

@@ -32,7 +32,7 @@ _EXPORTS = {
     "linearize": ("linearize_controller", "linearize_controller_step", "linearize_plant", "linearize_plant_fmu",
                   "linearize_position_controller", "linearize_velocity_controller", "linearize_feedforward"),
     "fmu_loop": ("FmuLoop", "fmu_closed_loop", "snapshot_loop", "join_loop", "inert_states"),
-    "along_flight": ("AlongFlight", "FlightRadius", "along_flight", "along_flight_study"),
+    "along_flight": ("AlongFlight", "AlongFlightRun", "along_flight", "along_flight_study"),
     "loops": ("LoopModel",),
     "operating_points": ("OperatingPoint", "default_operating_points", "forward_flight", "hover", "operating_point",
                          "trim_closed_loop", "trim_plant"),

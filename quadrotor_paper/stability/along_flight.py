@@ -56,7 +56,7 @@ from ..controller_component import controller_settings
 from .fmu_loop import FmuLoop, snapshot_loop
 from .operating_points import STATE_NAMES
 
-__all__ = ["FlightPoint", "FlightRadius", "AlongFlight", "along_flight", "along_flight_study", "along_flight_plan",
+__all__ = ["FlightPoint", "AlongFlightRun", "AlongFlight", "along_flight", "along_flight_study", "along_flight_plan",
            "AlongFlightPlan", "flight_events", "verdict", "write_points", "learned_state_names", "VARIANTS",
            "BOUNDARY_LAYER", "MISSIONS", "DELTA", "NEUTRAL_RATE", "SECONDS_PER_POINT"]
 
@@ -99,7 +99,7 @@ class FlightPoint:
 
 
 @dataclass(frozen=True)
-class FlightRadius:
+class AlongFlightRun:
     """The points of one run (mission, variant, boundary layer ``phi`` in m/s;
     0 is the paper's sign law), its status and error."""
 
@@ -138,7 +138,7 @@ def _relative_error(loop: FmuLoop) -> float:
 @dataclass(frozen=True)
 class AlongFlight:
     """A study metric (module level, picklable: it may run on a Dask
-    worker): :class:`FlightRadius` of the run, ``{"along_flight": ...}``.
+    worker): :class:`AlongFlightRun` of the run, ``{"along_flight": ...}``.
     Frozen every ``every`` s from ``every`` to the end less ``check``; the
     perturbation check (``check`` s, ``delta``) at every point when
     ``check`` > 0."""
@@ -178,7 +178,7 @@ class AlongFlight:
                                           _relative_error(loop), float(min(tau_c)), *rates))
         finally:
             master.close()
-        return {"along_flight": FlightRadius(scenario.name, variant, phi, result.status, result.error, tuple(points))}
+        return {"along_flight": AlongFlightRun(scenario.name, variant, phi, result.status, result.error, tuple(points))}
 
     def _check(self, master, snap, loop: FmuLoop, seed: int, fmus, plant: str,
                controller: str) -> tuple[float, float, float, float]:
@@ -248,7 +248,7 @@ def _rate(gain: float, duration: float) -> float:
     return math.log(gain) / duration
 
 
-def along_flight(scenario: Scenario, metric: AlongFlight = AlongFlight()) -> FlightRadius:
+def along_flight(scenario: Scenario, metric: AlongFlight = AlongFlight()) -> AlongFlightRun:
     """One run of ``scenario`` frozen along its flight, in this process."""
     master = build_master(scenario)
     try:
@@ -308,7 +308,7 @@ def along_flight_plan(missions: Sequence[str] = MISSIONS, variants: Sequence[str
 def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[str] = VARIANTS,
                        phis: Sequence[float] = (0.0, BOUNDARY_LAYER), metric: AlongFlight = AlongFlight(),
                        workers: int = 1, overrides: dict[str, Any] | None = None,
-                       progress: Callable[[int, int], None] | None = None) -> list[FlightRadius]:
+                       progress: Callable[[int, int], None] | None = None) -> list[AlongFlightRun]:
     """Every mission x variant x law (``phis``, m/s; 0 the sign law), one study per
     mission run by :func:`~quadrotor_paper.experiments.measure`; ``overrides``
     (dotted keys) set for every run, e.g. a shorter ``simulation.duration``;
@@ -333,7 +333,7 @@ def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[st
                 out.append(row["along_flight"])
             else:  # the run or its metric failed: the row says why
                 values = cases[row["case"]]["set"]
-                out.append(FlightRadius(mission, values["controller.variant"], values["controller.position.phi"][0],
+                out.append(AlongFlightRun(mission, values["controller.variant"], values["controller.position.phi"][0],
                                         row.get("status", "failed"), row.get("error")))
     return out
 
@@ -362,7 +362,7 @@ def flight_events(scenario: Scenario) -> list[tuple[float, str]]:
 NEUTRAL_RATE = 0.01
 
 
-def _where(f: FlightRadius, values: np.ndarray, dt: float) -> str:
+def _where(f: AlongFlightRun, values: np.ndarray, dt: float) -> str:
     i = int(np.argmax(values))
     rate = math.log(values[i]) / dt
     return f"max {values[i]:.4f} ({rate:+.3g} 1/s) at {f.points[i].time:g} s"
@@ -373,7 +373,7 @@ def _erased(rates: np.ndarray) -> str:
     return f"; erased (both runs at the same bound) at {n} points" if n else ""
 
 
-def verdict(f: FlightRadius, dt: float = 0.01) -> dict[str, str]:
+def verdict(f: AlongFlightRun, dt: float = 0.01) -> dict[str, str]:
     """One line each for the learning held, the learning on and the
     perturbation check of a flight (the report's and docs/stability.md's
     words); ``dt`` the controller's period (s), for the growth rates ln|z|/dt."""
@@ -411,7 +411,7 @@ def verdict(f: FlightRadius, dt: float = 0.01) -> dict[str, str]:
     return out
 
 
-def write_points(flights: Sequence[FlightRadius], path) -> None:
+def write_points(flights: Sequence[AlongFlightRun], path) -> None:
     """Every point of every flight as CSV (one row per mission, variant, law, time)."""
     import csv
 

@@ -93,7 +93,7 @@ class StabilityStudy:
     gain_checks: list[GainCheck] = field(default_factory=list)
     runs: list[Recording] = field(default_factory=list)
     finite_time: list[AxisClaims] = field(default_factory=list)
-    along_flight: list = field(default_factory=list)  # FlightRadius, every mission x variant x law
+    along_flight: list = field(default_factory=list)  # AlongFlightRun, every mission x variant x law
     flight_events: dict[str, list[tuple[float, str]]] = field(default_factory=dict)  # mission -> (t, label)
     report_path: Path | None = None
     figures: dict[str, Path] = field(default_factory=dict)

@@ -97,13 +97,13 @@ def test_snapshot_times_must_be_whole_steps():
 
 
 def _flight(radius, held, lin=(-1.0,), nl=(-1.1,), mode=(math.nan, math.nan)):
-    from quadrotor_paper.stability.along_flight import FlightPoint, FlightRadius
+    from quadrotor_paper.stability.along_flight import FlightPoint, AlongFlightRun
 
     n = len(radius)
     lin, nl = (list(lin) * n)[:n], (list(nl) * n)[:n]
     points = tuple(FlightPoint(float(t + 1), r, h, 1e-7, 0.1, a, b, *mode)
                    for t, (r, h, a, b) in enumerate(zip(radius, held, lin, nl)))
-    return FlightRadius("circles", "pd+lm", 0.0, "ok", None, points)
+    return AlongFlightRun("circles", "pd+lm", 0.0, "ok", None, points)
 
 
 def test_the_verdicts_read_stable_neutral_and_unstable_from_the_growth_rate():
