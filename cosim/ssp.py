@@ -269,7 +269,7 @@ def _write_conversions(root: etree._Element, conversions: Mapping[tuple[str, str
         element.set("suppressUnitConversion", "true")
         conversion = conversions[key]
         if conversion is not None:
-            transformation = etree.Element(_tag("ssc", "LinearTransformation"), nsmap={"ssc": NS["ssc"]})
+            transformation = etree.Element(_q("ssc", "LinearTransformation"), nsmap={"ssc": NS["ssc"]})
             transformation.set("factor", _num(conversion[0]))
             transformation.set("offset", _num(conversion[1]))
             element.insert(0, transformation)
@@ -442,7 +442,7 @@ class _System:
     sections: dict[str, Any] = field(default_factory=dict)  # an application's own tables, by name
 
 
-def _tag(prefix: str, tag: str) -> str:
+def _q(prefix: str, tag: str) -> str:
     return f"{{{NS[prefix]}}}{tag}"
 
 
@@ -485,7 +485,7 @@ def _source_path(where: str, source: str, folder: Path) -> Path:
 
 def _parameter_set(where: str, node: etree._Element) -> dict[str, float]:
     """The values of an ``ssv:ParameterSet`` (numbers only: the engine sets Float64 values)."""
-    if node.tag != _tag("ssv", "ParameterSet"):
+    if node.tag != _q("ssv", "ParameterSet"):
         raise ScenarioError(f"{where}: expected an ssv:ParameterSet, found {etree.QName(node).localname}")
     values: dict[str, float] = {}
     parameters = node.find("ssv:Parameters", NS)
@@ -621,10 +621,10 @@ def _connection(where: str, element: etree._Element, components: Mapping[str, di
     for child in element:
         if not isinstance(child.tag, str):
             continue
-        if child.tag == _tag("ssc", "LinearTransformation") and transformation is None:
+        if child.tag == _q("ssc", "LinearTransformation") and transformation is None:
             transformation = (_number(f"{where}: ssc:LinearTransformation", child.get("factor", "1"), "factor"),
                               _number(f"{where}: ssc:LinearTransformation", child.get("offset", "0"), "offset"))
-        elif child.tag not in (_tag("ssd", "ConnectionGeometry"), _tag("ssd", "Annotations")):
+        elif child.tag not in (_q("ssd", "ConnectionGeometry"), _q("ssd", "Annotations")):
             raise ScenarioError(f"{where}: {etree.QName(child).localname}: not supported (of the "
                                 f"transformations, a connection may carry one ssc:LinearTransformation)")
     if suppress in ("true", "1"):
@@ -659,7 +659,7 @@ def _read_ssd(ssd_path: Path) -> _System:
         root = _xml(ssd_path).getroot()
     except etree.XMLSyntaxError as exc:
         raise ScenarioError(f"not well-formed XML: {exc}") from None
-    if root.tag != _tag("ssd", "SystemStructureDescription"):
+    if root.tag != _q("ssd", "SystemStructureDescription"):
         raise ScenarioError(f"the root element is {root.tag}, not ssd:SystemStructureDescription")
     system = root.find("ssd:System", NS)
     if system is None:
@@ -774,7 +774,7 @@ def _referenced(ssd: bytes) -> set[str]:
     except etree.XMLSyntaxError:
         return set()  # the reader says why, naming the line
     names = set()
-    for element in root.iter(_tag("ssd", "Component"), _tag("ssd", "ParameterBinding")):
+    for element in root.iter(_q("ssd", "Component"), _q("ssd", "ParameterBinding")):
         source = element.get("source")
         if source and not urllib.parse.urlparse(source).scheme:
             name = posixpath.normpath(urllib.parse.unquote(source))
