@@ -54,7 +54,7 @@ COVARIANCE_BLOCKS = {"position": ("x", "y", "z"), "velocity": ("u", "v", "w"), "
                      "wind": ("wind_x", "wind_y", "wind_z")}
 # Tuning (docs/estimation.md, "Tuning"); the sensor values are the IMU's defaults.
 ESTIMATOR_DEFAULTS = {
-    "wind_walk": 4.0,             # m/s/sqrt(s): the horizontal wind's random walk, fast enough for a reversal
+    "wind_walk": 1.0,             # m/s/sqrt(s): the horizontal wind's random walk between gusts (steps restart it, E21)
     "wind_walk_z": 0.01,          # m/s/sqrt(s): the vertical wind's, nearly constant (hardly observable, E9)
     "drag_noise_density": 0.005,  # m/s2/sqrt(Hz): error of the drag model in the prediction
     "sigma_drag": 0.005,          # m/s2: error of the drag model in the accelerometer measurement
@@ -375,14 +375,16 @@ def _update(t, v):
     t_out = ca.fmax(t, t_filter)
     h_out = t_out - t_filter
     previous = ca.vertcat(*(v[f"previous_{name}"] for name in _IMU))
-    trend = ca.if_else(v["started"] > 0, ca.vertcat(gyro, acc) - previous, ca.DM.zeros(6)) * h_out / v["dt"]
+    change = ca.if_else(v["started"] > 0, ca.vertcat(gyro, acc) - previous, ca.DM.zeros(6))
+    trend = change * h_out / v["dt"]
     xs_out, P_out = _predict(xs, P, gyro + trend[0:3], acc + trend[3:6], v, h_out)
 
     events = {"outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
               "resets_acc": reset_acc}
     counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in _COUNTS}
     out = {name: xs_out[k] for k, name in enumerate(ESTIMATED_STATES)}
-    rates = gyro + trend[0:3] - xs_out[9:12]  # the rate brought forward as the attitude is
+    # the body rate at t_out: the average over the last step describes its middle, half a step earlier
+    rates = gyro + change[0:3] * (h_out / v["dt"] + 0.5) - xs_out[9:12]
     out.update({"p": rates[0], "q": rates[1], "r": rates[2],
                 "nis_acc": ca.if_else(new_imu, nis_acc, 0.0), "nis_fix": ca.if_else(new_fix, nis_fix, 0.0),
                 "fix_used": ca.if_else(used, 1.0, 0.0), "t_estimate": t_out, "t_filter": t_filter,
