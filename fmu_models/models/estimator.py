@@ -154,9 +154,10 @@ def _variables():
         input_("fresh", "1", "1 when the fix is new this step (then the filter corrects with it), 0 otherwise; "
                              "left at 1, every step's fix is used", 1.0),
         input_("t_imu", "s", "time the IMU's sample refers to (the IMU's t_sample): the filter predicts to it "
-                             "(E22); left at its start, the first sample is the only one", 0.0),
+                             "(E22); negative (its start, unconnected): every sample is taken as current", -1.0),
         input_("t_fix", "s", "time the fix was taken (the receiver's t_sample): the filter fuses it at that "
-                             "time (E20); a fix is new only when this is later than the last one's", 0.0),
+                             "time (E20), and only when it is later than the last fix's; negative (its start, "
+                             "unconnected): every fresh fix is taken as current", -1.0),
         *(output(name, unit, f"estimate of {name}") for name, unit in zip(ESTIMATED_STATES[:9], _UNITS)),
         *(output(name, "rad/s", f"body rate {name}: IMU rate less the estimated gyro bias")
           for name in ("p", "q", "r")),
@@ -323,7 +324,7 @@ def _update(t, v):
     # Timing (E22): the filter's state lives at the time of the last IMU sample it used, t_filter. A sample
     # is new when its time stamp is at least half a step later (each is used once, however often an
     # importer shows it); at the first step the initial estimate is the state at the IMU's time.
-    t_imu = v["t_imu"]
+    t_imu = ca.if_else(v["t_imu"] < 0, t, v["t_imu"])  # no stamp: the sample is current
     new_imu = ca.logic_or(ca.logic_not(started), t_imu > v["t_posterior"] + v["dt"] / 2)
     h = ca.if_else(ca.logic_and(started, new_imu), t_imu - v["t_posterior"], 0.0)
     xs, P = _predict(xs, P, gyro, acc, v, h)
@@ -349,7 +350,7 @@ def _update(t, v):
     # with the state retrodicted over tau = t_filter - t_fix through the process model (E20), gated
     fix = ca.vertcat(*(v[f"{name}_m"] for name in FIX_NAMES))
     sigma2 = [v[f"sigma_{name}_m"] ** 2 for name in FIX_NAMES]
-    t_fix = v["t_fix"]
+    t_fix = ca.if_else(v["t_fix"] < 0, t, v["t_fix"])
     new_fix = ca.logic_and(v["fresh"] > 0.5, t_fix > v["t_last_fix"])
     tau = ca.fmax(t_filter - t_fix, 0.0)
 
