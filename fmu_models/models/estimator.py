@@ -1,32 +1,39 @@
 """A state estimator as a sampled-data FMU: an extended Kalman filter written
 in CasADi that predicts with the IMU and corrects with the drag-model
-accelerometer and with GNSS or motion capture (docs/estimation.md, eqs.
-E5-E14; the numbers below are those equations').
+accelerometer and with GNSS or motion capture, each measurement gated and
+fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E23;
+the numbers below are those equations').
 
 State (18): position ``x y z`` and velocity ``u v w`` (world frame, z down,
 eq. 6), attitude ``phi theta psi`` (Z-Y-X Euler, eq. 8), gyro bias
 ``b_g``, accelerometer bias ``b_a`` (body frame) and the wind ``w_W`` (world
-frame). Per communication step n, with the IMU's ``gyro_n, acc_n`` and the
-position/velocity fix ``y_n`` (fresh or not) as inputs:
+frame). The discrete state is the posterior at ``t_filter``, the time of the
+last IMU sample used (a delayed horizon, as PX4's EKF2). At the FMU's time t,
+with the IMU's ``gyro, acc`` stamped ``t_imu`` and the fix ``y`` stamped
+``t_fix`` (fresh or not) as inputs:
 
-1. the prior ``x^-_n, P^-_n`` is corrected with the
-   accelerometer's two horizontal body axes, the drag model's measurement
-   (E9): ``acc_xy = [R^T D(v - w_W) / m]_xy + b_a,xy``, every step;
-2. then, when ``fresh = 1``, with the six position/velocity channels (E10);
-   both as sequential scalar updates (E11-E12), the Jacobians from CasADi's AD;
-3. the outputs are the posterior: the state named like the plant's outputs
-   (``x .. psi``), the body rates ``p q r = gyro - b_g``, the wind, the biases,
-   the covariance (variances of all 18, covariances within the position,
-   velocity, attitude and wind blocks) and the normalized innovations squared
-   (NIS) of both corrections;
-0. before the corrections, the posterior of t_{n-1} is propagated to the
-   prior of t_n with the IMU's averages over the step (E7-E8, explicit Euler
-   over dt; covariance E13).
+1. a new IMU sample (``t_imu > t_filter + dt/2``) predicts the posterior to
+   ``t_imu`` (E7-E8, explicit Euler; covariance E13; E22) and is corrected
+   with the accelerometer's two horizontal body axes, the drag model's
+   measurement (E9): ``acc_xy = [R^T D(v - w_W) / m]_xy + b_a,xy``;
+2. a fresh fix newer than the last is compared with the state retrodicted
+   over its age ``tau = t_filter - t_fix`` (E10, E20);
+3. both corrections are sequential scalar updates (E11-E12), the Jacobians
+   from CasADi's AD, kept only when their NIS passes the chi-square gate of
+   ``gate_level`` (E19); refusals are counted, and a run of them restarts
+   that measurement's part of the state (E21);
+4. the outputs are the posterior predicted from ``t_filter`` to t with the
+   IMU's averages extrapolated along their trend (the output predictor,
+   E23): the state named like the plant's outputs (``x .. psi``), the body
+   rates, the wind, the biases, the covariance (variances of all 18,
+   covariances within the position, velocity, attitude and wind blocks),
+   the NIS of both corrections, the time they describe (``t_estimate``) and
+   the gate's counts.
 
-The discrete state is the posterior of t_{n-1}; step n first predicts it
-to t_n with the IMU's averages over [t_{n-1}, t_n] (``fmu_models/models/imu.py``),
-then corrects. Outputs have direct feedthrough from the fix and the IMU: the
-controller reading the estimate at t_n flies on the measurements of t_n.
+In our master's feedthrough ordering ``t_imu = t`` and the output is the
+posterior: the controller reading the estimate at t_n flies on the
+measurements of t_n. In a Jacobi importer the samples arrive a step old,
+say so by their stamps, and the output is brought forward to t_n.
 """
 from __future__ import annotations
 
