@@ -147,6 +147,9 @@ def _cmd_run(args) -> int:
                      "{nees_attitude:.2f}, wind {nees_wind:.2f} (3 each when consistent); NIS fix {nis_fix:.2f} "
                      "(6); RMSE position {est_rmse_position_m:.4f} m, wind once steady "
                      "{est_rmse_wind_settled_mps:.3f} m/s".format(**summary))
+        lines.append("- gate (chi-square, docs/estimation.md): fixes refused {outliers_fix:.0f}, drag measurements "
+                     "refused {outliers_acc:.0f}; restarts after refusals in a row: position and velocity "
+                     "{resets_fix:.0f}, wind {resets_acc:.0f}".format(**summary))
     if learned_error:
         lines.append(f"- learned state not saved: {learned_error}")
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]

@@ -37,9 +37,11 @@ _BLOCKS = {
     "attitude": (("phi", "theta", "psi"), ("phi", "theta", "psi"), "rad"),
     "wind": (("wind_x", "wind_y", "wind_z"), ("wind_x", "wind_y", "wind_z"), "mps"),
 }
+# the estimator's counts of refused measurements and restarts (E19-E21), their values at the end of a run
+_COUNTS = ("outliers_fix", "outliers_acc", "resets_fix", "resets_acc")
 ESTIMATION_METRICS = (*(f"nees_{b}" for b in _BLOCKS), "nis_fix", "nis_acc",
                       *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in _BLOCKS.items()), "est_rmse_wind_settled_mps",
-                      "est_bias_position_m", "rmse_seen_m")
+                      "est_bias_position_m", "rmse_seen_m", *_COUNTS)
 
 
 def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None = None,
@@ -138,7 +140,15 @@ def estimation_signals(scenario: Scenario) -> list[str]:
         names += [f"{truth}.{n}" for n in true] + [f"{estimator}.{n}" for n in estimated]
         names += [f"{estimator}.{_covariance_name(a, b, estimated)}" for i, a in enumerate(estimated)
                   for b in estimated[i:]]
-    return names + [f"{estimator}.{n}" for n in ("nis_fix", "nis_acc", "fix_used")]
+    return names + [f"{estimator}.{n}" for n in ("nis_fix", "nis_acc", "fix_used", "t_estimate", *_COUNTS)]
+
+
+def _rows_at_estimate_time(result, estimator: str, step: float) -> np.ndarray:
+    """Per row, the row whose time is the one the estimate describes (its
+    ``t_estimate``, E23): the same row when the estimator's output is read at
+    its own time, an earlier one in an importer that reads it a step later."""
+    t = result.time
+    return np.clip(np.rint((result[f"{estimator}.t_estimate"] - t[0]) / step).astype(int), 0, len(t) - 1)
 
 
 def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
@@ -155,9 +165,10 @@ def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
     estimator, truth, settle = estimation_spec(scenario)
     t = result.time
     after_start = t - t[0] >= settle
+    at = _rows_at_estimate_time(result, estimator, scenario.step)  # the truth at the estimate's own time
     out: dict[str, float] = {}
     for block, (estimated, true, unit) in _BLOCKS.items():
-        error = np.column_stack([result[f"{estimator}.{e}"] - result[f"{truth}.{n}"]
+        error = np.column_stack([result[f"{estimator}.{e}"] - result[f"{truth}.{n}"][at]
                                  for e, n in zip(estimated, true)])
         if block == "attitude":
             error = wrap_angle(error)
@@ -165,7 +176,7 @@ def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
                                                 for b in estimated]) for a in estimated], axis=1)
         # the wind's NEES where it is steady: a step of the gust is no random walk (E13), the filter is
         # not consistent through it by construction; its RMSE both ways
-        judged = settled(t, np.column_stack([result[f"{truth}.{n}"] for n in true]), settle) \
+        judged = settled(t, np.column_stack([result[f"{truth}.{n}"][at] for n in true]), settle) \
             if block == "wind" else after_start
         out[f"nees_{block}"] = float(np.mean(nees(error[judged], covariance[judged])))
         out[f"est_rmse_{block}_{unit}"] = float(np.sqrt(np.mean(np.sum(error[after_start] ** 2, axis=1))))
@@ -180,6 +191,7 @@ def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
     used = result[f"{estimator}.fix_used"] > 0.5
     out["nis_fix"] = float(np.mean(result[f"{estimator}.nis_fix"][used & after_start]))
     out["nis_acc"] = float(np.mean(result[f"{estimator}.nis_acc"][after_start]))
+    out.update({c: float(result[f"{estimator}.{c}"][-1]) for c in _COUNTS})
     return out
 
 
