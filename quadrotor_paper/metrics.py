@@ -61,9 +61,13 @@ def oscillation_period(x: np.ndarray, step: float, longest: float = 5.0) -> tupl
 def nees(error: np.ndarray, covariance: np.ndarray) -> np.ndarray:
     """NEES per row (eq. E15): ``e_n^T P_n^-1 e_n`` for errors of shape (N, k)
     and covariances of shape (N, k, k); NaN where P_n is singular."""
-    error = np.asarray(error, dtype=float)
+    error, covariance = np.asarray(error, dtype=float), np.asarray(covariance, dtype=float)
+    try:  # every row in one call (LAPACK's gesv per matrix, as row by row below)
+        return (error[:, None, :] @ np.linalg.solve(covariance, error[..., None]))[:, 0, 0]  # e @ x as below
+    except np.linalg.LinAlgError:  # one singular P: row by row, NaN where singular
+        pass
     out = np.full(len(error), np.nan)
-    for n, (e, P) in enumerate(zip(error, np.asarray(covariance, dtype=float))):
+    for n, (e, P) in enumerate(zip(error, covariance)):
         try:
             out[n] = float(e @ np.linalg.solve(P, e))
         except np.linalg.LinAlgError:

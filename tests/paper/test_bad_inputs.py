@@ -454,7 +454,7 @@ def test_the_results_sidecar_counts_rows_as_blocks_are_flushed(tmp_path, monkeyp
     monkeypatch.setattr(recorder, "SIDECAR_EVERY", 0.0)
     rec = recorder.Recorder(("time", "x"), ("s", "m"), 1000, tmp_path / "r.csv", block_rows=10)
     for n in range(25):
-        rec.data[n] = (n, 2 * n)
+        rec.row(n)[:] = (n, 2 * n)
         rec.commit(n + 1)
     sidecar = json.loads((tmp_path / "r.csv.json").read_text())
     assert (sidecar["status"], sidecar["rows"]) == ("running", 20)  # two blocks flushed, the third not yet
