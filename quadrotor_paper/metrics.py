@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["position_error", "euclidean_error", "rmse", "pd_share", "oscillation_period", "nees", "settled",
+__all__ = ["position_error", "euclidean_error", "squared_error", "rmse", "pd_share", "oscillation_period", "nees", "settled",
            "wrap_angle"]
 
 
@@ -31,10 +31,22 @@ def euclidean_error(result, position: Sequence[str], reference: Sequence[str]) -
     return np.linalg.norm(position_error(result, position, reference), axis=1)
 
 
-def rmse(result, position: Sequence[str], reference: Sequence[str]) -> float:
-    """Euclidean RMSE (m) over all recorded rows."""
+def squared_error(result, position: Sequence[str], reference: Sequence[str]) -> np.ndarray:
+    """|p* - p|^2 per row (m^2), the terms of the RMSE."""
     e = position_error(result, position, reference)
-    return float(np.sqrt(np.mean(np.sum(e * e, axis=1)))) if len(e) else float("nan")
+    return np.sum(e * e, axis=1)
+
+
+def rmse(result, position: Sequence[str], reference: Sequence[str]) -> float:
+    """Euclidean RMSE (m) over all recorded rows (NaN without rows), summed as
+    a run's streamed metrics sum (:class:`cosim.online.Sum`: numpy's
+    ``mean`` to the bit up to its 65 536 values)."""
+    from cosim.online import Sum
+
+    total = Sum()
+    total.add(squared_error(result, position, reference))
+    mean = total.mean()
+    return float(np.sqrt(mean)) if mean is not None else float("nan")
 
 
 def pd_share(tau_c: np.ndarray, tau_n: np.ndarray) -> np.ndarray:

@@ -27,7 +27,7 @@ import numpy as np
 
 from cosim.online import ColumnSum, Last, Maximum, Sum, finite
 
-from .metrics import nees, position_error, wrap_angle
+from .metrics import euclidean_error, nees, squared_error, wrap_angle
 from .missions import estimation_spec, metric_signals
 
 __all__ = ["RunMetrics", "Tracking", "Estimation", "BLOCKS", "covariance_name", "from_results"]
@@ -69,10 +69,9 @@ class Tracking:
         self._squares, self._max, self._last = Sum(), Maximum(), Last()
 
     def add(self, rows) -> None:
-        e = position_error(rows, self.position, self.reference)
-        self._squares.add(np.sum(e * e, axis=1))
+        self._squares.add(squared_error(rows, self.position, self.reference))
         if len(self.names) > 1:
-            norm = np.linalg.norm(e, axis=1)
+            norm = euclidean_error(rows, self.position, self.reference)
             self._max.add(norm)
             self._last.add(norm)
 
