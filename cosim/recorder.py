@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import json
 import time
 from pathlib import Path
@@ -375,7 +376,8 @@ def iter_results(path: str | Path, block_rows: int = CHUNK_ROWS) -> Iterator[Row
     """The rows of a results CSV as :class:`Rows` of at most ``block_rows``
     rows, in order, read as they are needed (memory bounded by the block);
     what :func:`read_results` returns, block by block (no block for a file
-    without rows)."""
+    without rows). A file of numbers only is parsed a block at a time by
+    numpy (each number read back to its bits, as ``float`` reads it)."""
     path = Path(path)
     with open(path, "rb") as raw:
         raw.seek(0, io.SEEK_END)
@@ -386,8 +388,7 @@ def iter_results(path: str | Path, block_rows: int = CHUNK_ROWS) -> Iterator[Row
     if not size:
         raise ValueError(f"{path}: empty results file (no header)")
     with open(path, encoding="utf-8", newline="") as f:
-        records = csv.reader(f)
-        columns = next(records)
+        columns = next(csv.reader([f.readline()]))
         types = ["Float64"] * len(columns)
         side = sidecar_path(path)
         if side.is_file():
@@ -398,23 +399,61 @@ def iter_results(path: str | Path, block_rows: int = CHUNK_ROWS) -> Iterator[Row
             if isinstance(told, list) and len(told) == len(columns):
                 types = told
         index = {c: i for i, c in enumerate(columns)}
-        words = {"true": 1.0, "false": 0.0}
-        rows: list[list[float]] = []
+        if all(t in _FLOATS for t in types):
+            blocks = _number_blocks(f, len(columns), block_rows, whole)
+        else:
+            blocks = _typed_blocks(csv.reader(f), types, block_rows, whole)
         first = 0
-        pending = next(records, None)
-        while pending is not None:
-            fields, pending = pending, next(records, None)
-            if pending is None and not whole:
-                break
-            if len(fields) != len(columns):
-                break
-            try:
-                rows.append([np.nan if t in _TEXTS else words[v] if v in words else float(v)
-                             for v, t in zip(fields, types)])
-            except ValueError:
-                break
-            if len(rows) == block_rows:
-                yield Rows(index, np.array(rows, dtype=float), first)
-                first, rows = first + len(rows), []
-        if rows:
-            yield Rows(index, np.array(rows, dtype=float).reshape(len(rows), len(columns)), first)
+        for data in blocks:
+            yield Rows(index, data, first)
+            first += len(data)
+
+
+def _number_blocks(f, n_columns: int, block_rows: int, whole: bool) -> Iterator[np.ndarray]:
+    """Blocks of rows of a file of numbers: numpy's parser, a block at a time;
+    a block it refuses (a line that is no row) read line by line, up to that line."""
+    while True:
+        lines = list(itertools.islice(f, block_rows))
+        if not lines:
+            return
+        cut = not lines[-1].endswith("\n")
+        if cut:
+            lines.pop()
+        try:
+            data = np.loadtxt(lines, delimiter=",", dtype=float, ndmin=2, comments=None) if lines else None
+            good = data is not None and data.shape[1] == n_columns
+        except ValueError:
+            good = False
+        if not good:
+            data = next(_typed_blocks(csv.reader(lines), ["Float64"] * n_columns, len(lines) or 1, True), None)
+            if data is not None:
+                yield data
+            return
+        yield data
+        if cut or len(data) < block_rows:
+            return
+
+
+def _typed_blocks(records, types: Sequence[str], block_rows: int, whole: bool) -> Iterator[np.ndarray]:
+    """Blocks of rows read field by field (Booleans 1/0, String and Binary NaN),
+    up to the first line that is no row."""
+    n_columns = len(types)
+    words = {"true": 1.0, "false": 0.0}
+    rows: list[list[float]] = []
+    pending = next(records, None)
+    while pending is not None:
+        fields, pending = pending, next(records, None)
+        if pending is None and not whole:
+            break
+        if len(fields) != n_columns:
+            break
+        try:
+            rows.append([np.nan if t in _TEXTS else words[v] if v in words else float(v)
+                         for v, t in zip(fields, types)])
+        except ValueError:
+            break
+        if len(rows) == block_rows:
+            yield np.array(rows, dtype=float)
+            rows = []
+    if rows:
+        yield np.array(rows, dtype=float).reshape(len(rows), n_columns)
