@@ -76,6 +76,16 @@ def _out_folder(given: str | None, default: Path) -> Path:
 
 # ---- run ------------------------------------------------------------------------------
 
+class _Shown:
+    """A metric in a line of text: its number as the format asks, or "undefined" (None: over no rows)."""
+
+    def __init__(self, value: float | None):
+        self.value = value
+
+    def __format__(self, spec: str) -> str:
+        return "undefined" if self.value is None else format(self.value, spec)
+
+
 def _record_every(text: str) -> int:
     """The ``type`` of ``--record-every``: a whole number from 1."""
     from cosim.errors import shown_text
@@ -175,10 +185,12 @@ def _cmd_run(args) -> int:
     if summary.get("max_error_m") is not None:
         lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
     if summary.get("nees_position") is not None:  # flown on an estimate (docs/estimation.md)
+        shown = {k: _Shown(summary.get(k)) for k in ("nees_position", "nees_velocity", "nees_attitude", "nees_wind",
+                                                      "nis_fix", "est_rmse_position_m", "est_rmse_wind_settled_mps")}
         lines.append("- estimate: NEES position {nees_position:.2f}, velocity {nees_velocity:.2f}, attitude "
                      "{nees_attitude:.2f}, wind {nees_wind:.2f} (3 each when consistent); NIS fix {nis_fix:.2f} "
                      "(6); RMSE position {est_rmse_position_m:.4f} m, wind once steady "
-                     "{est_rmse_wind_settled_mps:.3f} m/s".format(**summary))
+                     "{est_rmse_wind_settled_mps:.3f} m/s".format(**shown))
     if learned_error:
         lines.append(f"- learned state not saved: {learned_error}")
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]

@@ -111,3 +111,17 @@ def test_a_run_keeping_a_few_rows_keeps_them_evenly_and_the_last(tmp_path):
     result, summary = run_once(scenario, None, keep=100)
     assert result.rows == summary["rows"] == 2001 and len(result.time) <= 101 and result.stride == 32
     assert result.time[-1] == 20.0 and np.allclose(np.diff(result.time[:-1]), 0.32)
+
+
+def test_an_estimate_never_judged_on_a_steady_wind_says_undefined(tmp_path):
+    """Turbulence changes the true wind every step: the wind is never steady
+    for 5 s, so its NEES and settled RMSE are undefined (null), the rest is
+    not, and summary.md says so instead of failing to format a number."""
+    code = main(["run", "circles_estimated", "--set", "simulation.duration=6", "--set", "wind.turbulence=0.5",
+                 "--out", str(tmp_path), "--quiet", "--no-plots"])
+    assert code == 0
+    summary = read_summary(tmp_path / "summary.json")
+    assert summary["nees_wind"] is None and summary["est_rmse_wind_settled_mps"] is None
+    assert summary["nees_position"] > 0 and summary["est_rmse_wind_mps"] > 0
+    text = (tmp_path / "summary.md").read_text()
+    assert "wind undefined (3 each when consistent)" in text and "wind once steady undefined m/s" in text
