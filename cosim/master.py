@@ -111,7 +111,15 @@ class RunResult:
     python_loop: tuple[str, ...] = ()
     terminated: str | None = None
     python_calls: dict[str, str] = field(default_factory=dict)
-    """``types``: each column's signal type (docs/cosim.md, "Signal types");
+    rows: int = 0
+    stride: int = 1
+    span: tuple[float, float] | None = None
+    observers: tuple = ()
+    """``rows``: the rows recorded (``data`` holds those kept: all of them,
+    the default; none; or every ``stride``-th and the last, as
+    ``Master.run(keep=...)`` asked); ``span``: the first and the last row's
+    time (``None`` without rows); ``observers``: those the rows streamed to
+    (``Master.run(observers=...)``); ``types``: each column's signal type (docs/cosim.md, "Signal types");
     ``objects``: the columns of Int64, UInt64, String and Binary signals, as
     object arrays of ``int``, ``str`` and ``bytes`` (their ``data`` column is
     NaN); ``python_loop``: why this run took the Python loop
@@ -121,6 +129,10 @@ class RunResult:
     ``terminated``: an FMU asked to end the simulation
     (:class:`~cosim.errors.SimulationTerminated`): the run ended early, at
     its last row, status ok; the message says which FMU and when."""
+
+    def __post_init__(self) -> None:
+        if not self.rows and len(self.data):  # built with every row (libcosim's run, cosim.ssp)
+            self.rows, self.span = len(self.data), (float(self.data[0, 0]), float(self.data[-1, 0]))
 
     @property
     def time(self) -> np.ndarray:
@@ -223,7 +235,8 @@ class Master:
             csv_path: str | Path | None = None, t0: float = 0.0, block_rows: int = 100,
             raise_on_error: bool = True, progress: Callable[[int, int], None] | None = None,
             profile: bool = False, snapshots: Sequence[float] = (),
-            restore: Mapping[str, bytes] | None = None) -> RunResult:
+            restore: Mapping[str, bytes] | None = None, keep: int | None = None, observers: Sequence = (),
+            record_every: int = 1) -> RunResult:
         """Run from ``t0`` for ``duration`` seconds (a whole number of steps).
 
         ``seed`` (an integer in [0, 2^53]) goes to every Python component's
@@ -249,6 +262,14 @@ class Master:
         run resumed from a snapshot (``t0`` its time). An FMU left out
         starts from its parameters, so a run can resume with some FMUs put
         in another state (a perturbed plant, a linearization's check).
+
+        The rows stream (:class:`~cosim.recorder.Recorder`): to ``csv_path``
+        (every ``record_every``-th row), to ``observers`` (each with
+        ``add(rows)``: :class:`~cosim.recorder.Rows` in order, e.g. metrics
+        taken as the run goes) and into the result's ``data``: every row
+        (``keep=None``, bounded by ``cosim.limits.MAX_RECORD_BYTES``), none
+        (``keep=0``) or at most ``keep``, evenly thinned, and the last: a
+        run's memory then does not grow with its duration.
         """
         if (why := seed_error(seed)) is not None:
             raise ScenarioError(f"seed = {seed!r}: {why}")
@@ -265,7 +286,7 @@ class Master:
                                        f"{', '.join(f.name for f in self.fmus)}")
         recorder = Recorder(self.record_columns, self.record_units, n_steps + 1, csv_path, block_rows,
                             meta={"step": h, "t0": t0, "seed": seed}, types=self.plan.record_types,
-                            objects=self.plan.record_objects)
+                            objects=self.plan.record_objects, keep=keep, observers=observers, every=record_every)
         phase_times: dict[str, float] = {}
         started: dict[str, dict[str, Any]] = {}
         taken: list[Snapshot] = []
@@ -311,11 +332,13 @@ class Master:
         if terminated is not None:
             recorder.meta["terminated"] = terminated
         recorder.close(status, error)
-        result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
+        data, stride = recorder.kept()
+        result = RunResult(self.record_columns, self.record_units, data,
                            status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
                            recorder.path, seed, dict(parameters or {}), taken, self.plan.record_types,
                            recorder.object_columns(), python_loop, terminated,
-                           dict(self.plan.python_calls))
+                           dict(self.plan.python_calls), recorder.n_rows, stride, recorder.span,
+                           tuple(observers))
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure
@@ -556,7 +579,7 @@ class Master:
         from . import kernel
 
         recorder = blocks.recorder
-        h, signals, block = self.step, self.signals, recorder.block_rows
+        h, signals, block, chunk = self.step, self.signals, recorder.block_rows, recorder.chunk
         low, high = self.guard.limits
         args = kernel.prepare(self.plan, self.fmus, signals, recorder.data, low, high, t0, h, n_steps)
         stop = kernel.KernelStop()
@@ -573,6 +596,7 @@ class Master:
                 take(n)
             last = min((n // block + 1) * block - 1, n_steps)  # the Python loop flushes at the same rows
             last = min([last] + [m - 1 for m in marks if m > n])  # a snapshot is taken between kernel calls
+            args.data_first = n - n % chunk  # the recorder's chunk in memory (a call never crosses one)
             code = run(ctypes.byref(args), n, last, ctypes.byref(stop))
             if code != kernel.Stop.OK:
                 recorder.n_rows = int(stop.n) + int(stop.recorded)
@@ -592,13 +616,13 @@ class Master:
         recorder = blocks.recorder
         data, rec_idx = recorder.data, plan.record_slots
         guard_ok, guard_idx, guard = self.guard.ok, plan.watch_slots, self.guard
-        written = blocks.written
+        written, chunk = blocks.written, recorder.chunk
 
         record_objects = recorder.record_objects if plan.record_objects else None
         values = self.values
 
         def record(n: int, t: float) -> None:
-            take(signals, rec_idx, out=data[n])
+            take(signals, rec_idx, out=data[n % chunk])  # the recorder's chunk in memory
             if record_objects is not None:  # Int64, UInt64, String, Binary columns
                 record_objects(n, values)
             written(n + 1)

@@ -36,8 +36,6 @@ from .model_exchange import METHODS
 from .plan import ORDERINGS  # the master's (docs/cosim.md)
 from .files import read_toml
 from .limits import MAX_NESTING, MAX_STEPS
-from .limits import MAX_RECORD_BYTES
-from .recorder import record_bytes
 from .limits import SEED_LIMIT
 from .time_grid import runs_at, whole_steps
 from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, json_schema, one_of, refuse,
@@ -477,12 +475,8 @@ class Scenario:
         set_(self, "connections", tuple(c if isinstance(c, str) else MappingProxyType(c.model_dump(exclude_none=True))
                                         for c in model.connections))
         set_(self, "record", tuple(model.record.signals))
-        need = record_bytes(self.n_steps + 1, len(self.record) + 1)  # the rows a run keeps: refused when read
-        if need > MAX_RECORD_BYTES:
-            raise ScenarioError(f"simulation.duration = {self.duration!r}: {self.n_steps + 1} rows of "
-                                f"{len(self.record) + 1} recorded columns need {need / 2 ** 30:.1f} GiB in memory; "
-                                f"at most {MAX_RECORD_BYTES / 2 ** 30:.0f} GiB (record fewer signals, or run a "
-                                f"shorter mission)")
+        # no bound on the rows here: a run streams them (cosim.recorder); only a run asked to keep every row
+        # in memory (Master.run(keep=None)) is bounded, when it starts
         set_(self, "block_rows", model.record.block_rows)
         set_(self, "envelope", MappingProxyType(dict(model.envelope)))
 
