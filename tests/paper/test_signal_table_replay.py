@@ -99,10 +99,12 @@ def test_the_replay_exports_to_ssp_and_flies_alike_in_fmpy_and_libcosim(recorded
         n = len(ours.time) - 1
         for name in COMMANDS:
             assert np.array_equal(theirs[f"log.{name}"][:n], original[name][1:]), name
-        # its plant gets them one step late (connectors start at 0, Jacobi: the first step on rotors at
-        # rest), which the open-loop plant, unstable, does not forgive over 10 s (18 m): the first 0.5 s
+        # its plant gets them one step late (connectors start at 0, Jacobi): the first step is flown on
+        # rotors at rest, which leaves the vehicle falling g h = 0.1 m/s faster, with no controller to
+        # take it back (4.3 cm in z after 0.5 s, measured; 18 m in x after 10 s, the open-loop plant
+        # being unstable): the first 0.5 s within 6 cm
         for name in STATES[:3]:
             gap = np.max(np.abs(theirs[name][:50] - ours[name][1:51]))
-            assert gap < 5e-3, (name, gap)  # measured: 2.1 mm in x
+            assert gap < 0.06, (name, gap)
     finally:
         log.with_name("moved.csv").rename(log)
