@@ -259,3 +259,27 @@ def test_check_times_is_the_one_rule(tmp_path):
     check_times(np.array([0.0, 1.0, 1.0, 2.0]), "log")  # a step
     with pytest.raises(ScenarioError, match=re.escape("log: line 5, column t: time = 2 repeats")):
         check_times(np.array([0.0, 1.0, 2.0, 2.0]), "log", column="t", steps=False)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_the_table_fmu_validates_and_keeps_the_file_s_units(tmp_path, version):
+    """fmpy's validator accepts the table FMU; a unit of the header that
+    the project's models do not use (km/h) is defined by its SI meaning."""
+    from fmpy import read_model_description
+
+    from cosim.table import fmu_entry
+    from tests.fmu_validation import validate_fmu
+
+    path = fmu_entry("table", {"file": str(_write(tmp_path)), "fmi_version": version})["path"]
+    assert validate_fmu(path) == []
+    md = read_model_description(path)
+    assert {v.name: v.unit for v in md.modelVariables if v.causality == "output"} == {"x": "m", "y": "km/h"}
+    kmh = next(u for u in md.unitDefinitions if u.name == "km/h")
+    assert (kmh.baseUnit.m, kmh.baseUnit.s) == (1, -1) and kmh.baseUnit.factor == pytest.approx(1 / 3.6, rel=1e-15)
+
+
+def test_a_scenario_key_of_the_table_is_checked_in_one_line(tmp_path):
+    raw = scenario(tmp_path, "auto", outside="clamp")
+    with pytest.raises(ScenarioError, match=r"components\.table\.outside = 'clamp'") as info:
+        parse_scenario(raw)
+    assert "\n" not in str(info.value)
