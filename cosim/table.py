@@ -122,8 +122,8 @@ def _num(x: float) -> str:
 
 
 def check_times(times: np.ndarray, where: str, column: str = "time", max_gap: float | None = None,
-                steps: bool = True, line_of=lambda i: i + 2) -> None:
-    """Refuse, in one line naming the row (``line_of(i)``: the CSV line) and
+                steps: bool = True, line_of=lambda i: f"line {i + 2}") -> None:
+    """Refuse, in one line naming the row (``line_of(i)``: a CSV's line, by default) and
     the column, a time column that is not finite, goes back, repeats a time
     (unless ``steps``: two rows at one time are a step) or has two rows more
     than ``max_gap`` apart."""
@@ -131,20 +131,20 @@ def check_times(times: np.ndarray, where: str, column: str = "time", max_gap: fl
     bad = np.flatnonzero(~np.isfinite(times))
     if bad.size:
         i = int(bad[0])
-        raise ScenarioError(f"{where}: line {line_of(i)}, column {column}: {_num(times[i])}: expected a finite number")
+        raise ScenarioError(f"{where}: {line_of(i)}, column {column}: {_num(times[i])}: expected a finite number")
     step = np.diff(times)
     back = np.flatnonzero(step < 0 if steps else step <= 0)
     if back.size:
         i = int(back[0]) + 1
         how = "goes back" if times[i] < times[i - 1] else "repeats the row before's"
         rule = "the times must not decrease" if steps else "the times must increase"
-        raise ScenarioError(f"{where}: line {line_of(i)}, column {column}: time = {_num(times[i])} {how} "
+        raise ScenarioError(f"{where}: {line_of(i)}, column {column}: time = {_num(times[i])} {how} "
                             f"(after {_num(times[i - 1])}); {rule}")
     if max_gap is not None:
         wide = np.flatnonzero(step > max_gap)
         if wide.size:
             i = int(wide[0]) + 1
-            raise ScenarioError(f"{where}: line {line_of(i)}, column {column}: time = {_num(times[i])} is "
+            raise ScenarioError(f"{where}: {line_of(i)}, column {column}: time = {_num(times[i])} is "
                                 f"{_num(step[i - 1])} s after the row before ({_num(times[i - 1])}); max_gap = "
                                 f"{_num(max_gap)} s")
 
@@ -350,8 +350,8 @@ def load_table(path: str | Path, types: Mapping[str, str] | None = None, max_gap
     types = {k: v for k, v in (types or {}).items() if v}
     parquet = path.suffix.lower() in PARQUET_SUFFIXES
     times, columns, units, kinds = (_parquet_columns if parquet else _csv_columns)(path, where, types)
-    check_times(times, where, max_gap=max_gap, steps=steps, line_of=(lambda i: f"{i + 1} (row)") if parquet
-                else (lambda i: i + 2))
+    check_times(times, where, max_gap=max_gap, steps=steps, line_of=(lambda i: f"row {i + 1}") if parquet
+                else (lambda i: f"line {i + 2}"))
     return RecordedTable(path, times, columns, units, kinds)
 
 

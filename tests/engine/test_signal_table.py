@@ -202,7 +202,7 @@ def test_parquet_tables_with_units_in_names_or_metadata(tmp_path):
         load_table(tmp_path / "bad.parquet")
     back = pa.table([[0.0, 2.0, 1.0], [1.0, 2.0, 3.0]], names=["time", "x"])
     pq.write_table(back, tmp_path / "back.parquet")
-    with pytest.raises(ScenarioError, match=re.escape("line 3 (row), column time: time = 1 goes back (after 2)")):
+    with pytest.raises(ScenarioError, match=re.escape("row 3, column time: time = 1 goes back (after 2)")):
         load_table(tmp_path / "back.parquet")
     (tmp_path / "junk.parquet").write_bytes(b"not parquet at all")
     with pytest.raises(ScenarioError, match="not a readable Parquet file"):
