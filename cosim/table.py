@@ -62,7 +62,7 @@ from pydantic import Field
 from .component import FLOAT_HELD, TYPES, Port, PythonComponent, element_ports, typed_value
 from .errors import ScenarioError
 from .files import read_json, read_text, regular_file
-from .limits import MAX_TABLE_BYTES, MAX_TABLE_ROWS
+from .limits import MAX_TABLE_BYTES, MAX_TABLE_DATA, MAX_TABLE_ROWS
 from .schema import Positive, Table, one_of
 
 __all__ = ["SignalTable", "RecordedTable", "TableData", "read_table", "load_table", "check_times", "split_unit",
@@ -263,8 +263,8 @@ _ARROW_TYPES = {"double": "Float64", "float": "Float32", "halffloat": "Float32",
 
 
 def _parquet_columns(path: Path, where: str, types: dict[str, str]) -> tuple[np.ndarray, dict, dict, dict]:
-    """A Parquet table: bounded by its file size and its row count (read from
-    its footer before any column), each column's Arrow type its signal type
+    """A Parquet table: bounded by its file size, its row count and its data
+    uncompressed (read from its footer before any column), each column's Arrow type its signal type
     (a declared type must be the same), units from the names or the field
     metadata ``unit``; rows counted from 1 (the Parquet file has no lines)."""
     import pyarrow.parquet as pq
@@ -274,10 +274,14 @@ def _parquet_columns(path: Path, where: str, types: dict[str, str]) -> tuple[np.
         raise ScenarioError(f"{where}: {size} bytes; at most {MAX_TABLE_BYTES} are read")
     try:
         parquet = pq.ParquetFile(path)
-        n_rows = parquet.metadata.num_rows
+        meta = parquet.metadata
+        n_rows = meta.num_rows
         if n_rows > MAX_TABLE_ROWS:
             raise ScenarioError(f"{where}: more than {MAX_TABLE_ROWS} rows ({n_rows}); at most {MAX_TABLE_ROWS} "
                                 f"are read")
+        data = sum(meta.row_group(i).total_byte_size for i in range(meta.num_row_groups))
+        if data > MAX_TABLE_DATA:
+            raise ScenarioError(f"{where}: {data} bytes of data uncompressed; at most {MAX_TABLE_DATA} are read")
         table = parquet.read()
     except ScenarioError:
         raise

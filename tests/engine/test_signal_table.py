@@ -219,6 +219,10 @@ def test_a_parquet_table_is_bounded_by_its_footer_before_it_is_read(tmp_path, mo
     monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 4)
     with pytest.raises(ScenarioError, match=re.escape("more than 4 rows (5); at most 4 are read")):
         load_table(tmp_path / "t.parquet")
+    monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 5)
+    monkeypatch.setattr(cosim.table, "MAX_TABLE_DATA", 10)  # a zip bomb's kin: small compressed, large read
+    with pytest.raises(ScenarioError, match=r"\d+ bytes of data uncompressed; at most 10 are read"):
+        load_table(tmp_path / "t.parquet")
     monkeypatch.setattr(cosim.table, "MAX_TABLE_BYTES", 10)
     with pytest.raises(ScenarioError, match=r"\d+ bytes; at most 10 are read"):
         load_table(tmp_path / "t.parquet")
