@@ -7,13 +7,14 @@ as an FMU (resources/signal_table.bin inside it) and flies alike in our
 master, in fmpy's ``simulate_ssp`` and in libcosim."""
 from __future__ import annotations
 
+import json
 import zipfile
 
 import numpy as np
 import pytest
 
 from cosim.scenario import build_master, load_scenario, parse_scenario
-from cosim.ssp import export_ssp, load_ssp
+from cosim.ssp import load_ssp
 
 STATES = [f"Quadrotor.{s}" for s in ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")]
 COMMANDS = [f"controller.Omega_{i}" for i in range(1, 5)]
@@ -46,6 +47,24 @@ def replay(log, form: str = "auto", outside: str = "refuse") -> dict:
             "record": {"signals": STATES}}
 
 
+def as_toml(document: dict) -> str:
+    """A scenario document of strings, numbers, lists of strings and flat tables of numbers as TOML."""
+    def value(v):
+        return json.dumps(v) if isinstance(v, (str, list)) else repr(v)
+
+    lines = [f"{k} = {value(v)}" for k, v in document.items() if not isinstance(v, dict)]
+    for key, table in document.items():
+        if isinstance(table, dict):
+            nested = {k: v for k, v in table.items() if isinstance(v, dict)}
+            if len(nested) < len(table):
+                lines += [f"[{key}]"] + [f"{k} = {value(v)}" for k, v in table.items() if k not in nested]
+            for name, sub in nested.items():
+                lines.append(f"[{key}.{name}]")
+                lines += [f"{k} = {{ {', '.join(f'{a} = {value(b)}' for a, b in v.items())} }}"
+                          if isinstance(v, dict) else f"{k} = {value(v)}" for k, v in sub.items()]
+    return "\n".join(lines) + "\n"
+
+
 @pytest.mark.parametrize("form", ["fmu", "python"])
 def test_the_plant_on_its_recorded_commands_flies_the_recorded_run(recorded, form):
     """Held commands (the value each step was flown with, recorded at t_n):
@@ -73,12 +92,16 @@ def test_the_replay_exports_to_ssp_and_flies_alike_in_fmpy_and_libcosim(recorded
     from fmpy.ssp.simulation import simulate_ssp
 
     from cosim.ssp import run_libcosim
-    from quadrotor_paper.portable import all_fmu
+    from quadrotor_paper.cli import main
 
     log, original = recorded
     # outside = "hold": fmpy's simulate_ssp steps once beyond the stop time (its time accumulates h), which a
     # table that refuses to leave its rows would refuse
-    path = export_ssp(all_fmu(parse_scenario(replay(log, outside="hold"))), tmp_path / "replay.ssp")
+    toml = log.with_name("replay.toml")  # beside the log: its file named relative to the scenario
+    toml.write_text(as_toml({**replay(log, outside="hold"), "components": {"log": {
+        "kind": "signal_table", "file": log.name}}}), encoding="utf-8")
+    path = tmp_path / "replay.ssp"
+    assert main(["export-ssp", str(toml), "--out", str(path)]) == 0
     log.rename(log.with_name("moved.csv"))  # the archive needs the log no more
     try:
         with zipfile.ZipFile(path) as archive:
