@@ -27,9 +27,9 @@ columns (docs/cosim.md, "The signal table"):
   input does). Several rows at one time are a step: from that time on, the
   last of them holds (fmpy's ``Input`` at a communication point, after the
   event);
-* **the time column** (:func:`check_times`): finite, never decreasing, and,
-  with ``max_gap``, no two rows further apart than that; one line naming
-  the row and the column otherwise;
+* **the time column** (:func:`check_times`): finite, never decreasing (with
+  ``duplicates = "refuse"`` increasing), and, with ``max_gap``, no two rows
+  further apart than that; one line naming the row and the column otherwise;
 * **outside the recorded times** (``outside``): ``"hold"`` (default: before
   the first row the first value holds, after the last row the last) or
   ``"refuse"`` (a run that starts before the first row or ends after the
@@ -66,11 +66,13 @@ from .limits import MAX_TABLE_BYTES, MAX_TABLE_DATA, MAX_TABLE_ROWS
 from .schema import Positive, Table, one_of
 
 __all__ = ["SignalTable", "RecordedTable", "TableData", "read_table", "load_table", "check_times", "split_unit",
-           "table_component", "fmu_entry", "KIND", "INTERPOLATIONS", "OUTSIDE", "FORMS", "PARQUET_SUFFIXES"]
+           "table_component", "fmu_entry", "KIND", "INTERPOLATIONS", "OUTSIDE", "DUPLICATES", "FORMS",
+           "PARQUET_SUFFIXES"]
 
 KIND = "signal_table"
 INTERPOLATIONS = ("hold", "linear")
 OUTSIDE = ("hold", "refuse")
+DUPLICATES = ("step", "refuse")
 FORMS = ("auto", "fmu", "python")
 PARQUET_SUFFIXES = (".parquet", ".pq")
 
@@ -98,6 +100,9 @@ class TableSpec(Table):
                                                          "first / last values, or 'refuse' a run that goes there")
     max_gap: Positive = Field(None, description="the most two rows may lie apart [s]; a table with a wider gap "
                                                 "is refused (default: any)")
+    duplicates: one_of(DUPLICATES) = Field("step", description="two rows at one time: 'step' (from then on the "
+                                                               "last holds) or 'refuse' (a log sampled once per "
+                                                               "instant)")
     form: one_of(FORMS) = Field("auto", description="'fmu' (the table FMU: compiled loop, SSP archives), "
                                                     "'python', or 'auto': the FMU when every column is a Float64 "
                                                     "scalar and an FMU builder is registered")
@@ -403,22 +408,25 @@ class SignalTable(PythonComponent):
     ``columns`` gives, per column, ``{"type", "unit", "interpolation"}``
     (any may be left out: Float64 or the results sidecar's type, the file's
     unit, the table's ``interpolation``); ``outside``: ``"hold"`` or
-    ``"refuse"``; ``max_gap``: the widest gap between rows [s].
+    ``"refuse"``; ``max_gap``: the widest gap between rows [s];
+    ``duplicates``: ``"step"`` or ``"refuse"`` (two rows at one time).
     :meth:`values_at` gives every output's value at a time; :meth:`fmu_data`
     what the table FMU is built from.
     """
 
     def __init__(self, name: str, file: str | Path, interpolation: str = "hold",
                  columns: Mapping[str, Mapping[str, Any]] | None = None, outside: str = "hold",
-                 max_gap: float | None = None):
+                 max_gap: float | None = None, duplicates: str = "step"):
         super().__init__(name)
         self.path = Path(file)
         specs = {k: dict(v) for k, v in (columns or {}).items()}
-        for key, value, allowed in (("interpolation", interpolation, INTERPOLATIONS), ("outside", outside, OUTSIDE)):
+        for key, value, allowed in (("interpolation", interpolation, INTERPOLATIONS), ("outside", outside, OUTSIDE),
+                                    ("duplicates", duplicates, DUPLICATES)):
             if value not in allowed:
                 raise ScenarioError(f"{name}.{key} = {value!r}: expected one of {', '.join(allowed)}")
         self.outside = outside
-        recorded = load_table(self.path, {k: v.get("type") for k, v in specs.items()}, max_gap)
+        recorded = load_table(self.path, {k: v.get("type") for k, v in specs.items()}, max_gap,
+                              steps=duplicates == "step")
         unknown = sorted(set(specs) - set(recorded.columns))
         if unknown:
             raise ScenarioError(f"signal table {str(self.path)!r}: no column {unknown[0]!r}; its columns are: "
@@ -522,7 +530,7 @@ def _table(name: str, params: Mapping[str, Any], context) -> SignalTable:
         path = Path(source).parent / path
     return SignalTable(name, path, params.get("interpolation", "hold"),
                        {k: dict(v) for k, v in (params.get("columns") or {}).items()},
-                       params.get("outside", "hold"), params.get("max_gap"))
+                       params.get("outside", "hold"), params.get("max_gap"), params.get("duplicates", "step"))
 
 
 def _fmu_path(table: SignalTable, params: Mapping[str, Any]) -> Path | None:

@@ -143,6 +143,13 @@ def test_bad_time_columns_are_refused_in_one_line_naming_row_and_column(tmp_path
     assert "\n" not in str(info.value)
 
 
+def test_duplicates_step_by_default_and_refuse_when_asked(tmp_path):
+    (tmp_path / "in.csv").write_text("time,x\n0,1\n1,2\n1,3\n", encoding="utf-8")
+    assert SignalTable("t", tmp_path / "in.csv").values_at(1.0) == [3.0]
+    with pytest.raises(ScenarioError, match=re.escape("line 4, column time: time = 1 repeats the row before's")):
+        SignalTable("t", tmp_path / "in.csv", duplicates="refuse")
+
+
 def test_a_bad_table_exits_2_at_the_cli_in_one_line(tmp_path, capsys):
     from quadrotor_paper.cli import main
 
