@@ -302,7 +302,7 @@ def _register_engine_kinds() -> None:
     def build(name: str, parameters: Mapping[str, Any], context: BuildContext) -> Any:
         from .table import build as build_table
 
-        return build_table(name, parameters, context)
+        return build_table(name, parameters, context, table_fmu())
 
     def parameters() -> type:
         from .table import TableSpec

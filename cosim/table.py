@@ -533,11 +533,10 @@ def _table(name: str, params: Mapping[str, Any], context) -> SignalTable:
                        params.get("outside", "hold"), params.get("max_gap"), params.get("duplicates", "step"))
 
 
-def _fmu_path(table: SignalTable, params: Mapping[str, Any]) -> Path | None:
-    """The table FMU of ``table`` if its form is one (``None``: the Python component)."""
-    from .registry import table_fmu
-
-    form, builder = params.get("form", "auto"), table_fmu()
+def _fmu_path(table: SignalTable, params: Mapping[str, Any], builder) -> Path | None:
+    """The table FMU of ``table`` if its form is one (``None``: the Python
+    component); ``builder``: the registered one (:func:`cosim.registry.table_fmu`)."""
+    form = params.get("form", "auto")
     if form == "python" or (form == "auto" and (builder is None or not table.fmu_form)):
         return None
     if builder is None:
@@ -546,9 +545,10 @@ def _fmu_path(table: SignalTable, params: Mapping[str, Any]) -> Path | None:
     return Path(builder(table.fmu_data(), int(params.get("fmi_version", 2))))
 
 
-def table_component(name: str, params: Mapping[str, Any], context=None):
+def table_component(name: str, params: Mapping[str, Any], context=None, builder=None):
     """The component of a ``kind = "signal_table"`` table ``params``: the
-    table FMU (an :class:`~cosim.fmu_component.FmuComponent`) or the
+    table FMU (an :class:`~cosim.fmu_component.FmuComponent`, made by
+    ``builder``: :func:`cosim.registry.table_fmu`'s) or the
     :class:`SignalTable` itself, per its ``form``; ``file`` relative to the
     scenario file. With ``outside = "refuse"`` a scenario whose run leaves
     the table's times is refused here, before anything runs."""
@@ -557,7 +557,7 @@ def table_component(name: str, params: Mapping[str, Any], context=None):
     if scenario is not None and getattr(scenario, "duration", None) is not None:
         t0 = float(getattr(scenario, "start_time", 0.0) or 0.0)
         table.check_span(t0, t0 + float(scenario.duration))
-    path = _fmu_path(table, params)
+    path = _fmu_path(table, params, builder)
     if path is None:
         return table
     from .fmu_component import FmuComponent
@@ -565,13 +565,13 @@ def table_component(name: str, params: Mapping[str, Any], context=None):
     return FmuComponent(name, path)
 
 
-def fmu_entry(name: str, params: Mapping[str, Any], context=None) -> dict[str, Any]:
+def fmu_entry(name: str, params: Mapping[str, Any], context=None, builder=None) -> dict[str, Any]:
     """The ``[fmus]`` entry a table runs as in an all-FMU scenario (an SSP
-    archive): its table FMU, FMI 2.0 unless it says otherwise (libcosim runs
-    2.0), the table inside it."""
+    archive): its table FMU (made by ``builder``), FMI 2.0 unless it says
+    otherwise (libcosim runs 2.0), the table inside it."""
     table = _table(name, params, context)
-    path = _fmu_path(table, {**params, "form": "fmu"})
+    path = _fmu_path(table, {**params, "form": "fmu"}, builder)
     return {"path": str(path)}
 
 
-build = table_component  # the registered kind's factory (cosim.registry)
+build = table_component  # the registered kind's factory (cosim.registry passes its builder)

@@ -81,7 +81,7 @@ def fmu_entry(instance: str, spec: Mapping[str, Any], context) -> dict[str, Any]
     if kind == "signal_table":  # the engine's table, as its table FMU with the table inside
         from cosim.table import fmu_entry as table_entry
 
-        return table_entry(instance, params, context)
+        return table_entry(instance, params, context, registry.table_fmu())
     if kind == "fnn_controller":
         from .controller_component import ControllerComponent
 

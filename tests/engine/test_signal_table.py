@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from cosim.errors import ScenarioError
+from cosim.registry import table_fmu
 from cosim.scenario import build_master, parse_scenario
 from cosim.table import SignalTable, check_times, load_table, split_unit
 
@@ -118,7 +119,7 @@ def test_a_unit_from_the_header_is_converted_on_the_connection(tmp_path, form):
     from cosim.master import Master
     from cosim.table import table_component
 
-    table = table_component("table", {"file": str(tmp_path / "t.csv"), "form": form})
+    table = table_component("table", {"file": str(tmp_path / "t.csv"), "form": form}, builder=table_fmu())
     with Master([table] if form == "fmu" else [], [Sink("sink")] + ([table] if form == "python" else []),
                 ["table.y -> sink.v"], 0.5, ["sink.out"]) as master:
         result = master.run(3.0)
@@ -182,7 +183,7 @@ def test_the_table_fmu_refuses_a_step_beyond_its_rows_itself(tmp_path):
 
     from cosim.table import fmu_entry
 
-    path = fmu_entry("table", {"file": str(_write(tmp_path)), "outside": "refuse"})["path"]
+    path = fmu_entry("table", {"file": str(_write(tmp_path)), "outside": "refuse"}, builder=table_fmu())["path"]
     with pytest.raises(Exception, match="(?i)dostep"):
         simulate_fmu(path, stop_time=4.0, output_interval=0.5, fmi_type="CoSimulation")
     assert len(simulate_fmu(path, stop_time=3.0, output_interval=0.5, fmi_type="CoSimulation")) == 7
@@ -245,7 +246,7 @@ def test_the_table_fmu_refuses_a_tampered_resource(tmp_path):
     from cosim.table import fmu_entry
     from fmu_models.models.signal_table import RESOURCE
 
-    path = fmu_entry("table", {"file": str(_write(tmp_path))})["path"]
+    path = fmu_entry("table", {"file": str(_write(tmp_path))}, builder=table_fmu())["path"]
     with zipfile.ZipFile(path) as z:
         data = z.read(RESOURCE)
     n = (len(data) - 32) // 8 // 3  # rows: header 8 + 16 + 3 flags, padded to 32
@@ -279,7 +280,7 @@ def test_the_table_fmu_validates_and_keeps_the_file_s_units(tmp_path, version):
     from cosim.table import fmu_entry
     from tests.fmu_validation import validate_fmu
 
-    path = fmu_entry("table", {"file": str(_write(tmp_path)), "fmi_version": version})["path"]
+    path = fmu_entry("table", {"file": str(_write(tmp_path)), "fmi_version": version}, builder=table_fmu())["path"]
     assert validate_fmu(path) == []
     md = read_model_description(path)
     assert {v.name: v.unit for v in md.modelVariables if v.causality == "output"} == {"x": "m", "y": "km/h"}
