@@ -352,7 +352,7 @@ def _operating_point_of_run(args) -> tuple[Path, dict[str, Any]]:
     (its FMU state, its inputs and parameters then, as keyword arguments of
     ``linearize_fmu``)."""
     from cosim.errors import ScenarioError
-    from cosim.master import communication_point
+    from cosim.time_grid import communication_point
     from cosim.scenario import build_master, load_scenario
 
     if args.parameter:
@@ -534,7 +534,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("scenario", help="TOML file, shipped scenario name (see fnn-cosim scenarios), or SSP archive (.ssp)")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario value, e.g. --set wind.speed=5 (repeatable)")
-    r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
+    r.add_argument("--seed", type=int, help="the run's seed (simulation.seed): every seeded component and FMU "
+                   "draws from it (the FNN's initial weights, sensor noise, wind)")
     r.add_argument("--variant", choices=variant_names(), help="controller variant")
     r.add_argument("--no-plots", action="store_true")
     r.add_argument("--profile", action="store_true",
