@@ -64,6 +64,7 @@ from .errors import ScenarioError
 from .files import read_json, read_text, regular_file
 from .limits import MAX_TABLE_BYTES, MAX_TABLE_DATA, MAX_TABLE_ROWS
 from .schema import Positive, Table, one_of
+from .time_grid import TOLERANCE  # a time within it of a row's counts as the row's (math.isclose, as fmpy)
 
 __all__ = ["SignalTable", "RecordedTable", "TableData", "read_table", "load_table", "check_times", "split_unit",
            "table_component", "fmu_entry", "KIND", "INTERPOLATIONS", "OUTSIDE", "DUPLICATES", "FORMS",
@@ -463,8 +464,8 @@ class SignalTable(PythonComponent):
         """With ``outside = "refuse"``: a one-line :class:`ScenarioError` if
         ``[t0, t_end]`` leaves the recorded times (within 1e-9 relative)."""
         first, last = float(self.times[0]), float(self.times[-1])
-        early = t0 < first and not math.isclose(t0, first, rel_tol=1e-9)
-        late = t_end > last and not math.isclose(t_end, last, rel_tol=1e-9)
+        early = t0 < first and not math.isclose(t0, first, rel_tol=TOLERANCE)
+        late = t_end > last and not math.isclose(t_end, last, rel_tol=TOLERANCE)
         if self.outside == "refuse" and (early or late):
             raise ScenarioError(f"{self.name}: the run from t = {t0!r} to {t_end!r} s leaves the table's times "
                                 f"[{first!r}, {last!r}] s (outside = 'refuse'; 'hold' holds the first and last rows)")
@@ -476,7 +477,7 @@ class SignalTable(PythonComponent):
         """The last row whose time is ``<= t`` (within 1e-9 relative), -1 before the first."""
         times = self.times
         i = int(np.searchsorted(times, t, side="right")) - 1
-        while i + 1 < len(times) and math.isclose(times[i + 1], t, rel_tol=1e-9):
+        while i + 1 < len(times) and math.isclose(times[i + 1], t, rel_tol=TOLERANCE):
             i += 1
         return i
 
