@@ -29,7 +29,7 @@ from typing import Any, Callable, Mapping, Sequence
 __all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
            "register_section", "register_fmu_model", "register_scenarios", "register_case", "component_kinds",
            "sections", "fmu_models", "cases", "aliases", "scenario_folders", "scoped", "with_connections", "version",
-           "PLUGIN_GROUP"]
+           "register_table_fmu", "table_fmu", "PLUGIN_GROUP"]
 
 PLUGIN_GROUP = "cosim.plugins"
 
@@ -145,6 +145,7 @@ _SECTIONS: dict[str, Section] = {}
 _MODELS: dict[str, RegisteredModel] = {}
 _CASES: dict[str, Case] = {}
 _SCENARIO_FOLDERS: list[Path] = []
+_TABLE_FMU: list[Callable[[Any, int], Path]] = []  # at most one: the builder of the signal table's FMU
 _plugins_loaded = False
 _VERSION = [0]  # bumped by every change of the registry (the scenario's declaration is rebuilt)
 
@@ -200,6 +201,25 @@ def build_fmu_models(fmi_versions: Sequence[int]) -> list[tuple[str, int, Path]]
     with ThreadPoolExecutor(max(1, os.cpu_count() or 1)) as pool:
         paths = list(pool.map(lambda b: b[1].build(b[2]), builds))
     return [(name, version, path) for (name, _, version), path in zip(builds, paths)]
+
+
+def register_table_fmu(build: Callable[[Any, int], Path]) -> None:
+    """The builder of the signal table's FMU form (``kind = "signal_table"``,
+    :mod:`cosim.table`): ``build(table, fmi_version)`` returns the path of an
+    FMU playing ``table`` (a :class:`cosim.table.TableData`) from its own
+    resources; the engine builds no FMU itself. One per process: a second,
+    different one is refused."""
+    if _TABLE_FMU and _TABLE_FMU[0] != build:
+        raise ValueError("a table FMU builder is registered twice, differently")
+    if not _TABLE_FMU:
+        _TABLE_FMU.append(build)
+        _VERSION[0] += 1
+
+
+def table_fmu() -> Callable[[Any, int], Path] | None:
+    """The registered table FMU builder (:func:`register_table_fmu`), or ``None``."""
+    _load_plugins()
+    return _TABLE_FMU[0] if _TABLE_FMU else None
 
 
 def register_case(case: Case) -> Case:
@@ -282,7 +302,7 @@ def _register_engine_kinds() -> None:
     def build(name: str, parameters: Mapping[str, Any], context: BuildContext) -> Any:
         from .table import build as build_table
 
-        return build_table(name, parameters, context)
+        return build_table(name, parameters, context, table_fmu())
 
     def parameters() -> type:
         from .table import TableSpec
@@ -290,7 +310,8 @@ def _register_engine_kinds() -> None:
         return TableSpec
 
     register_component_kind(ComponentKind("signal_table", build, parameters,
-                                          "a CSV signal table played as outputs (docs/cosim.md, 'The signal table')"))
+                                          "a recorded CSV or Parquet table played as outputs (docs/cosim.md, "
+                                          "'The signal table')"))
 
 
 _register_engine_kinds()

@@ -1,11 +1,20 @@
-"""The signal table: a CSV file played as outputs (``kind = "signal_table"``).
+"""The signal table: a recorded CSV or Parquet file played as outputs (``kind = "signal_table"``).
 
-The engine's one table component (it knows no model): a file with a header
-``time,col1,col2,...`` and one row per instant, as the Reference FMUs'
-``<Model>_in.csv`` input tables, becomes a source whose outputs are the
+The engine's one table component (it knows no model): a file with a time
+column and one row per instant -- the Reference FMUs' ``<Model>_in.csv``
+input tables, test-bench data, a log, or this engine's own results
+(``results.csv`` and its sidecar) -- becomes a source whose outputs are the
 columns (docs/cosim.md, "The signal table"):
 
-* **types** per column, declared in the scenario (default ``Float64``): any
+* **files**: CSV (a header ``time,col1,col2,...``) or Parquet (``.parquet``,
+  ``.pq``: a column ``time``, numbers, Booleans and strings, no nulls);
+* **units** per column: from the header (``x [m]``: the column ``x`` in
+  metres; ``time [s]``), from this engine's results sidecar
+  (``results.csv.json``: its ``units``), from a Parquet field's ``unit``
+  metadata, or declared in the scenario (``columns.x.unit``, the map); two
+  that disagree are refused in one line; checked on connections like any
+  port's (``km/h -> m/s`` is converted);
+* **types** per column (default Float64; the results sidecar's types): any
   of :data:`cosim.component.TYPES`; a field holding several numbers
   separated by spaces (``"1 2"``, as ``StateSpace_in.csv`` writes the input
   vector) makes the column an array of that many elements (every row the
@@ -17,9 +26,20 @@ columns (docs/cosim.md, "The signal table"):
   1e-9 relative of ``t`` count as ``<= t`` (``math.isclose``, as fmpy's
   input does). Several rows at one time are a step: from that time on, the
   last of them holds (fmpy's ``Input`` at a communication point, after the
-  event). Before the first row the first value holds, after the last row
-  the last;
-* **units** per column (optional), checked on connections like any port's.
+  event);
+* **the time column** (:func:`check_times`): finite, never decreasing (with
+  ``duplicates = "refuse"`` increasing), and, with ``max_gap``, no two rows
+  further apart than that; one line naming the row and the column otherwise;
+* **outside the recorded times** (``outside``): ``"hold"`` (default: before
+  the first row the first value holds, after the last row the last) or
+  ``"refuse"`` (a run that starts before the first row or ends after the
+  last is refused before its first step, naming both times);
+* **form** (``form``): a table of Float64 scalar columns runs as an FMU
+  (``fmu_models``' generic table FMU, registered with
+  :func:`cosim.registry.register_table_fmu`: the same values, in the
+  compiled loop and inside SSP archives) where one is registered
+  (``"auto"``, the default; ``"fmu"`` insists), else as this Python
+  component (``"python"``).
 
 The file is data from anyone: read whole, it is bounded
 (:data:`~cosim.limits.MAX_TABLE_BYTES`, :data:`~cosim.limits.MAX_TABLE_ROWS`),
@@ -31,41 +51,108 @@ from __future__ import annotations
 import csv
 import io
 import math
+import re
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from pydantic import Field
 
 from .component import FLOAT_HELD, TYPES, Port, PythonComponent, element_ports, typed_value
 from .errors import ScenarioError
-from .files import read_text
-from .limits import MAX_TABLE_BYTES, MAX_TABLE_ROWS
-from .schema import Table, one_of
+from .files import read_json, read_text, regular_file
+from .limits import MAX_TABLE_BYTES, MAX_TABLE_DATA, MAX_TABLE_ROWS
+from .schema import Positive, Table, one_of
+from .time_grid import TOLERANCE  # a time within it of a row's counts as the row's (math.isclose, as fmpy)
 
-__all__ = ["SignalTable", "read_table", "KIND", "INTERPOLATIONS"]
+__all__ = ["SignalTable", "RecordedTable", "TableData", "read_table", "load_table", "check_times", "split_unit",
+           "table_component", "fmu_entry", "KIND", "INTERPOLATIONS", "OUTSIDE", "DUPLICATES", "FORMS",
+           "PARQUET_SUFFIXES"]
 
 KIND = "signal_table"
 INTERPOLATIONS = ("hold", "linear")
+OUTSIDE = ("hold", "refuse")
+DUPLICATES = ("step", "refuse")
+FORMS = ("auto", "fmu", "python")
+PARQUET_SUFFIXES = (".parquet", ".pq")
 
 
 class ColumnSpec(Table):
     """``[components.<name>.columns.<column>]``: one column's declaration."""
 
-    type: one_of(TYPES) = Field("Float64", description="its signal type (docs/cosim.md, 'Signal types')")
-    unit: str = Field(None, description="its unit (checked on connections)")
+    type: one_of(TYPES) = Field(None, description="its signal type (docs/cosim.md, 'Signal types'; default "
+                                                  "Float64, or what the results sidecar says)")
+    unit: str = Field(None, description="its unit (checked on connections; must agree with the file's)")
     interpolation: one_of(INTERPOLATIONS) = Field(None, description="'hold' or 'linear' (default: the table's)")
 
 
 class TableSpec(Table):
-    """``[components.<name>] kind = "signal_table"``: a CSV file played as outputs."""
+    """``[components.<name>] kind = "signal_table"``: a recorded CSV or Parquet file played as outputs."""
 
-    file: str = Field(..., description="the CSV file (relative to the scenario file): a header 'time,col1,...', "
-                                       "one row per instant")
+    file: str = Field(..., description="the CSV or Parquet file (relative to the scenario file): a time column "
+                                       "'time' (CSV: the first, header 'time,col1,...'), one row per instant; "
+                                       "units in the header as 'x [m]'")
     interpolation: one_of(INTERPOLATIONS) = Field("hold", description="every column's, unless it says its own: "
                                                                       "'hold' (sample and hold) or 'linear'")
     columns: dict[str, ColumnSpec] = Field(default_factory=dict, description="type, unit, interpolation per "
                                                                              "column (default Float64)")
+    outside: one_of(OUTSIDE) = Field("hold", description="before the first row and after the last: 'hold' the "
+                                                         "first / last values, or 'refuse' a run that goes there")
+    max_gap: Positive = Field(None, description="the most two rows may lie apart [s]; a table with a wider gap "
+                                                "is refused (default: any)")
+    duplicates: one_of(DUPLICATES) = Field("step", description="two rows at one time: 'step' (from then on the "
+                                                               "last holds) or 'refuse' (a log sampled once per "
+                                                               "instant)")
+    form: one_of(FORMS) = Field("auto", description="'fmu' (the table FMU: compiled loop, SSP archives), "
+                                                    "'python', or 'auto': the FMU when every column is a Float64 "
+                                                    "scalar and an FMU builder is registered")
+    fmi_version: one_of((2, 3), type_=int) = Field(2, description="FMI version of the table FMU")
+
+
+_UNIT = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]\s*$")
+
+
+def split_unit(header: str) -> tuple[str, str | None]:
+    """``"x [m]"`` -> ``("x", "m")``; a name without brackets has no unit."""
+    match = _UNIT.match(header.strip())
+    if match is None:
+        return header.strip(), None
+    return match["name"], match["unit"].strip() or None
+
+
+def _num(x: float) -> str:
+    """A time as written: the shortest text that reads back as it (``1``, ``0.1``)."""
+    text = repr(float(x))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def check_times(times: np.ndarray, where: str, column: str = "time", max_gap: float | None = None,
+                steps: bool = True, line_of=lambda i: f"line {i + 2}") -> None:
+    """Refuse, in one line naming the row (``line_of(i)``: a CSV's line, by default) and
+    the column, a time column that is not finite, goes back, repeats a time
+    (unless ``steps``: two rows at one time are a step) or has two rows more
+    than ``max_gap`` apart."""
+    times = np.asarray(times, dtype=float)
+    bad = np.flatnonzero(~np.isfinite(times))
+    if bad.size:
+        i = int(bad[0])
+        raise ScenarioError(f"{where}: {line_of(i)}, column {column}: {_num(times[i])}: expected a finite number")
+    step = np.diff(times)
+    back = np.flatnonzero(step < 0 if steps else step <= 0)
+    if back.size:
+        i = int(back[0]) + 1
+        how = "goes back" if times[i] < times[i - 1] else "repeats the row before's"
+        rule = "the times must not decrease" if steps else "the times must increase"
+        raise ScenarioError(f"{where}: {line_of(i)}, column {column}: time = {_num(times[i])} {how} "
+                            f"(after {_num(times[i - 1])}); {rule}")
+    if max_gap is not None:
+        wide = np.flatnonzero(step > max_gap)
+        if wide.size:
+            i = int(wide[0]) + 1
+            raise ScenarioError(f"{where}: {line_of(i)}, column {column}: time = {_num(times[i])} is "
+                                f"{_num(step[i - 1])} s after the row before ({_num(times[i - 1])}); max_gap = "
+                                f"{_num(max_gap)} s")
 
 
 def _parse(text: str, where: str) -> tuple[list[str], list[list[str]]]:
@@ -78,13 +165,8 @@ def _parse(text: str, where: str) -> tuple[list[str], list[list[str]]]:
     except csv.Error as exc:
         raise ScenarioError(f"{where}: line 1: {exc}") from None
     header = [h.strip() for h in header]
-    if not header or header[0] != "time" or len(header) < 2:
+    if not header or split_unit(header[0])[0] != "time" or len(header) < 2:
         raise ScenarioError(f"{where}: header {','.join(header)!r}: expected 'time,col1,...'")
-    seen = set()
-    for name in header[1:]:
-        if not name or name in seen or name == "time":
-            raise ScenarioError(f"{where}: header: column name {name!r} is empty or repeated")
-        seen.add(name)
     rows = []
     try:
         for line, row in enumerate(reader, start=2):
@@ -102,37 +184,60 @@ def _parse(text: str, where: str) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
-def read_table(path: str | Path, types: Mapping[str, str] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-    """``(times, columns)`` of the CSV signal table ``path``: the time column
-    (finite, non-decreasing) and, per column, its values -- a float64 array
-    (rows, or rows x elements for an array column) for the types a double
-    holds exactly, else a list of Python values (int, str, bytes; a list of
-    lists for an array column) -- each field read as its column's type
-    (``types``, default Float64). One-line :class:`ScenarioError` otherwise."""
-    path = Path(path)
-    where = f"signal table {str(path)!r}"
+def _names(header: Sequence[str], where: str, told_units: Sequence[str | None] | None) -> tuple[list, list]:
+    """Column names and units of a header (``x [m]``; the sidecar's units where it gives them)."""
+    names, units = [], []
+    for k, field in enumerate(header):
+        name, unit = split_unit(field)
+        told = told_units[k] if told_units is not None else None
+        if unit is not None and told not in (None, unit):
+            raise ScenarioError(f"{where}: column {name}: unit {unit!r} in the header but {told!r} in the sidecar")
+        names.append(name)
+        units.append(unit if unit is not None else told)
+    seen = set()
+    for name in names[1:]:
+        if not name or name in seen or name == "time":
+            raise ScenarioError(f"{where}: header: column name {name!r} is empty or repeated")
+        seen.add(name)
+    if units[0] not in (None, "s"):
+        raise ScenarioError(f"{where}: column time: unit {units[0]!r}; the time is in s")
+    return names, units
+
+
+def _sidecar(path: Path, header: Sequence[str]) -> tuple[list | None, list | None]:
+    """Units and types of this engine's results file (its ``.json`` sidecar,
+    :mod:`cosim.recorder`) when it describes these very columns."""
+    side = Path(str(path) + ".json")
+    if not side.is_file():
+        return None, None
+    info = read_json(side, "results sidecar")
+    if not isinstance(info, dict) or info.get("columns") != list(header):
+        return None, None
+    units, types = info.get("units"), info.get("types")
+    ok = lambda v: isinstance(v, list) and len(v) == len(header)  # noqa: E731
+    return ([u if isinstance(u, str) and u else None for u in units] if ok(units) else None,
+            [t if t in TYPES else "Float64" for t in types] if ok(types) else None)
+
+
+def _csv_columns(path: Path, where: str, types: dict[str, str]) -> tuple[np.ndarray, dict, dict, dict]:
     header, rows = _parse(read_text(path, "signal table", limit=MAX_TABLE_BYTES), where)
-    types = dict(types or {})
-    unknown = sorted(set(types) - set(header[1:]))
+    told_units, told_types = _sidecar(path, header)
+    names, units = _names(header, where, told_units)
+    defaults = dict(zip(names, told_types)) if told_types is not None else {}
+    unknown = sorted(set(types) - set(names[1:]))
     if unknown:
-        raise ScenarioError(f"{where}: no column {unknown[0]!r}; its columns are: {', '.join(header[1:])}")
+        raise ScenarioError(f"{where}: no column {unknown[0]!r}; its columns are: {', '.join(names[1:])}")
     times = np.empty(len(rows))
     for i, row in enumerate(rows):
         try:
             times[i] = float(row[0])
         except ValueError:
-            raise ScenarioError(f"{where}: line {i + 2}: time = {row[0]!r}: expected a number") from None
-    if not np.isfinite(times).all():
-        i = int(np.argmin(np.isfinite(times)))
-        raise ScenarioError(f"{where}: line {i + 2}: time = {rows[i][0]!r}: expected a finite number")
-    back = np.flatnonzero(np.diff(times) < 0)
-    if back.size:
-        i = int(back[0]) + 1
-        raise ScenarioError(f"{where}: line {i + 2}: time = {rows[i][0]} goes back (after {rows[i - 1][0]}); "
-                            f"the times must not decrease")
+            raise ScenarioError(f"{where}: line {i + 2}, column time: {row[0]!r}: expected a number") from None
     columns: dict[str, Any] = {}
-    for j, name in enumerate(header[1:], start=1):
-        type_ = types.get(name, "Float64")
+    kinds: dict[str, str] = {}
+    for j, name in enumerate(names[1:], start=1):
+        type_ = types.get(name) or defaults.get(name) or "Float64"
+        kinds[name] = type_
         fields = [row[j] for row in rows]
         # several numbers separated by spaces: an array column (a String keeps its spaces)
         split = type_ != "String" and any(len(f.split()) > 1 for f in fields)
@@ -153,51 +258,226 @@ def read_table(path: str | Path, types: Mapping[str, str] | None = None) -> tupl
             if type_ in ("Float64", "Float32") and not all(math.isfinite(v) for v in parsed):
                 raise ScenarioError(f"{where}: line {i + 2}, column {name}: {field!r}: expected finite numbers")
             values.append(parsed if split else parsed[0])
+        columns[name] = np.array(values, dtype=float) if type_ in FLOAT_HELD else values  # Booleans as 0/1
+    return times, columns, dict(zip(names[1:], units[1:])), kinds
+
+
+_ARROW_TYPES = {"double": "Float64", "float": "Float32", "halffloat": "Float32", "int8": "Int8",
+                "int16": "Int16", "int32": "Int32", "int64": "Int64", "uint8": "UInt8", "uint16": "UInt16",
+                "uint32": "UInt32", "uint64": "UInt64", "bool": "Boolean", "string": "String",
+                "large_string": "String", "binary": "Binary", "large_binary": "Binary"}
+
+
+def _parquet_columns(path: Path, where: str, types: dict[str, str]) -> tuple[np.ndarray, dict, dict, dict]:
+    """A Parquet table: bounded by its file size, its row count and its data
+    uncompressed (read from its footer before any column), each column's Arrow type its signal type
+    (a declared type must be the same), units from the names or the field
+    metadata ``unit``; rows counted from 1 (the Parquet file has no lines)."""
+    import pyarrow.parquet as pq
+
+    size = regular_file(path, "signal table").st_size
+    if size > MAX_TABLE_BYTES:
+        raise ScenarioError(f"{where}: {size} bytes; at most {MAX_TABLE_BYTES} are read")
+    try:
+        parquet = pq.ParquetFile(path)
+        meta = parquet.metadata
+        n_rows = meta.num_rows
+        if n_rows > MAX_TABLE_ROWS:
+            raise ScenarioError(f"{where}: more than {MAX_TABLE_ROWS} rows ({n_rows}); at most {MAX_TABLE_ROWS} "
+                                f"are read")
+        data = sum(meta.row_group(i).total_byte_size for i in range(meta.num_row_groups))
+        if data > MAX_TABLE_DATA:
+            raise ScenarioError(f"{where}: {data} bytes of data uncompressed; at most {MAX_TABLE_DATA} are read")
+        table = parquet.read()
+    except ScenarioError:
+        raise
+    except Exception as exc:  # pyarrow's errors: a corrupt or foreign file
+        raise ScenarioError(f"{where}: not a readable Parquet file ({str(exc).splitlines()[0] if str(exc) else exc})"
+                            ) from None
+    if n_rows == 0:
+        raise ScenarioError(f"{where}: no rows")
+    header = list(table.schema.names)
+    meta = [(f.metadata or {}).get(b"unit") for f in table.schema]
+    names, units = _names(header, where, [m.decode("utf-8", "replace") if m else None for m in meta])
+    if "time" not in names:
+        raise ScenarioError(f"{where}: no column 'time'; its columns are: {', '.join(names)}")
+    unknown = sorted(set(types) - set(names) - {"time"})
+    if unknown:
+        raise ScenarioError(f"{where}: no column {unknown[0]!r}; its columns are: "
+                            f"{', '.join(n for n in names if n != 'time')}")
+    columns: dict[str, Any] = {}
+    kinds: dict[str, str] = {}
+    times = None
+    for name, field, array in zip(names, table.schema, table.columns):
+        type_ = _ARROW_TYPES.get(str(field.type))
+        if type_ is None:
+            raise ScenarioError(f"{where}: column {name}: Arrow type {field.type}; a table holds numbers, "
+                                f"Booleans, strings and bytes")
+        if array.null_count:
+            i = int(np.flatnonzero(np.asarray(array.is_null()))[0])
+            raise ScenarioError(f"{where}: row {i + 1}, column {name}: no value (null)")
+        if name == "time":
+            if type_ not in FLOAT_HELD:
+                raise ScenarioError(f"{where}: column time: {type_}; expected numbers")
+            times = np.asarray(array.to_numpy(zero_copy_only=False), dtype=float)
+            continue
+        declared = types.get(name)
+        if declared is not None and declared != type_:
+            raise ScenarioError(f"{where}: column {name}: {type_} in the file, declared {declared}")
+        kinds[name] = type_
         if type_ in FLOAT_HELD:
-            columns[name] = np.array(values, dtype=float)  # Booleans as 0/1
-        else:
+            values = np.asarray(array.to_numpy(zero_copy_only=False), dtype=float)
+            if type_ in ("Float64", "Float32") and not np.isfinite(values).all():
+                i = int(np.flatnonzero(~np.isfinite(values))[0])
+                raise ScenarioError(f"{where}: row {i + 1}, column {name}: {values[i]!r}: expected finite numbers")
             columns[name] = values
-    return times, columns
+        else:
+            columns[name] = array.to_pylist()
+    return times, columns, {n: u for n, u in zip(names, units) if n != "time"}, kinds
+
+
+@dataclass(frozen=True)
+class RecordedTable:
+    """A table file as read: the times, per column its values (a float64
+    array -- rows, or rows x elements -- for the types a double holds
+    exactly, else a list), its unit (``None``: none given) and type."""
+
+    path: Path
+    times: np.ndarray
+    columns: Mapping[str, Any]
+    units: Mapping[str, str | None]
+    types: Mapping[str, str]
+
+
+def load_table(path: str | Path, types: Mapping[str, str] | None = None, max_gap: float | None = None,
+               steps: bool = True) -> RecordedTable:
+    """The CSV or Parquet table ``path`` (by its suffix), every field read as
+    its column's type (``types``, default Float64 or the results sidecar's),
+    the time column checked (:func:`check_times` with ``max_gap`` and
+    ``steps``). One-line :class:`ScenarioError` otherwise."""
+    path = Path(path)
+    where = f"signal table {str(path)!r}"
+    types = {k: v for k, v in (types or {}).items() if v}
+    parquet = path.suffix.lower() in PARQUET_SUFFIXES
+    times, columns, units, kinds = (_parquet_columns if parquet else _csv_columns)(path, where, types)
+    check_times(times, where, max_gap=max_gap, steps=steps, line_of=(lambda i: f"row {i + 1}") if parquet
+                else (lambda i: f"line {i + 2}"))
+    return RecordedTable(path, times, columns, units, kinds)
+
+
+def read_table(path: str | Path, types: Mapping[str, str] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    """``(times, columns)`` of the table ``path`` (:func:`load_table`)."""
+    table = load_table(path, types)
+    return table.times, dict(table.columns)
+
+
+@dataclass(frozen=True, eq=False)
+class TableData:
+    """What the table FMU is built from (:func:`cosim.registry.register_table_fmu`):
+    the column names, their units (``""``: none) and SI definitions
+    (:class:`cosim.units.Unit` as ``<BaseUnit>`` attributes, ``None`` when
+    unknown), descriptions, ``linear`` per column, ``refuse_outside``, the
+    times and the values (rows x columns)."""
+
+    columns: tuple[str, ...]
+    units: tuple[str, ...]
+    base_units: tuple[Mapping[str, float] | None, ...]
+    descriptions: tuple[str, ...]
+    linear: tuple[bool, ...]
+    refuse_outside: bool
+    times: np.ndarray
+    values: np.ndarray
+
+
+def _base_unit(name: str) -> Mapping[str, float] | None:
+    from . import units
+
+    unit = units.parse(name)
+    if unit is None:
+        return None
+    base: dict[str, float] = {b: e for b, e in zip(units.BASE_UNITS, unit.exponents) if e}
+    if unit.factor != 1.0:
+        base["factor"] = unit.factor
+    if unit.offset != 0.0:
+        base["offset"] = unit.offset
+    return base
 
 
 class SignalTable(PythonComponent):
-    """A CSV signal table's columns as outputs (module docstring).
+    """A recorded table's columns as outputs (module docstring).
 
     ``columns`` gives, per column, ``{"type", "unit", "interpolation"}``
-    (any may be left out: Float64, no unit, the table's ``interpolation``).
+    (any may be left out: Float64 or the results sidecar's type, the file's
+    unit, the table's ``interpolation``); ``outside``: ``"hold"`` or
+    ``"refuse"``; ``max_gap``: the widest gap between rows [s];
+    ``duplicates``: ``"step"`` or ``"refuse"`` (two rows at one time).
+    :meth:`values_at` gives every output's value at a time; :meth:`fmu_data`
+    what the table FMU is built from.
     """
 
     def __init__(self, name: str, file: str | Path, interpolation: str = "hold",
-                 columns: Mapping[str, Mapping[str, Any]] | None = None):
+                 columns: Mapping[str, Mapping[str, Any]] | None = None, outside: str = "hold",
+                 max_gap: float | None = None, duplicates: str = "step"):
         super().__init__(name)
         self.path = Path(file)
         specs = {k: dict(v) for k, v in (columns or {}).items()}
-        if interpolation not in INTERPOLATIONS:
-            raise ScenarioError(f"{name}.interpolation = {interpolation!r}: expected one of "
-                                f"{', '.join(INTERPOLATIONS)}")
-        self.times, values = read_table(self.path, {k: v.get("type", "Float64") for k, v in specs.items()})
+        for key, value, allowed in (("interpolation", interpolation, INTERPOLATIONS), ("outside", outside, OUTSIDE),
+                                    ("duplicates", duplicates, DUPLICATES)):
+            if value not in allowed:
+                raise ScenarioError(f"{name}.{key} = {value!r}: expected one of {', '.join(allowed)}")
+        self.outside = outside
+        recorded = load_table(self.path, {k: v.get("type") for k, v in specs.items()}, max_gap,
+                              steps=duplicates == "step")
+        unknown = sorted(set(specs) - set(recorded.columns))
+        if unknown:
+            raise ScenarioError(f"signal table {str(self.path)!r}: no column {unknown[0]!r}; its columns are: "
+                                f"{', '.join(recorded.columns)}")
+        self.times = recorded.times
         ports, self._columns = [], []
-        for column, data in values.items():
+        for column, data in recorded.columns.items():
             spec = specs.get(column, {})
-            type_ = spec.get("type") or "Float64"
+            type_ = recorded.types[column]
+            unit = recorded.units.get(column)
+            if spec.get("unit") is not None and unit not in (None, spec["unit"]):
+                raise ScenarioError(f"{name}.columns.{column}.unit = {spec['unit']!r}: the file {self.path.name} "
+                                    f"gives {unit!r}")
+            unit = spec.get("unit") or unit
             how = spec.get("interpolation") or interpolation
             if how == "linear" and type_ not in ("Float64", "Float32"):
                 raise ScenarioError(f"{name}.columns.{column}.interpolation = 'linear': a {type_} column is held "
                                     f"('hold'); only Float32 and Float64 columns interpolate")
             first = data[0]
             shape = (len(first),) if isinstance(first, (list, np.ndarray)) and np.ndim(first) == 1 else ()
-            ports.append(Port(column, spec.get("unit"), type_, f"column {column} of {self.path.name}", shape=shape))
+            ports.append(Port(column, unit, type_, f"column {column} of {self.path.name}", shape=shape))
             self._columns.append((data, how, type_, shape))
         self.outputs = tuple(ports)
         self._typed = any(p.type != "Float64" for p in self.outputs)
         self._n = len(element_ports(self.outputs))
         self._y = np.zeros(self._n)
 
+    @property
+    def fmu_form(self) -> bool:
+        """Whether the table FMU can play it: every column a Float64 scalar."""
+        return all(p.type == "Float64" and not p.shape for p in self.outputs)
+
+    def check_span(self, t0: float, t_end: float) -> None:
+        """With ``outside = "refuse"``: a one-line :class:`ScenarioError` if
+        ``[t0, t_end]`` leaves the recorded times (within 1e-9 relative)."""
+        first, last = float(self.times[0]), float(self.times[-1])
+        early = t0 < first and not math.isclose(t0, first, rel_tol=TOLERANCE)
+        late = t_end > last and not math.isclose(t_end, last, rel_tol=TOLERANCE)
+        if self.outside == "refuse" and (early or late):
+            raise ScenarioError(f"{self.name}: the run from t = {t0!r} to {t_end!r} s leaves the table's times "
+                                f"[{first!r}, {last!r}] s (outside = 'refuse'; 'hold' holds the first and last rows)")
+
+    def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
+        self.check_span(t0, t0 + n_steps * h)
+
     def _row(self, t: float) -> int:
         """The last row whose time is ``<= t`` (within 1e-9 relative), -1 before the first."""
         times = self.times
         i = int(np.searchsorted(times, t, side="right")) - 1
-        while i + 1 < len(times) and math.isclose(times[i + 1], t, rel_tol=1e-9):
+        while i + 1 < len(times) and math.isclose(times[i + 1], t, rel_tol=TOLERANCE):
             i += 1
         return i
 
@@ -229,12 +509,70 @@ class SignalTable(PythonComponent):
         self._y[:] = values
         return self._y
 
+    def fmu_data(self) -> TableData:
+        """What the table FMU of this table is built from (Float64 scalar columns only)."""
+        if not self.fmu_form:
+            typed = next(p for p in self.outputs if p.type != "Float64" or p.shape)
+            what = f"an array column ({typed.name})" if typed.shape else f"a {typed.type} column ({typed.name})"
+            raise ScenarioError(f"components.{self.name}.form = 'fmu': {what}; the table FMU plays Float64 "
+                                f"scalar columns only (form = 'python' plays any)")
+        units = tuple(p.unit or "" for p in self.outputs)
+        return TableData(tuple(p.name for p in self.outputs), units, tuple(_base_unit(u) if u else None for u in units),
+                         tuple(p.description for p in self.outputs),
+                         tuple(how == "linear" for _, how, _, _ in self._columns), self.outside == "refuse",
+                         np.array(self.times, dtype=float),
+                         np.column_stack([data for data, _, _, _ in self._columns]).astype(float))
 
-def build(name: str, params: Mapping[str, Any], context) -> SignalTable:
-    """The registered kind's factory: ``file`` relative to the scenario file."""
+
+def _table(name: str, params: Mapping[str, Any], context) -> SignalTable:
     path = Path(params["file"])
-    source = getattr(context.scenario, "source", None)
+    source = getattr(getattr(context, "scenario", None), "source", None)
     if not path.is_absolute() and source is not None:
         path = Path(source).parent / path
     return SignalTable(name, path, params.get("interpolation", "hold"),
-                       {k: dict(v) for k, v in (params.get("columns") or {}).items()})
+                       {k: dict(v) for k, v in (params.get("columns") or {}).items()},
+                       params.get("outside", "hold"), params.get("max_gap"), params.get("duplicates", "step"))
+
+
+def _fmu_path(table: SignalTable, params: Mapping[str, Any], builder) -> Path | None:
+    """The table FMU of ``table`` if its form is one (``None``: the Python
+    component); ``builder``: the registered one (:func:`cosim.registry.table_fmu`)."""
+    form = params.get("form", "auto")
+    if form == "python" or (form == "auto" and (builder is None or not table.fmu_form)):
+        return None
+    if builder is None:
+        raise ScenarioError(f"components.{table.name}.form = 'fmu': no table FMU builder is registered "
+                            f"(cosim.registry.register_table_fmu); form = 'python' runs it in process")
+    return Path(builder(table.fmu_data(), int(params.get("fmi_version", 2))))
+
+
+def table_component(name: str, params: Mapping[str, Any], context=None, builder=None):
+    """The component of a ``kind = "signal_table"`` table ``params``: the
+    table FMU (an :class:`~cosim.fmu_component.FmuComponent`, made by
+    ``builder``: :func:`cosim.registry.table_fmu`'s) or the
+    :class:`SignalTable` itself, per its ``form``; ``file`` relative to the
+    scenario file. With ``outside = "refuse"`` a scenario whose run leaves
+    the table's times is refused here, before anything runs."""
+    table = _table(name, params, context)
+    scenario = getattr(context, "scenario", None)
+    if scenario is not None and getattr(scenario, "duration", None) is not None:
+        t0 = float(getattr(scenario, "start_time", 0.0) or 0.0)
+        table.check_span(t0, t0 + float(scenario.duration))
+    path = _fmu_path(table, params, builder)
+    if path is None:
+        return table
+    from .fmu_component import FmuComponent
+
+    return FmuComponent(name, path)
+
+
+def fmu_entry(name: str, params: Mapping[str, Any], context=None, builder=None) -> dict[str, Any]:
+    """The ``[fmus]`` entry a table runs as in an all-FMU scenario (an SSP
+    archive): its table FMU (made by ``builder``), FMI 2.0 unless it says
+    otherwise (libcosim runs 2.0), the table inside it."""
+    table = _table(name, params, context)
+    path = _fmu_path(table, {**params, "form": "fmu"}, builder)
+    return {"path": str(path)}
+
+
+build = table_component  # the registered kind's factory (cosim.registry passes its builder)

@@ -78,6 +78,10 @@ def fmu_entry(instance: str, spec: Mapping[str, Any], context) -> dict[str, Any]
     kind, params = spec.get("kind"), spec.get("parameters", {})
     if kind in TRAJECTORIES:
         return _trajectory_entry(kind, params)
+    if kind == "signal_table":  # the engine's table, as its table FMU with the table inside
+        from cosim.table import fmu_entry as table_entry
+
+        return table_entry(instance, params, context, registry.table_fmu())
     if kind == "fnn_controller":
         from .controller_component import ControllerComponent
 
@@ -149,3 +153,11 @@ def register() -> None:
     registry.register_section(registry.Section("metrics", lambda: Metrics, apply_metrics,
                                                "signals of the tracking error"))
     registry.register_scenarios(Path(__file__).parent / "scenarios")
+    registry.register_table_fmu(_table_fmu)
+
+
+def _table_fmu(table, fmi_version: int) -> Path:
+    """The engine's signal table as an FMU (fmu_models' generic table FMU)."""
+    from fmu_models.models.signal_table import build_table_fmu
+
+    return build_table_fmu(table, fmi_version)

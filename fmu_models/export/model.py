@@ -102,6 +102,10 @@ class FmuModel:
     equations: Equations | None = field(default=None, repr=False)
     initial_state: Callable[[Mapping[str, ca.SX]], Mapping[str, ca.SX]] | None = field(default=None, repr=False)
     sampled: Sampled | None = field(default=None, repr=False)
+    #: a table model: no states, no inputs, its outputs the columns of a table
+    #: the FMU reads from its resources (``c/signal_table.h``); ``equations``
+    #: give them as zeros, replaced by the table's values
+    table: bool = False
 
     def __post_init__(self) -> None:
         names = [v.name for v in self.all_variables]
@@ -110,6 +114,8 @@ class FmuModel:
             raise ValueError(f"model {self.identifier}: duplicated variable names {sorted(duplicated)}")
         if (self.sampled is None) == (self.equations is None):
             raise ValueError(f"model {self.identifier}: give equations (continuous) or a sampled part, not both")
+        if self.table and (self.states or self.inputs or self.sampled is not None):
+            raise ValueError(f"model {self.identifier}: a table model has outputs and parameters only")
         if self.sampled is not None:
             if self.states:
                 raise ValueError(f"model {self.identifier}: a sampled-data model has no continuous states")

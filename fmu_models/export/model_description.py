@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Mapping
 from xml.sax.saxutils import quoteattr
 
 from fmu_models.lazy_casadi import ca
@@ -23,8 +24,8 @@ __all__ = ["fmi2_model_description", "fmi3_model_description", "fmi3_build_descr
            "derivative_unit", "dependency_kinds", "clock_reference", "SOURCE_FILES_FMI2", "SOURCE_FILES_FMI3",
            "PERIOD_ANNOTATION", "CLOCK_NAME"]
 
-SOURCE_FILES_FMI2 = ("fmu_core.c", "numpy_random.c", "fmi2_functions.c", "model_generated.c")
-SOURCE_FILES_FMI3 = ("fmu_core.c", "numpy_random.c", "fmi3_functions.c", "model_generated.c")
+SOURCE_FILES_FMI2 = ("fmu_core.c", "numpy_random.c", "signal_table.c", "fmi2_functions.c", "model_generated.c")
+SOURCE_FILES_FMI3 = ("fmu_core.c", "numpy_random.c", "signal_table.c", "fmi3_functions.c", "model_generated.c")
 
 _DERIVATIVE_UNIT = {"m": "m/s", "m/s": "m/s2", "rad": "rad/s", "rad/s": "rad/s2", "1": "1"}
 
@@ -103,19 +104,27 @@ def dependency_kinds(model: FmuModel) -> dict[str, list[tuple[str, str]]]:
     return result
 
 
-def _unit_definitions(units: set[str]) -> str:
+def _unit_definitions(units: dict[str, Mapping[str, float] | None]) -> str:
+    """``<UnitDefinitions>`` of ``units`` (name -> BaseUnit attributes; ``None``: no BaseUnit)."""
     lines = ["  <UnitDefinitions>"]
     for name in sorted(units):
-        exps = " ".join(f'{k}="{e}"' for k, e in UNITS[name].items())
-        lines.append(f'    <Unit name={quoteattr(name)}><BaseUnit {exps}/></Unit>' if exps
+        base = units[name]
+        exps = " ".join(f'{k}="{_fmt(e) if isinstance(e, float) else e}"' for k, e in (base or {}).items())
+        lines.append(f'    <Unit name={quoteattr(name)}/>' if base is None
+                     else f'    <Unit name={quoteattr(name)}><BaseUnit {exps}/></Unit>' if exps
                      else f'    <Unit name={quoteattr(name)}><BaseUnit/></Unit>')
     lines.append("  </UnitDefinitions>")
     return "\n".join(lines)
 
 
-def _used_units(model: FmuModel) -> set[str]:
-    units = {v.unit for v in model.all_variables} | {"s"}
-    units |= {derivative_unit(v.unit) for v in model.states}
+def _used_units(model: FmuModel) -> dict[str, Mapping[str, float] | None]:
+    """Every unit the model uses, with its BaseUnit attributes (``None``: none known)."""
+    names = {v.unit for v in model.all_variables if v.base_unit is None} | {"s"}
+    names |= {derivative_unit(v.unit) for v in model.states}
+    units: dict[str, Mapping[str, float] | None] = {n: UNITS[n] for n in names}
+    for v in model.all_variables:
+        if v.base_unit is not None and v.unit and v.unit not in units:
+            units[v.unit] = dict(v.base_unit) if v.base_unit else None
     return units
 
 
@@ -198,7 +207,7 @@ def _variable_attributes(e: _Entry) -> str:
 
 def _value_attributes(e: _Entry, derivative_key) -> str:
     """unit, start, derivative, min, max of a Real (FMI 2.0) or Float64 (FMI 3.0)."""
-    text = f"unit={quoteattr(e.unit)}"
+    text = f"unit={quoteattr(e.unit)}" if e.unit else ""  # "": a table column that has none
     if e.start is not None:
         text += f' start="{_fmt(e.start)}"'
     if e.state is not None:

@@ -66,11 +66,16 @@ class Variable:
     min: float = -math.inf
     max: float = math.inf
     integer: bool = False
+    #: a unit outside :data:`UNITS` (a signal table's column): its SI
+    #: definition as ``<BaseUnit>`` attributes (exponents, ``factor``,
+    #: ``offset``); empty when nothing defines it (then its name is all the
+    #: modelDescription says)
+    base_unit: tuple[tuple[str, float], ...] | None = None
 
     def __post_init__(self) -> None:
         if self.causality not in ("state", "discrete", "input", "output", "parameter"):
             raise ValueError(f"variable {self.name!r}: unknown causality {self.causality!r}")
-        if self.unit not in UNITS:
+        if self.unit not in UNITS and self.base_unit is None:
             raise ValueError(f"variable {self.name!r}: unit {self.unit!r} is not in UNITS")
         if self.causality in ("input", "parameter") and self.start is None:
             raise ValueError(f"variable {self.name!r}: an {self.causality} needs a start value")

@@ -377,7 +377,7 @@ def test_the_table_holds_or_interpolates_per_column(tmp_path):
 
 
 @pytest.mark.parametrize("text, columns, message", [
-    ("time,x\n0,1\n2,1\n1,1\n", {}, "line 4: time = 1 goes back (after 2); the times must not decrease"),
+    ("time,x\n0,1\n2,1\n1,1\n", {}, "line 4, column time: time = 1 goes back (after 2); the times must not decrease"),
     ("t,x\n0,1\n", {}, "header 't,x': expected 'time,col1,...'"),
     ("time,x,x\n0,1,2\n", {}, "column name 'x' is empty or repeated"),
     ("time,x\n0,1,2\n", {}, "line 2: 3 fields for 2 columns"),
@@ -415,22 +415,25 @@ def test_the_table_file_is_bounded(tmp_path, monkeypatch):
         SignalTable("t", "/dev/null")
 
 
-def test_a_scenario_with_a_table_is_refused_by_export_ssp_in_one_line(tmp_path, capsys):
+def test_a_scenario_with_a_typed_table_is_refused_by_export_ssp_in_one_line(tmp_path, capsys):
+    """The table FMU plays Float64 scalar columns (tests/engine/test_signal_table.py);
+    a String column has no FMU form, so no archive can hold it."""
     from quadrotor_paper.cli import main
 
-    (tmp_path / "in.csv").write_text("time,v\n0,1\n", encoding="utf-8")
+    (tmp_path / "in.csv").write_text("time,v,s\n0,1,a\n", encoding="utf-8")
     toml = scenario_file(tmp_path, f"""
-connections = ["table.v -> F.Float64_continuous_input"]
+connections = ["table.{{v,s}} -> F.{{Float64_continuous_input,String_input}}"]
 [fmus.F]
-path = "{fmu(2, 'Feedthrough')}"
+path = "{fmu(3, 'Feedthrough')}"
 [components.table]
 kind = "signal_table"
 file = "in.csv"
+columns.s.type = "String"
 """)
     assert main(["export-ssp", str(toml), "--out", str(tmp_path / "x.ssp")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == ("fnn-cosim: error: components.table: a 'signal_table' component has no FMU form; an all-FMU "
-                   "scenario (SSP) cannot hold it")
+    assert err == ("fnn-cosim: error: components.table.form = 'fmu': a String column (s); the table FMU plays "
+                   "Float64 scalar columns only (form = 'python' plays any)")
     assert not (tmp_path / "x.ssp").exists()
 
 

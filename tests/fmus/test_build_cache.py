@@ -60,7 +60,7 @@ def test_the_second_fmi_version_compiles_only_its_api_layer(private_cache, compi
     model = _toy()
     fmi2 = build.cached_fmu(model, 2)
     fmi3 = build.cached_fmu(model, 3)
-    assert compiled == [{"fmi2_functions.c", "fmu_core.c", "model_generated.c", "numpy_random.c"},
+    assert compiled == [{"fmi2_functions.c", "fmu_core.c", "model_generated.c", "numpy_random.c", "signal_table.c"},
                         {"fmi3_functions.c"}]
     assert [p.name for p in (private_cache / "objects").iterdir()] and fmi2.parent.parent != fmi3.parent.parent
     assert validate_fmu(str(fmi2)) == [] and validate_fmu(str(fmi3)) == []

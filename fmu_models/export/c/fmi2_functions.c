@@ -45,7 +45,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
-    (void)fmuResourceLocation; (void)visible;
+    (void)visible;
     Fmi2Env *env = (Fmi2Env *)calloc(1, sizeof(Fmi2Env));
     if (!env) return NULL;
     if (functions) {
@@ -64,7 +64,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     Instance *inst = core_instantiate(name, fmuType == fmi2CoSimulation ? KIND_CO_SIMULATION : KIND_MODEL_EXCHANGE,
-                                      env, forward_log, loggingOn);
+                                      env, forward_log, loggingOn, fmuResourceLocation, 1);
     if (!inst) free(env);
     return inst;
 }

@@ -114,7 +114,8 @@ static Fmi3Env *new_env(fmi3InstanceEnvironment environment, fmi3LogMessageCallb
 }
 
 static fmi3Instance instantiate(Fmi3Env *env, const char *function, fmi3String instanceName,
-                                fmi3String instantiationToken, CoreKind kind, fmi3Boolean loggingOn) {
+                                fmi3String instantiationToken, fmi3String resourcePath, CoreKind kind,
+                                fmi3Boolean loggingOn) {
     const char *name = instanceName ? instanceName : "";
     if (!instantiationToken || strcmp(instantiationToken, MODEL_GUID) != 0) {
         char message[256];
@@ -124,7 +125,7 @@ static fmi3Instance instantiate(Fmi3Env *env, const char *function, fmi3String i
         free(env);
         return NULL;
     }
-    Instance *inst = core_instantiate(name, kind, env, forward_log, loggingOn);
+    Instance *inst = core_instantiate(name, kind, env, forward_log, loggingOn, resourcePath, 0);
     if (!inst) {
         free(env);
         return NULL;
@@ -140,10 +141,10 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
-    (void)resourcePath; (void)visible;
+    (void)visible;
     Fmi3Env *env = new_env(instanceEnvironment, logMessage);
     if (!env) return NULL;
-    return instantiate(env, "fmi3InstantiateModelExchange", instanceName, instantiationToken,
+    return instantiate(env, "fmi3InstantiateModelExchange", instanceName, instantiationToken, resourcePath,
                        KIND_MODEL_EXCHANGE, loggingOn);
 }
 
@@ -155,7 +156,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3InstanceEnvironment instanceEnvironment,
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate) {
-    (void)resourcePath; (void)visible;
+    (void)visible;
     (void)requiredIntermediateVariables; (void)intermediateUpdate;
     Fmi3Env *env = new_env(instanceEnvironment, logMessage);
     if (!env) return NULL;
@@ -168,7 +169,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     }
     env->event_mode_used = eventModeUsed;
     env->early_return_allowed = earlyReturnAllowed;
-    return instantiate(env, "fmi3InstantiateCoSimulation", instanceName, instantiationToken,
+    return instantiate(env, "fmi3InstantiateCoSimulation", instanceName, instantiationToken, resourcePath,
                        KIND_CO_SIMULATION, loggingOn);
 }
 
@@ -178,13 +179,13 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
                                                fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
                                                fmi3LockPreemptionCallback lockPreemption,
                                                fmi3UnlockPreemptionCallback unlockPreemption) {
-    (void)resourcePath; (void)visible;
+    (void)visible;
     /* one model partition, computed in the caller's thread: nothing to call back or lock */
     (void)clockUpdate; (void)lockPreemption; (void)unlockPreemption;
 #if NZ > 0
     Fmi3Env *env = new_env(instanceEnvironment, logMessage);
     if (!env) return NULL;
-    return instantiate(env, "fmi3InstantiateScheduledExecution", instanceName, instantiationToken,
+    return instantiate(env, "fmi3InstantiateScheduledExecution", instanceName, instantiationToken, resourcePath,
                        KIND_SCHEDULED_EXECUTION, loggingOn);
 #else
     (void)instantiationToken; (void)loggingOn; (void)instanceName;

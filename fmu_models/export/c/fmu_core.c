@@ -93,7 +93,7 @@ static void set_defaults(Instance *inst) {
 }
 
 Instance *core_instantiate(const char *instance_name, CoreKind kind, void *environment,
-                           CoreLogger logger, int logging_on) {
+                           CoreLogger logger, int logging_on, const char *resources, int resources_uri) {
     Instance *inst = (Instance *)calloc(1, sizeof(Instance));
     if (!inst) return NULL;
     const char *name = instance_name ? instance_name : "";
@@ -105,11 +105,24 @@ Instance *core_instantiate(const char *instance_name, CoreKind kind, void *envir
     inst->logger = logger;
     inst->logging_on = logging_on;
     set_defaults(inst);
+#ifdef MODEL_TABLE
+    char error[512];
+    if (table_load(&inst->table, resources, resources_uri, NY, error, sizeof error) != 0) {
+        core_log(inst, CORE_ERROR, "%s", error);
+        core_free(inst);
+        return NULL;
+    }
+#else
+    (void)resources; (void)resources_uri;
+#endif
     return inst;
 }
 
 void core_free(Instance *inst) {
     if (!inst) return;
+#ifdef MODEL_TABLE
+    table_free(&inst->table);
+#endif
     free(inst->instance_name);
     free(inst);
 }
@@ -185,7 +198,21 @@ static void update_derived(Instance *inst) {
     inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
     inst->res[0] = Y_;
     model_out(inst->arg, inst->res, inst->iw, inst->w, 0);
+#ifdef MODEL_TABLE
+    table_values(&inst->table, T_, Y_);  /* a table model's outputs are its table's, at the time */
+#endif
     inst->derived_valid = 1;
+}
+#endif
+
+#ifdef MODEL_TABLE
+/* A table that refuses times outside its rows (outside = "refuse"): t must lie within them. */
+static CoreStatus check_table_time(Instance *inst, double t) {
+    if (!inst->table.refuse_outside || !table_outside(&inst->table, t)) return CORE_OK;
+    char v[NUMBER_SIZE], first[NUMBER_SIZE], last[NUMBER_SIZE];
+    core_log(inst, CORE_ERROR, "t = %s refused: outside the signal table's times [%s, %s] (outside = refuse)",
+             exact(v, t), exact(first, inst->table.time[0]), exact(last, inst->table.time[inst->table.rows - 1]));
+    return CORE_ERROR;
 }
 #endif
 
@@ -251,6 +278,9 @@ static int first_non_finite(const double *values, size_t n) {
 }
 
 CoreStatus core_exit_initialization(Instance *inst) {
+#ifdef MODEL_TABLE
+    if (check_table_time(inst, T_) != CORE_OK) return CORE_ERROR;
+#endif
     if (initial_state(inst) != CORE_OK) return CORE_ERROR;
     /* the initial state from the parameters, and what was set */
     if (check_values(inst, "initial value: ", inst->s.v) != CORE_OK) return CORE_ERROR;
@@ -565,6 +595,10 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
     }
     const long n = (long)n_real;
     const double h = step_size / (double)n;
+#ifdef MODEL_TABLE
+    StepCounter next = count_step(inst, current_time, step_size);
+    if (check_table_time(inst, next.base + (double)next.count * next.size) != CORE_OK) return CORE_ERROR;
+#endif
     memcpy(inst->x_start, X_, NX * sizeof(double));
     for (long k = 0; k < n; k++) {
         /* time from a step counter, never accumulated */

@@ -34,6 +34,9 @@
 #include <stdint.h>
 #include "model_config.h"
 #include "numpy_random.h"
+#ifdef MODEL_TABLE
+#include "signal_table.h"
+#endif
 
 typedef enum {
     CORE_OK = 0, CORE_WARNING = 1, CORE_DISCARD = 2, CORE_ERROR = 3, CORE_FATAL = 4
@@ -129,10 +132,15 @@ typedef struct {
     double x_start[NX + 1], k_tmp[NX + 1];
     double z_next[NZ + 1], y_next[NY + 1];  /* sampled-data: the pending update */
     double jac[(NX + NY) * (NX + NU) + 1];
+#ifdef MODEL_TABLE
+    SignalTable table;       /* a table model: its outputs, read from its resources at instantiation */
+#endif
 } Instance;
 
+/* `resources`: the FMU's resources folder, an FMI 2.0 "file:" URI when
+ * `resources_uri`, else an FMI 3.0 path (read by a table model only). */
 Instance *core_instantiate(const char *instance_name, CoreKind kind, void *environment,
-                           CoreLogger logger, int logging_on);
+                           CoreLogger logger, int logging_on, const char *resources, int resources_uri);
 void core_free(Instance *inst);
 void core_reset(Instance *inst);
 
