@@ -1187,6 +1187,13 @@ class FmuComponent:
                 raise self._fail(what, exc) from None
         return out
 
+    def set_time(self, t: float) -> None:
+        """The Model Exchange instance's time (``fmiXSetTime``), for an evaluation at ``t``."""
+        try:
+            self._slave.setTime(float(t))
+        except FMICallException as exc:
+            raise self._fail(f"setting the time t = {t!r}", exc) from None
+
     def continuous_states(self) -> np.ndarray:
         return self._vector(self._slave.getContinuousStates, "getting the continuous states")
 

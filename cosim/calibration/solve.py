@@ -1,0 +1,264 @@
+"""The weighted least-squares fit over segments (scipy's ``least_squares``).
+
+Unknowns: the fitted names (parameters, then constant inputs) and, per
+segment, the initial states that are estimated (``initial_states =
+"estimated"``, or states the log lacks). Residuals, each divided by its
+output's noise level ``sigma``: every compared output at every fitted row,
+``(y_model - y_log) / sigma``; and, for states the log lacks, the
+continuity of consecutive segments, ``(x_end(i) - x_start(i + 1)) / scale``
+(multiple shooting). Bounds: the fitted names' ``min``/``max``.
+
+``sigma`` per output: the settings' ``noise``, else two passes: the first
+with each output's spread over the log, the second from the first's
+residuals (each output's RMS residual): the estimate of the noise that the
+statistics then use.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize import least_squares
+
+from ..errors import CosimError
+from .model import LogModel, REL_STEP
+from .segments import Segment
+from .sensitivity import segment_sensitivities
+
+__all__ = ["Fit", "fit", "CONTINUITY_WEIGHT"]
+
+CONTINUITY_WEIGHT = 1e3  # continuity residuals weigh this much more than one output sample (per state scale)
+
+
+@dataclass
+class Fit:
+    """The solver's result and what the statistics need."""
+
+    theta: np.ndarray  # fitted names
+    x0: np.ndarray  # segments x states: each segment's initial state
+    estimated: np.ndarray  # mask over states: estimated per segment
+    sigma: np.ndarray  # per output
+    residuals: list  # per segment: rows x outputs, y_model - y_log (unweighted)
+    jacobian: np.ndarray  # the weighted residuals' Jacobian (dense) at the optimum, output rows only
+    jacobian_state_blocks: list  # per segment: its rows' columns of its estimated states
+    converged: bool
+    message: str
+    evaluations: int
+    cost: float
+    method: str
+    error_estimate: float
+    history: list = field(default_factory=list)
+
+
+class _Problem:
+    """Residuals and Jacobian of the unknown vector ``z = [theta, x0 of each segment (estimated states)]``."""
+
+    def __init__(self, model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
+                 sigma: np.ndarray, method: str, progress: Callable | None):
+        self.model, self.segments, self.estimated = model, segments, estimated
+        self.x0_log, self.sigma = x0_log, sigma
+        p = model.problem
+        self.nt, self.ne = len(p.fit), int(estimated.sum())
+        self.method = method
+        self.progress = progress
+        self.cache: dict = {}
+        self.evaluations = 0
+        self.scale_x = np.maximum(np.abs(x0_log).max(axis=0), 1.0) if x0_log.size else np.ones(0)
+        self.continuity = [i for i in range(len(segments) - 1)] if self.ne else []
+        self.error_estimate = 0.0
+
+    def split(self, z):
+        theta = z[:self.nt]
+        x0 = self.x0_log.copy()
+        if self.ne:
+            x0[:, self.estimated] = z[self.nt:].reshape(len(self.segments), self.ne)
+        return theta, x0
+
+    def simulate(self, z):
+        key = z.tobytes()
+        if key not in self.cache:
+            theta, x0 = self.split(z)
+            self.cache.clear()
+            self.cache[key] = [self.model.simulate(theta, s, x0[i]) for i, s in enumerate(self.segments)]
+            self.evaluations += 1
+        return self.cache[key]
+
+    def residuals(self, z) -> np.ndarray:
+        trajs = self.simulate(z)
+        p = self.model.problem
+        parts = [((tr.outputs - p.output_values[s.first:s.last]) / self.sigma).ravel()
+                 for s, tr in zip(self.segments, trajs)]
+        if self.continuity:
+            _, x0 = self.split(z)
+            for i in self.continuity:
+                d = (trajs[i].states[-1] - x0[i + 1])[self.estimated] / self.scale_x[self.estimated]
+                parts.append(CONTINUITY_WEIGHT * d)
+        return np.concatenate(parts)
+
+    def jacobian(self, z):
+        if self.method == "differences":
+            return self._differences(z)
+        theta, x0 = self.split(z)
+        trajs = self.simulate(z)
+        nt, ne = self.nt, self.ne
+        blocks, ends = [], []
+        for i, (s, tr) in enumerate(zip(self.segments, trajs)):
+            dY, dX = segment_sensitivities(self.model, theta, s, tr, self.estimated)
+            blocks.append(dY / self.sigma[None, :, None])
+            ends.append(dX)
+        self.error_estimate = self.model.derivative_error
+        return self._assemble(blocks, ends)
+
+    def _assemble(self, blocks, ends):
+        nt, ne, nseg = self.nt, self.ne, len(self.segments)
+        ncol = nt + ne * nseg
+        if not ne:
+            return np.concatenate([b.reshape(-1, nt) for b in blocks])
+        rows = []
+        for i, b in enumerate(blocks):
+            flat = b.reshape(-1, nt + ne)
+            m = sparse.lil_matrix((flat.shape[0], ncol))
+            m[:, :nt] = flat[:, :nt]
+            m[:, nt + i * ne:nt + (i + 1) * ne] = flat[:, nt:]
+            rows.append(m.tocsr())
+        for i in self.continuity:
+            dX = ends[i][self.estimated] / self.scale_x[self.estimated, None] * CONTINUITY_WEIGHT
+            m = sparse.lil_matrix((ne, ncol))
+            m[:, :nt] = dX[:, :nt]
+            m[:, nt + i * ne:nt + (i + 1) * ne] = dX[:, nt:]
+            m[:, nt + (i + 1) * ne:nt + (i + 2) * ne] = -np.diag(CONTINUITY_WEIGHT / self.scale_x[self.estimated])
+            rows.append(m.tocsr())
+        return sparse.vstack(rows).tocsr()
+
+    def _differences(self, z):
+        """Central differences of the residuals (columns of the estimated
+        states moved in every segment at once: a segment's residuals depend
+        on its own start only), with the error estimate of h against 2h."""
+        r0 = self.residuals(z)
+        p = self.model.problem
+        scales = np.maximum(np.abs(z), 1e-300)
+        if p.defaults:
+            for j, name in enumerate(p.fit):
+                scales[j] = max(scales[j], abs(p.defaults[name]))
+        groups = [[j] for j in range(self.nt)]
+        groups += [[self.nt + i * self.ne + e for i in range(len(self.segments))] for e in range(self.ne)]
+        J = np.zeros((r0.size, z.size))
+        err = 0.0
+        lower, upper = self.bounds()
+        for group in groups:
+            cols = {}
+            for factor in (1.0, 2.0):
+                h = factor * REL_STEP * scales[group]
+                zp, zm = z.copy(), z.copy()
+                zp[group] += h
+                zm[group] -= h
+                over, under = zp[group] > upper[group], zm[group] < lower[group]
+                zp[group] = np.where(over, z[group], zp[group])
+                zm[group] = np.where(under, z[group], zm[group])
+                diff = self.residuals(zp) - self.residuals(zm)
+                cols[factor] = (diff, zp[group] - zm[group])
+            for which, j in enumerate(group):
+                rows = self._rows_of(j)
+                c1 = cols[1.0][0][rows] / cols[1.0][1][which]
+                c2 = cols[2.0][0][rows] / cols[2.0][1][which]
+                J[rows, j] = c1
+                err = max(err, float(np.max(np.abs(c1 - c2), initial=0.0)))
+        self.error_estimate = err
+        return sparse.csr_matrix(J) if self.ne else J
+
+    def _rows_of(self, j):
+        """The residual rows column ``j`` of z touches (all of them for a fitted name)."""
+        if j < self.nt:
+            return slice(None)
+        i = (j - self.nt) // self.ne
+        ny = len(self.model.problem.outputs)
+        seg = self.segments[i]
+        start = sum((s.last - s.first) * ny for s in self.segments[:i])
+        rows = np.arange(start, start + (seg.last - seg.first) * ny)
+        base = sum((s.last - s.first) * ny for s in self.segments)
+        extra = []
+        for c, k in enumerate(self.continuity):
+            if k == i or k + 1 == i:
+                extra += list(range(base + c * self.ne, base + (c + 1) * self.ne))
+        return np.concatenate([rows, np.array(extra, dtype=int)])
+
+    def bounds(self):
+        p = self.model.problem
+        lo = np.concatenate([p.lower, np.full(self.ne * len(self.segments), -np.inf)])
+        hi = np.concatenate([p.upper, np.full(self.ne * len(self.segments), np.inf)])
+        return lo, hi
+
+
+def _spread(values: np.ndarray) -> np.ndarray:
+    s = values.std(axis=0)
+    return np.where(s > 0, s, np.maximum(np.abs(values).max(axis=0), 1.0))
+
+
+def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
+        noise: dict[str, float], method: str, max_iterations: int, tolerance: float,
+        progress: Callable[[int, int], None] | None = None) -> Fit:
+    """The weighted least-squares estimate (module docstring)."""
+    p = model.problem
+    rows = np.concatenate([np.arange(s.first, s.last) for s in segments])
+    sigma = _spread(p.output_values[rows])
+    given = np.array([o in noise for o in p.outputs])
+    for i, o in enumerate(p.outputs):
+        if o in noise:
+            sigma[i] = noise[o]
+    z = np.concatenate([p.guess, x0_log[:, estimated].ravel()])
+    passes = 1 if given.all() else 2
+    done = [0]
+    total = max_iterations * passes
+
+    def report(*_):
+        done[0] += 1
+        if progress is not None:
+            progress(min(done[0], total), total)
+
+    result, prob = None, None
+    for n in range(passes):
+        prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress)
+        lo, hi = prob.bounds()
+        z = np.clip(z, lo, hi)
+        scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
+
+        def jac(zz):
+            report()
+            return prob.jacobian(zz)
+
+        try:
+            result = least_squares(prob.residuals, z, jac=jac, bounds=(lo, hi), x_scale=scale, method="trf",
+                                   ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_iterations,
+                                   tr_solver="lsmr" if prob.ne else "exact")
+        except CosimError:
+            raise
+        z = result.x
+        if n == 0 and passes == 2:
+            r = prob.residuals(z).copy()
+            ny = len(p.outputs)
+            out = r[:rows.size * ny].reshape(-1, ny) * sigma
+            rms = np.sqrt(np.mean(out ** 2, axis=0))
+            floor = 1e-9 * _spread(p.output_values[rows])
+            if np.all(rms <= floor):  # the model meets the log (noise-free): the first weights stay
+                break
+            sigma = np.where(given, sigma, np.maximum(rms, floor))
+    theta, x0 = prob.split(z)
+    J = prob.jacobian(z)
+    trajs = prob.simulate(z)
+    resid = [tr.outputs - p.output_values[s.first:s.last] for s, tr in zip(segments, trajs)]
+    Jd = J.toarray() if sparse.issparse(J) else J
+    n_out = rows.size * len(p.outputs)
+    Jout = Jd[:n_out]
+    nt, ne = prob.nt, prob.ne
+    state_blocks = []
+    start = 0
+    for i, s in enumerate(segments):
+        n = (s.last - s.first) * len(p.outputs)
+        state_blocks.append(Jout[start:start + n, nt + i * ne:nt + (i + 1) * ne] if ne else None)
+        start += n
+    converged = bool(result.status > 0)
+    return Fit(theta, x0, estimated, sigma, resid, Jout[:, :nt], state_blocks, converged, result.message,
+               prob.evaluations, float(result.cost), "forward sensitivities (directional derivatives)"
+               if method != "differences" else "central differences", prob.error_estimate)
