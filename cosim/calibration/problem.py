@@ -91,12 +91,19 @@ def _columns_of(log: Log, fmu, column_map, instance: str | None, extra: Mapping[
     for name, column in extra.items():  # e.g. a scenario's connections: input -> the source's column
         if name not in found and column in log.columns:
             found[name] = (column, None)
-    prefixes = {c.split(".", 1)[0] for c in log.columns if "." in c and c.split(".", 1)[1] in fmu.variables}
+    if instance is None:  # the prefix that names the most of the FMU's variables (the project's results)
+        counts: dict[str, int] = {}
+        for c in log.columns:
+            if "." in c and c.split(".", 1)[1] in fmu.variables:
+                counts[c.split(".", 1)[0]] = counts.get(c.split(".", 1)[0], 0) + 1
+        ranked = sorted(counts.items(), key=lambda kv: -kv[1])
+        if ranked and (len(ranked) == 1 or ranked[0][1] > ranked[1][1]):
+            instance = ranked[0][0]
     for column in log.columns:
         name = column
         if name not in fmu.variables and "." in column:
             prefix, rest = column.split(".", 1)
-            if rest in fmu.variables and (prefix == instance or (instance is None and len(prefixes) == 1)):
+            if rest in fmu.variables and prefix == instance:
                 name = rest
         if name in fmu.variables and name not in found:
             found[name] = (column, None)

@@ -22,7 +22,7 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import least_squares
 
-from ..errors import CosimError
+from ..errors import CosimError, FmuCallError
 from .model import LogModel, REL_STEP
 from .segments import Segment
 from .sensitivity import segment_sensitivities
@@ -81,9 +81,26 @@ class _Problem:
         if key not in self.cache:
             theta, x0 = self.split(z)
             self.cache.clear()
-            self.cache[key] = [self.model.simulate(theta, s, x0[i]) for i, s in enumerate(self.segments)]
+            trajs = []
+            for i, s in enumerate(self.segments):
+                try:
+                    trajs.append(self.model.simulate(theta, s, x0[i]))
+                except FmuCallError as exc:
+                    if not self.evaluations:  # the first guess: nothing to fall back on
+                        raise FmuCallError(exc.instance, exc.path, f"the first guess fails: {exc.reason}") from None
+                    # a trial point the FMU refuses: infinite residuals, which the solver rejects
+                    # (its trust region shrinks), as a step into a region the model cannot fly
+                    trajs.append(self._failed(s))
+            self.cache[key] = trajs
             self.evaluations += 1
         return self.cache[key]
+
+    def _failed(self, s):
+        from .model import Trajectory
+
+        nx, ny = len(self.model.states), len(self.model.problem.outputs)
+        steps = (s.last - s.first) if s.last < self.model.times.size else (s.last - s.first - 1)
+        return Trajectory(np.full((steps + 1, nx), np.inf), np.full((s.last - s.first, ny), np.inf))
 
     def residuals(self, z) -> np.ndarray:
         trajs = self.simulate(z)
