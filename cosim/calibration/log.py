@@ -66,27 +66,27 @@ class Log:
         where, t = self.where(), self.times
         bad = np.flatnonzero(~np.isfinite(t))
         if bad.size:
-            raise ScenarioError(f"{where}: row {bad[0] + 1}, column time: {t[bad[0]]!r} is not a finite number")
+            raise ScenarioError(f"{where}: row {bad[0] + 1}, column time: {float(t[bad[0]])!r} is not a finite number")
         steps = np.diff(t)
         if (steps == 0).any():
             i = int(np.flatnonzero(steps == 0)[0]) + 1
-            raise ScenarioError(f"{where}: row {i + 1}, column time: t = {t[i]!r} repeats the row before "
+            raise ScenarioError(f"{where}: row {i + 1}, column time: t = {float(t[i])!r} repeats the row before "
                                 f"(duplicate time)")
         if (steps < 0).any():
             i = int(np.flatnonzero(steps < 0)[0]) + 1
-            raise ScenarioError(f"{where}: row {i + 1}, column time: t = {t[i]!r} goes back (after {t[i - 1]!r})")
+            raise ScenarioError(f"{where}: row {i + 1}, column time: t = {float(t[i])!r} goes back (after {float(t[i - 1])!r})")
         if steps.size:
             median = float(np.median(steps))
             gaps = np.flatnonzero(steps > GAP_FACTOR * median)
             if gaps.size:
                 i = int(gaps[0]) + 1
                 raise ScenarioError(f"{where}: row {i + 1}, column time: a gap of {steps[i - 1]:g} s after "
-                                    f"t = {t[i - 1]!r} (the log's step is {median:g} s)")
+                                    f"t = {float(t[i - 1])!r} (the log's step is {median:g} s)")
         for name in names:
             values = self.columns[name]
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
-                raise ScenarioError(f"{where}: row {bad[0] + 1}, column {name}: {values[bad[0]]!r} is not a "
+                raise ScenarioError(f"{where}: row {bad[0] + 1}, column {name}: {float(values[bad[0]])!r} is not a "
                                     f"finite number")
 
 
