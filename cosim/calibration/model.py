@@ -14,11 +14,11 @@ the Jacobians of its right-hand side along them (Model Exchange).
   the same FMU set to the row's states and inputs: ``A = d der(x)/dx``,
   ``C = dy/dx`` and the columns of fitted inputs from the FMU's directional
   derivatives (FMI 2.0 section 3.2.2, FMI 3.0 section 3.2.2: knowns are
-  states and inputs); the columns of fitted parameters by central
-  differences, each on a pair of instances started with the parameter moved
-  by ``+-h`` (``fixed`` parameters are set before initialization and
-  nothing else may change them), with the error estimate of ``h`` against
-  ``2 h`` (at every :data:`ERROR_EVERY`-th row). :mod:`cosim.calibration.sensitivity` integrates them.
+  states and inputs); the columns of fitted parameters by forward
+  differences, each on an instance started with the parameter moved by
+  ``h`` (``fixed`` parameters are set before initialization and nothing else
+  may change them), with the error estimate of ``h`` against ``2 h`` (at
+  every :data:`ERROR_EVERY`-th row). :mod:`cosim.calibration.sensitivity` integrates them.
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ from .segments import Segment
 __all__ = ["Trajectory", "LogModel", "REL_STEP"]
 
 ERROR_EVERY = 20  # rows: the parameter columns' error estimate (h against 2 h) is made at every 20th row
-REL_STEP = np.finfo(float).eps ** (1.0 / 3.0)  # central differences: truncation h^2 against round-off eps/h
+REL_STEP = np.finfo(float).eps ** (1.0 / 3.0)  # differences: 6e-6 relative, the Jacobian's error about 1e-10
 
 
 @dataclass
@@ -150,7 +150,6 @@ class LogModel:
         self.times = p.log.times
         self._me: FmuComponent | None = None
         self._pairs: list[tuple[FmuComponent, FmuComponent, float]] = []
-        self._pairs2: list[tuple[FmuComponent, FmuComponent, float]] = []
         self._started_for: np.ndarray | None = None
         self.derivative_error = 0.0
         self._rows_seen = 0  # the largest difference of a parameter column at h against 2 h (last Jacobian)
@@ -241,77 +240,71 @@ class LogModel:
 
     def start_probes(self, theta: np.ndarray, t0: float) -> None:
         """The Model Exchange instances at ``theta``: one at it, and per fitted
-        parameter a pair at ``+-h`` and a pair at ``+-2h`` (the error estimate)."""
+        parameter one at ``theta_j + h`` and one at ``theta_j + 2 h`` (the
+        error estimate; ``-h`` and ``-2 h`` where ``+2 h`` passes the bound)."""
         if self._started_for is not None and np.array_equal(theta, self._started_for):
             return
         if self._me is None:
             self._me = self._model_exchange()
-            self._pairs = [(self._model_exchange(f"plus{j}"), self._model_exchange(f"minus{j}"), 0.0)
+            self._pairs = [(self._model_exchange(f"h{j}"), self._model_exchange(f"2h{j}"), 0.0)
                            for j in range(self.n_params)]
-            self._pairs2 = [(self._model_exchange(f"plus2_{j}"), self._model_exchange(f"minus2_{j}"), 0.0)
-                            for j in range(self.n_params)]
         base = self.parameters(theta)
         self._me.start(t0, base)
         self._fast = {id(self._me): self._fastof(self._me)}
         p = self.problem
-        for pairs, factor in ((self._pairs, 1.0), (self._pairs2, 2.0)):
-            for j, (plus, minus, _) in enumerate(pairs):
-                name = p.fit[j]
-                h = factor * REL_STEP * max(abs(float(theta[j])), abs(p.defaults.get(name, 0.0)), 1e-300)
-                hi, lo = float(theta[j]) + h, float(theta[j]) - h
-                if lo < p.lower[j]:  # one-sided near a bound: the pair straddles theta inside the bounds
-                    lo, hi = float(theta[j]), float(theta[j]) + 2 * h
-                elif hi > p.upper[j]:
-                    lo, hi = float(theta[j]) - 2 * h, float(theta[j])
-                plus.start(t0, base | {name: hi})
-                minus.start(t0, base | {name: lo})
-                self._fast[id(plus)], self._fast[id(minus)] = self._fastof(plus), self._fastof(minus)
-                pairs[j] = (plus, minus, hi - lo)
+        for j, (one, two, _) in enumerate(self._pairs):
+            name = p.fit[j]
+            h = REL_STEP * max(abs(float(theta[j])), abs(p.defaults.get(name, 0.0)), 1e-300)
+            if float(theta[j]) + 2 * h > p.upper[j]:
+                h = -h
+            one.start(t0, base | {name: float(theta[j]) + h})
+            two.start(t0, base | {name: float(theta[j]) + 2 * h})
+            self._fast[id(one)], self._fast[id(two)] = self._fastof(one), self._fastof(two)
+            self._pairs[j] = (one, two, (float(theta[j]) + h) - float(theta[j]))
         self._started_for = theta.copy()
+        nx = len(self.states)
+        others = list(self._me.output_names)
+        self._state_rows = [(i, self.states.index(o)) for i, o in enumerate(p.outputs) if o in self.states]
+        self._other_rows = [(i, nx + others.index(o)) for i, o in enumerate(p.outputs) if o not in self.states]
 
     def _fastof(self, comp: FmuComponent) -> _Fast:
         return _Fast(comp, self.drive, comp.output_names, self.states, self.problem.fit_inputs)
 
-    def _evaluate(self, comp: FmuComponent, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        return self._fast[id(comp)].evaluate(t, x, u)
-
     def jacobians(self, theta: np.ndarray, t: float, x: np.ndarray, u_log: np.ndarray):
         """At one row: ``(A, G, C, D)``: ``A = d der(x)/dx`` (nx x nx),
         ``G = d der(x)/d theta`` (nx x fitted), ``C = dy/dx``, ``D = dy/d theta``
-        over the compared outputs (a compared state: a row of the identity)."""
+        over the compared outputs (a compared state: a row of the identity).
+        A parameter's column by forward differences at ``h = eps^(1/3)
+        max(|theta_j|, |default_j|)`` (about 1e-10 relative here, as the
+        Jacobian needs), its error estimate against ``2 h`` at every
+        :data:`ERROR_EVERY`-th row."""
         p = self.problem
-        me = self._me
-        u = np.concatenate([u_log, theta[self.n_params:]])
-        self._evaluate(me, t, x, u)
-        others = list(me.output_names)
-        unknowns = me.derivative_names + others
-        J = self._fast[id(me)].derivatives()  # columns: states, then fitted inputs
-        nx = len(self.states)
-        P = np.zeros((len(unknowns), self.n_params))
-        err = 0.0
-        check = self._rows_seen % ERROR_EVERY == 0  # the error estimate at every ERROR_EVERY-th row
+        fast = self._fast
+        u = np.concatenate([u_log, theta[self.n_params:]]) if self.drive else u_log
+        me = fast[id(self._me)]
+        f0 = me.evaluate(t, x, u)
+        J = me.derivatives()  # columns: states, then fitted inputs
+        nx, npar = len(self.states), self.n_params
+        Jt = np.empty((J.shape[0], len(p.fit)))
+        Jt[:, npar:] = J[:, nx:]
+        check = self._rows_seen % ERROR_EVERY == 0
         self._rows_seen += 1
-        for j, ((plus, minus, width), (plus2, minus2, width2)) in enumerate(zip(self._pairs, self._pairs2)):
-            col = (self._evaluate(plus, t, x, u) - self._evaluate(minus, t, x, u)) / width
+        for j, (one, two, h) in enumerate(self._pairs):
+            col = (fast[id(one)].evaluate(t, x, u) - f0) / h
             if check:
-                col2 = (self._evaluate(plus2, t, x, u) - self._evaluate(minus2, t, x, u)) / width2
-                err = max(err, float(np.max(np.abs(col - col2), initial=0.0)))
-            P[:, j] = col
-        self.derivative_error = max(self.derivative_error, err)
-        Jt = np.hstack([P, J[:, nx:]])  # theta columns: parameters, then fitted inputs
-        A, G = J[:nx, :nx], Jt[:nx]
+                col2 = (fast[id(two)].evaluate(t, x, u) - f0) / (2 * h)
+                self.derivative_error = max(self.derivative_error, float(np.max(np.abs(col - col2), initial=0.0)))
+            Jt[:, j] = col
         ny = len(p.outputs)
         C, D = np.zeros((ny, nx)), np.zeros((ny, len(p.fit)))
-        for i, o in enumerate(p.outputs):
-            if o in self.states:
-                C[i, self.states.index(o)] = 1.0
-            else:
-                r = nx + others.index(o)
-                C[i] = J[r, :nx]
-                D[i] = Jt[r]
-        return A, G, C, D
+        for i, k in self._state_rows:
+            C[i, k] = 1.0
+        for i, r in self._other_rows:
+            C[i] = J[r, :nx]
+            D[i] = Jt[r]
+        return J[:nx, :nx], Jt[:nx], C, D
 
     def close(self) -> None:
-        for comp in [self._me] + [c for pair in self._pairs + self._pairs2 for c in pair[:2]]:
+        for comp in [self._me] + [c for pair in self._pairs for c in pair[:2]]:
             if comp is not None:
                 comp.close()
