@@ -24,6 +24,8 @@ error against the hidden value, and the ratio of the times. Never asserted.
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -41,16 +43,23 @@ def truth() -> dict[str, float]:
     return {**HIDDEN, "wind_x": wind, "wind_y": wind}
 
 
-def ours(log: Path, fmu: Path, fixed: dict) -> tuple[float, dict, int]:
+def cpu() -> float:
+    """CPU seconds of this process and its finished children (the workers)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def ours(log: Path, fmu: Path, fixed: dict, workers: int) -> tuple[float, float, dict, int]:
     from cosim.calibration import CalibrationSettings, calibrate
 
-    t = time.perf_counter()
-    cal = calibrate(log, fmu, CalibrationSettings(fit=list(FIT), guess=GUESS, fix=fixed, segment=2.0, holdout=0.0))
+    t, c = time.perf_counter(), cpu()
+    cal = calibrate(log, fmu, CalibrationSettings(fit=list(FIT), guess=GUESS, fix=fixed, segment=2.0, holdout=0.0,
+                                                  workers=workers))
     wall = time.perf_counter() - t
-    return wall, dict(zip(cal.problem.fit, map(float, cal.fit.theta))), cal.fit.evaluations
+    return wall, cpu() - c, dict(zip(cal.problem.fit, map(float, cal.fit.theta))), cal.fit.evaluations
 
 
-def baseline(log: Path, fmu: Path, fixed: dict, max_evaluations: int) -> tuple[float, dict, int, str]:
+def baseline(log: Path, fmu: Path, fixed: dict, max_evaluations: int) -> tuple[float, float, dict, int, str]:
     from fmpy import simulate_fmu
     from scipy.optimize import least_squares
 
@@ -85,17 +94,18 @@ def baseline(log: Path, fmu: Path, fixed: dict, max_evaluations: int) -> tuple[f
         return ((sim - measured) / scale).ravel()
 
     lower = np.array([1e-12, 1e-9, 0.0, 0.0, -np.inf, -np.inf])
-    w = time.perf_counter()
+    w, c = time.perf_counter(), cpu()
     res = least_squares(residuals, x0, bounds=(lower, np.inf), x_scale=np.where(x0 != 0, np.abs(x0), 1.0),
                         max_nfev=max_evaluations)
     wall = time.perf_counter() - w
-    return wall, dict(zip(FIT, map(float, res.x))), evaluations[0], res.message
+    return wall, cpu() - c, dict(zip(FIT, map(float, res.x))), evaluations[0], res.message
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--baseline-evaluations", type=int, default=400)
+    ap.add_argument("--workers", type=int, default=2, help="our fit's processes (default 2)")
     args = ap.parse_args()
     from fmu_models.built import built_fmu
     from fmu_models.catalog import model
@@ -108,15 +118,19 @@ def main() -> None:
         log = fly_synthetic_log(Path(tmp), duration=args.duration)
         rows = sum(1 for _ in open(log)) - 1
         print(f"log: {args.duration:g} s at 100 Hz ({rows} rows), {len(FIT)} names fitted: {', '.join(FIT)}")
-        t_ours, est, n_ours = ours(log, fmu, fixed)
-        print(f"fnn-cosim calibrate: {t_ours:.1f} s wall, {n_ours} simulations of the log")
+        print(f"load average before: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall times grow with it; "
+              f"CPU times much less)")
+        t_ours, c_ours, est, n_ours = ours(log, fmu, fixed, args.workers)
+        print(f"fnn-cosim calibrate ({args.workers} workers): {t_ours:.1f} s wall, {c_ours:.1f} s CPU, "
+              f"{n_ours} simulations of the log")
         for n in FIT:
             print(f"    {n:11s} = {est[n]:+.10g}  relative error {abs(est[n] / true[n] - 1):.1e}")
-        t_base, est_b, n_base, message = baseline(log, fmu, fixed, args.baseline_evaluations)
-        print(f"least_squares over fmpy simulate_fmu: {t_base:.1f} s wall, {n_base} simulations ({message})")
+        t_base, c_base, est_b, n_base, message = baseline(log, fmu, fixed, args.baseline_evaluations)
+        print(f"least_squares over fmpy simulate_fmu: {t_base:.1f} s wall, {c_base:.1f} s CPU, {n_base} simulations "
+              f"({message})")
         for n in FIT:
             print(f"    {n:11s} = {est_b[n]:+.10g}  relative error {abs(est_b[n] / true[n] - 1):.1e}")
-        print(f"ratio: the plain loop took {t_base / t_ours:.1f}x our time")
+        print(f"ratio: the plain loop took {t_base / t_ours:.1f}x our wall time, {c_base / c_ours:.1f}x our CPU time")
 
 
 if __name__ == "__main__":

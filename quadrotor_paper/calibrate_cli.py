@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .workers_option import worker_count
+
 __all__ = ["add_parser", "run"]
 
 DEFAULT_OUT = "results/calibration"
@@ -38,6 +40,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     c.add_argument("--segment", type=float, default=None, metavar="S", help="shooting segment length, s")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="with --scenario: override a "
                    "value of the scenario (repeatable)")
+    c.add_argument("--workers", type=worker_count, default=None, metavar="N",
+                   help="processes that share the segments (default: the settings', 1)")
     c.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
     c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -72,6 +76,8 @@ def run(args) -> int:
         if not args.segment > 0:
             raise ScenarioError(f"--segment {args.segment!r}: must be positive")
         update["segment"] = args.segment
+    if args.workers is not None:
+        update["workers"] = args.workers
     if update:
         settings = validate(CalibrationSettings, settings.model_dump(exclude_none=True) | update)
     column_map = read_column_map(args.columns) if args.columns else None

@@ -31,6 +31,64 @@ __all__ = ["Fit", "fit", "CONTINUITY_WEIGHT"]
 
 CONTINUITY_WEIGHT = 1e3  # continuity residuals weigh this much more than one output sample (per state scale)
 
+_MODEL: LogModel | None = None  # a worker's model: inherited from the parent at fork (its own FMU instances)
+
+
+def _simulate_part(job):
+    theta, part = job
+    out = []
+    for s, x0 in part:
+        try:
+            out.append(_MODEL.simulate(theta, s, x0))
+        except FmuCallError as exc:
+            out.append(exc)
+    return out
+
+
+def _sensitivities_part(job):
+    theta, part, estimated = job
+    out = [segment_sensitivities(_MODEL, theta, s, tr, estimated) for s, tr in part]
+    return out, _MODEL.derivative_error
+
+
+class _Workers:
+    """Segments shared by ``n`` worker processes, each a fork of this one
+    holding its own copies of the FMU instances (an FMU instance is memory of
+    its process: a forked copy is an instance of its own). Segment ``i`` goes
+    to worker ``i mod n``; the results come back in order."""
+
+    def __init__(self, model: LogModel, n: int):
+        import multiprocessing
+
+        global _MODEL
+        _MODEL = model
+        self.n = n
+        self.pool = multiprocessing.get_context("fork").Pool(n)
+
+    def _parts(self, items):
+        return [items[k::self.n] for k in range(self.n)]
+
+    def _merge(self, parts, total):
+        out = [None] * total
+        for k, part in enumerate(parts):
+            out[k::self.n] = part
+        return out
+
+    def simulate(self, theta, segments, x0):
+        parts = self._parts(list(zip(segments, x0)))
+        results = self.pool.map(_simulate_part, [(theta, part) for part in parts])
+        return self._merge(results, len(segments))
+
+    def sensitivities(self, theta, segments, trajs, estimated):
+        parts = self._parts(list(zip(segments, trajs)))
+        results = self.pool.map(_sensitivities_part, [(theta, part, estimated) for part in parts])
+        error = max(r[1] for r in results)
+        return self._merge([r[0] for r in results], len(segments)), error
+
+    def close(self):
+        self.pool.terminate()
+        self.pool.join()
+
 
 @dataclass
 class Fit:
@@ -56,8 +114,9 @@ class _Problem:
     """Residuals and Jacobian of the unknown vector ``z = [theta, x0 of each segment (estimated states)]``."""
 
     def __init__(self, model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
-                 sigma: np.ndarray, method: str, progress: Callable | None):
+                 sigma: np.ndarray, method: str, progress: Callable | None, workers: "_Workers | None" = None):
         self.model, self.segments, self.estimated = model, segments, estimated
+        self.workers = workers
         self.x0_log, self.sigma = x0_log, sigma
         p = model.problem
         self.nt, self.ne = len(p.fit), int(estimated.sum())
@@ -81,16 +140,24 @@ class _Problem:
         if key not in self.cache:
             theta, x0 = self.split(z)
             self.cache.clear()
+            if self.workers is not None:
+                done = self.workers.simulate(theta, self.segments, list(x0))
+            else:
+                done = []
+                for i, s in enumerate(self.segments):
+                    try:
+                        done.append(self.model.simulate(theta, s, x0[i]))
+                    except FmuCallError as exc:
+                        done.append(exc)
             trajs = []
-            for i, s in enumerate(self.segments):
-                try:
-                    trajs.append(self.model.simulate(theta, s, x0[i]))
-                except FmuCallError as exc:
+            for s, tr in zip(self.segments, done):
+                if isinstance(tr, FmuCallError):
                     if not self.evaluations:  # the first guess: nothing to fall back on
-                        raise FmuCallError(exc.instance, exc.path, f"the first guess fails: {exc.reason}") from None
+                        raise FmuCallError(tr.instance, tr.path, f"the first guess fails: {tr.reason}") from None
                     # a trial point the FMU refuses: infinite residuals, which the solver rejects
                     # (its trust region shrinks), as a step into a region the model cannot fly
-                    trajs.append(self._failed(s))
+                    tr = self._failed(s)
+                trajs.append(tr)
             self.cache[key] = trajs
             self.evaluations += 1
         return self.cache[key]
@@ -120,12 +187,14 @@ class _Problem:
         theta, x0 = self.split(z)
         trajs = self.simulate(z)
         nt, ne = self.nt, self.ne
-        blocks, ends = [], []
-        for i, (s, tr) in enumerate(zip(self.segments, trajs)):
-            dY, dX = segment_sensitivities(self.model, theta, s, tr, self.estimated)
-            blocks.append(dY / self.sigma[None, :, None])
-            ends.append(dX)
-        self.error_estimate = self.model.derivative_error
+        if self.workers is not None:
+            done, self.error_estimate = self.workers.sensitivities(theta, self.segments, trajs, self.estimated)
+        else:
+            done = [segment_sensitivities(self.model, theta, s, tr, self.estimated)
+                    for s, tr in zip(self.segments, trajs)]
+            self.error_estimate = self.model.derivative_error
+        blocks = [dY / self.sigma[None, :, None] for dY, _ in done]
+        ends = [dX for _, dX in done]
         return self._assemble(blocks, ends)
 
     def _assemble(self, blocks, ends):
@@ -215,8 +284,23 @@ def _spread(values: np.ndarray) -> np.ndarray:
 
 def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
         noise: dict[str, float], method: str, max_iterations: int, tolerance: float,
-        progress: Callable[[int, int], None] | None = None) -> Fit:
-    """The weighted least-squares estimate (module docstring)."""
+        progress: Callable[[int, int], None] | None = None, workers: int = 1) -> Fit:
+    """The weighted least-squares estimate (module docstring); ``workers``
+    processes share the segments (forward sensitivities only)."""
+    pool = None
+    if workers > 1 and len(segments) > 1 and method != "differences":
+        # the Model Exchange instances made here, before the fork: every worker inherits them (and this
+        # process, which extracted them, removes their folders at the end)
+        model.start_probes(np.asarray(model.problem.guess, dtype=float), float(model.times[0]))
+        pool = _Workers(model, min(workers, len(segments)))
+    try:
+        return _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool)
+    finally:
+        if pool is not None:
+            pool.close()
+
+
+def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool) -> Fit:
     p = model.problem
     rows = np.concatenate([np.arange(s.first, s.last) for s in segments])
     sigma = _spread(p.output_values[rows])
@@ -236,7 +320,7 @@ def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log:
 
     result, prob = None, None
     for n in range(passes):
-        prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress)
+        prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress, pool)
         lo, hi = prob.bounds()
         z = np.clip(z, lo, hi)
         scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
