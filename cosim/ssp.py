@@ -63,7 +63,7 @@ from .limits import MAX_DOCUMENT_BYTES
 from .scenario import Scenario, apply_overrides, fmu_component, fmu_error_in_scenario, fmu_file, parse_scenario
 from .scenario import check_fmu_file
 
-__all__ = ["export_ssp", "load_ssp", "is_ssp", "run_libcosim", "ssd_schema_errors", "SSD_NAME", "FMU_TYPE",
+__all__ = ["export_ssp", "load_ssp", "read_parameter_set", "is_ssp", "run_libcosim", "ssd_schema_errors", "SSD_NAME", "FMU_TYPE",
            "OSP_NAMESPACE", "OSP_ANNOTATION", "COSIM_NAMESPACE", "COSIM_ANNOTATION"]
 
 FMU_TYPE = "application/x-fmu-sharedlibrary"
@@ -481,6 +481,21 @@ def _source_path(where: str, source: str, folder: Path) -> Path:
     if not path.is_file():
         raise ScenarioError(f"{where}: source {source!r}: no such file in the archive ({path})")
     return path
+
+
+def read_parameter_set(path: str | Path) -> dict[str, float]:
+    """The values of an SSP parameter set file (``.ssv``: an
+    ``ssv:ParameterSet``, e.g. ``fnn-cosim calibrate``'s ``parameters.ssv``),
+    or a one-line :class:`ScenarioError` naming the file."""
+    from .files import read_text
+
+    where = f"parameter set {str(path)!r}"
+    try:
+        node = etree.fromstring(read_text(path, "parameter set").encode(),
+                                etree.XMLParser(resolve_entities=False, no_network=True))
+    except etree.XMLSyntaxError as exc:
+        raise ScenarioError(f"{where}: not XML ({exc})") from None
+    return _parameter_set(where, node)
 
 
 def _parameter_set(where: str, node: etree._Element) -> dict[str, float]:

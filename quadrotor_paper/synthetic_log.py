@@ -33,7 +33,8 @@ def fly_synthetic_log(out: str | Path, duration: float = 10.0, hidden: Mapping[s
 
     hidden = HIDDEN if hidden is None else hidden
     overrides = {"simulation.duration": float(duration), "wind.switch_times": [1e6, 2e6],
-                 "record.signals": list(record) + ["reference.x", "reference.y", "reference.z"]}
+                 "record.signals": list(dict.fromkeys(list(record) + [  # and what the mission's metrics read
+                     "Quadrotor.x", "Quadrotor.y", "Quadrotor.z", "reference.x", "reference.y", "reference.z"]))}
     overrides |= {f"fmus.Quadrotor.parameters.{k}": float(v) for k, v in hidden.items()}
     overrides |= dict(extra or {})
     sc = load_scenario(scenario, overrides)

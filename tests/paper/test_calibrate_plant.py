@@ -69,3 +69,31 @@ def test_a_column_in_a_unit_of_another_quantity_is_refused(tmp_path, flight_log,
     code, _ = _calibrate(tmp_path, flight_log, "--fmu", "Quadrotor", "--fit", "b", "--columns", cmap)
     err = capsys.readouterr().err.strip()
     assert code == 2 and "does not match x's unit 'm'" in err and len(err.splitlines()) == 1
+
+
+def test_the_calibrated_parameter_set_flies_in_a_run_and_in_an_exported_archive(tmp_path, flight_log, capsys):
+    from cosim.scenario import load_scenario
+    from cosim.ssp import load_ssp
+
+    fix = [a for k, v in HIDDEN.items() if k != "Ix" for a in ("--fix", f"{k}={v}")]
+    code, out = _calibrate(tmp_path, flight_log, "--fmu", "Quadrotor", "--fit", "Ix,wind_x,wind_y", *fix)
+    assert code == 0, capsys.readouterr().err
+    ssv = out / "parameters.ssv"
+    scenario = load_scenario("circles", {"fmus.Quadrotor.parameter_set": str(ssv)})
+    flown = scenario.fmus["Quadrotor"]["parameters"]
+    assert flown["Ix"] == pytest.approx(HIDDEN["Ix"], rel=1e-6) and flown["b"] == HIDDEN["b"]
+    assert flown["z_0"] == -15.0  # the scenario's own parameters win and stay
+    assert main(["run", "circles", "--set", f"fmus.Quadrotor.parameter_set={ssv}", "--set", "simulation.duration=1",
+                 "--out", str(tmp_path / "run"), "--quiet", "--no-plots"]) == 0
+    archive = tmp_path / "c.ssp"
+    assert main(["export-ssp", "circles", "--set", f"fmus.Quadrotor.parameter_set={ssv}", "--out", str(archive)]) == 0
+    assert load_ssp(archive).fmus["Quadrotor"]["parameters"]["Ix"] == flown["Ix"]
+
+
+def test_a_parameter_set_that_is_not_one_is_refused_in_one_line(tmp_path, capsys):
+    bad = tmp_path / "bad.ssv"
+    bad.write_text("<nope/>")
+    code = main(["run", "circles", "--set", f"fmus.Quadrotor.parameter_set={bad}", "--out", str(tmp_path / "r"),
+                 "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "expected an ssv:ParameterSet" in err and len(err.splitlines()) == 1
