@@ -15,6 +15,7 @@ from typing import Any, Mapping
 
 from pydantic import Field
 
+from ..errors import ScenarioError
 from ..files import read_toml
 from ..schema import NonNegative, Number, Positive, Count, Table, json_schema, one_of, validate
 
@@ -94,12 +95,22 @@ class CalibrationSettings(Table):
     workers: Count = Field(1, description="processes that share the segments")
 
 
+def _named(what: str, path, make):
+    try:
+        return make()
+    except ScenarioError as exc:
+        raise ScenarioError(f"{what} {path}: {exc}") from None
+
+
 def read_column_map(path) -> ColumnMap:
-    return ColumnMap.from_document(read_toml(path, "column map"), str(path))
+    """The column map file ``path``, or a one-line error naming the file and the key."""
+    return _named("column map", path, lambda: ColumnMap.from_document(read_toml(path, "column map"), str(path)))
 
 
 def read_settings(path) -> CalibrationSettings:
-    return validate(CalibrationSettings, read_toml(path, "calibration settings"))
+    """The settings file ``path``, or a one-line error naming the file and the key."""
+    return _named("calibration settings", path,
+                  lambda: validate(CalibrationSettings, read_toml(path, "calibration settings")))
 
 
 def calibration_schema() -> dict[str, Any]:

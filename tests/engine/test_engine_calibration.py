@@ -177,3 +177,26 @@ def test_a_parquet_log_is_read_with_its_units(tmp_path):
     cal = calibrate(tmp_path / "log.parquet", REFERENCE / "fmi2" / "Dahlquist.fmu",
                     CalibrationSettings(fit=["k"], guess={"k": 1.5}))
     assert abs(cal.fit.theta[0] - 1.0) < 1e-6
+
+
+def test_a_settings_file_with_an_unknown_key_is_one_line_naming_file_and_key(tmp_path, capsys):
+    settings = tmp_path / "s.toml"
+    settings.write_text("segmnt = 2.0\n")
+    code = _cli("calibrate", RESULTS / "Dahlquist_out.csv", "--fmu", REFERENCE / "fmi2" / "Dahlquist.fmu", "--fit",
+                "k", "--settings", settings, "--out", tmp_path / "o", "--quiet")
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and f"calibration settings {settings}: segmnt: unknown key" in err and len(err.splitlines()) == 1
+
+
+def test_a_ulog_without_pyulog_or_without_a_topic_is_one_line(tmp_path, capsys):
+    log = tmp_path / "flight.ulg"
+    log.write_bytes(b"ULog\x01\x12\x35\x01")
+    code = _cli("calibrate", log, "--fmu", REFERENCE / "fmi2" / "Dahlquist.fmu", "--fit", "k", "--out",
+                tmp_path / "o", "--quiet")
+    err = capsys.readouterr().err.strip()
+    try:
+        import pyulog  # noqa: F401
+        expected = "a ULog needs a column map (--columns) naming its 'topic'"
+    except ImportError:
+        expected = "reading a PX4 ULog needs pyulog"
+    assert code == 2 and expected in err and len(err.splitlines()) == 1
