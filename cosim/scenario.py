@@ -185,7 +185,7 @@ class FmuSpec(Table):
         the scenario file's folder if it is there, else from the current folder."""
         if self.parameter_set is None:
             return {}
-        from .ssp import read_parameter_set
+        from .ssv import read_parameter_set
 
         path = Path(self.parameter_set)
         if not path.is_absolute() and source is not None and (source.parent / path).is_file():

@@ -17,7 +17,10 @@ __all__ = ["add_parser", "run"]
 DEFAULT_OUT = "results/calibration"
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
+def add_parser(sub, named_values, overrides) -> argparse.ArgumentParser:
+    """The subcommand on ``sub``; ``named_values`` and ``overrides``: the
+    command line's readers of ``K=V`` and ``--set`` pairs (``fnn-cosim``'s,
+    handed over: this module does not import the command line's)."""
     c = sub.add_parser("calibrate", help="fit an FMU's parameters to a log: estimates, intervals, identifiability, "
                        "an SSP parameter set")
     c.add_argument("log", help="the log: the project's results (CSV, Parquet), any CSV with --columns, a PX4 ULog "
@@ -45,7 +48,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     c.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
     c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
-    c.set_defaults(func=run)
+    c.set_defaults(func=run, named_values=named_values, overrides=overrides)
     return c
 
 
@@ -58,9 +61,9 @@ def run(args) -> int:
     from cosim.files import output_folder
     from cosim.schema import validate
 
-    from .cli import _named_values, _overrides
     from .progress import progress_bar
 
+    _named_values, _overrides = args.named_values, args.overrides
     settings = read_settings(args.settings) if args.settings else CalibrationSettings()
     update = {}
     if args.fit is not None:

@@ -621,7 +621,7 @@ def _parser() -> argparse.ArgumentParser:
     add_stability_parser(sub)
     from .calibrate_cli import add_parser as add_calibrate_parser  # its own module: argparse only
 
-    add_calibrate_parser(sub)
+    add_calibrate_parser(sub, _named_values, _overrides)
     return p
 
 
