@@ -103,7 +103,7 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
                     if logged[j]:
                         x0[i, j] = problem.output_values[seg.first, problem.state_columns[s]]
             result = solve(model, segments, estimated, x0, dict(settings.noise), method, settings.max_iterations,
-                           settings.tolerance, progress, settings.workers)
+                           settings.tolerance, progress, settings.workers, settings.jacobian_stride)
             weighted = np.concatenate([(r / result.sigma).ravel() for r in result.residuals])
             stats = statistics(problem.fit, result.theta, result.jacobian, weighted, result.jacobian_state_blocks,
                                int(estimated.sum()) * len(segments), settings.identifiability)

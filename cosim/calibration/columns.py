@@ -86,6 +86,8 @@ class CalibrationSettings(Table):
     stop: Number = Field(None, description="and ends here, s")
     jacobian: one_of(JACOBIANS) = Field("auto", description="'derivatives' (forward sensitivities from the FMU's "
                                                             "directional derivatives), 'differences', or 'auto'")
+    jacobian_stride: Count = Field(4, description="the solver's iterations evaluate the Jacobians at every this "
+                                                  "many rows (fewer FMU calls; the statistics use every row)")
     max_iterations: Count = Field(100, description="the solver's limit of Jacobian evaluations")
     tolerance: Positive = Field(1e-12, description="the solver's relative tolerance on the cost, step and "
                                                    "gradient")

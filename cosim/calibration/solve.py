@@ -46,8 +46,8 @@ def _simulate_part(job):
 
 
 def _sensitivities_part(job):
-    theta, part, estimated = job
-    out = [segment_sensitivities(_MODEL, theta, s, tr, estimated) for s, tr in part]
+    theta, part, estimated, stride = job
+    out = [segment_sensitivities(_MODEL, theta, s, tr, estimated, stride) for s, tr in part]
     return out, _MODEL.derivative_error
 
 
@@ -79,9 +79,9 @@ class _Workers:
         results = self.pool.map(_simulate_part, [(theta, part) for part in parts])
         return self._merge(results, len(segments))
 
-    def sensitivities(self, theta, segments, trajs, estimated):
+    def sensitivities(self, theta, segments, trajs, estimated, stride):
         parts = self._parts(list(zip(segments, trajs)))
-        results = self.pool.map(_sensitivities_part, [(theta, part, estimated) for part in parts])
+        results = self.pool.map(_sensitivities_part, [(theta, part, estimated, stride) for part in parts])
         error = max(r[1] for r in results)
         return self._merge([r[0] for r in results], len(segments)), error
 
@@ -117,6 +117,7 @@ class _Problem:
                  sigma: np.ndarray, method: str, progress: Callable | None, workers: "_Workers | None" = None):
         self.model, self.segments, self.estimated = model, segments, estimated
         self.workers = workers
+        self.stride = 1  # rows between Jacobian evaluations (cosim.calibration.sensitivity)
         self.x0_log, self.sigma = x0_log, sigma
         p = model.problem
         self.nt, self.ne = len(p.fit), int(estimated.sum())
@@ -188,9 +189,10 @@ class _Problem:
         trajs = self.simulate(z)
         nt, ne = self.nt, self.ne
         if self.workers is not None:
-            done, self.error_estimate = self.workers.sensitivities(theta, self.segments, trajs, self.estimated)
+            done, self.error_estimate = self.workers.sensitivities(theta, self.segments, trajs, self.estimated,
+                                                                   self.stride)
         else:
-            done = [segment_sensitivities(self.model, theta, s, tr, self.estimated)
+            done = [segment_sensitivities(self.model, theta, s, tr, self.estimated, self.stride)
                     for s, tr in zip(self.segments, trajs)]
             self.error_estimate = self.model.derivative_error
         blocks = [dY / self.sigma[None, :, None] for dY, _ in done]
@@ -284,9 +286,12 @@ def _spread(values: np.ndarray) -> np.ndarray:
 
 def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
         noise: dict[str, float], method: str, max_iterations: int, tolerance: float,
-        progress: Callable[[int, int], None] | None = None, workers: int = 1) -> Fit:
+        progress: Callable[[int, int], None] | None = None, workers: int = 1, stride: int = 1) -> Fit:
     """The weighted least-squares estimate (module docstring); ``workers``
-    processes share the segments (forward sensitivities only)."""
+    processes share the segments (forward sensitivities only); ``stride``:
+    the solver's iterations evaluate the Jacobians at every ``stride``-th row
+    (:func:`~cosim.calibration.sensitivity.segment_sensitivities`), the
+    statistics' Jacobian at the optimum at every row."""
     pool = None
     if workers > 1 and len(segments) > 1 and method != "differences":
         # the Model Exchange instances made here, before the fork: every worker inherits them (and this
@@ -294,13 +299,15 @@ def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log:
         model.start_probes(np.asarray(model.problem.guess, dtype=float), float(model.times[0]))
         pool = _Workers(model, min(workers, len(segments)))
     try:
-        return _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool)
+        return _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool,
+                    stride)
     finally:
         if pool is not None:
             pool.close()
 
 
-def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool) -> Fit:
+def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool,
+         stride) -> Fit:
     p = model.problem
     rows = np.concatenate([np.arange(s.first, s.last) for s in segments])
     sigma = _spread(p.output_values[rows])
@@ -321,6 +328,7 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
     result, prob = None, None
     for n in range(passes):
         prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress, pool)
+        prob.stride = stride
         lo, hi = prob.bounds()
         z = np.clip(z, lo, hi)
         scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
@@ -346,6 +354,7 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
                 break
             sigma = np.where(given, sigma, np.maximum(rms, floor))
     theta, x0 = prob.split(z)
+    prob.stride = 1
     J = prob.jacobian(z)
     trajs = prob.simulate(z)
     resid = [tr.outputs - p.output_values[s.first:s.last] for s, tr in zip(segments, trajs)]
