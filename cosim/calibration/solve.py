@@ -31,6 +31,9 @@ __all__ = ["Fit", "fit", "CONTINUITY_WEIGHT"]
 
 CONTINUITY_WEIGHT = 1e3  # continuity residuals weigh this much more than one output sample (per state scale)
 
+COARSE_TOLERANCE = 1e-8  # the iterations with Jacobians at every stride-th row stop here; exact ones go on
+COARSE_EVALUATIONS = 20  # at most this many simulations with them (their convergence is linear near the optimum)
+DENSE_LIMIT = 20_000_000  # entries: a Jacobian with estimated initial states up to this size is solved dense
 _MODEL: LogModel | None = None  # a worker's model: inherited from the parent at fork (its own FMU instances)
 
 
@@ -121,6 +124,9 @@ class _Problem:
         self.x0_log, self.sigma = x0_log, sigma
         p = model.problem
         self.nt, self.ne = len(p.fit), int(estimated.sum())
+        n_rows = sum(s.last - s.first for s in segments) * len(model.problem.outputs)
+        # estimated initial states: a dense Jacobian (exact trust-region steps) while it is small, else sparse (lsmr)
+        self.dense = n_rows * (self.nt + self.ne * len(segments)) <= DENSE_LIMIT
         self.method = method
         self.progress = progress
         self.cache: dict = {}
@@ -128,6 +134,7 @@ class _Problem:
         self.scale_x = np.maximum(np.abs(x0_log).max(axis=0), 1.0) if x0_log.size else np.ones(0)
         self.continuity = [i for i in range(len(segments) - 1)] if self.ne else []
         self.error_estimate = 0.0
+        self._last_jacobian = (None, None)
 
     def split(self, z):
         theta = z[:self.nt]
@@ -183,6 +190,12 @@ class _Problem:
         return np.concatenate(parts)
 
     def jacobian(self, z):
+        key = (z.tobytes(), self.stride)
+        if self._last_jacobian[0] != key:
+            self._last_jacobian = (key, self._jacobian(z))
+        return self._last_jacobian[1]
+
+    def _jacobian(self, z):
         if self.method == "differences":
             return self._differences(z)
         theta, x0 = self.split(z)
@@ -218,7 +231,8 @@ class _Problem:
             m[:, nt + i * ne:nt + (i + 1) * ne] = dX[:, nt:]
             m[:, nt + (i + 1) * ne:nt + (i + 2) * ne] = -np.diag(CONTINUITY_WEIGHT / self.scale_x[self.estimated])
             rows.append(m.tocsr())
-        return sparse.vstack(rows).tocsr()
+        J = sparse.vstack(rows).tocsr()
+        return J.toarray() if self.dense else J
 
     def _differences(self, z):
         """Central differences of the residuals (columns of the estimated
@@ -254,7 +268,7 @@ class _Problem:
                 J[rows, j] = c1
                 err = max(err, float(np.max(np.abs(c1 - c2), initial=0.0)))
         self.error_estimate = err
-        return sparse.csr_matrix(J) if self.ne else J
+        return sparse.csr_matrix(J) if self.ne and not self.dense else J
 
     def _rows_of(self, j):
         """The residual rows column ``j`` of z touches (all of them for a fitted name)."""
@@ -328,7 +342,6 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
     result, prob = None, None
     for n in range(passes):
         prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress, pool)
-        prob.stride = stride
         lo, hi = prob.bounds()
         z = np.clip(z, lo, hi)
         scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
@@ -337,12 +350,20 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
             report()
             return prob.jacobian(zz)
 
-        try:
+        solver = "lsmr" if prob.ne and not prob.dense else "exact"
+        used = 0
+        if stride > 1:  # the coarse Jacobians bring the iterate near the optimum, the exact ones finish
+            prob.stride = stride
+            coarse = max(tolerance, COARSE_TOLERANCE)
             result = least_squares(prob.residuals, z, jac=jac, bounds=(lo, hi), x_scale=scale, method="trf",
-                                   ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_iterations,
-                                   tr_solver="lsmr" if prob.ne else "exact")
-        except CosimError:
-            raise
+                                   ftol=coarse, xtol=coarse, gtol=coarse, tr_solver=solver,
+                                   max_nfev=min(max_iterations, COARSE_EVALUATIONS))
+            z, used = result.x, result.nfev
+        prob.stride = 1
+        if used < max_iterations:
+            result = least_squares(prob.residuals, z, jac=jac, bounds=(lo, hi), x_scale=scale, method="trf",
+                                   ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_iterations - used,
+                                   tr_solver=solver)
         z = result.x
         if n == 0 and passes == 2:
             r = prob.residuals(z).copy()
