@@ -28,7 +28,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import FmuCallError, ScenarioError
-from ..fmu_component import FmuComponent, _bare
+from ..fmu_component import FmuComponent
 from ..fmu_description import start_value_rule
 from ..model_exchange import SolverSettings
 from .problem import Problem
@@ -52,7 +52,7 @@ class Trajectory:
 
 class _Fast:
     """One started Model Exchange instance's evaluation calls, bare (ctypes
-    arrays made once; :func:`cosim.fmu_component._bare`): the
+    arrays made once; :meth:`cosim.fmu_component.FmuComponent.bare_call`): the
     right-hand side and outputs at a point, and directional derivatives. A
     status above warning is the instance's :class:`~cosim.errors.FmuCallError`."""
 
@@ -60,14 +60,11 @@ class _Fast:
                  known_inputs: Sequence[str] = ()):
         import ctypes
 
-        from fmpy.fmi1 import FMICallException
-
-        self.comp, self._exc = comp, FMICallException
-        s = comp._slave
+        self.comp = comp
         v2 = comp.fmi_version == 2
         self.v2 = v2
-        self.c = ctypes.c_void_p(s.component)
-        f = lambda n2, n3: _bare(s, n2 if v2 else n3)  # noqa: E731
+        self.c = comp.handle
+        f = lambda n2, n3: comp.bare_call(n2 if v2 else n3)  # noqa: E731
         self._time = f("fmi2SetTime", "fmi3SetTime")
         self._setx = f("fmi2SetContinuousStates", "fmi3SetContinuousStates")
         self._setr = f("fmi2SetReal", "fmi3SetFloat64")
@@ -95,7 +92,7 @@ class _Fast:
 
     def _check(self, status: int, what: str) -> None:
         if status > 1:
-            raise self.comp._fail(what, self._exc(function=what, status=status))
+            self.comp.check_status(status, what)
 
     def evaluate(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``[der(x); y]`` at time ``t``, states ``x``, inputs ``u`` (a copy)."""
