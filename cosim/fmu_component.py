@@ -1205,13 +1205,6 @@ class FmuComponent:
         if status > 1:
             raise self._fail(what, FMICallException(function=what, status=status))
 
-    def set_time(self, t: float) -> None:
-        """The Model Exchange instance's time (``fmiXSetTime``), for an evaluation at ``t``."""
-        try:
-            self._slave.setTime(float(t))
-        except FMICallException as exc:
-            raise self._fail(f"setting the time t = {t!r}", exc) from None
-
     def continuous_states(self) -> np.ndarray:
         return self._vector(self._slave.getContinuousStates, "getting the continuous states")
 
