@@ -1187,6 +1187,24 @@ class FmuComponent:
                 raise self._fail(what, exc) from None
         return out
 
+    def bare_call(self, name: str):
+        """The instance's FMI function ``name`` without fmpy's wrapper (a
+        caller that prepares its ctypes arguments once, e.g. the calibrator's
+        right-hand side evaluations: :mod:`cosim.calibration.model`); its
+        status goes to :meth:`check_status`."""
+        return _bare(self._slave, name)
+
+    @property
+    def handle(self) -> ctypes.c_void_p:
+        """The instance's FMI handle (``fmi2Component``, ``fmi3Instance``), the first argument of a bare call."""
+        return ctypes.c_void_p(self._slave.component)
+
+    def check_status(self, status: int, what: str) -> None:
+        """A bare call's status: above warning, the :class:`~cosim.errors.FmuCallError`
+        of this instance quoting its log (the one place status codes become exceptions)."""
+        if status > 1:
+            raise self._fail(what, FMICallException(function=what, status=status))
+
     def continuous_states(self) -> np.ndarray:
         return self._vector(self._slave.getContinuousStates, "getting the continuous states")
 

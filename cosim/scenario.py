@@ -137,6 +137,9 @@ class FmuSpec(Table):
     fmi_version: one_of((2, 3), "expected 2 or 3", int) = Field(
         None, description="2 or 3: the version built (a model, default 2) or the version the file must have")
     parameters: dict[str, Number] = Field(default_factory=dict, description="start values of parameters and inputs")
+    parameter_set: str = Field(None, description="an SSP parameter set file (.ssv, e.g. fnn-cosim calibrate's "
+                                                 "parameters.ssv): its values, under 'parameters' (which win); "
+                                                 "relative to the scenario file's folder, else to the current one")
     start: dict[str, Union[bool, Number]] = Field(
         default_factory=dict, description="start values of the other variables the standard lets an importer set "
                                           "(initial = exact or approx: a state's initial value, ...)")
@@ -172,7 +175,21 @@ class FmuSpec(Table):
                 raise refuse(f"not a regular file or an extracted FMU's folder ({path})", key="path",
                              value=self.path)
         _check_model_parameters(self.model, self.parameters)
+        if self.parameter_set is not None:
+            _check_model_parameters(self.model, self.set_values(_source(info)), "parameter_set")
         return self
+
+    def set_values(self, source: Path | None) -> dict[str, float]:
+        """The values of ``parameter_set`` (none without one): the file from
+        the scenario file's folder if it is there, else from the current folder."""
+        if self.parameter_set is None:
+            return {}
+        from .ssv import read_parameter_set
+
+        path = Path(self.parameter_set)
+        if not path.is_absolute() and source is not None and (source.parent / path).is_file():
+            path = source.parent / path
+        return read_parameter_set(path)
 
     def resolved(self, source: Path | None) -> Path:
         """The FMU file, relative paths taken from the scenario file's folder."""
@@ -437,7 +454,8 @@ class Scenario:
         fmus: dict[str, dict[str, Any]] = {}
         for instance, spec in model.fmus.items():
             # the values as the document wrote them (an integer stays one, as an error quotes it)
-            entry: dict[str, Any] = {"parameters": dict(document["fmus"][instance].get("parameters", {}))}
+            entry: dict[str, Any] = {"parameters": spec.set_values(source)
+                                     | dict(document["fmus"][instance].get("parameters", {}))}
             if spec.model is not None:
                 entry.update(model=spec.model, fmi_version=spec.fmi_version or 2)
             else:

@@ -37,7 +37,6 @@ name the element it comes from.
 from __future__ import annotations
 
 import json
-import math
 import os
 import posixpath
 import shutil
@@ -57,13 +56,14 @@ from lxml import etree
 
 from . import registry, units
 from .connection import check_connections, parse_connections
+from .ssv import number as _number, parameter_set as _parameter_set, read_parameter_set
 from .errors import CosimError, FmuError, ScenarioError, one_line, show_folder_as
 from .files import SSD_NAME, check_document, extract_zip, is_ssp, read_entry, regular_file, safe_name, zip_members
 from .limits import MAX_DOCUMENT_BYTES
 from .scenario import Scenario, apply_overrides, fmu_component, fmu_error_in_scenario, fmu_file, parse_scenario
 from .scenario import check_fmu_file
 
-__all__ = ["export_ssp", "load_ssp", "is_ssp", "run_libcosim", "ssd_schema_errors", "SSD_NAME", "FMU_TYPE",
+__all__ = ["export_ssp", "load_ssp", "read_parameter_set", "is_ssp", "run_libcosim", "ssd_schema_errors", "SSD_NAME", "FMU_TYPE",
            "OSP_NAMESPACE", "OSP_ANNOTATION", "COSIM_NAMESPACE", "COSIM_ANNOTATION"]
 
 FMU_TYPE = "application/x-fmu-sharedlibrary"
@@ -446,16 +446,6 @@ def _q(prefix: str, tag: str) -> str:
     return f"{{{NS[prefix]}}}{tag}"
 
 
-def _number(where: str, text: str | None, what: str) -> float:
-    try:
-        value = float(text)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ScenarioError(f"{where}: {what} = {text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise ScenarioError(f"{where}: {what} = {text!r} is not a finite number")
-    return value
-
-
 def _integer(where: str, text: str | None, what: str) -> int:
     """A whole number written as one (``1.5`` and ``1e3`` are refused, not truncated)."""
     if text is None or not text.strip().lstrip("+-").isdigit():
@@ -481,37 +471,6 @@ def _source_path(where: str, source: str, folder: Path) -> Path:
     if not path.is_file():
         raise ScenarioError(f"{where}: source {source!r}: no such file in the archive ({path})")
     return path
-
-
-def _parameter_set(where: str, node: etree._Element) -> dict[str, float]:
-    """The values of an ``ssv:ParameterSet`` (numbers only: the engine sets Float64 values)."""
-    if node.tag != _q("ssv", "ParameterSet"):
-        raise ScenarioError(f"{where}: expected an ssv:ParameterSet, found {etree.QName(node).localname}")
-    values: dict[str, float] = {}
-    parameters = node.find("ssv:Parameters", NS)
-    for i, parameter in enumerate(parameters if parameters is not None else [], 1):
-        name = parameter.get("name")
-        at = f"{where}: ssv:Parameter {name!r}" if name else f"{where}: ssv:Parameter {i}"
-        if not name:
-            raise ScenarioError(f"{at}: no name attribute")
-        value = next(iter(parameter), None)
-        kind = etree.QName(value).localname if value is not None else None
-        if kind == "Real":
-            values[name] = _number(at, value.get("value"), "value")
-        elif kind == "Integer":
-            number = _number(at, value.get("value"), "value")
-            if number != int(number):
-                raise ScenarioError(f"{at}: value = {value.get('value')!r} is not an integer")
-            values[name] = int(number)
-        elif kind == "Boolean":
-            text = value.get("value")
-            if text not in ("true", "false", "1", "0"):
-                raise ScenarioError(f"{at}: value = {text!r} is not a boolean")
-            values[name] = 1 if text in ("true", "1") else 0
-        else:
-            raise ScenarioError(f"{at}: {kind or 'no value'}: only Real, Integer and Boolean values are supported")
-        # a unit on the value is not converted: the FMU takes the value in its variable's unit
-    return values
 
 
 def _bindings(where: str, component: etree._Element, folder: Path) -> dict[str, float]:

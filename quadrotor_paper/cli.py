@@ -671,6 +671,9 @@ def _parser() -> argparse.ArgumentParser:
     from .stability.cli import add_parser as add_stability_parser
 
     add_stability_parser(sub)
+    from .calibrate_cli import add_parser as add_calibrate_parser  # its own module: argparse only
+
+    add_calibrate_parser(sub, _named_values, _overrides)
     return p
 
 

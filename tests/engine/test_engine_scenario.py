@@ -289,7 +289,7 @@ def test_model_parameters_are_checked_before_any_build(raw, key, value, message)
     ({"model": "toy_FirstOrderLag", "fmi_version": 4}, "fmus.Lag.fmi_version = 4: expected 2 or 3"),
     ({"model": "toy_FirstOrderLag", "path": "x.fmu"}, "fmus.Lag: give exactly one of 'model'"),
     ({"model": "toy_FirstOrderLag", "version": 2}, "fmus.Lag.version: unknown key; known keys: fmi_version, "
-                                                   "interface, model, parameters, path"),
+                                                   "interface, model, parameter_set, parameters, path"),
     ({"path": "missing.fmu"}, "fmus.Lag.path = 'missing.fmu': no such file"),
 ])
 def test_bad_fmu_tables_are_refused_naming_the_key(raw, spec, message):

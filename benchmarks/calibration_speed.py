@@ -1,0 +1,137 @@
+"""``fnn-cosim calibrate``'s speed against a plain loop of scipy's
+``least_squares`` over fmpy's ``simulate_fmu`` (what fmpy's parameter
+example does), on the same log and the same parameters.
+
+The log: the plant flown by the project (quadrotor_paper.synthetic_log) with
+hidden parameters, ``--duration`` s at 100 Hz (default 60 s: 6000 rows), its
+12 states, commanded and measured rotor speeds. Six names fitted from the
+same first guesses (b, Ix, k_drag_lin, tau_m 20-30 % off; the constant wind
+from 0): ``b, Ix, k_drag_lin, tau_m, wind_x, wind_y``.
+
+1. ours: :func:`cosim.calibration.calibrate` (2 s shooting segments from the
+   logged states, forward sensitivities from the FMU's directional
+   derivatives), the wall time of the whole fit (target <= 30 s on 2 cores);
+2. the plain loop: ``least_squares`` (its own 2-point differences) over
+   ``simulate_fmu`` of the same FMU on the whole log from its first state,
+   the logged rotor commands as its input signal, the wind as two constant
+   input columns; ``--baseline-evaluations`` simulations at most.
+
+Printed: each wall time, the number of simulations, each estimate's relative
+error against the hidden value, and the ratio of the times. Never asserted.
+
+    .venv/bin/python benchmarks/calibration_speed.py [--duration 60] [--baseline-evaluations 400]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+FIT = ("b", "Ix", "k_drag_lin", "tau_m", "wind_x", "wind_y")
+GUESS = {"b": 5.0e-6, "Ix": 0.025, "k_drag_lin": 0.18, "tau_m": 0.022, "wind_x": 0.0, "wind_y": 0.0}
+
+
+def truth() -> dict[str, float]:
+    from quadrotor_paper.synthetic_log import HIDDEN
+
+    wind = -3.0 / 2 ** 0.5
+    return {**HIDDEN, "wind_x": wind, "wind_y": wind}
+
+
+def cpu() -> float:
+    """CPU seconds of this process and its finished children (the workers)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def ours(log: Path, fmu: Path, fixed: dict, workers: int) -> tuple[float, float, dict, int]:
+    from cosim.calibration import CalibrationSettings, calibrate
+
+    t, c = time.perf_counter(), cpu()
+    cal = calibrate(log, fmu, CalibrationSettings(fit=list(FIT), guess=GUESS, fix=fixed, segment=2.0, holdout=0.0,
+                                                  workers=workers))
+    wall = time.perf_counter() - t
+    return wall, cpu() - c, dict(zip(cal.problem.fit, map(float, cal.fit.theta))), cal.fit.evaluations
+
+
+def baseline(log: Path, fmu: Path, fixed: dict, max_evaluations: int) -> tuple[float, float, dict, int, str]:
+    from fmpy import simulate_fmu
+    from scipy.optimize import least_squares
+
+    data = np.genfromtxt(log, delimiter=",", names=True)
+    states = ["x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r"]
+    col = lambda n: data[n.replace(".", "")]  # noqa: E731
+    measured = np.column_stack([col(f"Quadrotor.{s}") for s in states])
+    scale = np.maximum(measured.std(axis=0), 1e-3)
+    t = data["time"]
+    start = {f"{s}_0": float(col(f"Quadrotor.{s}")[0]) for s in states}
+    start |= {f"Omega_r_{i}_0": float(col(f"Quadrotor.Omega_r_{i}")[0]) for i in range(1, 5)}
+    evaluations = [0]
+    x0 = np.array([GUESS[n] for n in FIT])
+
+    def residuals(theta):
+        evaluations[0] += 1
+        values = dict(zip(FIT, theta))
+        signal = np.zeros(t.size, dtype=[("time", float)] + [(f"Omega_{i}", float) for i in range(1, 5)] +
+                          [("wind_x", float), ("wind_y", float), ("wind_z", float)])
+        signal["time"] = t
+        for i in range(1, 5):
+            signal[f"Omega_{i}"] = col(f"Quadrotor.Omega_{i}")
+        signal["wind_x"], signal["wind_y"] = values.pop("wind_x"), values.pop("wind_y")
+        try:
+            r = simulate_fmu(str(fmu), stop_time=float(t[-1]), output_interval=float(t[1] - t[0]), input=signal,
+                             start_values={**fixed, **start, **values}, output=states)
+            sim = np.column_stack([r[s] for s in states])[:t.size]
+        except Exception:  # a step the FMU refuses: the plain loop has no way on
+            return np.full(measured.size, 1e6)
+        if sim.shape != measured.shape or not np.isfinite(sim).all():
+            return np.full(measured.size, 1e6)
+        return ((sim - measured) / scale).ravel()
+
+    lower = np.array([1e-12, 1e-9, 0.0, 0.0, -np.inf, -np.inf])
+    w, c = time.perf_counter(), cpu()
+    res = least_squares(residuals, x0, bounds=(lower, np.inf), x_scale=np.where(x0 != 0, np.abs(x0), 1.0),
+                        max_nfev=max_evaluations)
+    wall = time.perf_counter() - w
+    return wall, cpu() - c, dict(zip(FIT, map(float, res.x))), evaluations[0], res.message
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=60.0)
+    ap.add_argument("--baseline-evaluations", type=int, default=400)
+    ap.add_argument("--workers", type=int, default=2, help="our fit's processes (default 2)")
+    args = ap.parse_args()
+    from fmu_models.built import built_fmu
+    from fmu_models.catalog import model
+    from quadrotor_paper.synthetic_log import HIDDEN, fly_synthetic_log
+
+    fmu = built_fmu("Quadrotor", 2, lambda: model("Quadrotor"))
+    fixed = {k: v for k, v in HIDDEN.items() if k not in FIT}
+    true = truth()
+    with tempfile.TemporaryDirectory() as tmp:
+        log = fly_synthetic_log(Path(tmp), duration=args.duration)
+        rows = sum(1 for _ in open(log)) - 1
+        print(f"log: {args.duration:g} s at 100 Hz ({rows} rows), {len(FIT)} names fitted: {', '.join(FIT)}")
+        print(f"load average before: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall times grow with it; "
+              f"CPU times much less)")
+        t_ours, c_ours, est, n_ours = ours(log, fmu, fixed, args.workers)
+        print(f"fnn-cosim calibrate ({args.workers} workers): {t_ours:.1f} s wall, {c_ours:.1f} s CPU, "
+              f"{n_ours} simulations of the log")
+        for n in FIT:
+            print(f"    {n:11s} = {est[n]:+.10g}  relative error {abs(est[n] / true[n] - 1):.1e}")
+        t_base, c_base, est_b, n_base, message = baseline(log, fmu, fixed, args.baseline_evaluations)
+        print(f"least_squares over fmpy simulate_fmu: {t_base:.1f} s wall, {c_base:.1f} s CPU, {n_base} simulations "
+              f"({message})")
+        for n in FIT:
+            print(f"    {n:11s} = {est_b[n]:+.10g}  relative error {abs(est_b[n] / true[n] - 1):.1e}")
+        print(f"ratio: the plain loop took {t_base / t_ours:.1f}x our wall time, {c_base / c_ours:.1f}x our CPU time")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,138 @@
+"""Calibration of an FMU from recorded data (docs/calibration.md).
+
+The engine's one way to fit an FMU's parameters (and constant unknown
+inputs, and initial states) to a log; it knows no model. Modules, one job
+each:
+
+* :mod:`~cosim.calibration.columns`: the column map and the settings (the files a user writes);
+* :mod:`~cosim.calibration.log`: the log read and checked (CSV, Parquet, ULog);
+* :mod:`~cosim.calibration.problem`: the FMU's variables bound to the log's columns;
+* :mod:`~cosim.calibration.segments`: multiple shooting's segments and the held-out part;
+* :mod:`~cosim.calibration.model`: the trajectories (Co-Simulation) and the right-hand side's Jacobians (Model Exchange);
+* :mod:`~cosim.calibration.sensitivity`: the forward sensitivities along a segment;
+* :mod:`~cosim.calibration.solve`: the weighted least squares (scipy's ``least_squares``);
+* :mod:`~cosim.calibration.statistics`: standard errors, intervals, correlation, identifiability, residuals;
+* :mod:`~cosim.calibration.outputs`: ``calibration.json``, ``parameters.ssv``, the TOML override, ``report.md``.
+
+:func:`calibrate` runs them in order and returns a :class:`Calibration`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+
+from ..errors import ScenarioError
+from ..fmu_component import FmuComponent
+from .columns import CalibrationSettings, ColumnMap, read_column_map, read_settings
+from .log import Log, read_log
+from .problem import Problem, bind_problem
+from .segments import Segment, split
+from .statistics import Statistics, residual_statistics, statistics
+
+__all__ = ["Calibration", "calibrate", "CalibrationSettings", "ColumnMap", "read_column_map", "read_settings",
+           "read_log", "Log"]
+
+
+@dataclass
+class Calibration:
+    """A calibration's result: the problem, the fit, the statistics, the
+    prediction of the held-out part."""
+
+    problem: Problem
+    settings: CalibrationSettings
+    segments: list
+    held_out: Segment | None
+    fit: object  # cosim.calibration.solve.Fit
+    stats: Statistics
+    residuals: dict
+    prediction: dict | None  # {"times", "logged", "predicted", "rms"} of the held-out part
+    instance: str | None = None
+
+    @property
+    def converged(self) -> bool:
+        return self.fit.converged
+
+    def estimates(self) -> dict[str, float | None]:
+        """Fitted name -> value (``None`` where not identifiable)."""
+        return {n: (float(v) if ok else None) for n, v, ok in
+                zip(self.problem.fit, self.fit.theta, self.stats.identifiable)}
+
+
+def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSettings,
+              column_map: ColumnMap | None = None, instance: str | None = None,
+              extra_columns: Mapping[str, str] | None = None, fixed: Mapping[str, float] | None = None,
+              progress: Callable[[int, int], None] | None = None) -> Calibration:
+    """Fit ``settings.fit`` of the FMU at ``fmu`` to ``log`` (module docstring).
+
+    ``instance``: the name whose columns the log holds as
+    ``<instance>.<variable>`` (the project's results); ``extra_columns``:
+    input -> column known from elsewhere (a scenario's connections);
+    ``fixed``: values set before the settings' ``fix`` (a scenario's
+    parameters of the instance)."""
+    from .model import LogModel
+    from .solve import fit as solve
+
+    if not isinstance(log, Log):
+        log = read_log(log, column_map)
+    if settings.start is not None or settings.stop is not None:
+        log = log.window(settings.start, settings.stop)
+    if fixed:
+        settings = settings.model_copy(update={"fix": {**{k: v for k, v in fixed.items() if k not in settings.fit},
+                                                       **settings.fix}})
+    cs = FmuComponent(instance or "calibrated", fmu, interface="CoSimulation")
+    try:
+        states = _states(cs)
+        problem = bind_problem(cs, log, settings, column_map, instance, extra_columns, states)
+        model = LogModel(problem, settings.initial_parameters)
+        try:
+            method = settings.jacobian
+            if method == "auto":
+                method = "derivatives" if model.has_derivatives else "differences"
+            elif method == "derivatives" and not model.has_derivatives:
+                raise ScenarioError(f"jacobian = 'derivatives': {Path(fmu).name} provides no directional derivatives "
+                                    f"(or no Model Exchange interface); use 'differences'")
+            segments, held_out = split(log.times, settings.segment, settings.holdout)
+            logged = np.array([s in problem.state_columns for s in states], dtype=bool)
+            estimated = np.ones(len(states), bool) if settings.initial_states == "estimated" else ~logged
+            x0 = np.tile(model.initial_guess(), (len(segments), 1))
+            for i, seg in enumerate(segments):
+                for j, s in enumerate(states):
+                    if logged[j]:
+                        x0[i, j] = problem.output_values[seg.first, problem.state_columns[s]]
+            result = solve(model, segments, estimated, x0, dict(settings.noise), method, settings.max_iterations,
+                           settings.tolerance, progress, settings.workers, settings.jacobian_stride)
+            weighted = np.concatenate([(r / result.sigma).ravel() for r in result.residuals])
+            stats = statistics(problem.fit, result.theta, result.jacobian, weighted, result.jacobian_state_blocks,
+                               int(estimated.sum()) * len(segments), settings.identifiability)
+            residuals = residual_statistics(problem.outputs, np.concatenate(result.residuals), result.sigma)
+            prediction = _predict(model, result, segments, held_out, logged, problem) if held_out is not None else None
+        finally:
+            model.close()
+    finally:
+        cs.close()
+    return Calibration(problem, settings, segments, held_out, result, stats, residuals, prediction, instance)
+
+
+def _states(cs: FmuComponent) -> list[str]:
+    """The continuous states (from the Model Exchange interface's derivatives), or none."""
+    md = cs.model_description
+    if md.modelExchange is None:
+        return []
+    return [d.variable.derivative.name for d in md.derivatives]
+
+
+def _predict(model, result, segments, held_out: Segment, logged: np.ndarray, problem: Problem) -> dict:
+    """The held-out part simulated with the estimates from its logged start
+    (states the log lacks: where the last fitted segment ended)."""
+    end = model.simulate(result.theta, segments[-1], result.x0[-1])
+    x0 = end.states[-1].copy()
+    for j, s in enumerate(model.states):
+        if logged[j]:
+            x0[j] = problem.output_values[held_out.first, problem.state_columns[s]]
+    tr = model.simulate(result.theta, held_out, x0)
+    logged_y = problem.output_values[held_out.first:held_out.last]
+    return {"times": problem.log.times[held_out.first:held_out.last], "logged": logged_y,
+            "predicted": tr.outputs, "rms": np.sqrt(np.mean((tr.outputs - logged_y) ** 2, axis=0))}

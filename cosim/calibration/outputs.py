@@ -1,0 +1,223 @@
+"""A calibration's files: ``calibration.json``, ``parameters.ssv``,
+``calibration.toml`` and ``report.md`` with its figures.
+
+* ``calibration.json``: ``{"parameters": {name: {"value", "std", "ci95":
+  [lo, hi], "identifiable", "default", "unit"}}, "correlation",
+  "identifiability", "residuals", "prediction", "fixed", "converged",
+  "message", ...}``; a parameter the data do not determine has ``value``,
+  ``std`` and ``ci95`` ``null`` (never a number) and the direction it
+  shares in ``identifiability.undetermined``.
+* ``parameters.ssv``: an SSP 1.0 parameter set (``ssv:ParameterSet``,
+  written with pyssp-standard as :mod:`cosim.ssp` writes SSDs, valid against
+  the standard's schema): the fixed values and the identifiable estimates
+  of parameters, by variable name, with their units; what an
+  ``ssd:ParameterBinding`` of the FMU's component reads.
+* ``calibration.toml``: the same values as a scenario's override,
+  ``[fmus.<instance>.parameters]`` (paste it into a scenario, or give each
+  as ``--set fmus.<instance>.parameters.<name>=<value>``).
+* ``report.md``: the estimates with their intervals beside the defaults,
+  the residuals, the prediction of the held-out part, with figures.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..files import write_json
+
+__all__ = ["write_outputs", "calibration_document", "write_parameter_set"]
+
+
+def _num(v) -> float | None:
+    return float(v) if v is not None and np.isfinite(v) else None
+
+
+def calibration_document(cal, log_path: str, fmu_path: str) -> dict:
+    p, f, st = cal.problem, cal.fit, cal.stats
+    params = {}
+    for j, name in enumerate(p.fit):
+        ok = bool(st.identifiable[j])
+        params[name] = {
+            "value": _num(f.theta[j]) if ok else None,
+            "std": _num(st.std[j]) if ok else None,
+            "ci95": [_num(st.ci95[j, 0]), _num(st.ci95[j, 1])] if ok else None,
+            "identifiable": ok,
+            "default": _num(p.defaults.get(name)),
+            "unit": p.units.get(name, ""),
+            "kind": "input (constant)" if name in p.fit_inputs else "parameter",
+        }
+    corr = [[_num(v) for v in row] for row in st.correlation]
+    doc = {
+        "log": str(log_path), "fmu": str(fmu_path), "instance": cal.instance,
+        "parameters": params,
+        "correlation": {"names": list(p.fit), "matrix": corr},
+        "identifiability": {"relative_singular_values": [float(s) for s in st.singular_values],
+                            "tolerance": cal.settings.identifiability, "undetermined": st.null_directions},
+        "residuals": cal.residuals,
+        "degrees_of_freedom": st.dof, "residual_variance": st.residual_variance,
+        "fixed": {k: float(v) for k, v in p.fixed.items()},
+        "inputs_from_log": list(p.inputs), "outputs_compared": list(p.outputs),
+        "segments": [{"start": float(p.log.times[s.first]), "rows": s.last - s.first} for s in cal.segments],
+        "initial_states": cal.settings.initial_states,
+        "jacobian": f.method, "jacobian_error_estimate": f.error_estimate,
+        "converged": f.converged, "message": f.message, "evaluations": f.evaluations, "cost": f.cost,
+        "prediction": None,
+    }
+    if cal.prediction is not None:
+        pr = cal.prediction
+        doc["prediction"] = {"start": float(pr["times"][0]), "stop": float(pr["times"][-1]),
+                             "rms": {o: float(r) for o, r in zip(p.outputs, pr["rms"])}}
+    return doc
+
+
+def _values(cal) -> dict[str, tuple[float, str]]:
+    """name -> (value, unit): the fixed parameters and the identifiable fitted parameters."""
+    p = cal.problem
+    out = {k: (float(v), p.fmu.variables[k].unit or "") for k, v in p.fixed.items()}
+    for j, name in enumerate(p.fit):
+        if cal.stats.identifiable[j] and name not in p.fit_inputs:
+            out[name] = (float(cal.fit.theta[j]), p.units.get(name, ""))
+    return out
+
+
+def write_parameter_set(values: dict[str, tuple[float, str]], path: Path, name: str) -> Path:
+    """An SSP 1.0 ``ssv:ParameterSet`` of Real values (pyssp-standard's
+    classes, written as :mod:`cosim.ssp` writes its inline sets)."""
+    from lxml import etree
+    from pyssp_standard.parameter_types import ParameterType
+    from pyssp_standard.ssv import Parameter, SSVElem
+
+    parameters = []
+    for key, (value, unit) in values.items():
+        ptype = ParameterType("Real", {"value": repr(float(value)), "unit": unit or None})
+        ptype.parameter = {k: v for k, v in ptype.parameter.items() if v is not None}  # pyssp-standard 0.9.1
+        parameters.append(Parameter(name=key, type_name="Real", type_value=ptype))
+    root = SSVElem(name=name, parameters=parameters).to_xml()
+    path.write_bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
+    return path
+
+
+def _toml(cal, instance: str) -> str:
+    lines = [f"# fnn-cosim calibrate: the fixed and the identifiable fitted parameters of {instance}",
+             f"[fmus.{instance}.parameters]"]
+    for key, (value, unit) in _values(cal).items():
+        lines.append(f"{key} = {value!r}" + (f"  # {unit}" if unit else ""))
+    not_ident = [n for n, ok in zip(cal.problem.fit, cal.stats.identifiable) if not ok]
+    if not_ident:
+        lines.append(f"# not identifiable from the log (left out): {', '.join(not_ident)}")
+    return "\n".join(lines) + "\n"
+
+
+def _figures(cal, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    p, f = cal.problem, cal.fit
+    names = []
+    # estimates relative to their defaults, with the 95 % intervals
+    fig, ax = plt.subplots(figsize=(7, 0.5 + 0.45 * len(p.fit)))
+    for j, n in enumerate(p.fit):
+        d = p.defaults.get(n) or 1.0
+        d = d if d != 0 else 1.0
+        if cal.stats.identifiable[j]:
+            lo, hi = cal.stats.ci95[j]
+            ax.errorbar([f.theta[j] / d], [j], xerr=[[(f.theta[j] - lo) / abs(d)], [(hi - f.theta[j]) / abs(d)]],
+                        fmt="o", color="C0")
+        else:
+            ax.plot([np.nan], [j])
+            ax.text(1.0, j, "not identifiable", va="center", ha="center", color="C3")
+    ax.axvline(1.0, color="grey", lw=0.8, ls="--")
+    ax.set_yticks(range(len(p.fit)), p.fit)
+    ax.set_xlabel("estimate / default (95 % interval)")
+    fig.tight_layout()
+    fig.savefig(out / "estimates.png", dpi=90)
+    plt.close(fig)
+    names.append("estimates.png")
+    # residuals over time
+    t = np.concatenate([p.log.times[s.first:s.last] for s in cal.segments])
+    r = np.concatenate(f.residuals)
+    ny = len(p.outputs)
+    fig, axes = plt.subplots(ny, 1, figsize=(8, 1.3 * ny + 0.5), sharex=True, squeeze=False)
+    for j, o in enumerate(p.outputs):
+        axes[j, 0].plot(t, r[:, j], lw=0.6)
+        axes[j, 0].set_ylabel(f"{o}\n[{p.units.get(o, '')}]", fontsize=7)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(out / "residuals.png", dpi=80)
+    plt.close(fig)
+    names.append("residuals.png")
+    if cal.prediction is not None:
+        pr = cal.prediction
+        fig, axes = plt.subplots(ny, 1, figsize=(8, 1.3 * ny + 0.5), sharex=True, squeeze=False)
+        for j, o in enumerate(p.outputs):
+            axes[j, 0].plot(pr["times"], pr["logged"][:, j], lw=1.2, label="logged")
+            axes[j, 0].plot(pr["times"], pr["predicted"][:, j], lw=0.8, ls="--", label="predicted")
+            axes[j, 0].set_ylabel(o, fontsize=7)
+        axes[0, 0].legend(fontsize=7)
+        axes[-1, 0].set_xlabel("t [s]")
+        fig.tight_layout()
+        fig.savefig(out / "prediction.png", dpi=80)
+        plt.close(fig)
+        names.append("prediction.png")
+    return names
+
+
+def _fmt(v) -> str:
+    return "—" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.6g}"
+
+
+def _report(cal, doc: dict, figures: list[str]) -> str:
+    p = cal.problem
+    lines = ["# Calibration", "",
+             f"Log `{Path(doc['log']).name}`, FMU `{Path(doc['fmu']).name}`"
+             + (f" (instance `{cal.instance}`)" if cal.instance else "") + ".", "",
+             f"**{'Converged' if doc['converged'] else 'NOT CONVERGED: the last iterate is reported'}**: "
+             f"{doc['message']} ({doc['evaluations']} simulations of the log; Jacobian by {doc['jacobian']}).", "",
+             f"Fitted over {len(cal.segments)} segment(s) ({cal.settings.initial_states} initial states); "
+             f"inputs from the log: {', '.join(p.inputs) or 'none'}; outputs compared: {', '.join(p.outputs)}.", "",
+             "## Estimates", "", "| name | estimate | std | 95 % interval | default | unit |", "|---|---|---|---|---|---|"]
+    for name, e in doc["parameters"].items():
+        if e["identifiable"]:
+            ci = f"[{_fmt(e['ci95'][0])}, {_fmt(e['ci95'][1])}]"
+            lines.append(f"| {name} | {_fmt(e['value'])} | {_fmt(e['std'])} | {ci} | {_fmt(e['default'])} | {e['unit']} |")
+        else:
+            lines.append(f"| {name} | not identifiable | — | — | {_fmt(e['default'])} | {e['unit']} |")
+    und = doc["identifiability"]["undetermined"]
+    if und:
+        lines += ["", "Directions the log does not determine (components in relative changes; the parameters move "
+                      "together along each without changing the residuals):", ""]
+        lines += ["* " + ", ".join(f"{k}: {v:+.3f}" for k, v in d.items()) for d in und]
+    if p.fixed:
+        lines += ["", "Fixed: " + ", ".join(f"{k} = {v:g}" for k, v in p.fixed.items()) + "."]
+    lines += ["", "![estimates](estimates.png)", "", "## Residuals", "",
+              "| output | RMS | mean | max | lag-1 autocorrelation | noise level used |", "|---|---|---|---|---|---|"]
+    for o, r in doc["residuals"].items():
+        lines.append(f"| {o} | {_fmt(r['rms'])} | {_fmt(r['mean'])} | {_fmt(r['max_abs'])} | "
+                     f"{r['lag1_autocorrelation']:.3f} | {_fmt(r['sigma'])} |")
+    lines += ["", "![residuals](residuals.png)"]
+    if doc["prediction"]:
+        pr = doc["prediction"]
+        lines += ["", "## Prediction of the held-out part", "",
+                  f"From {pr['start']:g} s to {pr['stop']:g} s, not fitted, simulated with the estimates from its "
+                  "logged start. RMS error: " + ", ".join(f"{o} {_fmt(v)}" for o, v in pr["rms"].items()) + ".",
+                  "", "![prediction](prediction.png)"]
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(cal, out: Path, log_path, fmu_path, instance: str | None = None) -> list[Path]:
+    """The four files (and the figures) into ``out``; returns their paths."""
+    out = Path(out)
+    doc = calibration_document(cal, str(log_path), str(fmu_path))
+    instance = instance or cal.instance or Path(fmu_path).stem
+    written = [write_json(out / "calibration.json", doc),
+               write_parameter_set(_values(cal), out / "parameters.ssv", f"calibrated {instance}")]
+    (out / "calibration.toml").write_text(_toml(cal, instance))
+    written.append(out / "calibration.toml")
+    figures = _figures(cal, out)
+    (out / "report.md").write_text(_report(cal, doc, figures))
+    written.append(out / "report.md")
+    return written + [out / n for n in figures]

@@ -1,0 +1,395 @@
+"""The weighted least-squares fit over segments (scipy's ``least_squares``).
+
+Unknowns: the fitted names (parameters, then constant inputs) and, per
+segment, the initial states that are estimated (``initial_states =
+"estimated"``, or states the log lacks). Residuals, each divided by its
+output's noise level ``sigma``: every compared output at every fitted row,
+``(y_model - y_log) / sigma``; and, for states the log lacks, the
+continuity of consecutive segments, ``(x_end(i) - x_start(i + 1)) / scale``
+(multiple shooting). Bounds: the fitted names' ``min``/``max``.
+
+``sigma`` per output: the settings' ``noise``, else two passes: the first
+with each output's spread over the log, the second from the first's
+residuals (each output's RMS residual): the estimate of the noise that the
+statistics then use.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize import least_squares
+
+from ..errors import CosimError, FmuCallError
+from .model import LogModel, REL_STEP
+from .segments import Segment
+from .sensitivity import segment_sensitivities
+
+__all__ = ["Fit", "fit", "CONTINUITY_WEIGHT"]
+
+CONTINUITY_WEIGHT = 1e3  # continuity residuals weigh this much more than one output sample (per state scale)
+
+COARSE_TOLERANCE = 1e-8  # the iterations with Jacobians at every stride-th row stop here; exact ones go on
+COARSE_EVALUATIONS = 20  # at most this many simulations with them (their convergence is linear near the optimum)
+DENSE_LIMIT = 20_000_000  # entries: a Jacobian with estimated initial states up to this size is solved dense
+_MODEL: LogModel | None = None  # a worker's model: inherited from the parent at fork (its own FMU instances)
+
+
+def _simulate_part(job):
+    theta, part = job
+    out = []
+    for s, x0 in part:
+        try:
+            out.append(_MODEL.simulate(theta, s, x0))
+        except FmuCallError as exc:
+            out.append(exc)
+    return out
+
+
+def _sensitivities_part(job):
+    theta, part, estimated, stride = job
+    out = [segment_sensitivities(_MODEL, theta, s, tr, estimated, stride) for s, tr in part]
+    return out, _MODEL.derivative_error
+
+
+class _Workers:
+    """Segments shared by ``n`` worker processes, each a fork of this one
+    holding its own copies of the FMU instances (an FMU instance is memory of
+    its process: a forked copy is an instance of its own). Segment ``i`` goes
+    to worker ``i mod n``; the results come back in order."""
+
+    def __init__(self, model: LogModel, n: int):
+        import multiprocessing
+
+        global _MODEL
+        _MODEL = model
+        self.n = n
+        self.pool = multiprocessing.get_context("fork").Pool(n)
+
+    def _parts(self, items):
+        return [items[k::self.n] for k in range(self.n)]
+
+    def _merge(self, parts, total):
+        out = [None] * total
+        for k, part in enumerate(parts):
+            out[k::self.n] = part
+        return out
+
+    def simulate(self, theta, segments, x0):
+        parts = self._parts(list(zip(segments, x0)))
+        results = self.pool.map(_simulate_part, [(theta, part) for part in parts])
+        return self._merge(results, len(segments))
+
+    def sensitivities(self, theta, segments, trajs, estimated, stride):
+        parts = self._parts(list(zip(segments, trajs)))
+        results = self.pool.map(_sensitivities_part, [(theta, part, estimated, stride) for part in parts])
+        error = max(r[1] for r in results)
+        return self._merge([r[0] for r in results], len(segments)), error
+
+    def close(self):
+        self.pool.terminate()
+        self.pool.join()
+
+
+@dataclass
+class Fit:
+    """The solver's result and what the statistics need."""
+
+    theta: np.ndarray  # fitted names
+    x0: np.ndarray  # segments x states: each segment's initial state
+    estimated: np.ndarray  # mask over states: estimated per segment
+    sigma: np.ndarray  # per output
+    residuals: list  # per segment: rows x outputs, y_model - y_log (unweighted)
+    jacobian: np.ndarray  # the weighted residuals' Jacobian (dense) at the optimum, output rows only
+    jacobian_state_blocks: list  # per segment: its rows' columns of its estimated states
+    converged: bool
+    message: str
+    evaluations: int
+    cost: float
+    method: str
+    error_estimate: float
+    history: list = field(default_factory=list)
+
+
+class _Problem:
+    """Residuals and Jacobian of the unknown vector ``z = [theta, x0 of each segment (estimated states)]``."""
+
+    def __init__(self, model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
+                 sigma: np.ndarray, method: str, progress: Callable | None, workers: "_Workers | None" = None):
+        self.model, self.segments, self.estimated = model, segments, estimated
+        self.workers = workers
+        self.stride = 1  # rows between Jacobian evaluations (cosim.calibration.sensitivity)
+        self.x0_log, self.sigma = x0_log, sigma
+        p = model.problem
+        self.nt, self.ne = len(p.fit), int(estimated.sum())
+        n_rows = sum(s.last - s.first for s in segments) * len(model.problem.outputs)
+        # estimated initial states: a dense Jacobian (exact trust-region steps) while it is small, else sparse (lsmr)
+        self.dense = n_rows * (self.nt + self.ne * len(segments)) <= DENSE_LIMIT
+        self.method = method
+        self.progress = progress
+        self.cache: dict = {}
+        self.evaluations = 0
+        self.scale_x = np.maximum(np.abs(x0_log).max(axis=0), 1.0) if x0_log.size else np.ones(0)
+        self.continuity = [i for i in range(len(segments) - 1)] if self.ne else []
+        self.error_estimate = 0.0
+        self._last_jacobian = (None, None)
+
+    def split(self, z):
+        theta = z[:self.nt]
+        x0 = self.x0_log.copy()
+        if self.ne:
+            x0[:, self.estimated] = z[self.nt:].reshape(len(self.segments), self.ne)
+        return theta, x0
+
+    def simulate(self, z):
+        key = z.tobytes()
+        if key not in self.cache:
+            theta, x0 = self.split(z)
+            self.cache.clear()
+            if self.workers is not None:
+                done = self.workers.simulate(theta, self.segments, list(x0))
+            else:
+                done = []
+                for i, s in enumerate(self.segments):
+                    try:
+                        done.append(self.model.simulate(theta, s, x0[i]))
+                    except FmuCallError as exc:
+                        done.append(exc)
+            trajs = []
+            for s, tr in zip(self.segments, done):
+                if isinstance(tr, FmuCallError):
+                    if not self.evaluations:  # the first guess: nothing to fall back on
+                        raise FmuCallError(tr.instance, tr.path, f"the first guess fails: {tr.reason}") from None
+                    # a trial point the FMU refuses: infinite residuals, which the solver rejects
+                    # (its trust region shrinks), as a step into a region the model cannot fly
+                    tr = self._failed(s)
+                trajs.append(tr)
+            self.cache[key] = trajs
+            self.evaluations += 1
+        return self.cache[key]
+
+    def _failed(self, s):
+        from .model import Trajectory
+
+        nx, ny = len(self.model.states), len(self.model.problem.outputs)
+        steps = (s.last - s.first) if s.last < self.model.times.size else (s.last - s.first - 1)
+        return Trajectory(np.full((steps + 1, nx), np.inf), np.full((s.last - s.first, ny), np.inf))
+
+    def residuals(self, z) -> np.ndarray:
+        trajs = self.simulate(z)
+        p = self.model.problem
+        parts = [((tr.outputs - p.output_values[s.first:s.last]) / self.sigma).ravel()
+                 for s, tr in zip(self.segments, trajs)]
+        if self.continuity:
+            _, x0 = self.split(z)
+            for i in self.continuity:
+                d = (trajs[i].states[-1] - x0[i + 1])[self.estimated] / self.scale_x[self.estimated]
+                parts.append(CONTINUITY_WEIGHT * d)
+        return np.concatenate(parts)
+
+    def jacobian(self, z):
+        key = (z.tobytes(), self.stride)
+        if self._last_jacobian[0] != key:
+            self._last_jacobian = (key, self._jacobian(z))
+        return self._last_jacobian[1]
+
+    def _jacobian(self, z):
+        if self.method == "differences":
+            return self._differences(z)
+        theta, x0 = self.split(z)
+        trajs = self.simulate(z)
+        nt, ne = self.nt, self.ne
+        if self.workers is not None:
+            done, self.error_estimate = self.workers.sensitivities(theta, self.segments, trajs, self.estimated,
+                                                                   self.stride)
+        else:
+            done = [segment_sensitivities(self.model, theta, s, tr, self.estimated, self.stride)
+                    for s, tr in zip(self.segments, trajs)]
+            self.error_estimate = self.model.derivative_error
+        blocks = [dY / self.sigma[None, :, None] for dY, _ in done]
+        ends = [dX for _, dX in done]
+        return self._assemble(blocks, ends)
+
+    def _assemble(self, blocks, ends):
+        nt, ne, nseg = self.nt, self.ne, len(self.segments)
+        ncol = nt + ne * nseg
+        if not ne:
+            return np.concatenate([b.reshape(-1, nt) for b in blocks])
+        rows = []
+        for i, b in enumerate(blocks):
+            flat = b.reshape(-1, nt + ne)
+            m = sparse.lil_matrix((flat.shape[0], ncol))
+            m[:, :nt] = flat[:, :nt]
+            m[:, nt + i * ne:nt + (i + 1) * ne] = flat[:, nt:]
+            rows.append(m.tocsr())
+        for i in self.continuity:
+            dX = ends[i][self.estimated] / self.scale_x[self.estimated, None] * CONTINUITY_WEIGHT
+            m = sparse.lil_matrix((ne, ncol))
+            m[:, :nt] = dX[:, :nt]
+            m[:, nt + i * ne:nt + (i + 1) * ne] = dX[:, nt:]
+            m[:, nt + (i + 1) * ne:nt + (i + 2) * ne] = -np.diag(CONTINUITY_WEIGHT / self.scale_x[self.estimated])
+            rows.append(m.tocsr())
+        J = sparse.vstack(rows).tocsr()
+        return J.toarray() if self.dense else J
+
+    def _differences(self, z):
+        """Central differences of the residuals (columns of the estimated
+        states moved in every segment at once: a segment's residuals depend
+        on its own start only), with the error estimate of h against 2h."""
+        r0 = self.residuals(z)
+        p = self.model.problem
+        scales = np.maximum(np.abs(z), 1e-300)
+        if p.defaults:
+            for j, name in enumerate(p.fit):
+                scales[j] = max(scales[j], abs(p.defaults[name]))
+        groups = [[j] for j in range(self.nt)]
+        groups += [[self.nt + i * self.ne + e for i in range(len(self.segments))] for e in range(self.ne)]
+        J = np.zeros((r0.size, z.size))
+        err = 0.0
+        lower, upper = self.bounds()
+        for group in groups:
+            cols = {}
+            for factor in (1.0, 2.0):
+                h = factor * REL_STEP * scales[group]
+                zp, zm = z.copy(), z.copy()
+                zp[group] += h
+                zm[group] -= h
+                over, under = zp[group] > upper[group], zm[group] < lower[group]
+                zp[group] = np.where(over, z[group], zp[group])
+                zm[group] = np.where(under, z[group], zm[group])
+                diff = self.residuals(zp) - self.residuals(zm)
+                cols[factor] = (diff, zp[group] - zm[group])
+            for which, j in enumerate(group):
+                rows = self._rows_of(j)
+                c1 = cols[1.0][0][rows] / cols[1.0][1][which]
+                c2 = cols[2.0][0][rows] / cols[2.0][1][which]
+                J[rows, j] = c1
+                err = max(err, float(np.max(np.abs(c1 - c2), initial=0.0)))
+        self.error_estimate = err
+        return sparse.csr_matrix(J) if self.ne and not self.dense else J
+
+    def _rows_of(self, j):
+        """The residual rows column ``j`` of z touches (all of them for a fitted name)."""
+        if j < self.nt:
+            return slice(None)
+        i = (j - self.nt) // self.ne
+        ny = len(self.model.problem.outputs)
+        seg = self.segments[i]
+        start = sum((s.last - s.first) * ny for s in self.segments[:i])
+        rows = np.arange(start, start + (seg.last - seg.first) * ny)
+        base = sum((s.last - s.first) * ny for s in self.segments)
+        extra = []
+        for c, k in enumerate(self.continuity):
+            if k == i or k + 1 == i:
+                extra += list(range(base + c * self.ne, base + (c + 1) * self.ne))
+        return np.concatenate([rows, np.array(extra, dtype=int)])
+
+    def bounds(self):
+        p = self.model.problem
+        lo = np.concatenate([p.lower, np.full(self.ne * len(self.segments), -np.inf)])
+        hi = np.concatenate([p.upper, np.full(self.ne * len(self.segments), np.inf)])
+        return lo, hi
+
+
+def _spread(values: np.ndarray) -> np.ndarray:
+    s = values.std(axis=0)
+    return np.where(s > 0, s, np.maximum(np.abs(values).max(axis=0), 1.0))
+
+
+def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
+        noise: dict[str, float], method: str, max_iterations: int, tolerance: float,
+        progress: Callable[[int, int], None] | None = None, workers: int = 1, stride: int = 1) -> Fit:
+    """The weighted least-squares estimate (module docstring); ``workers``
+    processes share the segments (forward sensitivities only); ``stride``:
+    the solver's iterations evaluate the Jacobians at every ``stride``-th row
+    (:func:`~cosim.calibration.sensitivity.segment_sensitivities`), the
+    statistics' Jacobian at the optimum at every row."""
+    pool = None
+    if workers > 1 and len(segments) > 1 and method != "differences":
+        # the Model Exchange instances made here, before the fork: every worker inherits them (and this
+        # process, which extracted them, removes their folders at the end)
+        model.start_probes(np.asarray(model.problem.guess, dtype=float), float(model.times[0]))
+        pool = _Workers(model, min(workers, len(segments)))
+    try:
+        return _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool,
+                    stride)
+    finally:
+        if pool is not None:
+            pool.close()
+
+
+def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool,
+         stride) -> Fit:
+    p = model.problem
+    rows = np.concatenate([np.arange(s.first, s.last) for s in segments])
+    sigma = _spread(p.output_values[rows])
+    given = np.array([o in noise for o in p.outputs])
+    for i, o in enumerate(p.outputs):
+        if o in noise:
+            sigma[i] = noise[o]
+    z = np.concatenate([p.guess, x0_log[:, estimated].ravel()])
+    passes = 1 if given.all() else 2
+    done = [0]
+    total = max_iterations * passes
+
+    def report(*_):
+        done[0] += 1
+        if progress is not None:
+            progress(min(done[0], total), total)
+
+    result, prob = None, None
+    for n in range(passes):
+        prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress, pool)
+        lo, hi = prob.bounds()
+        z = np.clip(z, lo, hi)
+        scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
+
+        def jac(zz):
+            report()
+            return prob.jacobian(zz)
+
+        solver = "lsmr" if prob.ne and not prob.dense else "exact"
+        used = 0
+        if stride > 1:  # the coarse Jacobians bring the iterate near the optimum, the exact ones finish
+            prob.stride = stride
+            coarse = max(tolerance, COARSE_TOLERANCE)
+            result = least_squares(prob.residuals, z, jac=jac, bounds=(lo, hi), x_scale=scale, method="trf",
+                                   ftol=coarse, xtol=coarse, gtol=coarse, tr_solver=solver,
+                                   max_nfev=min(max_iterations, COARSE_EVALUATIONS))
+            z, used = result.x, result.nfev
+        prob.stride = 1
+        if used < max_iterations:
+            result = least_squares(prob.residuals, z, jac=jac, bounds=(lo, hi), x_scale=scale, method="trf",
+                                   ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_iterations - used,
+                                   tr_solver=solver)
+        z = result.x
+        if n == 0 and passes == 2:
+            r = prob.residuals(z).copy()
+            ny = len(p.outputs)
+            out = r[:rows.size * ny].reshape(-1, ny) * sigma
+            rms = np.sqrt(np.mean(out ** 2, axis=0))
+            floor = 1e-9 * _spread(p.output_values[rows])
+            if np.all(rms <= floor):  # the model meets the log (noise-free): the first weights stay
+                break
+            sigma = np.where(given, sigma, np.maximum(rms, floor))
+    theta, x0 = prob.split(z)
+    prob.stride = 1
+    J = prob.jacobian(z)
+    trajs = prob.simulate(z)
+    resid = [tr.outputs - p.output_values[s.first:s.last] for s, tr in zip(segments, trajs)]
+    Jd = J.toarray() if sparse.issparse(J) else J
+    n_out = rows.size * len(p.outputs)
+    Jout = Jd[:n_out]
+    nt, ne = prob.nt, prob.ne
+    state_blocks = []
+    start = 0
+    for i, s in enumerate(segments):
+        n = (s.last - s.first) * len(p.outputs)
+        state_blocks.append(Jout[start:start + n, nt + i * ne:nt + (i + 1) * ne] if ne else None)
+        start += n
+    converged = bool(result.status > 0)
+    return Fit(theta, x0, estimated, sigma, resid, Jout[:, :nt], state_blocks, converged, result.message,
+               prob.evaluations, float(result.cost), "forward sensitivities (directional derivatives)"
+               if method != "differences" else "central differences", prob.error_estimate)

@@ -1,0 +1,121 @@
+"""``fnn-cosim calibrate``: an FMU's parameters fitted to a log (docs/calibration.md).
+
+The command's arguments and its run; the calibration is the engine's
+(:mod:`cosim.calibration`). Exit status 0: converged; 1: the fit did not
+converge (its report is written with the last iterate, and says so); 2: bad
+input, nothing fitted.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from .workers_option import worker_count
+
+__all__ = ["add_parser", "run"]
+
+DEFAULT_OUT = "results/calibration"
+
+
+def add_parser(sub, named_values, overrides) -> argparse.ArgumentParser:
+    """The subcommand on ``sub``; ``named_values`` and ``overrides``: the
+    command line's readers of ``K=V`` and ``--set`` pairs (``fnn-cosim``'s,
+    handed over: this module does not import the command line's)."""
+    c = sub.add_parser("calibrate", help="fit an FMU's parameters to a log: estimates, intervals, identifiability, "
+                       "an SSP parameter set")
+    c.add_argument("log", help="the log: the project's results (CSV, Parquet), any CSV with --columns, a PX4 ULog "
+                   "(.ulg, needs pyulog)")
+    where = c.add_mutually_exclusive_group(required=True)
+    where.add_argument("--fmu", metavar="FILE|MODEL", help="the FMU driven alone by the log's inputs (a file, or a "
+                       "model fnn-cosim builds, e.g. Quadrotor)")
+    where.add_argument("--scenario", metavar="NAME|FILE", help="an FMU instance of this scenario, its inputs fed by "
+                       "the log's columns of what is connected to them")
+    c.add_argument("--instance", default=None, help="with --scenario: the FMU instance (default: the one that has "
+                   "every --fit name)")
+    c.add_argument("--fit", default=None, metavar="NAMES", help="comma-separated parameters (and inputs the log "
+                   "lacks, fitted as constants) to estimate")
+    c.add_argument("--fix", action="append", default=[], metavar="K=V", help="a parameter set and not fitted "
+                   "(repeatable)")
+    c.add_argument("--guess", action="append", default=[], metavar="K=V", help="a first guess (repeatable; default "
+                   "the FMU's start value)")
+    c.add_argument("--columns", default=None, metavar="MAP.toml", help="the column map: log columns as FMU variables")
+    c.add_argument("--settings", default=None, metavar="FILE.toml", help="calibration settings (docs/calibration.md)")
+    c.add_argument("--segment", type=float, default=None, metavar="S", help="shooting segment length, s")
+    c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="with --scenario: override a "
+                   "value of the scenario (repeatable)")
+    c.add_argument("--workers", type=worker_count, default=None, metavar="N",
+                   help="processes that share the segments (default: the settings', 1)")
+    c.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
+    c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
+    c.add_argument("--quiet", action="store_true", help="no progress bar")
+    c.set_defaults(func=run, named_values=named_values, overrides=overrides)
+    return c
+
+
+def run(args) -> int:
+    from cosim import registry
+    from cosim.calibration import calibrate, read_column_map, read_settings
+    from cosim.calibration.columns import CalibrationSettings
+    from cosim.calibration.outputs import write_outputs
+    from cosim.errors import ScenarioError
+    from cosim.files import output_folder
+    from cosim.schema import validate
+
+    from .progress import progress_bar
+
+    _named_values, _overrides = args.named_values, args.overrides
+    settings = read_settings(args.settings) if args.settings else CalibrationSettings()
+    update = {}
+    if args.fit is not None:
+        names = [n.strip() for n in args.fit.split(",") if n.strip()]
+        if not names:
+            raise ScenarioError(f"--fit {args.fit!r}: expected comma-separated names, e.g. --fit m,Ix")
+        update["fit"] = names
+    if args.fix:
+        update["fix"] = {**settings.fix, **_named_values(args.fix, "--fix")}
+    if args.guess:
+        update["guess"] = {**settings.guess, **_named_values(args.guess, "--guess")}
+    if args.segment is not None:
+        if not args.segment > 0:
+            raise ScenarioError(f"--segment {args.segment!r}: must be positive")
+        update["segment"] = args.segment
+    if args.workers is not None:
+        update["workers"] = args.workers
+    if update:
+        settings = validate(CalibrationSettings, settings.model_dump(exclude_none=True) | update)
+    column_map = read_column_map(args.columns) if args.columns else None
+    out = output_folder(args.out or DEFAULT_OUT)
+    fixed, extra, instance = {}, {}, None
+    if args.scenario is not None:
+        from cosim.calibration.scenario_instance import scenario_instance
+
+        instance, fmu, fixed, extra = scenario_instance(args.scenario, args.instance, settings.fit,
+                                                        _overrides(args.set))
+    else:
+        if args.set or args.instance:
+            raise ScenarioError("--set and --instance go with --scenario")
+        models = registry.fmu_models()
+        if Path(args.fmu).exists():
+            fmu = Path(args.fmu)
+        elif args.fmu in models:
+            fmu = models[args.fmu].build(args.fmi)
+        else:
+            raise ScenarioError(f"--fmu {args.fmu!r}: no such FMU file, and no model of that name "
+                                f"(models: {', '.join(models)})")
+    with progress_bar("calibrate", settings.max_iterations, enabled=not args.quiet, unit="Jacobian") as update_bar:
+        cal = calibrate(args.log, fmu, settings, column_map, instance=instance, extra_columns=extra, fixed=fixed,
+                        progress=update_bar)
+    written = write_outputs(cal, out, args.log, fmu, instance)
+    for name, value in cal.estimates().items():
+        j = cal.problem.fit.index(name)
+        if value is None:
+            print(f"{name}: not identifiable from this log")
+        else:
+            lo, hi = cal.stats.ci95[j]
+            print(f"{name} = {value:.10g} (95 % interval [{lo:.6g}, {hi:.6g}])")
+    for path in written[:4]:
+        print(path)
+    if not cal.converged:
+        print(f"fnn-cosim: the fit did not converge ({cal.fit.message}); the report shows the last iterate")
+        return 1
+    return 0

@@ -1,0 +1,202 @@
+"""The engine's calibrator (cosim.calibration) on the Reference FMUs: known
+answers from their published outputs and from data of our own, the
+statistics, and every bad input refused in one line (docs/calibration.md)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.calibration import CalibrationSettings, calibrate
+from cosim.errors import ScenarioError
+
+REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
+pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
+RESULTS = REFERENCE / "results"
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_van_der_pol_mu_from_its_published_output_from_a_guess_50_percent_off(version):
+    # the published file is the FMU's own Co-Simulation (forward Euler at 0.01 s): the fit meets it to round-off
+    settings = CalibrationSettings(fit=["mu"], guess={"mu": 1.5}, segment=5.0, **({"stop": 10.0} if version == 3 else {}))
+    cal = calibrate(RESULTS / "VanDerPol_out.csv", REFERENCE / f"fmi{version}" / "VanDerPol.fmu", settings)
+    assert cal.converged
+    assert cal.fit.method.startswith("forward sensitivities")  # VanDerPol provides directional derivatives
+    assert abs(cal.fit.theta[0] - 1.0) < 1e-6
+    assert cal.stats.identifiable[0]
+
+
+def test_dahlquist_k_from_its_published_output_by_differences_from_a_guess_50_percent_off():
+    cal = calibrate(RESULTS / "Dahlquist_out.csv", REFERENCE / "fmi2" / "Dahlquist.fmu",
+                    CalibrationSettings(fit=["k"], guess={"k": 0.5}))
+    assert cal.converged
+    assert cal.fit.method == "central differences"  # Dahlquist provides no directional derivatives
+    assert abs(cal.fit.theta[0] - 1.0) < 1e-6
+    assert cal.fit.error_estimate < 1e-6
+
+
+def _van_der_pol_data(tmp_path, mu, sigma, seed, stop=10.0):
+    from fmpy import simulate_fmu
+
+    r = simulate_fmu(str(REFERENCE / "fmi2" / "VanDerPol.fmu"), stop_time=stop, output_interval=0.01,
+                     start_values={"mu": mu})
+    rng = np.random.default_rng(seed)
+    path = tmp_path / f"vdp_{seed}.csv"
+    x0 = r["x0"] + sigma * rng.standard_normal(r.size)
+    x1 = r["x1"] + sigma * rng.standard_normal(r.size)
+    np.savetxt(path, np.column_stack([r["time"], x0, x1]), delimiter=",", header="time,x0,x1", comments="")
+    return path
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_van_der_pol_mu_from_noisy_data_of_our_own_inside_its_interval(tmp_path, seed):
+    truth = 0.7
+    path = _van_der_pol_data(tmp_path, truth, 0.01, seed)
+    cal = calibrate(path, REFERENCE / "fmi2" / "VanDerPol.fmu",
+                    CalibrationSettings(fit=["mu"], guess={"mu": 1.05}, initial_states="estimated", segment=2.5))
+    assert cal.converged
+    lo, hi = cal.stats.ci95[0]
+    assert lo < truth < hi
+    assert 0 < cal.stats.std[0] < 0.05
+    # the noise level estimated from the residuals is the one put in
+    assert cal.residuals["x0"]["sigma"] == pytest.approx(0.01, rel=0.15)
+
+
+def test_a_parameter_without_effect_is_reported_not_identifiable_never_as_a_number(tmp_path):
+    # Dahlquist from x(0) = 0: x stays 0 whatever k is; the data cannot determine k
+    path = tmp_path / "zero.csv"
+    t = np.arange(0, 2.01, 0.1)
+    np.savetxt(path, np.column_stack([t, np.zeros_like(t)]), delimiter=",", header="time,x", comments="")
+    cal = calibrate(path, REFERENCE / "fmi2" / "Dahlquist.fmu", CalibrationSettings(fit=["k"], guess={"k": 0.5}))
+    assert not cal.stats.identifiable[0]
+    assert np.isnan(cal.stats.std[0])
+    assert cal.estimates() == {"k": None}
+
+
+def _cli(*args):
+    from quadrotor_paper.cli import main
+
+    return main(list(map(str, args)))
+
+
+def test_the_command_writes_its_four_files(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = _cli("calibrate", RESULTS / "VanDerPol_out.csv", "--fmu", REFERENCE / "fmi2" / "VanDerPol.fmu",
+                "--fit", "mu", "--guess", "mu=0.5", "--segment", "5", "--out", out, "--quiet")
+    assert code == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    mu = doc["parameters"]["mu"]
+    assert abs(mu["value"] - 1.0) < 1e-6 and mu["identifiable"] and mu["ci95"][0] <= mu["value"] <= mu["ci95"][1]
+    assert doc["converged"] and set(doc["residuals"]) == {"x0", "x1"}
+    assert "mu = " in (out / "calibration.toml").read_text()
+    from cosim.ssp import ssd_schema_errors  # noqa: F401  (the module that writes SSP files)
+    from lxml import etree
+
+    ssv = etree.parse(str(out / "parameters.ssv")).getroot()
+    assert etree.QName(ssv).localname == "ParameterSet"
+    assert float(ssv.find(".//{*}Real").get("value")) == pytest.approx(1.0, rel=1e-6)
+    report = (out / "report.md").read_text()
+    assert "| mu |" in report and (out / "estimates.png").is_file() and (out / "prediction.png").is_file()
+
+
+def test_a_fit_that_does_not_converge_keeps_its_report_and_exits_1(tmp_path, capsys):
+    settings = tmp_path / "settings.toml"
+    settings.write_text("max_iterations = 1\n")
+    out = tmp_path / "out"
+    code = _cli("calibrate", RESULTS / "VanDerPol_out.csv", "--fmu", REFERENCE / "fmi2" / "VanDerPol.fmu",
+                "--fit", "mu", "--guess", "mu=1.5", "--settings", settings, "--out", out, "--quiet")
+    assert code == 1
+    assert "NOT CONVERGED" in (out / "report.md").read_text()
+    assert json.loads((out / "calibration.json").read_text())["converged"] is False
+
+
+def _bad_log(tmp_path, rows, header="time,x"):
+    path = tmp_path / "bad.csv"
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("rows, says", [
+    (["0,1", "0.1,nan", "0.2,0.8"], "row 2, column x: nan is not a finite number"),
+    (["0,1", "0.1,0.9", "0.1,0.8"], "row 3, column time: t = 0.1 repeats the row before"),
+    (["0,1", "0.2,0.9", "0.1,0.8"], "row 3, column time: t = 0.1 goes back"),
+    (["0,1", "0.1,0.9", "0.2,0.8", "0.7,0.5", "0.8,0.4"], "row 4, column time: a gap of 0.5 s"),
+])
+def test_a_bad_log_is_one_line_naming_row_and_column_exit_2(tmp_path, capsys, rows, says):
+    code = _cli("calibrate", _bad_log(tmp_path, rows), "--fmu", REFERENCE / "fmi2" / "Dahlquist.fmu", "--fit", "k",
+                "--out", tmp_path / "out", "--quiet")
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and says in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--fit", "kk"], "--fit kk: Dahlquist.fmu has no such parameter"),
+    (["--fit", "k", "--fix", "k=2"], "--fit k: it is fixed"),
+    (["--fit", "x"], "--fit x: a continuous output of Dahlquist.fmu"),
+    (["--fit", "k", "--columns", "MAP:columns.x = 'missing'"], "no column 'missing'"),
+    (["--fit", "k", "--columns", "MAP:columns.y = 'x'"], "'y' is not a variable of Dahlquist.fmu"),
+])
+def test_bad_names_units_and_maps_are_one_line_exit_2(tmp_path, capsys, args, says):
+    args = list(args)
+    for i, a in enumerate(args):
+        if a.startswith("MAP:"):
+            path = tmp_path / "map.toml"
+            path.write_text(a[4:] + "\n")
+            args[i] = path
+    path = tmp_path / "ok.csv"
+    t = np.arange(0, 1.01, 0.1)
+    np.savetxt(path, np.column_stack([t, np.exp(-t)]), delimiter=",", header="time,x", comments="")
+    code = _cli("calibrate", path, "--fmu", REFERENCE / "fmi2" / "Dahlquist.fmu", *args, "--out", tmp_path / "o",
+                "--quiet")
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert says in err and len(err.splitlines()) == 1
+
+
+def test_a_column_map_renames_a_column(tmp_path):
+    path = tmp_path / "ok.csv"
+    t = np.arange(0, 5.01, 0.1)
+    np.savetxt(path, np.column_stack([t, 0.9 ** (t / 0.1)]), delimiter=",", header="time,xx", comments="")
+    from cosim.calibration import ColumnMap
+
+    cmap = ColumnMap.from_document({"columns": {"x": "xx"}}, "map")
+    cal = calibrate(path, REFERENCE / "fmi2" / "Dahlquist.fmu", CalibrationSettings(fit=["k"], guess={"k": 2.0}),
+                    cmap)
+    assert abs(cal.fit.theta[0] - 1.0) < 1e-6
+
+
+def test_a_parquet_log_is_read_with_its_units(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    r = np.loadtxt(RESULTS / "Dahlquist_out.csv", delimiter=",", skiprows=1)
+    table = pa.table({"time": r[:, 0], "x": r[:, 1]})
+    pq.write_table(table, tmp_path / "log.parquet")
+    cal = calibrate(tmp_path / "log.parquet", REFERENCE / "fmi2" / "Dahlquist.fmu",
+                    CalibrationSettings(fit=["k"], guess={"k": 1.5}))
+    assert abs(cal.fit.theta[0] - 1.0) < 1e-6
+
+
+def test_a_settings_file_with_an_unknown_key_is_one_line_naming_file_and_key(tmp_path, capsys):
+    settings = tmp_path / "s.toml"
+    settings.write_text("segmnt = 2.0\n")
+    code = _cli("calibrate", RESULTS / "Dahlquist_out.csv", "--fmu", REFERENCE / "fmi2" / "Dahlquist.fmu", "--fit",
+                "k", "--settings", settings, "--out", tmp_path / "o", "--quiet")
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and f"calibration settings {settings}: segmnt: unknown key" in err and len(err.splitlines()) == 1
+
+
+def test_a_ulog_without_pyulog_or_without_a_topic_is_one_line(tmp_path, capsys):
+    log = tmp_path / "flight.ulg"
+    log.write_bytes(b"ULog\x01\x12\x35\x01")
+    code = _cli("calibrate", log, "--fmu", REFERENCE / "fmi2" / "Dahlquist.fmu", "--fit", "k", "--out",
+                tmp_path / "o", "--quiet")
+    err = capsys.readouterr().err.strip()
+    try:
+        import pyulog  # noqa: F401
+        expected = "a ULog needs a column map (--columns) naming its 'topic'"
+    except ImportError:
+        expected = "reading a PX4 ULog needs pyulog"
+    assert code == 2 and expected in err and len(err.splitlines()) == 1
