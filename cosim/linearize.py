@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import control
 import numpy as np
@@ -40,7 +40,8 @@ import numpy as np
 from .errors import FmuCallError, FmuLoadError
 from .fmu_component import FmuComponent
 
-__all__ = ["Linearization", "LinearizationError", "linearize_fmu", "save_linearization", "METHODS"]
+__all__ = ["Linearization", "LinearizationError", "linearize_fmu", "save_linearization", "operating_point_of_run",
+           "METHODS"]
 
 METHODS = ("auto", "derivatives", "differences")
 _REL_STEP = np.finfo(float).eps ** (1.0 / 3.0)  # central differences: truncation h^2 vs round-off eps / h
@@ -364,6 +365,38 @@ def _linearize_sampled(path, comp: FmuComponent, start, inputs, parameters, fmu_
 
 
 # ---- files ---------------------------------------------------------------------------------------
+
+def operating_point_of_run(scenario, instance: str, t: float, label: str | None = None) -> tuple[Path, dict[str, Any]]:
+    """Fly ``scenario`` (a :class:`cosim.scenario.Scenario`) to ``t`` (s), a
+    communication point of its run, and return the FMU file of its instance
+    ``instance`` with the operating point there: its FMU state, inputs and
+    parameters (a snapshot, :class:`cosim.master.Snapshot`), as keyword
+    arguments of :func:`linearize_fmu`. A ``ScenarioError`` names a time that
+    is no communication point, an instance the scenario lacks, or a run that
+    failed before ``t``; ``label`` says how ``t`` was given (default ``t = ... s``)."""
+    from .errors import ScenarioError
+    from .scenario import build_master
+    from .time_grid import communication_point
+
+    t0, h = scenario.start_time, scenario.step
+    label = label or f"t = {t!r} s"
+    n = communication_point(t, t0, h, scenario.n_steps)
+    if n is None:
+        raise ScenarioError(f"{label}: expected a communication point of {scenario.name} in "
+                            f"[{t0:g}, {t0 + scenario.duration:g}] s (a whole number of steps of {h:g} s)")
+    with build_master(scenario) as master:
+        names = [f.name for f in master.fmus]
+        if instance not in names:
+            raise ScenarioError(f"linearize {instance!r}: no FMU instance of that name in {scenario.name} "
+                                f"(its FMUs: {', '.join(names)})")
+        result = master.run(max(n, 1) * h, seed=scenario.seed, t0=t0, snapshots=[t0 + n * h], raise_on_error=False)
+        path = Path(master.components[instance].path)
+    if not result.snapshots:
+        raise ScenarioError(f"{label}: the run of {scenario.name} {result.status} before it: {result.error}")
+    snap = result.snapshots[0]
+    return path, dict(inputs=snap.inputs_of(instance), parameters=snap.parameters[instance],
+                      fmu_state=snap.states[instance], t=snap.time)
+
 
 def save_linearization(lin: Linearization, out_dir: str | Path, bode: Sequence[tuple[str, str]] = (),
                        stem: str = "linearization") -> list[Path]:

@@ -76,16 +76,6 @@ def _out_folder(given: str | None, default: Path) -> Path:
 
 # ---- run ------------------------------------------------------------------------------
 
-class _Shown:
-    """A metric in a line of text: its number as the format asks, or "undefined" (None: over no rows)."""
-
-    def __init__(self, value: float | None):
-        self.value = value
-
-    def __format__(self, spec: str) -> str:
-        return "undefined" if self.value is None else format(self.value, spec)
-
-
 def _record_every(text: str) -> int:
     """The ``type`` of ``--record-every``: a whole number from 1."""
     from cosim.errors import shown_text
@@ -122,6 +112,7 @@ def _cmd_run(args) -> int:
 
     from .experiments import run_once
     from .progress import progress_bar
+    from .run_summary import summary_lines
 
     from cosim.errors import CosimError, ScenarioError, one_line
     from cosim.files import is_ssp, not_a_study_folder, output_file, output_folder, safe_name
@@ -175,29 +166,7 @@ def _cmd_run(args) -> int:
         figures = run_figures(out, result, scenario)
     summary["figures"] = [str(p) for p in figures]
     write_json(out / "summary.json", summary)
-    simulated = result.time[-1] - result.time[0] if summary["rows"] else 0.0
-    lines = [f"# Run of {scenario.name}", "", scenario.description, "",
-             f"- status: {summary['status']}" + (f" ({summary['error']})" if summary["error"] else "")
-             + (f", ended early: {summary['terminated']}" if summary.get("terminated") else ""),
-             f"- seed: {summary['seed']}, controller: {summary['variant']}",
-             f"- simulated {simulated:.2f} s in {summary['wall_time_s']:.3f} s "
-             f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
-    if summary.get("max_error_m") is not None:
-        lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
-    if summary.get("nees_position") is not None:  # flown on an estimate (docs/estimation.md)
-        shown = {k: _Shown(summary.get(k)) for k in ("nees_position", "nees_velocity", "nees_attitude", "nees_wind",
-                                                      "nis_fix", "est_rmse_position_m", "est_rmse_wind_settled_mps",
-                                                      "outliers_fix", "outliers_acc", "resets_fix", "resets_acc")}
-        lines.append("- estimate: NEES position {nees_position:.2f}, velocity {nees_velocity:.2f}, attitude "
-                     "{nees_attitude:.2f}, wind {nees_wind:.2f} (3 each when consistent); NIS fix {nis_fix:.2f} "
-                     "(6); RMSE position {est_rmse_position_m:.4f} m, wind once steady "
-                     "{est_rmse_wind_settled_mps:.3f} m/s".format(**shown))
-        lines.append("- gate (chi-square, docs/estimation.md): fixes refused {outliers_fix:.0f}, drag measurements "
-                     "refused {outliers_acc:.0f}; restarts after refusals in a row: position and velocity "
-                     "{resets_fix:.0f}, wind {resets_acc:.0f}".format(**shown))
-    if learned_error:
-        lines.append(f"- learned state not saved: {learned_error}")
-    lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]
+    lines = summary_lines(scenario, result, summary, figures, learned_error)
     (out / "summary.md").write_text("\n".join(lines))
     print("\n".join(lines[4:-2]))
     print(f"results: {out}")
@@ -395,36 +364,18 @@ def _named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
 
 
 def _operating_point_of_run(args) -> tuple[Path, dict[str, Any]]:
-    """``--scenario S --time T``: fly S to T, take its snapshot there and
-    return the FMU file of instance ``args.fmu`` with its operating point
-    (its FMU state, its inputs and parameters then, as keyword arguments of
-    ``linearize_fmu``)."""
+    """``--scenario S --time T``: the FMU file of instance ``args.fmu`` and its
+    operating point at T of S's run (:func:`cosim.linearize.operating_point_of_run`)."""
     from cosim.errors import ScenarioError
-    from cosim.time_grid import communication_point
-    from cosim.scenario import build_master, load_scenario
+    from cosim.linearize import operating_point_of_run
+    from cosim.scenario import load_scenario
 
     if args.parameter:
         raise ScenarioError("--parameter: with --scenario the parameters are the run's; set them with --set")
-    scenario = load_scenario(args.scenario, _overrides(args.set))
-    t0, h = scenario.start_time, scenario.step
-    end = t0 + scenario.duration
-    t = args.time
-    n = communication_point(t, t0, h, scenario.n_steps) if t is not None else None
-    if n is None:
-        raise ScenarioError(f"--time {t!r}: expected a communication point of {scenario.name} in [{t0:g}, {end:g}] s "
-                            f"(a whole number of steps of {h:g} s)")
-    with build_master(scenario) as master:
-        names = [f.name for f in master.fmus]
-        if args.fmu not in names:
-            raise ScenarioError(f"linearize {args.fmu!r}: no FMU instance of that name in {scenario.name} "
-                                f"(its FMUs: {', '.join(names)})")
-        result = master.run(max(n, 1) * h, seed=scenario.seed, t0=t0, snapshots=[t0 + n * h], raise_on_error=False)
-        path = Path(master.components[args.fmu].path)
-    if not result.snapshots:
-        raise ScenarioError(f"--time {t!r}: the run of {scenario.name} {result.status} before it: {result.error}")
-    snap = result.snapshots[0]
-    return path, dict(inputs=snap.inputs_of(args.fmu), parameters=snap.parameters[args.fmu],
-                      fmu_state=snap.states[args.fmu], t=snap.time)
+    if args.time is None:
+        raise ScenarioError("--scenario: give the time of the run to linearize at with --time")
+    return operating_point_of_run(load_scenario(args.scenario, _overrides(args.set)), args.fmu, args.time,
+                                  f"--time {args.time!r}")
 
 
 def _cmd_linearize(args) -> int:
