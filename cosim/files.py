@@ -27,8 +27,47 @@ from typing import Any, Iterable
 from .errors import ScenarioError, one_line, shown_text
 from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_NESTING, MAX_RATIO
 
-__all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder", "output_file",
-           "zip_members", "read_entry", "extract_zip"]
+__all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "json_document",
+           "repeated", "given_twice", "put_once", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder",
+           "output_file", "zip_members", "read_entry", "extract_zip"]
+
+
+# ---- duplicates: each name given once ---------------------------------------------------------------
+# A name given twice in a file (a recorded signal, a parameter binding, an SSP archive's section, a
+# JSON object's key) is refused where it is read: the last one silently winning hid a mistake (z
+# starting at -50 where the file also said -15), and a list of repeats grew memory with no use.
+
+def repeated(items: Iterable[Any]) -> Any | None:
+    """The first item of ``items`` that an earlier one equals (``None`` if
+    none does), in one pass."""
+    seen = set()
+    for item in items:
+        if item in seen:
+            return item
+        seen.add(item)
+    return None
+
+
+def given_twice(where: str, item: Any) -> ScenarioError:
+    """The one refusal of a name given twice: ``where: 'x' is given twice; each at most once``."""
+    return ScenarioError(f"{where}: {shown_text(repr(item) if isinstance(item, str) else str(item))} is given "
+                         f"twice; each at most once")
+
+
+def put_once(mapping: dict, key: Any, value: Any, where: str) -> None:
+    """``mapping[key] = value``, refused (:func:`given_twice`) if ``key`` is there already."""
+    if key in mapping:
+        raise given_twice(where, key)
+    mapping[key] = value
+
+
+def _object_once(where: str):
+    def pairs_once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in pairs:
+            put_once(out, key, value, f"{where}: key")
+        return out
+    return pairs_once
 
 
 
@@ -157,15 +196,21 @@ def check_document(data: Any, where: str, depth: int = 0) -> None:
 def read_json(path: str | Path, what: str) -> Any:
     """A JSON file as Python data, or a one-line :class:`ScenarioError`
     (:func:`check_document`: what a document may hold)."""
-    text = read_text(path, what)
+    return json_document(read_text(path, what), f"{what} {str(path)!r}")
+
+
+def json_document(text: str, where: str, depth: int = 0) -> Any:
+    """``text`` as JSON data (a file's, or a JSON value inside another
+    document: an SSP archive's section), or a one-line :class:`ScenarioError`
+    naming ``where``: not JSON, a key given twice in an object, or what
+    :func:`check_document` refuses (``depth``: the levels above it)."""
     try:
-        doc = json.loads(text)
+        doc = json.loads(text, object_pairs_hook=_object_once(where))
     except json.JSONDecodeError as exc:
-        raise ScenarioError(f"{what} {str(path)!r}: not JSON ({exc.msg}, line {exc.lineno})") from None
+        raise ScenarioError(f"{where}: not JSON ({exc.msg}, line {exc.lineno})") from None
     except (ValueError, RecursionError) as exc:
-        raise ScenarioError(f"{what} {str(path)!r}: not a document this tool reads: "
-                            f"{one_line(str(exc))[:200]}") from None
-    check_document(doc, f"{what} {str(path)!r}")
+        raise ScenarioError(f"{where}: not a document this tool reads: {one_line(str(exc))[:200]}") from None
+    check_document(doc, where, depth)
     return doc
 
 
