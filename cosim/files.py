@@ -29,7 +29,7 @@ from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_
 
 __all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "json_document",
            "repeated", "given_twice", "put_once", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder",
-           "output_file", "zip_members", "read_entry", "extract_zip"]
+           "not_others_results", "output_file", "zip_members", "read_entry", "extract_zip"]
 
 
 # ---- duplicates: each name given once ---------------------------------------------------------------
@@ -241,15 +241,20 @@ def output_folder(path: str | Path, what: str = "--out") -> Path:
 
 
 STUDY_SIDECAR = "study.json"  # what marks a study's folder (cosim.study_run): its definition and progress
+RUN_SIDECAR = "results.csv.json"  # what marks a run's folder: the sidecar of its results.csv (cosim.recorder)
+_MARKS = {"study": STUDY_SIDECAR, "run": RUN_SIDECAR}  # a command -> the file that says its results are there
 
 
-def not_a_study_folder(path: Path, what: str = "--out") -> Path:
-    """``path``, refused if it holds a study's results: a single run's files
-    (``summary.json`` among them) would overwrite the study's, even while the
-    study runs (its lock keeps out other studies only)."""
-    if (path / STUDY_SIDECAR).exists():
-        raise ScenarioError(f"{what} {path}: holds a study's results ({STUDY_SIDECAR}); a run would overwrite its "
-                            f"summary: choose another folder")
+def not_others_results(path: Path, command: str, what: str = "--out") -> Path:
+    """``path``, refused if it holds another command's results (a study's
+    ``study.json``, a run's ``results.csv.json``): both write
+    ``summary.json``, so one would overwrite the other's, even while a study
+    runs (its lock keeps out other studies only). The same command's results
+    are its own to resume or replace. ``command``: ``"run"`` or ``"study"``."""
+    for other, mark in _MARKS.items():
+        if other != command and (path / mark).exists():
+            raise ScenarioError(f"{what} {path}: holds a {other}'s results ({mark}); a {command} would overwrite "
+                                f"its summary: choose another folder")
     return path
 
 

@@ -32,7 +32,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from .errors import ScenarioError, one_line
 from .files import STUDY_SIDECAR as SIDECAR
-from .files import output_folder
+from .files import not_others_results, output_folder
 from .files import write_json  # noqa: F401  (where the study writers have always found it)
 from .scenario import apply_overrides, parse_scenario
 from .study import Study, count, runs
@@ -224,7 +224,7 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
         base = parse_scenario(apply_overrides(base.raw, {"record.signals": list(record)}), source=base.source)
     header = columns(study, metric_names)
     total = count(study)
-    out = output_folder(out_dir) if out_dir is not None else None
+    out = not_others_results(output_folder(out_dir), "study") if out_dir is not None else None
     with (_Lock(out) if out is not None else contextlib.nullcontext()):
         done = bytearray((total + 7) // 8)
         runs_csv = None
