@@ -106,7 +106,11 @@ def read_text(path: str | Path, what: str = "file", limit: int = MAX_DOCUMENT_BY
 
 def read_toml(path: str | Path, what: str = "scenario") -> dict[str, Any]:
     """A TOML file as a mapping, or a one-line :class:`ScenarioError` naming the file and the fault
-    (:func:`check_document`: what a document may hold)."""
+    (:func:`check_document`: what a document may hold). An SSP archive
+    (:func:`is_ssp`) is named as one, and the command that takes it."""
+    if is_ssp(path):  # its bytes are a zip's: "not UTF-8 text (byte 11)" said nothing of use
+        raise ScenarioError(f"{what} {str(path)!r}: an SSP archive, not a TOML file: `fnn-cosim run {path}` flies it "
+                            f"(a study, export-ssp and linearize --scenario take a TOML scenario)")
     text = read_text(path, what)
     try:
         doc = _loads_toml(text, str(path), lines=True)
