@@ -108,7 +108,8 @@ def check_state(variant: Variant, state) -> None:
     names = [name for name, _, _ in ports]
     first = names.index("R_ref_prev_1")
     R = state[first:first + 9].reshape(3, 3, order="F")  # column-major, as the state holds it
-    deviation = max(float(np.abs(R.T @ R - np.eye(3)).max()), abs(float(np.linalg.det(R)) - 1.0))
+    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: an infinite deviation, refused below
+        deviation = max(float(np.abs(R.T @ R - np.eye(3)).max()), abs(float(np.linalg.det(R)) - 1.0))
     if not deviation <= ROTATION_TOLERANCE:
         raise ValueError(f"R_ref_prev_1..9 = {np.round(R.reshape(-1, order='F'), 6).tolist()}: the previous desired "
                          f"attitude R* must be a rotation (R^T R = I, det R = +1, to {ROTATION_TOLERANCE:g}; "

@@ -73,8 +73,9 @@ CASES += [
                                     "{out}"]),
 ]
 for command in (["run", "circles", "--set", SHORT], ["sweep", "table2"], ["table2"], ["table3"], ["reproduce"],
-                ["stability", "--no-cosim"], ["linearize", "Quadrotor"], ["build-fmu"], ["schema", "scenario"]):
+                ["stability", "--no-cosim"], ["linearize", "Quadrotor"], ["build-fmu"]):
     CASES.append(("--out a file", [*command, "--out", "{plain}"]))
+CASES.append(("--out a folder where a file is written", ["schema", "scenario", "--out", "{folder}"]))
 CASES += [
     ("--out another command's results", ["run", "circles", "--set", SHORT, "--out", "{study}"]),
     ("--out another command's results", ["sweep", "table2", "--out", "{run}"]),
