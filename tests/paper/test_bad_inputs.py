@@ -538,7 +538,7 @@ def test_a_brace_group_is_expanded_in_linear_time_and_capped():
 @pytest.mark.parametrize("key, value, message", [
     ("kp", "-1", "PositionParams.kp = -1.0 1/s is outside its range [1e-09, inf]"),
     ("kp", "0", "PositionParams.kp = 0.0 1/s is outside its range [1e-09, inf]"),
-    ("kd", "-0.5", "PositionParams.kd = -0.5 1 is outside its range [0, inf]"),
+    ("kd", "-0.5", "controller.position.kd = -0.5: must be in [0, inf): a flight's derivative gain"),
 ])
 def test_negative_pd_gains_are_refused_with_their_range(sandbox, capsys, key, value, message):
     code, line = cli(capsys, "run", "circles", "--set", f"controller.position.{key}={value}", *SHORT)
@@ -610,10 +610,23 @@ def test_a_resumed_runs_table_with_a_run_twice_or_a_word_for_a_number_is_refused
     assert code == EXIT_BAD_INPUT and message.format(run=lines[-1].split(",")[0]) in line, line
 
 
-def test_a_local_study_leaves_no_dask_scratch_space(small_study, sandbox, capsys):
+def test_a_local_study_leaves_no_dask_scratch_space(small_study, tmp_path, monkeypatch, capsys):
     """issue 28: dask-scratch-space was left in the temporary folder after every local sweep."""
+    import multiprocessing
+    import multiprocessing.forkserver
+    import multiprocessing.util
     import tempfile
 
+    # multiprocessing's own folder and its forkserver's socket, made once a process, stay where they are
+    # (in the suite's deep temporary folders a socket's path would pass AF_UNIX's 108 bytes)
+    multiprocessing.util.get_temp_dir()
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        multiprocessing.forkserver.ensure_running()
+    sandbox = tmp_path / "work"
+    sandbox.mkdir()
+    monkeypatch.chdir(sandbox)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
     study, _ = small_study
     code, _ = cli(capsys, "sweep", str(study), "--workers", "2", "--out", str(sandbox / "out"), "--quiet", "--no-plots")
     assert code == 0 and (sandbox / "out" / "summary.json").is_file()
