@@ -1,7 +1,8 @@
 """How the importers a Python user can install fly the archives of
 ``fnn-cosim export-ssp``: a markdown table for ``docs/ssp.md``.
 
-Exports ``circles`` and ``circles_sensors`` (every component an FMU,
+Exports ``circles``, ``circles_sensors``, ``circles_estimated``, ``figure8_lab`` and
+``figure8_lab_estimated`` (every component an FMU,
 ``quadrotor_paper.portable.all_fmu``) and flies each archive with
 
 * our master (the scenario file, and the archive read back by ``load_ssp``),
@@ -25,7 +26,7 @@ with the values after the step from t, and its time is a running sum, so it
 records one row more than the duration: the position at t = duration is its
 row stamped duration - h; its RMSE is over all its rows.
 
-    .venv/bin/python benchmarks/ssp_importers.py [--scenarios circles circles_sensors]
+    .venv/bin/python benchmarks/ssp_importers.py [--scenarios circles circles_estimated ...]
 """
 from __future__ import annotations
 
@@ -102,7 +103,8 @@ def _member(archive: Path, member: str, target: Path) -> Path:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--scenarios", nargs="+", default=["circles", "circles_sensors"])
+    p.add_argument("--scenarios", nargs="+",
+                   default=["circles", "circles_sensors", "circles_estimated", "figure8_lab", "figure8_lab_estimated"])
     args = p.parse_args(argv)
     results = {}
     with tempfile.TemporaryDirectory(prefix="ssp-importers-") as tmp:

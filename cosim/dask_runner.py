@@ -9,6 +9,9 @@ small record (a dict) per run, in the order the runs finish:
      "seed": int, "wall_time_s": float, "metrics": {...}, "pid": int}
 
 A metric is called as ``metrics(scenario, result)``. One with an attribute
+``observe(scenario) -> observer`` has the run's rows streamed to that
+observer (``Master.run(observers=...)``, in ``result.observers``) and keeps
+none in memory. One with an attribute
 ``snapshot_times(scenario) -> times`` gets the run's FMU states at those
 times in ``result.snapshots`` (:class:`~cosim.master.Snapshot`), e.g. to
 linearize the loop along the flight.
@@ -257,8 +260,13 @@ def execute(raw: Mapping[str, Any], source: str | None, run: Run, metrics: Metri
     try:
         # a metric may ask for the run's FMU states at chosen times (cosim.master.Snapshot)
         wanted = getattr(metrics, "snapshot_times", None)
+        # a metric taken as the rows stream (``metrics.observe(scenario)``, an observer of the run) keeps no
+        # row in memory: a run's memory does not grow with its duration; other metrics read the kept rows
+        observe = getattr(metrics, "observe", None)
         result = master.run(scenario.duration, seed=seed, t0=scenario.start_time, raise_on_error=False,
-                            snapshots=wanted(scenario) if wanted is not None else ())
+                            snapshots=wanted(scenario) if wanted is not None else (),
+                            keep=0 if observe is not None else None,
+                            observers=[observe(scenario)] if observe is not None else ())
     except Exception as exc:  # could not start, or a component raised mid-run
         cache.drop(master)
         record["error"] = _message(exc)

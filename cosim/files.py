@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import math
 import os
 import posixpath
 import re
@@ -29,7 +30,7 @@ from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_
 
 __all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "json_document",
            "repeated", "given_twice", "put_once", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder",
-           "not_others_results", "output_file", "zip_members", "read_entry", "extract_zip"]
+           "not_others_results", "output_file", "room_for", "zip_members", "read_entry", "extract_zip"]
 
 
 # ---- duplicates: each name given once ---------------------------------------------------------------
@@ -244,6 +245,25 @@ def output_folder(path: str | Path, what: str = "--out") -> Path:
     return path
 
 
+def room_for(path: Path, need: int, what: str, remedy: str) -> int:
+    """``need`` bytes, refused in one line if the file system of the folder
+    ``path`` has less free space (disk is the user's: nothing else bounds a
+    results file); ``remedy`` says how to write less."""
+    free = shutil.disk_usage(path).free
+    if need > free:
+        raise ScenarioError(f"{what}: up to {_size(need)}; the file system of {path} has {_size(free)} free "
+                            f"({remedy})")
+    return need
+
+
+def _size(n: float) -> str:
+    for unit in ("bytes", "KB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} TB"
+
+
 STUDY_SIDECAR = "study.json"  # what marks a study's folder (cosim.study_run): its definition and progress
 RUN_SIDECAR = "results.csv.json"  # what marks a run's folder: the sidecar of its results.csv (cosim.recorder)
 _MARKS = {"study": STUDY_SIDECAR, "run": RUN_SIDECAR}  # a command -> the file that says its results are there
@@ -387,16 +407,28 @@ def write_json(path: str | Path, data: Any) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(json.dumps(data, indent=1, default=_json_default))
+    # strict JSON: a number that is not finite (an undefined metric) is null, as no JSON parser reads NaN
+    tmp.write_text(json.dumps(_finite(data), indent=1, default=_json_default, allow_nan=False))
     os.replace(tmp, path)
     return path
+
+
+def _finite(data: Any) -> Any:
+    """``data`` with every float that is not finite (NaN, infinity) as ``None``."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: _finite(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [_finite(v) for v in data]
+    return data
 
 
 def _json_default(obj):
     import numpy as np
 
     if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
+        return _finite(obj.item())
     if isinstance(obj, Path):
         return str(obj)
     raise TypeError(f"not JSON serializable: {type(obj).__name__}")

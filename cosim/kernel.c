@@ -74,7 +74,7 @@ int cosim_kernel_run(KernelRun *run, int64_t first, int64_t last, KernelStop *st
         for (int64_t j = 0; j < run->n_derived; j++)  /* converted inputs recorded or bounded */
             signals[run->derived_slot[j]] = run->derived_factor[j] * signals[run->derived_source[j]]
                                             + run->derived_offset[j];
-        double *row = run->data + n * run->n_columns;
+        double *row = run->data + (n - run->data_first) * run->n_columns;
         for (int64_t j = 0; j < run->n_columns; j++) row[j] = signals[run->record_idx[j]];
         for (int64_t j = 0; j < run->n_guard; j++) {
             const double v = signals[run->guard_idx[j]];

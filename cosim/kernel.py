@@ -101,7 +101,8 @@ _RUN_FIELDS = (
     ("t0", _f64, "start time (s)"),
     ("h", _f64, "communication step (s)"),
     ("n_steps", _i64, "steps of the run: points 0 .. n_steps"),
-    ("data", _f64p, "the recorder's rows, n_columns each"),
+    ("data", _f64p, "the recorder's rows in memory, n_columns each"),
+    ("data_first", _i64, "the point whose row is data[0] (the recorder's chunk)"),
     ("n_columns", _i64, "recorded columns"),
     ("record_idx", _i64p, "their slots"),
     ("n_guard", _i64, "guarded signals"),
@@ -249,7 +250,7 @@ def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, 
                                         (np.int64, np.int64, np.float64, np.float64)))
     kept += [slot, source, factor, offset]
     run = KernelRun(entries, len(fmus), p(order, _i64p), len(order), p(signals, _f64p), float(t0), float(h),
-                    int(n_steps), p(data, _f64p), len(record), p(record, _i64p), len(guard), p(guard, _i64p),
+                    int(n_steps), p(data, _f64p), 0, len(record), p(record, _i64p), len(guard), p(guard, _i64p),
                     p(low, _f64p), p(high, _f64p), len(slot), p(slot, _i64p), p(source, _i64p),
                     p(factor, _f64p), p(offset, _f64p))
     run.arrays = (entries, order, record, guard, low, high, signals, data, kept)  # alive as long as the run

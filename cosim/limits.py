@@ -15,12 +15,13 @@ MAX_ENTRY_BYTES = 512 * 2 ** 20  # one file extracted from an archive (an FMU's 
 MAX_ARCHIVE_BYTES = 2 * 2 ** 30  # everything extracted from one archive
 MAX_RATIO = 200  # uncompressed / compressed size of an entry (of more than 1 MiB): FMUs 3-10x, zip bombs 1000x
 MAX_STEPS = 10 ** 9  # steps of one run: beyond, the step counter and the results outgrow any machine
-MAX_RECORD_BYTES = 2 ** 30  # the rows a run keeps in memory (its result): 1 GiB, 16 h of 23 signals at 10 ms
+MAX_RECORD_BYTES = 2 ** 30  # the rows a run keeps in memory when asked for every row (Master.run(keep=None)): 1 GiB,
+# 16 h of 23 signals at 10 ms; a run that streams its rows (fnn-cosim run, studies) keeps a bounded few
 MAX_RUNS = 1_000_000  # runs of one study: its runs.csv, its summary and its resume bitmap grow with them
 MAX_STATE = 100_000  # values of a learned state
 SEED_LIMIT = 2 ** 53  # a seed parameter is a double: every whole number up to 2^53 is exact
 WORKER_TIMEOUT = 120.0  # s a study waits for a Dask cluster without a worker before it stops
-MAX_STRING_BYTES = 2 ** 20  # one recorded String or Binary value; all of them count against MAX_RECORD_BYTES
+MAX_STRING_BYTES = 2 ** 20  # one recorded String or Binary value; those a result keeps count against MAX_RECORD_BYTES
 MAX_TABLE_BYTES = 256 * 2 ** 20  # a signal table file (cosim.table): read whole, so bounded
 MAX_TABLE_ROWS = 10 ** 7  # rows of a signal table
 MAX_NESTING = 32  # levels of a document (tables and arrays within each other) and parts of a dotted key (--set a.b.c): ours use 6; thousands exhaust the interpreter

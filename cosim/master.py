@@ -46,24 +46,13 @@ import numpy as np
 from .component import PythonComponent, typed_value
 from .connection import Connection, check_connections, parse_connections
 from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError, SimulationTerminated
-from .limits import SEED_LIMIT
+from .time_grid import communication_point, seed_error, whole_steps
 from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
 from .plan import ORDERINGS, FmuBlock, PythonBlock, make_plan
 from .recorder import Recorder
 
-__all__ = ["Master", "RunResult", "Snapshot", "ORDERINGS", "communication_point"]
-
-
-def communication_point(t: float, t0: float, h: float, n_steps: int) -> int | None:
-    """``n`` with ``t = t0 + n h`` (to 1e-9 relative) and ``0 <= n <= n_steps``:
-    the step of a run at which time ``t`` is a communication point; ``None``
-    if it is none."""
-    t = float(t)
-    if not np.isfinite(t):
-        return None
-    n = round((t - t0) / h)
-    return n if 0 <= n <= n_steps and abs(t0 + n * h - t) <= 1e-9 * max(1.0, abs(t)) else None
+__all__ = ["Master", "RunResult", "Snapshot", "ORDERINGS"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,16 +111,28 @@ class RunResult:
     python_loop: tuple[str, ...] = ()
     terminated: str | None = None
     python_calls: dict[str, str] = field(default_factory=dict)
-    """``types``: each column's signal type (docs/cosim.md, "Signal types");
+    rows: int = 0
+    stride: int = 1
+    span: tuple[float, float] | None = None
+    observers: tuple = ()
+    """``rows``: the rows recorded (``data`` holds those kept: all of them,
+    the default; none; or every ``stride``-th and the last, as
+    ``Master.run(keep=...)`` asked); ``span``: the first and the last row's
+    time (``None`` without rows); ``observers``: those the rows streamed to
+    (``Master.run(observers=...)``); ``types``: each column's signal type (docs/cosim.md, "Signal types");
     ``objects``: the columns of Int64, UInt64, String and Binary signals, as
     object arrays of ``int``, ``str`` and ``bytes`` (their ``data`` column is
-    NaN); ``python_loop``: why the plan cannot run in the compiled loop
-    (:attr:`cosim.plan.Plan.python_loop`, empty when it can);
+    NaN); ``python_loop``: why this run took the Python loop
+    (:meth:`cosim.plan.Plan.python_loop_for`: the plan's reasons, a profiled run, no compiled loop; empty when it ran compiled);
     ``python_calls``: the FMUs it drives through their Python calls
     (:attr:`cosim.plan.Plan.python_calls`), with the reason;
     ``terminated``: an FMU asked to end the simulation
     (:class:`~cosim.errors.SimulationTerminated`): the run ended early, at
     its last row, status ok; the message says which FMU and when."""
+
+    def __post_init__(self) -> None:
+        if not self.rows and len(self.data):  # built with every row (libcosim's run, cosim.ssp)
+            self.rows, self.span = len(self.data), (float(self.data[0, 0]), float(self.data[-1, 0]))
 
     @property
     def time(self) -> np.ndarray:
@@ -162,6 +163,12 @@ class Master:
     bounds : ``signal -> (low, high)``, the envelope (inclusive); every
         signal the master holds (the FMU outputs in use, every Python output,
         the internal signals recorded) is also checked to be finite.
+    fmu_parameters : ``{fmu name: {parameter: value}}``, the base values set
+        at every run's start (a run's ``parameters`` override them).
+    ordering : ``"feedthrough"`` (default: the blocks with direct
+        feedthrough evaluated at ``t_n``) or ``"exchange"`` (every block sees
+        the others' values of the previous step, as Jacobi masters do);
+        :data:`cosim.plan.ORDERINGS`, docs/cosim.md.
     """
 
     def __init__(self, fmus: Sequence[FmuComponent], components: Sequence[PythonComponent],
@@ -228,10 +235,17 @@ class Master:
             csv_path: str | Path | None = None, t0: float = 0.0, block_rows: int = 100,
             raise_on_error: bool = True, progress: Callable[[int, int], None] | None = None,
             profile: bool = False, snapshots: Sequence[float] = (),
-            restore: Mapping[str, bytes] | None = None) -> RunResult:
+            restore: Mapping[str, bytes] | None = None, keep: int | None = None, observers: Sequence = (),
+            record_every: int = 1) -> RunResult:
         """Run from ``t0`` for ``duration`` seconds (a whole number of steps).
 
-        ``parameters`` overrides, for this run only, FMU parameters and Python
+        ``seed`` (an integer in [0, 2^53]) goes to every Python component's
+        ``start`` and to every FMU's seed parameter (its stream's seed,
+        :func:`cosim.fmu_component.stream_seed`). ``csv_path``: the recorded
+        rows are also streamed there as they are produced, ``block_rows`` rows
+        at a time, with a JSON sidecar (:mod:`cosim.recorder`); a failed run
+        keeps what it wrote. ``progress(done_steps, n_steps)`` is called
+        as the run advances (at each written block). ``parameters`` overrides, for this run only, FMU parameters and Python
         component parameters by ``component.name``. With ``raise_on_error``
         (default) a divergence or FMU failure raises after the partial result
         is saved (the exception carries it as ``.result``); otherwise the
@@ -248,13 +262,20 @@ class Master:
         run resumed from a snapshot (``t0`` its time). An FMU left out
         starts from its parameters, so a run can resume with some FMUs put
         in another state (a perturbed plant, a linearization's check).
+
+        The rows stream (:class:`~cosim.recorder.Recorder`): to ``csv_path``
+        (every ``record_every``-th row), to ``observers`` (each with
+        ``add(rows)``: :class:`~cosim.recorder.Rows` in order, e.g. metrics
+        taken as the run goes) and into the result's ``data``: every row
+        (``keep=None``, bounded by ``cosim.limits.MAX_RECORD_BYTES``), none
+        (``keep=0``) or at most ``keep``, evenly thinned, and the last: a
+        run's memory then does not grow with its duration.
         """
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= SEED_LIMIT:
-            # one range in every form: an FMU's seed parameter is a double, exact to 2^53
-            raise ScenarioError(f"seed = {seed!r}: expected an integer in [0, 2^53 = {SEED_LIMIT}]")
+        if (why := seed_error(seed)) is not None:
+            raise ScenarioError(f"seed = {seed!r}: {why}")
         h = self.step
-        n_steps = int(round(duration / h))
-        if n_steps < 1 or abs(n_steps * h - duration) > 1e-9 * max(1.0, abs(duration)):
+        n_steps = whole_steps(duration, h)
+        if n_steps is None:
             raise ValueError(f"duration = {duration!r} s is not a positive whole number of steps of {h!r} s")
         split = self._split_parameters(parameters or {})
         snap_steps = self._snapshot_steps(snapshots, t0, n_steps)
@@ -265,7 +286,7 @@ class Master:
                                        f"{', '.join(f.name for f in self.fmus)}")
         recorder = Recorder(self.record_columns, self.record_units, n_steps + 1, csv_path, block_rows,
                             meta={"step": h, "t0": t0, "seed": seed}, types=self.plan.record_types,
-                            objects=self.plan.record_objects)
+                            objects=self.plan.record_objects, keep=keep, observers=observers, every=record_every)
         phase_times: dict[str, float] = {}
         started: dict[str, dict[str, Any]] = {}
         taken: list[Snapshot] = []
@@ -289,9 +310,16 @@ class Master:
         except BaseException as exc:  # nothing ran: a refused start is raised, never a run's status
             recorder.close("failed", f"could not start: {exc}")
             raise
+        python_loop = self._python_loop_for(profile)
         try:
             take = self._snapshot_taker(snap_steps, t0, started, taken)
-            self._loop(t0, n_steps, recorder, progress, phase_times if profile else None, take, snap_steps)
+            blocks = _Blocks(recorder, progress, n_steps)
+            if python_loop:
+                self._loop_python(t0, n_steps, blocks, phase_times if profile else None, take)
+            else:
+                from . import kernel
+
+                self._loop_compiled(kernel.load(), t0, n_steps, blocks, take, snap_steps)
         except SimulationTerminated as exc:  # the FMU's own end of the simulation: not a failure
             terminated = str(exc)
         except DivergenceError as exc:
@@ -304,11 +332,13 @@ class Master:
         if terminated is not None:
             recorder.meta["terminated"] = terminated
         recorder.close(status, error)
-        result = RunResult(self.record_columns, self.record_units, recorder.data[:recorder.n_rows].copy(),
+        data, stride = recorder.kept()
+        result = RunResult(self.record_columns, self.record_units, data,
                            status, error, _time.perf_counter() - wall0, n_steps, h, phase_times,
                            recorder.path, seed, dict(parameters or {}), taken, self.plan.record_types,
-                           recorder.object_columns(), self.plan.python_loop, terminated,
-                           dict(self.plan.python_calls))
+                           recorder.object_columns(), python_loop, terminated,
+                           dict(self.plan.python_calls), recorder.n_rows, stride, recorder.span,
+                           tuple(observers))
         if status != "ok" and raise_on_error:
             failure.result = result
             raise failure
@@ -528,27 +558,28 @@ class Master:
                 signals[out_block] = held
         return phase
 
-    def _loop(self, t0: float, n_steps: int, recorder: Recorder, progress: Callable[[int, int], None] | None,
-              phase_times: dict[str, float] | None, take: Callable[[int], None] | None = None,
-              marks: frozenset[int] = frozenset()) -> None:
-        if phase_times is None and self.plan.compiled:  # the plan decides (Plan.python_loop)
+    def _python_loop_for(self, profile: bool) -> tuple[str, ...]:
+        """Why this run takes the Python loop (:meth:`cosim.plan.Plan.python_loop_for`);
+        the compiled loop is looked for only where the plan allows it."""
+        compiled_available = True
+        if self.plan.compiled and not profile:
             from . import kernel
 
-            run = kernel.load()
-            if run is not None:
-                return self._loop_compiled(run, t0, n_steps, recorder, progress, take, marks)
-        self._loop_python(t0, n_steps, recorder, progress, phase_times, take)
+            compiled_available = kernel.load() is not None
+        return self.plan.python_loop_for(profile=profile, compiled_available=compiled_available)
 
-    def _loop_compiled(self, run, t0: float, n_steps: int, recorder: Recorder,
-                       progress: Callable[[int, int], None] | None, take=None, marks=frozenset()) -> None:
+    def _loop_compiled(self, run, t0: float, n_steps: int, blocks: "_Blocks", take=None,
+                       marks=frozenset()) -> None:
         """The plan run by the compiled loop (:mod:`cosim.kernel`): one call
-        per block of recorded rows, as :meth:`_loop_python` flushes them, a
-        call also ending before a snapshot's row (``marks``, taken by ``take``)."""
+        per block of recorded rows (:class:`_Blocks`, as :meth:`_loop_python`
+        writes them), a call also ending before a snapshot's row (``marks``,
+        taken by ``take``)."""
         import ctypes
 
         from . import kernel
 
-        h, signals, block = self.step, self.signals, recorder.block_rows
+        recorder = blocks.recorder
+        h, signals, block, chunk = self.step, self.signals, recorder.block_rows, recorder.chunk
         low, high = self.guard.limits
         args = kernel.prepare(self.plan, self.fmus, signals, recorder.data, low, high, t0, h, n_steps)
         stop = kernel.KernelStop()
@@ -565,6 +596,7 @@ class Master:
                 take(n)
             last = min((n // block + 1) * block - 1, n_steps)  # the Python loop flushes at the same rows
             last = min([last] + [m - 1 for m in marks if m > n])  # a snapshot is taken between kernel calls
+            args.data_first = n - n % chunk  # the recorder's chunk in memory (a call never crosses one)
             code = run(ctypes.byref(args), n, last, ctypes.byref(stop))
             if code != kernel.Stop.OK:
                 recorder.n_rows = int(stop.n) + int(stop.recorded)
@@ -574,35 +606,26 @@ class Master:
                 if code == kernel.Stop.TERMINATE:
                     raise self.fmus[int(stop.fmu)]._terminated(t, h)
                 raise self.fmus[int(stop.fmu)].kernel_failure(int(stop.call), int(stop.status), t, h)
-            recorder.n_rows = last + 1
-            if (last + 1) % block == 0:
-                recorder.commit(last + 1)
-                if progress is not None:
-                    progress(last, n_steps)
+            blocks.written(last + 1)
             n = last + 1
-        if progress is not None:
-            progress(n_steps, n_steps)
+        blocks.finished()
 
-    def _loop_python(self, t0: float, n_steps: int, recorder: Recorder,
-                     progress: Callable[[int, int], None] | None, phase_times: dict[str, float] | None,
+    def _loop_python(self, t0: float, n_steps: int, blocks: "_Blocks", phase_times: dict[str, float] | None,
                      snap: Callable[[int], None] | None = None) -> None:
         plan, h, signals, take = self.plan, self.step, self.signals, np.take
+        recorder = blocks.recorder
         data, rec_idx = recorder.data, plan.record_slots
         guard_ok, guard_idx, guard = self.guard.ok, plan.watch_slots, self.guard
-        block = recorder.block_rows
+        written, chunk = blocks.written, recorder.chunk
 
         record_objects = recorder.record_objects if plan.record_objects else None
         values = self.values
 
         def record(n: int, t: float) -> None:
-            take(signals, rec_idx, out=data[n])
+            take(signals, rec_idx, out=data[n % chunk])  # the recorder's chunk in memory
             if record_objects is not None:  # Int64, UInt64, String, Binary columns
                 record_objects(n, values)
-            recorder.n_rows = n + 1
-            if (n + 1) % block == 0:
-                recorder.commit(n + 1)
-                if progress is not None:
-                    progress(n, n_steps)
+            written(n + 1)
 
         if plan.derived:  # converted inputs recorded or bounded: their values before the row is recorded
             record = _deriving(record, signals, plan.derived)
@@ -644,8 +667,7 @@ class Master:
             check(n, t)
             if n < n_steps:
                 exchange(n, t)
-        if progress is not None:
-            progress(n_steps, n_steps)
+        blocks.finished()
 
     def close(self) -> None:
         for f in self.fmus:
@@ -656,6 +678,29 @@ class Master:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class _Blocks:
+    """How both loops hand rows to the recorder: ``written(rows)`` after each
+    row (or kernel call) counts them and, every ``block_rows`` rows, commits
+    the block to the CSV and reports progress; ``finished()`` reports the end."""
+
+    __slots__ = ("recorder", "progress", "n_steps", "block")
+
+    def __init__(self, recorder: Recorder, progress: Callable[[int, int], None] | None, n_steps: int):
+        self.recorder, self.progress, self.n_steps = recorder, progress, n_steps
+        self.block = recorder.block_rows
+
+    def written(self, rows: int) -> None:
+        self.recorder.n_rows = rows
+        if rows % self.block == 0:
+            self.recorder.commit(rows)
+            if self.progress is not None:
+                self.progress(rows - 1, self.n_steps)
+
+    def finished(self) -> None:
+        if self.progress is not None:
+            self.progress(self.n_steps, self.n_steps)
 
 
 def _converting(call: Callable, buffers: Sequence[np.ndarray], converted) -> Callable:

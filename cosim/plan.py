@@ -52,9 +52,13 @@ from .component import FLOAT_HELD, Port, element_of, element_ports
 from .connection import Connection
 from .errors import ConnectionCheckError
 
-__all__ = ["Plan", "FmuBlock", "PythonBlock", "Transfer", "make_plan", "signal_port", "ORDERINGS"]
+__all__ = ["Plan", "FmuBlock", "PythonBlock", "Transfer", "make_plan", "signal_port", "ORDERINGS", "PROFILED",
+           "NO_COMPILED_LOOP"]
 
 ORDERINGS = ("feedthrough", "exchange")
+# the reasons a run takes the Python loop that are the run's, not the plan's (Plan.python_loop_for)
+PROFILED = "a profiled run: its phases are timed in the Python loop"
+NO_COMPILED_LOOP = "no C compiler (or COSIM_PYTHON_LOOP set): the compiled loop is not available"
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,6 +195,14 @@ class Plan:
         :attr:`python_loop`, the reasons the plan takes the Python loop
         instead (an FMU in :attr:`python_calls` does not stop it)."""
         return not self.python_loop
+
+    def python_loop_for(self, *, profile: bool = False, compiled_available: bool = True) -> tuple[str, ...]:
+        """Why a run of this plan takes the Python loop, the one decision of
+        which loop runs (empty: the compiled loop): the plan's own reasons
+        (:attr:`python_loop`), then a profiled run's (its phases are timed in
+        Python) and a missing compiled loop's (no C compiler)."""
+        reasons = self.python_loop + ((PROFILED,) if profile else ())
+        return reasons if reasons or compiled_available else (NO_COMPILED_LOOP,)
 
     @property
     def exchanged(self) -> tuple[FmuBlock, ...]:

@@ -36,15 +36,14 @@ from .model_exchange import METHODS
 from .plan import ORDERINGS  # the master's (docs/cosim.md)
 from .files import read_toml
 from .limits import MAX_NESTING, MAX_STEPS
-from .limits import MAX_RECORD_BYTES
-from .recorder import record_bytes
 from .limits import SEED_LIMIT
+from .time_grid import runs_at, whole_steps
 from .schema import (Count, NonNegativeInt, Number, Positive, Names, Table, json_schema, one_of, refuse,
                      scenario_error, where)
 
 __all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "ConnectionTable", "scenario_model", "scenario_json_schema", "load_scenario",
            "parse_scenario", "shipped_scenarios", "scenario_path", "apply_overrides", "build_master", "fmu_file",
-           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "fmu_values", "runs_at"]
+           "fmu_error_in_scenario", "check_fmu_parameters", "check_fmu_file", "fmu_component", "fmu_values"]
 
 
 
@@ -63,8 +62,8 @@ class Simulation(Table):
 
     @model_validator(mode="after")
     def _whole_steps(self):
-        n = round(self.duration / self.step)
-        if n < 1 or abs(n * self.step - self.duration) > 1e-9 * max(1.0, self.duration):
+        n = whole_steps(self.duration, self.step)
+        if n is None:
             raise refuse(f"not a whole number of steps of {self.step!r} s", key="duration", value=self.duration)
         if n > MAX_STEPS:
             raise refuse(f"{n} steps of {self.step!r} s; at most {MAX_STEPS} a run", key="duration",
@@ -476,12 +475,8 @@ class Scenario:
         set_(self, "connections", tuple(c if isinstance(c, str) else MappingProxyType(c.model_dump(exclude_none=True))
                                         for c in model.connections))
         set_(self, "record", tuple(model.record.signals))
-        need = record_bytes(self.n_steps + 1, len(self.record) + 1)  # the rows a run keeps: refused when read
-        if need > MAX_RECORD_BYTES:
-            raise ScenarioError(f"simulation.duration = {self.duration!r}: {self.n_steps + 1} rows of "
-                                f"{len(self.record) + 1} recorded columns need {need / 2 ** 30:.1f} GiB in memory; "
-                                f"at most {MAX_RECORD_BYTES / 2 ** 30:.0f} GiB (record fewer signals, or run a "
-                                f"shorter mission)")
+        # no bound on the rows here: a run streams them (cosim.recorder); only a run asked to keep every row
+        # in memory (Master.run(keep=None)) is bounded, when it starts
         set_(self, "block_rows", model.record.block_rows)
         set_(self, "envelope", MappingProxyType(dict(model.envelope)))
 
@@ -577,7 +572,10 @@ def scenario_path(name_or_path: str | Path) -> Path:
 
 
 def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None = None) -> Scenario:
-    """Read, override (dotted keys) and validate a scenario file."""
+    """Read, override and validate a scenario: ``name_or_path`` a shipped
+    scenario's name (``"circles"``) or a TOML file; ``overrides`` dotted keys
+    (``{"wind.speed": 3.0}``, as ``--set`` takes them) applied before the
+    document is validated."""
     path = scenario_path(name_or_path)
     return parse_scenario(apply_overrides(read_toml(path), overrides or {}), source=path)
 
@@ -625,15 +623,6 @@ def check_fmu_file(scenario: Scenario, fmu) -> None:
     elif "solver" in spec:
         raise ScenarioError(f"fmus.{fmu.name}.solver: the FMU runs in {fmu.interface}; a solver is for Model Exchange")
     _check_sample_period(fmu, spec["parameters"], scenario.step, f"fmus.{fmu.name}.parameters")
-
-
-def runs_at(step: float, period: float) -> bool:
-    """Whether a master's communication ``step`` (s) is a sampled-data
-    model's ``period`` (s): equal within 1e-9 of the period, the tolerance
-    of our FMUs' own check (``fmu_core.c``, ``sampled_step``). The one rule
-    for every sampled-data part (an FMU's period parameter, the
-    controller's ``position.dt``)."""
-    return abs(step - period) <= 1e-9 * abs(period)
 
 
 def _check_sample_period(fmu, parameters: Mapping[str, Any], step: float, where: str) -> None:

@@ -273,7 +273,7 @@ def study_json_schema() -> dict[str, Any]:
 
 # ---- reading ------------------------------------------------------------------------------
 
-def _q(key: str) -> str:
+def _quoted(key: str) -> str:
     return f'"{key}"' if "." in key else key
 
 
@@ -339,9 +339,9 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
             ours = any(key == k or key.startswith(f"{k}.") or k.startswith(f"{key}.") for k in doc.set)
             raise ScenarioError(f"{'set' if ours else label}: {exc}") from None
 
-    cases = tuple(_case(f"cases.{_q(n)}", n, spec) for n, spec in doc.cases.items())
+    cases = tuple(_case(f"cases.{_quoted(n)}", n, spec) for n, spec in doc.cases.items())
     for case in cases:
-        _check(f"cases.{_q(case.name)}", base, case.applied_to(base.raw))
+        _check(f"cases.{_quoted(case.name)}", base, case.applied_to(base.raw))
     case_keys = {k: c.name for c in cases for k in c.overrides}
 
     sweep = doc.sweep
@@ -349,7 +349,7 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
         _check("sweep.seeds", base, {"simulation.seed": sweep.seeds[0]})
     grid: dict[str, tuple[Any, ...]] = {}
     for key, values in sweep.grid.items():
-        where = f"sweep.grid.{_q(key)}"
+        where = f"sweep.grid.{_quoted(key)}"
         if key == "simulation.seed":
             raise ScenarioError(f"{where}: sweep seeds with sweep.seeds")
         if key in case_keys:
@@ -361,7 +361,7 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
     random: dict[str, tuple[str, tuple[Any, ...]]] = {}
     rand = sweep.random
     for key, distribution in ((rand.model_extra or {}).items() if rand is not None else ()):
-        where = f"sweep.random.{_q(key)}"
+        where = f"sweep.random.{_quoted(key)}"
         if key in grid:
             raise ScenarioError(f"{where}: already swept in sweep.grid")
         if key == "simulation.seed":
@@ -383,6 +383,9 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
 
 
 def load_study(path: str | Path, base: Scenario | None = None) -> Study:
+    """The study file at ``path``, read and checked against its scenario
+    (the file's ``scenario``, or ``base`` when given: a command's scenario
+    with its overrides)."""
     path = Path(path)
     return parse_study(read_toml(path, "study"), source=path, base=base)
 

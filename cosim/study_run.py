@@ -237,6 +237,10 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
     rows come back in :attr:`StudyResult.rows`, with whatever else ``metrics``
     returned (an analysis may return a recorded run). With ``out_dir`` the
     driver keeps no row in memory: its memory does not grow with the study.
+    ``workers`` local worker processes, or ``scheduler``, the address of a
+    running Dask scheduler (``tcp://host:8786``) whose cluster flies the runs
+    (:mod:`cosim.dask_runner`); with neither (1 worker) the runs fly in this
+    process. ``plots``: the study's figures beside its summary.
     ``worker_timeout``: how long a Dask cluster without a worker is waited
     for before the study stops (:func:`cosim.dask_runner.fly`; ``None``: for ever)."""
     from .dask_runner import fly

@@ -44,7 +44,7 @@ from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 from .fmu_names import FNN_SEED, fmu_identifier  # re-exported: where the controller FMU's users found them
 from .step import OUTPUTS, state_ports
 from .geometric import GeometricParams
-from .parametric import initial_state_function, parameter_table, parametric_step_function, structure
+from .parametric import initial_state_function, parameter_table, parametric_step_function, geometric_structure
 from .position_parameters import PositionParams
 from .variants import Variant, variant as lookup
 
@@ -114,8 +114,8 @@ def controller_model(variant: str, position: PositionParams = PositionParams(),
     """The FMU model of ``variant``; ``position`` and ``geometric`` give the
     parameters' start values and the structural choices."""
     v = lookup(variant)
-    step = parametric_step_function(variant, PositionParams(), structure(geometric))
-    init = initial_state_function(variant, PositionParams(), structure(geometric))
+    step = parametric_step_function(variant, PositionParams(), geometric_structure(geometric))
+    init = initial_state_function(variant, PositionParams(), geometric_structure(geometric))
     plant = [QUADROTOR.variable(name) for name in STATE_NAMES]  # the rigid body's 12
     inputs = (
         *(input_(name, unit, text) for name, unit, text in REFERENCE_INPUTS),

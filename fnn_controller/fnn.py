@@ -41,7 +41,7 @@ __all__ = [
     "N_MF", "N_RULES", "AXIS_STATE_SIZE", "AXIS_STATE_PORTS",
     "C1", "C2", "SIGMA1", "SIGMA2", "F", "ALPHA", "X1_PREV", "X2_PREV", "PRIMED",
     "FnnInit", "membership", "firing_exponent", "firing_strength",
-    "normalized_firing_strength", "fnn_output", "initial_axis_state", "initial_axis_expression",
+    "normalized_firing_strength", "fnn_output", "initial_axis_expression",
 ]
 
 
@@ -126,15 +126,3 @@ def initial_axis_expression(init: FnnInit, r):
     ones = ca.DM.ones(N_MF)
     return ca.vertcat(*init.c1, *init.c2, init.sigma1 * ones, init.sigma2 * ones, init.f_high * r,
                       init.alpha, 0.0, 0.0, 0.0)
-
-
-def initial_axis_state(rng: np.random.Generator, init: FnnInit = FnnInit()) -> np.ndarray:
-    """:func:`initial_axis_expression` with ``r = rng.random(N_RULES)``, as numbers.
-
-    ``f_high * rng.random()`` is bit for bit numpy's ``rng.uniform(0, f_high)``
-    (numpy computes ``0 + (f_high - 0) * random()``), and the controller FMU
-    draws the same ``r`` from the same seed (``numpy_random.c``).
-    """
-    state = np.array(ca.DM(initial_axis_expression(init, rng.random(N_RULES)))).ravel()
-    assert state.shape == (AXIS_STATE_SIZE,)
-    return state

@@ -49,37 +49,20 @@ import numpy as np
 from .axis_state import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, IT2_AXIS_STATE_PORTS, IT2_AXIS_STATE_SIZE, N_MF,
                          N_RULES, SIGMA1, SIGMA2)
 from .axis_state import IT2_PRIMED as PRIMED, IT2_Q as Q, IT2_X1_PREV as X1_PREV, IT2_X2_PREV as X2_PREV
-from .fnn import FnnInit, firing_strength, normalized_firing_strength
-from .learning import RULES, LearningBounds, parameters_step, project, switching
+from .fnn import FnnInit, normalized_firing_strength
+from .learning import AxisGains, LearningBounds, parameters_step, project, switching
 from .position_parameters import IT2Params
 
 __all__ = [
     "C1", "C2", "SIGMA1", "SIGMA2", "F", "ALPHA", "Q", "X1_PREV", "X2_PREV", "PRIMED",
     "IT2_AXIS_STATE_SIZE", "IT2_AXIS_STATE_PORTS", "IT2Params", "IT2_DEFAULTS",
-    "it2_membership", "it2_firing_strengths", "it2_normalized_firing_strengths", "type_reduction",
-    "it2_regressor", "q_rate", "it2_learning_step", "it2_initial_axis_expression", "it2_axis_state_bounds",
+    "it2_normalized_firing_strengths", "type_reduction",
+    "it2_regressor", "q_rate", "it2_learning_step", "it2_initial_axis_expression", "it2_state_box",
 ]
 
 
 
 IT2_DEFAULTS = IT2Params()
-
-
-def it2_membership(x, c, sigma, spread):
-    """Lower and upper membership grades of one input (uncertain width).
-
-    Returns ``(mu_lower, mu_upper)``, each of length I, with
-    ``mu_lower = exp(-((x - c) / sigma)^2)`` (eqs. 21-22) and
-    ``mu_upper = exp(-((x - c) / ((1 + d) sigma))^2)``; ``0 < mu_lower <= mu_upper <= 1``.
-    """
-    return ca.exp(-((x - c) / sigma) ** 2), ca.exp(-((x - c) / ((1 + spread) * sigma)) ** 2)
-
-
-def it2_firing_strengths(x1, x2, c1, c2, sigma1, sigma2, spread):
-    """Lower and upper firing strengths ``(W_lower, W_upper)`` of the I*J rules,
-    product T-norm (eqs. 20, 23 for each bound), rule k = j * I + i."""
-    return (firing_strength(x1, x2, c1, c2, sigma1, sigma2),
-            firing_strength(x1, x2, c1, c2, (1 + spread) * sigma1, (1 + spread) * sigma2))
 
 
 def it2_normalized_firing_strengths(x1, x2, c1, c2, sigma1, sigma2, spread):
@@ -114,17 +97,18 @@ def q_rate(y_lower, y_upper, tau_c, gamma_q, phi=0.0):
     return -gamma_q * (y_lower - y_upper) * switching(tau_c, phi)
 
 
-def it2_learning_step(rule: str, state, x1, x2, tau_c, w_bar_lower, w_bar_upper, dt, gamma, nu, alpha_bar,
-                      gamma_q, bounds: LearningBounds = LearningBounds(), phi=0.0):
+def it2_learning_step(gains: AxisGains, gamma_q, state, x1, x2, tau_c, w_bar_lower, w_bar_upper):
     """One forward-Euler step of the IT2 SMC or LM laws for one axis.
 
     Parameters
     ----------
-    rule : {"smc", "lm"}
-        ``"smc"``: eqs. IT-6 ... IT-9 (centres and widths as eqs. 33-36, f by
-        eq. 37 with the regressor ``W_bar_q``, alpha by eq. 38); ``"lm"``:
-        eqs. IT-10, IT-11 (centres and widths as eqs. 57-60, f by eqs. 61-62
-        with ``W_bar_q``, alpha held).
+    gains : AxisGains (:mod:`fnn_controller.learning`)
+        ``training = "smc"``: eqs. IT-6 ... IT-9 (centres and widths as eqs.
+        33-36, f by eq. 37 with the regressor ``W_bar_q``, alpha by eq. 38);
+        ``"lm"``: eqs. IT-10, IT-11 (centres and widths as eqs. 57-60, f by
+        eqs. 61-62 with ``W_bar_q``, alpha held); the step, gains, bounds (q
+        is projected onto [0, 1]) and boundary layer.
+    gamma_q : gain of the q law (1/m: q_dot in 1/s, y_lower - y_upper in m/s)
     state : vector of length IT2_AXIS_STATE_SIZE
         Axis state at step k.
     x1, x2 : scalar
@@ -133,24 +117,18 @@ def it2_learning_step(rule: str, state, x1, x2, tau_c, w_bar_lower, w_bar_upper,
         PD output at step k (m/s), the learning error.
     w_bar_lower, w_bar_upper : vectors of length I*J
         Normalized lower and upper firing strengths at step k.
-    dt, gamma, nu, alpha_bar : as :func:`fnn_controller.learning.learning_step`
-    gamma_q : gain of the q law (1/m: q_dot in 1/s, y_lower - y_upper in m/s)
-    bounds : LearningBounds (floors and the projection box; q is projected onto [0, 1])
-    phi : boundary layer of the switching term (m/s)
 
     Returns
     -------
     vector of length IT2_AXIS_STATE_SIZE, the axis state at step k + 1.
     """
-    if rule not in RULES:
-        raise ValueError(f"unknown learning rule {rule!r}; expected 'smc' or 'lm'")
     f, q = state[F], state[Q]
     # IT-6 ... IT-8, IT-10, IT-11: eqs. 33-38 / 57-62 with the regressor W_bar_q, on the lower
     # (nominal) widths (the upper width (1 + d) sigma follows)
-    parameters = parameters_step(rule, state, (state[X1_PREV], state[X2_PREV]), state[PRIMED], x1, x2, tau_c,
-                                 it2_regressor(w_bar_lower, w_bar_upper, q), dt, gamma, nu, alpha_bar, bounds, phi)
+    parameters = parameters_step(gains, state, (state[X1_PREV], state[X2_PREV]), state[PRIMED], x1, x2, tau_c,
+                                 it2_regressor(w_bar_lower, w_bar_upper, q))
     y_lower, y_upper = ca.dot(f, w_bar_lower), ca.dot(f, w_bar_upper)
-    q_next = project(q + dt * q_rate(y_lower, y_upper, tau_c, gamma_q, phi), 0.0, 1.0)  # IT-9
+    q_next = project(q + gains.dt * q_rate(y_lower, y_upper, tau_c, gamma_q, gains.phi), 0.0, 1.0)  # IT-9
 
     next_state = ca.vertcat(*parameters, q_next, x1, x2, ca.DM(1.0))
     assert next_state.shape[0] == IT2_AXIS_STATE_SIZE
@@ -166,7 +144,7 @@ def it2_initial_axis_expression(init: FnnInit, it2: IT2Params, r):
                       init.alpha, it2.q0, 0.0, 0.0, 0.0)
 
 
-def it2_axis_state_bounds(bounds: LearningBounds):
+def it2_state_box(bounds: LearningBounds):
     """``(low, high)``: the projection box of eqs. 27-29 per element of the IT2
     axis state, q in [0, 1]."""
     b = bounds

@@ -33,6 +33,9 @@ Lyapunov function of Theorem 3 (eq. 63) has no alpha term.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 from fmu_models.lazy_casadi import ca
 
 from .axis_state import ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV
@@ -40,7 +43,7 @@ from .position_parameters import LearningBounds
 
 __all__ = [
     "LearningBounds", "sgn", "switching", "sigma_rate", "smc_f_rate", "alpha_rate", "lm_delta",
-    "lm_f_rate", "learning_step", "parameters_step", "project", "clip_inputs", "RULES",
+    "lm_f_rate", "learning_step", "parameters_step", "project", "clip_inputs", "RULES", "AxisGains",
 ]
 
 RULES = ("smc", "lm")
@@ -146,15 +149,62 @@ def project(value, low, high):
     return ca.fmin(ca.fmax(value, low), high)
 
 
-def parameters_step(rule: str, state, previous_inputs, primed, x1, x2, tau_c, w_bar, dt, gamma, nu, alpha_bar,
-                    bounds: LearningBounds = LearningBounds(), phi=0.0):
+@dataclass(frozen=True)
+class AxisGains:
+    """What the learning laws of one axis read besides its state and inputs:
+    the ``training`` law (``"smc"``: eqs. 33-38; ``"lm"``: eqs. 57-62 with
+    alpha held; :attr:`~fnn_controller.variants.Variant.training`), the step
+    ``dt`` (s), the gains ``gamma`` and ``nu`` of eq. (38) (gamma is also the
+    LM gain of eq. 61), ``alpha_bar`` of eq. (62), the floors and projection
+    box ``bounds`` and the boundary layer ``phi`` (m/s, :func:`switching`; 0
+    is the paper's ``sgn(tau_c)``). Numbers or CasADi symbols (the
+    parametric step)."""
+
+    training: str
+    dt: Any
+    gamma: Any
+    nu: Any
+    alpha_bar: Any
+    bounds: LearningBounds = LearningBounds()
+    phi: Any = 0.0
+
+    def __post_init__(self):
+        if self.training not in RULES:
+            raise ValueError(f"unknown learning rule {self.training!r}; expected one of {RULES}")
+
+    @classmethod
+    def of_axis(cls, training: str, params, axis: int, gamma_field: str) -> "AxisGains":
+        """Axis ``axis`` (0 = x) of the :class:`PositionParams` ``params``, the
+        gain gamma read from its field ``gamma_field``."""
+        return cls(training, params.dt, getattr(params, gamma_field)[axis], params.nu[axis],
+                   params.alpha_bar[axis], params.bounds, params.phi[axis])
+
+
+def _smc_consequents(f, alpha, w_bar, tau_c, gains: AxisGains):
+    """f and alpha at k + 1 under SMC: eqs. (37) and (38)."""
+    f_dot = smc_f_rate(w_bar, alpha, tau_c, gains.phi)
+    alpha_next = project(alpha + gains.dt * alpha_rate(tau_c, alpha, gains.gamma, gains.nu), 0.0,
+                         gains.bounds.alpha_max)
+    return f + gains.dt * f_dot, alpha_next
+
+
+def _lm_consequents(f, alpha, w_bar, tau_c, gains: AxisGains):
+    """f and alpha at k + 1 under LM: eqs. (61)-(62), alpha held."""
+    return f + gains.dt * lm_f_rate(w_bar, tau_c, gains.gamma, gains.alpha_bar, gains.phi), alpha
+
+
+_CONSEQUENTS = {"smc": _smc_consequents, "lm": _lm_consequents}
+
+
+def parameters_step(gains: AxisGains, state, previous_inputs, primed, x1, x2, tau_c, w_bar):
     """The centres, widths, consequents and alpha of one axis at step k + 1,
-    eqs. (33)-(38) (``"smc"``) or (57)-(62) (``"lm"``, alpha held), from the
-    elements C1 ... ALPHA of ``state`` (the layout of :mod:`fnn_controller.fnn`,
-    which the interval type-2 state shares), the previous inputs
-    ``(x1, x2)`` and the ``primed`` flag: the part of the learning step the
-    type-1 and the interval type-2 FNN have in common (the latter passes its
-    regressor W_bar_q as ``w_bar``). Returns ``(c1, c2, sigma1, sigma2, f, alpha)``."""
+    eqs. (33)-(38) or (57)-(62) (``gains.training``), from the elements C1 ...
+    ALPHA of ``state`` (the layout of :mod:`fnn_controller.fnn`, which the
+    interval type-2 state shares), the previous inputs ``(x1, x2)`` and the
+    ``primed`` flag (where each layout keeps them): the part of the learning step the type-1 and the interval type-2
+    FNN have in common (the latter passes its regressor W_bar_q as
+    ``w_bar``). Returns ``(c1, c2, sigma1, sigma2, f, alpha)``."""
+    bounds, dt, phi = gains.bounds, gains.dt, gains.phi
     c1, c2 = state[C1], state[C2]
     sigma1, sigma2 = state[SIGMA1], state[SIGMA2]
     f, alpha = state[F], state[ALPHA]
@@ -168,24 +218,18 @@ def parameters_step(rule: str, state, previous_inputs, primed, x1, x2, tau_c, w_
                           bounds.sigma1_min, bounds.sigma1_max)
     sigma2_next = project(sigma2 + dt * sigma_rate(x2, c2, sigma2, alpha, tau_c, bounds.a_min, phi),
                           bounds.sigma2_min, bounds.sigma2_max)
-    if rule == "smc":
-        f_dot = smc_f_rate(w_bar, alpha, tau_c, phi)  # eq. 37
-        alpha_next = project(alpha + dt * alpha_rate(tau_c, alpha, gamma, nu), 0.0, bounds.alpha_max)  # eq. 38
-    else:
-        f_dot = lm_f_rate(w_bar, tau_c, gamma, alpha_bar, phi)  # eqs. 61-62
-        alpha_next = alpha
-    f_next = project(f + dt * f_dot, -bounds.f_max, bounds.f_max)
-    return c1_next, c2_next, sigma1_next, sigma2_next, f_next, alpha_next
+    f_next, alpha_next = _CONSEQUENTS[gains.training](f, alpha, w_bar, tau_c, gains)
+    return c1_next, c2_next, sigma1_next, sigma2_next, project(f_next, -bounds.f_max, bounds.f_max), alpha_next
 
 
-def learning_step(rule: str, state, x1, x2, tau_c, w_bar, dt: float, gamma: float,
-                  nu: float, alpha_bar: float, bounds: LearningBounds = LearningBounds(), phi=0.0):
+def learning_step(gains: AxisGains, state, x1, x2, tau_c, w_bar):
     """One forward-Euler step of the SMC or LM learning laws for one axis.
 
     Parameters
     ----------
-    rule : {"smc", "lm"}
-        ``"smc"``: eqs. (33)-(38); ``"lm"``: eqs. (57)-(62) with alpha held.
+    gains : AxisGains
+        The law (``"smc"``: eqs. 33-38; ``"lm"``: eqs. 57-62 with alpha
+        held), the step, the gains, the bounds and the boundary layer.
     state : vector of length AXIS_STATE_SIZE
         Axis state at step k (layout in :mod:`fnn_controller.fnn`).
     x1, x2 : scalar
@@ -194,27 +238,13 @@ def learning_step(rule: str, state, x1, x2, tau_c, w_bar, dt: float, gamma: floa
         PD output at step k (eq. 19), the learning error (m/s).
     w_bar : vector of length I*J
         Normalized firing strengths at step k (eq. 25).
-    dt : float
-        Step (s).
-    gamma, nu : float
-        SMC gains of eq. (38) (gamma is also the LM gain of eq. 61).
-    alpha_bar : float
-        LM constant of eq. (62) (unused by SMC).
-    bounds : LearningBounds
-        Floor and projection box.
-    phi : float
-        Boundary layer of the switching term (m/s, :func:`switching`); 0 is
-        the paper's ``sgn(tau_c)``.
 
     Returns
     -------
     vector of length AXIS_STATE_SIZE
         Axis state at step k + 1.
     """
-    if rule not in RULES:
-        raise ValueError(f"unknown learning rule {rule!r}; expected one of {RULES}")
-    parameters = parameters_step(rule, state, (state[X1_PREV], state[X2_PREV]), state[PRIMED], x1, x2, tau_c,
-                                 w_bar, dt, gamma, nu, alpha_bar, bounds, phi)
+    parameters = parameters_step(gains, state, (state[X1_PREV], state[X2_PREV]), state[PRIMED], x1, x2, tau_c, w_bar)
     next_state = ca.vertcat(*parameters, x1, x2, ca.DM(1.0))
     assert next_state.shape[0] == AXIS_STATE_SIZE
     return next_state

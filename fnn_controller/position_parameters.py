@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 from .parameters import check_ranges, param
 
-__all__ = ["PositionParams", "FnnInit", "IT2Params", "LearningBounds", "FLOWN_KD_MIN"]
+__all__ = ["PositionParams", "FnnInit", "IT2Params", "LearningBounds", "check_one_step", "FLOWN_KD_MIN"]
 
 FLOWN_KD_MIN = 0.0  # the smallest derivative gain a scenario flies (the stability analysis goes below)
 
@@ -108,3 +108,14 @@ class PositionParams:
 
     def __post_init__(self) -> None:
         check_ranges(self)
+
+
+def check_one_step(position_dt: float, geometric_dt: float) -> None:
+    """The position and the velocity controller run in one step (Fig. 2: the
+    velocity command v* of eq. 26 is used in the step that computes it), so
+    ``geometric.dt`` must be ``position.dt``: ``ValueError`` naming both
+    otherwise. The one check of this rule (the scenario's controller table,
+    the parametric step's parameter table)."""
+    if geometric_dt != position_dt:
+        raise ValueError(f"geometric.dt = {geometric_dt!r} s: the position and the velocity controller run in one "
+                         f"step, it must equal position.dt = {position_dt!r} s")

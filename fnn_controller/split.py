@@ -18,10 +18,11 @@ where one FMU holding both (:mod:`fnn_controller.controller_fmu`) cannot place i
   state_next, check)``, ``x`` the vehicle's u v w phi theta psi p q r,
   ``y = (Omega, wrench)`` laid out as :data:`INNER_OUTPUTS`.
 
-Both are built from the same law functions (:func:`position_controller`,
-:func:`velocity_controller`) as the whole step, with the parameters as an
-input (:mod:`fnn_controller.parametric`): connected directly, outer then
-inner, they give the whole controller's outputs exactly (tested).
+Both are the functions the whole step is composed of
+(:func:`~fnn_controller.parametric.outer_step_function`,
+:func:`~fnn_controller.parametric.inner_step_function`, the parameters an
+input): connected directly, outer then inner, they give the whole
+controller's outputs exactly (tested). This module makes them FMU models.
 """
 from __future__ import annotations
 
@@ -36,16 +37,15 @@ from fmu_models.models.quadrotor import QUADROTOR, STATE_NAMES
 from .fmu_names import INNER_IDENTIFIER, outer_identifier
 from .step import OUTPUTS, state_ports
 from .controller_fmu import ACCELERATION_INPUTS, PARAMETERS, PSI_REF, REFERENCE_INPUTS, STATE, step_model
-from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
-from .parametric import Parameter, _symbolic, initial_fnn_expression, parameter_table, structure
-from .position import fnn_state_size, position_controller
+from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state
+from .parametric import (inner_parameter_table, inner_step_function, outer_initial_function,
+                         outer_parameter_table, outer_step_function, geometric_structure)
+from .position import fnn_state_size
 from .position_parameters import PositionParams
 from .variants import variant as lookup
-from .variants.registry import identifier
 
-__all__ = ["A_REF_PORTS", "OUTER_OUTPUTS", "INNER_OUTPUTS", "OUTER_MEASURED", "INNER_MEASURED", "outer_parameter_table",
-           "inner_parameter_table", "outer_step_function", "inner_step_function", "outer_initial_function",
-           "outer_model", "inner_model", "outer_identifier", "INNER_IDENTIFIER"]
+__all__ = ["A_REF_PORTS", "OUTER_OUTPUTS", "INNER_OUTPUTS", "OUTER_MEASURED", "INNER_MEASURED", "outer_model",
+           "inner_model", "outer_identifier", "INNER_IDENTIFIER"]
 
 OUTER_MEASURED = STATE_NAMES[0:6]   # x y z u v w: the motion-capture feed
 INNER_MEASURED = STATE_NAMES[3:12]  # u v w phi theta psi p q r: the vehicle's own estimate
@@ -54,77 +54,6 @@ A_REF_PORTS = tuple((f"a_ref_{a}", "m/s2", f"acceleration fed forward to the vel
 OUTER_OUTPUTS = tuple(o for o in OUTPUTS if o[0].startswith(("v_ref_", "tau_c_", "tau_n_"))) + A_REF_PORTS
 INNER_OUTPUTS = tuple(o for o in OUTPUTS if o not in OUTER_OUTPUTS)
 _AXES = "xyz"
-
-
-def outer_parameter_table(variant: str, position: PositionParams = PositionParams()) -> tuple[Parameter, ...]:
-    """The whole step's parameters that the outer loop reads: the PD's, ``dt``
-    and the variant's learning parameters."""
-    return tuple(p for p in parameter_table(variant, position) if p.path[0] == "position")
-
-
-def inner_parameter_table(geometric: GeometricParams = GeometricParams()) -> tuple[Parameter, ...]:
-    """The whole step's parameters that the inner loop reads: the geometric
-    gains, the nominal vehicle and ``dt`` (its sample period)."""
-    any_variant = lookup("pd").name
-    return tuple(p for p in parameter_table(any_variant, PositionParams(), geometric)
-                 if p.path[0] == "geometric" or p.name == "dt")
-
-
-def _check(*parts) -> ca.SX:
-    """Finite exactly when every input, parameter and output is."""
-    return sum(ca.sum1(v) for v in parts)
-
-
-@lru_cache(maxsize=None)
-def outer_step_function(variant: str, position: PositionParams = PositionParams()) -> ca.Function:
-    """The outer loop of ``variant`` with its parameters as the input ``p``
-    (module docstring); ``position`` gives the constants of the fields that
-    are no parameter of ``variant``."""
-    v = lookup(variant)
-    table = outer_parameter_table(variant, position)
-    p = ca.SX.sym("p", len(table))
-    sym_position, _ = _symbolic(table, position, GeometricParams(), p)
-    p_ref, p_ref_dot = ca.SX.sym("p_ref", 3), ca.SX.sym("p_ref_dot", 3)
-    x, state = ca.SX.sym("x", 6), ca.SX.sym("state", fnn_state_size(v))
-    p_ref_ddot = ca.SX.sym("p_ref_ddot", 3)
-    out = position_controller(v, p_ref - x[0:3], p_ref_dot - x[3:6], state, sym_position, p_ref_dot,
-                              p_ref_ddot=p_ref_ddot)
-    a_ref = out["a_ref"] if out["a_ref"] is not None else ca.SX.zeros(3)  # a constant gain of 0: no term
-    y = ca.vertcat(out["v_ref"], out["tau_c"], out["tau_n"], a_ref)
-    args = [p_ref, p_ref_dot, x, state, p, p_ref_ddot]
-    return ca.Function(f"outer_step_{identifier(variant)}_parametric", args,
-                       [y, out["fnn_state_next"], _check(*args, y, out["fnn_state_next"])],
-                       ["p_ref", "p_ref_dot", "x", "state", "p", "p_ref_ddot"], ["y", "state_next", "check"])
-
-
-@lru_cache(maxsize=None)
-def outer_initial_function(variant: str, position: PositionParams = PositionParams()) -> ca.Function:
-    """``(p[m], r[3 n_random]) -> state0``: the outer state after reset, the
-    whole controller's learned part (:func:`initial_fnn_expression`)."""
-    v = lookup(variant)
-    table = outer_parameter_table(variant, position)
-    p = ca.SX.sym("p", len(table))
-    r = ca.SX.sym("r", 3 * v.n_random)
-    sym_position, _ = _symbolic(table, position, GeometricParams(), p)
-    return ca.Function(f"outer_initial_{identifier(variant)}", [p, r],
-                       [initial_fnn_expression(v, sym_position, r)], ["p", "r"], ["state0"])
-
-
-@lru_cache(maxsize=None)
-def inner_step_function(geometric: GeometricParams = GeometricParams()) -> ca.Function:
-    """The inner loop with its parameters as the input ``p`` (module
-    docstring); ``geometric`` gives the structural choice ``desired_rate``."""
-    table = inner_parameter_table(geometric)
-    p = ca.SX.sym("p", len(table))
-    _, sym_geometric = _symbolic(table, PositionParams(), geometric, p)
-    v_ref, x, psi_ref = ca.SX.sym("v_ref", 3), ca.SX.sym("x", 9), ca.SX.sym("psi_ref")
-    state, a_ref = ca.SX.sym("state", VEL_STATE_SIZE), ca.SX.sym("a_ref", 3)
-    out = velocity_controller(v_ref, x[0:3], x[3:6], x[6:9], psi_ref, state, sym_geometric, a_ref=a_ref)
-    y = ca.vertcat(out["Omega"], out["wrench"])
-    args = [v_ref, x, psi_ref, state, p, a_ref]
-    return ca.Function("inner_step_parametric", args, [y, out["vel_state_next"],
-                                                       _check(*args, y, out["vel_state_next"])],
-                       ["v_ref", "x", "psi_ref", "state", "p", "a_ref"], ["y", "state_next", "check"])
 
 
 def _plant_inputs(names) -> tuple:
@@ -168,6 +97,6 @@ def inner_model(geometric: GeometricParams = GeometricParams()) -> FmuModel:
         INNER_IDENTIFIER,
         "geometric SE(3) velocity controller of the LM-FNN paper (eqs. 13-18) with rotor-speed inversion, the "
         "inner loop alone (on board): tracks v*; sampled at dt, z axis down",
-        inputs, arguments, inner_step_function(structure(geometric)),
+        inputs, arguments, inner_step_function(geometric_structure(geometric)),
         INNER_OUTPUTS, inner_parameter_table(geometric), states,
         lambda p, r: ca.DM(initial_velocity_state()))  # R*_prev = identity, not primed

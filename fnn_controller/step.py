@@ -1,17 +1,15 @@
-"""The whole controller step of Fig. 2: the two loops composed, and the
-step's inputs, outputs and state.
+"""The whole controller step of Fig. 2: its inputs, outputs and state.
 
-:func:`controller_step` composes the position controller of
-:mod:`fnn_controller.position` (outer loop, 3 axes, PD + FNN with learning)
-and the geometric velocity controller of :mod:`fnn_controller.geometric`
-(inner loop, rotor-speed inversion) into the expressions of one controller
-step (dt = 0.01 s; outer and inner loop run at the same rate). They are the
-body of the one step function,
-:func:`fnn_controller.parametric.parametric_step_function`, which the
-co-simulation master, the controller FMUs,
-:class:`~fnn_controller.fast.QuadrotorController`, the tests and the
-stability analysis all evaluate (fixed gains are its parameter vector ``p``
-bound to values, :func:`~fnn_controller.parametric.bound_step_function`):
+The step composes the position controller of :mod:`fnn_controller.position`
+(outer loop, 3 axes, PD + FNN with learning) and the geometric velocity
+controller of :mod:`fnn_controller.geometric` (inner loop, rotor-speed
+inversion) into one controller step (dt = 0.01 s; outer and inner loop run
+at the same rate): :func:`fnn_controller.parametric.parametric_step_function`,
+the one composition, which the co-simulation master, the controller FMUs and
+:class:`~fnn_controller.fast.QuadrotorController` evaluate (fixed gains are
+its parameter vector ``p`` bound to values,
+:func:`~fnn_controller.parametric.bound_step_function`). This module says
+what goes in and out:
 
 ``controller_step_<variant>_parametric(p_ref[3], p_ref_dot[3], x[12], psi_ref, state[85], p[m], p_ref_ddot[3])
 -> (y[17], state_next[85], check)``
@@ -54,14 +52,14 @@ import numpy as np
 
 from fmu_models.models.quadrotor import STATE_NAMES
 
-from .geometric import VEL_STATE_SIZE, GeometricParams, initial_velocity_state, velocity_controller
-from .position import FNN_STATE_SIZE, fnn_state_size, initial_fnn_state, position_controller
+from .geometric import VEL_STATE_SIZE, initial_velocity_state
+from .position import FNN_STATE_SIZE, fnn_state_size, initial_fnn_state
 from .position_parameters import PositionParams
 from .variants.registry import Variant
 
 __all__ = [
     "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES", "OUTPUTS", "Y_PARTS", "Y_SLICES", "STEP_INPUT_NAMES",
-    "state_size", "state_ports", "check_state", "controller_step", "step_symbols", "initial_state", "raise_non_finite",
+    "state_size", "state_ports", "check_state", "step_symbols", "initial_state", "raise_non_finite",
 ]
 
 STATE_SIZE = FNN_STATE_SIZE + VEL_STATE_SIZE  # the paper's variants
@@ -141,32 +139,6 @@ _ENDS = np.cumsum([len(part) for _, part in _Y]).tolist()
 Y_SLICES: dict[str, slice] = {name: slice(end - len(part), end) for (name, part), end in zip(_Y, _ENDS)}
 
 _INPUTS = ("p_ref", "p_ref_dot", "x", "psi_ref", "p_ref_ddot")  # the checked inputs; state is the function's own
-
-
-def controller_step(variant: Variant, position: PositionParams, geometric: GeometricParams,
-                    p_ref, p_ref_dot, x, psi_ref, state, p_ref_ddot=None) -> dict[str, ca.SX]:
-    """The step as CasADi expressions of the given inputs (the body of
-    :func:`~fnn_controller.parametric.parametric_step_function`): ``Omega``,
-    ``state_next``, ``v_ref``, ``tau_c``, ``tau_n``, ``wrench``. The
-    parameters may be numbers or symbols. The one place the outer and the
-    inner loop are composed: v* and the fed-forward acceleration a_ref of the
-    position controller drive the velocity controller.
-
-    ``e = p_ref - p`` (eq. 12) and ``e_dot = p_ref_dot - v`` are formed
-    here from the plant state.
-    """
-    n_fnn = fnn_state_size(variant)
-    numeric = not isinstance(position.dt, ca.SX)  # a parametric build shares one dt symbol
-    if numeric and abs(position.dt - geometric.dt) > 1e-15:
-        raise ValueError(f"position.dt = {position.dt} s and geometric.dt = {geometric.dt} s must agree: "
-                         "outer and inner loop run in the same step")
-    pos, vel = x[0:3], x[3:6]
-    outer = position_controller(variant, p_ref - pos, p_ref_dot - vel, state[:n_fnn], position, p_ref_dot,
-                                p_ref_ddot=p_ref_ddot)
-    inner = velocity_controller(outer["v_ref"], vel, x[6:9], x[9:12], psi_ref, state[n_fnn:], geometric,
-                                a_ref=outer["a_ref"])
-    return {"Omega": inner["Omega"], "state_next": ca.vertcat(outer["fnn_state_next"], inner["vel_state_next"]),
-            "v_ref": outer["v_ref"], "tau_c": outer["tau_c"], "tau_n": outer["tau_n"], "wrench": inner["wrench"]}
 
 
 def step_symbols(variant: Variant) -> list[ca.SX]:

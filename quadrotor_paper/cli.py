@@ -2,7 +2,7 @@
 
 Subcommands::
 
-    fnn-cosim run SCENARIO|FILE.ssp [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots]
+    fnn-cosim run SCENARIO|FILE.ssp [--out DIR] [--set KEY=VALUE ...] [--seed N] [--variant V] [--no-plots] [--record-every K]
                  [--profile] [--save-learned FILE] [--load-learned FILE] [--fmu-log [INSTANCE=]LEVEL]
     fnn-cosim export-ssp SCENARIO --out FILE.ssp [--set KEY=VALUE ...]
     fnn-cosim table2 [--out DIR] [--seeds 10] [--winds 1,3,5] [--duration S] [--workers 2] [--scheduler ADDRESS]
@@ -76,6 +76,46 @@ def _out_folder(given: str | None, default: Path) -> Path:
 
 # ---- run ------------------------------------------------------------------------------
 
+class _Shown:
+    """A metric in a line of text: its number as the format asks, or "undefined" (None: over no rows)."""
+
+    def __init__(self, value: float | None):
+        self.value = value
+
+    def __format__(self, spec: str) -> str:
+        return "undefined" if self.value is None else format(self.value, spec)
+
+
+def _record_every(text: str) -> int:
+    """The ``type`` of ``--record-every``: a whole number from 1."""
+    from cosim.errors import shown_text
+
+    try:
+        k = int(text)
+    except ValueError:  # not a whole number, or beyond Python's digits
+        k = 0
+    if k < 1:
+        raise argparse.ArgumentTypeError(f"{shown_text(repr(text))}: expected a whole number from 1 (every K-th "
+                                         f"row written)")
+    return k
+
+
+def _results_room(scenario, master, out: Path, every: int, quiet: bool) -> None:
+    """What results.csv will take, said before the run, and refused when the
+    output folder's file system cannot hold it (memory does not grow with
+    the run: disk is the only bound, and it is the user's; docs/security.md)."""
+    from cosim.files import room_for
+    from cosim.recorder import csv_bytes
+
+    rows = int(round(scenario.duration / scenario.step)) + 1
+    written = -(-rows // every)
+    need = csv_bytes(written, master.record_columns, master.plan.record_types)
+    room_for(out, need, f"results.csv: {written} rows of {len(master.record_columns)} columns",
+             "write every K-th row: --record-every K, or record fewer signals")
+    if not quiet and need > 100e6:  # a long mission: say what it will write before it starts
+        print(f"results.csv: {written} rows of {len(master.record_columns)} columns, up to {need / 1e9:.1f} GB "
+              f"(--record-every K writes every K-th)", file=sys.stderr)
+
 def _cmd_run(args) -> int:
     from cosim.scenario import load_scenario
     from cosim.files import write_json
@@ -115,8 +155,10 @@ def _cmd_run(args) -> int:
             if "controller" not in master.components:
                 raise ScenarioError(f"--save-learned {learned_file}: the scenario has no controller")
             learned_variant(master.components["controller"], f"--save-learned {learned_file}")
+        _results_room(scenario, master, out, args.record_every, quiet=args.quiet)
         with progress_bar(f"run {scenario.name}", enabled=not args.quiet, unit="step") as bar:
-            result, summary = run_once(scenario, out, progress=bar, master=master, profile=args.profile)
+            result, summary = run_once(scenario, out, progress=bar, master=master, profile=args.profile,
+                                       record_every=args.record_every)
         if args.load_learned:
             summary["resumed_from"] = str(args.load_learned)
         write_json(out / "summary.json", summary)  # the run's results first; the optional parts after
@@ -143,10 +185,16 @@ def _cmd_run(args) -> int:
     if summary.get("max_error_m") is not None:
         lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
     if summary.get("nees_position") is not None:  # flown on an estimate (docs/estimation.md)
+        shown = {k: _Shown(summary.get(k)) for k in ("nees_position", "nees_velocity", "nees_attitude", "nees_wind",
+                                                      "nis_fix", "est_rmse_position_m", "est_rmse_wind_settled_mps",
+                                                      "outliers_fix", "outliers_acc", "resets_fix", "resets_acc")}
         lines.append("- estimate: NEES position {nees_position:.2f}, velocity {nees_velocity:.2f}, attitude "
                      "{nees_attitude:.2f}, wind {nees_wind:.2f} (3 each when consistent); NIS fix {nis_fix:.2f} "
                      "(6); RMSE position {est_rmse_position_m:.4f} m, wind once steady "
-                     "{est_rmse_wind_settled_mps:.3f} m/s".format(**summary))
+                     "{est_rmse_wind_settled_mps:.3f} m/s".format(**shown))
+        lines.append("- gate (chi-square, docs/estimation.md): fixes refused {outliers_fix:.0f}, drag measurements "
+                     "refused {outliers_acc:.0f}; restarts after refusals in a row: position and velocity "
+                     "{resets_fix:.0f}, wind {resets_acc:.0f}".format(**shown))
     if learned_error:
         lines.append(f"- learned state not saved: {learned_error}")
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]
@@ -352,7 +400,7 @@ def _operating_point_of_run(args) -> tuple[Path, dict[str, Any]]:
     (its FMU state, its inputs and parameters then, as keyword arguments of
     ``linearize_fmu``)."""
     from cosim.errors import ScenarioError
-    from cosim.master import communication_point
+    from cosim.time_grid import communication_point
     from cosim.scenario import build_master, load_scenario
 
     if args.parameter:
@@ -534,9 +582,13 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("scenario", help="TOML file, shipped scenario name (see fnn-cosim scenarios), or SSP archive (.ssp)")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario value, e.g. --set wind.speed=5 (repeatable)")
-    r.add_argument("--seed", type=int, help="seed of the FNN initial weights")
+    r.add_argument("--seed", type=int, help="the run's seed (simulation.seed): every seeded component and FMU "
+                   "draws from it (the FNN's initial weights, sensor noise, wind)")
     r.add_argument("--variant", choices=variant_names(), help="controller variant")
     r.add_argument("--no-plots", action="store_true")
+    r.add_argument("--record-every", type=_record_every, default=1, metavar="K",
+                   help="write every K-th row to results.csv (rows 0, K, 2K, ...): a long mission in less disk; "
+                        "the metrics still take every row (default 1)")
     r.add_argument("--profile", action="store_true",
                    help="time each phase of the loop (summary.json: cost_per_step_us; python_loop: why the "
                         "compiled loop cannot run the plan)")

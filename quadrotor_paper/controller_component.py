@@ -59,7 +59,8 @@ from cosim.errors import DivergenceError, ScenarioError
 from cosim.schema import Number, ParameterTable, Table, dataclass_table, one_of, refuse, validate
 from fnn_controller.variants import DEFAULT_VARIANT
 
-__all__ = ["ControllerComponent", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT", "internal_ports"]
+__all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS",
+           "DEFAULT_PLANT", "internal_ports"]
 
 DEFAULT_PLANT = "Quadrotor"
 FORMS = ("python", "fmu")
@@ -126,11 +127,17 @@ def _parameters(cls, value: Any, where: str, base: Any = None) -> Any:
     return table.applied(base)
 
 
-def _known_variant(name: str) -> str:
+def _unknown_variant(name: Any) -> str | None:
+    """Why ``name`` is no registered variant, or ``None``: the one check of a
+    controller's variant (the scenario's table, the component's constructor)."""
     from fnn_controller.variants import variant_names
 
-    if name not in variant_names():
-        raise refuse(f"expected one of {', '.join(variant_names())}", value=name)
+    return None if name in variant_names() else f"expected one of {', '.join(variant_names())}"
+
+
+def _known_variant(name: str) -> str:
+    if (why := _unknown_variant(name)) is not None:
+        raise refuse(why, value=name)
     return name
 
 
@@ -149,6 +156,7 @@ def controller_table() -> type[Table]:
     nominal vehicle is read from and the deliberate mismatch, the form, the
     FMI version, a learned state to resume from."""
     from fnn_controller import GeometricParams, PositionParams, VehicleParams
+    from fnn_controller.position_parameters import check_one_step
     from fnn_controller.variants import variant_names
 
     class ControllerTable(Table):
@@ -177,9 +185,11 @@ def controller_table() -> type[Table]:
                 else PositionParams().dt
             geometric_dt = self.geometric.dt if self.geometric is not None and self.geometric.dt is not None \
                 else None
-            if geometric_dt is not None and geometric_dt != position_dt:
-                raise refuse(f"the position and the velocity controller run in one step: it must equal "
-                             f"position.dt = {position_dt!r} s", key="geometric.dt", value=geometric_dt)
+            if geometric_dt is not None:
+                try:
+                    check_one_step(position_dt, geometric_dt)
+                except ValueError as e:
+                    raise refuse(str(e).split(": ", 1)[1], key="geometric.dt", value=geometric_dt) from None
             return self
 
         @model_validator(mode="after")
@@ -197,8 +207,8 @@ def controller_table() -> type[Table]:
 
 def _check_period(name: str, dt: float, step: float) -> None:
     """The controller computes once per ``position.dt``: a master takes no
-    other communication step (the rule of every sampled-data part, :func:`cosim.scenario.runs_at`)."""
-    from cosim.scenario import runs_at
+    other communication step (the rule of every sampled-data part, :func:`cosim.time_grid.runs_at`)."""
+    from cosim.time_grid import runs_at
 
     if not runs_at(step, dt):
         raise ScenarioError(f"{name}.position.dt = {dt!r}: the controller's period must equal the communication "
@@ -300,9 +310,8 @@ class ControllerComponent(PythonComponent):
                                     variant=self.variant, state=self.learned, interface=interface)
 
     def _check_variant(self, variant: Any) -> str:
-        names = self._fc.variant_names()
-        if variant not in names:
-            raise ScenarioError(f"{self.name}.variant = {variant!r}: expected one of {', '.join(names)}")
+        if (why := _unknown_variant(variant)) is not None:
+            raise ScenarioError(f"{self.name}.variant = {variant!r}: {why}")
         return variant
 
     def function(self):
@@ -373,3 +382,35 @@ class ControllerComponent(PythonComponent):
         state) the control at t_n was computed with, as the FMU form's
         local variables read at t_n."""
         return self._fast.state[:self._n_internal]
+
+
+@dataclasses.dataclass(frozen=True)
+class ControllerSettings:
+    """What a scenario's controller flies, validated: its instance name, the
+    FMU it flies (``plant``, whose parameters are its nominal vehicle; ``""``
+    for none), its variant and its position controller's parameters
+    (:class:`fnn_controller.PositionParams`)."""
+
+    instance: str
+    plant: str
+    variant: str
+    position: Any
+
+
+def controller_settings(scenario, instance: str | None = None) -> ControllerSettings | None:
+    """The settings of ``scenario``'s controller ``instance`` (default: its one
+    ``fnn_controller`` component), ``None`` without one: the one way the
+    application reads a controller's settings (the scenario's table
+    validated as a run builds it, its defaults included)."""
+    found = [name for name, spec in scenario.components.items() if spec.get("kind") == "fnn_controller"]
+    if instance is None:
+        if len(found) > 1:
+            raise ScenarioError(f"the scenario has {len(found)} controllers ({', '.join(found)}): name one")
+        instance = found[0] if found else None
+    if instance not in found:
+        return None
+    parameters = scenario.components[instance]["parameters"]
+    table = validate(controller_table(), parameters, instance)
+    component = ControllerComponent.from_parameters(instance, parameters)
+    plant = table.plant if table.plant in scenario.fmus or "plant" in table.model_fields_set else ""
+    return ControllerSettings(instance, plant, component.variant, component.position)

@@ -7,6 +7,11 @@ process or on Dask, recording only the signals the metrics read, each row
 measured by :func:`study_metrics` (Euclidean RMSE, largest and final error
 between the ``[metrics]`` signals). :func:`run_once` is the single run of
 ``fnn-cosim run`` and of the figures, with its results CSV.
+
+Both take the metrics as the rows stream (:class:`~quadrotor_paper.run_metrics.RunMetrics`,
+an observer of the run): a run's memory does not grow with its duration; a
+single run keeps at most :data:`PLOT_ROWS` rows (evenly thinned, for its
+plots), a study's runs none.
 """
 from __future__ import annotations
 
@@ -21,33 +26,27 @@ if TYPE_CHECKING:
     from cosim.study import Study
     from cosim.study_run import StudyResult
 
-import numpy as np
-
-from .metrics import euclidean_error, nees, rmse, settled, wrap_angle
 from .missions import controller_variant, estimation_spec, metric_signals
+from .run_metrics import BLOCKS, COUNTS, RunMetrics, covariance_name
 
 __all__ = ["run_once", "run_summary", "measure", "study_metrics", "STUDY_METRICS", "ESTIMATION_METRICS",
-           "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics"]
+           "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics", "PLOT_ROWS"]
 
-# The estimate's blocks (docs/estimation.md, E15-E17): the Estimator's outputs, the truth's signals of the
-# plant instance (its wind inputs for the wind), and the unit of the block's RMSE.
-_BLOCKS = {
-    "position": (("x", "y", "z"), ("x", "y", "z"), "m"),
-    "velocity": (("u", "v", "w"), ("u", "v", "w"), "mps"),
-    "attitude": (("phi", "theta", "psi"), ("phi", "theta", "psi"), "rad"),
-    "wind": (("wind_x", "wind_y", "wind_z"), ("wind_x", "wind_y", "wind_z"), "mps"),
-}
-ESTIMATION_METRICS = (*(f"nees_{b}" for b in _BLOCKS), "nis_fix", "nis_acc",
-                      *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in _BLOCKS.items()), "est_rmse_wind_settled_mps",
-                      "est_bias_position_m", "rmse_seen_m")
+ESTIMATION_METRICS = (*(f"nees_{b}" for b in BLOCKS), "nis_fix", "nis_acc",
+                      *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in BLOCKS.items()), "est_rmse_wind_settled_mps",
+                      "est_bias_position_m", "rmse_seen_m", *COUNTS)
+PLOT_ROWS = 10_000  # rows a single run keeps for its plots: every row of a 100 s mission at 10 ms, then thinned
 
 
 def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None = None,
-             progress: Callable[[int, int], None] | None = None, master=None, profile: bool = False):
-    """Run ``scenario`` once; with ``out_dir``, stream ``results.csv`` there.
+             progress: Callable[[int, int], None] | None = None, master=None, profile: bool = False,
+             keep: int | None = PLOT_ROWS, record_every: int = 1):
+    """Run ``scenario`` once; with ``out_dir``, stream ``results.csv`` there
+    (every ``record_every``-th row).
 
-    Returns ``(result, summary)``: the :class:`~cosim.master.RunResult` and a
-    JSON-ready summary (:func:`run_summary`).
+    Returns ``(result, summary)``: the :class:`~cosim.master.RunResult`
+    (keeping ``keep`` rows: ``Master.run``) and a JSON-ready summary
+    (:func:`run_summary`), its metrics taken over every row as they streamed.
     """
     position, reference = metric_signals(scenario)
     missing = [s for s in position + reference + estimation_signals(scenario) if s not in scenario.record]
@@ -55,30 +54,49 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
         raise ScenarioError(f"metrics: {missing[0]!r} is not recorded; add it to record.signals")
     own = master is None
     master = master or build_master(scenario)
+    metrics = RunMetrics(scenario)
     try:
         csv = Path(out_dir) / "results.csv" if out_dir is not None else None
         result = master.run(scenario.duration, seed=scenario.seed if seed is None else seed, csv_path=csv,
                             t0=scenario.start_time, block_rows=scenario.block_rows, raise_on_error=False,
-                            progress=progress, profile=profile)
+                            progress=progress, profile=profile, keep=keep, observers=[metrics],
+                            record_every=record_every)
     except FmuError as exc:  # could not start: a parameter refused, told with its scenario key
         raise fmu_error_in_scenario(scenario, exc) from None
     finally:
         if own:
             master.close()
-    return result, run_summary(scenario, result)
+    return result, run_summary(scenario, result, metrics)
 
 
-def run_summary(scenario: Scenario, result) -> dict[str, Any]:
+def _streamed(scenario: Scenario, result) -> RunMetrics:
+    """The :class:`RunMetrics` the run streamed to, or (a result that kept
+    every row) one fed with its rows."""
+    for observer in result.observers:
+        if isinstance(observer, RunMetrics):
+            return observer
+    if len(result.data) != result.rows or result.stride != 1:
+        raise ValueError(f"metrics of a run that kept {len(result.data)} of its {result.rows} rows: pass "
+                         f"observers=[RunMetrics(scenario)] to Master.run")
+    metrics = RunMetrics(scenario)
+    metrics.add(result)
+    return metrics
+
+
+def run_summary(scenario: Scenario, result, metrics: RunMetrics | None = None) -> dict[str, Any]:
     """A run's summary: status, error, seed, variant, duration, rows, wall
     time, real-time factor, the cost per step of each phase (us, profiled
     runs) and, with ``[metrics]``, the Euclidean RMSE, largest and final error (m)
-    and, when it names an estimator, :func:`estimation_metrics`."""
+    and, when it names an estimator, :func:`estimation_metrics`: from
+    ``metrics`` (taken as the run streamed), else from the observers of the
+    run or its rows. An undefined metric is ``None`` (JSON ``null``)."""
+    span = result.span
     summary: dict[str, Any] = {
         "scenario": scenario.name, "status": result.status, "error": result.error, "seed": result.seed,
         "variant": controller_variant(scenario),
-        "duration_s": scenario.duration, "step_s": scenario.step, "rows": int(result.data.shape[0]),
+        "duration_s": scenario.duration, "step_s": scenario.step, "rows": int(result.rows),
         "wall_time_s": result.wall_time,
-        "real_time_factor": (result.time[-1] - result.time[0]) / result.wall_time if len(result.time) > 1 else None,
+        "real_time_factor": (span[1] - span[0]) / result.wall_time if result.rows > 1 else None,
     }
     if result.terminated is not None:  # an FMU ended the simulation early (not a failure)
         summary["terminated"] = result.terminated
@@ -86,14 +104,7 @@ def run_summary(scenario: Scenario, result) -> dict[str, Any]:
         summary["cost_per_step_us"] = {k: v / max(result.n_steps, 1) * 1e6 for k, v in result.phase_times.items()}
         summary["python_loop"] = list(result.python_loop)  # why the compiled loop could not run it (empty: it could)
         summary["python_calls"] = [f"{name}: {why}" for name, why in result.python_calls.items()]
-    position, reference = metric_signals(scenario)
-    if position and len(result.time):
-        e = euclidean_error(result, position, reference)
-        summary["rmse_m"] = rmse(result, position, reference)
-        summary["max_error_m"] = float(e.max()) if len(e) else None
-        summary["final_error_m"] = float(e[-1]) if len(e) else None
-    if estimation_spec(scenario) is not None and len(result.time):
-        summary.update(estimation_metrics(scenario, result))
+    summary.update((metrics or _streamed(scenario, result)).values())
     if result.csv_path is not None:
         summary["results_csv"] = str(result.csv_path)
     return summary
@@ -110,6 +121,9 @@ def study_metrics(scenario: Scenario, result) -> dict[str, Any]:
     return {k: summary.get(k) for k in study_metric_names(scenario)}
 
 
+study_metrics.observe = RunMetrics  # a study streams each run's rows to one (cosim.dask_runner.execute)
+
+
 def lean_signals(scenario: Scenario) -> list[str]:
     """What the metrics read: only these are recorded in studies."""
     return list(dict.fromkeys(sum(metric_signals(scenario), []) + estimation_signals(scenario)))
@@ -120,67 +134,22 @@ def study_metric_names(scenario: Scenario) -> tuple[str, ...]:
     return STUDY_METRICS + (ESTIMATION_METRICS if estimation_spec(scenario) else ())
 
 
-def _covariance_name(a: str, b: str, order: tuple[str, ...]) -> str:
-    if a == b:
-        return f"var_{a}"
-    a, b = sorted((a, b), key=order.index)
-    return f"cov_{a}_{b}"
-
-
 def estimation_signals(scenario: Scenario) -> list[str]:
     """The signals :func:`estimation_metrics` reads (none without ``[metrics].estimator``)."""
+    from .run_metrics import Estimation
+
     spec = estimation_spec(scenario)
-    if spec is None:
-        return []
-    estimator, truth, _ = spec
-    names = []
-    for estimated, true, _ in _BLOCKS.values():
-        names += [f"{truth}.{n}" for n in true] + [f"{estimator}.{n}" for n in estimated]
-        names += [f"{estimator}.{_covariance_name(a, b, estimated)}" for i, a in enumerate(estimated)
-                  for b in estimated[i:]]
-    return names + [f"{estimator}.{n}" for n in ("nis_fix", "nis_acc", "fix_used")]
+    return [] if spec is None else Estimation(*spec, metric_signals(scenario)[1], scenario.step).signals
 
 
-def estimation_metrics(scenario: Scenario, result) -> dict[str, float]:
-    """The estimate's consistency and accuracy over one run (docs/estimation.md,
-    E15-E17): per block (position, velocity, attitude, wind) the mean NEES and
-    the RMSE of the estimate (Euclidean over the block's three axes; yaw
-    wrapped); the mean NIS of the fix (over the steps that used one) and of
-    the drag measurement; and the wind RMSE over the rows where the true wind
-    has been steady for ``settle`` s; the length of the position estimate's
-    mean error (its bias) and the RMSE of reference - estimate over the whole
-    run (the error the controller sees, beside ``rmse_m``, the true one).
-    NEES, NIS and RMSE skip the first
-    ``settle`` s (the filter's convergence from its initial guess)."""
-    estimator, truth, settle = estimation_spec(scenario)
-    t = result.time
-    after_start = t - t[0] >= settle
-    out: dict[str, float] = {}
-    for block, (estimated, true, unit) in _BLOCKS.items():
-        error = np.column_stack([result[f"{estimator}.{e}"] - result[f"{truth}.{n}"]
-                                 for e, n in zip(estimated, true)])
-        if block == "attitude":
-            error = wrap_angle(error)
-        covariance = np.stack([np.column_stack([result[f"{estimator}.{_covariance_name(a, b, estimated)}"]
-                                                for b in estimated]) for a in estimated], axis=1)
-        # the wind's NEES where it is steady: a step of the gust is no random walk (E13), the filter is
-        # not consistent through it by construction; its RMSE both ways
-        judged = settled(t, np.column_stack([result[f"{truth}.{n}"] for n in true]), settle) \
-            if block == "wind" else after_start
-        out[f"nees_{block}"] = float(np.mean(nees(error[judged], covariance[judged])))
-        out[f"est_rmse_{block}_{unit}"] = float(np.sqrt(np.mean(np.sum(error[after_start] ** 2, axis=1))))
-        if block == "wind":
-            out["est_rmse_wind_settled_mps"] = float(np.sqrt(np.mean(np.sum(error[judged] ** 2, axis=1))))
-        if block == "position":
-            # the estimate's bias: the length of its mean error; and the tracking error the controller
-            # sees, reference - estimate (the FNN learns on it; E18)
-            out["est_bias_position_m"] = float(np.linalg.norm(np.mean(error[after_start], axis=0)))
-            _, reference = metric_signals(scenario)
-            out["rmse_seen_m"] = rmse(result, [f"{estimator}.{e}" for e in estimated], reference)
-    used = result[f"{estimator}.fix_used"] > 0.5
-    out["nis_fix"] = float(np.mean(result[f"{estimator}.nis_fix"][used & after_start]))
-    out["nis_acc"] = float(np.mean(result[f"{estimator}.nis_acc"][after_start]))
-    return out
+def estimation_metrics(scenario: Scenario, result) -> dict[str, float | None]:
+    """The estimate's consistency and accuracy over one run whose rows were
+    all kept (:class:`quadrotor_paper.run_metrics.Estimation`, which states them)."""
+    from .run_metrics import Estimation
+
+    part = Estimation(*estimation_spec(scenario), metric_signals(scenario)[1], scenario.step)
+    part.add(result)
+    return part.values()
 
 
 def measure(study: Study, out_dir: str | Path | None = None, *, workers: int = 1, scheduler: str | None = None,

@@ -79,7 +79,7 @@ from fnn_controller.variants import variants as _variants
 from .controller_component import internal_ports
 from .missions import controller_variant
 
-__all__ = ["Recording", "AxisClaims", "record_run", "recorded", "evaluate_claims", "default_runs",
+__all__ = ["Recording", "AxisClaims", "recorded", "evaluate_claims", "default_runs",
            "finite_time_report", "regressor_step_change", "CLAIM_MISSIONS", "CLAIM_VARIANTS"]
 
 _AXES = ("x", "y", "z")
@@ -119,9 +119,9 @@ def _signals(variant: str) -> list[str]:
 
 def _position(scenario) -> PositionParams:
     """The position controller's parameters of ``scenario``'s controller."""
-    from .controller_component import ControllerComponent
+    from .controller_component import controller_settings
 
-    return ControllerComponent.from_parameters("controller", scenario.components["controller"]["parameters"]).position
+    return controller_settings(scenario).position
 
 
 def recorded(scenario, result) -> dict[str, Recording]:
@@ -141,19 +141,6 @@ def recorded(scenario, result) -> dict[str, Recording]:
     return {"recorded": Recording(scenario.name, variant, result.time.copy(), e, e_dot, cols("controller.tau_c_{a}"),
                             cols("controller.tau_n_{a}"), cols("controller.v_ref_{a}"), states, position,
                             result.status)}
-
-
-def record_run(name: str, variant: str, scenario: str = "circles", overrides: dict | None = None) -> Recording:
-    """Run ``scenario`` (shipped name or path, with dotted ``overrides``) with
-    the controller ``variant`` and record what the claims need."""
-    from cosim.scenario import load_scenario
-
-    from .experiments import run_once
-
-    sc = load_scenario(scenario, {**(overrides or {}), "controller.variant": variant,
-                                  "record.signals": _signals(variant)})
-    result, _ = run_once(sc)
-    return replace(recorded(sc, result)["recorded"], name=name)
 
 
 def _is_it2(variant: str) -> bool:

@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["position_error", "euclidean_error", "rmse", "pd_share", "oscillation_period", "nees", "settled",
+__all__ = ["position_error", "euclidean_error", "squared_error", "rmse", "pd_share", "oscillation_period", "nees", "settled",
            "wrap_angle"]
 
 
@@ -31,10 +31,22 @@ def euclidean_error(result, position: Sequence[str], reference: Sequence[str]) -
     return np.linalg.norm(position_error(result, position, reference), axis=1)
 
 
-def rmse(result, position: Sequence[str], reference: Sequence[str]) -> float:
-    """Euclidean RMSE (m) over all recorded rows."""
+def squared_error(result, position: Sequence[str], reference: Sequence[str]) -> np.ndarray:
+    """|p* - p|^2 per row (m^2), the terms of the RMSE."""
     e = position_error(result, position, reference)
-    return float(np.sqrt(np.mean(np.sum(e * e, axis=1)))) if len(e) else float("nan")
+    return np.sum(e * e, axis=1)
+
+
+def rmse(result, position: Sequence[str], reference: Sequence[str]) -> float:
+    """Euclidean RMSE (m) over all recorded rows (NaN without rows), summed as
+    a run's streamed metrics sum (:class:`cosim.online.Sum`: numpy's
+    ``mean`` to the bit up to its 65 536 values)."""
+    from cosim.online import Sum
+
+    total = Sum()
+    total.add(squared_error(result, position, reference))
+    mean = total.mean()
+    return float(np.sqrt(mean)) if mean is not None else float("nan")
 
 
 def pd_share(tau_c: np.ndarray, tau_n: np.ndarray) -> np.ndarray:
@@ -61,9 +73,13 @@ def oscillation_period(x: np.ndarray, step: float, longest: float = 5.0) -> tupl
 def nees(error: np.ndarray, covariance: np.ndarray) -> np.ndarray:
     """NEES per row (eq. E15): ``e_n^T P_n^-1 e_n`` for errors of shape (N, k)
     and covariances of shape (N, k, k); NaN where P_n is singular."""
-    error = np.asarray(error, dtype=float)
+    error, covariance = np.asarray(error, dtype=float), np.asarray(covariance, dtype=float)
+    try:  # every row in one call (LAPACK's gesv per matrix, as row by row below)
+        return (error[:, None, :] @ np.linalg.solve(covariance, error[..., None]))[:, 0, 0]  # e @ x as below
+    except np.linalg.LinAlgError:  # one singular P: row by row, NaN where singular
+        pass
     out = np.full(len(error), np.nan)
-    for n, (e, P) in enumerate(zip(error, np.asarray(covariance, dtype=float))):
+    for n, (e, P) in enumerate(zip(error, covariance)):
         try:
             out[n] = float(e @ np.linalg.solve(P, e))
         except np.linalg.LinAlgError:

@@ -33,7 +33,6 @@ from pydantic import Field, model_validator
 from cosim.errors import ScenarioError
 from cosim.scenario import Scenario, check_fmu_parameters
 from cosim.schema import NonNegative, NonNegativeInt, Strings, Table, numbers, refuse
-from fnn_controller.variants import DEFAULT_VARIANT
 
 __all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "metric_signals", "estimation_spec",
            "controller_variant"]
@@ -125,9 +124,9 @@ def estimation_spec(scenario: Scenario) -> tuple[str, str, float] | None:
     return metrics["estimator"], metrics["position"][0].split(".")[0], float(metrics["settle"])
 
 
-def controller_variant(scenario: Scenario, instance: str = "controller") -> str | None:
+def controller_variant(scenario: Scenario, instance: str | None = None) -> str | None:
     """The variant the scenario's controller flies (``None`` without one)."""
-    spec = scenario.components.get(instance)
-    if spec is None or spec.get("kind") != "fnn_controller":
-        return None
-    return spec["parameters"].get("variant", DEFAULT_VARIANT)
+    from .controller_component import controller_settings
+
+    settings = controller_settings(scenario, instance)
+    return settings.variant if settings is not None else None

@@ -17,6 +17,9 @@ from typing import Mapping
 import matplotlib
 
 matplotlib.use("Agg")
+# a line of many samples (a long run's kept rows: quadrotor_paper.experiments.PLOT_ROWS) drawn in pieces: the
+# rasterizer's memory grows with the length of the path it fills at once, not with the picture
+matplotlib.rcParams["agg.path.chunksize"] = 1000
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 

@@ -109,7 +109,9 @@ def table3(out_dir: Path, workers: int = 2, scheduler: str | None = None, show_p
 
 
 def _share_stats(result, early=(0.0, 5.0), late_seconds: float = 10.0) -> dict[str, dict[str, float]]:
-    """Mean PD share |tau_c| / (|tau_c| + |tau_n|) per axis early and late in the run."""
+    """Mean PD share |tau_c| / (|tau_c| + |tau_n|) per axis early and late in the run
+    (over the rows the run kept: every row of the figures' missions; evenly
+    thinned beyond :data:`~quadrotor_paper.experiments.PLOT_ROWS`)."""
     t = result.time
     out = {}
     for a in "xyz":

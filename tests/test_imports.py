@@ -15,6 +15,8 @@ does.
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -151,3 +153,25 @@ def test_a_cycle_hidden_in_a_function_is_found(graph):
     graph = {**graph, "fnn_controller.variants.registry": graph["fnn_controller.variants.registry"]
              | {"fnn_controller.position"}}
     assert any({"fnn_controller.position", "fnn_controller.variants.registry"} <= set(c) for c in cycles(graph))
+
+
+def test_the_engine_imports_nothing_of_the_application(graph):
+    """Every module of ``cosim/``, every import statement in it (top level
+    and inside functions): the engine names no application package."""
+    engine = [m for m in graph if m == "cosim" or m.startswith("cosim.")]
+    assert len(engine) == len(list((ROOT / "cosim").rglob("*.py")))
+    outside = {m: sorted(t for t in graph[m] if t.split(".")[0] != "cosim") for m in engine}
+    assert {m: t for m, t in outside.items() if t} == {}
+
+
+def test_importing_every_engine_module_loads_no_application_package():
+    """The same at run time, where an import by a computed name would show
+    (without reading a registry, which loads the cosim.plugins entry points)."""
+    engine = sorted(m for m in _modules() if m.startswith("cosim."))
+    code = (f"import sys; import {', '.join(engine)}; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('quadrotor_paper', 'fnn_controller', 'fmu_models')))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
+

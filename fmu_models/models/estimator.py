@@ -1,32 +1,39 @@
 """A state estimator as a sampled-data FMU: an extended Kalman filter written
 in CasADi that predicts with the IMU and corrects with the drag-model
-accelerometer and with GNSS or motion capture (docs/estimation.md, eqs.
-E5-E14; the numbers below are those equations').
+accelerometer and with GNSS or motion capture, each measurement gated and
+fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E23;
+the numbers below are those equations').
 
 State (18): position ``x y z`` and velocity ``u v w`` (world frame, z down,
 eq. 6), attitude ``phi theta psi`` (Z-Y-X Euler, eq. 8), gyro bias
 ``b_g``, accelerometer bias ``b_a`` (body frame) and the wind ``w_W`` (world
-frame). Per communication step n, with the IMU's ``gyro_n, acc_n`` and the
-position/velocity fix ``y_n`` (fresh or not) as inputs:
+frame). The discrete state is the posterior at ``t_filter``, the time of the
+last IMU sample used (a delayed horizon, as PX4's EKF2). At the FMU's time t,
+with the IMU's ``gyro, acc`` stamped ``t_imu`` and the fix ``y`` stamped
+``t_fix`` (fresh or not) as inputs:
 
-1. the prior ``x^-_n, P^-_n`` is corrected with the
-   accelerometer's two horizontal body axes, the drag model's measurement
-   (E9): ``acc_xy = [R^T D(v - w_W) / m]_xy + b_a,xy``, every step;
-2. then, when ``fresh = 1``, with the six position/velocity channels (E10);
-   both as sequential scalar updates (E11-E12), the Jacobians from CasADi's AD;
-3. the outputs are the posterior: the state named like the plant's outputs
-   (``x .. psi``), the body rates ``p q r = gyro - b_g``, the wind, the biases,
-   the covariance (variances of all 18, covariances within the position,
-   velocity, attitude and wind blocks) and the normalized innovations squared
-   (NIS) of both corrections;
-0. before the corrections, the posterior of t_{n-1} is propagated to the
-   prior of t_n with the IMU's averages over the step (E7-E8, explicit Euler
-   over dt; covariance E13).
+1. a new IMU sample (``t_imu > t_filter + dt/2``) predicts the posterior to
+   ``t_imu`` (E7-E8, explicit Euler; covariance E13; E22) and is corrected
+   with the accelerometer's two horizontal body axes, the drag model's
+   measurement (E9): ``acc_xy = [R^T D(v - w_W) / m]_xy + b_a,xy``;
+2. a fresh fix newer than the last is compared with the state retrodicted
+   over its age ``tau = t_filter - t_fix`` (E10, E20);
+3. both corrections are sequential scalar updates (E11-E12), the Jacobians
+   from CasADi's AD, kept only when their NIS passes the chi-square gate of
+   ``gate_level`` (E19); refusals are counted, and a run of them restarts
+   that measurement's part of the state (E21);
+4. the outputs are the posterior predicted from ``t_filter`` to t with the
+   IMU's averages extrapolated along their trend (the output predictor,
+   E23): the state named like the plant's outputs (``x .. psi``), the body
+   rates, the wind, the biases, the covariance (variances of all 18,
+   covariances within the position, velocity, attitude and wind blocks),
+   the NIS of both corrections, the time they describe (``t_estimate``) and
+   the gate's counts.
 
-The discrete state is the posterior of t_{n-1}; step n first predicts it
-to t_n with the IMU's averages over [t_{n-1}, t_n] (``fmu_models/models/imu.py``),
-then corrects. Outputs have direct feedthrough from the fix and the IMU: the
-controller reading the estimate at t_n flies on the measurements of t_n.
+In our master's feedthrough ordering ``t_imu = t`` and the output is the
+posterior: the controller reading the estimate at t_n flies on the
+measurements of t_n. In a Jacobi importer the samples arrive a step old,
+say so by their stamps, and the output is brought forward to t_n.
 """
 from __future__ import annotations
 
@@ -39,6 +46,7 @@ from .quadrotor import DEFAULTS, aerodynamic_drag, euler_rate_matrix, rotation_m
 from .sensors import DT_DEFAULT
 
 __all__ = ["ESTIMATOR", "ESTIMATED_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
+           "chi2_quantile_even",
            "body_drag_acceleration", "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
 
 # The filter's state, in order: the 9 plant states it estimates, then the biases and the wind.
@@ -53,13 +61,18 @@ COVARIANCE_BLOCKS = {"position": ("x", "y", "z"), "velocity": ("u", "v", "w"), "
                      "wind": ("wind_x", "wind_y", "wind_z")}
 # Tuning (docs/estimation.md, "Tuning"); the sensor values are the IMU's defaults.
 ESTIMATOR_DEFAULTS = {
-    "wind_walk": 4.0,             # m/s/sqrt(s): the horizontal wind's random walk, fast enough for a reversal
+    "wind_walk": 1.0,             # m/s/sqrt(s): the horizontal wind's random walk between gusts (steps restart it, E21)
     "wind_walk_z": 0.01,          # m/s/sqrt(s): the vertical wind's, nearly constant (hardly observable, E9)
     "drag_noise_density": 0.005,  # m/s2/sqrt(Hz): error of the drag model in the prediction
     "sigma_drag": 0.005,          # m/s2: error of the drag model in the accelerometer measurement
     "P0_position": 1.0, "P0_velocity": 0.2, "P0_attitude": 0.05,
     "P0_gyro_bias": 0.005, "P0_accel_bias": 0.01, "P0_wind": 3.0, "P0_wind_z": 0.1,
+    "gate_level": 0.9999,         # chi-square gate: one good measurement in 10^4 refused (E19)
+    "reset_after_fix": 5.0,       # fixes refused in a row before position and velocity restart (E21)
+    "reset_after_drag": 1.0,      # drag measurements refused in a row before the wind restarts (E21)
 }
+_COUNTS = ("outliers_fix", "outliers_acc", "resets_fix", "resets_acc")
+_IMU = tuple(f"gyro_{i}" for i in AXES) + tuple(f"acc_{i}" for i in AXES)
 _P0 = {"x": "P0_position", "u": "P0_velocity", "phi": "P0_attitude", "gyro_bias_x": "P0_gyro_bias",
        "accel_bias_x": "P0_accel_bias", "wind_x": "P0_wind"}
 
@@ -147,6 +160,11 @@ def _variables():
           for name, unit in zip(FIX_NAMES, _UNITS)),
         input_("fresh", "1", "1 when the fix is new this step (then the filter corrects with it), 0 otherwise; "
                              "left at 1, every step's fix is used", 1.0),
+        input_("t_imu", "s", "time the IMU's sample refers to (the IMU's t_sample): the filter predicts to it "
+                             "(E22); negative (its start, unconnected): every sample is taken as current", -1.0),
+        input_("t_fix", "s", "time the fix was taken (the receiver's t_sample): the filter fuses it at that "
+                             "time (E20), and only when it is later than the last fix's; negative (its start, "
+                             "unconnected): every fresh fix is taken as current", -1.0),
         *(output(name, unit, f"estimate of {name}") for name, unit in zip(ESTIMATED_STATES[:9], _UNITS)),
         *(output(name, "rad/s", f"body rate {name}: IMU rate less the estimated gyro bias")
           for name in ("p", "q", "r")),
@@ -158,7 +176,16 @@ def _variables():
                                "0 without a fresh fix)"),
         output("fix_used", "1", "1 when this step corrected with the fix (fresh), else 0"),
         output("nis_acc", "1", "normalized innovation squared of the accelerometer's drag measurement "
-                               "(2 degrees of freedom)"),
+                               "(2 degrees of freedom; 0 without a new IMU sample)"),
+        output("t_estimate", "s", "time the outputs describe: the FMU's time (E23)"),
+        output("t_filter", "s", "time of the filter's posterior: the last IMU sample's (E22)"),
+        output("fix_age", "s", "tau: how far before t_filter this step's fix was taken (E20; 0 without one)"),
+        output("outliers_fix", "1", "fixes refused by the gate since the start (E19)"),
+        output("outliers_acc", "1", "drag measurements refused by the gate since the start (E19)"),
+        output("resets_fix", "1", "restarts of position and velocity from the fix after reset_after refusals "
+                                  "in a row (E21)"),
+        output("resets_acc", "1", "restarts of the wind's covariance after reset_after refused drag "
+                                  "measurements in a row (E21)"),
         parameter("m", "kg", "vehicle mass of the drag model (the plant's)", DEFAULTS["m"], min=1e-3),
         parameter("g", "m/s2", "gravitational acceleration", DEFAULTS["g"], min=0.0),
         parameter("k_drag_lin", "N.s/m", "linear drag coefficient of the model (the plant's)",
@@ -179,8 +206,16 @@ def _variables():
                   ESTIMATOR_DEFAULTS["sigma_drag"], min=0.0),
         *(parameter(f"sigma_{name}_m", unit, f"standard deviation of the fix's {name} (E10)", 1.0, min=1e-9)
           for name, unit in zip(FIX_NAMES, _UNITS)),
-        parameter("fix_latency", "s", "age of the fix when it arrives (GNSS latency); the filter compares it "
-                  "with the position extrapolated back by it (E10)", 0.0, min=0.0, max=1.0),
+        parameter("gate_level", "1", "level of the chi-square innovation gate: a measurement whose NIS is above "
+                  "the chi-square quantile of this level (its degrees of freedom) is refused (E19)",
+                  ESTIMATOR_DEFAULTS["gate_level"], min=0.5, max=1.0 - 1e-12),
+        parameter("reset_after_fix", "1", "fixes refused in a row after which position and velocity start "
+                  "again from the fix (E21)", ESTIMATOR_DEFAULTS["reset_after_fix"], min=1.0, max=1.0e6,
+                  integer=True),
+        parameter("reset_after_drag", "1", "drag measurements refused in a row after which the wind starts "
+                  "again from its initial uncertainty and the measurement is fused (E21): 1, a gust's step "
+                  "is found by its first measurement", ESTIMATOR_DEFAULTS["reset_after_drag"], min=1.0,
+                  max=1.0e6, integer=True),
         *(parameter(f"{name}_0", unit, f"initial estimate of {name}", 0.0)
           for name, unit in zip(ESTIMATED_STATES, _UNITS)),
         *(parameter(p0, unit, f"initial standard deviation of the {p0[3:].replace('_', ' ')} estimate (each axis)",
@@ -191,6 +226,13 @@ def _variables():
         parameter("dt", "s", "communication step = sample period of the filter (every doStep must be dt)",
                   DT_DEFAULT, min=1e-6, max=10.0),
         discrete("started", "1", "0 before the first step (the initial estimate is the first prior), 1 after"),
+        discrete("t_posterior", "s", "time of the posterior below: the last IMU sample's"),
+        discrete("t_last_fix", "s", "time of the last fix seen (used or refused)"),
+        discrete("refusal_run_fix", "1", "fixes refused in a row"),
+        discrete("refusal_run_acc", "1", "drag measurements refused in a row"),
+        *(discrete(f"total_{c}", "1", f"{c.replace('_', ' of the ')} so far") for c in _COUNTS),
+        *(discrete(f"previous_{name}", unit, f"the IMU's {name} of the sample before the last")
+          for name, unit in zip(_IMU, ("rad/s",) * 3 + ("m/s2",) * 3)),
         *(discrete(f"xhat_{name}", unit, f"posterior estimate of {name} at the previous step")
           for name, unit in zip(ESTIMATED_STATES, _UNITS)),
         *(discrete(_upper(i, j), "1", "posterior covariance entry at the previous step")
@@ -214,58 +256,162 @@ def _discrete(xs, P):
     return z
 
 
-def _predict(xs, P, gyro, acc, v):
-    """The prior at t_n from the posterior at t_{n-1} and the IMU's averages
-    over [t_{n-1}, t_n]: explicit Euler over dt (E7-E8), covariance E13."""
-    dt = v["dt"]
+def chi2_quantile_even(k: int, level, iterations: int = 40):
+    """The ``level`` quantile of the chi-square distribution with an even
+    number ``k`` of degrees of freedom (the gate of E19), by Newton's method
+    on its log survival function, closed form for even k::
+
+        S(x) = exp(-x/2) sum_{i < k/2} (x/2)^i / i!,   S(x_gate) = 1 - level
+
+    ``log S`` is concave (the chi-square density is log-concave for k >= 2),
+    so from any start Newton's iterates reach the root from above after the
+    first step and decrease to it monotonically; 40 steps reach round-off
+    for levels up to 1 - 1e-12. Numbers or CasADi expressions (the FMU's law)."""
+    m = k // 2
+    if m < 1 or 2 * m != k:
+        raise ValueError(f"chi2_quantile_even: k = {k} is not an even positive integer")
+    target = ca.log(1.0 - level)
+    x = 0 * level + float(k)  # a number or an expression, as the level
+    for _ in range(iterations):
+        terms, term = 1.0, 1.0
+        for i in range(1, m):
+            term = term * (x / 2) / i
+            terms = terms + term
+        log_survival = -x / 2 + ca.log(terms)
+        slope = -term / (2 * terms)  # d log S / dx = -density / S, the last term being (x/2)^(m-1) / (m-1)!
+        x = ca.fmax(x - (log_survival - target) / slope, 1e-9)
+    return x
+
+
+def _predict(xs, P, gyro, acc, v, h):
+    """The state and covariance ``h`` seconds later with the IMU's averages
+    held (E7-E8, E13): explicit Euler over h, the covariance by F and G
+    linearized at the estimate, noise-free. ``h = 0`` leaves both unchanged."""
     xs_sym, noise = ca.SX.sym("xs", _N), ca.SX.sym("n", 15)
     f = process_model(xs_sym, gyro, acc, noise, v)
     at_estimate = [xs_sym, noise], [xs, ca.DM.zeros(15)]  # linearized at the posterior, noise-free
-    # the position also takes the velocity's change over the step, dt^2/2 dv/dt (E8): with a 0.1 mm fix,
-    # the first-order step's dt^2/2 |a| (50 um at 1 m/s2) would be half the fix's noise
-    second = ca.vertcat(dt / 2 * f[3:6], ca.SX.zeros(_N - 3))
+    # the position also takes the velocity's change over the step, h^2/2 dv/dt (E8): with a 0.1 mm fix,
+    # the first-order step's h^2/2 |a| (50 um at 1 m/s2) would be half the fix's noise
+    second = ca.vertcat(h / 2 * f[3:6], ca.SX.zeros(_N - 3))
     f = f + second
     F, G, f_hat = ca.substitute([ca.jacobian(f, xs_sym), ca.jacobian(f, noise), f], *at_estimate)
-    F, G = ca.DM.eye(_N) + dt * F, dt * G
+    F, G = ca.SX.eye(_N) + h * F, h * G
     density = [v["gyro_noise_density"]] * 3 + [v["accel_noise_density"]] + [v["drag_noise_density"]] * 2 + \
         [v["gyro_bias_walk"]] * 3 + [v["accel_bias_walk"]] * 3 + [v["wind_walk"]] * 2 + [v["wind_walk_z"]]
-    Q = ca.diag(ca.vertcat(*density) ** 2 / dt)  # continuous density -> covariance of a dt-averaged sample
+    # continuous density -> covariance of a dt-averaged sample (the IMU's), held over h (E13)
+    Q = ca.diag(ca.vertcat(*density) ** 2 / v["dt"])
     P_next = F @ P @ F.T + G @ Q @ G.T
-    return xs + dt * f_hat, (P_next + P_next.T) / 2
+    return xs + h * f_hat, (P_next + P_next.T) / 2
+
+
+def _reset(P, states, variances):
+    """``P`` with the rows and columns of ``states`` (indices) cleared and
+    their variances set (E21): those states start again, uncorrelated."""
+    keep = ca.DM.ones(_N)
+    for k in states:
+        keep[k] = 0.0
+    fresh = ca.SX.zeros(_N)
+    for k, variance in zip(states, variances):
+        fresh[k] = variance
+    return ca.diag(keep) @ P @ ca.diag(keep) + ca.diag(fresh)
+
+
+def _gated(accept, corrected, before):
+    """The corrected state and covariance when the gate accepts, else the prior (E19)."""
+    return tuple(ca.if_else(accept, c, b) for c, b in zip(corrected, before))
 
 
 def _update(t, v):
     xs, P = _state(v)
     gyro = ca.vertcat(*(v[f"gyro_{i}"] for i in AXES))
     acc = ca.vertcat(*(v[f"acc_{i}"] for i in AXES))
-
-    # the prior of t_n; at n = 0 the initial estimate is the prior
-    xs_prior, P_prior = _predict(xs, P, gyro, acc, v)
     started = v["started"] > 0
-    xs, P = ca.if_else(started, xs_prior, xs), ca.if_else(started, P_prior, P)
-    # E9: the drag model's measurement, every step
-    r_acc = v["accel_noise_density"] ** 2 / v["dt"] + v["sigma_drag"] ** 2
-    xs, P, nis_acc = _sequential(xs, P, lambda s: drag_measurement(s, v), acc[0:2], [r_acc, r_acc])
-    # E10: the fix, when fresh
-    fix = ca.vertcat(*(v[f"{name}_m"] for name in FIX_NAMES))
-    latency = v["fix_latency"]  # the fix describes t_n - latency: p(t_n - tau) = p - tau v (E10)
-    xs_fix, P_fix, nis_fix = _sequential(xs, P, lambda s: ca.vertcat(s[0:3] - latency * s[3:6], s[3:6]), fix,
-                                         [v[f"sigma_{name}_m"] ** 2 for name in FIX_NAMES])
-    fresh = v["fresh"] > 0.5
-    xs, P = ca.if_else(fresh, xs_fix, xs), ca.if_else(fresh, P_fix, P)
+    level = v["gate_level"]
 
-    out = {name: xs[k] for k, name in enumerate(ESTIMATED_STATES)}
-    rates = gyro - xs[9:12]
-    out.update({"p": rates[0], "q": rates[1], "r": rates[2], "nis_acc": nis_acc,
-                "nis_fix": ca.if_else(fresh, nis_fix, 0.0), "fix_used": ca.if_else(fresh, 1.0, 0.0)})
-    out.update({name: P[i, j] for name, i, j in covariance_names()})
-    return out, {"started": 1.0, **_discrete(xs, P)}
+    # Timing (E22): the filter's state lives at the time of the last IMU sample it used, t_filter. A sample
+    # is new when its time stamp is at least half a step later (each is used once, however often an
+    # importer shows it); at the first step the initial estimate is the state at the IMU's time.
+    t_imu = ca.if_else(v["t_imu"] < 0, t, v["t_imu"])  # no stamp: the sample is current
+    new_imu = ca.logic_or(ca.logic_not(started), t_imu > v["t_posterior"] + v["dt"] / 2)
+    h = ca.if_else(ca.logic_and(started, new_imu), t_imu - v["t_posterior"], 0.0)
+    xs, P = _predict(xs, P, gyro, acc, v, h)
+    t_filter = ca.if_else(new_imu, t_imu, v["t_posterior"])
+
+    # E9: the drag model's measurement, once per IMU sample, gated (E19-E21): after reset_after refusals
+    # in a row the wind starts again from its initial uncertainty (a gust's step is no random walk)
+    r_acc = v["accel_noise_density"] ** 2 / v["dt"] + v["sigma_drag"] ** 2
+    corrected = _sequential(xs, P, lambda s: drag_measurement(s, v), acc[0:2], [r_acc, r_acc])
+    nis_acc = corrected[2]
+    refused_acc = ca.logic_and(new_imu, nis_acc > chi2_quantile_even(2, level))
+    xs, P = _gated(ca.logic_and(new_imu, ca.logic_not(refused_acc)), corrected[:2], (xs, P))
+    run_acc = ca.if_else(new_imu, ca.if_else(refused_acc, v["refusal_run_acc"] + 1, 0.0), v["refusal_run_acc"])
+    reset_acc = run_acc >= v["reset_after_drag"]
+    # the wind starts again from its initial uncertainty, and the measurement that found the step is fused
+    wind = [_N - 3, _N - 2, _N - 1]
+    P_wind = _reset(P, wind, [v["P0_wind"] ** 2] * 2 + [v["P0_wind_z"] ** 2])
+    restarted = _sequential(xs, P_wind, lambda s: drag_measurement(s, v), acc[0:2], [r_acc, r_acc])
+    xs, P = _gated(reset_acc, restarted[:2], (xs, P))
+    run_acc = ca.if_else(reset_acc, 0.0, run_acc)
+
+    # E10: the fix, when fresh and newer than the last one seen, fused at its own time t_fix: compared
+    # with the state retrodicted over tau = t_filter - t_fix through the process model (E20), gated
+    fix = ca.vertcat(*(v[f"{name}_m"] for name in FIX_NAMES))
+    sigma2 = [v[f"sigma_{name}_m"] ** 2 for name in FIX_NAMES]
+    t_fix = ca.if_else(v["t_fix"] < 0, t, v["t_fix"])
+    new_fix = ca.logic_and(v["fresh"] > 0.5, t_fix > v["t_last_fix"])
+    tau = ca.fmax(t_filter - t_fix, 0.0)
+
+    def retrodicted(s):  # first order in tau: the velocity's change over tau (< 0.1 of its noise) left out
+        return ca.vertcat(s[0:3] - tau * s[3:6], s[3:6])
+
+    corrected = _sequential(xs, P, retrodicted, fix, sigma2)
+    nis_fix = corrected[2]
+    refused_fix = ca.logic_and(new_fix, nis_fix > chi2_quantile_even(6, level))
+    used = ca.logic_and(new_fix, ca.logic_not(refused_fix))
+    xs, P = _gated(used, corrected[:2], (xs, P))
+    run_fix = ca.if_else(new_fix, ca.if_else(refused_fix, v["refusal_run_fix"] + 1, 0.0), v["refusal_run_fix"])
+    reset_fix = run_fix >= v["reset_after_fix"]
+    # position and velocity start again from the fix (brought forward over tau), at its noise (E21)
+    restart = ca.vertcat(fix[0:3] + tau * fix[3:6], fix[3:6], xs[6:])
+    xs = ca.if_else(reset_fix, restart, xs)
+    P = ca.if_else(reset_fix, _reset(P, range(6), [sigma2[k] + (tau ** 2 * sigma2[k + 3] if k < 3 else 0.0)
+                                                    for k in range(6)]), P)
+    run_fix = ca.if_else(reset_fix, 0.0, run_fix)
+
+    # the output predictor (E23): the posterior at t_filter brought to the FMU's time t with the IMU's
+    # averages extrapolated along their trend over the last two samples (rates change within a step)
+    t_out = ca.fmax(t, t_filter)
+    h_out = t_out - t_filter
+    previous = ca.vertcat(*(v[f"previous_{name}"] for name in _IMU))
+    change = ca.if_else(v["started"] > 0, ca.vertcat(gyro, acc) - previous, ca.DM.zeros(6))
+    trend = change * h_out / v["dt"]
+    xs_out, P_out = _predict(xs, P, gyro + trend[0:3], acc + trend[3:6], v, h_out)
+
+    events = {"outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
+              "resets_acc": reset_acc}
+    counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in _COUNTS}
+    out = {name: xs_out[k] for k, name in enumerate(ESTIMATED_STATES)}
+    # the body rate at t_out: the average over the last step describes its middle, half a step earlier
+    rates = gyro + change[0:3] * (h_out / v["dt"] + 0.5) - xs_out[9:12]
+    out.update({"p": rates[0], "q": rates[1], "r": rates[2],
+                "nis_acc": ca.if_else(new_imu, nis_acc, 0.0), "nis_fix": ca.if_else(new_fix, nis_fix, 0.0),
+                "fix_used": ca.if_else(used, 1.0, 0.0), "t_estimate": t_out, "t_filter": t_filter,
+                "fix_age": ca.if_else(new_fix, tau, 0.0), **counts})
+    out.update({name: P_out[i, j] for name, i, j in covariance_names()})
+    return out, {"started": 1.0, "t_posterior": t_filter, "t_last_fix": ca.if_else(new_fix, t_fix, v["t_last_fix"]),
+                 "refusal_run_fix": run_fix, "refusal_run_acc": run_acc,
+                 **{f"previous_{name}": ca.if_else(new_imu, v[name], v[f"previous_{name}"]) for name in _IMU}, **{f"total_{c}": n for c, n in counts.items()},
+                 **_discrete(xs, P)}
+
+
+_NEVER = -1.0e300  # s: the time of the last fix before any: every fix's stamp is later
 
 
 def _initial(v, r):
     xs = ca.vertcat(*(v[f"{name}_0"] for name in ESTIMATED_STATES))
     sigma = [v[_P0[ESTIMATED_STATES[3 * (k // 3)]]] for k in range(_N - 1)] + [v["P0_wind_z"]]
-    return {"started": 0.0, **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
+    return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
+            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in _COUNTS}, **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
 
 
 ESTIMATOR = FmuModel(

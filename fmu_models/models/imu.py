@@ -16,6 +16,7 @@ inputs, and plant -> IMU -> estimator -> controller -> plant an algebraic loop
     gyro_n   = omega_n + b_g,n + (N_g / sqrt(dt)) w_n                 (E2)
     acc_n    = f_B,n + b_a,n + (N_a / sqrt(dt)) w'_n                  (E3)
     b_.,n+1  = b_.,n + K_. sqrt(dt) w''_n,   b_.,0 = bias_0           (E4)
+    t_sample = t_n                                                    the time the sample refers to
 
 with ``R`` of eq. 8, ``N`` the white-noise density, ``K`` the bias random walk
 and ``w`` standard normal numbers drawn by Box-Muller from numpy's
@@ -110,6 +111,8 @@ _VARIABLES = (
                          ("psi", "rad"), ("p", "rad/s"), ("q", "rad/s"), ("r", "rad/s"))),
     *(discrete(f"b_g_{i}", "rad/s", f"gyro bias about {i}_B") for i in AXES),
     *(discrete(f"b_a_{i}", "m/s2", f"accelerometer bias along {i}_B") for i in AXES),
+    output("t_sample", "s", "time the sample refers to: the end of the step it averages over, the FMU's time "
+                            "when it read the plant (an estimator fuses it at that time, docs/estimation.md)"),
 )
 
 
@@ -126,7 +129,7 @@ def _update(t, v, rs):
     R_mean = (rotation_matrix(before["phi"], before["theta"], before["psi"])
               + rotation_matrix(v["phi"], v["theta"], v["psi"])) / 2
     f_body = specific_force((velocity - velocity_before) / v["dt"], R_mean, v["g"])
-    out, nxt = {}, {"started": 1.0, **{f"previous_{name}": v[name] for name in _PREVIOUS}}
+    out, nxt = {"t_sample": t}, {"started": 1.0, **{f"previous_{name}": v[name] for name in _PREVIOUS}}
     for k, i in enumerate(AXES):
         rate = (before["pqr"[k]] + v["pqr"[k]]) / 2
         b_g, b_a = v[f"b_g_{i}"], v[f"b_a_{i}"]

@@ -14,7 +14,7 @@ channels; four members are shipped (``docs/sensors.md``):
   v_ref_z``, the desired velocity v* of eq. 26 (m/s, world frame, z down),
   outputs ``v_ref_x_rx ..``; a link: packets can be lost;
 * ``GNSS6``: a GNSS receiver, plant -> estimator. Inputs ``x y z u v w``,
-  outputs ``x_m .. w_m`` and ``fresh`` (1 on the step a new fix arrives,
+  outputs ``x_m .. w_m``, ``fresh`` (1 on the step a new fix arrives,
   ``fresh=True`` below; docs/estimation.md).
 
 Per communication step n (``t_n = n dt``), channel i, with ``u`` the input::
@@ -88,6 +88,14 @@ def gaussian(r1, r2):
     return ca.sqrt(-2.0 * ca.log(1.0 - r1)) * ca.cos(2.0 * math.pi * r2)
 
 
+def _tap(line, delay):
+    """The tap of a delay line selected by the integer ``delay`` (0: the first)."""
+    y = line[0]
+    for j in range(1, len(line)):
+        y = ca.if_else(delay == j, line[j], y)
+    return y
+
+
 def sensors_model(identifier: str, description: str, channels: Sequence[tuple[str, str, str, float]],
                   suffix: str, delay_max: int = DELAY_MAX, loss: bool = False, fresh: bool = False) -> FmuModel:
     """A sensor/link model with one channel per ``(name, unit, description,
@@ -104,8 +112,10 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
     ``fresh=True`` adds the output ``fresh``: 1 at the steps where a new
     sample reaches the output (the sample flag ``c_n = 0`` through the same
     delay line, 0 where the line is still filled with ``s_0``), 0 while the
-    output holds an old one; an estimator corrects only on it. The model
-    without it is exactly the one before."""
+    output holds an old one; an estimator corrects only on it; and the output
+    ``t_sample``, the time the delivered sample was taken (through the same
+    hold and delay line), at which an estimator fuses it. The model without
+    it is exactly the one before."""
     names = [c[0] for c in channels]
     units = {c[0]: c[1] for c in channels}
     delivered = "noise, bias, hold, delay, loss" if loss else "noise, bias, hold, delay"
@@ -147,6 +157,11 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         variables += [
             output("fresh", "1", "1 when a new sample reaches the output this step (after the delay), else 0"),
             *(discrete(f"fresh_delay_{j}", "1", f"sample flag {j} step(s) ago") for j in range(1, delay_max + 1)),
+            output("t_sample", "s", "time the delivered sample was taken (the FMU's time when it sampled its "
+                                    "inputs): an estimator fuses it at that time (docs/estimation.md, \"Timing\")"),
+            discrete("held_t_sample", "s", "time of the last sample"),
+            *(discrete(f"t_sample_delay_{j}", "s", f"time of the sample {j} step(s) ago")
+              for j in range(1, delay_max + 1)),
         ]
     n_channel_random = 2 * len(names)  # the noise's numbers per step; the loss draw, if any, comes after
 
@@ -166,6 +181,13 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
                 flag = ca.if_else(delay == j, flags[j], flag)
             out["fresh"] = flag
             nxt.update({f"fresh_delay_{j}": flags[j - 1] for j in range(1, delay_max + 1)})
+            # the sample's own time through the same hold and delay line: the delivered value's age
+            stamp = ca.if_else(sample, t, v["held_t_sample"])
+            stamps = [stamp] + [ca.if_else(started > 0, v[f"t_sample_delay_{j}"], stamp)
+                                for j in range(1, delay_max + 1)]
+            out["t_sample"] = _tap(stamps, delay)
+            nxt["held_t_sample"] = stamp
+            nxt.update({f"t_sample_delay_{j}": stamps[j - 1] for j in range(1, delay_max + 1)})
         for i, name in enumerate(names):
             measured = v[name] + v[f"sigma_{name}"] * gaussian(rs[2 * i], rs[2 * i + 1]) + v[f"bias_{name}"]
             s = ca.if_else(sample, measured, v[f"held_{name}"])
@@ -193,6 +215,7 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
             z0["packets_lost"] = 0.0
         if fresh:
             z0.update({f"fresh_delay_{j}": 0.0 for j in range(1, delay_max + 1)})
+            z0.update({"held_t_sample": 0.0, **{f"t_sample_delay_{j}": 0.0 for j in range(1, delay_max + 1)}})
         return z0
 
     return FmuModel(

@@ -22,9 +22,9 @@ def it2_initial_axis(params, r):
 
 def it2_axis_state_bounds(params):
     """The projection box of the IT2 axis state (eqs. 27-29, q in [0, 1])."""
-    from ..it2 import it2_axis_state_bounds as _bounds
+    from ..it2 import it2_state_box
 
-    return _bounds(params.bounds)
+    return it2_state_box(params.bounds)
 
 
 def it2_axis_law(rule: str, gamma_field: str):
@@ -33,17 +33,15 @@ def it2_axis_law(rule: str, gamma_field: str):
 
     def axis_law(e, e_dot, tau_c, axis_state, axis, params):
         from ..it2 import it2_learning_step, it2_normalized_firing_strengths, type_reduction
-        from ..learning import clip_inputs
+        from ..learning import AxisGains, clip_inputs
 
         it2 = params.it2
         x1, x2 = clip_inputs(e, e_dot, params.bounds)
         w_lower, w_upper = it2_normalized_firing_strengths(x1, x2, axis_state[C1], axis_state[C2],
                                                            axis_state[SIGMA1], axis_state[SIGMA2], it2.spread)
         tau_n, _, _ = type_reduction(axis_state[F], w_lower, w_upper, axis_state[Q])
-        state_next = it2_learning_step(rule, axis_state, x1, x2, tau_c, w_lower, w_upper, params.dt,
-                                       gamma=getattr(params, gamma_field)[axis], nu=params.nu[axis],
-                                       alpha_bar=params.alpha_bar[axis], gamma_q=it2.gamma_q,
-                                       bounds=params.bounds, phi=params.phi[axis])
+        state_next = it2_learning_step(AxisGains.of_axis(rule, params, axis, gamma_field), it2.gamma_q, axis_state,
+                                       x1, x2, tau_c, w_lower, w_upper)
         return tau_n, state_next
 
     return axis_law

@@ -40,15 +40,14 @@ def type1_axis_law(rule: str, gamma_field: str):
 
     def axis_law(e, e_dot, tau_c, axis_state, axis, params):
         from ..fnn import fnn_output, normalized_firing_strength
-        from ..learning import clip_inputs, learning_step
+        from ..learning import AxisGains, clip_inputs, learning_step
 
         x1, x2 = clip_inputs(e, e_dot, params.bounds)
         w_bar = normalized_firing_strength(x1, x2, axis_state[C1], axis_state[C2],
                                            axis_state[SIGMA1], axis_state[SIGMA2])
         tau_n = fnn_output(axis_state[F], w_bar)
-        state_next = learning_step(rule, axis_state, x1, x2, tau_c, w_bar, params.dt,
-                                   gamma=getattr(params, gamma_field)[axis], nu=params.nu[axis],
-                                   alpha_bar=params.alpha_bar[axis], bounds=params.bounds, phi=params.phi[axis])
+        state_next = learning_step(AxisGains.of_axis(rule, params, axis, gamma_field), axis_state, x1, x2, tau_c,
+                                   w_bar)
         return tau_n, state_next
 
     return axis_law

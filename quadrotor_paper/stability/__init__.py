@@ -15,10 +15,10 @@ Modules, one job each:
 * :mod:`~quadrotor_paper.stability.fmu_loop` -- the sampled loop from the FMUs, at a trimmed
   point or at a run's snapshot; :mod:`~quadrotor_paper.stability.along_flight` -- the
   learning loop of every variant along the missions, checked by perturbations;
-* :mod:`~quadrotor_paper.stability.finite_time` -- the learning laws' bounds (eqs. 53,
-  66, 70) on recorded runs;
 * :mod:`~quadrotor_paper.stability.study`, :mod:`~quadrotor_paper.stability.report`,
-  :mod:`~quadrotor_paper.stability.cli` -- all of it, the report, the command.
+  :mod:`~quadrotor_paper.stability.cli` -- all of it (with the learning laws' bounds,
+  eqs. 53, 66, 70, on recorded runs: :mod:`quadrotor_paper.learning_claims`), the
+  report, the command.
 
 The names below load their module (and python-control, scipy) on first use,
 so that ``fnn-cosim`` can add the ``stability`` subcommand without paying
@@ -32,11 +32,11 @@ _EXPORTS = {
     "linearize": ("linearize_controller", "linearize_controller_step", "linearize_plant", "linearize_plant_fmu",
                   "linearize_position_controller", "linearize_velocity_controller", "linearize_feedforward"),
     "fmu_loop": ("FmuLoop", "fmu_closed_loop", "snapshot_loop", "join_loop", "inert_states"),
-    "along_flight": ("AlongFlight", "FlightRadius", "along_flight", "along_flight_study"),
+    "along_flight": ("AlongFlight", "AlongFlightRun", "along_flight", "along_flight_study"),
     "loops": ("LoopModel",),
     "operating_points": ("OperatingPoint", "default_operating_points", "forward_flight", "hover", "operating_point",
                          "trim_closed_loop", "trim_plant"),
-    "study": ("StabilityStudy", "run_stability_analysis", "stability_study"),
+    "study": ("StabilityStudy", "StabilitySettings", "run_stability_analysis", "stability_study"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 

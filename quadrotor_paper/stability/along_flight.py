@@ -52,13 +52,11 @@ import numpy as np
 from cosim.scenario import Scenario, build_master
 from fnn_controller.variants import variant_names
 
-from ..components import CONTROLLER_INSTANCE
-from ..controller_component import DEFAULT_PLANT
-from ..missions import controller_variant
+from ..controller_component import controller_settings
 from .fmu_loop import FmuLoop, snapshot_loop
 from .operating_points import STATE_NAMES
 
-__all__ = ["FlightPoint", "FlightRadius", "AlongFlight", "along_flight", "along_flight_study", "along_flight_plan",
+__all__ = ["FlightPoint", "AlongFlightRun", "AlongFlight", "along_flight", "along_flight_study", "along_flight_plan",
            "AlongFlightPlan", "flight_events", "verdict", "write_points", "learned_state_names", "VARIANTS",
            "BOUNDARY_LAYER", "MISSIONS", "DELTA", "NEUTRAL_RATE", "SECONDS_PER_POINT"]
 
@@ -71,7 +69,6 @@ DELTA = {"u": 0.05, "phi": 0.02}
 # the size of the perturbation along the least stable mode (its state's units): small enough
 # to stay linear after a growth of e^4 over the 1 s check
 MODE_SIZE = 1e-4
-_PLANT, _CONTROLLER = DEFAULT_PLANT, CONTROLLER_INSTANCE
 # s of one worker per frozen point, its perturbation checks and its share of the flight included:
 # the whole study (972 points, 1 s checks) took about 3 min on 2 workers of an idle 2-core
 # machine (docs/stability.md, "What the command costs"); the estimate printed before the study
@@ -102,7 +99,7 @@ class FlightPoint:
 
 
 @dataclass(frozen=True)
-class FlightRadius:
+class AlongFlightRun:
     """The points of one run (mission, variant, boundary layer ``phi`` in m/s;
     0 is the paper's sign law), its status and error."""
 
@@ -141,7 +138,7 @@ def _relative_error(loop: FmuLoop) -> float:
 @dataclass(frozen=True)
 class AlongFlight:
     """A study metric (module level, picklable: it may run on a Dask
-    worker): :class:`FlightRadius` of the run, ``{"along_flight": ...}``.
+    worker): :class:`AlongFlightRun` of the run, ``{"along_flight": ...}``.
     Frozen every ``every`` s from ``every`` to the end less ``check``; the
     perturbation check (``check`` s, ``delta``) at every point when
     ``check`` > 0."""
@@ -160,29 +157,34 @@ class AlongFlight:
         return [scenario.start_time + n * h for n in range(k, n_last + 1, k)]
 
     def __call__(self, scenario: Scenario, result) -> dict[str, Any]:
-        variant = controller_variant(scenario) or "pd"
-        phi = float(scenario.raw.get("controller", {}).get("position", {}).get("phi", [0.0])[0])
+        settings = controller_settings(scenario)
+        if settings is None or not settings.plant:
+            raise ValueError(f"scenario {scenario.name!r}: along the flight needs a controller and the plant FMU it "
+                             "flies (its 'plant')")
+        variant, phi = settings.variant, float(settings.position.phi[0])
+        plant, controller = settings.plant, settings.instance
         held = learned_state_names(variant)
         points = []
         master = build_master(scenario)
         try:
             fmus = {f.name: f for f in master.fmus}
             for snap in result.snapshots:
-                loop = snapshot_loop(snap, fmus[_PLANT].path, fmus[_CONTROLLER].path, _PLANT, _CONTROLLER,
+                loop = snapshot_loop(snap, fmus[plant].path, fmus[controller].path, plant, controller,
                                      instances=fmus)
                 tau_c = [abs(loop.controller.outputs[f"tau_c_{a}"]) for a in "xyz"]
-                rates = self._check(master, snap, loop, result.seed, fmus) if self.check > 0 else (math.nan,) * 4
+                rates = self._check(master, snap, loop, result.seed, fmus, plant, controller) if self.check > 0 else (math.nan,) * 4
                 points.append(FlightPoint(snap.time, loop.spectral_radius,
                                           float(np.max(np.abs(loop.poles_holding(held)))),
                                           _relative_error(loop), float(min(tau_c)), *rates))
         finally:
             master.close()
-        return {"along_flight": FlightRadius(scenario.name, variant, phi, result.status, result.error, tuple(points))}
+        return {"along_flight": AlongFlightRun(scenario.name, variant, phi, result.status, result.error, tuple(points))}
 
-    def _check(self, master, snap, loop: FmuLoop, seed: int, fmus) -> tuple[float, float, float, float]:
+    def _check(self, master, snap, loop: FmuLoop, seed: int, fmus, plant: str,
+               controller: str) -> tuple[float, float, float, float]:
         """(linear, nonlinear) rates over ``check`` s of the perturbation
-        ``delta`` of the plant state, then of a perturbation along the least
-        stable mode; FMU states read and edited on the master's instances
+        ``delta`` of the ``plant``'s state, then of a perturbation along the
+        least stable mode; FMU states read and edited on the master's instances
         ``fmus`` (name -> :class:`~cosim.fmu_component.FmuComponent`)."""
         h = master.step
         n = int(round(self.check / h))
@@ -195,28 +197,28 @@ class AlongFlight:
 
         def resume(plant_kick: dict[str, float], controller_state: bytes) -> dict[str, float]:
             """Every active state's value after ``check`` s of co-simulation from the snapshot."""
-            values = {f"{_PLANT}.{k}_0": v + plant_kick.get(k, 0.0) for k, v in start.items()}
-            restore = {k: v for k, v in snap.states.items() if k != _PLANT} | {_CONTROLLER: controller_state}
+            values = {f"{plant}.{k}_0": v + plant_kick.get(k, 0.0) for k, v in start.items()}
+            restore = {k: v for k, v in snap.states.items() if k != plant} | {controller: controller_state}
             end = snap.time + n * h
             run = master.run(n * h, seed=seed, t0=snap.time, parameters=values, restore=restore, snapshots=[end],
                              raise_on_error=False)
             if run.status != "ok" or not run.snapshots:
                 return dict.fromkeys(names, math.nan)
             last = run.snapshots[-1]
-            out = {f"plant_{k}": v for k, v in fmus[_PLANT].state_values(last.states[_PLANT], plant_names,
+            out = {f"plant_{k}": v for k, v in fmus[plant].state_values(last.states[plant], plant_names,
                                                                           end).items()}
-            return out | {f"controller_{k}": v for k, v in fmus[_CONTROLLER].state_values(
-                last.states[_CONTROLLER], ctrl_names, end).items()}
+            return out | {f"controller_{k}": v for k, v in fmus[controller].state_values(
+                last.states[controller], ctrl_names, end).items()}
 
         def gap(a: dict[str, float], b: dict[str, float], keys) -> float:
             return float(np.linalg.norm([a[k] - b[k] for k in keys]))
 
-        nominal = resume({}, snap.states[_CONTROLLER])
+        nominal = resume({}, snap.states[controller])
         # the plant's state kicked
         delta = dict(self.delta)
         size = float(np.linalg.norm(list(delta.values())))
         linear = np.linalg.norm(loop.propagate(delta, n)) / size
-        kicked = resume(delta, snap.states[_CONTROLLER])
+        kicked = resume(delta, snap.states[controller])
         plant12 = [f"plant_{s}" for s in STATE_NAMES]
         rates = [_rate(linear, self.check), _rate(gap(kicked, nominal, plant12) / size, self.check)]
         # along the least stable mode (its eigenvector's real part), learned state included
@@ -225,10 +227,10 @@ class AlongFlight:
         v = np.real(V[:, int(np.argmax(np.abs(w)))])
         v = MODE_SIZE * v / np.linalg.norm(v)
         mode = dict(zip(names, v))
-        now = fmus[_CONTROLLER].state_values(snap.states[_CONTROLLER], ctrl_names, snap.time)
+        now = fmus[controller].state_values(snap.states[controller], ctrl_names, snap.time)
         grown = []
         for sign in (1.0, -1.0):  # both ways along the mode: a bound (a width's floor) may stop one side only
-            ctrl_state = fmus[_CONTROLLER].state_with(snap.states[_CONTROLLER],
+            ctrl_state = fmus[controller].state_with(snap.states[controller],
                                                       {k: now[k] + sign * mode[f"controller_{k}"] for k in ctrl_names},
                                                       snap.time)
             moved = resume({k: sign * mode[f"plant_{k}"] for k in plant_names}, ctrl_state)
@@ -246,7 +248,7 @@ def _rate(gain: float, duration: float) -> float:
     return math.log(gain) / duration
 
 
-def along_flight(scenario: Scenario, metric: AlongFlight = AlongFlight()) -> FlightRadius:
+def along_flight(scenario: Scenario, metric: AlongFlight = AlongFlight()) -> AlongFlightRun:
     """One run of ``scenario`` frozen along its flight, in this process."""
     master = build_master(scenario)
     try:
@@ -306,7 +308,7 @@ def along_flight_plan(missions: Sequence[str] = MISSIONS, variants: Sequence[str
 def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[str] = VARIANTS,
                        phis: Sequence[float] = (0.0, BOUNDARY_LAYER), metric: AlongFlight = AlongFlight(),
                        workers: int = 1, overrides: dict[str, Any] | None = None,
-                       progress: Callable[[int, int], None] | None = None) -> list[FlightRadius]:
+                       progress: Callable[[int, int], None] | None = None) -> list[AlongFlightRun]:
     """Every mission x variant x law (``phis``, m/s; 0 the sign law), one study per
     mission run by :func:`~quadrotor_paper.experiments.measure`; ``overrides``
     (dotted keys) set for every run, e.g. a shorter ``simulation.duration``;
@@ -331,7 +333,7 @@ def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[st
                 out.append(row["along_flight"])
             else:  # the run or its metric failed: the row says why
                 values = cases[row["case"]]["set"]
-                out.append(FlightRadius(mission, values["controller.variant"], values["controller.position.phi"][0],
+                out.append(AlongFlightRun(mission, values["controller.variant"], values["controller.position.phi"][0],
                                         row.get("status", "failed"), row.get("error")))
     return out
 
@@ -360,7 +362,7 @@ def flight_events(scenario: Scenario) -> list[tuple[float, str]]:
 NEUTRAL_RATE = 0.01
 
 
-def _where(f: FlightRadius, values: np.ndarray, dt: float) -> str:
+def _where(f: AlongFlightRun, values: np.ndarray, dt: float) -> str:
     i = int(np.argmax(values))
     rate = math.log(values[i]) / dt
     return f"max {values[i]:.4f} ({rate:+.3g} 1/s) at {f.points[i].time:g} s"
@@ -371,7 +373,7 @@ def _erased(rates: np.ndarray) -> str:
     return f"; erased (both runs at the same bound) at {n} points" if n else ""
 
 
-def verdict(f: FlightRadius, dt: float = 0.01) -> dict[str, str]:
+def verdict(f: AlongFlightRun, dt: float = 0.01) -> dict[str, str]:
     """One line each for the learning held, the learning on and the
     perturbation check of a flight (the report's and docs/stability.md's
     words); ``dt`` the controller's period (s), for the growth rates ln|z|/dt."""
@@ -409,7 +411,7 @@ def verdict(f: FlightRadius, dt: float = 0.01) -> dict[str, str]:
     return out
 
 
-def write_points(flights: Sequence[FlightRadius], path) -> None:
+def write_points(flights: Sequence[AlongFlightRun], path) -> None:
     """Every point of every flight as CSV (one row per mission, variant, law, time)."""
     import csv
 

@@ -96,15 +96,15 @@ def _checked(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study for parsed arguments; prints the report's path and verdicts."""
-    from .study import run_stability_analysis
+    from .study import StabilitySettings, run_stability_analysis
 
     _checked(args)
     workers = default_workers(args.workers)
     along_every = ALONG_EVERY if args.along_every is None else args.along_every
-    study = run_stability_analysis(args.out, speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
-                                   cosim=not args.no_cosim, feedforward=args.feedforward,
-                                   along_flight=args.along_flight, along_every=along_every, workers=workers,
-                                   show_progress=True)
+    settings = StabilitySettings(speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
+                                 cosim=not args.no_cosim, feedforward=args.feedforward,
+                                 along_flight=args.along_flight, along_every=along_every)
+    study = run_stability_analysis(args.out, settings, workers=workers, show_progress=True)
     for a in study.analyses:
         p = a.poles["discrete"]
         outer = min(m.gain_margin for m in a.margins["discrete"] if m.loop.startswith("outer"))

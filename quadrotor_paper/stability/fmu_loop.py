@@ -40,6 +40,8 @@ from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import QUADROTOR
 from fnn_controller.controller_fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS, controller_model
 
+from ..components import CONTROLLER_INSTANCE
+from ..controller_component import DEFAULT_PLANT
 from .linearize import INPUT_NAMES
 from .operating_points import STATE_NAMES, OperatingPoint
 
@@ -145,8 +147,8 @@ def fmu_closed_loop(op: OperatingPoint, variant: str = "pd", fmi_version: int = 
     return join_loop(plant, controller)
 
 
-def snapshot_loop(snapshot, plant_fmu: str | Path, controller_fmu: str | Path, plant: str = "Quadrotor",
-                  controller: str = "controller", instances: Mapping | None = None) -> FmuLoop:
+def snapshot_loop(snapshot, plant_fmu: str | Path, controller_fmu: str | Path, plant: str = DEFAULT_PLANT,
+                  controller: str = CONTROLLER_INSTANCE, instances: Mapping | None = None) -> FmuLoop:
     """The sampled closed loop of a run frozen at ``snapshot.time``
     (:class:`cosim.master.Snapshot`, taken by ``Master.run(snapshots=...)``):
     the controller's one-period map from its FMU state with its inputs at

@@ -9,19 +9,20 @@ the one source of truth.
 
   .. math:: \\delta\\dot x = A\\,\\delta x + B_\\Omega\\,\\delta\\Omega + B_w\\,\\delta w
 
-* Velocity controller (eqs. 13-18 + rotor inversion):
-  ``casadi.jacobian`` of ``velocity_controller_function(geometric)``,
-  a static map ``delta Omega = K_r delta v* + K_x delta x``.
-* PD position controller (eq. 19): ``casadi.jacobian`` of
-  ``position_controller_function(PD, position)``: ``delta v* = K_e delta e
-  + K_edot delta e_dot`` (``K_e = kp I``, ``K_edot = kd I``), plus the
-  velocity feed-forward option, ``K_ff delta dp*/dt`` (``K_ff = feedforward
-  I``, the Jacobian of the position controller's own expression).
+* Velocity controller (eqs. 13-18 + rotor inversion): ``casadi.jacobian``
+  of the inner loop the step runs (``fnn_controller.parametric.inner_step_function``,
+  its parameters bound to ``geometric``: ``bound_inner_function``), a static
+  map ``delta Omega = K_r delta v* + K_x delta x``.
+* PD position controller (eq. 19): ``casadi.jacobian`` of the outer loop
+  the step runs (``outer_step_function("pd")``, bound to ``position``:
+  ``bound_outer_function``): ``delta v* = K_e delta e + K_edot delta e_dot``
+  (``K_e = kp I``, ``K_edot = kd I``), plus the velocity feed-forward
+  option, ``K_ff delta dp*/dt`` (``K_ff = feedforward I``).
 
 The master runs the one step function of the controller,
 ``fnn_controller.parametric.parametric_step_function("pd")`` with its
-parameter vector filled from ``op.position`` and ``op.geometric``, which
-composes the same two laws (``fnn_controller.step``);
+parameter vector filled from ``op.position`` and ``op.geometric``, the
+composition of these two loops;
 :func:`linearize_controller_step` differentiates that function (its
 parameters bound, ``bound_step_function``) so a test can check the
 composition.
@@ -36,9 +37,9 @@ from fmu_models.lazy_casadi import ca
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR
-from fnn_controller import bound_step_function, position_controller_function, velocity_controller_function
+from fnn_controller.parametric import INNER_Y, OUTER_Y, bound_inner_function, bound_outer_function, bound_step_function
 from fnn_controller.geometric import initial_velocity_state
-from fnn_controller.position import fnn_state_size, position_controller
+from fnn_controller.position import fnn_state_size
 from fnn_controller.step import Y_SLICES
 from fnn_controller.variants.pd import PD
 
@@ -61,14 +62,6 @@ class PlantLinearization:
 
     A: np.ndarray
     B: np.ndarray
-
-    @property
-    def B_omega(self) -> np.ndarray:
-        return self.B[:, :4]
-
-    @property
-    def B_wind(self) -> np.ndarray:
-        return self.B[:, 4:7]
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,48 +127,54 @@ def _jacobian(f: ca.Function, output: str, inputs: list[str], values: dict) -> l
 # the same controller at many points and gains; building one costs ~10 ms).
 @lru_cache(maxsize=64)
 def _velocity_jacobian(geometric) -> tuple[ca.Function, tuple[str, ...]]:
-    f = velocity_controller_function(geometric)
-    return _jacobian_function(f, "Omega", ("v_ref", "v", "euler", "omega_b")), tuple(f.name_in())
+    f = bound_inner_function(geometric)
+    return _jacobian_function(f, "y", ("v_ref", "x")), tuple(f.name_in())
 
 
 @lru_cache(maxsize=64)
 def _position_jacobian(position) -> tuple[ca.Function, tuple[str, ...]]:
-    f = position_controller_function(PD, position)
-    return _jacobian_function(f, "v_ref", ("e", "e_dot")), tuple(f.name_in())
+    f = bound_outer_function(PD.name, position)
+    return _jacobian_function(f, "y", ("p_ref", "p_ref_dot", "x")), tuple(f.name_in())
 
 
 def linearize_velocity_controller(op: OperatingPoint) -> tuple[np.ndarray, np.ndarray]:
     """``K_r = d Omega/d v*`` (4 x 3) and ``K_x = d Omega/d x`` (4 x 12) of
-    ``velocity_controller_function(op.geometric)`` at ``op``."""
+    the inner loop the step runs (``bound_inner_function(op.geometric)``:
+    :func:`fnn_controller.parametric.inner_step_function`, its parameters
+    bound) at ``op``."""
     _check_geometric(op.geometric)
     jac, names = _velocity_jacobian(op.geometric)
-    values = {"v_ref": op.v_ref, "v": op.x[3:6], "euler": op.x[6:9], "omega_b": op.x[9:12],
-              "psi_ref": op.psi_ref, "vel_state": initial_velocity_state()}
-    K_r, K_v, K_euler, K_rates = (np.array(m) for m in jac(*[values[n] for n in names]))
+    values = {"v_ref": op.v_ref, "x": op.x[3:12], "psi_ref": op.psi_ref, "state": initial_velocity_state(),
+              "a_ref": np.zeros(3)}
+    d_v_ref, d_x = (np.array(m)[INNER_Y["Omega"]] for m in jac(*[values[n] for n in names]))
     K_x = np.zeros((4, _N_X))
-    K_x[:, 3:6], K_x[:, 6:9], K_x[:, 9:12] = K_v, K_euler, K_rates
-    return K_r, K_x
+    K_x[:, 3:12] = d_x
+    return d_v_ref, K_x
+
+
+def _outer_jacobians(op: OperatingPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``d v*/d p*``, ``d v*/d dp*/dt`` and ``d v*/d x[0:6]`` of the PD's outer
+    loop the step runs (``bound_outer_function("pd", op.position)``) at ``op``."""
+    jac, names = _position_jacobian(op.position)
+    values = {"p_ref": op.x[0:3] + op.position_error, "p_ref_dot": op.p_ref_dot, "x": op.x[0:6],
+              "state": np.zeros(fnn_state_size(PD)), "p_ref_ddot": np.zeros(3)}
+    return tuple(np.array(m)[OUTER_Y["v_ref"]] for m in jac(*[values[n] for n in names]))
 
 
 def linearize_position_controller(op: OperatingPoint) -> tuple[np.ndarray, np.ndarray]:
-    """``K_e = d v*/d e`` and ``K_edot = d v*/d(de/dt)`` (3 x 3 each) of
-    ``position_controller_function(PD, op.position)`` at ``op``."""
-    jac, names = _position_jacobian(op.position)
-    values = {"e": op.position_error, "e_dot": op.p_ref_dot - op.x[3:6],
-              "fnn_state": np.zeros(fnn_state_size(PD))}
-    K_e, K_edot = (np.array(m) for m in jac(*[values[n] for n in names]))
-    return K_e, K_edot
+    """``K_e = d v*/d e`` and ``K_edot = d v*/d(de/dt)`` (3 x 3 each) of the
+    PD's outer loop at ``op`` (``e = p* - p``, ``de/dt = dp*/dt - v``, eq. 12)."""
+    d_p_ref, _, d_x = _outer_jacobians(op)
+    return d_p_ref, -d_x[:, 3:6]
 
 
 def linearize_feedforward(op: OperatingPoint) -> np.ndarray:
     """``K_ff = d v*/d(dp*/dt)`` (3 x 3) at fixed e and de/dt: the velocity
     feed-forward of ``op.position`` (``feedforward I``; zero for the paper's
-    law), from the position controller's own CasADi expression."""
-    p_ref_dot = ca.SX.sym("p_ref_dot", 3)
-    out = position_controller(PD, ca.DM(op.position_error), ca.DM(op.p_ref_dot - op.x[3:6]),
-                              ca.DM.zeros(fnn_state_size(PD)), op.position, p_ref_dot)
-    jac = ca.Function("feedforward_jacobian", [p_ref_dot], [ca.densify(ca.jacobian(out["v_ref"], p_ref_dot))])
-    return np.array(jac(op.p_ref_dot))
+    law). dp*/dt enters v* twice, through de/dt and fed forward, so this is
+    ``d v*/d dp*/dt - K_edot``."""
+    _, d_p_ref_dot, d_x = _outer_jacobians(op)
+    return d_p_ref_dot + d_x[:, 3:6]
 
 
 def linearize_controller(op: OperatingPoint) -> ControllerLinearization:

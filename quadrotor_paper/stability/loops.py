@@ -93,7 +93,7 @@ class LoopModel:
         master has none (0).
     kp, kd : float, optional
         PD gains (eq. 19) replacing ``op.position``'s; the PD gains are then
-        linearized from ``position_controller_function(PD)`` with them.
+        linearized from the step's outer loop (``bound_outer_function("pd")``) with them.
     feedforward : float, optional
         Velocity feed-forward gain (``PositionParams.feedforward``, [0, 1])
         replacing ``op.position``'s: ``v* = PD + feedforward dp*/dt``. It acts

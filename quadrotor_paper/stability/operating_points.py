@@ -38,7 +38,8 @@ import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR, hover_rotor_speed
 from fmu_models.models.quadrotor import STATE_NAMES as PLANT_STATE_NAMES
-from fnn_controller import GeometricParams, PositionParams, velocity_controller_function
+from fnn_controller import GeometricParams, PositionParams
+from fnn_controller.parametric import INNER_Y, bound_inner_function
 from fnn_controller.geometric import initial_velocity_state
 from fnn_controller.position import fnn_state_size, position_controller
 from fnn_controller.variants.pd import PD
@@ -180,8 +181,8 @@ def trim_closed_loop(velocity=(0.0, 0.0, 0.0), wind=(0.0, 0.0, 0.0), psi_ref: fl
     """Trim of the plant flown by the geometric velocity controller.
 
     Unknowns phi, theta, psi (rad) and the desired velocity v* (m/s); the
-    rotor speeds are ``velocity_controller_function(geometric)`` evaluated
-    at (v*, x); residual: the six velocity and rate derivatives of the plant.
+    rotor speeds are the inner loop the step runs (``bound_inner_function(geometric)``)
+    evaluated at (v*, x); residual: the six velocity and rate derivatives of the plant.
 
     Returns
     -------
@@ -190,15 +191,19 @@ def trim_closed_loop(velocity=(0.0, 0.0, 0.0), wind=(0.0, 0.0, 0.0), psi_ref: fl
     _check_geometric(geometric)
     p = np.array(QUADROTOR.parameter_values(**dict(plant_parameters or {})))
     velocity, wind = np.asarray(velocity, float), np.asarray(wind, float)
-    kv = velocity_controller_function(geometric)
+    inner = bound_inner_function(geometric)  # (v_ref, x = u v w phi theta psi p q r, psi_ref, state, a_ref)
+
+    def omega(v_ref, euler):
+        y = inner(v_ref, ca.vertcat(velocity, euler, ca.DM.zeros(3)), psi_ref, initial_velocity_state(),
+                  ca.DM.zeros(3))[0]
+        return y[INNER_Y["Omega"]]
+
     z = ca.SX.sym("z", 6)  # phi, theta, psi, v*_x, v*_y, v*_z
     x = ca.vertcat(0.0, 0.0, -15.0, velocity, z[0:3], 0.0, 0.0, 0.0)
-    omega = kv(z[3:6], velocity, z[0:3], ca.DM.zeros(3), psi_ref, initial_velocity_state())[0]
     guess = np.array([0.0, 0.0, psi_ref, *velocity])
-    sol = _solve("trim_closed_loop", z, _ode_residual(x, ca.vertcat(omega, wind), p), guess)
+    sol = _solve("trim_closed_loop", z, _ode_residual(x, ca.vertcat(omega(z[3:6], z[0:3]), wind), p), guess)
     x_num = _state(velocity, sol[0:3])
-    omega_num = np.array(kv(sol[3:6], velocity, sol[0:3], np.zeros(3), psi_ref,
-                            initial_velocity_state())[0]).ravel()
+    omega_num = np.array(omega(ca.DM(sol[3:6]), ca.DM(sol[0:3]))).ravel()
     return x_num, omega_num, sol[3:6]
 
 

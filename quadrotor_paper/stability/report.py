@@ -361,8 +361,9 @@ def _section_loop_structure(study) -> list[str]:
     """What is linearized and how the master's sampling enters (ZOH, no delay)."""
     return ["## Loop structure", "",
             "Plant (12 states, CasADi Jacobian = the FMU's directional derivatives) -> rotor speeds from the "
-            "geometric velocity controller (static gain, Jacobian of `velocity_controller_function`) <- desired "
-            "velocity v* from the PD (Jacobian of `position_controller_function(PD)`). Both controllers run "
+            "geometric velocity controller (static gain, Jacobian of the step's inner loop, `inner_step_function`) <- "
+            "desired velocity v* from the PD (Jacobian of the step's outer loop, `outer_step_function(\"pd\")`). "
+            "Both controllers run "
             f"at h = {study.dt} s. The co-simulation master evaluates the controller at t_n on the plant state at "
             "t_n and holds the rotor speeds over [t_n, t_n+1): **ZOH, no extra delay**. 'discrete+1' adds one "
             "step of delay on the rotor commands, to show what a delay would cost.", ""]

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from ..learning_claims import AxisClaims, Recording, default_runs, evaluate_clai
 from .operating_points import OperatingPoint, default_operating_points
 from .validation import GainCheck, StepCheck, check_gains, check_step, pd_mission_rmse, ramp_lag
 
-__all__ = ["StabilityStudy", "stability_study", "run_stability_analysis", "check_pd_gains", "DT", "SWEEP_KP",
+__all__ = ["StabilityStudy", "StabilitySettings", "stability_study", "run_stability_analysis", "check_pd_gains", "DT", "SWEEP_KP",
            "SWEEP_KD", "STEP_CHECKS"]
 
 DT = 0.01  # s: the controller and communication step the study analyses (the paper's)
@@ -92,7 +93,7 @@ class StabilityStudy:
     gain_checks: list[GainCheck] = field(default_factory=list)
     runs: list[Recording] = field(default_factory=list)
     finite_time: list[AxisClaims] = field(default_factory=list)
-    along_flight: list = field(default_factory=list)  # FlightRadius, every mission x variant x law
+    along_flight: list = field(default_factory=list)  # AlongFlightRun, every mission x variant x law
     flight_events: dict[str, list[tuple[float, str]]] = field(default_factory=dict)  # mission -> (t, label)
     report_path: Path | None = None
     figures: dict[str, Path] = field(default_factory=dict)
@@ -104,24 +105,21 @@ class StabilityStudy:
         raise KeyError(f"no operating point {name!r}; have {[a.op.name for a in self.analyses]}")
 
 
-def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = DT, kp: float | None = None,
-                    kd: float | None = None, cosim: bool = True, sweep_kp=SWEEP_KP, sweep_kd=SWEEP_KD,
-                    geometric: GeometricParams = GeometricParams(), feedforward: float = 0.0,
-                    feedforward_gains=(0.0, 1.0), along_flight: bool = False, along_every: float = 1.0,
-                    workers: int = 1, show_progress: bool = False, analysed=None) -> StabilityStudy:
-    """Run every analysis.
+@dataclass(frozen=True)
+class StabilitySettings:
+    """What the study analyses and how far it goes.
 
-    Parameters
-    ----------
     speed : forward-flight speed (m/s) of the operating points and the ramp.
     wind_speed : steady wind (m/s) of the third operating point, along the
         paper's gust direction [-1, -1, 0].
     dt : controller and communication step (s) of the discrete loops.
-    kp, kd : PD gains (default: the paper's 2.5, 0.005).
+    kp, kd : PD gains (default ``None``: the paper's 2.5, 0.005).
+    geometric : the velocity controller's gains (its ``dt`` is ``dt``).
     feedforward : velocity feed-forward gain of the analysed PD (default 0,
         the paper's law; ``PositionParams.feedforward``).
     feedforward_gains : the gains compared side by side (poles, margins,
         ramp and circle error; with ``cosim`` the co-simulated ramp lag too).
+    sweep_kp, sweep_kd : the grid of the gain sweep.
     cosim : also run the co-simulation checks of the PD (steps, gains, ramp,
         mission).
     along_flight : with ``cosim``, also the learning laws (minutes, not
@@ -129,47 +127,92 @@ def stability_study(speed: float = 2.5, wind_speed: float = 3.0, dt: float = DT,
         runs of :mod:`quadrotor_paper.learning_claims` and the learning loop
         along the missions (:mod:`.along_flight`, frozen every ``along_every``
         s; 0 skips it).
+    """
+
+    speed: float = 2.5
+    wind_speed: float = 3.0
+    dt: float = DT
+    kp: float | None = None
+    kd: float | None = None
+    geometric: GeometricParams = GeometricParams()
+    feedforward: float = 0.0
+    feedforward_gains: tuple[float, ...] = (0.0, 1.0)
+    sweep_kp: Any = field(default_factory=lambda: SWEEP_KP)
+    sweep_kd: Any = field(default_factory=lambda: SWEEP_KD)
+    cosim: bool = True
+    along_flight: bool = False
+    along_every: float = 1.0
+
+    @property
+    def position(self) -> PositionParams:
+        """The analysed PD's parameters (eq. 19): the paper's, with these gains and step."""
+        default = PositionParams()
+        return replace(default, kp=default.kp if self.kp is None else self.kp,
+                       kd=default.kd if self.kd is None else self.kd, dt=self.dt, feedforward=self.feedforward)
+
+
+def stability_study(settings: StabilitySettings = StabilitySettings(), *, workers: int = 1,
+                    show_progress: bool = False, analysed=None) -> StabilityStudy:
+    """Run every analysis ``settings`` asks for: the linear analysis of the
+    PD baseline, then (``settings.cosim``) its co-simulation checks, then
+    (``settings.along_flight``) the learning laws.
+
     workers : Dask worker processes of the studies (1: in this process).
     show_progress : print the along-flight study's plan and estimated time
         (:func:`~.along_flight.along_flight_plan`) before it starts, and draw its
         progress bar (stderr).
-    sweep_kp, sweep_kd : the grid of the gain sweep.
     analysed : called with the operating points' analyses as soon as they are
         computed, before the rest of the study (:func:`run_stability_analysis`
         starts drawing their figures there).
     """
-    position = PositionParams()
-    position = replace(position, kp=position.kp if kp is None else kp, kd=position.kd if kd is None else kd, dt=dt,
-                       feedforward=feedforward)
-    geometric = replace(geometric, dt=dt)
+    study = _linear(settings, analysed)
+    if settings.cosim:
+        _cosim_checks(study, settings)
+        if settings.along_flight:
+            _learning(study, settings, workers, show_progress)
+    return study
+
+
+def _linear(settings: StabilitySettings, analysed=None) -> StabilityStudy:
+    """The linear analysis of the PD baseline at the default operating points."""
+    dt, speed, position = settings.dt, settings.speed, settings.position
+    geometric = replace(settings.geometric, dt=dt)
     check_pd_gains(position.kp, position.kd, dt, geometric)
-    ops = default_operating_points(speed, wind_speed, position=position, geometric=geometric)
+    ops = default_operating_points(speed, settings.wind_speed, position=position, geometric=geometric)
     analyses = [analyze(op, dt, every_loop=("discrete",)) for op in ops]  # what the report shows
     if analysed is not None:
         analysed(analyses)
+    sweep_kp, sweep_kd = settings.sweep_kp, settings.sweep_kd
     sweeps = [gain_sweep(ops[0], sweep_kp, sweep_kd, None), gain_sweep(ops[0], sweep_kp, sweep_kd, dt),
               gain_sweep(ops[0], sweep_kp, sweep_kd, dt, 1), gain_sweep(ops[-1], sweep_kp, sweep_kd, dt)]
     bases = {"continuous": (None, 0), "discrete": (dt, 0), "discrete+1": (dt, 1)}
     critical = {op.name: {k: critical_gain_factor(op, s, d) for k, (s, d) in bases.items()} for op in ops}
     study = StabilityStudy(dt, position, ops, analyses, sweeps, critical,
                            ramp_error(ops[0], ops[1], speed, dt), circle_error(ops[0], dt=dt))
-    study.feedforward_cases = feedforward_comparison(ops, dt, speed, feedforward_gains, analyses)
-    if cosim:
-        study.feedforward_ramp_nonlinear = {float(g): ramp_lag(ops[0].with_feedforward(g), speed, dt=dt)[0]
-                                            for g in feedforward_gains}
-        hover = ops[0]
-        study.step_checks = [check_step(hover, kind, axis, size) for kind, axis, size in STEP_CHECKS]
-        c = critical[hover.name]["discrete"]
-        study.gain_checks = [check_gains(hover, f * c * position.kp, f * c * position.kd, dt=dt)
-                             for f in GAIN_FACTORS]
-        study.ramp_nonlinear = ramp_lag(hover, speed, dt=dt)[0]
-        study.mission_rmse = pd_mission_rmse()
-    if cosim and along_flight:
-        study.runs = default_runs(kp=kp, kd=kd, workers=workers)
-        study.finite_time = [evaluate_claims(run, a) for run in study.runs for a in range(3)]
-        if along_every > 0:
-            _along_flight(study, kp, kd, along_every, workers, show_progress)
+    study.feedforward_cases = feedforward_comparison(ops, dt, speed, settings.feedforward_gains, analyses)
     return study
+
+
+def _cosim_checks(study: StabilityStudy, settings: StabilitySettings) -> None:
+    """The PD's linear answers checked in the co-simulation, into ``study``."""
+    dt, speed, hover = settings.dt, settings.speed, study.operating_points[0]
+    study.feedforward_ramp_nonlinear = {float(g): ramp_lag(hover.with_feedforward(g), speed, dt=dt)[0]
+                                        for g in settings.feedforward_gains}
+    study.step_checks = [check_step(hover, kind, axis, size) for kind, axis, size in STEP_CHECKS]
+    c = study.critical_factors[hover.name]["discrete"]
+    study.gain_checks = [check_gains(hover, f * c * study.position.kp, f * c * study.position.kd, dt=dt)
+                         for f in GAIN_FACTORS]
+    study.ramp_nonlinear = ramp_lag(hover, speed, dt=dt)[0]
+    study.mission_rmse = pd_mission_rmse()
+
+
+def _learning(study: StabilityStudy, settings: StabilitySettings, workers: int, show_progress: bool) -> None:
+    """The learning laws into ``study``: their finite-time claims on recorded
+    runs, then the learning loop along the missions."""
+    study.runs = default_runs(kp=settings.kp, kd=settings.kd, workers=workers)
+    study.finite_time = [evaluate_claims(run, a) for run in study.runs for a in range(3)]
+    if settings.along_every > 0:
+        _along_flight(study, settings.kp, settings.kd, settings.along_every, workers, show_progress)
 
 
 def _along_flight(study: StabilityStudy, kp: float | None, kd: float | None, every: float, workers: int,
@@ -189,8 +232,10 @@ def _along_flight(study: StabilityStudy, kp: float | None, kd: float | None, eve
     study.flight_events = {m: flight_events(load_scenario(m)) for m in MISSIONS}
 
 
-def run_stability_analysis(out_dir: str | Path = "results/stability", **kwargs) -> StabilityStudy:
-    """:func:`stability_study` (same keyword arguments), then write
+def run_stability_analysis(out_dir: str | Path = "results/stability",
+                           settings: StabilitySettings = StabilitySettings(), *, workers: int = 1,
+                           show_progress: bool = False) -> StabilityStudy:
+    """:func:`stability_study` (same arguments), then write
     ``out_dir/stability.md`` and the PNG figures; returns the study with
     ``report_path`` and ``figures`` set. With ``workers`` > 1 the operating
     points' figures are drawn in a second process while the study goes on
@@ -199,8 +244,7 @@ def run_stability_analysis(out_dir: str | Path = "results/stability", **kwargs) 
     from .report import point_figures_aside, write_report
 
     aside = []
-    if kwargs.get("workers", 1) > 1:
-        kwargs["analysed"] = lambda analyses: aside.append(point_figures_aside(analyses, out_dir))
-    study = stability_study(**kwargs)
+    analysed = (lambda analyses: aside.append(point_figures_aside(analyses, out_dir))) if workers > 1 else None
+    study = stability_study(settings, workers=workers, show_progress=show_progress, analysed=analysed)
     write_report(study, out_dir, aside[0]() if aside else None)
     return study

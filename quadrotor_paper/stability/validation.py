@@ -12,7 +12,7 @@ compared one to one.
   of the position reference (master with :class:`~quadrotor_paper.controller_component.ControllerComponent`);
 * :func:`velocity_step` -- the inner loop alone after a step of the desired
   velocity (master with :class:`VelocityCommandComponent`, which runs
-  ``velocity_controller_function`` -- the law inside the full controller);
+  the step's inner loop, ``bound_inner_function`` -- the law inside the full controller);
 * :func:`ramp_lag` -- the PD's steady lag behind a ramp (master with a
   :class:`Ramp` reference);
 * :func:`growth_rate` -- how fast an oscillation grows or decays, to compare a
@@ -28,11 +28,13 @@ import control as ct
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR
-from fnn_controller import FastFunction, GeometricParams, velocity_controller_function
+from fnn_controller import FastFunction, GeometricParams
+from fnn_controller.parametric import INNER_Y, bound_inner_function
 from fnn_controller.geometric import initial_velocity_state
 
 from cosim.component import Port, PythonComponent
-from ..controller_component import ControllerComponent
+from ..components import CONTROLLER_INSTANCE
+from ..controller_component import DEFAULT_PLANT, ControllerComponent
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from ..trajectories import Hover, ReferenceComponent
@@ -47,7 +49,7 @@ __all__ = [
 
 _STATE_GROUP = "{" + ",".join(STATE_NAMES) + "}"
 # flipping over or falling out of the sky ends a run as "diverged"
-ENVELOPE = {"Quadrotor.phi": (-1.2, 1.2), "Quadrotor.theta": (-1.2, 1.2), "Quadrotor.z": (-100.0, 0.0)}
+ENVELOPE = {f"{DEFAULT_PLANT}.phi": (-1.2, 1.2), f"{DEFAULT_PLANT}.theta": (-1.2, 1.2), f"{DEFAULT_PLANT}.z": (-100.0, 0.0)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,7 +93,8 @@ class Ramp:
 class VelocityCommandComponent(PythonComponent):
     """The geometric velocity controller alone, at a constant desired
     velocity: plant state in, rotor speeds out (eqs. 13-18, evaluated by
-    ``velocity_controller_function`` through its fast buffer path)."""
+    the inner loop the step runs, ``bound_inner_function``, through its fast
+    buffer path)."""
 
     inputs = tuple(Port(v.name, v.unit, description="plant state")
                    for v in (QUADROTOR.variable(name) for name in STATE_NAMES))
@@ -102,19 +105,19 @@ class VelocityCommandComponent(PythonComponent):
         super().__init__(name)
         self.v_ref = np.asarray(v_ref, float)
         self.psi_ref = float(psi_ref)
-        self._f = FastFunction(velocity_controller_function(geometric), state=("vel_state", "vel_state_next"))
+        self._f = FastFunction(bound_inner_function(geometric), state=("state", "state_next"))
 
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
         self._f.state[:] = initial_velocity_state()
         self._f.inputs["v_ref"][:] = self.v_ref
         self._f.inputs["psi_ref"][0] = self.psi_ref
+        self._f.inputs["a_ref"][:] = 0.0
 
     def step(self, n: int, t: float, u: np.ndarray) -> np.ndarray:
-        ins = self._f.inputs
-        ins["v"][:], ins["euler"][:], ins["omega_b"][:] = u[3:6], u[6:9], u[9:12]
+        self._f.inputs["x"][:] = u[3:12]  # u v w phi theta psi p q r
         self._f.evaluate()
         self._f.commit()
-        return self._f.outputs["Omega"]
+        return self._f.outputs["y"][INNER_Y["Omega"]]
 
 
 def plant_fmu_path(fmi_version: int = 2) -> Path:
@@ -133,14 +136,14 @@ def _start_parameters(op: OperatingPoint) -> dict[str, float]:
 
 def _run(op: OperatingPoint, python: list[PythonComponent], controller: str, duration: float, dt: float,
          fmu: Path | None) -> Response:
-    connections = [f"Quadrotor.{_STATE_GROUP} -> {controller}.{_STATE_GROUP}",
-                   f"{controller}.Omega_{{1,2,3,4}} -> Quadrotor.Omega_{{1,2,3,4}}"]
+    connections = [f"{DEFAULT_PLANT}.{_STATE_GROUP} -> {controller}.{_STATE_GROUP}",
+                   f"{controller}.Omega_{{1,2,3,4}} -> {DEFAULT_PLANT}.Omega_{{1,2,3,4}}"]
     if any(c.name == "reference" for c in python):
         connections.append("reference.{x,y,z,vx,vy,vz} -> controller.{x_ref,y_ref,z_ref,vx_ref,vy_ref,vz_ref}")
-    plant = FmuComponent("Quadrotor", fmu or plant_fmu_path())
-    record = [f"Quadrotor.{n}" for n in STATE_NAMES]
+    plant = FmuComponent(DEFAULT_PLANT, fmu or plant_fmu_path())
+    record = [f"{DEFAULT_PLANT}.{n}" for n in STATE_NAMES]
     with Master([plant], python, connections, dt, record, ENVELOPE,
-                {"Quadrotor": _start_parameters(op)}) as master:
+                {DEFAULT_PLANT: _start_parameters(op)}) as master:
         result = master.run(duration, raise_on_error=False)
     return Response(result.time, result.data[:, 1:] - op.x, result.status, result.error)
 
@@ -158,7 +161,7 @@ def position_step(op: OperatingPoint, step=(0.1, 0.0, 0.0), duration: float = 5.
     p = op.x[0:3] + np.asarray(step, float)
     python = [ReferenceComponent(Hover(*p)),
               ControllerComponent("pd", asdict(position), asdict(replace(op.geometric, dt=dt)), op.psi_ref)]
-    return _run(op, python, "controller", duration, dt, fmu)
+    return _run(op, python, CONTROLLER_INSTANCE, duration, dt, fmu)
 
 
 def velocity_step(op: OperatingPoint, step=(0.1, 0.0, 0.0), duration: float = 3.0, dt: float = 0.01,
@@ -201,7 +204,7 @@ def ramp_lag(op: OperatingPoint, speed: float = 2.5, duration: float = 15.0, dt:
     python = [ReferenceComponent(Ramp(speed, 0.0, *p)),
               ControllerComponent("pd", asdict(replace(op.position, dt=dt)), asdict(replace(op.geometric, dt=dt)),
                                   op.psi_ref)]
-    run = _run(op, python, "controller", duration, dt, fmu)
+    run = _run(op, python, CONTROLLER_INSTANCE, duration, dt, fmu)
     return float(speed * run.t[-1] - run.x[-1, 0]), run
 
 

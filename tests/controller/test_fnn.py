@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fnn_controller.fnn import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, N_MF, N_RULES, PRIMED, SIGMA1, SIGMA2,
-                                X1_PREV, X2_PREV, FnnInit, firing_strength, fnn_output, initial_axis_state,
+                                X1_PREV, X2_PREV, FnnInit, firing_strength, fnn_output, initial_axis_expression,
                                 membership, normalized_firing_strength)
 from fnn_controller.position import FNN_STATE_SIZE, axis_slice, initial_fnn_state
 from fnn_controller.variants.pd_lm import PD_LM
@@ -77,7 +77,7 @@ def test_normalized_strengths_stay_finite_when_every_strength_underflows():
 
 
 def test_initial_axis_state_has_the_values_of_section_5_1():
-    state = initial_axis_state(np.random.default_rng(0))
+    state = np.array(ca.DM(initial_axis_expression(FnnInit(), np.random.default_rng(0).random(N_RULES)))).ravel()
     assert state.shape == (AXIS_STATE_SIZE,)
     np.testing.assert_array_equal(state[C1], [-3.0, 1e-4, 3.0])
     np.testing.assert_array_equal(state[C2], [-30.0, 1e-4, 30.0])

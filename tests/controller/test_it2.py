@@ -12,12 +12,11 @@ import numpy as np
 import pytest
 
 from fnn_controller.fast import FastFunction
-from fnn_controller.fnn import fnn_output, normalized_firing_strength
+from fnn_controller.fnn import firing_strength, fnn_output, normalized_firing_strength
 from fnn_controller.it2 import (ALPHA, C1, C2, F, IT2_AXIS_STATE_SIZE, IT2_DEFAULTS, PRIMED, Q, SIGMA1, SIGMA2,
-                                X1_PREV, X2_PREV, IT2Params, it2_firing_strengths, it2_learning_step,
-                                it2_membership, it2_normalized_firing_strengths, it2_regressor, q_rate,
-                                type_reduction)
-from fnn_controller.learning import LearningBounds, learning_step
+                                X1_PREV, X2_PREV, IT2Params, it2_learning_step, it2_normalized_firing_strengths,
+                                it2_regressor, q_rate, type_reduction)
+from fnn_controller.learning import AxisGains, LearningBounds, learning_step
 from fnn_controller.position import initial_fnn_state, position_controller_function
 from fnn_controller.position_parameters import PositionParams
 from fnn_controller.variants import variant
@@ -30,6 +29,24 @@ BOUNDS = LearningBounds()
 DT = PARAMS.dt
 
 # ------------------------------------------------------------- symbolic forward
+
+def it2_membership(x, c, sigma, spread):
+    """The definition the tests check the law against: lower and upper membership grades of one input (uncertain width).
+
+    Returns ``(mu_lower, mu_upper)``, each of length I, with
+    ``mu_lower = exp(-((x - c) / sigma)^2)`` (eqs. 21-22) and
+    ``mu_upper = exp(-((x - c) / ((1 + d) sigma))^2)``; ``0 < mu_lower <= mu_upper <= 1``.
+    """
+    return ca.exp(-((x - c) / sigma) ** 2), ca.exp(-((x - c) / ((1 + spread) * sigma)) ** 2)
+
+
+def it2_firing_strengths(x1, x2, c1, c2, sigma1, sigma2, spread):
+    """The definition the tests check the law against: lower and upper firing strengths ``(W_lower, W_upper)`` of the I*J rules,
+    product T-norm (eqs. 20, 23 for each bound), rule k = j * I + i."""
+    return (firing_strength(x1, x2, c1, c2, sigma1, sigma2),
+            firing_strength(x1, x2, c1, c2, (1 + spread) * sigma1, (1 + spread) * sigma2))
+
+
 
 x1, x2, d, q = ca.SX.sym("x1"), ca.SX.sym("x2"), ca.SX.sym("d"), ca.SX.sym("q")
 c1, c2 = ca.SX.sym("c1", 3), ca.SX.sym("c2", 3)
@@ -130,7 +147,7 @@ def _sym_step(rule, spread, gamma, nu, alpha_bar, gamma_q, phi):
     state = ca.SX.sym("state", IT2_AXIS_STATE_SIZE)
     xs1, xs2, tc = ca.SX.sym("x1"), ca.SX.sym("x2"), ca.SX.sym("tau_c")
     wl, wu = it2_normalized_firing_strengths(xs1, xs2, state[C1], state[C2], state[SIGMA1], state[SIGMA2], spread)
-    nxt = it2_learning_step(rule, state, xs1, xs2, tc, wl, wu, DT, gamma, nu, alpha_bar, gamma_q, BOUNDS, phi)
+    nxt = it2_learning_step(AxisGains(rule, DT, gamma, nu, alpha_bar, BOUNDS, phi), gamma_q, state, xs1, xs2, tc, wl, wu)
     return ca.Function("step", [state, xs1, xs2, tc], [nxt])
 
 
@@ -203,7 +220,7 @@ def test_without_uncertainty_the_learning_step_is_the_type1_step(rule):
     t1 = ca.SX.sym("s", AXIS_STATE_SIZE)
     xs1, xs2, tc = ca.SX.sym("x1"), ca.SX.sym("x2"), ca.SX.sym("tau_c")
     w_bar = normalized_firing_strength(xs1, xs2, t1[0:3], t1[3:6], t1[6:9], t1[9:12])
-    type1 = ca.Function("t1", [t1, xs1, xs2, tc], [learning_step(rule, t1, xs1, xs2, tc, w_bar, DT, 1.5, 0.85, 1.1)])
+    type1 = ca.Function("t1", [t1, xs1, xs2, tc], [learning_step(AxisGains(rule, DT, 1.5, 0.85, 1.1), t1, xs1, xs2, tc, w_bar)])
     for _ in range(10):
         state = _random_state(rng)
         x1v, x2v, tau_c = rng.uniform(-4, 4), rng.uniform(-40, 40), rng.uniform(-2, 2)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from fnn_controller.fast import FastFunction
 from fnn_controller.fnn import (ALPHA, AXIS_STATE_SIZE, C1, C2, F, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV,
                                 normalized_firing_strength)
-from fnn_controller.learning import (LearningBounds, learning_step, lm_delta, lm_f_rate, sigma_rate,
+from fnn_controller.learning import (AxisGains, LearningBounds, learning_step, lm_delta, lm_f_rate, sigma_rate,
                                      smc_f_rate)
 from fnn_controller.position import axis_slice, initial_fnn_state, position_controller_function
 from fnn_controller.position_parameters import PositionParams
@@ -75,7 +75,7 @@ def test_sigma_law_is_the_papers_away_from_the_floor_and_floored_near_it():
 def _axis_step(rule, state, x1, x2, tau_c, gamma=1.5, nu=0.85, alpha_bar=1.1):
     state_sym = ca.SX.sym("state", AXIS_STATE_SIZE)
     w_bar = normalized_firing_strength(x1, x2, state_sym[C1], state_sym[C2], state_sym[SIGMA1], state_sym[SIGMA2])
-    step = learning_step(rule, state_sym, x1, x2, tau_c, w_bar, DT, gamma, nu, alpha_bar)
+    step = learning_step(AxisGains(rule, DT, gamma, nu, alpha_bar), state_sym, x1, x2, tau_c, w_bar)
     return np.array(ca.Function("step", [state_sym], [step])(state)).ravel()
 
 

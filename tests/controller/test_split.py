@@ -9,8 +9,9 @@ import pytest
 import fnn_controller as fc
 from fnn_controller.step import OUTPUTS
 from fnn_controller.parametric import parameter_table, parameter_vector, parametric_step_function
-from fnn_controller.split import (INNER_OUTPUTS, OUTER_OUTPUTS, inner_parameter_table, inner_step_function,
-                                  outer_parameter_table, outer_step_function)
+from fnn_controller.parametric import (inner_parameter_table, inner_step_function, outer_parameter_table,
+                                      outer_step_function)
+from fnn_controller.split import INNER_OUTPUTS, OUTER_OUTPUTS
 
 NAMES = [name for name, _, _ in OUTPUTS]
 

@@ -93,9 +93,21 @@ def test_an_fmu_failure_is_the_same_error_with_the_same_rows(monkeypatch):
 
 
 def test_a_profiled_run_and_a_python_component_take_the_python_loop(monkeypatch):
-    """Profiling times phases of the Python loop; a Python component needs it."""
+    """Profiling times phases of the Python loop; a Python component needs it;
+    the run says why it took that loop (the plan decides, Plan.python_loop_for)."""
+    from cosim.plan import NO_COMPILED_LOOP, PROFILED
+
     with _master(2, "feedthrough") as master:
-        assert set(master.run(0.1, profile=True).phase_times) >= {"fmu", "record", "guard"}
+        profiled = master.run(0.1, profile=True)
+        assert set(profiled.phase_times) >= {"fmu", "record", "guard"} and profiled.python_loop == (PROFILED,)
+        if kernel.load() is not None:
+            assert master.run(0.1).python_loop == ()
+        monkeypatch.setenv("COSIM_PYTHON_LOOP", "1")
+        kernel.load.cache_clear()
+        try:
+            assert master.run(0.1).python_loop == (NO_COMPILED_LOOP,)
+        finally:
+            kernel.load.cache_clear()
 
 
 def _lag_into_sum(version: int, ordering: str, bounds=None) -> Master:

@@ -24,6 +24,7 @@ from fmpy import read_model_description, simulate_fmu
 
 from cosim.recorder import read_results
 from quadrotor_paper.cli import main
+from tests.strict_json import read_summary
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
 pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE} "
@@ -84,7 +85,7 @@ def fly(tmp_path: Path, version: int, model: str, step: float, stop: float, name
     header, rows = read_results(out / "results.csv")
     columns = dict(zip(header, rows.T))
     return {"time": columns["time"], **{n: columns[f"{model}.{n}"] for n in names},
-            "summary": json.loads((out / "summary.json").read_text())}
+            "summary": read_summary(out / "summary.json")}
 
 
 def worst(ours: dict[str, np.ndarray], theirs, names=None) -> float:

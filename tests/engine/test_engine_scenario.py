@@ -1,14 +1,11 @@
 """The scenario core with toy registrations only: component kinds, an alias
 section, a section that sets FMU parameters, a model built on demand, factory
-components, FMU files, and every refusal naming its key. Also: the engine
-imports nothing of the application."""
+components, FMU files, and every refusal naming its key."""
 from __future__ import annotations
 
 import math
 import re
 import shutil
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
@@ -368,21 +365,6 @@ def test_a_value_refused_by_an_fmu_file_is_told_in_the_scenario_words(file_scena
     assert isinstance(err, ScenarioError)
     assert str(err).startswith("fmus.Lag.parameters.internal_step = 0.0: refused by the FMU ")
     assert str(err).endswith("internal_step = 0 refused: outside its range [1e-06, inf]")
-
-
-# ---- the engine knows no application --------------------------------------------------------------
-
-def test_cosim_imports_nothing_of_the_application():
-    """Importing the engine (without reading a registry, which would load the
-    cosim.plugins entry points) pulls in no application package."""
-    code = ("import cosim.master, cosim.scenario, cosim.registry, cosim.fmu_component, cosim.recorder, cosim.guard, "
-            "cosim.connection, cosim.schema, cosim.study, cosim.study_run, cosim.summary, cosim.dask_runner, sys; "
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('quadrotor_paper', 'fnn_controller', 'fmu_models')))")
-    root = Path(cosim.__file__).resolve().parents[1]
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=60)
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip() == "[]"
 
 
 @pytest.mark.parametrize("spec, message", [

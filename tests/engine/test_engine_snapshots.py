@@ -31,6 +31,8 @@ def _run(monkeypatch, compiled: bool, **kwargs):
     monkeypatch.setenv("COSIM_PYTHON_LOOP", "" if compiled else "1")
     kernel.load.cache_clear()
     try:
+        if compiled and kernel.load() is None:  # else both runs would take the Python loop and agree trivially
+            pytest.skip("no C compiler: the compiled loop is not available")
         with _master(**kwargs) as master:
             return master.run(2.0, snapshots=TIMES), master.run(2.0)
     finally:

@@ -19,6 +19,7 @@ from cosim.limits import MAX_RUNS
 from cosim.study import count, load_study, parse_study, plan, runs
 from cosim.study_run import LOCK, read_runs, run_study
 from cosim.summary import summarize
+from tests.strict_json import read_summary
 
 pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
 
@@ -152,13 +153,13 @@ def test_failed_and_diverged_runs_are_rows_and_the_summary_counts_them(folder, t
     assert by_status["diverged"] and all(r["toy_controller.kp"] == "60.0" and "Lag.y" in r["error"]
                                          for r in by_status["diverged"])
     assert by_status["ok"] and all(r["error"] == "" and math.isfinite(float(r["final_y"])) for r in by_status["ok"])
-    cells = {c["values"]["toy_controller.kp"]: c for c in json.loads((out / "summary.json").read_text())["cells"]}
+    cells = {c["values"]["toy_controller.kp"]: c for c in read_summary(out / "summary.json")["cells"]}
     assert set(cells) == {1.0, 60.0}
     good = cells[1.0]
     assert good["runs"] == 6 and good["ok"] + good["failed"] == 6 and good["ok"] > 0
     assert good["metrics"]["final_y"]["n"] == good["ok"]
     assert cells[60.0]["ok"] == 0 and cells[60.0]["metrics"]["final_y"]["mean"] is None
-    assert result.summary["cells"] == json.loads((out / "summary.json").read_text())["cells"]
+    assert result.summary["cells"] == read_summary(out / "summary.json")["cells"]
     import pyarrow.parquet as pq
 
     table = pq.read_table(out / "runs.parquet")

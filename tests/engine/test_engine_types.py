@@ -32,6 +32,7 @@ from cosim.connection import Connection, Endpoint, parse_connection
 from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.fmu_component import FmuComponent
 from cosim.scenario import build_master, parse_scenario
+from tests.strict_json import read_summary
 
 ROOT = Path(__file__).resolve().parents[2]
 REFERENCE = ROOT.parent / "shared" / "reference-fmus"
@@ -166,7 +167,7 @@ signals = {[f"Feedthrough.{n}" for n in outputs]}
 """.replace("'", '"'))
     ours_header, ours = run_cli(toml, tmp_path / "out", "--profile")
     assert len(ours) == len(rows)
-    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    summary = read_summary(tmp_path / "out" / "summary.json")
     told = summary["python_loop"]  # --profile names why the compiled loop could not run it
     assert told[0] == "Python component inputs"
     assert told[1].startswith("recorded signals held as objects (Feedthrough.Int64_output") or version == 2

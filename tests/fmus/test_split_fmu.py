@@ -13,9 +13,10 @@ import fnn_controller as fc
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel, Sampled
 from fnn_controller.controller_fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS
+from fnn_controller.parametric import (inner_parameter_table, inner_step_function, outer_initial_function,
+                                      outer_parameter_table, outer_step_function)
 from fnn_controller.split import (A_REF_PORTS, INNER_MEASURED, INNER_OUTPUTS, OUTER_MEASURED, OUTER_OUTPUTS,
-                                  inner_model, inner_parameter_table, inner_step_function, outer_initial_function,
-                                  outer_model, outer_parameter_table, outer_step_function)
+                                  inner_model, outer_model)
 
 from fmi2_harness import Fmi2Instance
 

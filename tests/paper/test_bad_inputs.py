@@ -17,6 +17,7 @@ from cosim.errors import ScenarioError
 from cosim.limits import MAX_RATIO
 from cosim.scenario import scenario_path
 from quadrotor_paper.cli import EXIT_BAD_INPUT, EXIT_RUN_FAILED, main
+from tests.strict_json import read_summary
 
 SHORT = ["--set", "simulation.duration=0.2", "--no-plots", "--quiet"]
 
@@ -123,7 +124,6 @@ def test_a_fifo_is_no_study(sandbox, capsys):
     (["table2", "--duration", "1e9", "--seeds", "1"], "steps of 0.01 s; at most 1000000000 a run"),
     (["table2", "--seeds", "0"], "sweep.seeds = 0: must be positive"),
     (["table2", "--winds", "1,1", "--seeds", "1"], "1.0 is given twice"),
-    (["run", "circles", "--set", "simulation.duration=1e6"], "need 17.1 GiB in memory; at most 1 GiB"),
     (["run", "circles", "--set", "simulation.start_time=1e300"], "a step of 0.01 s is lost in rounding"),
     (["run", "circles", "--set", "simulation.step=1e-12", "--set", "simulation.duration=1.0"],
      "1000000000000 steps of 1e-12 s"),
@@ -396,7 +396,7 @@ def test_an_archive_saves_its_controllers_learned_state(archive, sandbox, capsys
     assert code == 0 and (sandbox / "out" / "summary.md").is_file()
     doc = json.loads(learned.read_text())
     assert (doc["variant"], doc["source"]) == ("pd+lm", "fmu") and len(doc["state"]) == len(doc["names"])
-    assert json.loads((sandbox / "out" / "summary.json").read_text())["learned_state"] == str(learned)
+    assert read_summary(sandbox / "out" / "summary.json")["learned_state"] == str(learned)
     code, _ = cli(capsys, "run", "circles", "--load-learned", str(learned), *SHORT, "--out", str(sandbox / "again"))
     assert code == 0
 
@@ -454,7 +454,7 @@ def test_the_results_sidecar_counts_rows_as_blocks_are_flushed(tmp_path, monkeyp
     monkeypatch.setattr(recorder, "SIDECAR_EVERY", 0.0)
     rec = recorder.Recorder(("time", "x"), ("s", "m"), 1000, tmp_path / "r.csv", block_rows=10)
     for n in range(25):
-        rec.data[n] = (n, 2 * n)
+        rec.row(n)[:] = (n, 2 * n)
         rec.commit(n + 1)
     sidecar = json.loads((tmp_path / "r.csv.json").read_text())
     assert (sidecar["status"], sidecar["rows"]) == ("running", 20)  # two blocks flushed, the third not yet

@@ -11,6 +11,7 @@ import pytest
 
 from quadrotor_paper.cli import EXIT_BAD_INPUT, EXIT_RUN_FAILED, main
 from cosim.recorder import read_results
+from tests.strict_json import read_summary
 
 
 def test_run_writes_results_plots_and_summary(tmp_path, capsys):
@@ -18,7 +19,7 @@ def test_run_writes_results_plots_and_summary(tmp_path, capsys):
     code = main(["run", "circles", "--set", "simulation.duration=2.0", "--set", "wind.speed=5",
                  "--variant", "pd+smc", "--seed", "4", "--out", str(out), "--quiet", "--profile"])
     assert code == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_summary(out / "summary.json")
     assert summary["status"] == "ok" and summary["variant"] == "pd+smc" and summary["seed"] == 4
     assert 0 < summary["rmse_m"] < 1.5 and summary["rows"] == 201
     assert {"fmu", "record", "guard", "fmu:controller"} <= set(summary["cost_per_step_us"])  # all FMUs
@@ -43,7 +44,7 @@ def test_divergence_exits_nonzero_and_keeps_the_partial_csv(tmp_path, capsys):
     assert code == EXIT_RUN_FAILED
     err = capsys.readouterr().err
     assert "diverged at t = " in err and "Quadrotor.z = " in err and "outside its envelope [-15.2, -14.8]" in err
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_summary(out / "summary.json")
     assert summary["status"] == "diverged"
     columns, data = read_results(out / "results.csv")
     assert 1 < len(data) < 1001 and len(data) == summary["rows"]

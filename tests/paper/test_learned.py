@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from quadrotor_paper.cli import EXIT_BAD_INPUT, main
+from tests.strict_json import read_summary
 
 RUN = ["--set", "simulation.duration=5.0", "--quiet", "--no-plots"]
 
@@ -16,7 +17,7 @@ RUN = ["--set", "simulation.duration=5.0", "--quiet", "--no-plots"]
 def _run(tmp_path, name, *extra) -> dict:
     out = tmp_path / name
     assert main(["run", "circles", "--out", str(out), *RUN, *extra]) == 0
-    return json.loads((out / "summary.json").read_text())
+    return read_summary(out / "summary.json")
 
 
 def _state(path) -> np.ndarray:

@@ -75,6 +75,11 @@ def test_the_study_runs_every_case_through_the_study_runner_in_case_order():
     for f in flights:
         assert f.status == "ok" and [p.time for p in f.points] == [2.0, 4.0]
         assert all(math.isnan(p.linear_rate) for p in f.points)  # check = 0: no perturbation check
+        # each case's settings reached its run: the study's points are those of the case flown alone
+        alone = load_scenario("circles", overrides={**arguments["overrides"], "controller.variant": f.variant,
+                                                    "controller.position.phi": [f.phi] * 3})
+        assert along_flight(alone, arguments["metric"]).points == f.points
+    assert flights[1].points != flights[2].points  # the boundary layer changes what pd+lm learns
 
 
 def test_flight_events_and_learned_state_names():
@@ -92,13 +97,13 @@ def test_snapshot_times_must_be_whole_steps():
 
 
 def _flight(radius, held, lin=(-1.0,), nl=(-1.1,), mode=(math.nan, math.nan)):
-    from quadrotor_paper.stability.along_flight import FlightPoint, FlightRadius
+    from quadrotor_paper.stability.along_flight import FlightPoint, AlongFlightRun
 
     n = len(radius)
     lin, nl = (list(lin) * n)[:n], (list(nl) * n)[:n]
     points = tuple(FlightPoint(float(t + 1), r, h, 1e-7, 0.1, a, b, *mode)
                    for t, (r, h, a, b) in enumerate(zip(radius, held, lin, nl)))
-    return FlightRadius("circles", "pd+lm", 0.0, "ok", None, points)
+    return AlongFlightRun("circles", "pd+lm", 0.0, "ok", None, points)
 
 
 def test_the_verdicts_read_stable_neutral_and_unstable_from_the_growth_rate():

@@ -4,13 +4,14 @@ report / command."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import control as ct
 import numpy as np
 import pytest
 
 from quadrotor_paper.stability import critical_gain_factor, hover
-from quadrotor_paper.learning_claims import AxisClaims, Recording, evaluate_claims, record_run
+from quadrotor_paper.learning_claims import AxisClaims, Recording, _signals, evaluate_claims, recorded
 from quadrotor_paper.stability.loops import LoopModel
 from quadrotor_paper.stability.validation import Ramp, check_gains, check_step, growth_rate, position_step, ramp_lag
 from fnn_controller import PositionParams
@@ -19,6 +20,18 @@ from fnn_controller.variants import variant as lookup
 
 H = 0.01
 TOLERANCE = 0.01  # of the step: the stated agreement of linear model and co-simulation
+
+
+def record_run(name: str, variant: str, scenario: str = "circles", overrides: dict | None = None) -> Recording:
+    """Run ``scenario`` (shipped name or path, with dotted ``overrides``) with
+    the controller ``variant`` and record what the claims need."""
+    from cosim.scenario import load_scenario
+    from quadrotor_paper.experiments import run_once
+
+    sc = load_scenario(scenario, {**(overrides or {}), "controller.variant": variant,
+                                  "record.signals": _signals(variant)})
+    result, _ = run_once(sc, keep=None)  # every row: the claims read the whole flight
+    return replace(recorded(sc, result)["recorded"], name=name)
 
 
 @pytest.fixture(scope="module")

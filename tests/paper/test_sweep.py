@@ -18,6 +18,7 @@ from cosim.study import load_study, plan
 from cosim.study_run import read_runs
 from quadrotor_paper.cli import main
 from quadrotor_paper.experiments import run_once
+from tests.strict_json import read_summary
 
 STUDY = """
 scenario = "circles"
@@ -75,7 +76,7 @@ def test_every_run_is_a_row_with_the_metrics_of_a_single_run(in_process):
 
 
 def test_the_summary_parquet_and_plots(in_process):
-    summary = json.loads((in_process / "summary.json").read_text())
+    summary = read_summary(in_process / "summary.json")
     assert [(c["values"]["controller.variant"], c["values"]["wind.speed"]) for c in summary["cells"]] == \
         [("pd", 1.0), ("pd", 5.0), ("pd+lm", 1.0), ("pd+lm", 5.0)]
     for c in summary["cells"]:

@@ -13,6 +13,7 @@ from cosim.study_run import read_runs
 from quadrotor_paper.cli import main
 from quadrotor_paper.report import STUDIES, table_study
 from quadrotor_paper.tables import PAPER_TABLE2, cell, deviations, table2_markdown, table3_markdown
+from tests.strict_json import read_summary
 
 
 def _mean(summary, case, wind=None):
@@ -29,7 +30,7 @@ def test_table2_reduced_fnn_rows_beat_pd(tmp_path, capsys):
     out = tmp_path / "t2"
     assert main(["table2", "--seeds", "2", "--winds", "1,5", "--duration", "15", "--workers", "2",
                  "--variants", "pd,pd+smc,pd+lm", "--options", "none", "--out", str(out), "--quiet"]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_summary(out / "summary.json")
     rows = read_runs(out / "runs.csv")
     assert len(rows) == summary["rows"] == 2 * 2 * 3 and all(r["status"] == "ok" for r in rows)
     for wind in (1.0, 5.0):
@@ -47,7 +48,7 @@ def test_table3_reduced(tmp_path):
     out = tmp_path / "t3"
     assert main(["table3", "--seeds", "1", "--duration", "20", "--workers", "1", "--options", "none",
                  "--out", str(out), "--quiet"]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_summary(out / "summary.json")
     assert _mean(summary, "pd+lm") < _mean(summary, "pd")
     assert "0.327" in (out / "table3.md").read_text()
 
@@ -109,7 +110,7 @@ def test_full_reproduction(tmp_path):
     assert main(["reproduce", "--out", str(tmp_path), "--quiet"]) == 0
     report = (tmp_path / "report.md").read_text()
     assert "## Table 2" in report and "## Table 3" in report
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    summary = read_summary(tmp_path / "summary.json")
     assert summary["table2"]["rows"] == 186 and summary["table3"]["rows"] == 62
     for f in summary["figures"]["files"]:
         assert (tmp_path / "figures").joinpath(f).exists()
@@ -130,7 +131,7 @@ def test_option_rows_follow_the_papers_rows_which_stay_bit_identical(tmp_path):
     common = ["table3", "--seeds", "1", "--duration", "12", "--workers", "1", "--variants", "pd", "--quiet"]
     assert main(common + ["--options", "none", "--out", str(tmp_path / "paper")]) == 0
     assert main(common + ["--options", "pd-ff,pd-ff-acc", "--out", str(tmp_path / "opt")]) == 0
-    opt = json.loads((tmp_path / "opt" / "summary.json").read_text())
+    opt = read_summary(tmp_path / "opt" / "summary.json")
     assert _rmse(tmp_path / "opt", "pd") == _rmse(tmp_path / "paper", "pd")
     assert _mean(opt, "pd-ff") < 0.5 * _mean(opt, "pd")
     assert _mean(opt, "pd-ff-acc") != _mean(opt, "pd-ff")  # the acceleration arrives
@@ -172,7 +173,7 @@ def test_table2_with_noise_on_has_spread_over_the_seeds_and_with_it_off_none(tmp
         assert main(["table2", "--scenario", scenario, "--seeds", "3", "--winds", "3", "--duration", "4",
                      "--workers", "1", "--variants", "pd+lm", "--options", "none", "--out", str(out),
                      "--quiet"]) == 0
-        summary = json.loads((out / "summary.json").read_text())
+        summary = read_summary(out / "summary.json")
         assert summary["scenario"] == scenario
         stats = cell(summary, "pd+lm", 3.0)["metrics"]["rmse_m"]
         spread[scenario] = stats["std"]

@@ -11,6 +11,7 @@ import toy_variant
 from cosim import registry
 from fnn_controller.variants import unregister_variant, variant_names
 from quadrotor_paper.tables import cell
+from tests.strict_json import read_summary
 
 
 @pytest.fixture
@@ -29,7 +30,7 @@ def test_a_toy_variant_is_one_module_away_from_the_cli_and_the_tables(toy, tmp_p
     out = tmp_path / "t2"
     assert main(["table2", "--seeds", "1", "--winds", "1", "--duration", "3", "--workers", "1",
                  "--variants", f"pd,{toy}", "--out", str(out), "--quiet"]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = read_summary(out / "summary.json")
     toy_cell = cell(summary, toy, 1.0)
     assert toy_cell["runs"] == 1 and toy_cell["metrics"]["rmse_m"]["mean"] > 0
     table = (out / "table2.md").read_text()
