@@ -26,8 +26,10 @@ if TYPE_CHECKING:
     from cosim.study import Study
     from cosim.study_run import StudyResult
 
+from fmu_models.models.estimator_outputs import COUNTS
+
 from .missions import controller_variant, estimation_spec, metric_signals
-from .run_metrics import BLOCKS, COUNTS, RunMetrics, covariance_name
+from .run_metrics import BLOCKS, RunMetrics
 
 __all__ = ["run_once", "run_summary", "measure", "study_metrics", "STUDY_METRICS", "ESTIMATION_METRICS",
            "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics", "PLOT_ROWS"]

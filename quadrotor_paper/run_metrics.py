@@ -27,32 +27,21 @@ import numpy as np
 
 from cosim.online import ColumnSum, Last, Maximum, Sum, finite
 
+from fmu_models.models.estimator_outputs import COUNTS, COVARIANCE_BLOCKS, covariance_output
+
 from .metrics import euclidean_error, nees, squared_error, wrap_angle
 from .missions import estimation_spec, metric_signals
 
-__all__ = ["RunMetrics", "Tracking", "Estimation", "BLOCKS", "COUNTS", "covariance_name", "from_results"]
+__all__ = ["RunMetrics", "Tracking", "Estimation", "BLOCKS", "from_results"]
 
-# The estimate's blocks (docs/estimation.md, E15-E17): the Estimator's outputs, the truth's signals of the
-# plant instance (its wind inputs for the wind), and the unit of the block's RMSE.
-BLOCKS = {
-    "position": (("x", "y", "z"), ("x", "y", "z"), "m"),
-    "velocity": (("u", "v", "w"), ("u", "v", "w"), "mps"),
-    "attitude": (("phi", "theta", "psi"), ("phi", "theta", "psi"), "rad"),
-    "wind": (("wind_x", "wind_y", "wind_z"), ("wind_x", "wind_y", "wind_z"), "mps"),
-}
-# the estimator's counts of refused measurements and restarts (E19-E21), their values at the end of a run
-COUNTS = ("outliers_fix", "outliers_acc", "resets_fix", "resets_acc")
+# The estimate's blocks (docs/estimation.md, E15-E17): the Estimator's outputs (the model's covariance
+# blocks), the truth's signals of the plant instance (its wind inputs for the wind), and the unit of the
+# block's RMSE.
+_UNITS = {"position": "m", "velocity": "mps", "attitude": "rad", "wind": "mps"}
+BLOCKS = {block: (states, states, _UNITS[block]) for block, states in COVARIANCE_BLOCKS.items()}
 # rows of the truth kept to compare the estimate with the truth at the time it describes (its t_estimate,
 # E23): an importer reads the estimate a step or two late; far more than any latency of a real chain
 TRUTH_HISTORY = 1024
-
-
-def covariance_name(a: str, b: str, order: tuple[str, ...]) -> str:
-    """The Estimator's output holding the covariance of ``a`` and ``b``."""
-    if a == b:
-        return f"var_{a}"
-    a, b = sorted((a, b), key=order.index)
-    return f"cov_{a}_{b}"
 
 
 def _rms(total: Sum) -> float | None:
@@ -131,7 +120,7 @@ class Estimation:
         self.signals = []
         for estimated, true, _ in BLOCKS.values():
             self.signals += [f"{truth}.{n}" for n in true] + [f"{estimator}.{n}" for n in estimated]
-            self.signals += [f"{estimator}.{covariance_name(a, b, estimated)}" for i, a in enumerate(estimated)
+            self.signals += [f"{estimator}.{covariance_output(a, b, estimated)}" for i, a in enumerate(estimated)
                              for b in estimated[i:]]
         self.signals += [f"{estimator}.{n}" for n in ("nis_fix", "nis_acc", "fix_used", "t_estimate", *COUNTS)]
         self._truth = [f"{truth}.{n}" for _, true, _ in BLOCKS.values() for n in true]
@@ -159,7 +148,7 @@ class Estimation:
                                      for e, n in zip(estimated, true)])
             if block == "attitude":
                 error = wrap_angle(error)
-            covariance = np.stack([np.column_stack([rows[f"{estimator}.{covariance_name(a, b, estimated)}"]
+            covariance = np.stack([np.column_stack([rows[f"{estimator}.{covariance_output(a, b, estimated)}"]
                                                     for b in estimated]) for a in estimated], axis=1)
             # the wind's NEES where it is steady: a step of the gust is no random walk (E13), the filter is
             # not consistent through it by construction; its RMSE both ways

@@ -41,6 +41,7 @@ from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter
+from .estimator_outputs import COUNTS, COVARIANCE_BLOCKS, covariance_output
 from .imu import AXES, IMU_DEFAULTS
 from .quadrotor import DEFAULTS, aerodynamic_drag, euler_rate_matrix, rotation_matrix
 from .sensors import DT_DEFAULT
@@ -56,9 +57,6 @@ ESTIMATED_STATES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi",
 _N = len(ESTIMATED_STATES)
 _UNITS = ("m",) * 3 + ("m/s",) * 3 + ("rad",) * 3 + ("rad/s",) * 3 + ("m/s2",) * 3 + ("m/s",) * 3
 FIX_NAMES = ("x", "y", "z", "u", "v", "w")  # the fix: position and velocity (GNSS or motion capture)
-# 3-state blocks whose full covariance is an output (the study's NEES per block)
-COVARIANCE_BLOCKS = {"position": ("x", "y", "z"), "velocity": ("u", "v", "w"), "attitude": ("phi", "theta", "psi"),
-                     "wind": ("wind_x", "wind_y", "wind_z")}
 # Tuning (docs/estimation.md, "Tuning"); the sensor values are the IMU's defaults.
 ESTIMATOR_DEFAULTS = {
     "wind_walk": 1.0,             # m/s/sqrt(s): the horizontal wind's random walk between gusts (steps restart it, E21)
@@ -71,7 +69,6 @@ ESTIMATOR_DEFAULTS = {
     "reset_after_fix": 5.0,       # fixes refused in a row before position and velocity restart (E21)
     "reset_after_drag": 1.0,      # drag measurements refused in a row before the wind restarts (E21)
 }
-_COUNTS = ("outliers_fix", "outliers_acc", "resets_fix", "resets_acc")
 _IMU = tuple(f"gyro_{i}" for i in AXES) + tuple(f"acc_{i}" for i in AXES)
 _P0 = {"x": "P0_position", "u": "P0_velocity", "phi": "P0_attitude", "gyro_bias_x": "P0_gyro_bias",
        "accel_bias_x": "P0_accel_bias", "wind_x": "P0_wind"}
@@ -83,7 +80,8 @@ def covariance_names() -> list[tuple[str, int, int]]:
     index = {s: k for k, s in enumerate(ESTIMATED_STATES)}
     names = [(f"var_{s}", k, k) for k, s in enumerate(ESTIMATED_STATES)]
     for block in COVARIANCE_BLOCKS.values():
-        names += [(f"cov_{a}_{b}", index[a], index[b]) for k, a in enumerate(block) for b in block[k + 1:]]
+        names += [(covariance_output(a, b, block), index[a], index[b]) for k, a in enumerate(block)
+                  for b in block[k + 1:]]
     return names
 
 
@@ -230,7 +228,7 @@ def _variables():
         discrete("t_last_fix", "s", "time of the last fix seen (used or refused)"),
         discrete("refusal_run_fix", "1", "fixes refused in a row"),
         discrete("refusal_run_acc", "1", "drag measurements refused in a row"),
-        *(discrete(f"total_{c}", "1", f"{c.replace('_', ' of the ')} so far") for c in _COUNTS),
+        *(discrete(f"total_{c}", "1", f"{c.replace('_', ' of the ')} so far") for c in COUNTS),
         *(discrete(f"previous_{name}", unit, f"the IMU's {name} of the sample before the last")
           for name, unit in zip(_IMU, ("rad/s",) * 3 + ("m/s2",) * 3)),
         *(discrete(f"xhat_{name}", unit, f"posterior estimate of {name} at the previous step")
@@ -389,7 +387,7 @@ def _update(t, v):
 
     events = {"outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
               "resets_acc": reset_acc}
-    counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in _COUNTS}
+    counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in COUNTS}
     out = {name: xs_out[k] for k, name in enumerate(ESTIMATED_STATES)}
     # the body rate at t_out: the average over the last step describes its middle, half a step earlier
     rates = gyro + change[0:3] * (h_out / v["dt"] + 0.5) - xs_out[9:12]
@@ -411,7 +409,7 @@ def _initial(v, r):
     xs = ca.vertcat(*(v[f"{name}_0"] for name in ESTIMATED_STATES))
     sigma = [v[_P0[ESTIMATED_STATES[3 * (k // 3)]]] for k in range(_N - 1)] + [v["P0_wind_z"]]
     return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
-            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in _COUNTS}, **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
+            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS}, **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
 
 
 ESTIMATOR = FmuModel(

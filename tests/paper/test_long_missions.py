@@ -49,8 +49,9 @@ def test_the_streamed_summary_equals_the_one_recomputed_from_the_csv(tmp_path):
     blocks the file is read in; and as from every row held in memory."""
     scenario = load_scenario("circles_estimated", {"simulation.duration": 12.0})
     result, summary = run_once(scenario, tmp_path, keep=None)
-    streamed = {k: summary[k] for k in summary if k.startswith(("rmse", "max_", "final_", "nees", "nis", "est_"))}
-    assert len(streamed) == 16 and all(v is not None for v in streamed.values()), streamed
+    streamed = {k: summary[k] for k in summary
+                if k.startswith(("rmse", "max_", "final_", "nees", "nis", "est_", "outliers_", "resets_"))}
+    assert len(streamed) == 20 and all(v is not None for v in streamed.values()), streamed
     for block_rows in (7, 4096):
         assert from_results(scenario, tmp_path / "results.csv", block_rows) == streamed
     held = RunMetrics(scenario)

@@ -1,0 +1,26 @@
+"""What the estimator FMU publishes beside its estimate, named once for the
+model (:mod:`fmu_models.models.estimator`) and for whoever reads its
+outputs (the application's metrics), without building it (no CasADi).
+
+* :data:`COVARIANCE_BLOCKS`: the 3-state blocks whose full covariance is an
+  output (the NEES per block, docs/estimation.md, E15);
+* :func:`covariance_output`: the output holding the covariance of two
+  states, ``var_<a>`` or ``cov_<a>_<b>`` (a before b in its block);
+* :data:`COUNTS`: the gate's counts of refused measurements and restarts (E19-E21).
+"""
+from __future__ import annotations
+
+__all__ = ["COVARIANCE_BLOCKS", "COUNTS", "covariance_output"]
+
+COVARIANCE_BLOCKS = {"position": ("x", "y", "z"), "velocity": ("u", "v", "w"), "attitude": ("phi", "theta", "psi"),
+                     "wind": ("wind_x", "wind_y", "wind_z")}
+COUNTS = ("outliers_fix", "outliers_acc", "resets_fix", "resets_acc")
+
+
+def covariance_output(a: str, b: str, order: tuple[str, ...]) -> str:
+    """The output holding the covariance of states ``a`` and ``b`` of one
+    block (``order``: the block's states, in the model's order)."""
+    if a == b:
+        return f"var_{a}"
+    a, b = sorted((a, b), key=order.index)
+    return f"cov_{a}_{b}"
