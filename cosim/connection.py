@@ -31,7 +31,8 @@ from typing import Any, Iterable, Mapping
 
 from . import units
 from .component import Port, element_of, element_ports
-from .errors import ConnectionCheckError
+from .errors import ConnectionCheckError, shown_text
+from .limits import MAX_GROUP
 
 __all__ = ["Connection", "parse_connection", "parse_connections", "check_connections", "Endpoint", "TABLE_KEYS",
            "unit_conversion"]
@@ -67,32 +68,39 @@ class Connection:
 def _endpoint(text: str, whole: str) -> Endpoint:
     component, dot, variable = text.strip().partition(".")
     if not dot or not component or not variable:
-        raise ConnectionCheckError(
-            f"connection {whole!r}: {text.strip()!r} is not of the form Component.variable")
+        raise ConnectionCheckError(f"connection {shown_text(repr(whole))}: {shown_text(repr(text.strip()))} is not "
+                                   f"of the form Component.variable")
     return Endpoint(component, variable)
 
 
 def _expand(side: str, whole: str) -> list[str]:
+    """The endpoints a side's brace group stands for, in time linear in the
+    side's length (the text around the group is joined to each item, not
+    searched again per item), at most :data:`~cosim.limits.MAX_GROUP` of them."""
     groups = _BRACES.findall(side)
     if not groups:
         return [side]
     if len(groups) > 1:
-        raise ConnectionCheckError(f"connection {whole!r}: at most one {{a,b,...}} group per side")
-    items = [g.strip() for g in groups[0].split(",")]
-    return [_BRACES.sub(lambda _, item=item: item, side, count=1) for item in items]  # no escapes in names
+        raise ConnectionCheckError(f"connection {shown_text(repr(whole))}: at most one {{a,b,...}} group per side")
+    if groups[0].count(",") >= MAX_GROUP:
+        raise ConnectionCheckError(f"connection {shown_text(repr(whole))}: a group of {groups[0].count(',') + 1} "
+                                   f"names; at most {MAX_GROUP}")
+    group = _BRACES.search(side)
+    before, after = side[:group.start()], side[group.end():]
+    return [before + item.strip() + after for item in group[1].split(",")]  # no escapes in names
 
 
 def parse_connection(text: str) -> list[Connection]:
     """Parse one connection string (with optional brace expansion)."""
     if not isinstance(text, str) or text.count("->") != 1:
-        raise ConnectionCheckError(f"connection {text!r} must be a string 'A.out -> B.in'")
+        raise ConnectionCheckError(f"connection {shown_text(repr(text))} must be a string 'A.out -> B.in'")
     left, right = text.split("->")
     sources, destinations = _expand(left, text), _expand(right, text)
     if len(sources) == 1 and len(destinations) > 1:  # fan-out: one output feeds every destination
         sources = sources * len(destinations)
     if len(sources) != len(destinations):
         raise ConnectionCheckError(
-            f"connection {text!r}: {len(sources)} sources but {len(destinations)} destinations (a group "
+            f"connection {shown_text(repr(text))}: {len(sources)} sources but {len(destinations)} destinations (a group "
             f"pairs with a group of the same size; one source may feed a group)")
     return [Connection(_endpoint(s, text), _endpoint(d, text)) for s, d in zip(sources, destinations)]
 
@@ -108,7 +116,7 @@ def _from_table(entry: Mapping[str, Any]) -> list[Connection]:
     converts = "factor" in entry or "offset" in entry
     if (set(entry) - set(TABLE_KEYS) or "connect" not in entry or entry.get("units", "unchecked") != "unchecked"
             or converts == ("units" in entry)):
-        raise ConnectionCheckError(f"connection {dict(entry)!r}: expected 'connect' and either a conversion "
+        raise ConnectionCheckError(f"connection {shown_text(repr(dict(entry)))}: expected 'connect' and either a conversion "
                                    f"(factor, offset) or units = 'unchecked'")
     conversion = (float(entry.get("factor", 1.0)), float(entry.get("offset", 0.0))) if converts else None
     unchecked = "units" in entry

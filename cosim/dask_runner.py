@@ -342,7 +342,12 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
     yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total)
 
 
-def _client(workers: int, scheduler: str | None):
+def _client(workers: int, scheduler: str | None, scratch: Path | None = None):
+    """A Dask client: of the cluster at ``scheduler``, or of a local cluster of
+    ``workers`` processes whose scratch space (Dask's ``dask-scratch-space``:
+    the workers' folders, its locks) is the folder ``scratch``, which the
+    caller makes and removes: it was left in the system's temporary folder
+    after every study."""
     import logging
 
     import dask
@@ -352,7 +357,7 @@ def _client(workers: int, scheduler: str | None):
         try:
             return Client(scheduler, timeout=30), None
         except (OSError, TimeoutError, ValueError) as exc:
-            raise CosimError(f"--scheduler {scheduler}: no Dask scheduler answers there ({_message(exc)})") from None
+            raise ScenarioError(f"--scheduler {scheduler}: no Dask scheduler answers there ({_message(exc)})") from None
     # The local scheduler lives in this process. Its diagnostic logs keep
     # about 19 kB per task up to 10 000 entries (measured by
     # benchmarks/study_efficiency.py): short logs keep the driver's memory
@@ -363,11 +368,12 @@ def _client(workers: int, scheduler: str | None):
     # tenth (a study of 6 short runs on 2 workers: 3.9-5.0 s against 5.1-7.2 s,
     # alternated on this busy machine). A cluster given by address keeps its own settings.
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-    with dask.config.set({"distributed.admin.log-length": LOG_LENGTH,
+    with dask.config.set({"temporary-directory": str(scratch) if scratch else None,
+                          "distributed.admin.log-length": LOG_LENGTH,
                           "distributed.admin.low-level-log-length": LOG_LENGTH,
                           "distributed.worker.multiprocessing-method": method}):
         cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address=None, silence_logs=logging.ERROR, local_directory=scratch)
         return Client(cluster), cluster
 
 
@@ -375,7 +381,13 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
               worker_timeout: float | None, total: int | None) -> Iterator[dict[str, Any]]:
     from dask.distributed import wait
 
-    client, cluster = _client(workers, scheduler)
+    scratch = Path(tempfile.mkdtemp(prefix="cosim-dask-")) if scheduler is None else None
+    try:
+        client, cluster = _client(workers, scheduler, scratch)
+    except BaseException:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+        raise
     try:
         pending = iter(runs)
         again: list[Run] = []  # the runs of a batch whose worker died: flown again one by one
@@ -445,3 +457,5 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
         client.close()
         if cluster is not None:
             cluster.close()
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)

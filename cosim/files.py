@@ -28,8 +28,47 @@ from typing import Any, Iterable
 from .errors import ScenarioError, one_line, shown_text
 from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_NESTING, MAX_RATIO
 
-__all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder", "output_file",
-           "room_for", "zip_members", "read_entry", "extract_zip"]
+__all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "json_document",
+           "repeated", "given_twice", "put_once", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder",
+           "not_others_results", "output_file", "room_for", "zip_members", "read_entry", "extract_zip"]
+
+
+# ---- duplicates: each name given once ---------------------------------------------------------------
+# A name given twice in a file (a recorded signal, a parameter binding, an SSP archive's section, a
+# JSON object's key) is refused where it is read: the last one silently winning hid a mistake (z
+# starting at -50 where the file also said -15), and a list of repeats grew memory with no use.
+
+def repeated(items: Iterable[Any]) -> Any | None:
+    """The first item of ``items`` that an earlier one equals (``None`` if
+    none does), in one pass."""
+    seen = set()
+    for item in items:
+        if item in seen:
+            return item
+        seen.add(item)
+    return None
+
+
+def given_twice(where: str, item: Any) -> ScenarioError:
+    """The one refusal of a name given twice: ``where: 'x' is given twice; each at most once``."""
+    return ScenarioError(f"{where}: {shown_text(repr(item) if isinstance(item, str) else str(item))} is given "
+                         f"twice; each at most once")
+
+
+def put_once(mapping: dict, key: Any, value: Any, where: str) -> None:
+    """``mapping[key] = value``, refused (:func:`given_twice`) if ``key`` is there already."""
+    if key in mapping:
+        raise given_twice(where, key)
+    mapping[key] = value
+
+
+def _object_once(where: str):
+    def pairs_once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in pairs:
+            put_once(out, key, value, f"{where}: key")
+        return out
+    return pairs_once
 
 
 
@@ -68,7 +107,11 @@ def read_text(path: str | Path, what: str = "file", limit: int = MAX_DOCUMENT_BY
 
 def read_toml(path: str | Path, what: str = "scenario") -> dict[str, Any]:
     """A TOML file as a mapping, or a one-line :class:`ScenarioError` naming the file and the fault
-    (:func:`check_document`: what a document may hold)."""
+    (:func:`check_document`: what a document may hold). An SSP archive
+    (:func:`is_ssp`) is named as one, and the command that takes it."""
+    if is_ssp(path):  # its bytes are a zip's: "not UTF-8 text (byte 11)" said nothing of use
+        raise ScenarioError(f"{what} {str(path)!r}: an SSP archive, not a TOML file: `fnn-cosim run {path}` flies it "
+                            f"(a study, export-ssp and linearize --scenario take a TOML scenario)")
     text = read_text(path, what)
     try:
         doc = _loads_toml(text, str(path), lines=True)
@@ -158,15 +201,21 @@ def check_document(data: Any, where: str, depth: int = 0) -> None:
 def read_json(path: str | Path, what: str) -> Any:
     """A JSON file as Python data, or a one-line :class:`ScenarioError`
     (:func:`check_document`: what a document may hold)."""
-    text = read_text(path, what)
+    return json_document(read_text(path, what), f"{what} {str(path)!r}")
+
+
+def json_document(text: str, where: str, depth: int = 0) -> Any:
+    """``text`` as JSON data (a file's, or a JSON value inside another
+    document: an SSP archive's section), or a one-line :class:`ScenarioError`
+    naming ``where``: not JSON, a key given twice in an object, or what
+    :func:`check_document` refuses (``depth``: the levels above it)."""
     try:
-        doc = json.loads(text)
+        doc = json.loads(text, object_pairs_hook=_object_once(where))
     except json.JSONDecodeError as exc:
-        raise ScenarioError(f"{what} {str(path)!r}: not JSON ({exc.msg}, line {exc.lineno})") from None
+        raise ScenarioError(f"{where}: not JSON ({exc.msg}, line {exc.lineno})") from None
     except (ValueError, RecursionError) as exc:
-        raise ScenarioError(f"{what} {str(path)!r}: not a document this tool reads: "
-                            f"{one_line(str(exc))[:200]}") from None
-    check_document(doc, f"{what} {str(path)!r}")
+        raise ScenarioError(f"{where}: not a document this tool reads: {one_line(str(exc))[:200]}") from None
+    check_document(doc, where, depth)
     return doc
 
 
@@ -216,15 +265,20 @@ def _size(n: float) -> str:
 
 
 STUDY_SIDECAR = "study.json"  # what marks a study's folder (cosim.study_run): its definition and progress
+RUN_SIDECAR = "results.csv.json"  # what marks a run's folder: the sidecar of its results.csv (cosim.recorder)
+_MARKS = {"study": STUDY_SIDECAR, "run": RUN_SIDECAR}  # a command -> the file that says its results are there
 
 
-def not_a_study_folder(path: Path, what: str = "--out") -> Path:
-    """``path``, refused if it holds a study's results: a single run's files
-    (``summary.json`` among them) would overwrite the study's, even while the
-    study runs (its lock keeps out other studies only)."""
-    if (path / STUDY_SIDECAR).exists():
-        raise ScenarioError(f"{what} {path}: holds a study's results ({STUDY_SIDECAR}); a run would overwrite its "
-                            f"summary: choose another folder")
+def not_others_results(path: Path, command: str, what: str = "--out") -> Path:
+    """``path``, refused if it holds another command's results (a study's
+    ``study.json``, a run's ``results.csv.json``): both write
+    ``summary.json``, so one would overwrite the other's, even while a study
+    runs (its lock keeps out other studies only). The same command's results
+    are its own to resume or replace. ``command``: ``"run"`` or ``"study"``."""
+    for other, mark in _MARKS.items():
+        if other != command and (path / mark).exists():
+            raise ScenarioError(f"{what} {path}: holds a {other}'s results ({mark}); a {command} would overwrite "
+                                f"its summary: choose another folder")
     return path
 
 

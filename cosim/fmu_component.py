@@ -88,7 +88,7 @@ from .errors import FmuCallError, FmuLoadError, ScenarioError, SimulationTermina
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
 
-__all__ = ["FmuComponent", "fmi2_callbacks", "stream_seed"]
+__all__ = ["FmuComponent", "fmi2_callbacks", "stream_seed", "read_description"]
 
 
 @functools.lru_cache(maxsize=64)
@@ -99,6 +99,46 @@ def _parsed_model_description(path: str, size: int, mtime_ns: int, validate: boo
     (lxml, about 3.5 ms each, a fifth of a master's build). Nothing changes
     the parsed description; a failure is not kept."""
     return read_model_description(path, validate=validate)
+
+
+def read_description(name: str, path: Path, validate: bool = False):
+    """fmpy's reading of the modelDescription of the FMU ``path`` (instance
+    ``name``), and the XML's bytes if it is an archive; its failures told in
+    one line (:class:`FmuLoadError`). The archive is looked at first (a
+    regular file, every entry within the limits of :mod:`cosim.files`): an
+    FMU file is data from anyone. Loads nothing."""
+    from .files import read_entry, regular_file, zip_members
+    from .limits import MAX_DOCUMENT_BYTES
+
+    path, xml = Path(path), None
+    try:
+        if not path.is_dir():
+            regular_file(path, "FMU")
+            with zipfile.ZipFile(path) as archive:
+                entry = zip_members(archive, "the archive").get("modelDescription.xml")
+                if entry is not None and entry.file_size > 4 * MAX_DOCUMENT_BYTES:
+                    raise FmuLoadError(name, path, f"modelDescription.xml is {entry.file_size} bytes; at most "
+                                                   f"{4 * MAX_DOCUMENT_BYTES} are read")
+                if entry is not None:  # corrupt data is told here, naming the entry (read again by fmpy)
+                    xml = read_entry(archive, entry, "the archive")
+    except ScenarioError as exc:
+        raise FmuLoadError(name, path, str(exc).removeprefix(f"FMU {str(path)!r}: ")) from None
+    except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, EOFError, ValueError) as exc:
+        raise FmuLoadError(name, path, f"not an FMU: not a zip archive ({exc})") from None
+    try:
+        where = path / "modelDescription.xml" if path.is_dir() else path
+        stat = where.stat()
+        return _parsed_model_description(str(path), stat.st_size, stat.st_mtime_ns, validate), xml
+    except zipfile.BadZipFile as exc:
+        reason = f"not an FMU: not a zip archive ({exc})"
+    except KeyError:
+        reason = "not an FMU: the archive holds no modelDescription.xml"
+    except OSError as exc:
+        reason = f"cannot read modelDescription.xml: {exc.strerror or exc}"
+    except Exception as exc:  # lxml's syntax errors, fmpy's validation and attribute errors
+        reason = f"broken modelDescription.xml: {type(exc).__name__}: {exc}"
+    raise FmuLoadError(name, path, reason) from None
+
 
 _FMI2_LOGGER = None
 _FMI2_LOG_RECEIVERS: dict[int, weakref.WeakMethod] = {}
@@ -338,39 +378,8 @@ class FmuComponent:
         return out
 
     def _read_model_description(self, validate: bool):
-        """fmpy's reading of the modelDescription, its failures told in one
-        line; an archive is looked at first (a regular file, every entry within
-        the limits of :mod:`cosim.files`): an FMU file is data from anyone."""
-        from .files import read_entry, regular_file, zip_members
-        from .limits import MAX_DOCUMENT_BYTES
-
-        try:
-            if not self.path.is_dir():
-                regular_file(self.path, "FMU")
-                with zipfile.ZipFile(self.path) as archive:
-                    entry = zip_members(archive, "the archive").get("modelDescription.xml")
-                    if entry is not None and entry.file_size > 4 * MAX_DOCUMENT_BYTES:
-                        raise FmuLoadError(self.name, self.path, f"modelDescription.xml is {entry.file_size} bytes; "
-                                                                 f"at most {4 * MAX_DOCUMENT_BYTES} are read")
-                    if entry is not None:  # corrupt data is told here, naming the entry (read again by fmpy)
-                        self._description_xml = read_entry(archive, entry, "the archive")
-        except ScenarioError as exc:
-            raise FmuLoadError(self.name, self.path, str(exc).removeprefix(f"FMU {str(self.path)!r}: ")) from None
-        except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, EOFError, ValueError) as exc:
-            raise FmuLoadError(self.name, self.path, f"not an FMU: not a zip archive ({exc})") from None
-        try:
-            where = self.path / "modelDescription.xml" if self.path.is_dir() else self.path
-            stat = where.stat()
-            return _parsed_model_description(str(self.path), stat.st_size, stat.st_mtime_ns, validate)
-        except zipfile.BadZipFile as exc:
-            reason = f"not an FMU: not a zip archive ({exc})"
-        except KeyError:
-            reason = "not an FMU: the archive holds no modelDescription.xml"
-        except OSError as exc:
-            reason = f"cannot read modelDescription.xml: {exc.strerror or exc}"
-        except Exception as exc:  # lxml's syntax errors, fmpy's validation and attribute errors
-            reason = f"broken modelDescription.xml: {type(exc).__name__}: {exc}"
-        raise FmuLoadError(self.name, self.path, reason) from None
+        md, self._description_xml = read_description(self.name, self.path, validate)
+        return md
 
     def _declared_period(self) -> str | None:
         """The parameter a sampled-data FMU declares as its period

@@ -221,6 +221,15 @@ def _component(path: Path, interface: str) -> FmuComponent:
     return comp
 
 
+def _refused(path: Path, exc: FmuCallError) -> LinearizationError:
+    """The FMU's refusal of the operating point, naming the value it refused
+    first (``m = -1.0``) where the failing call set one."""
+    if exc.variable is not None:
+        return LinearizationError(f"{path.name}: {exc.variable} = {exc.value!r}: the FMU refuses it "
+                                  f"({exc.log or exc.reason})")
+    return LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})")
+
+
 def _values_in_state(path: Path, parameters, fmu_state: bytes, t: float, names,
                      instance: FmuComponent | None) -> dict[str, float]:
     """``names``' values in a serialized Co-Simulation FMU state, read on
@@ -234,7 +243,7 @@ def _values_in_state(path: Path, parameters, fmu_state: bytes, t: float, names,
             cs.start(t, parameters)
         return cs.state_values(fmu_state, names, t)
     except FmuCallError as exc:
-        raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
+        raise _refused(path, exc) from None
     finally:
         if instance is None:
             cs.close()
@@ -267,7 +276,7 @@ def _linearize_me(path, comp: FmuComponent, start, inputs, parameters, t, method
     try:  # the inputs given are set in Initialization Mode; start() ends in Continuous-Time Mode
         comp.start(t, parameters, inputs)
     except FmuCallError as exc:
-        raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
+        raise _refused(path, exc) from None
     x = comp.continuous_states()
     for i, n in enumerate(state_names):
         if n in start:
@@ -315,6 +324,10 @@ def _linearize_sampled(path, comp: FmuComponent, start, inputs, parameters, fmu_
         raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: it cannot get and "
                                  "set its FMU state")
     if comp.sample_period is None:
+        if md.modelExchange is not None:  # auto chose Co-Simulation: its Model Exchange has no continuous state
+            raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: it declares no sample "
+                                     f"period; its Model Exchange interface has no continuous state: linearize that "
+                                     f"(interface me, --interface me) for the static map of its inputs to its outputs")
         raise LinearizationError(f"{path.name}: cannot linearize its Co-Simulation step: it declares no "
                                  "sample period (a black-box Co-Simulation FMU, and no Model Exchange)")
     z_names = [v.name for v in md.modelVariables if v.causality == "local" and v.variability == "discrete"
@@ -327,7 +340,7 @@ def _linearize_sampled(path, comp: FmuComponent, start, inputs, parameters, fmu_
             if fmu_state is not None:
                 comp.restore_state(fmu_state)
         except FmuCallError as exc:
-            raise LinearizationError(f"{path.name}: the FMU refused the operating point ({exc})") from None
+            raise _refused(path, exc) from None
     period = float(parameters.get(comp.sample_period, comp.get_reals([comp.sample_period])[comp.sample_period]))
     z = np.fromiter(comp.get_reals(z_names).values(), float, len(z_names))
     for i, n in enumerate(z_names):

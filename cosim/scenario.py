@@ -38,7 +38,7 @@ from .files import read_toml
 from .limits import MAX_NESTING, MAX_STEPS
 from .limits import SEED_LIMIT
 from .time_grid import runs_at, whole_steps
-from .schema import (Count, NonNegativeInt, Number, Positive, Strings, Table, json_schema, one_of, refuse,
+from .schema import (Count, NonNegativeInt, Number, Positive, Names, Table, json_schema, one_of, refuse,
                      scenario_error, where)
 
 __all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "ConnectionTable", "scenario_model", "scenario_json_schema", "load_scenario",
@@ -225,7 +225,7 @@ def check_fmu_parameters(where_: str, fmu: Mapping[str, Any], params: Mapping[st
 class Record(Table):
     """``[record]``: what the results hold."""
 
-    signals: Strings = Field(default_factory=list, description="recorded signals, 'Component.variable'")
+    signals: Names = Field(default_factory=list, description="recorded signals, 'Component.variable', each once")
     block_rows: Count = Field(100, description="rows per block flushed to the results file")
 
 

@@ -25,7 +25,7 @@ from pydantic_core import PydanticCustomError
 from .errors import ScenarioError
 
 __all__ = ["Table", "ParameterTable", "Number", "Positive", "NonNegative", "Integer", "NonNegativeInt", "Count",
-           "Strings", "one_of", "numbers", "dataclass_table", "refuse", "scenario_error", "where", "validate",
+           "Strings", "Names", "one_of", "numbers", "dataclass_table", "refuse", "scenario_error", "where", "validate",
            "thawed", "json_schema"]
 
 # A float of the document: an int is taken as a float, a bool or a string is not; never inf or nan.
@@ -221,6 +221,18 @@ def _strings(value: Any) -> Any:
 
 
 Strings = Annotated[list[str], BeforeValidator(_strings)]
+
+
+def _names(value: Any) -> Any:
+    from .files import repeated
+
+    twice = repeated(_strings(value))
+    if twice is not None:  # a signal recorded twice: a column twice in the results, and memory for nothing
+        raise refuse(f"{twice!r} is given twice; each at most once")
+    return value
+
+
+Names = Annotated[list[str], BeforeValidator(_names)]  # strings, each given once (cosim.files.repeated)
 
 
 def numbers(n: int, what: str = "values", schema: Mapping[str, Any] | None = None, **constraints):

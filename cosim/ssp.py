@@ -58,7 +58,8 @@ from . import registry, units
 from .connection import check_connections, parse_connections
 from .ssv import number as _number, parameter_set as _parameter_set, read_parameter_set
 from .errors import CosimError, FmuError, ScenarioError, one_line, show_folder_as
-from .files import SSD_NAME, check_document, extract_zip, is_ssp, read_entry, regular_file, safe_name, zip_members
+from .files import (SSD_NAME, extract_zip, given_twice, is_ssp, json_document, put_once, read_entry, regular_file,
+                    safe_name, zip_members)
 from .limits import MAX_DOCUMENT_BYTES
 from .scenario import Scenario, apply_overrides, fmu_component, fmu_error_in_scenario, fmu_file, parse_scenario
 from .scenario import check_fmu_file
@@ -494,14 +495,21 @@ def _bindings(where: str, component: etree._Element, folder: Path) -> dict[str, 
                 node = _xml(path).getroot()
             except etree.XMLSyntaxError as exc:
                 raise ScenarioError(f"{at}: {source}: not well-formed XML: {exc}") from None
-            values.update(_parameter_set(f"{at} ({source})", node))
+            _bind(values, _parameter_set(f"{at} ({source})", node), where)
             continue
         inline = binding.find("ssd:ParameterValues", NS)
         node = next(iter(inline), None) if inline is not None else None
         if node is None:
             raise ScenarioError(f"{at}: neither a source nor inline ssd:ParameterValues")
-        values.update(_parameter_set(at, node))
+        _bind(values, _parameter_set(at, node), where)
     return values
+
+
+def _bind(values: dict[str, float], more: Mapping[str, float], where: str) -> None:
+    """A parameter set's values added to a component's: a parameter bound by two sets is refused (the
+    last one won: a z_0 of -50 in one set over the -15 of another, and nothing said)."""
+    for name, value in more.items():
+        put_once(values, name, value, f"{where}: parameter")
 
 
 def _component(where: str, element: etree._Element, folder: Path) -> tuple[str, dict[str, Any]]:
@@ -527,7 +535,7 @@ def _component(where: str, element: etree._Element, folder: Path) -> tuple[str, 
     for i, connector in enumerate(element.findall("ssd:Connectors/ssd:Connector", NS), 1):
         if not connector.get("name"):
             raise ScenarioError(f"{at}: ssd:Connector {i}: no name attribute")
-        connectors[connector.get("name")] = connector.get("kind", "")
+        put_once(connectors, connector.get("name"), connector.get("kind", ""), f"{at}: ssd:Connector")
         real = connector.find("ssc:Real", NS)
         if real is not None and real.get("unit"):
             units[connector.get("name")] = real.get("unit")
@@ -655,6 +663,7 @@ def _read_ssd(ssd_path: Path) -> _System:
                         raise ScenarioError(f"{where}: baseStepSize = {fixed.get('baseStepSize')!r} is not positive")
     out = _System(root.get("name") or system.get("name") or ssd_path.parent.name, root.get("description", ""),
                   start, stop, step, components, connections)
+    recorded: set[str] = set()
     for scenario in _annotations(system, COSIM_ANNOTATION):
         where = f"ssd:System: ssc:Annotation {COSIM_ANNOTATION}"
         if scenario.get("seed") is not None:
@@ -665,13 +674,16 @@ def _read_ssd(ssd_path: Path) -> _System:
         for item in scenario:
             tag = etree.QName(item).localname if isinstance(item.tag, str) else None
             if tag == "Record":
+                if item.get("signal", "") in recorded:
+                    raise given_twice(f"{where}: Record", item.get("signal", ""))
+                recorded.add(item.get("signal", ""))
                 out.record.append(item.get("signal", ""))
             elif tag == "SeedParameter":
                 component, name = item.get("component"), item.get("parameter")
                 if component not in components or not name:
                     raise ScenarioError(f"{where}: SeedParameter: component {component!r} is no component, or "
                                         f"no parameter is named")
-                out.seed_parameters[component] = name
+                put_once(out.seed_parameters, component, name, f"{where}: SeedParameter of component")
                 if item.get("stream") is not None:
                     out.seed_streams[component] = _integer(f"{where}: SeedParameter {component!r}", item.get("stream"),
                                                            "stream")
@@ -679,21 +691,17 @@ def _read_ssd(ssd_path: Path) -> _System:
                 component = item.get("component")
                 if component not in components:
                     raise ScenarioError(f"{where}: Fmu: component {component!r} is no component")
-                settings = out.fmu_settings.setdefault(component, {})
+                put_once(out.fmu_settings, component, {}, f"{where}: Fmu of component")
+                settings = out.fmu_settings[component]
                 if item.get("interface") is not None:
                     settings["interface"] = item.get("interface")
                 for key in ("start", "solver"):
                     if item.get(key) is not None:
-                        try:
-                            settings[key] = json.loads(item.get(key))
-                        except json.JSONDecodeError as exc:
-                            raise ScenarioError(f"{where}: Fmu {component!r}: {key} is not JSON ({exc})") from None
-                        except (ValueError, RecursionError) as exc:
-                            raise ScenarioError(f"{where}: Fmu {component!r}: {key}: not a document this tool "
-                                                f"reads ({one_line(str(exc))[:200]})") from None
-                        check_document(settings[key], f"{where}: Fmu {component!r}: {key}", 3)
+                        settings[key] = json_document(item.get(key), f"{where}: Fmu {component!r}: {key}", 3)
             elif tag == "Envelope":
                 signal = item.get("signal", "")
+                if signal in out.envelope:
+                    raise given_twice(f"{where}: Envelope", signal)
                 out.envelope[signal] = [_number(f"{where}: Envelope {signal!r}", item.get(k), k)
                                         for k in ("low", "high")]
             elif tag == "Section":
@@ -704,14 +712,9 @@ def _read_ssd(ssd_path: Path) -> _System:
                 if name not in registry.sections():
                     raise ScenarioError(f"{where}: Section {name!r}: not a section an archive may carry; known: "
                                         f"{', '.join(sorted(registry.sections())) or '(none registered)'}")
-                try:
-                    out.sections[name] = json.loads(item.text or "")
-                except json.JSONDecodeError as exc:
-                    raise ScenarioError(f"{where}: Section {name!r}: not JSON ({exc})") from None
-                except (ValueError, RecursionError) as exc:
-                    raise ScenarioError(f"{where}: Section {name!r}: not a document this tool reads "
-                                        f"({one_line(str(exc))[:200]})") from None
-                check_document(out.sections[name], f"{where}: Section {name!r}", 1)
+                if name in out.sections:  # two [wind] sections: the last one won
+                    raise given_twice(f"{where}: Section", name)
+                out.sections[name] = json_document(item.text or "", f"{where}: Section {name!r}", 1)
     return out
 
 
@@ -854,6 +857,10 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
         if scenario.components:  # an archive holds FMUs only: it never names Python code to run
             raise ScenarioError(f"{label}: Python component(s) {', '.join(sorted(scenario.components))}: an "
                                 f"SSP archive holds FMUs only")
+        try:
+            _check_kinds(system)
+        except ScenarioError as exc:
+            raise ScenarioError(f"{label}: {exc}") from None
     except BaseException:
         if temporary is not None:
             _remove_extraction(str(temporary), forget)
@@ -861,6 +868,38 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
     if temporary is not None:
         weakref.finalize(scenario, _remove_extraction, str(temporary), forget)
     return scenario
+
+
+# An FMU's variable's causality -> the kind an SSD's connector to it states (SSP 1.0 ssd:Connector
+# kind; an FMI 3.0 structural parameter is a parameter to an SSP tool).
+_KIND_OF = {"input": "input", "output": "output", "parameter": "parameter", "structuralParameter": "parameter",
+            "calculatedParameter": "calculatedParameter"}
+
+
+def _check_kinds(system: _System) -> None:
+    """Refuse a connector whose kind contradicts its FMU (an "input" that is
+    the FMU's output, a connector to no variable of it): an SSP tool that
+    trusts the SSD would connect or record the wrong thing, ours trusted the
+    FMU and said nothing."""
+    from .fmu_component import read_description
+
+    for name, entry in system.components.items():
+        if not entry["connectors"]:
+            continue
+        try:
+            md, _ = read_description(name, entry["path"])
+        except FmuError:
+            continue  # a broken FMU is told where it is built, naming its [fmus] entry
+        variables = {v.name: v for v in md.modelVariables}
+        for connector, kind in entry["connectors"].items():
+            variable = variables.get(connector)
+            if variable is None:
+                raise ScenarioError(f"ssd:Component {name!r}: ssd:Connector {connector!r}: no variable of its FMU")
+            expected = _KIND_OF.get(variable.causality)
+            if kind != expected:
+                raise ScenarioError(f"ssd:Component {name!r}: ssd:Connector {connector!r}: kind = {kind!r}, but its "
+                                    f"FMU's variable is {'an' if variable.causality[0] in 'aeiou' else 'a'} "
+                                    f"{variable.causality}" + (f" (kind {expected!r})" if expected else ""))
 
 
 def _remove_extraction(folder: str, forget) -> None:

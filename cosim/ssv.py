@@ -14,6 +14,7 @@ from pathlib import Path
 from lxml import etree
 
 from .errors import ScenarioError
+from .files import given_twice
 
 __all__ = ["read_parameter_set", "parameter_set", "number", "NS"]
 
@@ -59,6 +60,8 @@ def parameter_set(where: str, node: etree._Element) -> dict[str, float]:
             raise ScenarioError(f"{at}: no name attribute")
         value = next(iter(parameter), None)
         kind = etree.QName(value).localname if value is not None else None
+        if name in values:
+            raise given_twice(f"{where}: ssv:Parameter", name)
         if kind == "Real":
             values[name] = number(at, value.get("value"), "value")
         elif kind == "Integer":

@@ -60,7 +60,7 @@ from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
 from .errors import CosimError, ScenarioError
 from .files import read_toml
 from .limits import MAX_RUNS
-from .scenario import Scenario, apply_overrides, load_scenario, parse_scenario, scenario_path
+from .scenario import Scenario, apply_overrides, parse_scenario, scenario_path
 from .schema import Count, NonNegativeInt, Strings, Table, json_schema, numbers, refuse, validate
 
 __all__ = ["Case", "Study", "Run", "StudyFile", "parse_study", "load_study", "study_json_schema", "runs", "plan",
@@ -321,15 +321,23 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
     left out), e.g. to fly a shipped study on another mission."""
     doc = validate(StudyFile, dict(raw), quote=True)
     name = doc.name if doc.name is not None else (source.stem if source else "study")
-    try:
-        if base is None:
-            base = load_scenario(_scenario_file(doc.scenario, source), dict(doc.set))
-        elif doc.set:
-            base = parse_scenario(apply_overrides(base.raw, dict(doc.set)), source=base.source)
-    except ScenarioError as exc:
-        if str(exc).startswith("scenario"):
-            raise
-        raise ScenarioError(f"set: {exc}") from None
+    # a fault is named by where it is: the scenario's file, the [set] keys, or the scenario they make
+    if base is None:
+        path = _scenario_file(doc.scenario, source)
+        document, label = read_toml(path, "scenario"), f"scenario = {doc.scenario!r}"  # its faults name the file
+    else:
+        path, document, label = base.source, base.raw, f"scenario {base.name!r}"
+    if base is None or doc.set:
+        try:
+            document = apply_overrides(document, dict(doc.set))
+        except ScenarioError as exc:
+            raise ScenarioError(f"set: {exc}") from None
+        try:
+            base = parse_scenario(document, source=path)
+        except ScenarioError as exc:
+            key = str(exc).split(" ", 1)[0].rstrip(":")  # the key the refusal names first
+            ours = any(key == k or key.startswith(f"{k}.") or k.startswith(f"{key}.") for k in doc.set)
+            raise ScenarioError(f"{'set' if ours else label}: {exc}") from None
 
     cases = tuple(_case(f"cases.{_quoted(n)}", n, spec) for n, spec in doc.cases.items())
     for case in cases:

@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
-from .errors import ScenarioError, one_line
+from .errors import ScenarioError, one_line, shown_text
 from .files import STUDY_SIDECAR as SIDECAR
-from .files import output_folder
+from .files import not_others_results, output_folder
 from .files import write_json  # noqa: F401  (where the study writers have always found it)
 from .scenario import apply_overrides, parse_scenario
 from .study import Study, count, runs
@@ -92,10 +92,11 @@ def _rows_of(path: Path) -> Iterator[dict[str, str]]:
         yield from csv.DictReader(f)
 
 
-def _done(path: Path, header: list[str], total: int) -> bytearray:
+def _done(path: Path, header: list[str], total: int, numbers: Sequence[str] = ()) -> bytearray:
     """Which runs ``path`` already holds, as a bitmap over the plan's indices
-    (a half-written last line dropped first); a file with other columns, or
-    a row that is no run of the plan, is refused."""
+    (a half-written last line dropped first); a file with other columns, a
+    row that is no run of the plan or a run on two lines, a status that is
+    none, or a word in a column of ``numbers``, is refused."""
     done = bytearray((total + 7) // 8)
     if not path.exists() or path.stat().st_size == 0:
         return done
@@ -120,10 +121,32 @@ def _done(path: Path, header: list[str], total: int) -> bytearray:
                                     f"remove the line, or choose another --out")
             run = row.get("run", "")
             if not run.isdigit() or int(run) >= total:
-                raise ScenarioError(f"{path}: line {line}: run = {run!r} is no run of this study's plan "
-                                    f"(0..{total - 1})")
+                raise ScenarioError(f"{path}: line {line}: run = {shown_text(repr(run))} is no run of this study's "
+                                    f"plan (0..{total - 1})")
+            if _is_done(done, int(run)):  # counted twice: the cell's n and its interval would lie
+                raise ScenarioError(f"{path}: line {line}: run {run} is on an earlier line too; remove one, or "
+                                    f"choose another --out")
+            _check_row(row, numbers, f"{path}: line {line}")
             done[int(run) >> 3] |= 1 << (int(run) & 7)
     return done
+
+
+def _check_row(row: Mapping[str, str], numbers: Sequence[str], where: str) -> None:
+    """A resumed row's status one of :data:`~cosim.summary.STATUSES` and its
+    ``numbers`` (the metrics, the wall time) each a number or empty (an
+    undefined metric): a word in a metric's cell was kept, and its run
+    counted as ok over one value fewer."""
+    if row["status"] not in STATUSES:
+        raise ScenarioError(f"{where}: status = {shown_text(repr(row['status']))}: expected one of "
+                            f"{', '.join(STATUSES)}; remove the line, or choose another --out")
+    for name in numbers:
+        cell = row[name]
+        if cell:
+            try:
+                float(cell)
+            except ValueError:
+                raise ScenarioError(f"{where}: {name} = {shown_text(repr(cell))}: not a number; remove the line, or "
+                                    f"choose another --out") from None
 
 
 def _is_done(done: bytearray, index: int) -> bool:
@@ -228,7 +251,7 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
         base = parse_scenario(apply_overrides(base.raw, {"record.signals": list(record)}), source=base.source)
     header = columns(study, metric_names)
     total = count(study)
-    out = output_folder(out_dir) if out_dir is not None else None
+    out = not_others_results(output_folder(out_dir), "study") if out_dir is not None else None
     with (_Lock(out) if out is not None else contextlib.nullcontext()):
         done = bytearray((total + 7) // 8)
         runs_csv = None
@@ -236,7 +259,7 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
             runs_csv = out / "runs.csv"
             if resume:
                 _check_sidecar(out, study)
-                done = _done(runs_csv, header, total)
+                done = _done(runs_csv, header, total, [*metric_names, "wall_time_s"])
             else:
                 runs_csv.unlink(missing_ok=True)
         skipped = sum(bin(b).count("1") for b in done)

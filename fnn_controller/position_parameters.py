@@ -16,7 +16,9 @@ from dataclasses import dataclass, field
 
 from .parameters import check_ranges, param
 
-__all__ = ["PositionParams", "FnnInit", "IT2Params", "LearningBounds", "check_one_step"]
+__all__ = ["PositionParams", "FnnInit", "IT2Params", "LearningBounds", "check_one_step", "FLOWN_KD_MIN"]
+
+FLOWN_KD_MIN = 0.0  # the smallest derivative gain a scenario flies (the stability analysis goes below)
 
 
 @dataclass(frozen=True)
@@ -81,8 +83,11 @@ class IT2Params:
 class PositionParams:
     """Gains of the position controller, paper values (section 5.1)."""
 
-    kp: float = param(2.5, "1/s", "proportional gain of eq. 19")  # any sign: the stability analysis sweeps it
-    kd: float = param(0.005, "1", "derivative gain of eq. 19 (s/s)")
+    # A negative kp flew, silently, a loop that pushes away from the reference; kp = 0 has no equilibrium
+    # (e* = v*/kp). kd takes any sign here: the stability analysis maps and flies kd < 0 (below -1 the
+    # velocity feedback cancels and the vehicle runs away); a scenario's flight takes kd >= FLOWN_KD_MIN.
+    kp: float = param(2.5, "1/s", "proportional gain of eq. 19 (positive: at least 1e-9)", min=1e-9)
+    kd: float = param(0.005, "1", "derivative gain of eq. 19 (s/s); a scenario flies kd >= 0")
     dt: float = param(0.01, "s", "learning (and controller) step", min=1e-4, max=1.0)
     gamma_smc: tuple[float, float, float] = param((1.5, 1.5, 1.5), "1/s", "gamma of eq. 38 for x, y, z", min=0.0)
     nu: tuple[float, float, float] = param((0.85, 0.85, 0.2), "s", "nu of eq. 38 for x, y, z", min=0.0)

@@ -59,7 +59,7 @@ from .variants.registry import Variant
 
 __all__ = [
     "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES", "OUTPUTS", "Y_PARTS", "Y_SLICES", "STEP_INPUT_NAMES",
-    "state_size", "state_ports", "step_symbols", "initial_state", "raise_non_finite",
+    "state_size", "state_ports", "check_state", "step_symbols", "initial_state", "raise_non_finite",
 ]
 
 STATE_SIZE = FNN_STATE_SIZE + VEL_STATE_SIZE  # the paper's variants
@@ -79,6 +79,39 @@ def state_ports(variant: Variant) -> tuple[tuple[str, str, str], ...]:
     ports = learned + previous + (("R_ref_primed", "1", "1 once R* has been computed since reset"),)
     assert len(ports) == state_size(variant)
     return ports
+
+
+ROTATION_TOLERANCE = 1e-6  # |R^T R - I| and |det R - 1| of a saved R*: a float rotation is within 1e-15
+
+
+def check_state(variant: Variant, state) -> None:
+    """Refuse a controller state of ``variant`` (:func:`state_ports` order)
+    that no flight can reach, naming the element and its allowed range: a
+    membership function's width ``sigma`` (eqs. 21-22, a Gaussian's) must be
+    positive, (0, inf): at 0 the firing strengths are 0/0, below it the FNN
+    is no longer one; the previous desired attitude R* (eq. 14) must be a
+    rotation, R^T R = I and det R = +1 (to :data:`ROTATION_TOLERANCE`):
+    the attitude error of eq. 16 is defined on SO(3) only.
+
+    Raises
+    ------
+    ValueError
+        ``sigma1_1_x = -1.0 m: a membership function's width must be in (0, inf)``.
+    """
+    ports = state_ports(variant)
+    state = np.asarray(state, dtype=float)
+    for (name, unit, _), value in zip(ports, state):
+        if name.startswith("sigma") and not value > 0:
+            raise ValueError(f"{name} = {float(value)!r} {unit}: a membership function's width must be in (0, inf)")
+    names = [name for name, _, _ in ports]
+    first = names.index("R_ref_prev_1")
+    R = state[first:first + 9].reshape(3, 3, order="F")  # column-major, as the state holds it
+    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: an infinite deviation, refused below
+        deviation = max(float(np.abs(R.T @ R - np.eye(3)).max()), abs(float(np.linalg.det(R)) - 1.0))
+    if not deviation <= ROTATION_TOLERANCE:
+        raise ValueError(f"R_ref_prev_1..9 = {np.round(R.reshape(-1, order='F'), 6).tolist()}: the previous desired "
+                         f"attitude R* must be a rotation (R^T R = I, det R = +1, to {ROTATION_TOLERANCE:g}; "
+                         f"off by {deviation:.3g})")
 
 
 def state_size(variant: Variant) -> int:

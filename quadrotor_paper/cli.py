@@ -115,7 +115,7 @@ def _cmd_run(args) -> int:
     from .run_summary import summary_lines
 
     from cosim.errors import CosimError, ScenarioError, one_line
-    from cosim.files import is_ssp, not_a_study_folder, output_file, output_folder, safe_name
+    from cosim.files import is_ssp, not_others_results, output_file, output_folder, safe_name
 
     overrides = _overrides(args.set)
     if args.seed is not None:
@@ -138,7 +138,7 @@ def _cmd_run(args) -> int:
 
     with build_master(scenario) as master:  # every input refused before anything is written
         # every place a result goes is checked before the run: nothing computed is lost for want of it
-        out = not_a_study_folder(output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}"))
+        out = not_others_results(output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}"), "run")
         learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
         if learned_file is not None:
             from .learned import learned_variant, save_learned

@@ -192,6 +192,16 @@ def controller_table() -> type[Table]:
                     raise refuse(str(e).split(": ", 1)[1], key="geometric.dt", value=geometric_dt) from None
             return self
 
+        @model_validator(mode="after")
+        def _flown_gains(self):
+            from fnn_controller.position_parameters import FLOWN_KD_MIN
+
+            kd = self.position.kd if self.position is not None else None
+            if kd is not None and kd < FLOWN_KD_MIN:  # negative damping, silently flown before (issue 28)
+                raise refuse(f"must be in [{FLOWN_KD_MIN:g}, inf): a flight's derivative gain (the stability "
+                             f"analysis maps kd < 0; below -1 the vehicle runs away)", key="position.kd", value=kd)
+            return self
+
     return ControllerTable
 
 

@@ -90,6 +90,13 @@ def load_learned(path: str | Path, variant: str) -> np.ndarray:
         raise ScenarioError(f"{where}: its state layout is not the {variant} controller's")
     if len(doc.state) != len(doc.names):
         raise ScenarioError(f"{where}: 'state' must be {len(doc.names)} finite numbers")
+    from fnn_controller.step import check_state
+    from fnn_controller.variants import variant as lookup
+
+    try:
+        check_state(lookup(variant), doc.state)  # finite numbers no flight reaches: sigma <= 0, an R* no rotation
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
     return np.asarray(doc.state, dtype=float)
 
 

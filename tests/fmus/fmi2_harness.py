@@ -57,11 +57,15 @@ class Fmi2Instance:
             self.initialize(parameters or {})
 
     def initialize(self, parameters):
-        self.fmu.setupExperiment(startTime=0.0)
-        self.set(**parameters)
-        self.fmu.enterInitializationMode()
+        self.enter_initialization(parameters)
         self.fmu.exitInitializationMode()
         self.initialized = True
+
+    def enter_initialization(self, parameters=None):
+        """Into Initialization Mode, where a value can first be read (FMI 2.0: not in Instantiated)."""
+        self.fmu.setupExperiment(startTime=0.0)
+        self.set(**(parameters or {}))
+        self.fmu.enterInitializationMode()
 
     def set(self, **values):
         if values:

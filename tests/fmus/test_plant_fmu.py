@@ -328,6 +328,44 @@ def test_calls_in_the_wrong_state_are_refused(instance):
     assert np.isfinite(fmu.get(*STATES)).all()
 
 
+def test_a_value_read_before_initialization_and_a_stop_before_the_start_are_refused(instance):
+    """issue 28: fmi2GetReal answered in Instantiated (nothing is computed yet),
+    and fmi2SetupExperiment took a stop time before the start; each is now an
+    error, the FMU's log naming the call."""
+    fmu = instance(initialize=False)
+    with pytest.raises(FMICallException):
+        fmu.get("x")
+    assert any("fmi2GetReal" in m and "Instantiated" in m for m in fmu.messages), fmu.messages
+    with pytest.raises(FMICallException):
+        fmu.fmu.setupExperiment(startTime=10.0, stopTime=1.0)
+    assert any(m.startswith("fmi2SetupExperiment: stop time 1 refused: before the start time 10")
+               for m in fmu.messages), fmu.messages
+    fmu.initialize({})  # still usable
+    fmu.step(2)
+    assert np.isfinite(fmu.get(*STATES)).all()
+
+
+def test_a_derivative_that_overflows_is_refused_naming_the_call(quadrotor_fmu2):
+    """issue 28: at u = 1e308 (finite, so accepted) the drag overflows and
+    fmi2GetDerivatives returned -inf with status OK; now an error whose log
+    names the call, the derivative and the states."""
+    fmu = Fmi2Instance(quadrotor_fmu2, model_exchange=True)
+    try:
+        fmu.fmu.enterContinuousTimeMode()
+        n = len(fmu.md.derivatives)
+        x = np.zeros(n)
+        fmu.fmu.getContinuousStates(x.ctypes.data_as(POINTER(c_double)), n)
+        x[STATE_NAMES.index("u")] = 1e308
+        fmu.fmu.setContinuousStates(x.ctypes.data_as(POINTER(c_double)), n)
+        dx = np.zeros(n)
+        with pytest.raises(FMICallException):
+            fmu.fmu.getDerivatives(dx.ctypes.data_as(POINTER(c_double)), n)
+        assert any(m.startswith("fmi2GetDerivatives: der(u) = -inf") and "u = 1e+308" in m
+                   for m in fmu.messages), fmu.messages
+    finally:
+        fmu.close()
+
+
 def test_unknown_value_reference_is_refused(instance):
     fmu = instance()
     with pytest.raises(FMICallException):
@@ -458,6 +496,7 @@ def _assert_fmu_refuses(directory, name, value, start):
         with pytest.raises(FMICallException):
             fmu.set(**{name: value})
         assert any(m.startswith(f"{name} = {logged(value)} refused") for m in fmu.messages), fmu.messages
+        fmu.enter_initialization()  # a value is read from Initialization Mode on
         assert fmu.get(name)[0] == start
     finally:
         fmu.close()
@@ -469,9 +508,10 @@ def _assert_fmu_accepts(directory, name, value, run=True):
     fmu = Fmi2Instance(directory, unzip_dir=directory, initialize=False)
     try:
         fmu.set(**{name: value})  # raises FMICallException if refused
+        fmu.enter_initialization()  # a value is read from Initialization Mode on
         assert fmu.get(name)[0] == value
         if run:
-            fmu.initialize({})
+            fmu.fmu.exitInitializationMode()
             fmu.step(h=value if name == "dt" else None)  # a sampled-data FMU steps by its own dt only
         assert not fmu.messages, fmu.messages
     finally:

@@ -482,3 +482,177 @@ def test_a_run_into_a_studys_folder_is_refused_and_the_study_kept(tmp_path, caps
     code, line = cli(capsys, "run", "circles", "--set", "simulation.duration=0.1", "--out", str(study))
     assert code == EXIT_BAD_INPUT and "holds a study's results (study.json)" in line
     assert (study / "summary.json").read_text() == '{"kept": true}' and not (study / "results.csv").exists()
+
+
+# ---- issue 28, the long tail: names given twice, caps, values no flight can have ---------------------
+
+def _archive_with(archive: Path, path: Path, edit) -> Path:
+    """A copy of ``archive`` whose SSD text is ``edit(text)``."""
+    with zipfile.ZipFile(archive) as src:
+        entries = [(i.filename, src.read(i)) for i in src.infolist() if not i.is_dir()]
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data in entries:
+            z.writestr(name, edit(data.decode()) if name == "SystemStructure.ssd" else data)
+    return path
+
+
+@pytest.mark.parametrize("edit, message", [
+    # a second binding of z_0 (the last won: the vehicle started at z = -50)
+    (lambda t: t.replace("</ssd:ParameterBinding>", "</ssd:ParameterBinding>" + t[
+        t.index("<ssd:ParameterBinding>"):t.index("</ssd:ParameterBinding>") + 25].replace("-15.0", "-50.0"), 1),
+     "ssd:Component 'Quadrotor': parameter: 'z_0' is given twice; each at most once"),
+    (lambda t: t.replace('<cosim:Section name="wind">', '<cosim:Section name="wind">{"speed": 50.0}</cosim:Section>'
+                         '<cosim:Section name="wind">', 1),
+     "Section: 'wind' is given twice; each at most once"),
+    (lambda t: t.replace('"speed": 3.0,', '"speed": 3.0, "speed": 50.0,', 1),
+     "Section 'wind': key: 'speed' is given twice"),
+    (lambda t: t.replace('<ssd:Connector name="x" kind="output">', '<ssd:Connector name="x" kind="input">', 1),
+     "ssd:Component 'Quadrotor': ssd:Connector 'x': kind = 'input', but its FMU's variable is an output"),
+])
+def test_an_archive_that_says_a_thing_twice_or_against_its_fmu_is_one_line(archive, sandbox, capsys, edit, message):
+    path = _archive_with(archive, sandbox / "bad.ssp", edit)
+    code, line = cli(capsys, "run", str(path), "--out", str(sandbox / "out"), "--quiet", "--no-plots")
+    assert code == EXIT_BAD_INPUT and message in line, line
+
+
+def test_a_name_given_twice_is_refused_where_it_is_read(sandbox, capsys, tmp_path):
+    code, line = cli(capsys, "run", "circles", "--set", 'record.signals=["Quadrotor.x", "Quadrotor.y", "Quadrotor.x"]',
+                     *SHORT)
+    assert code == EXIT_BAD_INPUT and "record.signals: 'Quadrotor.x' is given twice; each at most once" in line
+    learned = tmp_path / "l.json"
+    learned.write_text('{"format": "fnn-cosim learned state", "variant": "pd+lm", "variant": "pd"}')
+    code, line = cli(capsys, "run", "circles", "--load-learned", str(learned), *SHORT)
+    assert code == EXIT_BAD_INPUT and "key: 'variant' is given twice" in line
+
+
+def test_a_brace_group_is_expanded_in_linear_time_and_capped():
+    from cosim.connection import ConnectionCheckError, parse_connection
+    from cosim.limits import MAX_GROUP
+
+    names = ",".join(f"v{i}" for i in range(MAX_GROUP))
+    assert len(parse_connection(f"A.{{{names}}} -> B.{{{names}}}")) == MAX_GROUP
+    with pytest.raises(ConnectionCheckError, match=rf"a group of {10 * MAX_GROUP} names; at most {MAX_GROUP}$"):
+        parse_connection("A.{%s} -> B.x" % ",".join(f"v{i}" for i in range(10 * MAX_GROUP)))
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("kp", "-1", "PositionParams.kp = -1.0 1/s is outside its range [1e-09, inf]"),
+    ("kp", "0", "PositionParams.kp = 0.0 1/s is outside its range [1e-09, inf]"),
+    ("kd", "-0.5", "controller.position.kd = -0.5: must be in [0, inf): a flight's derivative gain"),
+])
+def test_negative_pd_gains_are_refused_with_their_range(sandbox, capsys, key, value, message):
+    code, line = cli(capsys, "run", "circles", "--set", f"controller.position.{key}={value}", *SHORT)
+    assert code == EXIT_BAD_INPUT and message in line
+
+
+@pytest.fixture(scope="module")
+def saved_state(tmp_path_factory) -> dict:
+    path = tmp_path_factory.mktemp("learned") / "l.json"
+    assert main(["run", "circles", *SHORT, "--save-learned", str(path), "--out", str(path.parent / "out")]) == 0
+    return json.loads(path.read_text())
+
+
+@pytest.mark.parametrize("name, value, message", [
+    ("sigma1_1_x", -1.0, "sigma1_1_x = -1.0 m: a membership function's width must be in (0, inf)"),
+    ("sigma2_3_z", 0.0, "sigma2_3_z = 0.0 m/s: a membership function's width must be in (0, inf)"),
+    ("R_ref_prev_1", 5.0, "the previous desired attitude R* must be a rotation (R^T R = I, det R = +1, to 1e-06"),
+    ("R_ref_prev_4", 1e300, "must be a rotation"),
+])
+def test_a_learned_state_no_flight_reaches_is_refused_with_its_range(saved_state, sandbox, capsys, name, value,
+                                                                     message):
+    doc = json.loads(json.dumps(saved_state))
+    doc["state"][doc["names"].index(name)] = value
+    (sandbox / "l.json").write_text(json.dumps(doc))
+    code, line = cli(capsys, "run", "circles", "--load-learned", str(sandbox / "l.json"), *SHORT)
+    assert code == EXIT_BAD_INPUT and message in line, line
+
+
+def test_a_study_into_a_runs_folder_is_refused_and_the_run_kept(sandbox, capsys):
+    """issue 28: a study wrote its summary.json over a run's."""
+    out = sandbox / "run"
+    assert cli(capsys, "run", "circles", *SHORT, "--out", str(out))[0] == 0
+    summary = (out / "summary.json").read_text()
+    code, line = cli(capsys, "table2", "--seeds", "1", "--duration", "0.1", "--variants", "pd", "--options", "none",
+                     "--winds", "1", "--workers", "1", "--out", str(out), "--quiet")
+    assert code == EXIT_BAD_INPUT and "holds a run's results (results.csv.json); a study would overwrite" in line
+    assert (out / "summary.json").read_text() == summary and not (out / "runs.csv").exists()
+
+
+@pytest.fixture(scope="module")
+def small_study(tmp_path_factory) -> tuple[Path, Path]:
+    """A finished study of four runs, and its file."""
+    root = tmp_path_factory.mktemp("study")
+    study = root / "s.toml"
+    study.write_text('scenario = "circles"\n[set]\n"simulation.duration" = 0.1\n[sweep]\nseeds = 2\n'
+                     '[sweep.grid]\n"controller.variant" = ["pd", "pd+lm"]\n')
+    assert main(["sweep", str(study), "--workers", "1", "--out", str(root / "out"), "--quiet", "--no-plots"]) == 0
+    return study, root / "out"
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda lines: lines + [lines[-1]], "line 6: run {run} is on an earlier line too"),
+    (lambda lines: [lines[0], lines[1].replace(",ok,", ",great,")] + lines[2:], "line 2: status = 'great': expected one of ok, diverged, failed"),
+    (lambda lines: [lines[0], ",".join(c if i != 7 else "abc" for i, c in enumerate(lines[1].split(",")))] + lines[2:],
+     "line 2: rmse_m = 'abc': not a number"),
+])
+def test_a_resumed_runs_table_with_a_run_twice_or_a_word_for_a_number_is_refused(small_study, sandbox, capsys,
+                                                                                  edit, message):
+    import shutil
+
+    study, done = small_study
+    out = sandbox / "out"
+    shutil.copytree(done, out)
+    lines = (out / "runs.csv").read_text().splitlines()
+    assert lines[0].split(",")[7] == "rmse_m"
+    lines = edit(lines)
+    (out / "runs.csv").write_text("\n".join(lines) + "\n")
+    code, line = cli(capsys, "sweep", str(study), "--workers", "1", "--out", str(out), "--quiet", "--no-plots")
+    assert code == EXIT_BAD_INPUT and message.format(run=lines[-1].split(",")[0]) in line, line
+
+
+def test_a_local_study_leaves_no_dask_scratch_space(small_study, tmp_path, monkeypatch, capsys):
+    """issue 28: dask-scratch-space was left in the temporary folder after every local sweep."""
+    import multiprocessing
+    import multiprocessing.forkserver
+    import multiprocessing.util
+    import tempfile
+
+    # multiprocessing's own folder and its forkserver's socket, made once a process, stay where they are
+    # (in the suite's deep temporary folders a socket's path would pass AF_UNIX's 108 bytes)
+    multiprocessing.util.get_temp_dir()
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        multiprocessing.forkserver.ensure_running()
+    sandbox = tmp_path / "work"
+    sandbox.mkdir()
+    monkeypatch.chdir(sandbox)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    study, _ = small_study
+    code, _ = cli(capsys, "sweep", str(study), "--workers", "2", "--out", str(sandbox / "out"), "--quiet", "--no-plots")
+    assert code == 0 and (sandbox / "out" / "summary.json").is_file()
+    left = [p.name for p in Path(tempfile.gettempdir()).iterdir()]  # (multiprocessing's pymp-* lives with the process)
+    assert not [name for name in left if name.startswith(("dask-scratch-space", "cosim-dask-"))], left
+
+
+def test_a_scheduler_that_is_no_address_is_bad_input(small_study, sandbox, capsys):
+    study, _ = small_study
+    code, line = cli(capsys, "sweep", str(study), "--scheduler", "no-port", "--out", str(sandbox / "out"), "--quiet")
+    assert code == EXIT_BAD_INPUT and "--scheduler no-port: no Dask scheduler answers there" in line
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["sweep", "{archive}"], "study '{archive}': an SSP archive, not a TOML file: `fnn-cosim run {archive}` flies it"),
+    (["export-ssp", "{archive}", "--out", "x.ssp"], "scenario '{archive}': an SSP archive, not a TOML file"),
+    (["linearize", "Quadrotor", "--scenario", "{archive}", "--time", "0.05"], "an SSP archive, not a TOML file"),
+    (["linearize", "WindGust"], "its Model Exchange interface has no continuous state: linearize that (interface me"),
+    (["linearize", "Quadrotor", "--parameter", "m=-1"], "Quadrotor.fmu: m = -1.0: the FMU refuses it ("),
+])
+def test_messages_name_the_thing_that_is_wrong(archive, sandbox, capsys, argv, message):
+    code, line = cli(capsys, *[a.format(archive=archive) for a in argv])
+    assert code == EXIT_BAD_INPUT and message.format(archive=archive) in line, line
+
+
+def test_a_studys_scenario_file_that_is_no_toml_is_named_as_a_file_not_as_set(sandbox, capsys):
+    (sandbox / "s.toml").write_text('scenario = "/etc/passwd"\n[set]\n"simulation.duration" = 0.1\n')
+    code, line = cli(capsys, "sweep", str(sandbox / "s.toml"), "--out", str(sandbox / "out"), "--quiet")
+    assert code == EXIT_BAD_INPUT and line.startswith("fnn-cosim: error: /etc/passwd: not valid TOML"), line

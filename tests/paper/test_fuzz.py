@@ -102,6 +102,8 @@ class Written(str):
 
 HUGE_INTEGER = Written("1" + "0" * 5000)
 DEEP_ARRAY = Written("[" * 40 + "1" + "]" * 40)
+# a connection whose brace group names 20 000 variables (issue 28: quadratic before, now linear and capped)
+BIG_GROUP = Written(json.dumps("WindGust.{%s} -> Quadrotor.{%s}" % ((",".join(f"v{i}" for i in range(20000)),) * 2)))
 
 
 def toml_value(value) -> str:
@@ -136,7 +138,7 @@ values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=
                       max_leaves=12)
 # what TOML writes and JSON does not (issue 28): dates and times, an integer of 5001 digits, arrays 40 deep
 toml_values = st.recursive(st.one_of(scalars, st.dates(), st.times(), st.datetimes(), st.just(HUGE_INTEGER),
-                                     st.just(DEEP_ARRAY)),
+                                     st.just(DEEP_ARRAY), st.just(BIG_GROUP)),
                            lambda inner: st.one_of(st.lists(inner, max_size=4),
                                                    st.dictionaries(st.text(max_size=8), inner, max_size=4)),
                            max_leaves=12)
@@ -156,7 +158,7 @@ def mutated(draw, base: dict, keep_short: bool = True, pool=toml_values) -> dict
     doc = json.loads(json.dumps(base))
     for _ in range(draw(st.integers(1, 4))):
         paths = list(_paths(doc))
-        action = draw(st.sampled_from(["replace", "replace", "delete", "add"]))
+        action = draw(st.sampled_from(["replace", "replace", "delete", "add", "twice"]))
         if not paths:
             break
         path = draw(st.sampled_from(paths))
@@ -165,6 +167,9 @@ def mutated(draw, base: dict, keep_short: bool = True, pool=toml_values) -> dict
             node = node[key]
         if action == "replace":
             node[path[-1]] = draw(pool)
+        elif action == "twice":  # an item given twice (issue 28: a recorded signal, a connection, a grid value)
+            if isinstance(node[path[-1]], list) and node[path[-1]]:
+                node[path[-1]].append(node[path[-1]][draw(st.integers(0, len(node[path[-1]]) - 1))])
         elif action == "delete":
             node.pop(path[-1], None)
         elif isinstance(node.get(path[-1]), dict):
@@ -219,15 +224,38 @@ def study_files(draw) -> str:
     return to_toml(doc)
 
 
+def _learned_state() -> dict:
+    """A learned-state file of the pd+lm controller as it starts (issue 28: its values are then drawn)."""
+    from fnn_controller.step import state_ports
+    from fnn_controller.variants import variant
+
+    names = [n for n, _, _ in state_ports(variant("pd+lm"))]
+    identity = {f"R_ref_prev_{i}" for i in (1, 5, 9)}
+    state = [1.0 if n.startswith("sigma") or n in identity else 0.0 for n in names]
+    return {"format": "fnn-cosim learned state", "version": 1, "variant": "pd+lm", "source": "python",
+            "names": names, "state": state}
+
+
+LEARNED = _learned_state()
+
+
 @st.composite
 def learned_files(draw) -> str:
     doc = {"format": "fnn-cosim learned state", "version": 1, "variant": "pd+lm", "source": "python",
            "names": ["c1_1_x"], "state": [0.0]}
-    if draw(st.booleans()):
+    roll = draw(st.integers(0, 2))
+    if roll == 0:
         doc = draw(mutated(doc, keep_short=False, pool=values))  # JSON: no dates
+    elif roll == 1:  # the real layout, some values drawn: sigma <= 0, an R* that is no rotation (issue 28)
+        doc = json.loads(json.dumps(LEARNED))
+        for _ in range(draw(st.integers(1, 3))):
+            doc["state"][draw(st.integers(0, len(doc["state"]) - 1))] = draw(
+                st.one_of(st.floats(allow_nan=False, allow_infinity=False), st.just(0.0), st.just(-1.0)))
     else:
         doc = draw(values)
     text = json.dumps(doc, allow_nan=True)
+    if draw(st.integers(0, 4)) == 0 and text.startswith("{"):  # a key given twice (issue 28: the last one won)
+        text = '{"variant": "pd", ' + text[1:]
     return "[" * draw(st.integers(0, 3)) * 3000 + text if draw(st.integers(0, 9)) == 0 else text
 
 
@@ -288,12 +316,16 @@ def ssd_edits(draw, ssd: bytes) -> bytes:
     elements = list(root.iter())
     for _ in range(draw(st.integers(1, 3))):
         element = draw(st.sampled_from(elements))
-        action = draw(st.sampled_from(["attribute", "attribute", "drop", "section", "text"]))
+        action = draw(st.sampled_from(["attribute", "attribute", "drop", "section", "text", "twice"]))
         if action == "attribute" and element.attrib:
             key = draw(st.sampled_from(sorted(element.attrib)))
             element.set(key, draw(st.sampled_from(["", "0", "-1", "1.5", "1e300", "nan", "../../x.fmu",
                                                    "file:///etc/passwd", "/etc/passwd", "resources/../../y",
-                                                   "x" * 50, "Plant", "WindGust"])))
+                                                   "x" * 50, "Plant", "WindGust", "input", "output",
+                                                   "parameter"])))
+        elif action == "twice" and element.getparent() is not None:  # a binding, section, connector twice (issue 28)
+            element.addnext(etree.fromstring(etree.tostring(element)))
+            elements = list(root.iter())
         elif action == "drop" and element.getparent() is not None:
             element.getparent().remove(element)
             elements = list(root.iter())
@@ -367,6 +399,47 @@ def test_fuzz_archives(archive, sandbox, capsys):
     @NORMAL
     def case(entries):
         _archive_case(sandbox, capsys, entries)
+
+    case()
+
+
+# ---- files that are no documents, where every command reads one (issue 28) ----------------------------------
+
+FILE_COMMANDS = (["run", "{f}"], ["sweep", "{f}"], ["export-ssp", "{f}", "--out", "{out}/x.ssp"], ["linearize", "{f}"],
+                 ["linearize", "Quadrotor", "--scenario", "{f}", "--time", "0.05"], ["table2", "--scenario", "{f}"],
+                 ["run", "circles", "--set", "simulation.duration=0.1", "--load-learned", "{f}"])
+FILE_KINDS = ("device", "fifo", "folder", "archive", "empty")
+
+
+def _special_file(sandbox: Path, kind: str) -> Path:
+    if kind == "device":
+        return Path("/dev/zero")
+    path = sandbox / f"{kind}.toml"
+    if not path.exists() and not path.is_fifo():
+        if kind == "fifo":
+            os.mkfifo(path)
+        elif kind == "folder":
+            path.mkdir()
+        elif kind == "archive":
+            path = sandbox / "archive.ssp"
+            path.write_bytes(ORIGINAL["circles"])
+        else:
+            path.write_text("")
+    return sandbox / "archive.ssp" if kind == "archive" else path
+
+
+def test_fuzz_special_files(archive, sandbox, capsys):
+    """A device, a FIFO, a folder, an SSP archive or an empty file given to
+    any command that reads a file: one line, never a read without end."""
+    ORIGINAL["circles"] = archive.read_bytes()
+
+    @given(command=st.sampled_from(FILE_COMMANDS), kind=st.sampled_from(FILE_KINDS))
+    @NORMAL
+    def case(command, kind):
+        path = _special_file(sandbox, kind)
+        args = [a.format(f=path, out=sandbox / "out") for a in command]
+        code = check(args if "--out" in args else [*args, "--out", str(sandbox / "out"), "--quiet"], sandbox, capsys)
+        assert code == 2 or (kind == "archive" and command[:2] == ["run", "{f}"])  # an archive is run's to fly
 
     case()
 

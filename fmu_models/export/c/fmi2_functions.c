@@ -77,8 +77,10 @@ void fmi2FreeInstance(fmi2Component c) {
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
-    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+    (void)toleranceDefined; (void)tolerance;
     CHECK("fmi2SetupExperiment", IN(MODE_INSTANTIATED));
+    if (core_check_stop_time(INST, "fmi2SetupExperiment", startTime, stopTimeDefined, stopTime) != CORE_OK)
+        return fmi2Error;
     return (fmi2Status)core_set_time(INST, startTime);
 }
 
@@ -105,8 +107,8 @@ fmi2Status fmi2Reset(fmi2Component c) {
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
-    CHECK("fmi2GetReal", ANY_MODE);
-    return (fmi2Status)core_get_float64(INST, vr, nvr, value);
+    CHECK("fmi2GetReal", VALUE_MODES);
+    return (fmi2Status)core_get_float64(INST, "fmi2GetReal", vr, nvr, value);
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
@@ -253,7 +255,7 @@ fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t n
 
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx) {
     CHECK("fmi2GetDerivatives", IN(MODE_INITIALIZATION) | ME_MODES | IN(MODE_TERMINATED));
-    return (fmi2Status)core_get_derivatives(INST, derivatives, nx);
+    return (fmi2Status)core_get_derivatives(INST, "fmi2GetDerivatives", derivatives, nx);
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {

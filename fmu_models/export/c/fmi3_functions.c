@@ -207,8 +207,10 @@ void fmi3FreeInstance(fmi3Instance instance) {
 
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
-    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+    (void)toleranceDefined; (void)tolerance;
     CHECK("fmi3EnterInitializationMode", IN(MODE_INSTANTIATED));
+    if (core_check_stop_time(INST, "fmi3EnterInitializationMode", startTime, stopTimeDefined, stopTime) != CORE_OK)
+        return fmi3Error;
     return (fmi3Status)core_enter_initialization(INST, startTime);
 }
 
@@ -250,9 +252,9 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
 
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, fmi3Float64 values[], size_t nValues) {
-    CHECK("fmi3GetFloat64", ANY_MODE);
+    CHECK("fmi3GetFloat64", VALUE_MODES);
     if (check_scalar_sizes(INST, "fmi3GetFloat64", nValueReferences, nValues) != fmi3OK) return fmi3Error;
-    return (fmi3Status)core_get_float64(INST, valueReferences, nValueReferences, values);
+    return (fmi3Status)core_get_float64(INST, "fmi3GetFloat64", valueReferences, nValueReferences, values);
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
@@ -691,7 +693,7 @@ fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 cont
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
                                              size_t nContinuousStates) {
     CHECK_KIND("fmi3GetContinuousStateDerivatives", ME_EVALUATION, KIND_MODEL_EXCHANGE);
-    return (fmi3Status)core_get_derivatives(INST, derivatives, nContinuousStates);
+    return (fmi3Status)core_get_derivatives(INST, "fmi3GetContinuousStateDerivatives", derivatives, nContinuousStates);
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators) {

@@ -256,6 +256,18 @@ static CoreStatus check_values(Instance *inst, const char *context, const double
 
 /* ---- initialization ------------------------------------------------------- */
 
+CoreStatus core_check_stop_time(Instance *inst, const char *function, double start_time, int stop_defined,
+                                double stop_time) {
+    if (!stop_defined) return CORE_OK;
+    if (!(stop_time >= start_time)) {  /* NaN too */
+        char stop[NUMBER_SIZE], start[NUMBER_SIZE];
+        core_log(inst, CORE_ERROR, "%s: stop time %s refused: before the start time %s", function,
+                 exact(stop, stop_time), exact(start, start_time));
+        return CORE_ERROR;
+    }
+    return CORE_OK;
+}
+
 CoreStatus core_enter_initialization(Instance *inst, double start_time) {
     if (check_value(inst, "start ", 0, start_time) != CORE_OK) return CORE_ERROR;  /* "start time = ..." */
     T_ = start_time;
@@ -292,6 +304,8 @@ CoreStatus core_exit_initialization(Instance *inst) {
 }
 
 /* ---- get / set ------------------------------------------------------------ */
+
+static void report_non_finite_result(Instance *inst, const char *function, unsigned vr);
 
 CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const double value[]) {
     if (n > 0 && (!vr || !value)) {
@@ -348,18 +362,25 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
     return CORE_OK;
 }
 
-CoreStatus core_get_float64(Instance *inst, const unsigned vr[], size_t n, double value[]) {
+CoreStatus core_get_float64(Instance *inst, const char *function, const unsigned vr[], size_t n, double value[]) {
     if (n > 0 && (!vr || !value)) {
-        core_log(inst, CORE_ERROR, "get: NULL value reference or value array");
+        core_log(inst, CORE_ERROR, "%s: NULL value reference or value array", function);
         return CORE_ERROR;
     }
     for (size_t i = 0; i < n; i++) {
         if (vr[i] >= N_VARIABLES) {
-            core_log(inst, CORE_ERROR, "get: unknown value reference %u", vr[i]);
+            core_log(inst, CORE_ERROR, "%s: unknown value reference %u", function, vr[i]);
             return CORE_ERROR;
         }
     }
     update_derived(inst);
+#if NX > 0
+    for (size_t i = 0; i < n; i++)
+        if (vr[i] >= VR_DX && vr[i] < VR_U && !isfinite(inst->s.v[vr[i]])) {
+            report_non_finite_result(inst, function, vr[i]);
+            return CORE_ERROR;
+        }
+#endif
     for (size_t i = 0; i < n; i++) value[i] = inst->s.v[vr[i]];
     return CORE_OK;
 }
@@ -410,6 +431,22 @@ static void report_non_finite_state(Instance *inst, size_t vr, double value, dou
     char v[NUMBER_SIZE], from[NUMBER_SIZE], to[NUMBER_SIZE];
     message_append(&msg, "state %s became %s during the step from t = %s to t = %s", VAR_NAME[vr],
                    exact(v, value), exact(from, t0), exact(to, t1));
+    append_values(&msg, inst, "inputs", VR_U, NU);
+    append_values(&msg, inst, "parameters", VR_P, NP);
+    core_log(inst, CORE_ERROR, "%s", msg.text);
+}
+
+/* A result of the model (a derivative, an output) that is not a finite number
+ * although every value it is computed from is (each was checked when it came
+ * in): the values overflow the model (x = 1e308). Refused by the call that
+ * asked for it, `function`, which the message names with the states, inputs
+ * and parameters in effect. */
+static void report_non_finite_result(Instance *inst, const char *function, unsigned vr) {
+    Message msg = {{0}, 0, 0};
+    char v[NUMBER_SIZE], t[NUMBER_SIZE];
+    message_append(&msg, "%s: %s = %s at t = %s is not a finite number (the model overflows at these values)",
+                   function, VAR_NAME[vr], exact(v, inst->s.v[vr]), exact(t, T_));
+    append_values(&msg, inst, "states", VR_X, NX);
     append_values(&msg, inst, "inputs", VR_U, NU);
     append_values(&msg, inst, "parameters", VR_P, NP);
     core_log(inst, CORE_ERROR, "%s", msg.text);
@@ -667,12 +704,17 @@ CoreStatus core_get_states(Instance *inst, double x[], size_t nx) {
     return CORE_OK;
 }
 
-CoreStatus core_get_derivatives(Instance *inst, double dx[], size_t nx) {
+CoreStatus core_get_derivatives(Instance *inst, const char *function, double dx[], size_t nx) {
     if (nx != NX || (nx > 0 && !dx)) {
-        core_log(inst, CORE_ERROR, "get derivatives: expected %d states, got %zu", NX, nx);
+        core_log(inst, CORE_ERROR, "%s: expected %d states, got %zu", function, NX, nx);
         return CORE_ERROR;
     }
     update_derived(inst);
+    const int bad = first_non_finite(DX_, nx);
+    if (bad >= 0) {
+        report_non_finite_result(inst, function, (unsigned)(VR_DX + bad));
+        return CORE_ERROR;
+    }
     memcpy(dx, DX_, nx * sizeof(double));
     return CORE_OK;
 }

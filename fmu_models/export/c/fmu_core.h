@@ -148,11 +148,20 @@ void core_log(Instance *inst, CoreStatus status, const char *fmt, ...);
 /* CORE_OK if the instance is in one of the modes of `allowed`, else logs and errors. */
 CoreStatus core_check_mode(Instance *inst, const char *function, unsigned allowed);
 
+/* The modes in which a variable's value may be read: not Instantiated (FMI 2.0 and 3.0: nothing is computed
+ * before initialization; the start values are the modelDescription's). */
+#define VALUE_MODES (ANY_MODE & ~IN(MODE_INSTANTIATED))
+
+/* CORE_ERROR, logged naming `function`, if a stop time is given and is before the start time (or NaN). */
+CoreStatus core_check_stop_time(Instance *inst, const char *function, double start_time, int stop_defined,
+                                double stop_time);
 CoreStatus core_enter_initialization(Instance *inst, double start_time);
 CoreStatus core_exit_initialization(Instance *inst);
 
 CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const double value[]);
-CoreStatus core_get_float64(Instance *inst, const unsigned vr[], size_t n, double value[]);
+/* A continuous model's derivatives and outputs that are not finite are refused (CORE_ERROR, the log naming
+ * `function`, the FMI call): computed from finite values, they mean the model overflowed. */
+CoreStatus core_get_float64(Instance *inst, const char *function, const unsigned vr[], size_t n, double value[]);
 
 CoreStatus core_do_step(Instance *inst, double current_time, double step_size);
 
@@ -172,7 +181,7 @@ CoreStatus core_clocked_step(Instance *inst, double current_time, double step_si
 #endif
 CoreStatus core_set_states(Instance *inst, const double x[], size_t nx);
 CoreStatus core_get_states(Instance *inst, double x[], size_t nx);
-CoreStatus core_get_derivatives(Instance *inst, double dx[], size_t nx);
+CoreStatus core_get_derivatives(Instance *inst, const char *function, double dx[], size_t nx);
 
 CoreStatus core_directional_derivative(Instance *inst,
                                        const unsigned unknowns[], size_t n_unknowns,
