@@ -63,6 +63,7 @@ for kind in ("device", "fifo", "folder"):
         (kind, ["linearize", "Quadrotor", "--scenario", "{%s}" % kind, "--time", "0.05", "--out", "{out}"]),
         (kind, ["table2", "--scenario", "{%s}" % kind, "--out", "{out}"]),
         (kind, ["run", "circles", "--set", SHORT, "--load-learned", "{%s}" % kind, "--out", "{out}"]),
+        (kind, ["calibrate", "{%s}" % kind, "--fmu", "Quadrotor", "--fit", "b", "--out", "{out}"]),
     ]
 CASES += [
     ("archive where TOML is read", ["sweep", "{archive}", "--out", "{out}"]),
@@ -107,6 +108,10 @@ CASES += [
     ("an unknown name", ["sweep", "no-such-study", "--out", "{out}"]),
     ("an unknown name", ["linearize", "NoSuchModel", "--out", "{out}"]),
     ("an unknown name", ["schema", "nothing"]),
+    ("an unknown name", ["calibrate", "{plain}", "--fmu", "NoSuchModel", "--fit", "b", "--out", "{out}"]),
+    ("a number out of its range", ["calibrate", "{plain}", "--fmu", "Quadrotor", "--fit", "b", "--segment", "-1",
+                                   "--out", "{out}"]),
+    ("--workers", ["calibrate", "{plain}", "--fmu", "Quadrotor", "--fit", "b", "--workers", "0", "--out", "{out}"]),
     ("an unknown name", ["table2", "--variants", "pd,nothing", "--out", "{out}"]),
 ]
 
