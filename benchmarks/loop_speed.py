@@ -223,7 +223,8 @@ def main(argv=None) -> int:
 
     import quadrotor_paper  # noqa: F401  (registers the paper's scenarios)
     from cosim.scenario import load_scenario
-    from cosim.ssp import export_ssp, load_ssp
+    from cosim.ssp import load_ssp
+    from cosim.ssp_export import export_ssp
     from quadrotor_paper.portable import all_fmu
 
     portable = all_fmu(load_scenario("circles"))

@@ -31,15 +31,20 @@ row stamped duration - h; its RMSE is over all its rows.
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from cosim.scenario import build_master, fmu_file, load_scenario
-from cosim.ssp import export_ssp, load_ssp, run_libcosim
+from cosim.ssp import load_ssp
+from cosim.ssp_export import export_ssp
 from quadrotor_paper.metrics import rmse
 from quadrotor_paper.portable import all_fmu
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the libcosim runner lives with its users
+from libcosim_runner import run_libcosim  # noqa: E402
 
 _FMPY = "Jacobi, transfer after the step"
 HONOURS = {  # importer -> (parameter bindings, initial transfer, ordering)

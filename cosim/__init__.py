@@ -8,7 +8,7 @@ that provide them (:mod:`cosim.registry`). Entry points:
 :func:`cosim.scenario.load_scenario`, :func:`cosim.scenario.build_master`,
 :class:`cosim.master.Master` and :meth:`cosim.master.Master.run`;
 :func:`cosim.study.load_study` and :func:`cosim.study_run.run_study`;
-:func:`cosim.linearize.linearize_fmu`; :func:`cosim.ssp.export_ssp` and
+:func:`cosim.linearize.linearize_fmu`; :func:`cosim.ssp_export.export_ssp` and
 :func:`cosim.ssp.load_ssp`. Each documents every argument it takes (a test
 reads this list). See ``docs/cosim.md``.
 """

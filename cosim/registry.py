@@ -100,7 +100,7 @@ class RegisteredModel:
     of the model whose start values (its modelDescription's and its
     binary's) are ``values`` (parameter or input name -> value): a
     self-contained FMU, which runs a scenario's values in a tool that
-    ignores the values an SSP archive binds (:func:`cosim.ssp.export_ssp`).
+    ignores the values an SSP archive binds (:func:`cosim.ssp_export.export_ssp`).
     """
 
     name: str

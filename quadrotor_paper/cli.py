@@ -279,7 +279,7 @@ def _cmd_sweep(args) -> int:
 def _cmd_export_ssp(args) -> int:
     """Write the scenario, every component as an FMU, as an SSP archive."""
     from cosim.scenario import load_scenario
-    from cosim.ssp import export_ssp
+    from cosim.ssp_export import export_ssp
 
     from .portable import all_fmu
 

@@ -8,7 +8,7 @@
   ``std`` and ``ci95`` ``null`` (never a number) and the direction it
   shares in ``identifiability.undetermined``.
 * ``parameters.ssv``: an SSP 1.0 parameter set (``ssv:ParameterSet``,
-  written with pyssp-standard as :mod:`cosim.ssp` writes SSDs, valid against
+  written with pyssp-standard as :mod:`cosim.ssp_export` writes SSDs, valid against
   the standard's schema): the fixed values and the identifiable estimates
   of parameters, by variable name, with their units; what an
   ``ssd:ParameterBinding`` of the FMU's component reads.
@@ -84,7 +84,7 @@ def _values(cal) -> dict[str, tuple[float, str]]:
 
 def write_parameter_set(values: dict[str, tuple[float, str]], path: Path, name: str) -> Path:
     """An SSP 1.0 ``ssv:ParameterSet`` of Real values (pyssp-standard's
-    classes, written as :mod:`cosim.ssp` writes its inline sets)."""
+    classes, written as :mod:`cosim.ssp_export` writes its inline sets)."""
     from lxml import etree
     from pyssp_standard.parameter_types import ParameterType
     from pyssp_standard.ssv import Parameter, SSVElem

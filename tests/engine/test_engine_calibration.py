@@ -91,7 +91,7 @@ def test_the_command_writes_its_four_files(tmp_path, capsys):
     assert abs(mu["value"] - 1.0) < 1e-6 and mu["identifiable"] and mu["ci95"][0] <= mu["value"] <= mu["ci95"][1]
     assert doc["converged"] and set(doc["residuals"]) == {"x0", "x1"}
     assert "mu = " in (out / "calibration.toml").read_text()
-    from cosim.ssp import ssd_schema_errors  # noqa: F401  (the module that writes SSP files)
+    from cosim.ssp import ssd_schema_errors  # noqa: F401  (the module that writes SSP files
     from lxml import etree
 
     ssv = etree.parse(str(out / "parameters.ssv")).getroot()

@@ -304,7 +304,8 @@ def test_an_archive_keeps_how_the_master_runs_an_fmu(tmp_path):
     values (SSP 1.0 has no place for them: this engine's annotation), and
     the archive read back flies the same run."""
     from cosim.scenario import build_master, parse_scenario
-    from cosim.ssp import export_ssp, load_ssp
+    from cosim.ssp import load_ssp
+    from cosim.ssp_export import export_ssp
 
     raw = {"simulation": {"duration": 2.0, "step": 0.01},
            "fmus": {"Ball": {"path": str(fmu(3, "BouncingBall")), "interface": "ModelExchange",

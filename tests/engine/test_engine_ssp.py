@@ -25,8 +25,9 @@ from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.scenario import apply_overrides, build_master, parse_scenario
-from cosim.ssp import (COSIM_ANNOTATION, COSIM_NAMESPACE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, export_ssp, load_ssp,
+from cosim.ssp import (COSIM_ANNOTATION, COSIM_NAMESPACE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, load_ssp,
                        ssd_schema_errors)
+from cosim.ssp_export import export_ssp
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel
 from fmu_models.export.variables import input_, output, parameter, state
@@ -465,7 +466,7 @@ def test_an_external_parameter_set_is_read(archive, tmp_path):
 
 def test_cosim_ssp_imports_nothing_of_the_application_nor_pyssp():
     """pyssp-standard (and its pint, xmlschema) is imported by the export only."""
-    code = ("import cosim.ssp, sys; print(sorted({m.split('.')[0] for m in sys.modules} & "
+    code = ("import cosim.ssp, cosim.ssp_export, sys; print(sorted({m.split('.')[0] for m in sys.modules} & "
             "{'quadrotor_paper', 'fnn_controller', 'fmu_models', 'pyssp_standard', 'libcosimpy', 'pint'}))")
     root = Path(cosim.__file__).resolve().parents[1]
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=60)
@@ -508,7 +509,7 @@ def probe_archive(probe_fmu, tmp_path, fmus, connections, signals, duration=1.0,
 
 def both(path, signals, ordering="exchange"):
     """The archive run by libcosim and by our master in ``ordering``."""
-    from cosim.ssp import run_libcosim
+    from libcosim_runner import run_libcosim
 
     loaded = load_ssp(path, overrides={"simulation.ordering": ordering})
     with build_master(loaded) as master:
@@ -632,7 +633,7 @@ def test_a_seed_parameter_travels_in_the_parameter_set(probe_fmu, tmp_path):
         assert master.run(loaded.duration, seed=loaded.seed)["A.c"][0] == 42.0
         assert master.run(loaded.duration, seed=5)["A.c"][0] == 5.0
     if importlib.util.find_spec("libcosimpy") is not None:
-        from cosim.ssp import run_libcosim
+        from libcosim_runner import run_libcosim
 
         assert run_libcosim(path, ["A.c"])["A.c"][0] == 42.0
     with pytest.raises(ScenarioError, match=r"^fmus\.A\.seed_parameter = 'u': no parameter of the FMU file "):
@@ -647,7 +648,7 @@ def test_libcosim_runs_the_exported_toy_chain_as_our_master(archive):
     for [t_n, t_n+1]); libcosim reads the FMU's input after the step, i.e.
     what it held over [t_n-1, t_n]."""
     needs_libcosim()
-    from cosim.ssp import run_libcosim
+    from libcosim_runner import run_libcosim
 
     loaded = load_ssp(archive)
     assert loaded.ordering == "exchange"

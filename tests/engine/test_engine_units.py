@@ -344,7 +344,7 @@ signals = ["A.y", "B.y", "C.y", "B.u", "C.u"]
 def converted_archive(toys, tmp_path):
     import tomllib
 
-    from cosim.ssp import export_ssp
+    from cosim.ssp_export import export_ssp
 
     scenario = parse_scenario(tomllib.loads(SSP_SCENARIO))
     return scenario, export_ssp(scenario, tmp_path / "converted.ssp")
@@ -411,7 +411,7 @@ def test_libcosim_applies_the_archives_conversions(converted_archive):
     """libcosim (libcosimpy) loads the archive and applies ssc:LinearTransformation: it flies the
     'exchange' ordering's run (docs/ssp.md)."""
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
-    from cosim.ssp import run_libcosim
+    from libcosim_runner import run_libcosim
 
     scenario, archive = converted_archive
     lc = run_libcosim(archive, ["A.y", "B.y", "C.y", "B.u"])
@@ -453,7 +453,8 @@ def test_an_archive_defines_a_unit_the_fmu_only_names(toys, tmp_path):
     so that an importer converts as our master does."""
     import tomllib
 
-    from cosim.ssp import NS, export_ssp
+    from cosim.ssp import NS
+    from cosim.ssp_export import export_ssp
 
     no_m = _with_unit_definition(tmp_path, 2, '<Unit name="m"><BaseUnit m="1"/></Unit>', "")
     text = SSP_SCENARIO.replace('model = "toy_FirstOrderLag"', f'path = "{no_m}"')

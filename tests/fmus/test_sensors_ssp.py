@@ -49,7 +49,7 @@ def _noise(result) -> np.ndarray:
 
 
 def _fly_both(path):
-    from cosim.ssp import run_libcosim
+    from libcosim_runner import run_libcosim
 
     signals = POSITION + OUTPUTS
     lc = run_libcosim(path, signals)

@@ -102,7 +102,7 @@ def test_the_command_line_loads_no_analysis_or_plotting_library_it_does_not_use(
 # in-process controller's CasADi function, the split controller, SSP archives.
 NOT_FOR_A_RUN = ("dask", "distributed", "matplotlib", "control", "scipy", "casadi.casadi", "fmu_models.export.build",
                  "fmu_models.export.codegen", "fnn_controller.fast", "fnn_controller.split", "cosim.study",
-                 "cosim.study_run", "cosim.ssp")
+                 "cosim.study_run", "cosim.ssp", "cosim.ssp_export")
 
 
 def test_a_run_of_built_fmus_builds_no_model_and_loads_no_study_or_plotting_library(tmp_path):

@@ -57,7 +57,7 @@ def test_the_estimated_missions_as_fmus_fly_in_libcosim_as_in_our_master(tmp_pat
     in libcosim's ('exchange') ordering agree to 1e-9 m over 10 s, the
     sensors' noise included (the seeds travel in the archive)."""
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
-    from cosim.ssp import run_libcosim
+    from libcosim_runner import run_libcosim
     from quadrotor_paper.cli import main
 
     path = tmp_path / f"{name}.ssp"

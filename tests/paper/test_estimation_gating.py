@@ -225,7 +225,8 @@ def test_fmpy_simulate_ssp_flies_circles_estimated_without_chasing_its_first_fix
     after the first gust reversal, docs/ssp.md)."""
     from fmpy.ssp.simulation import simulate_ssp
 
-    from cosim.ssp import export_ssp, load_ssp
+    from cosim.ssp import load_ssp
+    from cosim.ssp_export import export_ssp
     from quadrotor_paper.portable import all_fmu
 
     scenario = load_scenario("circles_estimated")

@@ -52,7 +52,8 @@ def test_the_lab_loop_as_an_ssp_archive_flies_in_libcosim_as_in_our_master(tmp_p
     reference) in an independent master: libcosim flies the archive as our
     master does in its ordering, the Wi-Fi delay and the noise included."""
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
-    from cosim.ssp import load_ssp, run_libcosim
+    from cosim.ssp import load_ssp
+    from libcosim_runner import run_libcosim
     from quadrotor_paper.cli import main
 
     path = tmp_path / "lab.ssp"

@@ -91,7 +91,7 @@ def test_the_replay_exports_to_ssp_and_flies_alike_in_fmpy_and_libcosim(recorded
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
     from fmpy.ssp.simulation import simulate_ssp
 
-    from cosim.ssp import run_libcosim
+    from libcosim_runner import run_libcosim
     from quadrotor_paper.cli import main
 
     log, original = recorded

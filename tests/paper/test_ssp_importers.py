@@ -16,7 +16,8 @@ from lxml import etree
 
 import quadrotor_paper
 from cosim.scenario import build_master, fmu_file, load_scenario
-from cosim.ssp import NS, SSD_NAME, export_ssp
+from cosim.ssp import NS, SSD_NAME
+from cosim.ssp_export import export_ssp
 from quadrotor_paper.metrics import rmse
 from quadrotor_paper.portable import all_fmu
 

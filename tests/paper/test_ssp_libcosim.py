@@ -11,7 +11,8 @@ import pytest
 
 from cosim.errors import ScenarioError
 from cosim.scenario import build_master, load_scenario, parse_scenario
-from cosim.ssp import SSD_NAME, export_ssp, load_ssp, ssd_schema_errors
+from cosim.ssp import SSD_NAME, load_ssp, ssd_schema_errors
+from cosim.ssp_export import export_ssp
 from fmu_models.models.quadrotor import hover_rotor_speed
 
 POSITION = ["Quadrotor.x", "Quadrotor.y", "Quadrotor.z"]
@@ -67,7 +68,7 @@ def test_libcosim_and_our_master_fly_the_archive_alike(tmp_path, wind):
     measured). With the gust reversed inside the run, the agreement also
     shows both engines apply the wind at t_n over [t_n, t_n+1] (Jacobi)."""
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
-    from cosim.ssp import run_libcosim
+    from libcosim_runner import run_libcosim
 
     path = export_ssp(plant_and_wind(wind), tmp_path / "plant_and_wind.ssp")
     loaded = load_ssp(path)
@@ -105,7 +106,7 @@ def test_the_whole_mission_as_fmus_flies_in_libcosim_as_in_our_master(tmp_path):
     against libcosim, 6e-15 m against the Python components: the reference
     FMU reads its time as t_n + h where the master counts t0 + (n + 1) h)."""
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
-    from cosim.ssp import run_libcosim
+    from libcosim_runner import run_libcosim
     from quadrotor_paper.cli import main
 
     path = tmp_path / "circles.ssp"
