@@ -103,7 +103,7 @@ def _time_master(scenario, repeats: int, profile: bool = False):
     last result, the profiled runs' phase times per step (us), the ordering
     and which of the master's loops ran."""
     from cosim import kernel
-    from cosim.scenario import build_master
+    from cosim.assembly import build_master
 
     times, phases = [], {}
     with build_master(scenario) as master:

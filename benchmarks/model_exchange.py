@@ -24,7 +24,8 @@ import statistics
 
 import numpy as np
 
-from cosim.scenario import build_master, load_scenario
+from cosim.scenario import load_scenario
+from cosim.assembly import build_master
 
 POSITION = ("Quadrotor.x", "Quadrotor.y", "Quadrotor.z")
 

@@ -37,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.scenario import build_master, fmu_file, load_scenario
+from cosim.scenario import load_scenario
+from cosim.assembly import build_master, fmu_file
 from cosim.ssp import load_ssp
 from cosim.ssp_export import export_ssp
 from quadrotor_paper.metrics import rmse

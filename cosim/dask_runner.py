@@ -46,7 +46,7 @@ new master would. A run whose scenario differs from a cached one only in
 those reuses its master (FMUs extracted and instantiated once); any other
 difference builds a new master (the components may read FMU parameters when
 built, e.g. a controller's nominal model from the plant's:
-:func:`~cosim.scenario.build_master` notes which). FMU archives are
+:func:`~cosim.assembly.build_master` notes which). FMU archives are
 extracted once per worker process and shared by its masters, and a worker
 parses the scenario of a set of overrides once (the seeds of one cell share
 it).
@@ -70,7 +70,8 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 
 from .errors import CosimError, ScenarioError, one_line
 from .limits import WORKER_TIMEOUT
-from .scenario import Scenario, apply_overrides, build_master, check_fmu_file, fmu_file, fmu_values, parse_scenario
+from .scenario import Scenario, apply_overrides, parse_scenario
+from .assembly import build_master, check_fmu_file, fmu_file, fmu_values
 from .study import Run
 
 __all__ = ["MasterCache", "fly", "execute", "execute_batch", "batch_size", "structure_key", "BATCH_SECONDS"]
@@ -116,7 +117,7 @@ class MasterCache:
 
     :meth:`get` returns a master ready for a scenario: one built for it, or
     one built for a scenario of the same structure whose components read
-    the same FMU values; its FMUs' values (:func:`~cosim.scenario.fmu_values`)
+    the same FMU values; its FMUs' values (:func:`~cosim.assembly.fmu_values`)
     become the scenario's, checked against the FMU files as a build checks
     them. The next run resets the FMUs and sets them, as on a new master."""
 

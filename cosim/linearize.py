@@ -388,7 +388,7 @@ def operating_point_of_run(scenario, instance: str, t: float, label: str | None 
     is no communication point, an instance the scenario lacks, or a run that
     failed before ``t``; ``label`` says how ``t`` was given (default ``t = ... s``)."""
     from .errors import ScenarioError
-    from .scenario import build_master
+    from .assembly import build_master
     from .time_grid import communication_point
 
     t0, h = scenario.start_time, scenario.step

@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 __all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
-           "register_section", "register_fmu_model", "register_scenarios", "register_case", "component_kinds",
-           "sections", "fmu_models", "cases", "aliases", "scenario_folders", "scoped", "with_connections", "version",
+           "register_section", "register_fmu_model", "register_scenarios", "register_studies", "register_case", "component_kinds",
+           "sections", "fmu_models", "cases", "aliases", "scenario_folders", "study_folders", "scoped", "with_connections", "version",
            "register_table_fmu", "table_fmu", "PLUGIN_GROUP"]
 
 PLUGIN_GROUP = "cosim.plugins"
@@ -145,6 +145,7 @@ _SECTIONS: dict[str, Section] = {}
 _MODELS: dict[str, RegisteredModel] = {}
 _CASES: dict[str, Case] = {}
 _SCENARIO_FOLDERS: list[Path] = []
+_STUDY_FOLDERS: list[Path] = []
 _TABLE_FMU: list[Callable[[Any, int], Path]] = []  # at most one: the builder of the signal table's FMU
 _plugins_loaded = False
 _VERSION = [0]  # bumped by every change of the registry (the scenario's declaration is rebuilt)
@@ -234,6 +235,14 @@ def register_scenarios(folder: str | Path) -> None:
         _SCENARIO_FOLDERS.append(folder)
 
 
+def register_studies(folder: str | Path) -> None:
+    """A folder of ``*.toml`` study files, loadable by their stem
+    (:func:`cosim.study.study_path`), as :func:`register_scenarios` for scenarios."""
+    folder = Path(folder)
+    if folder not in _STUDY_FOLDERS:
+        _STUDY_FOLDERS.append(folder)
+
+
 def _load_plugins() -> None:
     global _plugins_loaded
     if _plugins_loaded:
@@ -280,12 +289,17 @@ def scenario_folders() -> list[Path]:
     return list(_SCENARIO_FOLDERS)
 
 
+def study_folders() -> list[Path]:
+    _load_plugins()
+    return list(_STUDY_FOLDERS)
+
+
 @contextmanager
 def scoped():
     """Registrations made inside the ``with`` block are undone at its end
     (tests that register toys leave the process's registry as they found it)."""
     _load_plugins()
-    saved = (dict(_KINDS), dict(_SECTIONS), dict(_MODELS), dict(_CASES), list(_SCENARIO_FOLDERS))
+    saved = (dict(_KINDS), dict(_SECTIONS), dict(_MODELS), dict(_CASES), list(_SCENARIO_FOLDERS), list(_STUDY_FOLDERS))
     try:
         yield
     finally:
@@ -293,6 +307,7 @@ def scoped():
             table.clear()
             table.update(before)
         _SCENARIO_FOLDERS[:] = saved[4]
+        _STUDY_FOLDERS[:] = saved[5]
         _VERSION[0] += 1
 
 

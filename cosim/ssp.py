@@ -36,7 +36,8 @@ from .errors import CosimError, FmuError, ScenarioError, one_line, show_folder_a
 from .files import (SSD_NAME, extract_zip, given_twice, json_document, put_once, read_entry, regular_file, safe_name,
                     zip_members)
 from .limits import MAX_DOCUMENT_BYTES
-from .scenario import Scenario, apply_overrides, fmu_component, parse_scenario
+from .scenario import Scenario, apply_overrides, parse_scenario
+from .assembly import fmu_component
 from .ssv import number as _number, parameter_set as _parameter_set
 
 __all__ = ["load_ssp", "ssd_schema_errors", "qualified", "SSD_NAME", "FMU_TYPE", "NS", "OSP_NAMESPACE", "OSP_ANNOTATION",

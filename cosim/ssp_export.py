@@ -36,7 +36,8 @@ from lxml import etree
 from . import registry, units
 from .connection import check_connections, parse_connections
 from .errors import FmuError, ScenarioError, one_line
-from .scenario import Scenario, check_fmu_file, fmu_component, fmu_error_in_scenario, fmu_file
+from .scenario import Scenario
+from .assembly import check_fmu_file, fmu_component, fmu_error_in_scenario, fmu_file
 from .ssp import COSIM_ANNOTATION, COSIM_NAMESPACE, FMU_TYPE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, qualified
 
 __all__ = ["export_ssp"]
@@ -79,7 +80,7 @@ def _fmu_bytes(path: Path) -> bytes:
 
 def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     """Every FMU's file, connectors, parameter values and units, checked as
-    :func:`~cosim.scenario.build_master` would (without instantiating)."""
+    :func:`~cosim.assembly.build_master` would (without instantiating)."""
     from .fmu_component import FmuComponent, stream_seed
 
     components: dict[str, FmuComponent] = {}  # as build_master makes them (fmu_component), not instantiated

@@ -63,7 +63,7 @@ from .limits import MAX_RUNS
 from .scenario import Scenario, apply_overrides, parse_scenario, scenario_path
 from .schema import Count, NonNegativeInt, Strings, Table, json_schema, numbers, refuse, validate
 
-__all__ = ["Case", "Study", "Run", "StudyFile", "parse_study", "load_study", "study_json_schema", "runs", "plan",
+__all__ = ["Case", "Study", "Run", "StudyFile", "parse_study", "load_study", "shipped_studies", "study_path", "study_json_schema", "runs", "plan",
            "count", "cells", "cell_of", "with_connections", "DISTRIBUTIONS", "MAX_RUNS"]
 
 DISTRIBUTIONS = ("uniform", "normal", "choice")
@@ -382,11 +382,30 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
     return study
 
 
+def shipped_studies() -> dict[str, Path]:
+    """The studies of the registered folders (:func:`cosim.registry.register_studies`), by name."""
+    out: dict[str, Path] = {}
+    for folder in registry.study_folders():
+        for path in sorted(folder.glob("*.toml")):
+            out.setdefault(path.stem, path)
+    return out
+
+
+def study_path(name_or_path: str | Path) -> Path:
+    """A path as given (an existing file, or any name ending in ``.toml``,
+    left for the reader to refuse), or the registered study of that name."""
+    path = Path(name_or_path)
+    if path.exists() or path.suffix == ".toml":
+        return path
+    return shipped_studies().get(str(name_or_path), path)
+
+
 def load_study(path: str | Path, base: Scenario | None = None) -> Study:
-    """The study file at ``path``, read and checked against its scenario
-    (the file's ``scenario``, or ``base`` when given: a command's scenario
-    with its overrides)."""
-    path = Path(path)
+    """The study file at ``path`` (or a registered study's name,
+    :func:`study_path`), read and checked against its scenario (the file's
+    ``scenario``, or ``base`` when given: a command's scenario with its
+    overrides)."""
+    path = study_path(path)
     return parse_study(read_toml(path, "study"), source=path, base=base)
 
 

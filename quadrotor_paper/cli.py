@@ -134,7 +134,7 @@ def _cmd_run(args) -> int:
         if args.load_learned:
             overrides["controller.learned"] = str(args.load_learned)
         scenario = load_scenario(args.scenario, overrides)
-    from cosim.scenario import build_master
+    from cosim.assembly import build_master
 
     with build_master(scenario) as master:  # every input refused before anything is written
         # every place a result goes is checked before the run: nothing computed is lost for want of it
@@ -232,17 +232,6 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
-STUDIES = Path(__file__).parent / "studies"
-
-
-def _study_path(name_or_path: str) -> Path:
-    path = Path(name_or_path)
-    if path.exists() or path.suffix == ".toml":
-        return path
-    shipped = STUDIES / f"{name_or_path}.toml"
-    return shipped if shipped.exists() else path
-
-
 def _cell_means(summary) -> str:
     """The study's cells, one line each: case, grid point, ok runs and each
     metric's mean over them (what summary.json holds, to read at a glance)."""
@@ -263,7 +252,7 @@ def _cmd_sweep(args) -> int:
 
     from cosim.files import safe_name
 
-    study = load_study(_study_path(args.study))
+    study = load_study(args.study)
     out = _out_folder(args.out, DEFAULT_OUT / f"study-{safe_name(study.name)}")
     workers = default_workers(args.workers)
     with progress_bar(f"sweep {study.name}", enabled=not args.quiet) as bar:

@@ -46,7 +46,7 @@ def _trajectory_table(name: str):
 def _trajectory_kind(name: str) -> registry.ComponentKind:
     def build(instance: str, params: Mapping[str, Any], context) -> Any:
         from cosim.fmu_component import FmuComponent
-        from cosim.scenario import fmu_file
+        from cosim.assembly import fmu_file
 
         entry = _trajectory_entry(name, params)
         return FmuComponent(instance, fmu_file(entry), parameters=entry["parameters"])
@@ -153,6 +153,7 @@ def register() -> None:
     registry.register_section(registry.Section("metrics", lambda: Metrics, apply_metrics,
                                                "signals of the tracking error"))
     registry.register_scenarios(Path(__file__).parent / "scenarios")
+    registry.register_studies(Path(__file__).parent / "studies")
     registry.register_table_fmu(_table_fmu)
 
 

@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from cosim.errors import FmuError, ScenarioError
-from cosim.scenario import Scenario, build_master, fmu_error_in_scenario
+from cosim.scenario import Scenario
+from cosim.assembly import build_master, fmu_error_in_scenario
 from cosim.limits import WORKER_TIMEOUT
 
 if TYPE_CHECKING:

@@ -55,7 +55,7 @@ def wind_series(scenario, speeds=(1.0, 3.0, 5.0)) -> dict[float, np.ndarray]:
     instance, :class:`cosim.fmu_component.FmuComponent`, the tool's one FMU
     lifecycle, reset between speeds)."""
     from cosim.fmu_component import FmuComponent
-    from cosim.scenario import fmu_file
+    from cosim.assembly import fmu_file
 
     name = scenario.sections["wind"]["fmu"]
     spec = scenario.fmus[name]

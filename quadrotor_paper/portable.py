@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from cosim import registry
 from cosim.registry import BuildContext
-from cosim.scenario import Scenario, fmu_file, parse_scenario
+from cosim.scenario import Scenario, parse_scenario
+from cosim.assembly import fmu_file
 
 __all__ = ["all_fmu"]
 

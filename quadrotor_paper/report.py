@@ -23,7 +23,7 @@ from cosim import registry
 from cosim.limits import WORKER_TIMEOUT
 from cosim.files import read_toml
 from cosim.scenario import load_scenario
-from cosim.study import Study, parse_study
+from cosim.study import Study, parse_study, study_path
 from cosim.study_run import write_json
 from fnn_controller.variants import variant, variant_names
 
@@ -35,9 +35,8 @@ from .options import OPTION_SEEDS, OPTIONS, variant_case
 from .progress import progress_bar
 from .tables import DEVIATION_LIMIT, WIND_KEY, deviations, table2_markdown, table3_markdown
 
-__all__ = ["STUDIES", "table_study", "table2", "table3", "figures", "reproduce"]
+__all__ = ["table_study", "table2", "table3", "figures", "reproduce"]
 
-STUDIES = Path(__file__).parent / "studies"
 
 
 def table_study(number: int, *, scenario: str | None = None, seeds: int | None = None,
@@ -52,7 +51,7 @@ def table_study(number: int, *, scenario: str | None = None, seeds: int | None =
     :data:`OPTION_SEEDS`). With no argument it is the study file's, run for
     run (``fnn-cosim sweep table2`` runs the same runs). Every value is
     checked as the study file's are (a bad wind speed names its key)."""
-    path = STUDIES / f"table{number}.toml"
+    path = study_path(f"table{number}")
     raw = read_toml(path, "study")
     base = None
     if scenario is not None or duration is not None or overrides:

@@ -28,7 +28,8 @@ def scenario_instance(scenario_name: str | Path, instance: str | None, fit, over
     FMU instance ``instance`` (default: the one FMU that has every name of
     ``fit``)."""
     from ..connection import parse_connections
-    from ..scenario import build_master, load_scenario
+    from ..scenario import load_scenario
+    from ..assembly import build_master
 
     scenario = load_scenario(scenario_name, overrides)
     with build_master(scenario) as master:

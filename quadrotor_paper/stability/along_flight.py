@@ -49,7 +49,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from cosim.scenario import Scenario, build_master
+from cosim.scenario import Scenario
+from cosim.assembly import build_master
 from fnn_controller.variants import variant_names
 
 from ..controller_component import controller_settings

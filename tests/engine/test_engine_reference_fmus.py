@@ -303,7 +303,8 @@ def test_an_archive_keeps_how_the_master_runs_an_fmu(tmp_path):
     """An exported archive carries each FMU's interface, solver and start
     values (SSP 1.0 has no place for them: this engine's annotation), and
     the archive read back flies the same run."""
-    from cosim.scenario import build_master, parse_scenario
+    from cosim.scenario import parse_scenario
+    from cosim.assembly import build_master
     from cosim.ssp import load_ssp
     from cosim.ssp_export import export_ssp
 

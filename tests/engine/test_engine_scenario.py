@@ -15,7 +15,8 @@ import pytest
 import cosim
 import toy_models
 from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError, ScenarioError
-from cosim.scenario import build_master, fmu_error_in_scenario, load_scenario, parse_scenario
+from cosim.scenario import load_scenario, parse_scenario
+from cosim.assembly import build_master, fmu_error_in_scenario
 from toy_models import BUILDS, Constant, Gain, PController, Step, lag_fmu2, lag_step  # noqa: F401
 
 TOL = 1e-9

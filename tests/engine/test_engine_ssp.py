@@ -24,7 +24,8 @@ from cosim.connection import parse_connections
 from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
-from cosim.scenario import apply_overrides, build_master, parse_scenario
+from cosim.scenario import apply_overrides, parse_scenario
+from cosim.assembly import build_master
 from cosim.ssp import (COSIM_ANNOTATION, COSIM_NAMESPACE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, load_ssp,
                        ssd_schema_errors)
 from cosim.ssp_export import export_ssp

@@ -31,7 +31,8 @@ from cosim.component import Port, PythonComponent
 from cosim.connection import Connection, Endpoint, parse_connection
 from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.fmu_component import FmuComponent
-from cosim.scenario import build_master, parse_scenario
+from cosim.scenario import parse_scenario
+from cosim.assembly import build_master
 from tests.strict_json import read_summary
 
 ROOT = Path(__file__).resolve().parents[2]

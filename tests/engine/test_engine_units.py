@@ -19,7 +19,8 @@ from cosim.errors import ConnectionCheckError, ScenarioError
 from cosim.fmu_component import FmuComponent
 from cosim.fmu_description import fmu_ports
 from cosim.master import Master
-from cosim.scenario import build_master, parse_scenario
+from cosim.scenario import parse_scenario
+from cosim.assembly import build_master
 from cosim.units import BASE_UNITS, Unit, conversion, definitions, parse, unit_of
 from toy_models import LAG_K, LAG_TAU, Constant, Probe, lag_fmu_path, lag_step
 

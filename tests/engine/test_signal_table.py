@@ -14,7 +14,8 @@ import pytest
 
 from cosim.errors import ScenarioError
 from cosim.registry import table_fmu
-from cosim.scenario import build_master, parse_scenario
+from cosim.scenario import parse_scenario
+from cosim.assembly import build_master
 from cosim.table import SignalTable, check_times, load_table, split_unit
 
 from tests.engine.test_engine_types import REFERENCE, fmu

@@ -321,7 +321,8 @@ def fmi2_circles():
 
 
 def _fly_circles(overrides):
-    from cosim.scenario import build_master, load_scenario
+    from cosim.scenario import load_scenario
+    from cosim.assembly import build_master
 
     scenario = load_scenario("circles", overrides)
     with build_master(scenario) as master:
@@ -360,7 +361,8 @@ def test_a_clocked_controller_is_snapshotted_and_resumed_like_any_fmu(interface)
     """A snapshot taken at a tick (the clocked FMU in Event Mode there) leaves
     the run as it was, and a run resumed from it continues the run: the
     first row exactly, the rest to round-off of the resumed time grid."""
-    from cosim.scenario import build_master, load_scenario
+    from cosim.scenario import load_scenario
+    from cosim.assembly import build_master
 
     scenario = load_scenario("circles", {"controller.fmi_version": 3, "controller.interface": interface,
                                          "simulation.duration": 5.0})

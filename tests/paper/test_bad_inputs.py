@@ -402,7 +402,8 @@ def test_an_archive_saves_its_controllers_learned_state(archive, sandbox, capsys
 
 
 def test_save_learned_refuses_before_the_run_a_controller_that_is_none_of_ours():
-    from cosim.scenario import build_master, load_scenario
+    from cosim.scenario import load_scenario
+    from cosim.assembly import build_master
     from quadrotor_paper.learned import learned_variant
 
     sc = load_scenario("circles", {"simulation.duration": 0.1})
@@ -438,7 +439,8 @@ def test_an_archive_takes_no_load_learned(archive, sandbox, capsys):
 # ---- the engine's own API ------------------------------------------------------------------------
 
 def test_a_seed_beyond_2_53_is_refused_by_the_master_whatever_the_form():
-    from cosim.scenario import build_master, load_scenario
+    from cosim.scenario import load_scenario
+    from cosim.assembly import build_master
 
     sc = load_scenario("circles", {"simulation.duration": 0.1, "controller.form": "python"})
     with build_master(sc) as master:

@@ -8,7 +8,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from cosim.scenario import build_master, load_scenario
+from cosim.scenario import load_scenario
+from cosim.assembly import build_master
 from cosim.ssp import SSD_NAME, load_ssp, ssd_schema_errors
 from quadrotor_paper.experiments import estimation_signals, lean_signals, study_metric_names
 from quadrotor_paper.metrics import nees, settled, wrap_angle

@@ -16,7 +16,8 @@ from pydantic import Field, create_model
 
 from cosim import registry
 from cosim.component import PythonComponent, ports
-from cosim.scenario import build_master, load_scenario, parse_scenario
+from cosim.scenario import load_scenario, parse_scenario
+from cosim.assembly import build_master
 from cosim.schema import Number, Table
 from fmu_models.models.estimator import ESTIMATOR, chi2_quantile_even
 

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.scenario import build_master, load_scenario
+from cosim.scenario import load_scenario
+from cosim.assembly import build_master
 from fnn_controller.split import outer_identifier
 
 REALISM_OFF = {

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from cosim.recorder import read_results
-from cosim.scenario import build_master, load_scenario
+from cosim.scenario import load_scenario
+from cosim.assembly import build_master
 from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 from quadrotor_paper.experiments import run_once
 from quadrotor_paper.run_metrics import RunMetrics, from_results

@@ -18,7 +18,8 @@ from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.recorder import read_results, sidecar_path
-from cosim.scenario import build_master, load_scenario
+from cosim.scenario import load_scenario
+from cosim.assembly import build_master
 from fmu_models.export.build import cached_fmu
 from fmu_models.catalog import MODELS
 from fmu_models.models.quadrotor import hover_rotor_speed

@@ -9,7 +9,8 @@ import pytest
 
 from cosim import registry
 from cosim.errors import ConnectionCheckError, ScenarioError
-from cosim.scenario import apply_overrides, build_master, load_scenario, parse_scenario, shipped_scenarios
+from cosim.scenario import apply_overrides, load_scenario, parse_scenario, shipped_scenarios
+from cosim.assembly import build_master
 
 
 def _raw(name="circles"):

@@ -16,7 +16,6 @@ import pytest
 from cosim.dask_runner import MasterCache, execute
 from cosim.scenario import apply_overrides, parse_scenario
 from cosim.study import load_study, runs
-from quadrotor_paper.cli import _study_path
 from quadrotor_paper.experiments import lean_signals, measure, study_metrics
 
 REFERENCE = json.loads((Path(__file__).parent / "data" / "reference_runs.json").read_text())["studies"]
@@ -40,7 +39,7 @@ def _planned(study, indices):
 
 @pytest.mark.parametrize("name", sorted(REFERENCE))
 def test_the_first_and_last_run_of_every_shipped_study_are_unchanged(name):
-    study = load_study(_study_path(name))
+    study = load_study(name)
     assert len(REFERENCE[name]["runs"]) == sum(1 for _ in runs(study))
     base = parse_scenario(apply_overrides(study.scenario.raw, {"record.signals": lean_signals(study.scenario)}),
                           source=study.scenario.source)
@@ -56,7 +55,7 @@ def test_the_first_and_last_run_of_every_shipped_study_are_unchanged(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(REFERENCE))
 def test_every_run_of_every_shipped_study_is_unchanged(name):
-    study = load_study(_study_path(name))
+    study = load_study(name)
     _planned(study, set(range(len(REFERENCE[name]["runs"]))))
     result = measure(study, workers=2)
     assert len(result.rows) == len(REFERENCE[name]["runs"])

@@ -13,7 +13,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from cosim.scenario import build_master, load_scenario, parse_scenario
+from cosim.scenario import load_scenario, parse_scenario
+from cosim.assembly import build_master
 from cosim.ssp import load_ssp
 
 STATES = [f"Quadrotor.{s}" for s in ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")]
