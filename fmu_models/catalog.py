@@ -26,6 +26,7 @@ _WHERE: dict[str, tuple[str, str]] = {
     "VelocityLink3": ("fmu_models.models.sensors", "VELOCITY_LINK_3"),
     "GNSS6": ("fmu_models.models.sensors", "GNSS_6"),
     "IMU": ("fmu_models.models.imu", "IMU"),
+    "Magnetometer3": ("fmu_models.models.magnetometer", "MAGNETOMETER"),
     "Estimator": ("fmu_models.models.estimator", "ESTIMATOR"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
