@@ -29,6 +29,7 @@ _WHERE: dict[str, tuple[str, str]] = {
     "IMU": ("fmu_models.models.imu", "IMU"),
     "Magnetometer3": ("fmu_models.models.magnetometer", "MAGNETOMETER"),
     "Estimator": ("fmu_models.models.estimator", "ESTIMATOR"),
+    "EstimatorMag": ("fmu_models.models.estimator", "ESTIMATOR_MAG"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 

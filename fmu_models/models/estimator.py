@@ -37,6 +37,8 @@ say so by their stamps, and the output is brought forward to t_n.
 """
 from __future__ import annotations
 
+from functools import partial
+
 from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
@@ -46,7 +48,7 @@ from .magnetometer import MAGNETOMETER_DEFAULTS, body_field
 from .quadrotor import DEFAULTS, aerodynamic_drag, euler_rate_matrix, rotation_matrix
 from .sensors import DT_DEFAULT
 
-__all__ = ["ESTIMATOR", "ESTIMATED_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
+__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATED_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
            "chi2_quantile_even", "chi2_quantile_odd", "magnetometer_measurement",
            "body_drag_acceleration", "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
 
@@ -152,7 +154,7 @@ def _sequential(xs, P, measure, measured, variances):
     return xs, P, nis
 
 
-def _variables():
+def _variables(magnetometer: bool):
     variables = [
         *(input_(f"gyro_{i}", "rad/s", f"IMU angular rate about {i}_B", 0.0) for i in AXES),
         input_("acc_x", "m/s2", "IMU specific force along x_B", 0.0),
@@ -239,7 +241,9 @@ def _variables():
           for name, unit in zip(ESTIMATED_STATES, _UNITS)),
         *(discrete(_upper(i, j), "1", "posterior covariance entry at the previous step")
           for i in range(_N) for j in range(i, _N)),
-        # the magnetometer (E24), appended so that the variables above keep their value references
+    ]
+    if magnetometer:  # the magnetometer (E24), appended so that the variables above keep their value references
+        variables += [
         *(input_(f"mag_{i}", "T", f"magnetometer's field along {i}_B (sampled with the IMU)", 0.0) for i in AXES),
         input_("fresh_mag", "1", "1 when the magnetometer's sample is to be fused (with each new IMU sample); "
                                  "0 (its start, unconnected): no magnetometer", 0.0),
@@ -251,7 +255,7 @@ def _variables():
                                "a sample fused this step)"),
         output("outliers_mag", "1", "magnetometer samples refused by the gate since the start (E19)"),
         discrete("total_outliers_mag", "1", "outliers of the magnetometer so far"),
-    ]
+        ]
     return tuple(variables)
 
 
@@ -370,7 +374,7 @@ def _gated(accept, corrected, before):
     return tuple(ca.if_else(accept, c, b) for c, b in zip(corrected, before))
 
 
-def _update(t, v):
+def _update(t, v, magnetometer: bool = False):
     xs, P = _state(v)
     gyro = ca.vertcat(*(v[f"gyro_{i}"] for i in AXES))
     acc = ca.vertcat(*(v[f"acc_{i}"] for i in AXES))
@@ -405,13 +409,14 @@ def _update(t, v):
     # E24: the magnetometer, sampled with the IMU (same board, same time stamp), once per new IMU sample,
     # gated; no restart after refusals: a refused field is a disturbed one (steel, currents), not a wrong
     # heading, and the heading coasts on the gyro until the field is clean again
-    mag = ca.vertcat(*(v[f"mag_{i}"] for i in AXES))
-    r_mag = v["sigma_mag"] ** 2
-    corrected = _sequential(xs, P, lambda s: magnetometer_measurement(s, v), mag, [r_mag] * 3)
-    nis_mag = corrected[2]
-    new_mag = ca.logic_and(new_imu, v["fresh_mag"] > 0.5)
-    refused_mag = ca.logic_and(new_mag, nis_mag > chi2_quantile_odd(3, level))
-    xs, P = _gated(ca.logic_and(new_mag, ca.logic_not(refused_mag)), corrected[:2], (xs, P))
+    if magnetometer:
+        mag = ca.vertcat(*(v[f"mag_{i}"] for i in AXES))
+        r_mag = v["sigma_mag"] ** 2
+        corrected = _sequential(xs, P, lambda s: magnetometer_measurement(s, v), mag, [r_mag] * 3)
+        nis_mag = corrected[2]
+        new_mag = ca.logic_and(new_imu, v["fresh_mag"] > 0.5)
+        refused_mag = ca.logic_and(new_mag, nis_mag > chi2_quantile_odd(3, level))
+        xs, P = _gated(ca.logic_and(new_mag, ca.logic_not(refused_mag)), corrected[:2], (xs, P))
 
     # E10: the fix, when fresh and newer than the last one seen, fused at its own time t_fix: compared
     # with the state retrodicted over tau = t_filter - t_fix through the process model (E20), gated
@@ -447,17 +452,22 @@ def _update(t, v):
     trend = change * h_out / v["dt"]
     xs_out, P_out = _predict(xs, P, gyro + trend[0:3], acc + trend[3:6], v, h_out)
 
-    events = {"outliers_mag": refused_mag, "outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
+    counted = _COUNTS + (("outliers_mag",) if magnetometer else ())
+    events = {"outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
               "resets_acc": reset_acc}
-    counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in _COUNTS + ("outliers_mag",)}
+    if magnetometer:
+        events["outliers_mag"] = refused_mag
+    counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in counted}
     out = {name: xs_out[k] for k, name in enumerate(ESTIMATED_STATES)}
     # the body rate at t_out: the average over the last step describes its middle, half a step earlier
     rates = gyro + change[0:3] * (h_out / v["dt"] + 0.5) - xs_out[9:12]
     out.update({"p": rates[0], "q": rates[1], "r": rates[2],
-                "nis_acc": ca.if_else(new_imu, nis_acc, 0.0), "nis_mag": ca.if_else(new_mag, nis_mag, 0.0), "nis_fix": ca.if_else(new_fix, nis_fix, 0.0),
+                "nis_acc": ca.if_else(new_imu, nis_acc, 0.0), "nis_fix": ca.if_else(new_fix, nis_fix, 0.0),
                 "fix_used": ca.if_else(used, 1.0, 0.0), "t_estimate": t_out, "t_filter": t_filter,
                 "fix_age": ca.if_else(new_fix, tau, 0.0), **counts})
     out.update({name: P_out[i, j] for name, i, j in covariance_names()})
+    if magnetometer:
+        out["nis_mag"] = ca.if_else(new_mag, nis_mag, 0.0)
     return out, {"started": 1.0, "t_posterior": t_filter, "t_last_fix": ca.if_else(new_fix, t_fix, v["t_last_fix"]),
                  "refusal_run_fix": run_fix, "refusal_run_acc": run_acc,
                  **{f"previous_{name}": ca.if_else(new_imu, v[name], v[f"previous_{name}"]) for name in _IMU}, **{f"total_{c}": n for c, n in counts.items()},
@@ -467,11 +477,12 @@ def _update(t, v):
 _NEVER = -1.0e300  # s: the time of the last fix before any: every fix's stamp is later
 
 
-def _initial(v, r):
+def _initial(v, r, magnetometer: bool = False):
     xs = ca.vertcat(*(v[f"{name}_0"] for name in ESTIMATED_STATES))
     sigma = [v[_P0[ESTIMATED_STATES[3 * (k // 3)]]] for k in range(_N - 1)] + [v["P0_wind_z"]]
     return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
-            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in _COUNTS + ("outliers_mag",)}, **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
+            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in _COUNTS + (("outliers_mag",) if magnetometer else ())},
+            **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
 
 
 ESTIMATOR = FmuModel(
@@ -480,6 +491,17 @@ ESTIMATOR = FmuModel(
                 "and the wind with the IMU, corrects with the drag model's accelerometer every step and with a "
                 "GNSS or motion-capture fix when it is fresh; outputs named like the plant's states, the "
                 "covariance and the NIS; z axis down",
-    variables=_variables(),
+    variables=_variables(magnetometer=False),
     sampled=Sampled(update=_update, initial=_initial, n_random=0, seed=None, sample_period="dt"),
+)
+
+# The same filter with the magnetometer's correction (E24): a model of its own, so that the Estimator of a
+# mission without a magnetometer keeps no input unconnected and flies bit for bit as before (docs/estimation.md)
+ESTIMATOR_MAG = FmuModel(
+    identifier="EstimatorMag",
+    description="the Estimator's extended Kalman filter (docs/estimation.md) also correcting its attitude with a "
+                "three-axis magnetometer sampled with the IMU (E24), gated; z axis down",
+    variables=_variables(magnetometer=True),
+    sampled=Sampled(update=partial(_update, magnetometer=True), initial=partial(_initial, magnetometer=True),
+                    n_random=0, seed=None, sample_period="dt"),
 )

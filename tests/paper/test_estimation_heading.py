@@ -7,14 +7,31 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fmu_models.models.estimator import ESTIMATOR, chi2_quantile_odd
+from fmu_models.models.estimator import ESTIMATOR_MAG, chi2_quantile_odd
 from fmu_models.models.magnetometer import MAGNETOMETER_DEFAULTS
 from fmu_models.models.quadrotor import rotation_matrix
 
-from test_estimation_gating import DT, G, _col, _run
+from test_estimation_gating import DT, FIX_SIGMA, G
 
 FIELD = np.array([MAGNETOMETER_DEFAULTS[f"field_{d}"] for d in ("north", "east", "down")])
 PSI = 0.15  # rad: the true heading; the filter starts at 0
+OUTPUTS = [v.name for v in ESTIMATOR_MAG.outputs]
+
+
+def _run(inputs, **parameters):
+    """EstimatorMag's outputs, row per step, from its CasADi step function (the FMU's law)."""
+    f = ESTIMATOR_MAG.functions
+    p = ESTIMATOR_MAG.parameter_values(**{"z_0": -10.0, "P0_velocity": 3.0, **FIX_SIGMA, **parameters})
+    z = np.array(f["dinit"](p, [])).ravel()
+    out = []
+    for n, u in enumerate(inputs):
+        y, z = (np.array(a).ravel() for a in f["dstep"](n * DT, u, p, z))
+        out.append(y)
+    return np.array(out)
+
+
+def _col(rows, name):
+    return rows[:, OUTPUTS.index(name)]
 
 
 @pytest.mark.parametrize("k", [3, 5])
@@ -32,12 +49,12 @@ def _hover(n, fresh_mag, disturbed=(), missing=()):
     every 10 steps, the magnetometer's exact field (``fresh_mag``); at the
     steps in ``disturbed`` the field is off by 20 uT on x_B (a steel beam),
     at those in ``missing`` there is no sample."""
-    inputs = [v.name for v in ESTIMATOR.inputs]
+    inputs = [v.name for v in ESTIMATOR_MAG.inputs]
     mag = np.array(rotation_matrix(0.0, 0.0, PSI), float).T @ FIELD
     rows = np.zeros((n, len(inputs)))
     for k in range(n):
         m = mag + (np.array([20e-6, 0, 0]) if k in disturbed else 0.0)
-        rows[k] = ESTIMATOR.input_values(acc_z=-G, z_m=-10.0, fresh=float(k % 10 == 0), t_imu=k * DT, t_fix=k * DT,
+        rows[k] = ESTIMATOR_MAG.input_values(acc_z=-G, z_m=-10.0, fresh=float(k % 10 == 0), t_imu=k * DT, t_fix=k * DT,
                                          mag_x=m[0], mag_y=m[1], mag_z=m[2],
                                          fresh_mag=0.0 if k in missing else fresh_mag)
     return rows
@@ -46,7 +63,7 @@ def _hover(n, fresh_mag, disturbed=(), missing=()):
 def test_a_heading_error_is_corrected_by_the_magnetometer():
     start = {"P0_attitude": 0.2, "sigma_mag": 0.6e-6}  # the start knows it does not know its heading
     with_mag = _run(_hover(500, 1.0), **start)
-    without = _run(_hover(500, 0.0), **start)
+    without = _run(_hover(500, 0.0), **start)  # fresh_mag = 0: the Estimator's filter (no magnetometer)
     assert abs(_col(with_mag, "psi")[-1] - PSI) < 1e-3
     assert np.sqrt(_col(with_mag, "var_psi")[-1]) < 0.01
     # without it, at hover nothing sees the heading: it stays where it started
