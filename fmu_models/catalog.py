@@ -25,8 +25,11 @@ _WHERE: dict[str, tuple[str, str]] = {
     "CommandLink4": ("fmu_models.models.sensors", "COMMAND_LINK_4"),
     "VelocityLink3": ("fmu_models.models.sensors", "VELOCITY_LINK_3"),
     "GNSS6": ("fmu_models.models.sensors", "GNSS_6"),
+    "GNSS6GM": ("fmu_models.models.sensors", "GNSS_6_GM"),
     "IMU": ("fmu_models.models.imu", "IMU"),
+    "Magnetometer3": ("fmu_models.models.magnetometer", "MAGNETOMETER"),
     "Estimator": ("fmu_models.models.estimator", "ESTIMATOR"),
+    "EstimatorMag": ("fmu_models.models.estimator", "ESTIMATOR_MAG"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 

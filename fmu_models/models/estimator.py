@@ -37,17 +37,20 @@ say so by their stamps, and the output is brought forward to t_n.
 """
 from __future__ import annotations
 
+from functools import partial
+
 from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter
 from .estimator_outputs import COUNTS, COVARIANCE_BLOCKS, covariance_output
 from .imu import AXES, IMU_DEFAULTS
+from .magnetometer import MAGNETOMETER_DEFAULTS, body_field
 from .quadrotor import DEFAULTS, aerodynamic_drag, euler_rate_matrix, rotation_matrix
 from .sensors import DT_DEFAULT
 
-__all__ = ["ESTIMATOR", "ESTIMATED_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
-           "chi2_quantile_even",
+__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATED_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
+           "chi2_quantile_even", "chi2_quantile_odd", "magnetometer_measurement",
            "body_drag_acceleration", "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
 
 # The filter's state, in order: the 9 plant states it estimates, then the biases and the wind.
@@ -68,6 +71,7 @@ ESTIMATOR_DEFAULTS = {
     "gate_level": 0.9999,         # chi-square gate: one good measurement in 10^4 refused (E19)
     "reset_after_fix": 5.0,       # fixes refused in a row before position and velocity restart (E21)
     "reset_after_drag": 1.0,      # drag measurements refused in a row before the wind restarts (E21)
+    "sigma_mag": 1.0e-6,          # T: the magnetometer's noise (BMM150, 0.6 uT) and its calibration's residual (E24)
 }
 _IMU = tuple(f"gyro_{i}" for i in AXES) + tuple(f"acc_{i}" for i in AXES)
 _P0 = {"x": "P0_position", "u": "P0_velocity", "phi": "P0_attitude", "gyro_bias_x": "P0_gyro_bias",
@@ -148,7 +152,7 @@ def _sequential(xs, P, measure, measured, variances):
     return xs, P, nis
 
 
-def _variables():
+def _variables(magnetometer: bool):
     variables = [
         *(input_(f"gyro_{i}", "rad/s", f"IMU angular rate about {i}_B", 0.0) for i in AXES),
         input_("acc_x", "m/s2", "IMU specific force along x_B", 0.0),
@@ -236,6 +240,20 @@ def _variables():
         *(discrete(_upper(i, j), "1", "posterior covariance entry at the previous step")
           for i in range(_N) for j in range(i, _N)),
     ]
+    if magnetometer:  # the magnetometer (E24), appended so that the variables above keep their value references
+        variables += [
+        *(input_(f"mag_{i}", "T", f"magnetometer's field along {i}_B (sampled with the IMU)", 0.0) for i in AXES),
+        input_("fresh_mag", "1", "1 when the magnetometer's sample is to be fused (with each new IMU sample); "
+                                 "0 (its start, unconnected): no magnetometer", 0.0),
+        *(parameter(f"field_{d}", "T", f"the site's Earth field the filter assumes, {d} component (NED, E24)",
+                    MAGNETOMETER_DEFAULTS[f"field_{d}"]) for d in ("north", "east", "down")),
+        parameter("sigma_mag", "T", "standard deviation of the magnetometer's error per axis the filter assumes: "
+                  "noise and the calibration's residual offset (E24)", ESTIMATOR_DEFAULTS["sigma_mag"], min=1e-12),
+        output("nis_mag", "1", "normalized innovation squared of the magnetometer (3 degrees of freedom; 0 without "
+                               "a sample fused this step)"),
+        output("outliers_mag", "1", "magnetometer samples refused by the gate since the start (E19)"),
+        discrete("total_outliers_mag", "1", "outliers of the magnetometer so far"),
+        ]
     return tuple(variables)
 
 
@@ -281,6 +299,41 @@ def chi2_quantile_even(k: int, level, iterations: int = 40):
     return x
 
 
+def chi2_quantile_odd(k: int, level, iterations: int = 40):
+    """The ``level`` quantile of the chi-square distribution with an odd number
+    ``k >= 3`` of degrees of freedom (the magnetometer's gate, E19), by
+    Newton's method on its log survival function, closed form for odd k::
+
+        S(x) = erfc(sqrt(x/2)) + exp(-x/2) sum_{1 <= i <= (k-1)/2} (x/2)^(i-1/2) / Gamma(i+1/2)
+
+    (k = 3: ``erfc(sqrt(x/2)) + sqrt(2x/pi) exp(-x/2)``). The density is
+    log-concave for k >= 2, so, as in :func:`chi2_quantile_even`, the
+    iterates reach the root from above after the first step; ``erfc`` is
+    ``1 - erf`` (CasADi has no erfc), exact to 1e-12 relative for levels up
+    to 1 - 1e-6. Numbers or CasADi expressions."""
+    m = (k - 1) // 2
+    if m < 1 or 2 * m + 1 != k:
+        raise ValueError(f"chi2_quantile_odd: k = {k} is not an odd integer >= 3")
+    target = ca.log(1.0 - level)
+    x = 0 * level + float(k)
+    for _ in range(iterations):
+        term = ca.sqrt(x / 2) / ca.sqrt(ca.pi) * 2  # (x/2)^(1/2) / Gamma(3/2)
+        terms = term
+        for i in range(1, m):
+            term = term * (x / 2) / (i + 0.5)
+            terms = terms + term
+        survival = 1.0 - ca.erf(ca.sqrt(x / 2)) + ca.exp(-x / 2) * terms
+        slope = -ca.exp(-x / 2) * term / 2 / survival  # d log S / dx = -density / S, density = e^(-x/2) term_m / 2
+        x = ca.fmax(x - (ca.log(survival) - target) / slope, 1e-9)
+    return x
+
+
+def magnetometer_measurement(xs, v):
+    """The magnetometer predicted from the state, eq. E24 less its noise: the
+    site's field rotated into the body frame by the estimated attitude."""
+    return body_field(xs[6:9], ca.vertcat(v["field_north"], v["field_east"], v["field_down"]))
+
+
 def _predict(xs, P, gyro, acc, v, h):
     """The state and covariance ``h`` seconds later with the IMU's averages
     held (E7-E8, E13): explicit Euler over h, the covariance by F and G
@@ -319,7 +372,7 @@ def _gated(accept, corrected, before):
     return tuple(ca.if_else(accept, c, b) for c, b in zip(corrected, before))
 
 
-def _update(t, v):
+def _update(t, v, magnetometer: bool = False):
     xs, P = _state(v)
     gyro = ca.vertcat(*(v[f"gyro_{i}"] for i in AXES))
     acc = ca.vertcat(*(v[f"acc_{i}"] for i in AXES))
@@ -350,6 +403,18 @@ def _update(t, v):
     restarted = _sequential(xs, P_wind, lambda s: drag_measurement(s, v), acc[0:2], [r_acc, r_acc])
     xs, P = _gated(reset_acc, restarted[:2], (xs, P))
     run_acc = ca.if_else(reset_acc, 0.0, run_acc)
+
+    # E24: the magnetometer, sampled with the IMU (same board, same time stamp), once per new IMU sample,
+    # gated; no restart after refusals: a refused field is a disturbed one (steel, currents), not a wrong
+    # heading, and the heading coasts on the gyro until the field is clean again
+    if magnetometer:
+        mag = ca.vertcat(*(v[f"mag_{i}"] for i in AXES))
+        r_mag = v["sigma_mag"] ** 2
+        corrected = _sequential(xs, P, lambda s: magnetometer_measurement(s, v), mag, [r_mag] * 3)
+        nis_mag = corrected[2]
+        new_mag = ca.logic_and(new_imu, v["fresh_mag"] > 0.5)
+        refused_mag = ca.logic_and(new_mag, nis_mag > chi2_quantile_odd(3, level))
+        xs, P = _gated(ca.logic_and(new_mag, ca.logic_not(refused_mag)), corrected[:2], (xs, P))
 
     # E10: the fix, when fresh and newer than the last one seen, fused at its own time t_fix: compared
     # with the state retrodicted over tau = t_filter - t_fix through the process model (E20), gated
@@ -385,9 +450,12 @@ def _update(t, v):
     trend = change * h_out / v["dt"]
     xs_out, P_out = _predict(xs, P, gyro + trend[0:3], acc + trend[3:6], v, h_out)
 
+    counted = COUNTS + (("outliers_mag",) if magnetometer else ())
     events = {"outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
               "resets_acc": reset_acc}
-    counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in COUNTS}
+    if magnetometer:
+        events["outliers_mag"] = refused_mag
+    counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in counted}
     out = {name: xs_out[k] for k, name in enumerate(ESTIMATED_STATES)}
     # the body rate at t_out: the average over the last step describes its middle, half a step earlier
     rates = gyro + change[0:3] * (h_out / v["dt"] + 0.5) - xs_out[9:12]
@@ -396,6 +464,8 @@ def _update(t, v):
                 "fix_used": ca.if_else(used, 1.0, 0.0), "t_estimate": t_out, "t_filter": t_filter,
                 "fix_age": ca.if_else(new_fix, tau, 0.0), **counts})
     out.update({name: P_out[i, j] for name, i, j in covariance_names()})
+    if magnetometer:
+        out["nis_mag"] = ca.if_else(new_mag, nis_mag, 0.0)
     return out, {"started": 1.0, "t_posterior": t_filter, "t_last_fix": ca.if_else(new_fix, t_fix, v["t_last_fix"]),
                  "refusal_run_fix": run_fix, "refusal_run_acc": run_acc,
                  **{f"previous_{name}": ca.if_else(new_imu, v[name], v[f"previous_{name}"]) for name in _IMU}, **{f"total_{c}": n for c, n in counts.items()},
@@ -405,11 +475,12 @@ def _update(t, v):
 _NEVER = -1.0e300  # s: the time of the last fix before any: every fix's stamp is later
 
 
-def _initial(v, r):
+def _initial(v, r, magnetometer: bool = False):
     xs = ca.vertcat(*(v[f"{name}_0"] for name in ESTIMATED_STATES))
     sigma = [v[_P0[ESTIMATED_STATES[3 * (k // 3)]]] for k in range(_N - 1)] + [v["P0_wind_z"]]
     return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
-            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS}, **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
+            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS + (("outliers_mag",) if magnetometer else ())},
+            **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
 
 
 ESTIMATOR = FmuModel(
@@ -418,6 +489,17 @@ ESTIMATOR = FmuModel(
                 "and the wind with the IMU, corrects with the drag model's accelerometer every step and with a "
                 "GNSS or motion-capture fix when it is fresh; outputs named like the plant's states, the "
                 "covariance and the NIS; z axis down",
-    variables=_variables(),
+    variables=_variables(magnetometer=False),
     sampled=Sampled(update=_update, initial=_initial, n_random=0, seed=None, sample_period="dt"),
+)
+
+# The same filter with the magnetometer's correction (E24): a model of its own, so that the Estimator of a
+# mission without a magnetometer keeps no input unconnected and flies bit for bit as before (docs/estimation.md)
+ESTIMATOR_MAG = FmuModel(
+    identifier="EstimatorMag",
+    description="the Estimator's extended Kalman filter (docs/estimation.md) also correcting its attitude with a "
+                "three-axis magnetometer sampled with the IMU (E24), gated; z axis down",
+    variables=_variables(magnetometer=True),
+    sampled=Sampled(update=partial(_update, magnetometer=True), initial=partial(_initial, magnetometer=True),
+                    n_random=0, seed=None, sample_period="dt"),
 )

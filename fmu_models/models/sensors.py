@@ -15,7 +15,13 @@ channels; four members are shipped (``docs/sensors.md``):
   outputs ``v_ref_x_rx ..``; a link: packets can be lost;
 * ``GNSS6``: a GNSS receiver, plant -> estimator. Inputs ``x y z u v w``,
   outputs ``x_m .. w_m``, ``fresh`` (1 on the step a new fix arrives,
-  ``fresh=True`` below; docs/estimation.md).
+  ``fresh=True`` below; docs/estimation.md);
+* ``GNSS6GM``: ``GNSS6`` whose errors are also correlated in time, a
+  first-order Gauss-Markov error per channel (``correlated=True`` below; E25
+  of docs/estimation.md)::
+
+    e_{n+1} = a e_n + sigma_gm sqrt(1 - a^2) w_n,  a = exp(-dt / gm_tau),  e_0 ~ N(0, sigma_gm^2)
+    m_n     = u_n + sigma_i w_n + bias_i + e_n
 
 Per communication step n (``t_n = n dt``), channel i, with ``u`` the input::
 
@@ -62,7 +68,7 @@ from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter, seed_parameter
 from .quadrotor import QUADROTOR, STATE_NAMES
 
-__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "VELOCITY_LINK_3", "GNSS_6", "DELAY_MAX",
+__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "VELOCITY_LINK_3", "GNSS_6", "GNSS_6_GM", "DELAY_MAX",
            "SAMPLE_RATE_MAX",
            "hold_period", "hold_steps", "gaussian"]
 
@@ -97,7 +103,8 @@ def _tap(line, delay):
 
 
 def sensors_model(identifier: str, description: str, channels: Sequence[tuple[str, str, str, float]],
-                  suffix: str, delay_max: int = DELAY_MAX, loss: bool = False, fresh: bool = False) -> FmuModel:
+                  suffix: str, delay_max: int = DELAY_MAX, loss: bool = False, fresh: bool = False,
+                  correlated: bool = False) -> FmuModel:
     """A sensor/link model with one channel per ``(name, unit, description,
     input start)``: input ``name``, output ``name + suffix``, parameters
     ``sigma_<name>``, ``bias_<name>`` and the shared ``sample_rate``,
@@ -115,7 +122,14 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
     output holds an old one; an estimator corrects only on it; and the output
     ``t_sample``, the time the delivered sample was taken (through the same
     hold and delay line), at which an estimator fuses it. The model without
-    it is exactly the one before."""
+    it is exactly the one before.
+
+    ``correlated=True`` (with ``fresh``) adds to each channel a first-order
+    Gauss-Markov error (docs/estimation.md, E25): the parameters ``gm_tau``
+    and ``gm_sigma_<name>``, 2N more uniform numbers per step after the
+    channels' 2N; the model without it is exactly the one before."""
+    if correlated and not fresh:
+        raise ValueError(f"sensors_model {identifier}: correlated=True needs fresh=True (a receiver's model)")
     names = [c[0] for c in channels]
     units = {c[0]: c[1] for c in channels}
     delivered = "noise, bias, hold, delay, loss" if loss else "noise, bias, hold, delay"
@@ -163,7 +177,15 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
             *(discrete(f"t_sample_delay_{j}", "s", f"time of the sample {j} step(s) ago")
               for j in range(1, delay_max + 1)),
         ]
+    if correlated:  # appended, as the fresh flag's: the errors correlated in time (issue 29), E25
+        variables += [
+            parameter("gm_tau", "s", "correlation time of the Gauss-Markov error (E25)", 60.0, min=1e-6),
+            *(parameter(f"gm_sigma_{name}", units[name], f"stationary standard deviation of the Gauss-Markov "
+                        f"error on {name} (E25); 0: none", 0.0, min=0.0) for name in names),
+            *(discrete(f"gm_{name}", units[name], f"the Gauss-Markov error on {name} this step") for name in names),
+        ]
     n_channel_random = 2 * len(names)  # the noise's numbers per step; the loss draw, if any, comes after
+    # a correlated model draws 2N more after the channels' (the Gauss-Markov errors', E25)
 
     def update(t, v, rs):
         n_hold = hold_period(v["sample_rate"], v["dt"])
@@ -188,8 +210,21 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
             out["t_sample"] = _tap(stamps, delay)
             nxt["held_t_sample"] = stamp
             nxt.update({f"t_sample_delay_{j}": stamps[j - 1] for j in range(1, delay_max + 1)})
+        if correlated:
+            # E25: e_{n+1} = a e_n + sigma_gm sqrt(1 - a^2) w_n, a = exp(-dt / tau); e_0 = sigma_gm w'_0, stationary,
+            # w'_0 the Box-Muller pair's other (sine) normal of the first step's numbers, independent of w_0
+            decay = ca.exp(-v["dt"] / v["gm_tau"])
+            gm = {}
+            for i, name in enumerate(names):
+                r1, r2 = rs[n_channel_random + 2 * i], rs[n_channel_random + 2 * i + 1]
+                w = gaussian(r1, r2)
+                w_start = ca.sqrt(-2.0 * ca.log(1.0 - r1)) * ca.sin(2.0 * math.pi * r2)
+                gm[name] = ca.if_else(started > 0, v[f"gm_{name}"], v[f"gm_sigma_{name}"] * w_start)
+                nxt[f"gm_{name}"] = decay * gm[name] + v[f"gm_sigma_{name}"] * ca.sqrt(1 - decay ** 2) * w
         for i, name in enumerate(names):
             measured = v[name] + v[f"sigma_{name}"] * gaussian(rs[2 * i], rs[2 * i + 1]) + v[f"bias_{name}"]
+            if correlated:
+                measured = measured + gm[name]
             s = ca.if_else(sample, measured, v[f"held_{name}"])
             line = [s] + [ca.if_else(started > 0, v[f"{name}_delay_{j}"], s) for j in range(1, delay_max + 1)]
             y = line[0]  # one tap selected by the integer delay_steps
@@ -216,6 +251,8 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         if fresh:
             z0.update({f"fresh_delay_{j}": 0.0 for j in range(1, delay_max + 1)})
             z0.update({"held_t_sample": 0.0, **{f"t_sample_delay_{j}": 0.0 for j in range(1, delay_max + 1)}})
+        if correlated:
+            z0.update({f"gm_{name}": 0.0 for name in names})
         return z0
 
     return FmuModel(
@@ -223,7 +260,7 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
         description=description,
         variables=tuple(variables),
         sampled=Sampled(update=update, initial=initial, n_random=0, seed="seed", sample_period="dt",
-                        n_random_step=n_channel_random + (1 if loss else 0)),
+                        n_random_step=n_channel_random + (1 if loss else 0) + (n_channel_random if correlated else 0)),
     )
 
 
@@ -264,4 +301,15 @@ GNSS_6 = sensors_model(
     [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES[:6]],
     suffix="_m",
     fresh=True,
+)
+
+GNSS_6_GM = sensors_model(
+    "GNSS6GM",
+    "GNSS receiver (plant -> estimator) whose errors are correlated in time: GNSS6's white noise, hold, "
+    "latency and fresh flag, plus a first-order Gauss-Markov error per channel (gm_tau, gm_sigma_*); seeded; "
+    "z axis down",
+    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES[:6]],
+    suffix="_m",
+    fresh=True,
+    correlated=True,
 )

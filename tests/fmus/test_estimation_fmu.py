@@ -12,7 +12,7 @@ import pytest
 from tests.fmu_validation import validate_fmu
 
 from fmu_models.export.build import cached_fmu
-from fmu_models.models.estimator import ESTIMATOR, ESTIMATED_STATES
+from fmu_models.models.estimator import ESTIMATOR, ESTIMATOR_MAG, ESTIMATED_STATES
 from fmu_models.models.imu import IMU
 from fmu_models.models.sensors import GNSS_6
 
@@ -32,7 +32,7 @@ def _outputs(model, rows, names):
     return rows[:, [index.index(n) for n in names]]
 
 
-@pytest.mark.parametrize("model", [IMU, GNSS_6, ESTIMATOR], ids=lambda m: m.identifier)
+@pytest.mark.parametrize("model", [IMU, GNSS_6, ESTIMATOR, ESTIMATOR_MAG], ids=lambda m: m.identifier)
 def test_builds_and_validates(model):
     assert validate_fmu(str(cached_fmu(model, 2))) == []
 

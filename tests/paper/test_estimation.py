@@ -50,7 +50,7 @@ def test_the_estimated_scenarios_name_their_estimator_and_record_what_it_needs()
 
 @pytest.mark.parametrize("name, parts", [
     ("circles_estimated", ("IMU", "GNSS", "Estimator", "controller", "reference")),
-    ("figure8_lab_estimated", ("IMU", "Mocap", "Estimator", "Ground", "WiFi", "Onboard", "reference")),
+    ("figure8_lab_estimated", ("IMU", "Magnetometer", "Mocap", "Estimator", "Ground", "WiFi", "Onboard", "reference")),
 ])
 def test_the_estimated_missions_as_fmus_fly_in_libcosim_as_in_our_master(tmp_path, name, parts):
     """``fnn-cosim export-ssp``: the plant, the gust, the sensors, the

@@ -1,0 +1,100 @@
+"""The heading (issue 29, docs/estimation.md "Heading", E24): the
+magnetometer's gate quantile for 3 degrees of freedom, a heading error
+corrected by the magnetometer (and not without it), a disturbed field
+refused and counted."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fmu_models.models.estimator import ESTIMATOR_MAG, chi2_quantile_odd
+from fmu_models.models.magnetometer import MAGNETOMETER_DEFAULTS
+from fmu_models.models.quadrotor import rotation_matrix
+
+from test_estimation_gating import DT, FIX_SIGMA, G
+
+FIELD = np.array([MAGNETOMETER_DEFAULTS[f"field_{d}"] for d in ("north", "east", "down")])
+PSI = 0.15  # rad: the true heading; the filter starts at 0
+OUTPUTS = [v.name for v in ESTIMATOR_MAG.outputs]
+
+
+def _run(inputs, **parameters):
+    """EstimatorMag's outputs, row per step, from its CasADi step function (the FMU's law)."""
+    f = ESTIMATOR_MAG.functions
+    p = ESTIMATOR_MAG.parameter_values(**{"z_0": -10.0, "P0_velocity": 3.0, **FIX_SIGMA, **parameters})
+    z = np.array(f["dinit"](p, [])).ravel()
+    out = []
+    for n, u in enumerate(inputs):
+        y, z = (np.array(a).ravel() for a in f["dstep"](n * DT, u, p, z))
+        out.append(y)
+    return np.array(out)
+
+
+def _col(rows, name):
+    return rows[:, OUTPUTS.index(name)]
+
+
+@pytest.mark.parametrize("k", [3, 5])
+def test_the_odd_gate_is_the_chi_square_quantile_of_its_level(k):
+    from scipy.stats import chi2
+
+    for level in (0.5, 0.95, 0.9999, 1 - 1e-6):
+        assert float(chi2_quantile_odd(k, level)) == pytest.approx(chi2.ppf(level, k), rel=1e-9)
+    with pytest.raises(ValueError, match="k = 4"):
+        chi2_quantile_odd(4, 0.99)
+
+
+def _hover(n, fresh_mag, disturbed=(), missing=()):
+    """A vehicle hovering at (0, 0, -10) with heading PSI: exact IMU, a fix
+    every 10 steps, the magnetometer's exact field (``fresh_mag``); at the
+    steps in ``disturbed`` the field is off by 20 uT on x_B (a steel beam),
+    at those in ``missing`` there is no sample."""
+    inputs = [v.name for v in ESTIMATOR_MAG.inputs]
+    mag = np.array(rotation_matrix(0.0, 0.0, PSI), float).T @ FIELD
+    rows = np.zeros((n, len(inputs)))
+    for k in range(n):
+        m = mag + (np.array([20e-6, 0, 0]) if k in disturbed else 0.0)
+        rows[k] = ESTIMATOR_MAG.input_values(acc_z=-G, z_m=-10.0, fresh=float(k % 10 == 0), t_imu=k * DT, t_fix=k * DT,
+                                         mag_x=m[0], mag_y=m[1], mag_z=m[2],
+                                         fresh_mag=0.0 if k in missing else fresh_mag)
+    return rows
+
+
+def test_a_heading_error_is_corrected_by_the_magnetometer():
+    start = {"P0_attitude": 0.2, "sigma_mag": 0.6e-6}  # the start knows it does not know its heading
+    with_mag = _run(_hover(500, 1.0), **start)
+    without = _run(_hover(500, 0.0), **start)  # fresh_mag = 0: the Estimator's filter (no magnetometer)
+    assert abs(_col(with_mag, "psi")[-1] - PSI) < 1e-3
+    assert np.sqrt(_col(with_mag, "var_psi")[-1]) < 0.01
+    # without it, at hover nothing sees the heading: it stays where it started
+    assert abs(_col(without, "psi")[-1]) < 1e-3 and _col(without, "var_psi")[-1] > 0.19 ** 2
+    assert np.all(_col(without, "nis_mag") == 0.0)
+    # its NIS is that of an exact field once converged (far below 3), and nothing was refused
+    assert _col(with_mag, "outliers_mag")[-1] == 0.0
+
+
+def test_a_disturbed_field_is_refused_counted_and_leaves_the_heading():
+    start = {"P0_attitude": 0.2, "sigma_mag": 0.6e-6}
+    clean = _run(_hover(400, 1.0, missing=(300,)), **start)  # as if that sample had never come
+    disturbed = _run(_hover(400, 1.0, disturbed=(300,)), **start)
+    assert _col(disturbed, "outliers_mag")[-1] == 1.0 and _col(clean, "outliers_mag")[-1] == 0.0
+    assert _col(disturbed, "nis_mag")[300] > chi2_quantile_odd(3, 0.9999)
+    for name in ("phi", "theta", "psi", "x", "u", "var_psi"):  # the refused sample changed nothing
+        np.testing.assert_array_equal(_col(disturbed, name), _col(clean, name))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_lab_flown_with_the_magnetometer_has_its_attitude_nees_in_band(tmp_path, seed):
+    """``figure8_lab_estimated`` (IMU, magnetometer, motion capture): the
+    attitude's NEES inside Bar-Shalom's 95 % band for k = 3 over 20 runs,
+    [2.02, 4.16], on each seed (16.1, 14.4, 20.7 without the magnetometer)."""
+    import json
+
+    from quadrotor_paper.cli import main
+
+    out = tmp_path / "r"
+    assert main(["run", "figure8_lab_estimated", "--set", f"simulation.seed={seed}", "--out", str(out),
+                 "--quiet", "--no-plots"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert 2.02 <= summary["nees_attitude"] <= 4.16, summary["nees_attitude"]
+    assert 2.02 <= summary["nees_position"] <= 4.16
