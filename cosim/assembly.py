@@ -18,7 +18,20 @@ from .fmu_description import start_value_rule
 from .scenario import Scenario
 from .time_grid import runs_at
 
-__all__ = ["build_master", "fmu_file", "fmu_error_in_scenario", "check_fmu_file", "fmu_component", "fmu_values"]
+__all__ = ["build_master", "fmu_file", "fmu_file_or_model", "fmu_error_in_scenario", "check_fmu_file", "fmu_component", "fmu_values"]
+
+
+def fmu_file_or_model(name_or_path: str | Path, fmi_version: int, where: str) -> Path:
+    """An FMU file as given, else the registered model of that name built as
+    FMI ``fmi_version`` (on demand, cached); a one-line ``ScenarioError``
+    naming ``where`` and the models otherwise."""
+    if Path(name_or_path).exists():
+        return Path(name_or_path)
+    models = registry.fmu_models()
+    if str(name_or_path) in models:
+        return models[str(name_or_path)].build(fmi_version)
+    raise ScenarioError(f"{where} {str(name_or_path)!r}: no such FMU file, and no model of that name "
+                        f"(models: {', '.join(models)})")
 
 
 def fmu_file(spec: Mapping[str, Any]) -> Path:

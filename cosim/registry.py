@@ -28,7 +28,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 __all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
            "register_section", "register_fmu_model", "register_scenarios", "register_studies", "register_case", "component_kinds",
-           "sections", "fmu_models", "cases", "aliases", "scenario_folders", "study_folders", "scoped", "with_connections", "version",
+           "sections", "fmu_models", "cases", "aliases", "scenario_folders", "study_folders", "files_by_name", "scoped", "with_connections", "version",
            "register_table_fmu", "table_fmu", "PLUGIN_GROUP"]
 
 PLUGIN_GROUP = "cosim.plugins"
@@ -292,6 +292,16 @@ def scenario_folders() -> list[Path]:
 def study_folders() -> list[Path]:
     _load_plugins()
     return list(_STUDY_FOLDERS)
+
+
+def files_by_name(folders: list[Path]) -> dict[str, Path]:
+    """The ``*.toml`` files of ``folders`` by stem, the first folder's first
+    (the shipped scenarios and studies)."""
+    out: dict[str, Path] = {}
+    for folder in folders:
+        for path in sorted(folder.glob("*.toml")):
+            out.setdefault(path.stem, path)
+    return out
 
 
 @contextmanager

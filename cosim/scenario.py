@@ -569,11 +569,7 @@ def parse_scenario(raw: Mapping[str, Any], source: Path | None = None, name: str
 
 def shipped_scenarios() -> dict[str, Path]:
     """The scenarios of the registered folders, by name."""
-    out: dict[str, Path] = {}
-    for folder in registry.scenario_folders():
-        for path in sorted(folder.glob("*.toml")):
-            out.setdefault(path.stem, path)
-    return out
+    return registry.files_by_name(registry.scenario_folders())
 
 
 def scenario_path(name_or_path: str | Path) -> Path:

@@ -384,11 +384,7 @@ def parse_study(raw: Mapping[str, Any], source: Path | None = None, base: Scenar
 
 def shipped_studies() -> dict[str, Path]:
     """The studies of the registered folders (:func:`cosim.registry.register_studies`), by name."""
-    out: dict[str, Path] = {}
-    for folder in registry.study_folders():
-        for path in sorted(folder.glob("*.toml")):
-            out.setdefault(path.stem, path)
-    return out
+    return registry.files_by_name(registry.study_folders())
 
 
 def study_path(name_or_path: str | Path) -> Path:

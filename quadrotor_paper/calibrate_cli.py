@@ -53,7 +53,7 @@ def add_parser(sub, named_values, overrides) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    from cosim import registry
+    from cosim.assembly import fmu_file_or_model
     from cosim.calibration import calibrate, read_column_map, read_settings
     from cosim.calibration.columns import CalibrationSettings
     from cosim.calibration.outputs import write_outputs
@@ -94,14 +94,7 @@ def run(args) -> int:
     else:
         if args.set or args.instance:
             raise ScenarioError("--set and --instance go with --scenario")
-        models = registry.fmu_models()
-        if Path(args.fmu).exists():
-            fmu = Path(args.fmu)
-        elif args.fmu in models:
-            fmu = models[args.fmu].build(args.fmi)
-        else:
-            raise ScenarioError(f"--fmu {args.fmu!r}: no such FMU file, and no model of that name "
-                                f"(models: {', '.join(models)})")
+        fmu = fmu_file_or_model(args.fmu, args.fmi, "--fmu")
     with progress_bar("calibrate", settings.max_iterations, enabled=not args.quiet, unit="Jacobian") as update_bar:
         cal = calibrate(args.log, fmu, settings, column_map, instance=instance, extra_columns=extra, fixed=fixed,
                         progress=update_bar)

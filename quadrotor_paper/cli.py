@@ -371,23 +371,16 @@ def _cmd_linearize(args) -> int:
     """Linearize an FMU file or a registered model (built as FMI ``--fmi``) at
     the operating point given, or an FMU instance of a scenario at time
     ``--time`` of its run; write the system, its poles and Bode plots."""
-    from cosim import registry
+    from cosim.assembly import fmu_file_or_model
     from cosim.errors import ScenarioError
     from cosim.linearize import LinearizationError, linearize_fmu, save_linearization
 
-    models = registry.fmu_models()
     if args.scenario is not None or args.time is not None:
         if args.scenario is None:
             raise ScenarioError("--time: give the run's scenario with --scenario")
         path, point = _operating_point_of_run(args)
     else:
-        if Path(args.fmu).exists():
-            path = Path(args.fmu)
-        elif args.fmu in models:
-            path = models[args.fmu].build(args.fmi)
-        else:
-            raise ScenarioError(f"linearize {args.fmu!r}: no such FMU file, and no model of that name "
-                                f"(models: {', '.join(models)})")
+        path = fmu_file_or_model(args.fmu, args.fmi, "linearize")
         point = dict(parameters=_named_values(args.parameter, "--parameter"))
     pairs = []
     for pair in args.bode:

@@ -46,11 +46,12 @@ def _line(n, imu_lag=0, fix_lag=0):
     return rows
 
 
-def _run(inputs, **parameters):
-    """The Estimator's outputs, row per step, from its CasADi step function (the
-    FMU's, bit for bit: tests/fmus/test_estimation_fmu.py)."""
-    f = ESTIMATOR.functions
-    p = ESTIMATOR.parameter_values(**{"z_0": -10.0, "P0_velocity": 3.0, **FIX_SIGMA, **parameters})
+def _run(inputs, model=ESTIMATOR, **parameters):
+    """An estimator model's outputs (default the Estimator's), row per step,
+    from its CasADi step function (the FMU's, bit for bit:
+    tests/fmus/test_estimation_fmu.py)."""
+    f = model.functions
+    p = model.parameter_values(**{"z_0": -10.0, "P0_velocity": 3.0, **FIX_SIGMA, **parameters})
     z = np.array(f["dinit"](p, [])).ravel()
     out = []
     for n, u in enumerate(inputs):

@@ -11,7 +11,7 @@ from fmu_models.models.estimator import ESTIMATOR_MAG, chi2_quantile_odd
 from fmu_models.models.magnetometer import MAGNETOMETER_DEFAULTS
 from fmu_models.models.quadrotor import rotation_matrix
 
-from test_estimation_gating import DT, FIX_SIGMA, G
+from test_estimation_gating import DT, G, _run as run_estimator
 
 FIELD = np.array([MAGNETOMETER_DEFAULTS[f"field_{d}"] for d in ("north", "east", "down")])
 PSI = 0.15  # rad: the true heading; the filter starts at 0
@@ -20,14 +20,7 @@ OUTPUTS = [v.name for v in ESTIMATOR_MAG.outputs]
 
 def _run(inputs, **parameters):
     """EstimatorMag's outputs, row per step, from its CasADi step function (the FMU's law)."""
-    f = ESTIMATOR_MAG.functions
-    p = ESTIMATOR_MAG.parameter_values(**{"z_0": -10.0, "P0_velocity": 3.0, **FIX_SIGMA, **parameters})
-    z = np.array(f["dinit"](p, [])).ravel()
-    out = []
-    for n, u in enumerate(inputs):
-        y, z = (np.array(a).ravel() for a in f["dstep"](n * DT, u, p, z))
-        out.append(y)
-    return np.array(out)
+    return run_estimator(inputs, ESTIMATOR_MAG, **parameters)
 
 
 def _col(rows, name):
