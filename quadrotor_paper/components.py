@@ -129,7 +129,7 @@ def register() -> None:
 
     from fnn_controller.fmu_names import INNER_IDENTIFIER, outer_identifier
 
-    from .missions import Metrics, Wind, apply_metrics, apply_wind
+    from .sections import Metrics, Wind, apply_metrics, apply_wind
     from .trajectories import TRAJECTORIES
 
     for identifier in MODEL_NAMES:

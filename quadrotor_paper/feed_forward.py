@@ -20,7 +20,7 @@ from fnn_controller import GeometricParams
 
 from .experiments import measure
 from .metrics import euclidean_error, rmse
-from .missions import metric_signals
+from .sections import metric_signals
 from .options import OPTIONS
 
 __all__ = ["ROWS", "study", "error_budget", "main"]

@@ -30,7 +30,7 @@ from fnn_controller.variants import variant, variant_names
 from . import plots
 from .experiments import measure, run_once
 from .metrics import pd_share
-from .missions import metric_signals
+from .sections import metric_signals
 from .options import OPTION_SEEDS, OPTIONS, variant_case
 from .progress import progress_bar
 from .tables import DEVIATION_LIMIT, WIND_KEY, deviations, table2_markdown, table3_markdown

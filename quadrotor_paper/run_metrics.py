@@ -30,7 +30,7 @@ from cosim.online import ColumnSum, Last, Maximum, Sum, finite
 from fmu_models.models.estimator_outputs import COUNTS, COVARIANCE_BLOCKS, covariance_output
 
 from .metrics import euclidean_error, nees, squared_error, wrap_angle
-from .missions import estimation_spec, metric_signals
+from .sections import estimation_spec, metric_signals
 
 __all__ = ["RunMetrics", "Tracking", "Estimation", "BLOCKS", "from_results"]
 
