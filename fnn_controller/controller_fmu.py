@@ -4,7 +4,9 @@ path evaluates, as a sampled-data :class:`~fmu_models.export.model.FmuModel`
 that the project's exporter turns into FMI 2.0 and FMI 3.0 Co-Simulation FMUs.
 
 One FMU per registered variant (``ControllerPD``, ``ControllerPDSMC``,
-``ControllerPDLM``): a variant fixes the laws and the size of the learned
+``ControllerPDLM``, ``ControllerPDIT2SMC``, ``ControllerPDIT2LM``: the
+variant's name as a C identifier, :func:`fnn_controller.fmu_names.fmu_identifier`):
+a variant fixes the laws and the size of the learned
 state, which FMI cannot change after instantiation, so it is the FMU's
 identity rather than a parameter.
 

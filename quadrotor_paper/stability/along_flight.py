@@ -343,13 +343,16 @@ def flight_events(scenario: Scenario) -> list[tuple[float, str]]:
     """The moments to mark along ``scenario``'s flight (s, label): the gust's
     reversals and, for the two circles, the change of circle; for the
     figure-8, each crossing of its centre."""
+    from ..components import TRAJECTORY_INSTANCE
     from ..trajectories import make_trajectory
 
-    raw = scenario.raw
     end = scenario.start_time + scenario.duration
-    events = [(float(t), "gust reverses") for t in raw.get("wind", {}).get("switch_times", []) if 0 < t < end]
-    spec = dict(raw.get("trajectory", {}))
-    kind = spec.pop("kind", None)
+    wind = scenario.sections.get("wind")  # the validated section and the gust FMU's parameters it set
+    gust = scenario.fmus[wind["fmu"]]["parameters"] if wind else {}
+    switches = [gust[k] for k in ("t_switch_1", "t_switch_2") if k in gust]
+    events = [(float(t), "gust reverses") for t in switches if 0 < t < end]
+    reference = scenario.components.get(TRAJECTORY_INSTANCE, {})
+    kind, spec = reference.get("kind"), dict(reference.get("parameters", {}))
     if kind == "two_circles":
         events.append((make_trajectory(kind, **spec).path_time / 2, "second circle"))
     elif kind == "figure_eight":
