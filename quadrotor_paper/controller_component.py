@@ -59,7 +59,7 @@ from cosim.errors import DivergenceError, ScenarioError
 from cosim.schema import Number, ParameterTable, Table, dataclass_table, one_of, refuse, validate
 from fnn_controller.variants import DEFAULT_VARIANT
 
-__all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS",
+__all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "controller_variant", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS",
            "DEFAULT_PLANT", "internal_ports"]
 
 DEFAULT_PLANT = "Quadrotor"
@@ -397,17 +397,35 @@ class ControllerSettings:
     position: Any
 
 
-def controller_settings(scenario, instance: str | None = None) -> ControllerSettings | None:
-    """The settings of ``scenario``'s controller ``instance`` (default: its one
-    ``fnn_controller`` component), ``None`` without one: the one way the
-    application reads a controller's settings (the scenario's table
-    validated as a run builds it, its defaults included)."""
+def _controller_instance(scenario, instance: str | None) -> str | None:
+    """``instance`` if it is one of ``scenario``'s controllers, else (``None``
+    given) its one ``fnn_controller`` component; ``None`` without one."""
     found = [name for name, spec in scenario.components.items() if spec.get("kind") == "fnn_controller"]
     if instance is None:
         if len(found) > 1:
             raise ScenarioError(f"the scenario has {len(found)} controllers ({', '.join(found)}): name one")
         instance = found[0] if found else None
-    if instance not in found:
+    return instance if instance in found else None
+
+
+def controller_variant(scenario, instance: str | None = None) -> str | None:
+    """The variant ``scenario``'s controller flies (``None`` without one): its
+    table's ``variant`` (checked when the scenario was parsed), else the
+    table's default. Read on every study row, so without validating the
+    table again (:func:`controller_settings` does, for the rest)."""
+    instance = _controller_instance(scenario, instance)
+    if instance is None:
+        return None
+    return scenario.components[instance]["parameters"].get("variant", DEFAULT_VARIANT)
+
+
+def controller_settings(scenario, instance: str | None = None) -> ControllerSettings | None:
+    """The settings of ``scenario``'s controller ``instance`` (default: its one
+    ``fnn_controller`` component), ``None`` without one: the one way the
+    application reads a controller's settings (the scenario's table
+    validated as a run builds it, its defaults included)."""
+    instance = _controller_instance(scenario, instance)
+    if instance is None:
         return None
     parameters = scenario.components[instance]["parameters"]
     table = validate(controller_table(), parameters, instance)

@@ -125,8 +125,8 @@ def estimation_spec(scenario: Scenario) -> tuple[str, str, float] | None:
 
 
 def controller_variant(scenario: Scenario, instance: str | None = None) -> str | None:
-    """The variant the scenario's controller flies (``None`` without one)."""
-    from .controller_component import controller_settings
+    """The variant the scenario's controller flies (``None`` without one;
+    :func:`quadrotor_paper.controller_component.controller_variant`)."""
+    from .controller_component import controller_variant as variant_of
 
-    settings = controller_settings(scenario, instance)
-    return settings.variant if settings is not None else None
+    return variant_of(scenario, instance)
