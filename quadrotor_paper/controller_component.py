@@ -59,8 +59,8 @@ from cosim.errors import DivergenceError, ScenarioError
 from cosim.schema import Number, ParameterTable, Table, dataclass_table, one_of, refuse, validate
 from fnn_controller.variants import DEFAULT_VARIANT
 
-__all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "controller_variant", "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS",
-           "DEFAULT_PLANT", "internal_ports"]
+__all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "controller_variant",
+           "CONTROLLER_INPUTS", "CONTROLLER_OUTPUTS", "DEFAULT_PLANT", "internal_ports"]
 
 DEFAULT_PLANT = "Quadrotor"
 FORMS = ("python", "fmu")
@@ -428,7 +428,7 @@ def controller_settings(scenario, instance: str | None = None) -> ControllerSett
     if instance is None:
         return None
     parameters = scenario.components[instance]["parameters"]
-    table = validate(controller_table(), parameters, instance)
-    component = ControllerComponent.from_parameters(instance, parameters)
-    plant = table.plant if table.plant in scenario.fmus or "plant" in table.model_fields_set else ""
+    component = ControllerComponent.from_parameters(instance, parameters)  # the table validated once, here
+    # the plant given, else the default one when the scenario has it (as from_parameters ties the vehicle)
+    plant = parameters.get("plant", DEFAULT_PLANT if DEFAULT_PLANT in scenario.fmus else "")
     return ControllerSettings(instance, plant, component.variant, component.position)

@@ -29,7 +29,8 @@ if TYPE_CHECKING:
 
 from fmu_models.models.estimator_outputs import COUNTS
 
-from .sections import controller_variant, estimation_spec, metric_signals
+from .controller_component import controller_variant
+from .sections import estimation_spec, metric_signals
 from .run_metrics import BLOCKS, RunMetrics
 
 __all__ = ["run_once", "run_summary", "measure", "study_metrics", "STUDY_METRICS", "ESTIMATION_METRICS",

@@ -77,7 +77,7 @@ from fnn_controller.variants import variant as _variant
 from fnn_controller.variants import variants as _variants
 
 from .controller_component import internal_ports
-from .sections import controller_variant
+from .controller_component import controller_variant
 
 __all__ = ["Recording", "AxisClaims", "recorded", "evaluate_claims", "default_runs",
            "finite_time_report", "regressor_step_change", "CLAIM_MISSIONS", "CLAIM_VARIANTS"]

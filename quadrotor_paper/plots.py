@@ -24,7 +24,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .metrics import euclidean_error  # noqa: E402
-from .sections import controller_variant, metric_signals  # noqa: E402
+from .controller_component import controller_variant  # noqa: E402
+from .sections import metric_signals  # noqa: E402
 
 __all__ = ["wind_profile", "trajectories_3d", "control_signals", "euclidean_errors", "run_figures",
            "wind_series"]

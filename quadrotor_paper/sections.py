@@ -34,8 +34,7 @@ from cosim.errors import ScenarioError
 from cosim.scenario import Scenario, check_fmu_parameters
 from cosim.schema import NonNegative, NonNegativeInt, Strings, Table, numbers, refuse
 
-__all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "metric_signals", "estimation_spec",
-           "controller_variant"]
+__all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "metric_signals", "estimation_spec"]
 
 WIND_KEYS = {"speed": "v_w", "ramp_time": "ramp_time", "turbulence": "turbulence",
              "turbulence_seed": "turbulence_seed"}
@@ -122,11 +121,3 @@ def estimation_spec(scenario: Scenario) -> tuple[str, str, float] | None:
     if metrics.get("estimator") is None:
         return None
     return metrics["estimator"], metrics["position"][0].split(".")[0], float(metrics["settle"])
-
-
-def controller_variant(scenario: Scenario, instance: str | None = None) -> str | None:
-    """The variant the scenario's controller flies (``None`` without one;
-    :func:`quadrotor_paper.controller_component.controller_variant`)."""
-    from .controller_component import controller_variant as variant_of
-
-    return variant_of(scenario, instance)
