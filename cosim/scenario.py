@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import hashlib
 import json
 import math
 import tomllib
@@ -30,6 +31,7 @@ from typing import Annotated, Any, Mapping, Union
 from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag, ValidationError, create_model, model_validator
 
 from . import registry
+from .cache import code_files, keep, kept, unchanged
 from .errors import ScenarioError, shown_text
 from .model_exchange import METHODS
 from .plan import ORDERINGS  # the master's (docs/cosim.md)
@@ -422,6 +424,59 @@ def _plain(model: Table) -> dict[str, Any]:
     return model.model_dump(exclude_unset=True, exclude={"kind", "factory"})
 
 
+def _state(document: dict[str, Any], source: Path | None, name: str | None) -> dict[str, Any]:
+    """What a scenario holds, derived from its validated ``document``: plain
+    data (a :class:`Scenario` is made of it, :meth:`Scenario._adopt`)."""
+    model = _validated(document, source)
+    state: dict[str, Any] = {"name": model.name if model.name is not None else (name or (source.stem if source else
+                                                                                          "scenario")),
+                             "description": model.description}
+    sim = model.simulation
+    for key in ("duration", "step", "seed", "start_time", "ordering"):
+        state[key] = getattr(sim, key)
+    fmus: dict[str, dict[str, Any]] = {}
+    for instance, spec in model.fmus.items():
+        # the values as the document wrote them (an integer stays one, as an error quotes it)
+        entry: dict[str, Any] = {"parameters": spec.set_values(source)
+                                 | dict(document["fmus"][instance].get("parameters", {}))}
+        if spec.model is not None:
+            entry.update(model=spec.model, fmi_version=spec.fmi_version or 2)
+        else:
+            entry.update(path=spec.resolved(source), fmi_version=spec.fmi_version)
+        if spec.seed_parameter is not None:
+            entry["seed_parameter"] = spec.seed_parameter
+        if spec.seed_stream is not None:
+            entry["seed_stream"] = spec.seed_stream
+        if spec.start:
+            entry["start"] = dict(document["fmus"][instance]["start"])
+        if spec.interface is not None:
+            entry["interface"] = spec.interface
+        if spec.solver is not None:
+            entry["solver"] = _plain(spec.solver)
+        fmus[instance] = entry
+    components: dict[str, dict[str, Any]] = {}
+    for alias, kinds in registry.aliases().items():
+        table = getattr(model, alias, None)
+        if table is not None:
+            kind = next(k for k in kinds if k.name == table.kind)
+            components[kind.instance or alias] = {"kind": kind.name, "parameters": _plain(table)}
+    for instance, table in model.components.items():
+        if isinstance(table, FactoryComponent):
+            components[instance] = {"factory": table.factory, "parameters": dict(table.model_extra or {})}
+        else:
+            components[instance] = {"kind": table.kind, "parameters": _plain(table)}
+    sections = {}
+    for key, section in registry.sections().items():
+        value = getattr(model, key, None)
+        if value is not None:
+            sections[key] = section.apply(key, value, fmus)
+    state.update(fmus=fmus, components=components, sections=sections,
+                 connections=[c if isinstance(c, str) else c.model_dump(exclude_none=True) for c in model.connections],
+                 record=list(model.record.signals), block_rows=model.record.block_rows,
+                 envelope={k: list(v) for k, v in model.envelope.items()})
+    return state
+
+
 class Scenario:
     """A validated scenario: immutable, one copy of its data.
 
@@ -440,62 +495,31 @@ class Scenario:
 
     def __init__(self, raw: Mapping[str, Any], source: Path | None = None, name: str | None = None):
         document = json.loads(json.dumps(raw))  # the one copy (a TOML document is JSON data)
-        model = _validated(document, source)
+        self._adopt(document, source, _state(document, source, name))
+
+    @classmethod
+    def _of(cls, document: dict[str, Any], source: Path | None, state: Mapping[str, Any]) -> "Scenario":
+        """The scenario of ``document`` (a copy of its own), whose validation
+        gave ``state`` (:func:`_state`)."""
+        scenario = object.__new__(cls)
+        scenario._adopt(document, source, state)
+        return scenario
+
+    def _adopt(self, document: dict[str, Any], source: Path | None, state: Mapping[str, Any]) -> None:
         set_ = object.__setattr__
         set_(self, "_document", json.dumps(document))
         set_(self, "source", source)
-        set_(self, "name", model.name if model.name is not None else (name or (source.stem if source else
-                                                                                 "scenario")))
-        set_(self, "description", model.description)
-        sim = model.simulation
-        for key in ("duration", "step", "seed", "start_time", "ordering"):
-            set_(self, key, getattr(sim, key))
-        fmus: dict[str, dict[str, Any]] = {}
-        for instance, spec in model.fmus.items():
-            # the values as the document wrote them (an integer stays one, as an error quotes it)
-            entry: dict[str, Any] = {"parameters": spec.set_values(source)
-                                     | dict(document["fmus"][instance].get("parameters", {}))}
-            if spec.model is not None:
-                entry.update(model=spec.model, fmi_version=spec.fmi_version or 2)
-            else:
-                entry.update(path=spec.resolved(source), fmi_version=spec.fmi_version)
-            if spec.seed_parameter is not None:
-                entry["seed_parameter"] = spec.seed_parameter
-            if spec.seed_stream is not None:
-                entry["seed_stream"] = spec.seed_stream
-            if spec.start:
-                entry["start"] = dict(document["fmus"][instance]["start"])
-            if spec.interface is not None:
-                entry["interface"] = spec.interface
-            if spec.solver is not None:
-                entry["solver"] = _plain(spec.solver)
-            fmus[instance] = entry
-        components: dict[str, dict[str, Any]] = {}
-        for alias, kinds in registry.aliases().items():
-            table = getattr(model, alias, None)
-            if table is not None:
-                kind = next(k for k in kinds if k.name == table.kind)
-                components[kind.instance or alias] = {"kind": kind.name, "parameters": _plain(table)}
-        for instance, table in model.components.items():
-            if isinstance(table, FactoryComponent):
-                components[instance] = {"factory": table.factory, "parameters": dict(table.model_extra or {})}
-            else:
-                components[instance] = {"kind": table.kind, "parameters": _plain(table)}
-        sections = {}
-        for key, section in registry.sections().items():
-            value = getattr(model, key, None)
-            if value is not None:
-                sections[key] = section.apply(key, value, fmus)
-        set_(self, "fmus", _frozen(fmus))
-        set_(self, "components", _frozen(components))
-        set_(self, "sections", _frozen(sections))
-        set_(self, "connections", tuple(c if isinstance(c, str) else MappingProxyType(c.model_dump(exclude_none=True))
-                                        for c in model.connections))
-        set_(self, "record", tuple(model.record.signals))
+        for key in ("name", "description", "duration", "step", "seed", "start_time", "ordering", "block_rows"):
+            set_(self, key, state[key])
+        set_(self, "fmus", _frozen(state["fmus"]))
+        set_(self, "components", _frozen(state["components"]))
+        set_(self, "sections", _frozen(state["sections"]))
+        set_(self, "connections", tuple(c if isinstance(c, str) else MappingProxyType(dict(c))
+                                        for c in state["connections"]))
+        set_(self, "record", tuple(state["record"]))
         # no bound on the rows here: a run streams them (cosim.recorder); only a run asked to keep every row
         # in memory (Master.run(keep=None)) is bounded, when it starts
-        set_(self, "block_rows", model.record.block_rows)
-        set_(self, "envelope", MappingProxyType(dict(model.envelope)))
+        set_(self, "envelope", MappingProxyType({k: tuple(v) for k, v in state["envelope"].items()}))
 
     def __setattr__(self, key, value):
         raise AttributeError(f"a Scenario is immutable: change its document (raw) and parse it again, not {key!r}")
@@ -588,6 +612,70 @@ def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None 
     """Read, override and validate a scenario: ``name_or_path`` a shipped
     scenario's name (``"circles"``) or a TOML file; ``overrides`` dotted keys
     (``{"wind.speed": 3.0}``, as ``--set`` takes them) applied before the
-    document is validated."""
+    document is validated.
+
+    A document validated before, by the same code, is not validated again:
+    what its validation gave is kept in the registered cache folder
+    (:func:`_kept_state`)."""
     path = scenario_path(name_or_path)
-    return parse_scenario(apply_overrides(read_toml(path), overrides or {}), source=path)
+    document = json.loads(json.dumps(apply_overrides(read_toml(path), overrides or {})))
+    folder = registry.cache_folder()
+    if folder is None:
+        return Scenario(document, path)
+    entry = folder / "scenarios" / f"{_state_key(document, path)}.json"
+    state = _kept_state(entry)
+    if state is None:
+        state = _state(document, path, None)
+        if _keepable(document, state):
+            keep(entry, {"code": code_files(), "state": state})
+    return Scenario._of(document, path, state)
+
+
+# A scenario's validation is kept (cosim.cache) when it depends on nothing but
+# its document and the code: keyed by the document, its file's path (its name
+# and relative paths come from it) and what is registered; valid while every
+# module loaded when it was validated is unchanged. A document that names a
+# file validation reads (an FMU by path, a parameter set, a component or
+# section that reads files) is validated every time. A refused document is
+# never kept: every error is the validation's own, every time.
+_STATE_FORMAT = 1
+
+
+def _state_key(document: Mapping[str, Any], source: Path) -> str:
+    text = json.dumps([_STATE_FORMAT, document, str(source), registry.signature()])
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def _kept_state(entry: Path) -> dict[str, Any] | None:
+    kept_entry = kept(entry)
+    if not isinstance(kept_entry, dict) or not unchanged(kept_entry.get("code")):
+        return None
+    state = kept_entry.get("state")
+    return state if isinstance(state, dict) else None
+
+
+def _keepable(document: Mapping[str, Any], state: Mapping[str, Any]) -> bool:
+    """Whether ``state`` may be kept: no file read to validate ``document``,
+    and JSON gives it back exactly (types included)."""
+    if any(isinstance(spec, Mapping) and ("path" in spec or "parameter_set" in spec)
+           for spec in (document.get("fmus") or {}).values()):
+        return False
+    kinds, sections = registry.component_kinds(), registry.sections()
+    if any(kinds[c["kind"]].reads_files for c in state["components"].values() if "kind" in c) or \
+            any(sections[name].reads_files for name in state["sections"]):
+        return False
+    try:
+        return _same(json.loads(json.dumps(state)), state)
+    except (TypeError, ValueError):  # a value JSON does not hold (a Path, ...)
+        return False
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal, and of the same types all the way down (``1 != 1.0`` here)."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, dict):
+        return list(a) == list(b) and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return a == b or (a != a and b != b)  # NaN is NaN
