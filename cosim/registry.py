@@ -23,7 +23,7 @@ installed with an entry point in the group ``cosim.plugins`` (a callable
 that registers) are imported the first time a registry is read, so a
 scenario file finds its kinds without the caller importing anything.
 Which entry points are installed is read once and kept in the cache folder
-(``plugins.json``) for as long as the distributions' metadata folders on
+(``plugins/``) for as long as the distributions' metadata folders on
 ``sys.path`` are the same, each with its modification time (installing,
 upgrading or removing a distribution makes, renames, rewrites or removes
 its metadata folder): reading every installed distribution's metadata, and
@@ -31,6 +31,8 @@ importing :mod:`importlib.metadata`, took longer than validating a scenario.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import re
 import sys
@@ -298,20 +300,24 @@ def _path_signature() -> list[list[Any]]:
 
 def _plugin_entries() -> list[tuple[str, str]]:
     """``(name, "module:attribute")`` of every installed entry point of
-    :data:`PLUGIN_GROUP`: kept in the cache folder while ``sys.path``'s
-    folders are unchanged, else read from the distributions' metadata."""
+    :data:`PLUGIN_GROUP`: kept in the cache folder while the distributions'
+    metadata folders on ``sys.path`` are unchanged (:func:`_path_signature`),
+    else read from the distributions' metadata."""
     from .cache import keep, kept
 
     folder = cache_folder()
     key = _path_signature()
-    kept = kept(folder / "plugins.json") if folder is not None else None
-    if isinstance(kept, dict) and kept.get("path") == key:
-        return [tuple(e) for e in kept["entries"]]
+    # one entry per sys.path (python -m and the fnn-cosim script see different ones)
+    entry = folder / "plugins" / f"{hashlib.sha256(json.dumps(key).encode()).hexdigest()[:32]}.json" \
+        if folder is not None else None
+    known = kept(entry) if entry is not None else None
+    if isinstance(known, dict) and known.get("path") == key:
+        return [tuple(e) for e in known["entries"]]
     from importlib.metadata import entry_points  # slow to import: only when not kept
 
     entries = [(e.name, e.value) for e in entry_points(group=PLUGIN_GROUP)]
-    if folder is not None:
-        keep(folder / "plugins.json", {"path": key, "entries": entries})
+    if entry is not None:
+        keep(entry, {"path": key, "entries": entries})
     return entries
 
 

@@ -101,7 +101,8 @@ def _controller_kind() -> registry.ComponentKind:
     def build(instance: str, params: Mapping[str, Any], context) -> Any:
         from .controller_component import ControllerComponent
 
-        return ControllerComponent.from_parameters(instance, params, context)
+        # a scenario's [controller] values, validated with the whole document: read as they are
+        return ControllerComponent.from_parameters(instance, params, context, validated=True)
 
     return registry.ComponentKind("fnn_controller", build, _controller_table,
                                   "PD + FNN position control and geometric velocity control (paper Fig. 2)",
@@ -159,12 +160,13 @@ def register() -> None:
 
 
 def _section(name: str, *args):
-    """A name of :mod:`.sections` (its tables, their appliers), called with
-    ``args``, or itself without: imported when a scenario's sections are
-    first declared or applied (a scenario served from the cache needs neither)."""
-    from . import sections
+    """A name of :mod:`.section_tables` (the sections' tables, their
+    appliers), called with ``args``, or itself without: imported when a
+    scenario's sections are first declared or applied (a scenario served
+    from the cache needs neither)."""
+    from . import section_tables
 
-    value = getattr(sections, name)
+    value = getattr(section_tables, name)
     return value(*args) if args else value
 
 
