@@ -11,6 +11,7 @@ nothing: a cache is never an error.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import sys
@@ -18,7 +19,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-__all__ = ["keep", "kept", "code_files", "unchanged"]
+__all__ = ["keep", "kept", "code_files", "unchanged", "keep_code", "code_unchanged"]
 
 
 def keep(path: Path, data: Any) -> None:
@@ -76,3 +77,29 @@ def unchanged(files: Any) -> bool:
         if stat.st_size != size or stat.st_mtime_ns != mtime:
             return False
     return True
+
+
+def keep_code(folder: Path) -> str:
+    """The :func:`code_files` of now, kept once in ``folder/code`` under
+    their digest (entries derived by the same code share one list); the
+    digest."""
+    files = code_files()
+    text = json.dumps(files)
+    digest = hashlib.sha256(text.encode()).hexdigest()[:32]
+    path = folder / "code" / f"{digest}.json"
+    if not path.exists():
+        keep(path, files)
+    return digest
+
+
+_UNCHANGED: dict[str, bool] = {}  # digest -> checked in this process (its modules are loaded: they stay as read)
+
+
+def code_unchanged(folder: Path, digest: Any) -> bool:
+    """Whether the code list kept under ``digest`` (:func:`keep_code`) is
+    unchanged (:func:`unchanged`)."""
+    if not isinstance(digest, str) or not digest.isalnum():
+        return False
+    if digest not in _UNCHANGED:
+        _UNCHANGED[digest] = unchanged(kept(folder / "code" / f"{digest}.json"))
+    return _UNCHANGED[digest]

@@ -28,7 +28,7 @@ from types import MappingProxyType
 from typing import Any, Mapping
 
 from . import registry
-from .cache import code_files, keep, kept, unchanged
+from .cache import code_unchanged, keep, keep_code, kept
 from .errors import ScenarioError, shown_text
 from .files import read_toml
 from .limits import MAX_NESTING
@@ -215,11 +215,11 @@ def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None 
     if folder is None:
         return Scenario(document, path)
     entry = folder / "scenarios" / f"{_state_key(document, path)}.json"
-    state = _kept_state(entry)
+    state = _kept_state(folder, entry)
     if state is None:
         state = _state(document, path, None)
         if _keepable(document, state):
-            keep(entry, {"code": code_files(), "state": state})
+            keep(entry, {"code": keep_code(folder), "state": state})
     return Scenario._of(document, path, state)
 
 
@@ -238,9 +238,9 @@ def _state_key(document: Mapping[str, Any], source: Path) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 
-def _kept_state(entry: Path) -> dict[str, Any] | None:
+def _kept_state(folder: Path, entry: Path) -> dict[str, Any] | None:
     kept_entry = kept(entry)
-    if not isinstance(kept_entry, dict) or not unchanged(kept_entry.get("code")):
+    if not isinstance(kept_entry, dict) or not code_unchanged(folder, kept_entry.get("code")):
         return None
     state = kept_entry.get("state")
     return state if isinstance(state, dict) else None
