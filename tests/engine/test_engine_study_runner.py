@@ -207,7 +207,7 @@ class _Cluster:
 
 def test_a_batch_whose_worker_died_is_flown_again_run_by_run_and_only_its_killer_fails(base, monkeypatch):
     cluster = _Cluster(killer=2)
-    monkeypatch.setattr(dask_runner, "_client", lambda workers, scheduler, scratch=None: (cluster, None))
+    monkeypatch.setattr(dask_runner, "_client", lambda workers, scheduler, scratch=None, threads=False: (cluster, None))
     monkeypatch.setattr("dask.distributed.wait", lambda futures, timeout, return_when: (set(futures), set()))
     monkeypatch.setattr(dask_runner, "batch_size", lambda left, threads, per_run: 5)
     runs = [_run(i, {"toy_controller.kp": 0.5 + i}) for i in range(7)]
