@@ -399,12 +399,14 @@ def _client(workers: int, scheduler: str | None, scratch: Path | None = None, th
                           "distributed.admin.log-length": LOG_LENGTH,
                           "distributed.admin.low-level-log-length": LOG_LENGTH,
                           "distributed.worker.multiprocessing-method": method}):
+        # no dashboard; the scheduler's HTTP server (which dashboard_address=None put on 8787, with a
+        # warning on stderr when another cluster held that port) on a free port
+        quiet = {"dashboard_address": ":0", "scheduler_kwargs": {"dashboard": False},
+                 "silence_logs": logging.ERROR, "local_directory": scratch}
         if threads:  # the runs' loops release the GIL (ctypes): N threads fly N runs at once
-            cluster = LocalCluster(n_workers=1, threads_per_worker=max(1, workers), processes=False,
-                                   dashboard_address=None, silence_logs=logging.ERROR, local_directory=scratch)
+            cluster = LocalCluster(n_workers=1, threads_per_worker=max(1, workers), processes=False, **quiet)
         else:
-            cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR, local_directory=scratch)
+            cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, **quiet)
         return Client(cluster), cluster
 
 
