@@ -231,7 +231,7 @@ LOG_LENGTH = 100  # entries of the local scheduler's diagnostic logs (see _clien
 POLL = 1.0  # s between looks at the cluster while no run finishes
 
 _LOCAL = threading.local()  # a worker's cache, one per thread (a master is not thread-safe)
-_MADE: list[MasterCache] = []  # the caches made in this process (threads of a local cluster in it: closed at its end)
+_MADE: list[tuple[threading.Thread, MasterCache]] = []  # the caches made in this process, by thread
 _MADE_LOCK = threading.Lock()
 
 
@@ -240,7 +240,7 @@ def _worker_cache() -> MasterCache:
     if cache is None or cache.closed:
         cache = _LOCAL.cache = MasterCache()
         with _MADE_LOCK:
-            _MADE.append(cache)
+            _MADE.append((threading.current_thread(), cache))
         # not atexit: a Dask worker is a multiprocessing child, which leaves by os._exit after
         # running multiprocessing's finalizers only (its extracted FMUs stayed in /tmp)
         Finalize(cache, cache.close, exitpriority=10)
@@ -248,12 +248,15 @@ def _worker_cache() -> MasterCache:
 
 
 def _close_worker_caches() -> None:
-    """Close the caches the threads of this process made (a threads cluster
-    ended: its masters' FMUs freed, their extracted files removed now)."""
+    """Close the caches of the threads of this process that have ended (a
+    threads cluster ended: its masters' FMUs freed, their extracted files
+    removed now). A thread still running (a cluster whose close timed out
+    with a run in flight) keeps its cache: freeing the FMUs under its loop
+    would crash; its finalizer closes it later."""
     with _MADE_LOCK:
-        made = _MADE[:]
-        _MADE.clear()
-    for cache in made:
+        ended = [(t, c) for t, c in _MADE if not t.is_alive()]
+        _MADE[:] = [(t, c) for t, c in _MADE if t.is_alive()]
+    for _, cache in ended:
         cache.close()
 
 
