@@ -413,7 +413,7 @@ def test_a_cluster_without_a_worker_stops_the_study_in_one_line(folder, tmp_path
     from cosim.errors import CosimError
 
     study = load_study(study_file(folder, "[sweep]\nseeds = 2\n"))
-    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster:
         with pytest.raises(CosimError, match=r"^no Dask worker for 0\.5 s \(\w+://.* lost them all\): the study "
                                              r"stops with 2 runs in flight; .* running it again resumes it$"):
             run_study(study, tmp_path / "out", scheduler=cluster.scheduler_address, worker_timeout=0.5, plots=False)
