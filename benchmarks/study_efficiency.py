@@ -12,12 +12,20 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   / runs, and as a share of ``L``: what a run costs besides its loop (its
   scenario, its master when it needs a new one, its metrics, its row, the
   summary);
-* **Table 2 on a LocalCluster** of ``--workers`` processes (``measure``,
-  cluster start and stop included) and the whole command ``fnn-cosim table2
-  --workers N`` (a new process: imports included), each against the ideal,
-  ``runs x L / workers``: target ``fnn-cosim table2`` <= 1.6x on 2 workers;
-  and the Dask overhead per run, (workers x wall - sum of the runs' times) /
-  runs, as a share of ``L``;
+* **Table 2 on a LocalCluster** (``measure``, cluster start and stop
+  included) of ``--workers`` threads of this process (what ``measure``
+  chooses for the project's own FMUs,
+  :func:`quadrotor_paper.experiments.threads_safe`) and of ``--workers``
+  worker processes (what any other study gets), and the whole command
+  ``fnn-cosim table2 --workers N`` (a new process: imports included), each
+  against the ideal, ``runs x L / workers``: target ``fnn-cosim table2`` <=
+  1.6x on 2 workers; and the Dask overhead per run, (workers x wall - sum
+  of the runs' times) / runs, as a share of ``L``;
+* **CPU time** beside each wall time (this process's, and its child
+  processes' polled every 20 ms: worker processes, the command's tree): on
+  a machine others load, wall time measures the load, CPU time what a
+  study costs; the in-process study's CPU is the reference (no Dask, one
+  core, every master built once);
 * the driver's peak Python memory (tracemalloc) for a study of 200 and of
   800 one-second runs: the rows are streamed to runs.csv, not held, and the
   local scheduler's logs are kept short (cosim/dask_runner.py), so the ratio
@@ -37,6 +45,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import tracemalloc
 from pathlib import Path
@@ -58,23 +67,75 @@ def _memory_study(seeds: int):
     return parse_study(raw)
 
 
-def _run(study, out: Path, workers: int) -> tuple[float, list[float]]:
-    """Wall time of ``measure`` (s) and the runs' own times."""
+class _Cpu:
+    """CPU time (s, user + system) of a process and its descendants while
+    it runs: the process's own ``process_time`` when it is this one, else
+    polled; descendants polled every ``every`` s (the last reading of each
+    counts: a process's last ``every`` s may be missed)."""
+
+    def __init__(self, pid: int | None = None, every: float = 0.02):
+        import psutil
+
+        self.root = psutil.Process(pid)
+        self.own = pid is None
+        self.every, self.seen, self.stop = every, {}, threading.Event()
+        self.thread = threading.Thread(target=self._poll, daemon=True)
+
+    def _poll(self) -> None:
+        import psutil
+
+        while not self.stop.is_set():
+            try:
+                procs = ([] if self.own else [self.root]) + self.root.children(recursive=True)
+            except psutil.Error:
+                procs = []
+            for proc in procs:
+                try:
+                    t = proc.cpu_times()
+                    self.seen[proc.pid] = t.user + t.system
+                except psutil.Error:
+                    pass
+            self.stop.wait(self.every)
+
+    def __enter__(self):
+        self.start = time.process_time()
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop.set()
+        self.thread.join()
+        self.cpu = sum(self.seen.values()) + (time.process_time() - self.start if self.own else 0.0)
+
+
+def _run(study, out: Path, workers: int, threads: bool | None = None) -> tuple[float, float, list[float]]:
+    """Wall and CPU time of ``measure`` (s; ``threads`` forces the local
+    cluster's kind) and the runs' own times."""
     from cosim.study_run import read_runs
-    from quadrotor_paper.experiments import measure
+    from quadrotor_paper import experiments
 
+    chosen = experiments.threads_safe
+    if threads is not None:
+        experiments.threads_safe = lambda *args, **kwargs: threads
+    try:
+        with _Cpu() as cpu:
+            t = time.perf_counter()
+            experiments.measure(study, out, workers=workers)
+            wall = time.perf_counter() - t
+    finally:
+        experiments.threads_safe = chosen
+    return wall, cpu.cpu, [float(r["wall_time_s"]) for r in read_runs(out / "runs.csv") if r["wall_time_s"]]
+
+
+def _command(out: Path, workers: int) -> tuple[float, float]:
+    """Wall and CPU time (s) of ``fnn-cosim table2`` in a new process (its whole tree)."""
     t = time.perf_counter()
-    measure(study, out, workers=workers)
-    wall = time.perf_counter() - t
-    return wall, [float(r["wall_time_s"]) for r in read_runs(out / "runs.csv") if r["wall_time_s"]]
-
-
-def _command(out: Path, workers: int) -> float:
-    """Wall time (s) of ``fnn-cosim table2`` in a new process."""
-    t = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "quadrotor_paper.cli", "table2", "--out", str(out), "--quiet",
-                    "--workers", str(workers)], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - t
+    proc = subprocess.Popen([sys.executable, "-m", "quadrotor_paper.cli", "table2", "--out", str(out), "--quiet",
+                             "--workers", str(workers)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    with _Cpu(proc.pid) as cpu:
+        if proc.wait():
+            raise SystemExit(f"fnn-cosim table2 exited with {proc.returncode}")
+    return time.perf_counter() - t, cpu.cpu
 
 
 def _driver_peak_bytes(study, out: Path, workers: int) -> int:
@@ -95,18 +156,28 @@ def main() -> None:
     args = p.parse_args()
 
     study = _table2()
+    med = statistics.median
     with tempfile.TemporaryDirectory() as tmp:
-        here_wall, here_times = _run(study, Path(tmp) / "here", 1)
+        here_wall, here_cpu, here_times = _run(study, Path(tmp) / "here", 1)
         runs = len(here_times)
         loop = sum(here_times) / runs
         ideal = runs * loop / args.workers
-        dask_walls, dask_sums, commands = [], [], []
-        for i in range(args.repeats):
-            wall, times = _run(study, Path(tmp) / f"dask{i}", args.workers)
-            dask_walls.append(wall)
-            dask_sums.append(sum(times))
-            commands.append(_command(Path(tmp) / f"command{i}", args.workers))
-        dask_wall, dask_sum, command = (statistics.median(x) for x in (dask_walls, dask_sums, commands))
+        kinds = {"threads": True, "processes": False}
+        walls = {k: [] for k in kinds}
+        cpus = {k: [] for k in kinds}
+        sums = {k: [] for k in kinds}
+        commands, command_cpus = [], []
+        for i in range(args.repeats):  # alternated, so that a change of the machine's load hits each alike
+            for kind, threads in kinds.items():
+                wall, cpu, times = _run(study, Path(tmp) / f"{kind}{i}", args.workers, threads)
+                walls[kind].append(wall)
+                cpus[kind].append(cpu)
+                sums[kind].append(sum(times))
+            wall, cpu = _command(Path(tmp) / f"command{i}", args.workers)
+            commands.append(wall)
+            command_cpus.append(cpu)
+        dask_walls, dask_sums = walls["threads"], sums["threads"]
+        dask_wall, dask_sum, command = med(dask_walls), med(dask_sums), med(commands)
         if not args.no_memory:
             small, large = _memory_study(40), _memory_study(160)
             peak_small = _driver_peak_bytes(small, Path(tmp) / "small", args.workers)
@@ -123,20 +194,28 @@ def main() -> None:
         "efficiency": dask_sum / (args.workers * dask_wall), "ideal_s": ideal,
         "dask_wall_over_ideal": dask_wall / ideal, "command_wall_s": command, "command_walls_s": commands,
         "command_wall_over_ideal": command / ideal,
+        "in_process_cpu_s": here_cpu, "command_cpu_s": med(command_cpus), "command_cpus_s": command_cpus,
+        **{f"{kind}_{what}": value for kind in kinds for what, value in
+           (("wall_s", med(walls[kind])), ("cpu_s", med(cpus[kind])), ("walls_s", walls[kind]),
+            ("cpus_s", cpus[kind]), ("wall_over_ideal", med(walls[kind]) / ideal))},
     }
     print(f"Table 2: {runs} runs of the 50 s circles")
     print(f"  one run's loop time L (mean Master.run)      {loop * 1e3:8.1f} ms")
     print(f"  in this process: wall                        {here_wall:8.2f} s")
     print(f"    overhead per run                           {here_overhead * 1e3:8.1f} ms = "
           f"{here_overhead / loop:5.0%} of L")
-    print(f"  on {args.workers} Dask workers (median of {args.repeats}): wall  {dask_wall:8.2f} s   "
-          f"(cluster start and stop included)")
-    print(f"    overhead per run (workers x wall - runs)   {dask_overhead * 1e3:8.1f} ms = "
-          f"{dask_overhead / loop:5.0%} of L;  efficiency {figures['efficiency']:.2f}")
+    print(f"    CPU                                        {here_cpu:8.2f} s = {here_cpu / runs * 1e3:.1f} ms a run "
+          f"(the reference below)")
     print(f"  ideal, runs x L / workers                    {ideal:8.2f} s")
-    print(f"  measure on Dask / ideal                      {dask_wall / ideal:8.2f} x")
+    for kind in kinds:
+        wall, cpu = med(walls[kind]), med(cpus[kind])
+        print(f"  measure on {args.workers} Dask {kind:9s} (median of {args.repeats}): wall {wall:8.2f} s = "
+              f"{wall / ideal:5.2f} x ideal;  CPU {cpu:6.2f} s = {cpu / here_cpu:4.2f} x in-process")
+    print(f"    threads: overhead per run (workers x wall - runs) {dask_overhead * 1e3:6.1f} ms = "
+          f"{dask_overhead / loop:5.0%} of L;  efficiency {figures['efficiency']:.2f}")
     print(f"  fnn-cosim table2 (a new process) / ideal     {command / ideal:8.2f} x   ({command:.2f} s; "
-          f"target <= 1.6 on 2 workers)")
+          f"target <= 1.6 on 2 workers);  CPU {med(command_cpus):6.2f} s = "
+          f"{med(command_cpus) / here_cpu:4.2f} x in-process")
     if not args.no_memory:
         figures.update({"driver_peak_small_MB": peak_small / 1e6, "driver_peak_large_MB": peak_large / 1e6,
                         "driver_memory_ratio_4x_runs": peak_large / peak_small})

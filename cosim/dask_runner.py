@@ -23,8 +23,13 @@ record with its status and message, never an exception.
 Engines: ``workers = 1`` and no ``scheduler`` runs every run in this
 process, one after the other (no Dask at all). Otherwise a
 ``dask.distributed`` client: a ``LocalCluster`` of ``workers`` processes
-with one thread each, or the running cluster at ``scheduler`` (an address
-such as ``tcp://127.0.0.1:8786``). A Dask task flies a **batch** of
+with one thread each, or, with ``threads``, a ``LocalCluster`` of one
+worker in this process with ``workers`` threads (no worker process to
+start, nothing imported twice, no record serialized; for runs whose
+loop is C that releases the GIL and whose every FMU is known reentrant,
+which the caller vouches for: an FMU that crashes takes this process with
+it), or the running cluster at ``scheduler`` (an address such as
+``tcp://127.0.0.1:8786``). A Dask task flies a **batch** of
 consecutive runs of the plan (:func:`execute_batch`) and returns their
 records together; its size adapts (:func:`batch_size`): about
 :data:`BATCH_SECONDS` of work, a share of the runs left that shrinks toward
@@ -131,6 +136,7 @@ class MasterCache:
         self._raw: Any = None
         self._raw_text: str | None = None
         self._serial = 0
+        self.closed = False
 
     def scenario(self, raw: Mapping[str, Any], source: str | None, overrides: Mapping[str, Any]) -> Scenario:
         """The base document ``raw`` with ``overrides`` applied, validated
@@ -210,6 +216,7 @@ class MasterCache:
         master.close()
 
     def close(self) -> None:
+        self.closed = True
         while self.masters:
             self.masters.popitem()[1].master.close()
         if self._tmp is not None:
@@ -224,16 +231,33 @@ LOG_LENGTH = 100  # entries of the local scheduler's diagnostic logs (see _clien
 POLL = 1.0  # s between looks at the cluster while no run finishes
 
 _LOCAL = threading.local()  # a worker's cache, one per thread (a master is not thread-safe)
+_MADE: list[tuple[threading.Thread, MasterCache]] = []  # the caches made in this process, by thread
+_MADE_LOCK = threading.Lock()
 
 
 def _worker_cache() -> MasterCache:
     cache = getattr(_LOCAL, "cache", None)
-    if cache is None:
+    if cache is None or cache.closed:
         cache = _LOCAL.cache = MasterCache()
+        with _MADE_LOCK:
+            _MADE.append((threading.current_thread(), cache))
         # not atexit: a Dask worker is a multiprocessing child, which leaves by os._exit after
         # running multiprocessing's finalizers only (its extracted FMUs stayed in /tmp)
         Finalize(cache, cache.close, exitpriority=10)
     return cache
+
+
+def _close_worker_caches() -> None:
+    """Close the caches of the threads of this process that have ended (a
+    threads cluster ended: its masters' FMUs freed, their extracted files
+    removed now). A thread still running (a cluster whose close timed out
+    with a run in flight) keeps its cache: freeing the FMUs under its loop
+    would crash; its finalizer closes it later."""
+    with _MADE_LOCK:
+        ended = [(t, c) for t, c in _MADE if not t.is_alive()]
+        _MADE[:] = [(t, c) for t, c in _MADE if t.is_alive()]
+    for _, cache in ended:
+        cache.close()
 
 
 def _message(exc: BaseException) -> str:
@@ -321,13 +345,16 @@ def batch_size(left: int | None, threads: int, per_run: float | None, seconds: f
 
 def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: str | None = None,
         metrics: Metrics | None = None, window: int = 2,
-        worker_timeout: float | None = WORKER_TIMEOUT, total: int | None = None) -> Iterator[dict[str, Any]]:
+        worker_timeout: float | None = WORKER_TIMEOUT, total: int | None = None,
+        threads: bool = False) -> Iterator[dict[str, Any]]:
     """Fly every run of ``scenario`` (its document and file); yield each
     record as its run (in this process) or its batch (on Dask) finishes.
     ``workers = 1`` without ``scheduler``: in this process; else on Dask
     (see the module's docstring), ``window`` batches in flight per worker
     thread; ``total``, the number of ``runs`` if known, lets the batches
-    shrink toward the end (:func:`batch_size`). On Dask, when the cluster
+    shrink toward the end (:func:`batch_size`). ``threads``: the local
+    cluster is ``workers`` threads of this process, not processes (the
+    module's docstring says when that is safe). On Dask, when the cluster
     has had no worker for ``worker_timeout`` seconds (``None``: wait for
     ever), a :class:`~cosim.errors.CosimError` says so and the flight stops
     (the records yielded so far are kept by the caller)."""
@@ -340,15 +367,17 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
         finally:
             cache.close()
         return
-    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total)
+    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total,
+                         threads and scheduler is None)
 
 
-def _client(workers: int, scheduler: str | None, scratch: Path | None = None):
+def _client(workers: int, scheduler: str | None, scratch: Path | None = None, threads: bool = False):
     """A Dask client: of the cluster at ``scheduler``, or of a local cluster of
     ``workers`` processes whose scratch space (Dask's ``dask-scratch-space``:
     the workers' folders, its locks) is the folder ``scratch``, which the
     caller makes and removes: it was left in the system's temporary folder
-    after every study."""
+    after every study. ``threads``: the local cluster is one worker of
+    ``workers`` threads in this process."""
     import logging
 
     import dask
@@ -373,18 +402,24 @@ def _client(workers: int, scheduler: str | None, scratch: Path | None = None):
                           "distributed.admin.log-length": LOG_LENGTH,
                           "distributed.admin.low-level-log-length": LOG_LENGTH,
                           "distributed.worker.multiprocessing-method": method}):
-        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR, local_directory=scratch)
+        # no dashboard; the scheduler's HTTP server (which dashboard_address=None put on 8787, with a
+        # warning on stderr when another cluster held that port) on a free port
+        quiet = {"dashboard_address": ":0", "scheduler_kwargs": {"dashboard": False},
+                 "silence_logs": logging.ERROR, "local_directory": scratch}
+        if threads:  # the runs' loops release the GIL (ctypes): N threads fly N runs at once
+            cluster = LocalCluster(n_workers=1, threads_per_worker=max(1, workers), processes=False, **quiet)
+        else:
+            cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, **quiet)
         return Client(cluster), cluster
 
 
 def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
-              worker_timeout: float | None, total: int | None) -> Iterator[dict[str, Any]]:
+              worker_timeout: float | None, total: int | None, threads: bool = False) -> Iterator[dict[str, Any]]:
     from dask.distributed import wait
 
     scratch = Path(tempfile.mkdtemp(prefix="cosim-dask-")) if scheduler is None else None
     try:
-        client, cluster = _client(workers, scheduler, scratch)
+        client, cluster = _client(workers, scheduler, scratch, threads)
     except BaseException:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
@@ -458,5 +493,7 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
         client.close()
         if cluster is not None:
             cluster.close()
+        if threads:
+            _close_worker_caches()
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)

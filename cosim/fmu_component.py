@@ -70,6 +70,7 @@ import logging
 import os
 import shutil
 import tempfile
+import threading
 import weakref
 import zipfile
 from collections import deque
@@ -89,6 +90,12 @@ from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
 
 __all__ = ["FmuComponent", "fmi2_callbacks", "stream_seed", "read_description"]
+
+# fmpy loads an FMU's library from inside its folder: its constructor (fmi1._FMU.__init__) reads the
+# working directory, changes to the library's folder and back. Two threads constructing at once (a
+# study on a cluster of threads) left the process in one FMU's extracted folder, removed later with
+# its cache: every later os.getcwd() failed. One constructor at a time in this process.
+_LOADING = threading.Lock()
 
 
 @functools.lru_cache(maxsize=64)
@@ -543,18 +550,19 @@ class FmuComponent:
             if self.fmi_version == 2:
                 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
-                slave = (FMU2Model if model_exchange else FMU2Slave)(**common)
+                with _LOADING:
+                    slave = (FMU2Model if model_exchange else FMU2Slave)(**common)
                 self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
                 slave.instantiate(callbacks=self._callbacks, loggingOn=True)
             else:
                 from fmpy.fmi3 import FMU3Model, FMU3Slave
 
                 log = lambda env, status, category, message: self._log(status, message)  # noqa: E731
+                with _LOADING:
+                    slave = (FMU3Model if model_exchange else FMU3Slave)(**common)
                 if model_exchange:
-                    slave = FMU3Model(**common)
                     slave.instantiate(loggingOn=True, logMessage=log)
                 else:
-                    slave = FMU3Slave(**common)
                     slave.instantiate(loggingOn=True, eventModeUsed=self.clock is not None, logMessage=log)
         except Exception as exc:  # fmpy raises plain Exceptions here; the FMU's log says why
             said = "; ".join(self.messages)

@@ -225,7 +225,8 @@ def summary_of(study: Study, rows: Iterable[Mapping[str, Any]], metric_names: Se
 def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int = 1, scheduler: str | None = None,
               metrics: Callable[[Any, Any], Mapping[str, Any]] | None = None, metric_names: Sequence[str] = (),
               record: Sequence[str] | None = None, progress: Callable[[int, int], None] | None = None,
-              plots: bool = True, resume: bool = True, worker_timeout: float | None = WORKER_TIMEOUT) -> StudyResult:
+              plots: bool = True, resume: bool = True, worker_timeout: float | None = WORKER_TIMEOUT,
+              threads: bool = False) -> StudyResult:
     """Run the runs of ``study`` (those not yet in ``out_dir/runs.csv`` when
     ``resume``; all of them, the folder's old rows dropped, otherwise),
     appending a row as each finishes; then write ``runs.parquet``,
@@ -240,7 +241,9 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
     ``workers`` local worker processes, or ``scheduler``, the address of a
     running Dask scheduler (``tcp://host:8786``) whose cluster flies the runs
     (:mod:`cosim.dask_runner`); with neither (1 worker) the runs fly in this
-    process. ``plots``: the study's figures beside its summary.
+    process; ``threads``: the local workers are threads of this process
+    (:func:`cosim.dask_runner.fly`: for runs whose every FMU the caller
+    knows reentrant). ``plots``: the study's figures beside its summary.
     ``worker_timeout``: how long a Dask cluster without a worker is waited
     for before the study stops (:func:`cosim.dask_runner.fly`; ``None``: for ever)."""
     from .dask_runner import fly
@@ -287,7 +290,8 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
             if progress is not None:
                 progress(0, total - skipped)
             for n, rec in enumerate(fly(base, todo(), workers=workers, scheduler=scheduler, metrics=metrics,
-                                        worker_timeout=worker_timeout, total=total - skipped), 1):
+                                        worker_timeout=worker_timeout, total=total - skipped,
+                                        threads=threads), 1):
                 run = pending.pop(rec["key"])
                 # every metric the function gave stays in a row kept in memory (an analysis may return
                 # more than numbers); the metric_names are the table's columns

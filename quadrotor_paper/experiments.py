@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from cosim.errors import FmuError, ScenarioError
-from cosim.scenario import Scenario
+from cosim.scenario import Scenario, dotted_key
 from cosim.assembly import build_master, fmu_error_in_scenario
 from cosim.limits import WORKER_TIMEOUT
 
@@ -34,7 +34,8 @@ from .sections import estimation_spec, metric_signals
 from .run_metrics import BLOCKS, RunMetrics
 
 __all__ = ["run_once", "run_summary", "measure", "study_metrics", "STUDY_METRICS", "ESTIMATION_METRICS",
-           "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics", "PLOT_ROWS"]
+           "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics", "PLOT_ROWS",
+           "threads_safe"]
 
 ESTIMATION_METRICS = (*(f"nees_{b}" for b in BLOCKS), "nis_fix", "nis_acc",
                       *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in BLOCKS.items()), "est_rmse_wind_settled_mps",
@@ -164,11 +165,42 @@ def measure(study: Study, out_dir: str | Path | None = None, *, workers: int = 1
     """Run ``study`` the paper's way: :func:`cosim.study_run.run_study`
     measuring each row with ``metrics`` and recording only what they read
     (``record``, default :func:`lean_signals`); ``metric_names`` default
-    :func:`study_metric_names` of the study's scenario."""
+    :func:`study_metric_names` of the study's scenario. A local cluster is
+    of threads in this process when :func:`threads_safe` says so, else of
+    processes."""
     from cosim.study_run import run_study  # the study machinery: not loaded by a single run
 
     return run_study(study, out_dir, workers=workers, scheduler=scheduler, metrics=metrics,
                      metric_names=study_metric_names(study.scenario) if metric_names is None else metric_names,
                      record=record if record is not None else (lean_signals(study.scenario) or None),
                      progress=progress, plots=plots, resume=resume,
-                     worker_timeout=worker_timeout)
+                     worker_timeout=worker_timeout, threads=threads_safe(study, metrics))
+
+
+_FMU_VALUES = ("parameters", "start")  # what a study may change of an [fmus] entry and stay on our FMUs
+
+
+def threads_safe(study: Study, metrics: Callable[[Scenario, Any], Mapping[str, Any]] = study_metrics) -> bool:
+    """Whether ``study``'s runs may fly as threads of one process
+    (:func:`cosim.dask_runner.fly`, ``docs/studies.md``, "Threads or
+    processes"): its metrics are :func:`study_metrics` (taken as the rows
+    stream: a run's time is its compiled loop, which releases the GIL; an
+    analysis's metrics run Python per run, which the GIL would serialize),
+    every ``[fmus]`` entry is a registered model of this project in
+    Co-Simulation (their C keeps no global state and is reentrant, checked
+    on every built binary; a Model Exchange FMU is integrated in Python),
+    and no case, grid or random key gives an FMU another file or interface.
+    Anything else (an FMU file of someone's, which may keep globals or
+    crash) flies in worker processes."""
+    if metrics is not study_metrics:
+        return False
+    scenario = study.scenario
+    for spec in scenario.fmus.values():
+        if "model" not in spec or spec.get("interface", "CoSimulation") != "CoSimulation":
+            return False
+    keys = [*study.grid, *study.random, *(k for case in study.cases for k in case.overrides)]
+    for key in keys:
+        parts = dotted_key(key)
+        if parts[0] == "fmus" and (len(parts) < 3 or parts[2] not in _FMU_VALUES):
+            return False
+    return True

@@ -27,7 +27,6 @@ from cosim.study import Study, parse_study, study_path
 from cosim.study_run import write_json
 from fnn_controller.variants import variant, variant_names
 
-from . import plots
 from .experiments import measure, run_once
 from .metrics import pd_share
 from .sections import metric_signals
@@ -124,6 +123,8 @@ def _share_stats(result, early=(0.0, 5.0), late_seconds: float = 10.0) -> dict[s
 def figures(out_dir: Path, wind: float = 3.0, seed: int = 0, duration: float | None = None,
             show_progress: bool = True) -> dict[str, Any]:
     """The single runs behind Figs. 5-9 (circles, 3 m/s) and 11-12 (figure-8), and the figures."""
+    from . import plots  # matplotlib: loaded by what draws, not by fnn-cosim table2 / table3
+
     out_dir = Path(out_dir)
     info: dict[str, Any] = {"runs": {}, "files": []}
     for name, label in (("circles", "circles"), ("figure8", "figure8")):

@@ -368,6 +368,43 @@ def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, m
     assert here.summary["cells"] == there.summary["cells"]
 
 
+def test_a_local_cluster_of_threads_gives_the_rows_of_this_process_and_frees_its_masters(folder, tmp_path,
+                                                                                          monkeypatch):
+    """``threads``: the runs fly on threads of this process (each its own
+    masters and FMU instances), to the same bits as one after the other here;
+    the threads' caches are closed when the cluster ends (their extracted
+    FMUs removed)."""
+    from cosim import dask_runner
+
+    (folder / "toy_by_path.toml").write_text(toy_models.LOOP_BY_PATH.format(lag=toy_models.lag_fmu_path(2)))
+    body = ('scenario = "toy_by_path.toml"\n[sweep]\nseeds = 3\n[sweep.grid]\n"components.ctrl.kp" = [0.5, 1.5]\n'
+            '[sweep.random]\nsamples = 2\n"fmus.Lag.parameters.tau" = { uniform = [0.2, 0.4] }\n')
+    (folder / "threads.toml").write_text(body)
+    study = load_study(folder / "threads.toml")
+    made = []
+    real = dask_runner._worker_cache
+
+    def spied():
+        cache = real()
+        if cache not in made:
+            made.append(cache)
+        return cache
+
+    monkeypatch.setattr(dask_runner, "_worker_cache", spied)
+    here = run_study(study, tmp_path / "here", metrics=final_y, metric_names=["final_y"], plots=False)
+    there = run_study(study, tmp_path / "threads", workers=2, threads=True, metrics=final_y,
+                      metric_names=["final_y"], plots=False)
+    assert (here.total, there.total, there.counts) == (12, 12, {"ok": 12})
+    a = {r["run"]: r for r in read_runs(tmp_path / "here" / "runs.csv")}
+    b = {r["run"]: r for r in read_runs(tmp_path / "threads" / "runs.csv")}
+    assert a.keys() == b.keys()
+    for k in a:
+        assert {c: v for c, v in a[k].items() if c != "wall_time_s"} == {c: v for c, v in b[k].items()
+                                                                          if c != "wall_time_s"}
+    assert here.summary["cells"] == there.summary["cells"]
+    assert made and all(cache.closed and not cache.masters and cache._tmp is None for cache in made)
+
+
 def test_a_cluster_without_a_worker_stops_the_study_in_one_line(folder, tmp_path):
     """The driver does not wait for ever: a cluster that has no worker for the
     stated time stops the study, saying so (what ran is kept; nothing ran here)."""
@@ -376,7 +413,7 @@ def test_a_cluster_without_a_worker_stops_the_study_in_one_line(folder, tmp_path
     from cosim.errors import CosimError
 
     study = load_study(study_file(folder, "[sweep]\nseeds = 2\n"))
-    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster:
         with pytest.raises(CosimError, match=r"^no Dask worker for 0\.5 s \(\w+://.* lost them all\): the study "
                                              r"stops with 2 runs in flight; .* running it again resumes it$"):
             run_study(study, tmp_path / "out", scheduler=cluster.scheduler_address, worker_timeout=0.5, plots=False)

@@ -207,7 +207,7 @@ class _Cluster:
 
 def test_a_batch_whose_worker_died_is_flown_again_run_by_run_and_only_its_killer_fails(base, monkeypatch):
     cluster = _Cluster(killer=2)
-    monkeypatch.setattr(dask_runner, "_client", lambda workers, scheduler, scratch=None: (cluster, None))
+    monkeypatch.setattr(dask_runner, "_client", lambda workers, scheduler, scratch=None, threads=False: (cluster, None))
     monkeypatch.setattr("dask.distributed.wait", lambda futures, timeout, return_when: (set(futures), set()))
     monkeypatch.setattr(dask_runner, "batch_size", lambda left, threads, per_run: 5)
     runs = [_run(i, {"toy_controller.kp": 0.5 + i}) for i in range(7)]
@@ -218,3 +218,51 @@ def test_a_batch_whose_worker_died_is_flown_again_run_by_run_and_only_its_killer
     assert cluster.tasks[:2] == [[0, 1, 2, 3, 4], [5, 6]]
     assert sorted(cluster.tasks[2:]) == [[0], [1], [2], [3], [4]]  # the dead batch, run by run
     assert all(_same_record(r, _fresh(base, runs[r["key"]])) for r in records if r["key"] != 2)
+
+
+# ---- threads --------------------------------------------------------------------------------------
+
+def test_fmus_instantiated_by_two_threads_at_once_leave_the_working_directory_as_it_was(monkeypatch, tmp_path):
+    """fmpy loads a library from inside its folder (chdir there and back):
+    two threads doing it at once, as the threads of a local cluster do,
+    left the process in one FMU's extracted folder, later removed; each
+    FMU is loaded alone (chdir slowed here so that the threads overlap)."""
+    import os
+    import threading
+    import time
+
+    from cosim.fmu_component import FmuComponent
+
+    real = os.chdir
+
+    def slow(path):
+        real(path)
+        time.sleep(0.05)
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(os, "chdir", slow)
+    here = os.getcwd()
+    start = threading.Barrier(2)
+    fmus, errors = [], []
+
+    def load():
+        try:
+            fmu = FmuComponent("Lag", toy_models.lag_fmu_path(2))
+            start.wait()
+            fmu.instantiate()
+            fmus.append(fmu)
+        except Exception as exc:  # reported below, with the thread's reason
+            errors.append(exc)
+
+    threads = [threading.Thread(target=load) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    monkeypatch.setattr(os, "chdir", real)
+    try:
+        assert not errors and len(fmus) == 2
+        assert os.getcwd() == here
+    finally:
+        for fmu in fmus:
+            fmu.close()

@@ -113,6 +113,26 @@ def test_a_local_dask_cluster_gives_the_same_rows(in_process, study, tmp_path):
     _same_rows(in_process, out)
 
 
+def test_studies_of_our_registered_fmus_fly_on_threads_others_on_worker_processes(study, tmp_path):
+    """threads_safe: a study of registered models in Co-Simulation, measured
+    by study_metrics, flies on threads; an FMU file of someone's, Model
+    Exchange or an analysis's own metrics keep worker processes."""
+    from quadrotor_paper.experiments import study_metrics, threads_safe
+    from quadrotor_paper.report import table_study
+
+    assert threads_safe(load_study(study)) and threads_safe(table_study(2)) and threads_safe(table_study(3))
+    assert not threads_safe(load_study(study), metrics=lambda scenario, result: {})
+    from cosim.assembly import fmu_file
+
+    plant = fmu_file(load_scenario("circles").fmus["Quadrotor"])
+    for extra in (f'[set]\n"fmus.Quadrotor" = {{ path = "{plant}", parameters = {{ z_0 = -15.0 }} }}\n',
+                  '[sweep.grid]\n"fmus.Quadrotor.fmi_version" = [2, 3]\n',
+                  '[set]\n"fmus.Quadrotor.interface" = "ModelExchange"\n'):
+        other = tmp_path / "other.toml"
+        other.write_text('scenario = "circles"\n' + extra)
+        assert not threads_safe(load_study(other)), extra
+
+
 def _dask(*args: str) -> list[str]:
     script = Path(sys.executable).with_name("dask")
     return [str(script), *args] if script.exists() else [sys.executable, "-m", "dask", *args]
