@@ -29,3 +29,65 @@ def pytest_sessionstart(session):
 def quadrotor_fmu2():
     """Path of the FMI 2.0 (ME + CS) quadrotor FMU."""
     return cached_fmu(QUADROTOR, 2)
+
+
+# The longest tests (measured with ``--durations``; longest first), run
+# first: pytest-xdist hands each process a contiguous share of the
+# collection and the first to run out steals from the end of the other's,
+# so a long test left at the end keeps one process busy while the other
+# waits. A test using a module-scoped fixture moves with its whole module,
+# so that fixture is still made once. A name no longer collected is ignored.
+LONGEST_FIRST = (
+    "tests/paper/test_stability_cosim.py::test_command_writes_the_report_and_figures",
+    "tests/paper/test_fuzz.py::test_fuzz_scenario_files",
+    "tests/paper/test_fuzz.py::test_fuzz_archives",
+    "tests/paper/test_ssp_importers.py::test_every_input_is_connected_and_every_fmu_starts_from_the_bound_values",
+    "tests/paper/test_stability_cosim.py::test_operating_point_figures_drawn_aside_are_the_same_files",
+    "tests/paper/test_fuzz.py::test_fuzz_learned_files",
+    "tests/paper/test_fuzz.py::test_fuzz_study_files",
+    "tests/paper/test_fuzz.py::test_fuzz_special_files",
+    "tests/paper/test_estimation_gating.py::test_fmpy_simulate_ssp_flies_circles_estimated_without_chasing_its_first_fix",
+    "tests/fmus/test_estimation_fmu.py::test_builds_and_validates",
+    "tests/fmus/test_sensors_ssp.py::test_circles_sensors_flies_in_libcosim_as_in_our_master_noise_and_seed_included",
+    "tests/paper/test_estimation.py::test_the_estimated_missions_as_fmus_fly_in_libcosim_as_in_our_master",
+    "tests/paper/test_cli.py::test_build_fmu_writes_the_plant_wind_references_and_every_controller",
+    "tests/paper/test_calibrate_plant.py::test_a_parameter_the_flight_does_not_excite_is_not_identifiable",
+    "tests/paper/test_stability_linear.py::test_feed_forward_leaves_poles_and_margins_and_removes_the_v_over_kp_ramp_lag",
+    "tests/paper/test_sweep.py::test_a_running_scheduler_and_two_workers_by_address",
+    "tests/paper/test_stability_linear.py::test_paper_gains_are_stable_with_margins_at_every_operating_point",
+    "tests/paper/test_ssp_importers.py::test_fmpy_flies_the_circles_archive_within_3_percent_of_our_master",
+    "tests/paper/test_stability_along_flight.py::test_the_study_runs_every_case_through_the_study_runner_in_case_order",
+    "tests/fmus/test_fmi3.py::test_source_fmu_compiles_with_fmpy_build",
+    "tests/engine/test_engine_calibration.py::test_the_command_writes_its_four_files",
+    "tests/paper/test_bad_inputs.py::test_a_local_study_leaves_no_dask_scratch_space",
+    "tests/test_imports.py::test_importing_every_engine_module_loads_no_application_package",
+    "tests/engine/test_engine_study.py::test_a_local_dask_cluster_gives_the_rows_of_this_process",
+)
+
+
+def _shares_module_fixture(item) -> bool:
+    info = getattr(item, "_fixtureinfo", None)
+    return info is not None and any(
+        d.scope in ("module", "class", "package") for defs in info.name2fixturedefs.values() for d in defs)
+
+
+@pytest.hookimpl(trylast=True)  # after pytest's own ordering by fixture
+def pytest_collection_modifyitems(session, config, items):
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    first: dict[int, list] = {}
+    modules = {}
+    for item in items:
+        i = rank.get(item.nodeid.split("[")[0])
+        if i is None:
+            continue
+        if _shares_module_fixture(item):
+            modules.setdefault(item.path, i)
+        else:
+            first.setdefault(i, []).append(item)
+    for path, i in modules.items():  # the whole module where the test is, in its order
+        first.setdefault(i, []).extend(it for it in items if it.path == path)
+    moved = [it for i in sorted(first) for it in first[i]]
+    seen = set()
+    moved = [it for it in moved if not (id(it) in seen or seen.add(id(it)))]
+    ids = {id(it) for it in moved}
+    items[:] = moved + [it for it in items if id(it) not in ids]

@@ -1,0 +1,36 @@
+"""The suite's ``validate_fmu`` (tests/fmu_validation.py) finds what fmpy's
+finds: its memory of parsed variable names changes the cost, not the verdict."""
+from __future__ import annotations
+
+import zipfile
+
+from fmpy.validation import validate_fmu as fmpy_validate_fmu
+
+from fmu_models.export.build import cached_fmu
+from fmu_models.models.wind_gust import WIND_GUST
+from tests.fmu_validation import validate_fmu
+
+
+def _renamed(source, target, old: str, new: str):
+    """``source`` with the variable ``old`` called ``new`` in its modelDescription."""
+    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(target, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(f'name="{old}"'.encode(), f'name="{new}"'.encode())
+            zout.writestr(item, data)
+    return target
+
+
+def test_an_illegal_name_is_reported_as_fmpy_reports_it_every_time_it_is_met(tmp_path):
+    stock = cached_fmu(WIND_GUST, 2)
+    assert validate_fmu(str(stock)) == fmpy_validate_fmu(str(stock)) == []
+    # the same illegal name in two FMUs of other bytes: the second meets it remembered
+    first = _renamed(stock, tmp_path / "a.fmu", "v_wind_x", "1v_wind_x")
+    second = _renamed(stock, tmp_path / "b.fmu", "v_wind_x", "1v_wind_x")
+    with zipfile.ZipFile(second, "a") as z:
+        z.writestr("documentation/readme.txt", "other bytes, same names")
+    for fmu in (first, second):
+        problems = validate_fmu(str(fmu))
+        assert problems == fmpy_validate_fmu(str(fmu))
+        assert len(problems) == 1 and '"1v_wind_x"' in problems[0] and "not a legal variable name" in problems[0]
