@@ -33,6 +33,7 @@ from pydantic import Field, model_validator
 from cosim.errors import ScenarioError
 from cosim.scenario import Scenario, check_fmu_parameters
 from cosim.schema import NonNegative, NonNegativeInt, Strings, Table, numbers, refuse
+from fmu_models.models.estimator_outputs import counts_of
 
 __all__ = ["WIND_KEYS", "Wind", "Metrics", "apply_wind", "apply_metrics", "metric_signals", "estimation_spec"]
 
@@ -114,10 +115,13 @@ def metric_signals(scenario: Scenario) -> tuple[list[str], list[str]]:
     return list(metrics.get("position", [])), list(metrics.get("reference", []))
 
 
-def estimation_spec(scenario: Scenario) -> tuple[str, str, float] | None:
-    """``(estimator instance, truth instance, settle s)`` of ``[metrics]``, or
-    ``None`` when it names no estimator."""
+def estimation_spec(scenario: Scenario) -> tuple[str, str, float, tuple[str, ...]] | None:
+    """``(estimator instance, truth instance, settle s, the estimator's
+    counts)`` of ``[metrics]``, or ``None`` when it names no estimator. The
+    counts are those its model outputs (:func:`counts_of`: the magnetometer's
+    refusals too for the filter with the magnetometer)."""
     metrics = scenario.sections.get("metrics", {})
     if metrics.get("estimator") is None:
         return None
-    return metrics["estimator"], metrics["position"][0].split(".")[0], float(metrics["settle"])
+    model = scenario.fmus.get(metrics["estimator"], {}).get("model")
+    return metrics["estimator"], metrics["position"][0].split(".")[0], float(metrics["settle"]), counts_of(model)

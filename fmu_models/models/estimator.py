@@ -43,7 +43,7 @@ from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter
-from .estimator_outputs import COUNTS, COVARIANCE_BLOCKS, covariance_output
+from .estimator_outputs import COUNTS, COVARIANCE_BLOCKS, MAGNETOMETER_COUNTS, MAGNETOMETER_MODEL, covariance_output
 from .imu import AXES, IMU_DEFAULTS
 from .magnetometer import MAGNETOMETER_DEFAULTS, body_field
 from .quadrotor import DEFAULTS, aerodynamic_drag, euler_rate_matrix, rotation_matrix
@@ -450,7 +450,7 @@ def _update(t, v, magnetometer: bool = False):
     trend = change * h_out / v["dt"]
     xs_out, P_out = _predict(xs, P, gyro + trend[0:3], acc + trend[3:6], v, h_out)
 
-    counted = COUNTS + (("outliers_mag",) if magnetometer else ())
+    counted = COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ())
     events = {"outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
               "resets_acc": reset_acc}
     if magnetometer:
@@ -479,7 +479,7 @@ def _initial(v, r, magnetometer: bool = False):
     xs = ca.vertcat(*(v[f"{name}_0"] for name in ESTIMATED_STATES))
     sigma = [v[_P0[ESTIMATED_STATES[3 * (k // 3)]]] for k in range(_N - 1)] + [v["P0_wind_z"]]
     return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
-            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS + (("outliers_mag",) if magnetometer else ())},
+            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ())},
             **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
 
 
@@ -496,7 +496,7 @@ ESTIMATOR = FmuModel(
 # The same filter with the magnetometer's correction (E24): a model of its own, so that the Estimator of a
 # mission without a magnetometer keeps no input unconnected and flies bit for bit as before (docs/estimation.md)
 ESTIMATOR_MAG = FmuModel(
-    identifier="EstimatorMag",
+    identifier=MAGNETOMETER_MODEL,
     description="the Estimator's extended Kalman filter (docs/estimation.md) also correcting its attitude with a "
                 "three-axis magnetometer sampled with the IMU (E24), gated; z axis down",
     variables=_variables(magnetometer=True),
