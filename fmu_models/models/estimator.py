@@ -1,7 +1,7 @@
 """A state estimator as a sampled-data FMU: an extended Kalman filter written
 in CasADi that predicts with the IMU and corrects with the drag-model
 accelerometer and with GNSS or motion capture, each measurement gated and
-fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E23;
+fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E26;
 the numbers below are those equations').
 
 State (18): position ``x y z`` and velocity ``u v w`` (world frame, z down,
@@ -22,10 +22,12 @@ with the IMU's ``gyro, acc`` stamped ``t_imu`` and the fix ``y`` stamped
    from CasADi's AD, kept only when their NIS passes the chi-square gate of
    ``gate_level`` (E19); refusals are counted, and a run of them restarts
    that measurement's part of the state (E21);
-4. the outputs are the posterior predicted from ``t_filter`` to t with the
-   IMU's averages extrapolated along their trend (the output predictor,
-   E23): the state named like the plant's outputs (``x .. psi``), the body
-   rates, the wind, the biases, the covariance (variances of all 18,
+4. the outputs are the posterior predicted from ``t_filter`` to t (the
+   output predictor, E23), the body rates brought forward by the torques of
+   the rotor command ``Omega_1..4`` received a step before, the one that
+   acted over that span (E26; unconnected: the IMU's averages extrapolated
+   along their trend): the state named like the plant's outputs
+   (``x .. psi``), the body rates, the wind, the biases, the covariance (variances of all 18,
    covariances within the position, velocity, attitude and wind blocks),
    the NIS of both corrections, the time they describe (``t_estimate``) and
    the gate's counts.
