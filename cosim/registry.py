@@ -12,15 +12,30 @@ register:
   by ``[fmus.NAME] model = "..."``;
 * folders of shipped scenario files, loadable by name;
 * :class:`Case` -- a named set of scenario overrides a study may name
-  (``[cases.NAME]``): e.g. a controller variant, an option row.
+  (``[cases.NAME]``): e.g. a controller variant, an option row;
+* a cache folder (:func:`register_cache`), where the engine may keep what
+  it derived from files and code that have not changed since: the plugins
+  installed, validated scenarios (:mod:`cosim.scenario_cache`). Without
+  one, everything is derived again in every process.
 
 Registration happens when the providing package is imported, and packages
 installed with an entry point in the group ``cosim.plugins`` (a callable
 that registers) are imported the first time a registry is read, so a
 scenario file finds its kinds without the caller importing anything.
+Which entry points are installed is read once and kept in the cache folder
+(``plugins/``) for as long as the distributions' metadata folders on
+``sys.path`` are the same, each with its modification time (installing,
+upgrading or removing a distribution makes, renames, rewrites or removes
+its metadata folder): reading every installed distribution's metadata, and
+importing :mod:`importlib.metadata`, took longer than validating a scenario.
 """
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import re
+import sys
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +44,7 @@ from typing import Any, Callable, Mapping, Sequence
 __all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
            "register_section", "register_fmu_model", "register_scenarios", "register_studies", "register_case", "component_kinds",
            "sections", "fmu_models", "cases", "aliases", "scenario_folders", "study_folders", "files_by_name", "scoped", "with_connections", "version",
-           "register_table_fmu", "table_fmu", "PLUGIN_GROUP"]
+           "register_table_fmu", "table_fmu", "register_cache", "cache_folder", "signature", "PLUGIN_GROUP"]
 
 PLUGIN_GROUP = "cosim.plugins"
 
@@ -58,7 +73,10 @@ class ComponentKind:
     the document gave them. ``alias`` is a top-level section that stands
     for ``[components.<instance>]`` of this kind; several kinds may share
     one alias section, whose ``kind`` key then picks among them
-    (``[trajectory] kind = "two_circles"``).
+    (``[trajectory] kind = "two_circles"``). ``reads_files``: validating
+    its table reads a file the table names (not only the table's text), so
+    a scenario holding one is validated every time it is read
+    (:mod:`cosim.scenario_cache`).
     """
 
     name: str
@@ -67,6 +85,7 @@ class ComponentKind:
     description: str = ""
     alias: str | None = None
     instance: str | None = None
+    reads_files: bool = False  # its table names files that validating it reads: never served from a cache
 
 
 @dataclass(frozen=True)
@@ -80,12 +99,14 @@ class Section:
     in ``fmus`` (``{instance: {"parameters": {...}, ...}}``), raising
     :class:`~cosim.errors.ScenarioError` naming ``where.key`` for what only
     the whole scenario can tell (an FMU it names that does not exist).
+    ``reads_files``: as :attr:`ComponentKind.reads_files`.
     """
 
     name: str
     parameters: Callable[[], type]
     apply: Callable[[str, Any, dict[str, dict[str, Any]]], Any]
     description: str = ""
+    reads_files: bool = False  # as ComponentKind.reads_files
 
 
 @dataclass(frozen=True)
@@ -147,6 +168,7 @@ _CASES: dict[str, Case] = {}
 _SCENARIO_FOLDERS: list[Path] = []
 _STUDY_FOLDERS: list[Path] = []
 _TABLE_FMU: list[Callable[[Any, int], Path]] = []  # at most one: the builder of the signal table's FMU
+_CACHE: list[Callable[[], Path]] = []  # at most one: where derived data may be kept
 _plugins_loaded = False
 _VERSION = [0]  # bumped by every change of the registry (the scenario's declaration is rebuilt)
 
@@ -243,15 +265,103 @@ def register_studies(folder: str | Path) -> None:
         _STUDY_FOLDERS.append(folder)
 
 
+def register_cache(folder: Callable[[], Path]) -> None:
+    """Where the engine may keep derived data: ``folder()`` is asked each
+    time (it may follow the environment). One per process: a second,
+    different one is refused."""
+    if _CACHE and _CACHE[0] != folder:
+        raise ValueError("a cache folder is registered twice, differently")
+    if not _CACHE:
+        _CACHE.append(folder)
+
+
+def cache_folder() -> Path | None:
+    """The registered cache folder (:func:`register_cache`), or ``None``."""
+    return _CACHE[0]() if _CACHE else None
+
+
+def _path_signature() -> list[list[Any]]:
+    """The distributions' metadata folders in each folder of ``sys.path``,
+    each with its modification time: what installing, upgrading or removing
+    a distribution changes (its metadata folder made, renamed with the
+    version, rewritten or removed)."""
+    out: list[list[Any]] = []
+    for entry in sys.path:
+        try:
+            with os.scandir(entry or ".") as found:
+                out.append([entry, sorted([e.name, e.stat().st_mtime_ns] for e in found
+                                          if e.name.endswith((".dist-info", ".egg-info")))])
+        except NotADirectoryError:  # a zip file: its own modification time
+            out.append([entry, os.stat(entry).st_mtime_ns])
+        except OSError:  # nothing there
+            out.append([entry, None])
+    return out
+
+
+def _plugin_entries() -> list[tuple[str, str]]:
+    """``(name, "module:attribute")`` of every installed entry point of
+    :data:`PLUGIN_GROUP`: kept in the cache folder while the distributions'
+    metadata folders on ``sys.path`` are unchanged (:func:`_path_signature`),
+    else read from the distributions' metadata."""
+    from .cache import keep, kept
+
+    folder = cache_folder()
+    key = _path_signature()
+    # one entry per sys.path (python -m and the fnn-cosim script see different ones)
+    entry = folder / "plugins" / f"{hashlib.sha256(json.dumps(key).encode()).hexdigest()[:32]}.json" \
+        if folder is not None else None
+    known = kept(entry) if entry is not None else None
+    if isinstance(known, dict) and known.get("path") == key:
+        return [tuple(e) for e in known["entries"]]
+    from importlib.metadata import entry_points  # slow to import: only when not kept
+
+    entries = [(e.name, e.value) for e in entry_points(group=PLUGIN_GROUP)]
+    if entry is not None:
+        keep(entry, {"path": key, "entries": entries})
+    return entries
+
+
+# an entry point's value, as the packaging specification writes it: module[:attribute.path] [extras]
+_ENTRY_VALUE = re.compile(r"^(?P<module>[\w.]+)\s*(?::\s*(?P<attr>[\w.]+)\s*)?(?:\[.*\]\s*)?$")
+
+
+def _load_entry(value: str) -> Any:
+    """The object an entry point's value names (what ``EntryPoint.load`` does)."""
+    from importlib import import_module
+
+    match = _ENTRY_VALUE.match(value)
+    if match is None:
+        raise ValueError(f"entry point {value!r} of {PLUGIN_GROUP}: expected 'module:attribute'")
+    obj = import_module(match["module"])
+    for part in (match["attr"] or "").split(".") if match["attr"] else ():
+        obj = getattr(obj, part)
+    return obj
+
+
 def _load_plugins() -> None:
     global _plugins_loaded
     if _plugins_loaded:
         return
     _plugins_loaded = True
-    from importlib.metadata import entry_points  # slow to import: only when a registry is read
+    for _, value in _plugin_entries():
+        _load_entry(value)()
 
-    for entry in entry_points(group=PLUGIN_GROUP):
-        entry.load()()
+
+def signature() -> list[str]:
+    """What is registered, by name and by the code that provides it
+    (``module:qualified name`` of every callable), the same in every process
+    that registers the same things: part of a cache key."""
+    _load_plugins()
+
+    def code(fn: Any) -> str:
+        fn = getattr(fn, "func", fn)  # a functools.partial: its function
+        return f"{getattr(fn, '__module__', '')}:{getattr(fn, '__qualname__', type(fn).__qualname__)}"
+
+    out = [f"kind {k.name} {code(k.build)} {code(k.parameters)} {k.alias} {k.instance} {k.reads_files}"
+           for k in _KINDS.values()]
+    out += [f"section {s.name} {code(s.parameters)} {code(s.apply)} {s.reads_files}" for s in _SECTIONS.values()]
+    out += [f"model {m.name} {code(m.build)} {code(m.check_parameter)}" for m in _MODELS.values()]
+    return out
 
 
 def component_kinds() -> dict[str, ComponentKind]:
@@ -336,7 +446,7 @@ def _register_engine_kinds() -> None:
 
     register_component_kind(ComponentKind("signal_table", build, parameters,
                                           "a recorded CSV or Parquet table played as outputs (docs/cosim.md, "
-                                          "'The signal table')"))
+                                          "'The signal table')", reads_files=True))
 
 
 _register_engine_kinds()

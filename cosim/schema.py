@@ -270,20 +270,12 @@ class ParameterTable(Table):
     dataclass_type: ClassVar[Any] = None
 
     def applied(self, base: Any = None) -> Any:
-        """``base`` (default: the dataclass's defaults) with the given keys replaced."""
-        import dataclasses
+        """``base`` (default: the dataclass's defaults) with the given keys
+        replaced (:func:`cosim.parameters.replaced`)."""
+        from .parameters import replaced
 
         base = self.dataclass_type() if base is None else base
-        changes = {}
-        for name in self.model_fields_set & {f.name for f in dataclasses.fields(self.dataclass_type)}:
-            value = getattr(self, name)
-            if isinstance(value, ParameterTable):
-                changes[name] = value.applied(getattr(base, name))
-            elif isinstance(value, list):
-                changes[name] = tuple(value)
-            else:
-                changes[name] = value
-        return dataclasses.replace(base, **changes)
+        return replaced(base, {name: getattr(self, name) for name in self.model_fields_set})
 
     @model_validator(mode="after")
     def _in_range(self):

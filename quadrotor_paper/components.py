@@ -101,7 +101,8 @@ def _controller_kind() -> registry.ComponentKind:
     def build(instance: str, params: Mapping[str, Any], context) -> Any:
         from .controller_component import ControllerComponent
 
-        return ControllerComponent.from_parameters(instance, params, context)
+        # a scenario's [controller] values, validated with the whole document: read as they are
+        return ControllerComponent.from_parameters(instance, params, context, validated=True)
 
     return registry.ComponentKind("fnn_controller", build, _controller_table,
                                   "PD + FNN position control and geometric velocity control (paper Fig. 2)",
@@ -124,12 +125,12 @@ def register() -> None:
     if _registered:
         return
     _registered = True
+    from fmu_models.cache import cache_root
     from fmu_models.catalog import MODEL_NAMES, model as catalog_model
     from fnn_controller.variants import variant_names
 
     from fnn_controller.fmu_names import INNER_IDENTIFIER, outer_identifier
 
-    from .sections import Metrics, Wind, apply_metrics, apply_wind
     from .trajectories import TRAJECTORIES
 
     for identifier in MODEL_NAMES:
@@ -148,13 +149,25 @@ def register() -> None:
         registry.register_case(variant_case(name))
     for case in OPTIONS.values():
         registry.register_case(case)
-    registry.register_section(registry.Section("wind", lambda: Wind, apply_wind,
+    registry.register_section(registry.Section("wind", partial(_section, "Wind"), partial(_section, "apply_wind"),
                                                "shorthand for the WindGust FMU's parameters"))
-    registry.register_section(registry.Section("metrics", lambda: Metrics, apply_metrics,
-                                               "signals of the tracking error"))
+    registry.register_section(registry.Section("metrics", partial(_section, "Metrics"),
+                                               partial(_section, "apply_metrics"), "signals of the tracking error"))
     registry.register_scenarios(Path(__file__).parent / "scenarios")
     registry.register_studies(Path(__file__).parent / "studies")
     registry.register_table_fmu(_table_fmu)
+    registry.register_cache(cache_root)  # the FMUs' cache folder also keeps the engine's derived data
+
+
+def _section(name: str, *args):
+    """A name of :mod:`.section_tables` (the sections' tables, their
+    appliers), called with ``args``, or itself without: imported when a
+    scenario's sections are first declared or applied (a scenario served
+    from the cache needs neither)."""
+    from . import section_tables
+
+    value = getattr(section_tables, name)
+    return value(*args) if args else value
 
 
 def _table_fmu(table, fmi_version: int) -> Path:

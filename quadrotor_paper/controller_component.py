@@ -52,11 +52,10 @@ from dataclasses import fields
 from typing import Annotated, Any, Mapping
 
 import numpy as np
-from pydantic import AfterValidator, BeforeValidator, Field, WithJsonSchema, model_validator
 
 from cosim.component import Port, PythonComponent
 from cosim.errors import DivergenceError, ScenarioError
-from cosim.schema import Number, ParameterTable, Table, dataclass_table, one_of, refuse, validate
+from cosim.parameters import Given
 from fnn_controller.variants import DEFAULT_VARIANT
 
 __all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "controller_variant",
@@ -64,6 +63,10 @@ __all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "
 
 DEFAULT_PLANT = "Quadrotor"
 FORMS = ("python", "fmu")
+# the defaults of a [controller] table's keys (its declaration, controller_table, and a validated table's values
+# read without it, Given)
+_DEFAULTS = {"variant": DEFAULT_VARIANT, "psi_ref": 0.0, "position": None, "geometric": None, "plant": DEFAULT_PLANT,
+             "nominal": None, "form": "fmu", "fmi_version": 2, "interface": "CoSimulation", "learned": None}
 _AXES = "xyz"
 
 
@@ -123,8 +126,13 @@ def _parameters(cls, value: Any, where: str, base: Any = None) -> Any:
     validated table), over ``base`` (default: the dataclass's defaults)."""
     if isinstance(value, cls):
         return value
-    table = value if isinstance(value, ParameterTable) else validate(dataclass_table(cls), dict(value or {}), where)
-    return table.applied(base)
+    if value is None:  # no table: the base as it is
+        return cls() if base is None else base
+    if hasattr(value, "applied"):  # a validated table (ParameterTable, Given)
+        return value.applied(cls() if base is None else base)
+    from cosim.schema import dataclass_table, validate
+
+    return validate(dataclass_table(cls), dict(value), where).applied(base)
 
 
 def _unknown_variant(name: Any) -> str | None:
@@ -136,12 +144,16 @@ def _unknown_variant(name: Any) -> str | None:
 
 
 def _known_variant(name: str) -> str:
+    from cosim.schema import refuse
+
     if (why := _unknown_variant(name)) is not None:
         raise refuse(why, value=name)
     return name
 
 
 def _no_vehicle(value: Any) -> Any:
+    from cosim.schema import refuse
+
     if isinstance(value, Mapping) and "vehicle" in value:
         raise refuse("the nominal vehicle is the plant's (the controller's plant); set a deliberate mismatch in "
                      "its nominal table", key="vehicle")
@@ -155,29 +167,36 @@ def controller_table() -> type[Table]:
     parameters (their dataclasses' fields, units and ranges), the plant the
     nominal vehicle is read from and the deliberate mismatch, the form, the
     FMI version, a learned state to resume from."""
+    from pydantic import AfterValidator, BeforeValidator, Field, WithJsonSchema, model_validator
+
+    from cosim.schema import Number, Table, dataclass_table, one_of, refuse
     from fnn_controller import GeometricParams, PositionParams, VehicleParams
     from fnn_controller.position_parameters import check_one_step
     from fnn_controller.variants import variant_names
 
+    d = _DEFAULTS
+
     class ControllerTable(Table):
         variant: Annotated[str, Field(strict=True), AfterValidator(_known_variant),
                            WithJsonSchema({"type": "string", "enum": list(variant_names())})] = Field(
-            DEFAULT_VARIANT, description="the controller variant: its laws and learned state")
-        psi_ref: Number = Field(0.0, description="commanded yaw psi* [rad]")
-        position: dataclass_table(PositionParams) = Field(None, description="position controller (section 3.1)")
+            d["variant"], description="the controller variant: its laws and learned state")
+        psi_ref: Number = Field(d["psi_ref"], description="commanded yaw psi* [rad]")
+        position: dataclass_table(PositionParams) = Field(d["position"], description="position controller (section 3.1)")
         geometric: Annotated[dataclass_table(GeometricParams), BeforeValidator(_no_vehicle)] = Field(
-            None, description="geometric velocity controller (eqs. 13-18); its vehicle is the plant's")
+            d["geometric"], description="geometric velocity controller (eqs. 13-18); its vehicle is the plant's")
         plant: Annotated[str, Field(strict=True)] = Field(
-            DEFAULT_PLANT, description="the FMU whose parameters are the nominal vehicle ('' for none)")
+            d["plant"], description="the FMU whose parameters are the nominal vehicle ('' for none)")
         nominal: dataclass_table(VehicleParams) = Field(
-            None, description="a deliberate mismatch: vehicle parameters that differ from the plant's")
-        form: one_of(FORMS) = Field("fmu", description="'fmu': the controller FMU (the compiled loop); 'python': "
-                                                       "the same step in process")
-        fmi_version: one_of((2, 3), "expected 2 or 3", int) = Field(2, description="FMI version of the FMU form")
+            d["nominal"], description="a deliberate mismatch: vehicle parameters that differ from the plant's")
+        form: one_of(FORMS) = Field(d["form"], description="'fmu': the controller FMU (the compiled loop); 'python': "
+                                                           "the same step in process")
+        fmi_version: one_of((2, 3), "expected 2 or 3", int) = Field(d["fmi_version"],
+                                                                    description="FMI version of the FMU form")
         interface: one_of(("CoSimulation", "ModelExchange")) = Field(
-            "CoSimulation", description="how the master drives the FMU form; 'ModelExchange' needs fmi_version = 3 "
+            d["interface"], description="how the master drives the FMU form; 'ModelExchange' needs fmi_version = 3 "
                                         "(the clocked controller: its ticks are time events)")
-        learned: Annotated[str, Field(strict=True)] = Field(None, description="a learned-state file to resume from")
+        learned: Annotated[str, Field(strict=True)] = Field(d["learned"],
+                                                            description="a learned-state file to resume from")
 
         @model_validator(mode="after")
         def _one_step(self):
@@ -253,18 +272,30 @@ class ControllerComponent(PythonComponent):
         self.learned: np.ndarray | None = None  # a saved state to start from instead of the seed's
 
     @classmethod
-    def from_parameters(cls, name: str, parameters: Mapping[str, Any], context=None) -> "ControllerComponent":
+    def from_parameters(cls, name: str, parameters: Mapping[str, Any], context=None,
+                        validated: bool = False) -> "ControllerComponent":
         """The component of a scenario's ``[controller]`` (or ``[components.NAME]
         kind = "fnn_controller"``) table; errors name ``name.key``.
 
         ``plant`` (default ``"Quadrotor"``, ``""`` for none) is the FMU whose
         parameters are the nominal vehicle; ``nominal`` overrides some of them
         on purpose (model mismatch). The vehicle is not set through
-        ``geometric.vehicle``: one way to say it.
+        ``geometric.vehicle``: one way to say it. ``validated``: ``parameters``
+        are a validated table's values (a scenario's, which validated them
+        with the whole document): read as they are (:class:`cosim.parameters.Given`).
         """
-        table = validate(controller_table(), parameters, name)
-        nominal = dataclasses.asdict(table.nominal.applied()) if table.nominal is not None else {}
-        nominal = {k: v for k, v in nominal.items() if k in table.nominal.model_fields_set} if nominal else {}
+        if validated:
+            table = Given(parameters, _DEFAULTS)
+        else:
+            from cosim.schema import validate
+
+            table = validate(controller_table(), parameters, name)
+        nominal = {}
+        if table.nominal is not None:
+            from fnn_controller import VehicleParams
+
+            nominal = dataclasses.asdict(table.nominal.applied(VehicleParams()))
+            nominal = {k: v for k, v in nominal.items() if k in table.nominal.model_fields_set}
         plant = table.plant
         if context is not None and plant not in context.fmus and "plant" not in table.model_fields_set:
             plant = ""  # no FMU of the default name: the controller keeps its own defaults

@@ -25,14 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from typing import Annotated
-
-from pydantic import Field
+from functools import cache
 
 from cosim.errors import ScenarioError
 from cosim.files import output_file, read_json
 from cosim.limits import MAX_STATE
-from cosim.schema import Number, Strings, Table, one_of, validate
 from cosim.fmu_component import FmuComponent
 
 __all__ = ["FORMAT", "save_learned", "learned_variant", "load_learned", "LearnedControllerFmu", "state_of", "write_learned"]
@@ -63,15 +60,27 @@ def write_learned(path: str | Path, variant: str, state: np.ndarray, source: str
     return path
 
 
-class LearnedStateFile(Table):
-    """A learned-state file (the module's docstring): its declaration."""
+@cache
+def _file_table():
+    """The declaration of a learned-state file (pydantic: built when a file is
+    read, not when a run that loads none starts)."""
+    from typing import Annotated
 
-    format: Annotated[str, Field(strict=True)] = Field(..., description=f"'{FORMAT}'")
-    version: Annotated[int, Field(strict=True)] = Field(..., description=f"{VERSION}")
-    variant: Annotated[str, Field(strict=True, max_length=100)] = Field(..., description="the controller variant")
-    source: one_of(("python", "fmu")) = Field(..., description="the controller form it was saved from")
-    names: Annotated[Strings, Field(max_length=MAX_STATE)] = Field(..., description="the state's names, in order")
-    state: Annotated[list[Number], Field(max_length=MAX_STATE)] = Field(..., description="the state's values")
+    from pydantic import Field
+
+    from cosim.schema import Number, Strings, Table, one_of
+
+    class LearnedStateFile(Table):
+        """A learned-state file (the module's docstring): its declaration."""
+
+        format: Annotated[str, Field(strict=True)] = Field(..., description=f"'{FORMAT}'")
+        version: Annotated[int, Field(strict=True)] = Field(..., description=f"{VERSION}")
+        variant: Annotated[str, Field(strict=True, max_length=100)] = Field(..., description="the controller variant")
+        source: one_of(("python", "fmu")) = Field(..., description="the controller form it was saved from")
+        names: Annotated[Strings, Field(max_length=MAX_STATE)] = Field(..., description="the state's names, in order")
+        state: Annotated[list[Number], Field(max_length=MAX_STATE)] = Field(..., description="the state's values")
+
+    return LearnedStateFile
 
 
 def load_learned(path: str | Path, variant: str) -> np.ndarray:
@@ -83,7 +92,9 @@ def load_learned(path: str | Path, variant: str) -> np.ndarray:
     doc = read_json(path, "learned state")
     if not isinstance(doc, dict) or doc.get("format") != FORMAT or doc.get("version") != VERSION:
         raise ScenarioError(f"{where}: not a '{FORMAT}' file of version {VERSION}")
-    doc = validate(LearnedStateFile, doc, where)
+    from cosim.schema import validate
+
+    doc = validate(_file_table(), doc, where)
     if doc.variant != variant:
         raise ScenarioError(f"{where}: saved from a {doc.variant!r} controller, this one is {variant!r}")
     if doc.names != _names(variant):

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import json
 import math
+from decimal import Decimal
 
 import numpy as np
 import pytest
 
-from cosim.recorder import Recorder, read_results, sidecar_path
+from cosim.recorder import Recorder, read_results, shortest_rows, sidecar_path
 
 
 def data_lines(path) -> list[str]:
@@ -104,6 +105,32 @@ def test_values_are_written_to_the_last_bit(tmp_path):
     columns, data = read_results(path)
     assert columns == ["time", "a", "b"]
     assert data[0, 1] == 1 / 3 and math.isnan(data[1, 1]) and data[1, 2] == 123456789012.0
+
+
+def test_finite_blocks_get_the_digits_repr_chooses_and_read_back_to_the_bit(tmp_path):
+    """A block of finite doubles goes through orjson, not repr: the same
+    shortest digits (as exact decimals), every value read back to its bits,
+    across the whole exponent range and its edges."""
+    rng = np.random.default_rng(7)
+    values = rng.standard_normal(3000) * 10.0 ** rng.integers(-300, 300, 3000)
+    edges = [5e-324, -2.2250738585072014e-308, 1.7976931348623157e308, 1e-5, 1e-7, 1e15, 1e16, -0.0, 0.0, 5.0]
+    block = np.concatenate([values, edges, rng.standard_normal(2) * 1e-3]).reshape(-1, 3)
+    text = shortest_rows(block)
+    lines = text.splitlines()
+    assert text.endswith("\n") and len(lines) == len(block)
+    for line, row in zip(lines, block.tolist()):
+        fields = line.split(",")
+        assert [Decimal(f) for f in fields] == [Decimal(repr(v)) for v in row]
+        assert [float(f) for f in fields] == row and [math.copysign(1, float(f)) for f in fields] == \
+            [math.copysign(1, v) for v in row]
+    path = tmp_path / "results.csv"
+    rec = Recorder(["time", "a", "b"], ["s", "m", "m"], len(block), path)
+    for n, row in enumerate(block):
+        rec.row(n)[:] = row
+    rec.commit(len(block))
+    rec.close()
+    assert np.array_equal(read_results(path)[1], block)
+    assert shortest_rows(block[:0]) == ""
 
 
 def test_values_can_be_written_with_fewer_digits(tmp_path):

@@ -1,0 +1,67 @@
+"""A run of the shipped mission, its FMUs built and its scenario validated
+before, starts only what it needs (issue 26): no CasADi, Dask, matplotlib or
+python-control, and no pydantic (the scenario served from the cache, the
+controller built from its validated values), and writes what a validated
+run writes. What is imported is checked here, in a fresh interpreter
+(``sys.modules``); the time it takes, by ``benchmarks/cli_startup.py``."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scipy", "pydantic", "pydantic_core",
+                 "importlib.metadata", "fnn_controller.fast", "fmu_models.export.build", "cosim.scenario_tables",
+                 "quadrotor_paper.section_tables")
+
+_RUN = """
+import json, sys
+from quadrotor_paper.cli import main
+code = main(["run", "circles", "--no-plots", "--quiet", "--out", sys.argv[1]])
+print(json.dumps({"code": code, "modules": sorted(sys.modules)}))
+"""
+
+
+def _run(out: Path, cwd: Path) -> tuple[int, set[str]]:
+    proc = subprocess.run([sys.executable, "-c", _RUN, str(out)], capture_output=True, text=True, cwd=cwd)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    return report["code"], set(report["modules"])
+
+
+def test_a_run_of_the_shipped_mission_imports_no_casadi_dask_matplotlib_or_pydantic(tmp_path):
+    first_code, _ = _run(tmp_path / "first", tmp_path)  # builds or finds the FMUs, keeps the validated scenario
+    code, modules = _run(tmp_path / "again", tmp_path)
+    assert first_code == code == 0
+    assert {"fmpy", "cosim.master", "quadrotor_paper.controller_component"} <= modules  # the run is seen
+    loaded = sorted(m for m in modules if any(m == name or m.startswith(name + ".") for name in NOT_FOR_A_RUN))
+    assert loaded == []
+    # the two runs write the same, to the bit
+    assert (tmp_path / "again" / "results.csv").read_bytes() == (tmp_path / "first" / "results.csv").read_bytes()
+    first, again = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("first", "again"))
+    for summary in (first, again):
+        for key in ("wall_time_s", "real_time_factor", "results"):
+            summary.pop(key, None)
+    assert {**first, "results_csv": None} == {**again, "results_csv": None} and first["status"] == "ok"
+
+
+def test_the_shipped_mission_served_from_the_cache_is_the_validated_one(tmp_path):
+    """What the run above reads instead of validating: the kept scenario and
+    the controller built from its values as they are (cosim.parameters.Given)."""
+    from cosim.scenario import Scenario, load_scenario, parse_scenario
+    from quadrotor_paper.controller_component import ControllerComponent
+
+    for overrides in ({}, {"controller.position.kd": 2.5, "controller.position.nu": [0.5, 0.5, 0.1],
+                           "controller.position.init.alpha": 2e-3, "controller.nominal.m": 1.3,
+                           "controller.geometric.dt": 0.01, "controller.variant": "pd+smc", "wind.speed": 4.0}):
+        load_scenario("circles", overrides)  # validated and kept, or already kept
+        kept = load_scenario("circles", overrides)
+        validated = parse_scenario(kept.raw, source=kept.source)
+        assert all(getattr(kept, k) == getattr(validated, k) for k in Scenario.__slots__ if k != "__weakref__")
+        parameters = kept.components["controller"]["parameters"]
+        given = ControllerComponent.from_parameters("controller", parameters, validated=True)
+        checked = ControllerComponent.from_parameters("controller", parameters)
+        assert (given.variant, given.psi_ref, given.position, given.geometric) == \
+            (checked.variant, checked.psi_ref, checked.position, checked.geometric)
+        assert given.fmu_entry() == checked.fmu_entry()
