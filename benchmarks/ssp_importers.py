@@ -26,6 +26,11 @@ with the values after the step from t, and its time is a running sum, so it
 records one row more than the duration: the position at t = duration is its
 row stamped duration - h; its RMSE is over all its rows.
 
+A second table prints issue 29's bars for the estimated scenarios, importer
+by importer (:func:`_bars`): ``circles_estimated`` over our master's run, and
+``figure8_lab_estimated`` over ``figure8_lab`` in the same importer against
+that ratio in our master, each within 3 %.
+
     .venv/bin/python benchmarks/ssp_importers.py [--scenarios circles circles_estimated ...]
 """
 from __future__ import annotations
@@ -125,7 +130,36 @@ def main(argv=None) -> int:
             error, final = results[name][importer]
             cells += [f"{error:.4g}", "(" + ", ".join(f"{v:.4g}" for v in final) + ")"]
         print(f"| {importer} | " + " | ".join(honours + tuple(cells)) + " |")
+    print()
+    _bars(results)
     return 0
+
+
+def _bars(results) -> None:
+    """Issue 29's bars, importer by importer: ``circles_estimated``'s RMSE over
+    our master's (feedthrough, the scenario), and the filter's own cost on the
+    lab, ``figure8_lab_estimated``'s RMSE over ``figure8_lab``'s in the same
+    importer, against that ratio in our master; each within 3 %."""
+    ours = "our master (scenario)"
+    importers = [i for i in HONOURS if i != ours and not i.startswith("fmpy `simulate_fmu`")
+                 and "stock FMUs" not in i]
+    columns = []
+    if "circles_estimated" in results:
+        base = results["circles_estimated"][ours][0]
+        columns.append(("circles_estimated over our master's", lambda i: results["circles_estimated"][i][0] / base))
+    if "figure8_lab" in results and "figure8_lab_estimated" in results:
+        def lab(i):
+            return results["figure8_lab_estimated"][i][0] / results["figure8_lab"][i][0]
+        columns.append(("figure8_lab_estimated / figure8_lab, over our master's ratio",
+                        lambda i: lab(i) / lab(ours)))
+    if not columns:
+        return
+    print("| importer | " + " | ".join(label for label, _ in columns) + " |")
+    print("|---|" + "---|" * len(columns))
+    for importer in importers:
+        cells = [f"{value(importer):.4f} ({'within' if abs(value(importer) - 1) <= 0.03 else 'outside'} 3 %)"
+                 for _, value in columns]
+        print(f"| {importer} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

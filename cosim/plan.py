@@ -283,12 +283,19 @@ def _order(blocks: Sequence[str], components: Mapping[str, Any], connections: Se
     """The blocks evaluated at t_n, in topological order of their
     connections. Only a connection whose source depends on its block's inputs
     at t_n orders two blocks, so a plant's states feeding a controller that
-    feeds the plant is no loop. In the exchange ordering nothing is ordered:
-    every block reads the values of the previous exchange."""
+    feeds the plant is no loop; nor does one into an FMU input that none of
+    its outputs depends on (ModelStructure): that input goes into the FMU's
+    next state only, and is read as its source stands when the FMU is
+    evaluated (an estimator storing the command its controller sends). In
+    the exchange ordering nothing is ordered: every block reads the values of
+    the previous exchange."""
     deps: dict[str, set[str]] = {name: set() for name in blocks}
     for c in connections:
         src, dst = c.source.component, c.destination.component
         if src not in deps or dst not in deps or ordering != "feedthrough":
+            continue
+        feeds = getattr(components[dst], "feedthrough", None)  # FMUs only: a Python block reads every input
+        if feeds is not None and not any(element_of(c.destination.variable)[0] in d for d in feeds.values()):
             continue
         if src not in direct or components[src].feedthrough.get(element_of(c.source.variable)[0]):
             deps[dst].add(src)

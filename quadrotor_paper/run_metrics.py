@@ -113,20 +113,22 @@ class Estimation:
     time, an earlier one in an importer that reads it a step later; the last
     :data:`TRUTH_HISTORY` rows of the truth are kept for it). Also the
     estimator's counts of refused measurements and restarts at the end of
-    the run (:data:`COUNTS`, E19-E21)."""
+    the run (``counts``: :data:`COUNTS`, and the magnetometer's refusals
+    for the filter that has one, E19-E21)."""
 
-    def __init__(self, estimator: str, truth: str, settle: float, reference: Sequence[str], step: float):
+    def __init__(self, estimator: str, truth: str, settle: float, counts: Sequence[str], reference: Sequence[str],
+                 step: float):
         self.estimator, self.truth, self.settle, self.step = estimator, truth, settle, step
         self.signals = []
         for estimated, true, _ in BLOCKS.values():
             self.signals += [f"{truth}.{n}" for n in true] + [f"{estimator}.{n}" for n in estimated]
             self.signals += [f"{estimator}.{covariance_output(a, b, estimated)}" for i, a in enumerate(estimated)
                              for b in estimated[i:]]
-        self.signals += [f"{estimator}.{n}" for n in ("nis_fix", "nis_acc", "fix_used", "t_estimate", *COUNTS)]
+        self.signals += [f"{estimator}.{n}" for n in ("nis_fix", "nis_acc", "fix_used", "t_estimate", *counts)]
         self._truth = [f"{truth}.{n}" for _, true, _ in BLOCKS.values() for n in true]
         self._history = np.zeros((0, len(self._truth)))  # the truth's last rows before the block
         self._row = 0  # the index of the block's first row in the run
-        self._counts = {c: Last() for c in COUNTS}
+        self._counts = {c: Last() for c in counts}
         self._t0: float | None = None
         self._wind_settled = _Settled(settle)
         self._nees = {b: Sum() for b in BLOCKS}

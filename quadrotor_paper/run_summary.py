@@ -45,7 +45,9 @@ def summary_lines(scenario, result, summary: Mapping[str, Any], figures: Sequenc
                      "{est_rmse_wind_settled_mps:.3f} m/s".format(**shown))
         lines.append("- gate (chi-square, docs/estimation.md): fixes refused {outliers_fix:.0f}, drag measurements "
                      "refused {outliers_acc:.0f}; restarts after refusals in a row: position and velocity "
-                     "{resets_fix:.0f}, wind {resets_acc:.0f}".format(**shown))
+                     "{resets_fix:.0f}, wind {resets_acc:.0f}".format(**shown)
+                     + (", magnetometer samples refused {:.0f}".format(_Shown(summary["outliers_mag"]))
+                        if "outliers_mag" in summary else ""))
     if learned_error:
         lines.append(f"- learned state not saved: {learned_error}")
     lines += ["", "Files: results.csv (+ .json), summary.json" + "".join(f", {Path(p).name}" for p in figures), ""]

@@ -29,6 +29,7 @@ Their declarations and how a validated one applies: :mod:`.section_tables`
 from __future__ import annotations
 
 from cosim.scenario import Scenario
+from fmu_models.models.estimator_outputs import counts_of
 
 __all__ = ["WIND_KEYS", "metric_signals", "estimation_spec"]
 
@@ -41,10 +42,13 @@ def metric_signals(scenario: Scenario) -> tuple[list[str], list[str]]:
     return list(metrics.get("position", [])), list(metrics.get("reference", []))
 
 
-def estimation_spec(scenario: Scenario) -> tuple[str, str, float] | None:
-    """``(estimator instance, truth instance, settle s)`` of ``[metrics]``, or
-    ``None`` when it names no estimator."""
+def estimation_spec(scenario: Scenario) -> tuple[str, str, float, tuple[str, ...]] | None:
+    """``(estimator instance, truth instance, settle s, the estimator's
+    counts)`` of ``[metrics]``, or ``None`` when it names no estimator. The
+    counts are those its model outputs (:func:`counts_of`: the magnetometer's
+    refusals too for the filter with the magnetometer)."""
     metrics = scenario.sections.get("metrics", {})
     if metrics.get("estimator") is None:
         return None
-    return metrics["estimator"], metrics["position"][0].split(".")[0], float(metrics["settle"])
+    model = scenario.fmus.get(metrics["estimator"], {}).get("model")
+    return metrics["estimator"], metrics["position"][0].split(".")[0], float(metrics["settle"]), counts_of(model)

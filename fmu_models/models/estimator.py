@@ -1,7 +1,7 @@
 """A state estimator as a sampled-data FMU: an extended Kalman filter written
 in CasADi that predicts with the IMU and corrects with the drag-model
 accelerometer and with GNSS or motion capture, each measurement gated and
-fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E23;
+fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E26;
 the numbers below are those equations').
 
 State (18): position ``x y z`` and velocity ``u v w`` (world frame, z down,
@@ -22,10 +22,12 @@ with the IMU's ``gyro, acc`` stamped ``t_imu`` and the fix ``y`` stamped
    from CasADi's AD, kept only when their NIS passes the chi-square gate of
    ``gate_level`` (E19); refusals are counted, and a run of them restarts
    that measurement's part of the state (E21);
-4. the outputs are the posterior predicted from ``t_filter`` to t with the
-   IMU's averages extrapolated along their trend (the output predictor,
-   E23): the state named like the plant's outputs (``x .. psi``), the body
-   rates, the wind, the biases, the covariance (variances of all 18,
+4. the outputs are the posterior predicted from ``t_filter`` to t (the
+   output predictor, E23), the body rates brought forward by the torques of
+   the rotor command ``Omega_1..4`` received a step before, the one that
+   acted over that span (E26; unconnected: the IMU's averages extrapolated
+   along their trend): the state named like the plant's outputs
+   (``x .. psi``), the body rates, the wind, the biases, the covariance (variances of all 18,
    covariances within the position, velocity, attitude and wind blocks),
    the NIS of both corrections, the time they describe (``t_estimate``) and
    the gate's counts.
@@ -43,10 +45,12 @@ from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter
-from .estimator_outputs import COUNTS, COVARIANCE_BLOCKS, covariance_output
+from .estimator_outputs import COUNTS, COVARIANCE_BLOCKS, MAGNETOMETER_COUNTS, MAGNETOMETER_MODEL, covariance_output
 from .imu import AXES, IMU_DEFAULTS
 from .magnetometer import MAGNETOMETER_DEFAULTS, body_field
-from .quadrotor import DEFAULTS, aerodynamic_drag, euler_rate_matrix, rotation_matrix
+from .quadrotor import (DEFAULTS, aerodynamic_drag, body_angular_acceleration, euler_rate_matrix, rotation_matrix,
+                        rotor_clip)
+from .rotor import thrust_and_torques
 from .sensors import DT_DEFAULT
 
 __all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATED_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
@@ -74,6 +78,7 @@ ESTIMATOR_DEFAULTS = {
     "sigma_mag": 1.0e-6,          # T: the magnetometer's noise (BMM150, 0.6 uT) and its calibration's residual (E24)
 }
 _IMU = tuple(f"gyro_{i}" for i in AXES) + tuple(f"acc_{i}" for i in AXES)
+_ROTORS = (1, 2, 3, 4)
 _P0 = {"x": "P0_position", "u": "P0_velocity", "phi": "P0_attitude", "gyro_bias_x": "P0_gyro_bias",
        "accel_bias_x": "P0_accel_bias", "wind_x": "P0_wind"}
 
@@ -254,6 +259,22 @@ def _variables(magnetometer: bool):
         output("outliers_mag", "1", "magnetometer samples refused by the gate since the start (E19)"),
         discrete("total_outliers_mag", "1", "outliers of the magnetometer so far"),
         ]
+    # the rotor speeds commanded (E26), appended last so that the variables above keep their value references
+    variables += [
+        *(input_(f"Omega_{i}", "rad/s", f"rotor {i}'s speed commanded (the controller's output): the output "
+                 "predictor brings the body rates forward by the torques it makes (E26); negative (its start, "
+                 "unconnected): along the IMU's trend instead", -1.0) for i in _ROTORS),
+        *(parameter(name, unit, f"{what} of the vehicle the output predictor's rotor model assumes (the plant's, "
+                    "E26)", DEFAULTS[name], min=1e-12)
+          for name, unit, what in (("l", "m", "arm length"), ("b", "N.s2", "rotor thrust coefficient"),
+                                   ("d", "N.m.s2", "rotor drag-torque coefficient"),
+                                   ("Ix", "kg.m2", "moment of inertia about x_B"),
+                                   ("Iy", "kg.m2", "moment of inertia about y_B"),
+                                   ("Iz", "kg.m2", "moment of inertia about z_B"),
+                                   ("Omega_max", "rad/s", "maximum rotor speed"))),
+        *(discrete(f"command_{i}", "rad/s", f"rotor {i}'s command received at the step before (E26)")
+          for i in _ROTORS),
+    ]
     return tuple(variables)
 
 
@@ -448,17 +469,31 @@ def _update(t, v, magnetometer: bool = False):
     previous = ca.vertcat(*(v[f"previous_{name}"] for name in _IMU))
     change = ca.if_else(v["started"] > 0, ca.vertcat(gyro, acc) - previous, ca.DM.zeros(6))
     trend = change * h_out / v["dt"]
-    xs_out, P_out = _predict(xs, P, gyro + trend[0:3], acc + trend[3:6], v, h_out)
+    # the body rates over [t_filter, t_out] (E26): the rate at t_filter (the IMU's average over the last step
+    # describes its middle, half a step earlier), then the angular acceleration of the torques commanded. The
+    # command received a step before is the one that acted over that span: an importer that adds a step per
+    # hop (the lag h_out) delivers the command a step late too, and without that lag h_out = 0 and it is unused.
+    # No output reads this step's command, so the estimator adds no direct feedthrough (no algebraic loop).
+    rate_start = gyro + change[0:3] * 0.5 - xs[9:12]
+    commands = [v[f"command_{i}"] for i in _ROTORS]
+    modelled = commands[0] >= 0
+    for c in commands[1:]:
+        modelled = ca.logic_and(modelled, c >= 0)
+    _, *torque = thrust_and_torques([rotor_clip(c, v["Omega_max"]) ** 2 for c in commands], v["b"], v["d"], v["l"])
+    alpha = body_angular_acceleration(rate_start, ca.vertcat(v["Ix"], v["Iy"], v["Iz"]), ca.vertcat(*torque))
+    # the attitude predicted with the mean rate over the span; unconnected: the IMU's averages along their trend
+    gyro_out = ca.if_else(modelled, rate_start + alpha * h_out / 2 + xs[9:12], gyro + trend[0:3])
+    xs_out, P_out = _predict(xs, P, gyro_out, acc + trend[3:6], v, h_out)
 
-    counted = COUNTS + (("outliers_mag",) if magnetometer else ())
+    counted = COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ())
     events = {"outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
               "resets_acc": reset_acc}
     if magnetometer:
         events["outliers_mag"] = refused_mag
     counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in counted}
     out = {name: xs_out[k] for k, name in enumerate(ESTIMATED_STATES)}
-    # the body rate at t_out: the average over the last step describes its middle, half a step earlier
-    rates = gyro + change[0:3] * (h_out / v["dt"] + 0.5) - xs_out[9:12]
+    # the body rate at t_out: from the commands (E26), or the IMU's trend (E23) when they are not connected
+    rates = ca.if_else(modelled, rate_start + h_out * alpha, gyro + change[0:3] * (h_out / v["dt"] + 0.5) - xs_out[9:12])
     out.update({"p": rates[0], "q": rates[1], "r": rates[2],
                 "nis_acc": ca.if_else(new_imu, nis_acc, 0.0), "nis_fix": ca.if_else(new_fix, nis_fix, 0.0),
                 "fix_used": ca.if_else(used, 1.0, 0.0), "t_estimate": t_out, "t_filter": t_filter,
@@ -469,6 +504,7 @@ def _update(t, v, magnetometer: bool = False):
     return out, {"started": 1.0, "t_posterior": t_filter, "t_last_fix": ca.if_else(new_fix, t_fix, v["t_last_fix"]),
                  "refusal_run_fix": run_fix, "refusal_run_acc": run_acc,
                  **{f"previous_{name}": ca.if_else(new_imu, v[name], v[f"previous_{name}"]) for name in _IMU}, **{f"total_{c}": n for c, n in counts.items()},
+                 **{f"command_{i}": v[f"Omega_{i}"] for i in _ROTORS},
                  **_discrete(xs, P)}
 
 
@@ -479,7 +515,8 @@ def _initial(v, r, magnetometer: bool = False):
     xs = ca.vertcat(*(v[f"{name}_0"] for name in ESTIMATED_STATES))
     sigma = [v[_P0[ESTIMATED_STATES[3 * (k // 3)]]] for k in range(_N - 1)] + [v["P0_wind_z"]]
     return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
-            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS + (("outliers_mag",) if magnetometer else ())},
+            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ())},
+            **{f"command_{i}": -1.0 for i in _ROTORS},
             **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
 
 
@@ -496,7 +533,7 @@ ESTIMATOR = FmuModel(
 # The same filter with the magnetometer's correction (E24): a model of its own, so that the Estimator of a
 # mission without a magnetometer keeps no input unconnected and flies bit for bit as before (docs/estimation.md)
 ESTIMATOR_MAG = FmuModel(
-    identifier="EstimatorMag",
+    identifier=MAGNETOMETER_MODEL,
     description="the Estimator's extended Kalman filter (docs/estimation.md) also correcting its attitude with a "
                 "three-axis magnetometer sampled with the IMU (E24), gated; z axis down",
     variables=_variables(magnetometer=True),

@@ -6,15 +6,28 @@ outputs (the application's metrics), without building it (no CasADi).
   output (the NEES per block, docs/estimation.md, E15);
 * :func:`covariance_output`: the output holding the covariance of two
   states, ``var_<a>`` or ``cov_<a>_<b>`` (a before b in its block);
-* :data:`COUNTS`: the gate's counts of refused measurements and restarts (E19-E21).
+* :data:`COUNTS`: the gate's counts of refused measurements and restarts (E19-E21);
+  :func:`counts_of` the counts of a model (the magnetometer's refusals,
+  :data:`MAGNETOMETER_COUNTS`, in :data:`MAGNETOMETER_MODEL`'s only).
 """
 from __future__ import annotations
 
-__all__ = ["COVARIANCE_BLOCKS", "COUNTS", "covariance_output"]
+__all__ = ["COVARIANCE_BLOCKS", "COUNTS", "MAGNETOMETER_COUNTS", "MAGNETOMETER_MODEL", "counts_of",
+           "covariance_output"]
 
 COVARIANCE_BLOCKS = {"position": ("x", "y", "z"), "velocity": ("u", "v", "w"), "attitude": ("phi", "theta", "psi"),
                      "wind": ("wind_x", "wind_y", "wind_z")}
 COUNTS = ("outliers_fix", "outliers_acc", "resets_fix", "resets_acc")
+# the filter with the magnetometer's correction (E24) is a model of its own, which also counts its refusals
+MAGNETOMETER_MODEL = "EstimatorMag"
+MAGNETOMETER_COUNTS = ("outliers_mag",)
+
+
+def counts_of(model: str | None) -> tuple[str, ...]:
+    """The counts the estimator model ``model`` (a registered model's name;
+    ``None`` for an FMU file) outputs: :data:`COUNTS`, and the
+    magnetometer's refusals for :data:`MAGNETOMETER_MODEL`."""
+    return COUNTS + MAGNETOMETER_COUNTS if model == MAGNETOMETER_MODEL else COUNTS
 
 
 def covariance_output(a: str, b: str, order: tuple[str, ...]) -> str:

@@ -37,7 +37,7 @@ from .rotor import thrust_and_torques
 from ..export.variables import input_, output, parameter, state
 
 __all__ = ["QUADROTOR", "STATE_NAMES", "BODY_STATES", "ROTOR_STATE_NAMES", "rotation_matrix", "euler_rate_matrix",
-           "aerodynamic_drag",
+           "aerodynamic_drag", "body_angular_acceleration", "rotor_clip",
            "hover_rotor_speed", "DEFAULTS"]
 
 # Keeps d|v_rel|/dv_rel finite at v_rel = 0 (the Jacobian at hover would be
@@ -170,12 +170,19 @@ def aerodynamic_drag(v_rel, k_drag_lin, k_drag_quad):
     return -(k_drag_lin + k_drag_quad * speed) * v_rel
 
 
-def _clip(omega, omega_max):
+def body_angular_acceleration(rates, inertia, torque):
+    """d omega_B / dt (rad/s^2), eq. (4): ``(-omega x (I omega) + tau) / I``
+    with ``I`` the diagonal of the inertia (kg m^2) and ``tau`` the torques (N m)."""
+    return (-ca.cross(rates, inertia * rates) + torque) / inertia
+
+
+def rotor_clip(omega, omega_max):
+    """The rotor speeds the rotors can turn (rad/s): a command saturated to ``[0, Omega_max]``."""
     return ca.fmin(ca.fmax(omega, 0), omega_max)
 
 
 def _equations(t, s):
-    commanded = [_clip(s[f"Omega_{i}"], s["Omega_max"]) for i in range(1, 5)]
+    commanded = [rotor_clip(s[f"Omega_{i}"], s["Omega_max"]) for i in range(1, 5)]
     # Motor dynamics. casadi.if_else on SX evaluates both branches and keeps
     # one by multiplication-free selection (a + 0 or 0 + b), so tau_m = 0
     # gives exactly the instantaneous rotor of before, and the lag divides by
@@ -184,7 +191,7 @@ def _equations(t, s):
     tau_m = ca.if_else(instant, 1.0, s["tau_m"])
     rotor_rates = [ca.if_else(instant, 0.0, (cmd - s[name]) / tau_m)
                    for cmd, name in zip(commanded, ROTOR_STATE_NAMES)]
-    applied = [ca.if_else(instant, cmd, _clip(s[name], s["Omega_max"]))
+    applied = [ca.if_else(instant, cmd, rotor_clip(s[name], s["Omega_max"]))
                for cmd, name in zip(commanded, ROTOR_STATE_NAMES)]
     omega_sq = [omega**2 for omega in applied]
     thrust, tau_phi, tau_theta, tau_psi = thrust_and_torques(omega_sq, s["b"], s["d"], s["l"])
@@ -201,7 +208,7 @@ def _equations(t, s):
     euler_rates = euler_rate_matrix(s["phi"], s["theta"]) @ rates  # eq. (2)
     inertia = ca.vertcat(s["Ix"], s["Iy"], s["Iz"])  # diagonal of I
     torque = ca.vertcat(tau_phi, tau_theta, tau_psi)
-    angular_acceleration = (-ca.cross(rates, inertia * rates) + torque) / inertia  # eq. (4)
+    angular_acceleration = body_angular_acceleration(rates, inertia, torque)  # eq. (4)
 
     derivatives = dict(zip(STATE_NAMES, ca.vertsplit(ca.vertcat(velocity, acceleration, euler_rates,
                                                                   angular_acceleration))))
@@ -217,7 +224,7 @@ QUADROTOR = FmuModel(
     variables=_VARIABLES,
     equations=_equations,
     initial_state=lambda s: {**{name: s[f"{name}_0"] for name in STATE_NAMES},
-                             **{name: _clip(s[f"{name}_0"], s["Omega_max"]) for name in ROTOR_STATE_NAMES}},
+                             **{name: rotor_clip(s[f"{name}_0"], s["Omega_max"]) for name in ROTOR_STATE_NAMES}},
 )
 
 DEFAULTS: dict[str, float] = {v.name: v.start for v in QUADROTOR.parameters}

@@ -46,6 +46,10 @@ def test_the_estimated_scenarios_name_their_estimator_and_record_what_it_needs()
         assert set(estimation_signals(scenario)) <= set(scenario.record)
         assert set(estimation_signals(scenario)) <= set(lean_signals(scenario))
     assert "nees_wind" not in study_metric_names(load_scenario("circles"))
+    # the magnetometer's refusals are a study column where the filter has a magnetometer (the lab's), only there
+    assert "outliers_mag" in study_metric_names(load_scenario("figure8_lab_estimated"))
+    assert "outliers_mag" not in study_metric_names(load_scenario("circles_estimated"))
+    assert "Estimator.outliers_mag" in estimation_signals(load_scenario("figure8_lab_estimated"))
 
 
 @pytest.mark.parametrize("name, parts", [

@@ -91,3 +91,7 @@ def test_the_lab_flown_with_the_magnetometer_has_its_attitude_nees_in_band(tmp_p
     summary = json.loads((out / "summary.json").read_text())
     assert 2.02 <= summary["nees_attitude"] <= 4.16, summary["nees_attitude"]
     assert 2.02 <= summary["nees_position"] <= 4.16
+    # the magnetometer's refusals beside the other counts, in the summary and its page (a clean field: few,
+    # the gate's level refuses one good sample in 10^4)
+    assert summary["outliers_mag"] <= 3
+    assert f"magnetometer samples refused {summary['outliers_mag']:.0f}" in (out / "summary.md").read_text()
