@@ -23,7 +23,7 @@ __all__ = ["Column", "ColumnMap", "CalibrationSettings", "read_column_map", "rea
            "JACOBIANS", "calibration_schema"]
 
 INITIAL_STATES = ("recorded", "estimated")
-JACOBIANS = ("auto", "derivatives", "differences")
+JACOBIANS = ("auto", "casadi", "derivatives", "differences")
 
 
 class Column(Table):
@@ -84,8 +84,10 @@ class CalibrationSettings(Table):
                                                    "predicted (default: the last segment when there are several)")
     start: Number = Field(None, description="the log's part used starts here, s")
     stop: Number = Field(None, description="and ends here, s")
-    jacobian: one_of(JACOBIANS) = Field("auto", description="'derivatives' (forward sensitivities from the FMU's "
-                                                            "directional derivatives), 'differences', or 'auto'")
+    jacobian: one_of(JACOBIANS) = Field("auto", description="'casadi' (the model's own CasADi definition, when the "
+                                                            "FMU is one of ours), 'derivatives' (forward "
+                                                            "sensitivities from the FMU's directional derivatives), "
+                                                            "'differences', or 'auto' (the first that applies)")
     jacobian_stride: Count = Field(4, description="the solver's iterations evaluate the Jacobians at every this "
                                                   "many rows (fewer FMU calls; the statistics use every row)")
     max_iterations: Count = Field(100, description="the solver's limit of Jacobian evaluations")
