@@ -209,7 +209,7 @@ class _Problem:
         trajs = self.simulate(z)
         nt, ne = self.nt, self.ne
         if self.symbolic is not None:  # exact: CasADi's forward mode through the trajectory
-            done = self.symbolic.sensitivities(theta, self.segments, x0, self.estimated)
+            done = self.symbolic.sensitivities(theta, self.segments, x0, self.estimated, coarse=self.stride > 1)
             self.error_estimate = 0.0
         elif self.workers is not None:
             done, self.error_estimate = self.workers.sensitivities(theta, self.segments, trajs, self.estimated,
@@ -319,10 +319,11 @@ def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log:
     statistics' Jacobian at the optimum at every row. ``symbolic``: a
     :class:`~cosim.calibration.symbolic.SymbolicModel` (``method =
     "casadi"``): the segments and their exact sensitivities from the model's
-    CasADi definition, in ``workers`` threads."""
+    CasADi definition, in ``workers`` threads (``stride > 1``: the first
+    iterations with the sensitivities of one RK4 step a row)."""
     pool = None
     if symbolic is not None:
-        stride = 1  # its Jacobians are exact and cheap: no coarse phase
+        pass  # its segments run in threads: no processes
     elif workers > 1 and len(segments) > 1 and method != "differences":
         # the Model Exchange instances made here, before the fork: every worker inherits them (and this
         # process, which extracted them, removes their folders at the end)

@@ -140,10 +140,11 @@ class SymbolicModel:
         return int(counts[0])
 
     def _arguments(self, theta: np.ndarray, segments, x0: np.ndarray):
-        """``(N, n, P, T, U, DT)``: the rows a segment function takes (the
-        longest segment's; the shorter ones held at their last row), the RK4
-        steps a row, and each segment's parameters, times, inputs and steps
-        side by side."""
+        """``(N, n, [(p, T, U, DT) of each segment])``: the rows a segment
+        function takes (the longest segment's; a shorter one held at its last
+        row), the RK4 steps a row, and each segment's parameters, times,
+        inputs and steps, as CasADi takes them (column-major: each array is
+        the transpose of the matrix)."""
         m, p = self.model, self.model.problem
         t = m.times
         N = max(s.last - s.first for s in segments)
@@ -151,32 +152,27 @@ class SymbolicModel:
         for name, value in m.parameters(theta).items():
             if name in self.p_names:
                 base[self.p_names.index(name)] = value
-        P = np.tile(base[:, None], (1, len(segments)))
-        P[self.p_setter, :] = np.asarray(x0, dtype=float).T
         dt_all = np.diff(t)
-        T = np.empty((1, N * len(segments)))
-        U = np.tile(self.u_base[:, None], (1, N * len(segments)))
-        U[self.u_fit, :] = theta[m.n_params:][:, None]
-        DT = np.empty((1, N * len(segments)))
-        for i, s in enumerate(segments):
-            rows = np.minimum(np.arange(s.first, s.first + N), s.last - 1)  # held at the segment's last row
-            steps = np.minimum(rows, t.size - 2)
-            block = slice(i * N, (i + 1) * N)
-            T[0, block] = t[rows]
-            DT[0, block] = dt_all[steps]
-            if self.u_log.size:
-                U[np.ix_(self.u_log, np.arange(i * N, (i + 1) * N))] = p.input_values[rows].T
         n = self._substeps(base, dt_all)
-        return N, n, P, T, U, DT
+        out = []
+        for s, start in zip(segments, np.asarray(x0, dtype=float)):
+            params = base.copy()
+            params[self.p_setter] = start
+            rows = np.minimum(np.arange(s.first, s.first + N), s.last - 1)  # held at the segment's last row
+            U = np.tile(self.u_base, (N, 1))
+            U[:, self.u_fit] = theta[m.n_params:]
+            if self.u_log.size:
+                U[:, self.u_log] = p.input_values[rows]
+            out.append((params, np.ascontiguousarray(t[rows]), U, np.ascontiguousarray(dt_all[np.minimum(rows, t.size - 2)])))
+        return N, n, out
 
     # ---- the functions ----------------------------------------------------------------------------
 
-    def _function(self, kind: str, N: int, n: int, nd: int, nseg: int):
+    def _function(self, kind: str, N: int, n: int, nd: int):
         key = (kind, N, n, nd)
         if key not in self._functions:
             self._functions[key] = self._build(kind, N, n, nd)
-        f = self._functions[key]
-        return f.map(nseg, "thread", self.workers) if self.workers > 1 and nseg > 1 else f.map(nseg)
+        return self._functions[key]
 
     def _build(self, kind: str, N: int, n: int, nd: int):
         import casadi as ca
@@ -217,8 +213,18 @@ class SymbolicModel:
         self.compile_seconds += time.perf_counter() - started
         if library is None:
             self.source = "CasADi's virtual machine"
-            return fn
-        return ca.external(fn.name(), str(library))
+            return _Interpreted(fn)
+        return _Compiled(library, fn)
+
+    def _run(self, fn, arguments: list) -> list:
+        """``fn`` on each segment's arguments, ``workers`` segments at a time
+        (threads: a compiled call releases the interpreter's lock)."""
+        if self.workers > 1 and len(arguments) > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(self.workers) as pool:
+                return list(pool.map(fn, arguments))
+        return [fn(a) for a in arguments]
 
     # ---- what the solver asks --------------------------------------------------------------------
 
@@ -237,43 +243,88 @@ class SymbolicModel:
     def simulate(self, theta: np.ndarray, segments, x0: np.ndarray) -> list:
         """Each segment's :class:`~cosim.calibration.model.Trajectory` (or the
         :class:`~cosim.errors.FmuCallError` of a state that is not finite)."""
-        N, n, P, T, U, DT = self._arguments(theta, segments, x0)
-        fn = self._function("simulate", N, n, 0, len(segments))
-        x0s, X, Y = (np.asarray(a) for a in fn(P, T, U, DT))
+        N, n, args = self._arguments(theta, segments, x0)
+        fn = self._function("simulate", N, n, 0)
         out = []
-        for i, s in enumerate(segments):
-            xs = np.vstack([x0s[:, i], X[:, i * N:(i + 1) * N].T])
-            tr = self._trajectory(s, xs, Y[:, i * N:(i + 1) * N].T)
+        for s, (x0s, X, Y) in zip(segments, self._run(fn, args)):
+            tr = self._trajectory(s, np.vstack([x0s, X]), Y)
             out.append(tr if np.isfinite(tr.states).all() and np.isfinite(tr.outputs).all() else self._failed(s))
         return out
 
-    def sensitivities(self, theta: np.ndarray, segments, x0: np.ndarray, estimated: np.ndarray) -> list:
+    def sensitivities(self, theta: np.ndarray, segments, x0: np.ndarray, estimated: np.ndarray,
+                      coarse: bool = False) -> list:
         """Each segment's ``(dY, dX_end)`` as
         :func:`~cosim.calibration.sensitivity.segment_sensitivities` gives
         them (unknowns: the fitted names, then the estimated initial states),
-        here the trajectory's exact derivatives."""
+        here the trajectory's exact derivatives; ``coarse``: those of one RK4
+        step a row instead of the FMU's ``n`` (the solver's first iterations:
+        a Jacobian within ``O(dt^4)`` at ``1/n`` of the cost)."""
         m = self.model
         nt, est = len(m.problem.fit), np.flatnonzero(estimated)
-        nd, nseg = nt + est.size, len(segments)
-        N, n, P, T, U, DT = self._arguments(theta, segments, x0)
+        nd = nt + est.size
+        N, n, args = self._arguments(theta, segments, x0)
         Pd = np.zeros((len(self.p_names), nd))
         Ud = np.zeros((len(self.u_names), nd))
         Pd[self.p_fit, np.arange(self.p_fit.size)] = 1.0
         Ud[self.u_fit, m.n_params + np.arange(self.u_fit.size)] = 1.0
         Pd[self.p_setter[est], nt + np.arange(est.size)] = 1.0
-        fn = self._function("sensitivities", N, n, nd, nseg)
-        x0s, S0, X, dX, Y, dY = (np.asarray(a) for a in fn(P, np.tile(Pd, (1, nseg)), np.tile(Ud, (1, nseg)),
-                                                          T, U, DT))
-        nx = len(self.x_names)
-        S0 = S0.reshape(nx, nseg, nd)
-        dX = dX.reshape(nx, nseg, N, nd)
-        dY = dY.reshape(dY.shape[0], nseg, N, nd)
+        Pd, Ud = np.ascontiguousarray(Pd.T), np.ascontiguousarray(Ud.T)  # column-major
+        fn = self._function("sensitivities", N, 1 if coarse else n, nd)
+        done = self._run(fn, [(params, Pd, Ud, T, U, DT) for params, T, U, DT in args])
         out = []
-        for i, s in enumerate(segments):
+        for s, (_, S0, _, dX, _, dY) in zip(segments, done):
             n_rows = s.last - s.first
-            S = np.concatenate([S0[:, i][None], dX[:, i].transpose(1, 0, 2)])  # rows x states x unknowns
-            dy = np.stack([S[:n_rows, j] if where == "x" else dY[j, i, :n_rows] for where, j in self.out_from],
+            S = np.concatenate([S0.T[None], dX.reshape(N, nd, -1).transpose(0, 2, 1)])  # rows x states x unknowns
+            dYr = dY.reshape(N, nd, -1)
+            dy = np.stack([S[:n_rows, j] if where == "x" else dYr[:n_rows, :, j] for where, j in self.out_from],
                           axis=1)
             steps = n_rows if s.last < m.times.size else n_rows - 1
             out.append((dy, S[n_rows] if steps == n_rows else None))
         return out
+
+
+class _Compiled:
+    """A generated CasADi function in its compiled library, called through
+    ctypes on numpy arrays in place (no copies; the interpreter's lock is
+    released during the call): arrays column-major, as CasADi's dense
+    matrices (each array is the transpose of its matrix)."""
+
+    def __init__(self, library, fn):
+        import ctypes
+
+        self.ctypes = ctypes
+        self.lib = ctypes.CDLL(str(library))
+        name = fn.name()
+        self.call = getattr(self.lib, name)
+        sizes = [ctypes.c_longlong() for _ in range(4)]
+        getattr(self.lib, f"{name}_work")(*map(ctypes.byref, sizes))
+        self.n_arg, self.n_res, self.n_iw, self.n_w = (v.value for v in sizes)
+        self.out_shapes = [(fn.size2_out(i), fn.size1_out(i)) for i in range(fn.n_out())]
+        for suffix in ("incref",):
+            if hasattr(self.lib, f"{name}_{suffix}"):
+                getattr(self.lib, f"{name}_{suffix}")()
+
+    def __call__(self, arguments) -> list:
+        ctypes = self.ctypes
+        P = ctypes.c_void_p
+        ins = [np.ascontiguousarray(a, dtype=float) for a in arguments]
+        outs = [np.empty(shape) for shape in self.out_shapes]
+        arg = (P * max(self.n_arg, len(ins)))(*[a.ctypes.data for a in ins])
+        res = (P * max(self.n_res, len(outs)))(*[o.ctypes.data for o in outs])
+        iw = np.zeros(max(self.n_iw, 1), dtype=np.int64)
+        w = np.zeros(max(self.n_w, 1))
+        status = self.call(arg, res, P(iw.ctypes.data), P(w.ctypes.data), 0)
+        if status:
+            raise RuntimeError(f"the compiled calibration function returned {status}")
+        return outs
+
+
+class _Interpreted:
+    """The same function run by CasADi's virtual machine (no C compiler): same arrays in and out."""
+
+    def __init__(self, fn):
+        self.fn = fn
+
+    def __call__(self, arguments) -> list:
+        ins = [np.asarray(a, dtype=float).T for a in arguments]
+        return [np.asarray(o).T.copy() for o in self.fn(*ins)]
