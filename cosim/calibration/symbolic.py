@@ -40,7 +40,11 @@ from ..errors import FmuCallError
 from .model import LogModel, Trajectory
 from .problem import _float
 
-__all__ = ["SymbolicModel", "symbolic_model", "definition_of"]
+__all__ = ["SymbolicModel", "symbolic_model", "definition_of", "CHUNK"]
+
+# rows a compiled call integrates: the compiled code depends on the model, the RK4 steps a row and the
+# directions only (not on the log), and a segment is chained from whole chunks (the last padded)
+CHUNK = 50
 
 
 def definition_of(cs) -> object | None:
@@ -140,14 +144,12 @@ class SymbolicModel:
         return int(counts[0])
 
     def _arguments(self, theta: np.ndarray, segments, x0: np.ndarray):
-        """``(N, n, [(p, T, U, DT) of each segment])``: the rows a segment
-        function takes (the longest segment's; a shorter one held at its last
-        row), the RK4 steps a row, and each segment's parameters, times,
-        inputs and steps, as CasADi takes them (column-major: each array is
-        the transpose of the matrix)."""
+        """``(n, [(p, T, U, DT) of each segment])``: the RK4 steps a row, and
+        each segment's parameters and its rows' times, inputs and steps,
+        padded to whole chunks (held at the segment's last row), as CasADi
+        takes them (column-major: each array is the transpose of the matrix)."""
         m, p = self.model, self.model.problem
         t = m.times
-        N = max(s.last - s.first for s in segments)
         base = self.p_base.copy()
         for name, value in m.parameters(theta).items():
             if name in self.p_names:
@@ -158,29 +160,41 @@ class SymbolicModel:
         for s, start in zip(segments, np.asarray(x0, dtype=float)):
             params = base.copy()
             params[self.p_setter] = start
-            rows = np.minimum(np.arange(s.first, s.first + N), s.last - 1)  # held at the segment's last row
-            U = np.tile(self.u_base, (N, 1))
+            padded = -(-(s.last - s.first) // CHUNK) * CHUNK
+            rows = np.minimum(np.arange(s.first, s.first + padded), s.last - 1)
+            U = np.tile(self.u_base, (padded, 1))
             U[:, self.u_fit] = theta[m.n_params:]
             if self.u_log.size:
                 U[:, self.u_log] = p.input_values[rows]
-            out.append((params, np.ascontiguousarray(t[rows]), U, np.ascontiguousarray(dt_all[np.minimum(rows, t.size - 2)])))
-        return N, n, out
+            out.append((params, np.ascontiguousarray(t[rows]), U,
+                        np.ascontiguousarray(dt_all[np.minimum(rows, t.size - 2)])))
+        return n, out
 
     # ---- the functions ----------------------------------------------------------------------------
 
-    def _function(self, kind: str, N: int, n: int, nd: int):
-        key = (kind, N, n, nd)
+    def _function(self, kind: str, n: int, nd: int):
+        key = (kind, n, nd)
         if key not in self._functions:
-            self._functions[key] = self._build(kind, N, n, nd)
+            self._functions[key] = self._build(kind, n, nd)
         return self._functions[key]
 
-    def _build(self, kind: str, N: int, n: int, nd: int):
+    def _build(self, kind: str, n: int, nd: int):
+        """``kind``: ``"start"`` (a segment's initial state from its
+        parameters, and its sensitivities: CasADi's virtual machine, it is
+        small), ``"simulate"`` or ``"sensitivities"`` of :data:`CHUNK` rows
+        (compiled)."""
         import casadi as ca
 
         from ..kernel import compiled_library
 
         f = self.definition.functions
         nx, nu, npar = len(self.x_names), len(self.u_names), len(self.p_names)
+        p0 = ca.MX.sym("p0", npar)
+        if kind == "start":
+            P0d = ca.MX.sym("P0d", npar, nd)
+            x0 = f["init"](p0)
+            fn = ca.Function("start", [p0, P0d], [x0, f["init"].forward(nd)(p0, x0, P0d) if nd else ca.MX(nx, 0)])
+            return _Interpreted(fn)
         x, t, dt = ca.MX.sym("x", nx), ca.MX.sym("t"), ca.MX.sym("dt")
         u, p = ca.MX.sym("u", nu), ca.MX.sym("p", npar)
         h = dt / n
@@ -188,21 +202,18 @@ class SymbolicModel:
         for k in range(n):  # core_do_step: n equal RK4 steps, the time from a step counter
             xk = f["step"](t + k * h, xk, u, p, h)
         row = ca.Function("row", [x, t, u, p, dt], [xk, f["out"](t, x, u, p)])
-        p0, T, U, DT = ca.MX.sym("p0", npar), ca.MX.sym("T", 1, N), ca.MX.sym("U", nu, N), ca.MX.sym("DT", 1, N)
-        x0 = f["init"](p0)
+        T, U, DT = ca.MX.sym("T", 1, CHUNK), ca.MX.sym("U", nu, CHUNK), ca.MX.sym("DT", 1, CHUNK)
         if kind == "simulate":
-            X, Y = row.mapaccum("rows", N)(x0, T, U, ca.repmat(p0, 1, N), DT)
-            fn = ca.Function("calibration_simulate", [p0, T, U, DT], [x0, X, Y])
+            X, Y = row.mapaccum("rows", CHUNK)(x, T, U, ca.repmat(p0, 1, CHUNK), DT)
+            fn = ca.Function("calibration_simulate", [x, p0, T, U, DT], [X, Y])
         else:
             S, Pd, Ud = ca.MX.sym("S", nx, nd), ca.MX.sym("Pd", npar, nd), ca.MX.sym("Ud", nu, nd)
             xn, y = row(x, t, u, p, dt)
             dxn, dy = row.forward(nd)(x, t, u, p, dt, xn, y, S, ca.MX(1, nd), Ud, Pd, ca.MX(1, nd))
             rows = ca.Function("row_sensitivities", [x, S, t, u, p, dt, Pd, Ud], [xn, dxn, y, dy])
-            P0d, U0d = ca.MX.sym("P0d", npar, nd), ca.MX.sym("U0d", nu, nd)
-            S0 = f["init"].forward(nd)(p0, x0, P0d)
-            X, dX, Y, dY = rows.mapaccum("rows", N, [0, 1], [0, 1])(
-                x0, S0, T, U, ca.repmat(p0, 1, N), DT, ca.repmat(P0d, 1, N), ca.repmat(U0d, 1, N))
-            fn = ca.Function("calibration_sensitivities", [p0, P0d, U0d, T, U, DT], [x0, S0, X, dX, Y, dY])
+            X, dX, Y, dY = rows.mapaccum("rows", CHUNK, [0, 1], [0, 1])(
+                x, S, T, U, ca.repmat(p0, 1, CHUNK), DT, ca.repmat(Pd, 1, CHUNK), ca.repmat(Ud, 1, CHUNK))
+            fn = ca.Function("calibration_sensitivities", [x, S, p0, Pd, Ud, T, U, DT], [X, dX, Y, dY])
         cg = ca.CodeGenerator(f"{fn.name()}.c")
         cg.add(fn)
         started = time.perf_counter()
@@ -243,11 +254,23 @@ class SymbolicModel:
     def simulate(self, theta: np.ndarray, segments, x0: np.ndarray) -> list:
         """Each segment's :class:`~cosim.calibration.model.Trajectory` (or the
         :class:`~cosim.errors.FmuCallError` of a state that is not finite)."""
-        N, n, args = self._arguments(theta, segments, x0)
-        fn = self._function("simulate", N, n, 0)
+        n, args = self._arguments(theta, segments, x0)
+        start, chunk = self._function("start", n, 0), self._function("simulate", n, 0)
+
+        def one(a):
+            params, T, U, DT = a
+            x = start((params, np.zeros((0, params.size))))[0].ravel()
+            xs, ys = [x[None]], []
+            with np.errstate(all="ignore"):
+                for c in range(0, T.size, CHUNK):
+                    X, Y = chunk((xs[-1][-1], params, T[c:c + CHUNK], U[c:c + CHUNK], DT[c:c + CHUNK]))
+                    xs.append(X)
+                    ys.append(Y)
+            return np.concatenate(xs), np.concatenate(ys)
+
         out = []
-        for s, (x0s, X, Y) in zip(segments, self._run(fn, args)):
-            tr = self._trajectory(s, np.vstack([x0s, X]), Y)
+        for s, (X, Y) in zip(segments, self._run(one, args)):
+            tr = self._trajectory(s, X, Y)
             out.append(tr if np.isfinite(tr.states).all() and np.isfinite(tr.outputs).all() else self._failed(s))
         return out
 
@@ -262,20 +285,31 @@ class SymbolicModel:
         m = self.model
         nt, est = len(m.problem.fit), np.flatnonzero(estimated)
         nd = nt + est.size
-        N, n, args = self._arguments(theta, segments, x0)
+        n, args = self._arguments(theta, segments, x0)
         Pd = np.zeros((len(self.p_names), nd))
         Ud = np.zeros((len(self.u_names), nd))
         Pd[self.p_fit, np.arange(self.p_fit.size)] = 1.0
         Ud[self.u_fit, m.n_params + np.arange(self.u_fit.size)] = 1.0
         Pd[self.p_setter[est], nt + np.arange(est.size)] = 1.0
         Pd, Ud = np.ascontiguousarray(Pd.T), np.ascontiguousarray(Ud.T)  # column-major
-        fn = self._function("sensitivities", N, 1 if coarse else n, nd)
-        done = self._run(fn, [(params, Pd, Ud, T, U, DT) for params, T, U, DT in args])
+        start, chunk = self._function("start", n, nd), self._function("sensitivities", 1 if coarse else n, nd)
+
+        def one(a):
+            params, T, U, DT = a
+            x, S = start((params, Pd))
+            x, S = x.ravel(), S  # S: nd x nx (column-major nx x nd)
+            Ss, dys = [S[None]], []
+            with np.errstate(all="ignore"):
+                for c in range(0, T.size, CHUNK):
+                    X, dX, _, dY = chunk((x, S, params, Pd, Ud, T[c:c + CHUNK], U[c:c + CHUNK], DT[c:c + CHUNK]))
+                    Ss.append(dX.reshape(CHUNK, nd, -1))
+                    dys.append(dY.reshape(CHUNK, nd, -1))
+                    x, S = X[-1], Ss[-1][-1]
+            return np.concatenate(Ss).transpose(0, 2, 1), np.concatenate(dys)  # rows x states x unknowns
+
         out = []
-        for s, (_, S0, _, dX, _, dY) in zip(segments, done):
+        for s, (S, dYr) in zip(segments, self._run(one, args)):
             n_rows = s.last - s.first
-            S = np.concatenate([S0.T[None], dX.reshape(N, nd, -1).transpose(0, 2, 1)])  # rows x states x unknowns
-            dYr = dY.reshape(N, nd, -1)
             dy = np.stack([S[:n_rows, j] if where == "x" else dYr[:n_rows, :, j] for where, j in self.out_from],
                           axis=1)
             steps = n_rows if s.last < m.times.size else n_rows - 1
