@@ -40,6 +40,27 @@ def test_the_hidden_parameters_and_the_wind_recovered_to_1e_6_from_guesses_far_o
     assert 'name="Ix"' in (out / "parameters.ssv").read_text()
 
 
+def test_the_casadi_way_and_the_fmu_way_give_the_same_estimates(flight_log):
+    # the plant's own CasADi definition (compiled segments, exact sensitivities) against the FMU's
+    # directional derivatives, on the same problem: the same optimum, the same intervals
+    from cosim.calibration import CalibrationSettings, calibrate
+    from fmu_models.built import built_fmu
+    from fmu_models.catalog import model
+
+    fmu = built_fmu("Quadrotor", 2, lambda: model("Quadrotor"))
+    fixed = {k: v for k, v in HIDDEN.items() if k not in ("b", "Ix")}
+    cals = {way: calibrate(flight_log, fmu, CalibrationSettings(
+        fit=["b", "Ix", "wind_x", "wind_y"], guess={"b": 6e-6, "Ix": 0.03}, fix=fixed, segment=1.0, holdout=0.0,
+        stop=3.0, jacobian=way)) for way in ("casadi", "derivatives")}
+    assert cals["casadi"].fit.method.startswith("forward sensitivities (CasADi")
+    assert cals["derivatives"].fit.method == "forward sensitivities (directional derivatives)"
+    a, b = cals["casadi"].fit.theta, cals["derivatives"].fit.theta
+    assert a == pytest.approx(b, rel=1e-10)
+    assert a[0] == pytest.approx(HIDDEN["b"], rel=1e-9) and a[1] == pytest.approx(HIDDEN["Ix"], rel=1e-9)
+    # the statistics from either Jacobian: the same standard errors to the generic way's Magnus step
+    assert cals["casadi"].stats.std == pytest.approx(cals["derivatives"].stats.std, rel=0.2)
+
+
 def test_a_parameter_the_flight_does_not_excite_is_not_identifiable(tmp_path, flight_log, capsys):
     # Omega_max only clips: a flight that never saturates a rotor says nothing about it
     fix = [a for k, v in HIDDEN.items() if k != "b" for a in ("--fix", f"{k}={v}")]
