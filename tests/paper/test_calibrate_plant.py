@@ -118,3 +118,32 @@ def test_a_parameter_set_that_is_not_one_is_refused_in_one_line(tmp_path, capsys
                  "--quiet"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "expected an ssv:ParameterSet" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("kind, good, bad", [
+    ("settings", "fit = ['b']\njacobian = 'casadi'\nsegment = 2.0\n", "fit = ['b']\njacobian = 'magic'\n"),
+    ("column-map", "time = 'timestamp'\n[columns]\nx = 'pos_n'\nOmega_1 = { column = 'rpm1', unit = 'rpm' }\n",
+     "[columns]\nx = 3\n"),
+])
+def test_the_calibration_files_schemas_are_printed_and_agree_with_the_readers(tmp_path, capsys, kind, good, bad):
+    import tomllib
+
+    import jsonschema
+
+    from cosim.calibration import read_column_map, read_settings
+    from cosim.errors import ScenarioError
+
+    assert main(["schema", kind]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    jsonschema.Draft202012Validator.check_schema(schema)
+    validator = jsonschema.Draft202012Validator(schema)
+    reader = read_settings if kind == "settings" else read_column_map
+    for text, valid in ((good, True), (bad, False)):
+        assert validator.is_valid(tomllib.loads(text)) is valid
+        path = tmp_path / f"{kind}.toml"
+        path.write_text(text)
+        if valid:
+            reader(path)
+        else:
+            with pytest.raises(ScenarioError):
+                reader(path)
