@@ -408,5 +408,7 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
         start += n
     converged = bool(result.status > 0)
     return Fit(theta, x0, estimated, sigma, resid, Jout[:, :nt], state_blocks, converged, result.message,
-               prob.evaluations, float(result.cost), METHODS[method], prob.error_estimate,
+               prob.evaluations, float(result.cost),
+               METHODS[method] + (f", run by {symbolic.source}" if symbolic is not None and
+                                  symbolic.source != "compiled" else ""), prob.error_estimate,
                compile_seconds=symbolic.compile_seconds if symbolic is not None else 0.0)

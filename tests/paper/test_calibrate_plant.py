@@ -61,6 +61,23 @@ def test_the_casadi_way_and_the_fmu_way_give_the_same_estimates(flight_log):
     assert cals["casadi"].stats.std == pytest.approx(cals["derivatives"].stats.std, rel=0.2)
 
 
+def test_without_a_c_compiler_the_casadi_way_runs_in_casadis_virtual_machine(flight_log, tmp_path, monkeypatch):
+    from cosim.calibration import CalibrationSettings, calibrate
+    from fmu_models.built import built_fmu
+    from fmu_models.catalog import model
+
+    monkeypatch.setenv("COSIM_CACHE", str(tmp_path / "empty-cache"))  # nothing compiled yet
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    fmu = built_fmu("Quadrotor", 2, lambda: model("Quadrotor"))
+    fixed = {k: v for k, v in HIDDEN.items() if k != "Ix"}
+    cal = calibrate(flight_log, fmu, CalibrationSettings(fit=["Ix", "wind_x", "wind_y"], guess={"Ix": 0.03},
+                                                         fix=fixed, segment=0.5, holdout=0.0, stop=1.0,
+                                                         jacobian_stride=1))
+    assert cal.fit.method.endswith("run by CasADi's virtual machine")
+    assert cal.fit.theta[0] == pytest.approx(HIDDEN["Ix"], rel=1e-9)
+    assert not any((tmp_path / "empty-cache").glob("*.so"))
+
+
 def test_a_parameter_the_flight_does_not_excite_is_not_identifiable(tmp_path, flight_log, capsys):
     # Omega_max only clips: a flight that never saturates a rotor says nothing about it
     fix = [a for k, v in HIDDEN.items() if k != "b" for a in ("--fix", f"{k}={v}")]
