@@ -357,8 +357,13 @@ class _Interpreted:
     """The same function run by CasADi's virtual machine (no C compiler): same arrays in and out."""
 
     def __init__(self, fn):
+        import threading
+
         self.fn = fn
+        self.lock = threading.Lock()  # one call at a time: the segments' threads share it
 
     def __call__(self, arguments) -> list:
         ins = [np.asarray(a, dtype=float).T for a in arguments]
-        return [np.asarray(o).T.copy() for o in self.fn(*ins)]
+        with self.lock:
+            outs = self.fn(*ins)
+        return [np.asarray(o).T.copy() for o in outs]
