@@ -11,7 +11,7 @@ Printed per seed: each estimate's relative error and whether its 95 %
 interval covers the truth; at the end, per parameter, the share of seeds
 covered (about 95 % expected) and the largest relative error (target 1 %).
 
-    .venv/bin/python benchmarks/calibration_coverage.py [--seeds 20] [--duration 20]
+    .venv/bin/python benchmarks/calibration_coverage.py [--seeds 20] [--first 1] [--duration 20]
 """
 from __future__ import annotations
 
@@ -69,11 +69,12 @@ def one(seed: int, duration: float, workers: int):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first", type=int, default=1, help="the first seed (a study split over processes)")
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     rows = []
-    for seed in range(1, args.seeds + 1):
+    for seed in range(args.first, args.first + args.seeds):
         r = one(seed, args.duration, args.workers)
         rows.append(r)
         print(f"seed {seed:2d}: " + ", ".join(f"{n} {e:.1e}{'' if c else ' NOT COVERED'}" for n, (e, c, _) in r.items())

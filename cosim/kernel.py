@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["KernelFmu", "KernelRun", "KernelStop", "Stop", "Call", "header", "load", "prepare"]
+__all__ = ["KernelFmu", "KernelRun", "KernelStop", "Stop", "Call", "header", "load", "prepare", "compiled_library"]
 
 _SOURCE = Path(__file__).with_name("kernel.c")
 _HEADER = "kernel_abi.h"
@@ -182,37 +182,58 @@ def _cache() -> Path:
     return Path(root)
 
 
+def compiled_library(source: bytes, stem: str, flags: tuple[str, ...] = (), include: dict[str, bytes] | None = None
+                     ) -> Path | None:
+    """The shared library of the C ``source`` (with the headers ``include``,
+    name -> text), compiled once per machine with the C compiler FMUs are
+    built with and kept content-addressed in the cache (``stem`` and the hash
+    of the source, the headers and the flags); ``None`` without a compiler.
+    A source that does not compile raises: ours, a bug, never a silent
+    fallback. The kernel's and the calibrator's compiled functions
+    (:mod:`cosim.calibration.symbolic`) are made here."""
+    digest = hashlib.sha256(source)
+    for name, text in sorted((include or {}).items()):
+        digest.update(name.encode() + text)
+    digest.update(" ".join(flags).encode())
+    target = _cache() / f"{stem}_{digest.hexdigest()[:16]}.so"
+    if target.exists():
+        return target
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if not cc:
+        return None
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        # compile beside the target and rename: parallel processes never load half a library
+        fd, tmp = tempfile.mkstemp(suffix=".so.part", dir=target.parent)
+        os.close(fd)
+        with tempfile.TemporaryDirectory() as folder:
+            for name, text in (include or {}).items():
+                Path(folder, name).write_bytes(text)
+            src = Path(folder, f"{stem}.c")
+            src.write_bytes(source)
+            result = subprocess.run([cc, *flags, "-shared", "-fPIC", f"-I{folder}", "-o", tmp, str(src)],
+                                    capture_output=True, text=True)
+        if result.returncode != 0:
+            os.unlink(tmp)
+            raise RuntimeError(f"compiling {stem}.c with {cc} failed: {result.stderr.strip()}")
+        os.replace(tmp, target)
+    except OSError:
+        return None
+    return target
+
+
 @lru_cache(maxsize=None)
 def load():
     """The compiled ``cosim_kernel_run``, or ``None`` (no C compiler, or the
     Python loop asked for); a source that does not compile raises."""
     if os.environ.get("COSIM_PYTHON_LOOP"):
         return None
-    source, abi = _SOURCE.read_bytes(), header().encode()
-    digest = hashlib.sha256(source)
-    digest.update(abi)
-    target = _cache() / f"cosim_kernel_{digest.hexdigest()[:16]}.so"
-    if not target.exists():
-        cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-        if not cc:
-            return None
-        try:
-            target.parent.mkdir(parents=True, exist_ok=True)
-            # compile beside the target and rename: parallel processes never load half a library
-            fd, tmp = tempfile.mkstemp(suffix=".so.part", dir=target.parent)
-            os.close(fd)
-            with tempfile.TemporaryDirectory() as include:
-                Path(include, _HEADER).write_bytes(abi)
-                # -ffp-contract=off: u = factor * v + offset rounds twice, as numpy does in the Python loop
-                result = subprocess.run([cc, "-O2", "-std=c99", "-ffp-contract=off", "-Wall", "-Werror", "-shared",
-                                         "-fPIC", f"-I{include}", "-o", tmp, str(_SOURCE)],
-                                        capture_output=True, text=True)
-            if result.returncode != 0:  # our own source that does not compile: a bug, never a silent fallback
-                os.unlink(tmp)
-                raise RuntimeError(f"compiling {_SOURCE} with {cc} failed: {result.stderr.strip()}")
-            os.replace(tmp, target)
-        except OSError:
-            return None
+    # -ffp-contract=off: u = factor * v + offset rounds twice, as numpy does in the Python loop
+    target = compiled_library(_SOURCE.read_bytes(), "cosim_kernel",
+                              ("-O2", "-std=c99", "-ffp-contract=off", "-Wall", "-Werror"),
+                              {_HEADER: header().encode()})
+    if target is None:
+        return None
     run = ctypes.CDLL(str(target)).cosim_kernel_run
     run.argtypes = [kind for _, kind in _RUN_ARGS]
     run.restype = ctypes.c_int

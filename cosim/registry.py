@@ -122,12 +122,18 @@ class RegisteredModel:
     binary's) are ``values`` (parameter or input name -> value): a
     self-contained FMU, which runs a scenario's values in a tool that
     ignores the values an SSP archive binds (:func:`cosim.ssp_export.export_ssp`).
+    ``definition()``, if given, returns the CasADi definition the FMU is
+    generated from (its ``functions`` ``init``, ``step``, ``out`` and its
+    ``states``, ``inputs``, ``outputs``, ``parameters`` in vector order, as
+    :class:`fmu_models.export.model.FmuModel` has them): the calibrator
+    differentiates it instead of the FMU (:mod:`cosim.calibration.symbolic`).
     """
 
     name: str
     build: Callable[[int], Path]
     check_parameter: Callable[[str, float], None] | None = None
     build_with: Callable[[Mapping[str, float], int], Path] | None = None
+    definition: Callable[[], Any] | None = None
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ Subcommands::
     fnn-cosim reproduce [--out DIR] [--seeds 10] [--duration S] [--workers 2] [--scheduler ADDRESS]
     fnn-cosim sweep STUDY.toml|NAME [--out DIR] [--workers N] [--scheduler ADDRESS] [--no-plots]
     fnn-cosim scenarios
-    fnn-cosim schema scenario|study [--out FILE]
+    fnn-cosim schema scenario|study|settings|column-map [--out FILE]
     fnn-cosim build-fmu [--out DIR]
     fnn-cosim linearize FMU|MODEL [--fmi 2|3] [--parameter N=V ...] [--input N=V ...] [--start N=V ...]
                  [--method auto|derivatives|differences] [--interface auto|me|cs] [--bode IN:OUT ...] [--out DIR]
@@ -280,13 +280,17 @@ def _cmd_export_ssp(args) -> int:
 
 
 def _cmd_schema(args) -> int:
-    """Print the JSON Schema of a scenario or a study file (for editors: docs/cosim.md)."""
+    """Print the JSON Schema of a scenario, a study or a calibration file (for editors: docs/cosim.md)."""
     import json
 
     if args.kind == "scenario":
         from cosim.scenario import scenario_json_schema as schema
-    else:
+    elif args.kind == "study":
         from cosim.study import study_json_schema as schema
+    else:  # fnn-cosim calibrate's files: --settings, --columns
+        from cosim.calibration.columns import calibration_schema
+
+        schema = lambda: calibration_schema()[args.kind.replace("-", "_")]  # noqa: E731
     text = json.dumps(schema(), indent=1)
     if args.out:
         from cosim.files import output_file
@@ -566,8 +570,9 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
     e.set_defaults(func=_cmd_export_ssp)
 
-    js = sub.add_parser("schema", help="print the JSON Schema of a scenario or study file (for editors)")
-    js.add_argument("kind", choices=("scenario", "study"))
+    js = sub.add_parser("schema", help="print the JSON Schema of a scenario, study or calibration file (for editors)")
+    js.add_argument("kind", choices=("scenario", "study", "settings", "column-map"),
+                    help="settings, column-map: fnn-cosim calibrate's --settings and --columns files")
     js.add_argument("--out", help="write it to this file instead")
     js.set_defaults(func=_cmd_schema)
 

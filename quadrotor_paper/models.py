@@ -45,7 +45,7 @@ def fmu_model(identifier: str, load, sources=tuple) -> registry.RegisteredModel:
 
         return cached_fmu(load().with_defaults(values), version)
 
-    return registry.RegisteredModel(identifier, build, check_parameter, build_with)
+    return registry.RegisteredModel(identifier, build, check_parameter, build_with, definition=load)
 
 
 def variant_sources(name: str) -> list[Path]:

@@ -10,6 +10,7 @@ each:
 * :mod:`~cosim.calibration.segments`: multiple shooting's segments and the held-out part;
 * :mod:`~cosim.calibration.model`: the trajectories (Co-Simulation) and the right-hand side's Jacobians (Model Exchange);
 * :mod:`~cosim.calibration.sensitivity`: the forward sensitivities along a segment;
+* :mod:`~cosim.calibration.symbolic`: segments and exact sensitivities from the model's own CasADi definition (FMUs of ours);
 * :mod:`~cosim.calibration.solve`: the weighted least squares (scipy's ``least_squares``);
 * :mod:`~cosim.calibration.statistics`: standard errors, intervals, correlation, identifiability, residuals;
 * :mod:`~cosim.calibration.outputs`: ``calibration.json``, ``parameters.ssv``, the TOML override, ``report.md``.
@@ -88,7 +89,15 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
         problem = bind_problem(cs, log, settings, column_map, instance, extra_columns, states)
         model = LogModel(problem, settings.initial_parameters)
         try:
-            method = settings.jacobian
+            method, symbolic = settings.jacobian, None
+            if method in ("auto", "casadi"):
+                symbolic = _symbolic(cs, model, settings.workers)
+                if isinstance(symbolic, str):
+                    if method == "casadi":
+                        raise ScenarioError(f"jacobian = 'casadi': {Path(fmu).name}: {symbolic}")
+                    symbolic = None
+                else:
+                    method = "casadi"
             if method == "auto":
                 method = "derivatives" if model.has_derivatives else "differences"
             elif method == "derivatives" and not model.has_derivatives:
@@ -103,7 +112,7 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
                     if logged[j]:
                         x0[i, j] = problem.output_values[seg.first, problem.state_columns[s]]
             result = solve(model, segments, estimated, x0, dict(settings.noise), method, settings.max_iterations,
-                           settings.tolerance, progress, settings.workers, settings.jacobian_stride)
+                           settings.tolerance, progress, settings.workers, settings.jacobian_stride, symbolic)
             weighted = np.concatenate([(r / result.sigma).ravel() for r in result.residuals])
             stats = statistics(problem.fit, result.theta, result.jacobian, weighted, result.jacobian_state_blocks,
                                int(estimated.sum()) * len(segments), settings.identifiability)
@@ -114,6 +123,17 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
     finally:
         cs.close()
     return Calibration(problem, settings, segments, held_out, result, stats, residuals, prediction, instance)
+
+
+def _symbolic(cs: FmuComponent, model, workers: int):
+    """The problem's :class:`~cosim.calibration.symbolic.SymbolicModel` when
+    the FMU is one of ours, else why not (a string)."""
+    from .symbolic import definition_of, symbolic_model
+
+    definition = definition_of(cs)
+    if definition is None:
+        return "not a model whose CasADi definition is registered (or built with other values)"
+    return symbolic_model(model, definition, workers)
 
 
 def _states(cs: FmuComponent) -> list[str]:

@@ -11,9 +11,9 @@ string``) and their JSON Schema (``calibration_schema``).
 """
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Annotated, Any, Mapping
 
-from pydantic import Field
+from pydantic import BeforeValidator, Field, WithJsonSchema
 
 from ..errors import ScenarioError
 from ..files import read_toml
@@ -23,7 +23,7 @@ __all__ = ["Column", "ColumnMap", "CalibrationSettings", "read_column_map", "rea
            "JACOBIANS", "calibration_schema"]
 
 INITIAL_STATES = ("recorded", "estimated")
-JACOBIANS = ("auto", "derivatives", "differences")
+JACOBIANS = ("auto", "casadi", "derivatives", "differences")
 
 
 class Column(Table):
@@ -39,6 +39,13 @@ def _column(value: Any) -> Any:
     return {"column": value} if isinstance(value, str) else value
 
 
+# a column: its name alone, or the table {column, unit}; the JSON Schema says both (editors accept what the
+# reader does)
+_AnyColumn = Annotated[Column, BeforeValidator(_column),
+                       WithJsonSchema({"anyOf": [{"type": "string", "description": "the column's name in the log"},
+                                                 Column.model_json_schema()]})]
+
+
 class ColumnMap(Table):
     """A column-map file: the log's columns as the FMU's variables."""
 
@@ -46,7 +53,7 @@ class ColumnMap(Table):
     time_unit: str = Field("s", description="the time column's unit (e.g. 'us' for PX4's microseconds)")
     topic: str = Field(None, description="ULog only: the topic whose samples are the log's instants; the other "
                                          "topics' fields are interpolated linearly onto them")
-    columns: dict[str, Column] = Field(default_factory=dict,
+    columns: dict[str, _AnyColumn] = Field(default_factory=dict,
                                        description="FMU variable -> its column: a name, or a table "
                                                    "{column, unit}")
 
@@ -84,8 +91,10 @@ class CalibrationSettings(Table):
                                                    "predicted (default: the last segment when there are several)")
     start: Number = Field(None, description="the log's part used starts here, s")
     stop: Number = Field(None, description="and ends here, s")
-    jacobian: one_of(JACOBIANS) = Field("auto", description="'derivatives' (forward sensitivities from the FMU's "
-                                                            "directional derivatives), 'differences', or 'auto'")
+    jacobian: one_of(JACOBIANS) = Field("auto", description="'casadi' (the model's own CasADi definition, when the "
+                                                            "FMU is one of ours), 'derivatives' (forward "
+                                                            "sensitivities from the FMU's directional derivatives), "
+                                                            "'differences', or 'auto' (the first that applies)")
     jacobian_stride: Count = Field(4, description="the solver's iterations evaluate the Jacobians at every this "
                                                   "many rows (fewer FMU calls; the statistics use every row)")
     max_iterations: Count = Field(100, description="the solver's limit of Jacobian evaluations")

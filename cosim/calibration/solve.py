@@ -33,6 +33,8 @@ CONTINUITY_WEIGHT = 1e3  # continuity residuals weigh this much more than one ou
 
 COARSE_TOLERANCE = 1e-8  # the iterations with Jacobians at every stride-th row stop here; exact ones go on
 COARSE_EVALUATIONS = 20  # at most this many simulations with them (their convergence is linear near the optimum)
+METHODS = {"casadi": "forward sensitivities (CasADi, the model's own definition)",
+           "derivatives": "forward sensitivities (directional derivatives)", "differences": "central differences"}
 DENSE_LIMIT = 20_000_000  # entries: a Jacobian with estimated initial states up to this size is solved dense
 _MODEL: LogModel | None = None  # a worker's model: inherited from the parent at fork (its own FMU instances)
 
@@ -111,14 +113,17 @@ class Fit:
     method: str
     error_estimate: float
     history: list = field(default_factory=list)
+    compile_seconds: float = 0.0  # the CasADi way's C generated and compiled in this run (0: found in the cache)
 
 
 class _Problem:
     """Residuals and Jacobian of the unknown vector ``z = [theta, x0 of each segment (estimated states)]``."""
 
     def __init__(self, model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
-                 sigma: np.ndarray, method: str, progress: Callable | None, workers: "_Workers | None" = None):
+                 sigma: np.ndarray, method: str, progress: Callable | None, workers: "_Workers | None" = None,
+                 symbolic=None):
         self.model, self.segments, self.estimated = model, segments, estimated
+        self.symbolic = symbolic  # cosim.calibration.symbolic.SymbolicModel: the model's own CasADi definition
         self.workers = workers
         self.stride = 1  # rows between Jacobian evaluations (cosim.calibration.sensitivity)
         self.x0_log, self.sigma = x0_log, sigma
@@ -148,7 +153,9 @@ class _Problem:
         if key not in self.cache:
             theta, x0 = self.split(z)
             self.cache.clear()
-            if self.workers is not None:
+            if self.symbolic is not None:
+                done = self.symbolic.simulate(theta, self.segments, x0)
+            elif self.workers is not None:
                 done = self.workers.simulate(theta, self.segments, list(x0))
             else:
                 done = []
@@ -201,7 +208,10 @@ class _Problem:
         theta, x0 = self.split(z)
         trajs = self.simulate(z)
         nt, ne = self.nt, self.ne
-        if self.workers is not None:
+        if self.symbolic is not None:  # exact: CasADi's forward mode through the trajectory
+            done = self.symbolic.sensitivities(theta, self.segments, x0, self.estimated, coarse=self.stride > 1)
+            self.error_estimate = 0.0
+        elif self.workers is not None:
             done, self.error_estimate = self.workers.sensitivities(theta, self.segments, trajs, self.estimated,
                                                                    self.stride)
         else:
@@ -300,28 +310,35 @@ def _spread(values: np.ndarray) -> np.ndarray:
 
 def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log: np.ndarray,
         noise: dict[str, float], method: str, max_iterations: int, tolerance: float,
-        progress: Callable[[int, int], None] | None = None, workers: int = 1, stride: int = 1) -> Fit:
+        progress: Callable[[int, int], None] | None = None, workers: int = 1, stride: int = 1,
+        symbolic=None) -> Fit:
     """The weighted least-squares estimate (module docstring); ``workers``
     processes share the segments (forward sensitivities only); ``stride``:
     the solver's iterations evaluate the Jacobians at every ``stride``-th row
     (:func:`~cosim.calibration.sensitivity.segment_sensitivities`), the
-    statistics' Jacobian at the optimum at every row."""
+    statistics' Jacobian at the optimum at every row. ``symbolic``: a
+    :class:`~cosim.calibration.symbolic.SymbolicModel` (``method =
+    "casadi"``): the segments and their exact sensitivities from the model's
+    CasADi definition, in ``workers`` threads (``stride > 1``: the first
+    iterations with the sensitivities of one RK4 step a row)."""
     pool = None
-    if workers > 1 and len(segments) > 1 and method != "differences":
+    if symbolic is not None:
+        pass  # its segments run in threads: no processes
+    elif workers > 1 and len(segments) > 1 and method != "differences":
         # the Model Exchange instances made here, before the fork: every worker inherits them (and this
         # process, which extracted them, removes their folders at the end)
         model.start_probes(np.asarray(model.problem.guess, dtype=float), float(model.times[0]))
         pool = _Workers(model, min(workers, len(segments)))
     try:
         return _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool,
-                    stride)
+                    stride, symbolic)
     finally:
         if pool is not None:
             pool.close()
 
 
 def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool,
-         stride) -> Fit:
+         stride, symbolic) -> Fit:
     p = model.problem
     rows = np.concatenate([np.arange(s.first, s.last) for s in segments])
     sigma = _spread(p.output_values[rows])
@@ -341,7 +358,7 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
 
     result, prob = None, None
     for n in range(passes):
-        prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress, pool)
+        prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress, pool, symbolic)
         lo, hi = prob.bounds()
         z = np.clip(z, lo, hi)
         scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
@@ -391,5 +408,7 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
         start += n
     converged = bool(result.status > 0)
     return Fit(theta, x0, estimated, sigma, resid, Jout[:, :nt], state_blocks, converged, result.message,
-               prob.evaluations, float(result.cost), "forward sensitivities (directional derivatives)"
-               if method != "differences" else "central differences", prob.error_estimate)
+               prob.evaluations, float(result.cost),
+               METHODS[method] + (f", run by {symbolic.source}" if symbolic is not None and
+                                  symbolic.source != "compiled" else ""), prob.error_estimate,
+               compile_seconds=symbolic.compile_seconds if symbolic is not None else 0.0)

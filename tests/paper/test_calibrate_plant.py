@@ -40,6 +40,44 @@ def test_the_hidden_parameters_and_the_wind_recovered_to_1e_6_from_guesses_far_o
     assert 'name="Ix"' in (out / "parameters.ssv").read_text()
 
 
+def test_the_casadi_way_and_the_fmu_way_give_the_same_estimates(flight_log):
+    # the plant's own CasADi definition (compiled segments, exact sensitivities) against the FMU's
+    # directional derivatives, on the same problem: the same optimum, the same intervals
+    from cosim.calibration import CalibrationSettings, calibrate
+    from fmu_models.built import built_fmu
+    from fmu_models.catalog import model
+
+    fmu = built_fmu("Quadrotor", 2, lambda: model("Quadrotor"))
+    fixed = {k: v for k, v in HIDDEN.items() if k not in ("b", "Ix")}
+    cals = {way: calibrate(flight_log, fmu, CalibrationSettings(
+        fit=["b", "Ix", "wind_x", "wind_y"], guess={"b": 6e-6, "Ix": 0.03}, fix=fixed, segment=1.0, holdout=0.0,
+        stop=3.0, jacobian=way)) for way in ("casadi", "derivatives")}
+    assert cals["casadi"].fit.method.startswith("forward sensitivities (CasADi")
+    assert cals["derivatives"].fit.method == "forward sensitivities (directional derivatives)"
+    a, b = cals["casadi"].fit.theta, cals["derivatives"].fit.theta
+    assert a == pytest.approx(b, rel=1e-10)
+    assert a[0] == pytest.approx(HIDDEN["b"], rel=1e-9) and a[1] == pytest.approx(HIDDEN["Ix"], rel=1e-9)
+    # the statistics from either Jacobian: the same standard errors to the generic way's Magnus step
+    assert cals["casadi"].stats.std == pytest.approx(cals["derivatives"].stats.std, rel=0.2)
+
+
+def test_without_a_c_compiler_the_casadi_way_runs_in_casadis_virtual_machine(flight_log, tmp_path, monkeypatch):
+    from cosim.calibration import CalibrationSettings, calibrate
+    from fmu_models.built import built_fmu
+    from fmu_models.catalog import model
+
+    monkeypatch.setenv("COSIM_CACHE", str(tmp_path / "empty-cache"))  # nothing compiled yet
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    fmu = built_fmu("Quadrotor", 2, lambda: model("Quadrotor"))
+    fixed = {k: v for k, v in HIDDEN.items() if k != "Ix"}
+    cal = calibrate(flight_log, fmu, CalibrationSettings(fit=["Ix", "wind_x", "wind_y"], guess={"Ix": 0.03},
+                                                         fix=fixed, segment=0.5, holdout=0.0, stop=1.0,
+                                                         jacobian_stride=1))
+    assert cal.fit.method.endswith("run by CasADi's virtual machine")
+    assert cal.fit.theta[0] == pytest.approx(HIDDEN["Ix"], rel=1e-9)
+    assert not any((tmp_path / "empty-cache").glob("*.so"))
+
+
 def test_a_parameter_the_flight_does_not_excite_is_not_identifiable(tmp_path, flight_log, capsys):
     # Omega_max only clips: a flight that never saturates a rotor says nothing about it
     fix = [a for k, v in HIDDEN.items() if k != "b" for a in ("--fix", f"{k}={v}")]
@@ -97,3 +135,32 @@ def test_a_parameter_set_that_is_not_one_is_refused_in_one_line(tmp_path, capsys
                  "--quiet"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "expected an ssv:ParameterSet" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("kind, good, bad", [
+    ("settings", "fit = ['b']\njacobian = 'casadi'\nsegment = 2.0\n", "fit = ['b']\njacobian = 'magic'\n"),
+    ("column-map", "time = 'timestamp'\n[columns]\nx = 'pos_n'\nOmega_1 = { column = 'rpm1', unit = 'rpm' }\n",
+     "[columns]\nx = 3\n"),
+])
+def test_the_calibration_files_schemas_are_printed_and_agree_with_the_readers(tmp_path, capsys, kind, good, bad):
+    import tomllib
+
+    import jsonschema
+
+    from cosim.calibration import read_column_map, read_settings
+    from cosim.errors import ScenarioError
+
+    assert main(["schema", kind]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    jsonschema.Draft202012Validator.check_schema(schema)
+    validator = jsonschema.Draft202012Validator(schema)
+    reader = read_settings if kind == "settings" else read_column_map
+    for text, valid in ((good, True), (bad, False)):
+        assert validator.is_valid(tomllib.loads(text)) is valid
+        path = tmp_path / f"{kind}.toml"
+        path.write_text(text)
+        if valid:
+            reader(path)
+        else:
+            with pytest.raises(ScenarioError):
+                reader(path)
