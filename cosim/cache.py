@@ -15,9 +15,10 @@ import hashlib
 import json
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
+
+from .files import write_whole
 
 __all__ = ["keep", "kept", "code_files", "unchanged", "keep_code", "code_unchanged"]
 
@@ -26,15 +27,7 @@ def keep(path: Path, data: Any) -> None:
     """``data`` written as JSON at ``path``, whole or not at all (a parallel
     process never reads half of it)."""
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".part")
-        try:
-            with os.fdopen(fd, "w") as f:
-                json.dump(data, f)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_whole(path, json.dumps(data))  # NaN and infinities kept as Python writes them: a parameter's range
     except (OSError, TypeError, ValueError):  # no room, no right to write, data that is not JSON: nothing kept
         pass
 

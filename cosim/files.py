@@ -19,6 +19,7 @@ import posixpath
 import re
 import shutil
 import stat
+import threading
 import tomllib
 import zipfile
 import zlib
@@ -29,7 +30,7 @@ from .errors import ScenarioError, one_line, shown_text
 from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_NESTING, MAX_RATIO
 
 __all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "json_document",
-           "repeated", "given_twice", "put_once", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder",
+           "repeated", "given_twice", "put_once", "write_whole", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder",
            "not_others_results", "output_file", "room_for", "zip_members", "read_entry", "extract_zip"]
 
 
@@ -402,15 +403,26 @@ def extract_zip(path: str | Path, target: str | Path, what: str, only: set[str] 
     return target
 
 
-def write_json(path: str | Path, data: Any) -> Path:
-    """``data`` as JSON at ``path``, written whole or not at all (a temporary file renamed)."""
+def write_whole(path: str | Path, text: str) -> Path:
+    """``text`` at ``path``, written whole or not at all: a temporary file
+    beside it, named for this process and thread (two writers of one path
+    never share it), renamed over ``path``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.partial")
-    # strict JSON: a number that is not finite (an undefined metric) is null, as no JSON parser reads NaN
-    tmp.write_text(json.dumps(_finite(data), indent=1, default=_json_default, allow_nan=False))
-    os.replace(tmp, path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.partial")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path
+
+
+def write_json(path: str | Path, data: Any) -> Path:
+    """``data`` as JSON at ``path``, written whole or not at all (:func:`write_whole`)."""
+    # strict JSON: a number that is not finite (an undefined metric) is null, as no JSON parser reads NaN
+    return write_whole(path, json.dumps(_finite(data), indent=1, default=_json_default, allow_nan=False))
 
 
 def _finite(data: Any) -> Any:
