@@ -214,7 +214,8 @@ def test_circles_estimated_in_the_jacobi_ordering_flies_near_the_feedthrough_one
     ratio = _rmse(results["exchange"][1]) / _rmse(results["feedthrough"][1])
     assert abs(ratio - 1.0) < 0.03, ratio
     metrics = estimation_metrics(*results["exchange"])
-    assert 2.0 < metrics["nees_position"] < 4.2 and metrics["est_rmse_position_m"] < 0.02
+    # the receiver's correlated error (E25, about 2 cm in all) is mostly not separable from the position
+    assert 2.0 < metrics["nees_position"] < 4.2 and metrics["est_rmse_position_m"] < 0.03
     # 655 before the stamps (the estimate judged against the truth 2 steps later), 4.9 before E26
     assert metrics["nees_attitude"] < 4.2 and metrics["nees_velocity"] < 4.2
 
