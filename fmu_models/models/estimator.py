@@ -243,8 +243,11 @@ def _variables(magnetometer: bool, fix_bias: bool = False):
         *(parameter(p0, unit, f"initial standard deviation of the {p0[3:].replace('_', ' ')} estimate (each axis)",
                     ESTIMATOR_DEFAULTS[p0], min=1e-9)
           for p0, unit in (("P0_position", "m"), ("P0_velocity", "m/s"), ("P0_attitude", "rad"),
-                           ("P0_gyro_bias", "rad/s"), ("P0_accel_bias", "m/s2"), ("P0_wind", "m/s"),
-                           ("P0_wind_z", "m/s"))),
+                           ("P0_gyro_bias", "rad/s"), ("P0_accel_bias", "m/s2"), ("P0_wind", "m/s"))),
+        # 0 with wind_walk_z = 0: no vertical wind state, the vertical wind held at wind_z_0 (its variance stays 0)
+        parameter("P0_wind_z", "m/s", "initial standard deviation of the vertical wind estimate; 0 (with "
+                  "wind_walk_z = 0): the filter has no vertical wind state, it holds wind_z_0",
+                  ESTIMATOR_DEFAULTS["P0_wind_z"], min=0.0),
         parameter("dt", "s", "communication step = sample period of the filter (every doStep must be dt)",
                   DT_DEFAULT, min=1e-6, max=10.0),
         discrete("started", "1", "0 before the first step (the initial estimate is the first prior), 1 after"),
