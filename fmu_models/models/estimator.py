@@ -32,6 +32,10 @@ with the IMU's ``gyro, acc`` stamped ``t_imu`` and the fix ``y`` stamped
    the NIS of both corrections, the time they describe (``t_estimate``) and
    the gate's counts.
 
+``EstimatorGM`` is the same filter with the fix's position error correlated
+in time as three more states (E27: a first-order Gauss-Markov process, the
+receiver ``GNSS6GM``'s E25), in the fix's measurement and its restart.
+
 In our master's feedthrough ordering ``t_imu = t`` and the output is the
 posterior: the controller reading the estimate at t_n flies on the
 measurements of t_n. In a Jacobi importer the samples arrive a step old,
@@ -53,7 +57,8 @@ from .quadrotor import (DEFAULTS, aerodynamic_drag, body_angular_acceleration, e
 from .rotor import thrust_and_torques
 from .sensors import DT_DEFAULT
 
-__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATOR_GM", "ESTIMATED_STATES", "FIX_BIAS_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
+__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATOR_GM", "ESTIMATED_STATES", "FIX_BIAS_STATES", "FIX_NAMES",
+           "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
            "chi2_quantile_even", "chi2_quantile_odd", "magnetometer_measurement",
            "body_drag_acceleration", "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
 
