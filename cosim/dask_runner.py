@@ -21,15 +21,17 @@ scenario refuses, an FMU that refuses a parameter, a worker that died) is a
 record with its status and message, never an exception.
 
 Engines: ``workers = 1`` and no ``scheduler`` runs every run in this
-process, one after the other (no Dask at all). Otherwise a
+process, one after the other (no Dask at all). With ``threads`` and no
+``scheduler``: Dask's threaded scheduler (``dask.threaded``, no
+``distributed`` imported, no cluster started) on ``workers`` threads of
+this process, one task per run, each record yielded as its run ends
+(:func:`_run_threaded`; no worker process to start, nothing imported
+twice, no record serialized; for runs whose loop is C that releases the
+GIL and whose every FMU is known reentrant, which the caller vouches for:
+an FMU that crashes takes this process with it). Otherwise a
 ``dask.distributed`` client: a ``LocalCluster`` of ``workers`` processes
-with one thread each, or, with ``threads``, a ``LocalCluster`` of one
-worker in this process with ``workers`` threads (no worker process to
-start, nothing imported twice, no record serialized; for runs whose
-loop is C that releases the GIL and whose every FMU is known reentrant,
-which the caller vouches for: an FMU that crashes takes this process with
-it), or the running cluster at ``scheduler`` (an address such as
-``tcp://127.0.0.1:8786``). A Dask task flies a **batch** of
+with one thread each, or the running cluster at ``scheduler`` (an address
+such as ``tcp://127.0.0.1:8786``). On ``distributed`` a Dask task flies a **batch** of
 consecutive runs of the plan (:func:`execute_batch`) and returns their
 records together; its size adapts (:func:`batch_size`): about
 :data:`BATCH_SECONDS` of work, a share of the runs left that shrinks toward
@@ -249,7 +251,7 @@ def _worker_cache() -> MasterCache:
 
 def _close_worker_caches() -> None:
     """Close the caches of the threads of this process that have ended (a
-    threads cluster ended: its masters' FMUs freed, their extracted files
+    study's threads ended: its masters' FMUs freed, their extracted files
     removed now). A thread still running (a cluster whose close timed out
     with a run in flight) keeps its cache: freeing the FMUs under its loop
     would crash; its finalizer closes it later."""
@@ -352,9 +354,10 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
     ``workers = 1`` without ``scheduler``: in this process; else on Dask
     (see the module's docstring), ``window`` batches in flight per worker
     thread; ``total``, the number of ``runs`` if known, lets the batches
-    shrink toward the end (:func:`batch_size`). ``threads``: the local
-    cluster is ``workers`` threads of this process, not processes (the
-    module's docstring says when that is safe). On Dask, when the cluster
+    shrink toward the end (:func:`batch_size`). ``threads``: without
+    ``scheduler``, the runs fly on Dask's threaded scheduler, ``workers``
+    threads of this process, not on a cluster of processes (the module's
+    docstring says when that is safe). On a cluster, when it
     has had no worker for ``worker_timeout`` seconds (``None``: wait for
     ever), a :class:`~cosim.errors.CosimError` says so and the flight stops
     (the records yielded so far are kept by the caller)."""
@@ -367,17 +370,92 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
         finally:
             cache.close()
         return
-    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total,
-                         threads and scheduler is None)
+    if threads and scheduler is None:
+        yield from _run_threaded(raw, source, runs, workers, metrics)
+        return
+    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total)
 
 
-def _client(workers: int, scheduler: str | None, scratch: Path | None = None, threads: bool = False):
+CHUNK = 1000  # runs per graph of Dask's threaded scheduler (_run_threaded): the driver's memory stays flat
+_END = object()  # the driver thread's last word
+
+
+def _run_threaded(raw, source, runs, workers: int, metrics) -> Iterator[dict[str, Any]]:
+    """Fly ``runs`` on Dask's threaded scheduler (``dask.threaded``, no
+    ``distributed``, no cluster), ``workers`` threads of this process; yield
+    each record as its run finishes.
+
+    A graph of one task per run is computed for every :data:`CHUNK` runs of
+    the plan (the plan is never listed whole) by a driver thread; each task
+    puts its record on a queue that this generator empties, so the rows
+    stream run by run (a stopped study loses only the runs in flight). One
+    task per run, not batches: the threaded scheduler hands a task to a
+    thread in well under a millisecond, so nothing is gained by grouping
+    runs and every thread stays busy to the end of each graph. The threads
+    are an executor made for this study (Dask's ``pool=``), shut down when
+    it ends, so their masters' FMUs are freed then (a pool Dask keeps per
+    calling thread would outlive the study with its masters)."""
+    import queue
+    from functools import partial
+
+    import dask.threaded
+
+    records: queue.Queue = queue.Queue()
+    stop = threading.Event()  # the consumer is gone: the runs not yet started are not flown
+    executor = getattr(dask.threaded, "ContextAwareThreadPoolExecutor", None)
+    if executor is None:  # an older Dask: its threads start with the driver's context anyway
+        from concurrent.futures import ThreadPoolExecutor as executor
+    pool = executor(max(1, workers), thread_name_prefix="cosim-run")
+
+    def flown(run: Run) -> None:
+        if stop.is_set():
+            return
+        try:
+            record = execute(raw, source, run, metrics)
+        except BaseException as exc:  # execute keeps a run's failures in its record: this is a bug
+            record = _failed(run, f"worker: {_message(exc)}", os.getpid())
+        records.put(record)
+
+    def drive() -> None:
+        try:
+            pending = iter(runs)
+            while not stop.is_set():
+                chunk = list(itertools.islice(pending, CHUNK))
+                if not chunk:
+                    break
+                # keys that Dask's ordering of independent tasks (by name, the last first) runs in plan order:
+                # a thread's consecutive runs keep their master (seeds innermost)
+                n = len(chunk)
+                graph = {f"run-{n - 1 - i:012d}": (partial(flown, run),) for i, run in enumerate(chunk)}
+                dask.threaded.get(graph, list(graph), pool=pool)
+        except BaseException as exc:  # the plan itself raised: the study's error, raised in the consumer
+            records.put(exc)
+        finally:
+            records.put(_END)
+
+    driver = threading.Thread(target=drive, name="cosim-study-driver", daemon=True)
+    driver.start()
+    try:
+        while True:
+            item = records.get()
+            if item is _END:
+                break
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()  # the runs in flight finish (a master is never freed under its loop), no other starts
+        driver.join()
+        pool.shutdown(wait=True)
+        _close_worker_caches()
+
+
+def _client(workers: int, scheduler: str | None, scratch: Path | None = None):
     """A Dask client: of the cluster at ``scheduler``, or of a local cluster of
     ``workers`` processes whose scratch space (Dask's ``dask-scratch-space``:
     the workers' folders, its locks) is the folder ``scratch``, which the
     caller makes and removes: it was left in the system's temporary folder
-    after every study. ``threads``: the local cluster is one worker of
-    ``workers`` threads in this process."""
+    after every study."""
     import logging
 
     import dask
@@ -406,20 +484,17 @@ def _client(workers: int, scheduler: str | None, scratch: Path | None = None, th
         # warning on stderr when another cluster held that port) on a free port
         quiet = {"dashboard_address": ":0", "scheduler_kwargs": {"dashboard": False},
                  "silence_logs": logging.ERROR, "local_directory": scratch}
-        if threads:  # the runs' loops release the GIL (ctypes): N threads fly N runs at once
-            cluster = LocalCluster(n_workers=1, threads_per_worker=max(1, workers), processes=False, **quiet)
-        else:
-            cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, **quiet)
+        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, **quiet)
         return Client(cluster), cluster
 
 
 def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
-              worker_timeout: float | None, total: int | None, threads: bool = False) -> Iterator[dict[str, Any]]:
+              worker_timeout: float | None, total: int | None) -> Iterator[dict[str, Any]]:
     from dask.distributed import wait
 
     scratch = Path(tempfile.mkdtemp(prefix="cosim-dask-")) if scheduler is None else None
     try:
-        client, cluster = _client(workers, scheduler, scratch, threads)
+        client, cluster = _client(workers, scheduler, scratch)
     except BaseException:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
@@ -493,7 +568,5 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
         client.close()
         if cluster is not None:
             cluster.close()
-        if threads:
-            _close_worker_caches()
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
