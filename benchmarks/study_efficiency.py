@@ -12,11 +12,11 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   / runs, and as a share of ``L``: what a run costs besides its loop (its
   scenario, its master when it needs a new one, its metrics, its row, the
   summary);
-* **Table 2 on a LocalCluster** (``measure``, cluster start and stop
-  included) of ``--workers`` threads of this process (what ``measure``
-  chooses for the project's own FMUs,
-  :func:`quadrotor_paper.experiments.threads_safe`) and of ``--workers``
-  worker processes (what any other study gets), and the whole command
+* **Table 2 on Dask** (``measure``, its start and stop included) on
+  ``--workers`` threads of this process (Dask's threaded scheduler, no
+  cluster: what ``measure`` chooses for the project's own FMUs,
+  :func:`quadrotor_paper.experiments.threads_safe`) and on a LocalCluster
+  of ``--workers`` worker processes (what any other study gets), and the whole command
   ``fnn-cosim table2 --workers N`` (a new process: imports included), each
   against the ideal, ``runs x L / workers``: target ``fnn-cosim table2`` <=
   1.6x on 2 workers; and the Dask overhead per run, (workers x wall - sum
@@ -209,7 +209,7 @@ def main() -> None:
     print(f"  ideal, runs x L / workers                    {ideal:8.2f} s")
     for kind in kinds:
         wall, cpu = med(walls[kind]), med(cpus[kind])
-        print(f"  measure on {args.workers} Dask {kind:9s} (median of {args.repeats}): wall {wall:8.2f} s = "
+        print(f"  measure on {args.workers} {kind:9s} (median of {args.repeats}): wall {wall:8.2f} s = "
               f"{wall / ideal:5.2f} x ideal;  CPU {cpu:6.2f} s = {cpu / here_cpu:4.2f} x in-process")
     print(f"    threads: overhead per run (workers x wall - runs) {dask_overhead * 1e3:6.1f} ms = "
           f"{dask_overhead / loop:5.0%} of L;  efficiency {figures['efficiency']:.2f}")
