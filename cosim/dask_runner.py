@@ -24,8 +24,9 @@ Engines: ``workers = 1`` and no ``scheduler`` runs every run in this
 process, one after the other (no Dask at all). With ``threads`` and no
 ``scheduler``: Dask's threaded scheduler (``dask.threaded``, no
 ``distributed`` imported, no cluster started) on ``workers`` threads of
-this process, one task per run, each record yielded as its run ends
-(:func:`_run_threaded`; no worker process to start, nothing imported
+this process, a task a few consecutive runs of one case (:func:`pieces`),
+each record yielded as its run ends, the threads sharing one
+:class:`MasterCache` (:func:`_run_threaded`; no worker process to start, nothing imported
 twice, no record serialized; for runs whose loop is C that releases the
 GIL and whose every FMU is known reentrant, which the caller vouches for:
 an FMU that crashes takes this process with it). Otherwise a
