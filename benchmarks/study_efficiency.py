@@ -12,11 +12,11 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   / runs, and as a share of ``L``: what a run costs besides its loop (its
   scenario, its master when it needs a new one, its metrics, its row, the
   summary);
-* **Table 2 on a LocalCluster** (``measure``, cluster start and stop
-  included) of ``--workers`` threads of this process (what ``measure``
-  chooses for the project's own FMUs,
-  :func:`quadrotor_paper.experiments.threads_safe`) and of ``--workers``
-  worker processes (what any other study gets), and the whole command
+* **Table 2 on Dask** (``measure``, its start and stop included) on
+  ``--workers`` threads of this process (Dask's threaded scheduler, no
+  cluster: what ``measure`` chooses for the project's own FMUs,
+  :func:`quadrotor_paper.experiments.threads_safe`) and on a LocalCluster
+  of ``--workers`` worker processes (what any other study gets), and the whole command
   ``fnn-cosim table2 --workers N`` (a new process: imports included), each
   against the ideal, ``runs x L / workers``: target ``fnn-cosim table2`` <=
   1.6x on 2 workers; and the Dask overhead per run, (workers x wall - sum
@@ -26,6 +26,8 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   a machine others load, wall time measures the load, CPU time what a
   study costs; the in-process study's CPU is the reference (no Dask, one
   core, every master built once);
+* whether the compiled loop leaves the GIL free: a Python counter in
+  this thread while another thread flies runs of one kernel call each;
 * the driver's peak Python memory (tracemalloc) for a study of 200 and of
   800 one-second runs: the rows are streamed to runs.csv, not held, and the
   local scheduler's logs are kept short (cosim/dask_runner.py), so the ratio
@@ -138,6 +140,45 @@ def _command(out: Path, workers: int) -> tuple[float, float]:
     return time.perf_counter() - t, cpu.cpu
 
 
+def _gil_free(runs: int = 5) -> tuple[float, float]:
+    """Whether another thread runs Python while a run's compiled loop runs:
+    counts per second of a Python counter in this thread while another
+    thread flies ``runs`` circles missions, each one kernel call (a block
+    of every row), and while it runs a Python loop (which shares the GIL at
+    the switch interval). A call that held the GIL would stop the counter
+    for each whole run."""
+    from cosim.assembly import build_master
+    from cosim.scenario import load_scenario
+
+    scenario = load_scenario("circles")
+    master = build_master(scenario)
+
+    def fly() -> None:
+        for _ in range(runs):
+            master.run(scenario.duration, seed=0, keep=0, block_rows=10 ** 9)
+
+    def spin() -> None:
+        x = 0
+        for _ in range(3_000_000):
+            x += 1
+
+    def counts(target) -> float:
+        done, n = threading.Event(), 0
+        thread = threading.Thread(target=lambda: (target(), done.set()))
+        t = time.perf_counter()
+        thread.start()
+        while not done.is_set():
+            n += 1
+        thread.join()
+        return n / (time.perf_counter() - t)
+
+    try:
+        fly()  # loaded
+        return counts(fly), counts(spin)
+    finally:
+        master.close()
+
+
 def _driver_peak_bytes(study, out: Path, workers: int) -> int:
     tracemalloc.start()
     try:
@@ -209,13 +250,17 @@ def main() -> None:
     print(f"  ideal, runs x L / workers                    {ideal:8.2f} s")
     for kind in kinds:
         wall, cpu = med(walls[kind]), med(cpus[kind])
-        print(f"  measure on {args.workers} Dask {kind:9s} (median of {args.repeats}): wall {wall:8.2f} s = "
+        print(f"  measure on {args.workers} {kind:9s} (median of {args.repeats}): wall {wall:8.2f} s = "
               f"{wall / ideal:5.2f} x ideal;  CPU {cpu:6.2f} s = {cpu / here_cpu:4.2f} x in-process")
     print(f"    threads: overhead per run (workers x wall - runs) {dask_overhead * 1e3:6.1f} ms = "
           f"{dask_overhead / loop:5.0%} of L;  efficiency {figures['efficiency']:.2f}")
     print(f"  fnn-cosim table2 (a new process) / ideal     {command / ideal:8.2f} x   ({command:.2f} s; "
           f"target <= 1.6 on 2 workers);  CPU {med(command_cpus):6.2f} s = "
           f"{med(command_cpus) / here_cpu:4.2f} x in-process")
+    beside_kernel, beside_python = _gil_free()
+    figures.update({"counts_per_s_beside_the_kernel": beside_kernel, "counts_per_s_beside_python": beside_python})
+    print(f"the GIL during the compiled loop: a Python counter in another thread {beside_kernel:,.0f}/s while a "
+          f"run's loop runs, {beside_python:,.0f}/s beside a Python loop (a loop holding the GIL would stop it)")
     if not args.no_memory:
         figures.update({"driver_peak_small_MB": peak_small / 1e6, "driver_peak_large_MB": peak_large / 1e6,
                         "driver_memory_ratio_4x_runs": peak_large / peak_small})

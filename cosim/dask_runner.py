@@ -21,15 +21,18 @@ scenario refuses, an FMU that refuses a parameter, a worker that died) is a
 record with its status and message, never an exception.
 
 Engines: ``workers = 1`` and no ``scheduler`` runs every run in this
-process, one after the other (no Dask at all). Otherwise a
+process, one after the other (no Dask at all). With ``threads`` and no
+``scheduler``: Dask's threaded scheduler (``dask.threaded``, no
+``distributed`` imported, no cluster started) on ``workers`` threads of
+this process, a task a few consecutive runs of one case (:func:`pieces`),
+each record yielded as its run ends, the threads sharing one
+:class:`MasterCache` (:func:`_run_threaded`; no worker process to start, nothing imported
+twice, no record serialized; for runs whose loop is C that releases the
+GIL and whose every FMU is known reentrant, which the caller vouches for:
+an FMU that crashes takes this process with it). Otherwise a
 ``dask.distributed`` client: a ``LocalCluster`` of ``workers`` processes
-with one thread each, or, with ``threads``, a ``LocalCluster`` of one
-worker in this process with ``workers`` threads (no worker process to
-start, nothing imported twice, no record serialized; for runs whose
-loop is C that releases the GIL and whose every FMU is known reentrant,
-which the caller vouches for: an FMU that crashes takes this process with
-it), or the running cluster at ``scheduler`` (an address such as
-``tcp://127.0.0.1:8786``). A Dask task flies a **batch** of
+with one thread each, or the running cluster at ``scheduler`` (an address
+such as ``tcp://127.0.0.1:8786``). On ``distributed`` a Dask task flies a **batch** of
 consecutive runs of the plan (:func:`execute_batch`) and returns their
 records together; its size adapts (:func:`batch_size`): about
 :data:`BATCH_SECONDS` of work, a share of the runs left that shrinks toward
@@ -79,7 +82,7 @@ from .scenario import Scenario, apply_overrides, parse_scenario
 from .assembly import build_master, check_fmu_file, fmu_file, fmu_values
 from .study import Run
 
-__all__ = ["MasterCache", "fly", "execute", "execute_batch", "batch_size", "structure_key", "BATCH_SECONDS"]
+__all__ = ["MasterCache", "fly", "execute", "execute_batch", "batch_size", "pieces", "structure_key", "BATCH_SECONDS"]
 
 Metrics = Callable[[Scenario, Any], Mapping[str, Any]]
 
@@ -120,15 +123,25 @@ class MasterCache:
     beyond ``size``), with FMU archives extracted once and parsed scenarios
     by their overrides (least recently used dropped beyond ``scenarios``).
 
-    :meth:`get` returns a master ready for a scenario: one built for it, or
-    one built for a scenario of the same structure whose components read
-    the same FMU values; its FMUs' values (:func:`~cosim.assembly.fmu_values`)
-    become the scenario's, checked against the FMU files as a build checks
-    them. The next run resets the FMUs and sets them, as on a new master."""
+    :meth:`get` takes out a master ready for a scenario: an idle one built
+    for it, or built for a scenario of the same structure whose components
+    read the same FMU values; its FMUs' values
+    (:func:`~cosim.assembly.fmu_values`) become the scenario's, checked
+    against the FMU files as a build checks them. The next run resets the
+    FMUs and sets them, as on a new master. :meth:`release` gives it back
+    after its run (:meth:`drop` when the run could not start on it). A
+    master is never handed to two runs at once, so threads may share one
+    cache (Dask's threaded scheduler, :func:`_run_threaded`): a master
+    serves whichever thread flies the next run of its structure, and is
+    built once, not once per thread; the threads then also share the FMU
+    files extracted once per cache (their instances load one copy of each
+    library, which keeps no writable global state: ``docs/studies.md``)."""
 
     def __init__(self, size: int = 8, scenarios: int = 16):
         self.size = size
-        self.masters: OrderedDict[tuple[str, int], _Built] = OrderedDict()
+        self.masters: OrderedDict[tuple[str, int], _Built] = OrderedDict()  # the idle ones
+        self._busy: dict[int, tuple[tuple[str, int], _Built]] = {}  # taken out by get, by id(master)
+        self._lock = threading.RLock()
         self._extracted: dict[str, Path] = {}
         self._tmp: Path | None = None
         self._scenarios: OrderedDict[str, Scenario] = OrderedDict()  # of the base document last seen
@@ -142,6 +155,10 @@ class MasterCache:
         """The base document ``raw`` with ``overrides`` applied, validated
         (:func:`~cosim.scenario.parse_scenario`): once per document and
         overrides; a refusal is raised every time."""
+        with self._lock:
+            return self._scenario(raw, source, overrides)
+
+    def _scenario(self, raw: Mapping[str, Any], source: str | None, overrides: Mapping[str, Any]) -> Scenario:
         if raw is not self._raw:  # a new task's copy: compared once, as JSON (1 and 1.0 are two documents)
             text = json.dumps([source, raw], sort_keys=True, default=repr)
             if text != self._raw_text:
@@ -189,36 +206,55 @@ class MasterCache:
         return None
 
     def get(self, scenario: Scenario):
+        """A master for ``scenario``, taken out of the cache until :meth:`release` or :meth:`drop`."""
         structure, values = structure_key(scenario), fmu_values(scenario)
-        key = self._find(structure, values)
-        if key is None:
+        with self._lock:
+            key = self._find(structure, values)
+            built = self.masters.pop(key) if key is not None else None
+            if built is None:
+                dirs = self._fmu_dirs(scenario)
+                self._serial += 1
+                key = (structure, self._serial)
+        if built is None:  # built outside the lock: another thread's run goes on meanwhile
             reads: set[str] = set()
-            master = build_master(scenario, self._fmu_dirs(scenario), reads=reads)
-            self._serial += 1
-            key = (structure, self._serial)
-            self.masters[key] = _Built(master, reads, values)
-            while len(self.masters) > self.size:
-                self.masters.popitem(last=False)[1].master.close()
-        else:
-            master = self.masters[key].master
+            built = _Built(build_master(scenario, dirs, reads=reads), reads, values)
+        master = built.master
+        with self._lock:
+            self._busy[id(master)] = (key, built)
+        try:
             if not _same(master.fmu_parameters, values):
                 for name in scenario.fmus:  # what a build checks of the values (ranges, the period)
                     check_fmu_file(scenario, master.components[name])
                 master.fmu_parameters = values
-        self.masters.move_to_end(key)
+        except BaseException:
+            self.release(master)
+            raise
         return master
+
+    def release(self, master) -> None:
+        """Give ``master`` back after its run: the next run of its structure may take it."""
+        with self._lock:
+            key, built = self._busy.pop(id(master))
+            self.masters[key] = built  # the most recently used last
+            dropped = [self.masters.popitem(last=False)[1].master for _ in range(len(self.masters) - self.size)]
+        for old in dropped:
+            old.close()
 
     def drop(self, master) -> None:
         """Close ``master`` and forget it (a run could not start on it)."""
-        for key, built in list(self.masters.items()):
-            if built.master is master:
-                del self.masters[key]
+        with self._lock:
+            self._busy.pop(id(master), None)
+            for key, built in list(self.masters.items()):
+                if built.master is master:
+                    del self.masters[key]
         master.close()
 
     def close(self) -> None:
         self.closed = True
         while self.masters:
             self.masters.popitem()[1].master.close()
+        while self._busy:  # none once every run has ended; a run cut short leaves its master here
+            self._busy.popitem()[1][1].master.close()
         if self._tmp is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
             self._tmp = None
@@ -230,34 +266,17 @@ class MasterCache:
 LOG_LENGTH = 100  # entries of the local scheduler's diagnostic logs (see _client)
 POLL = 1.0  # s between looks at the cluster while no run finishes
 
-_LOCAL = threading.local()  # a worker's cache, one per thread (a master is not thread-safe)
-_MADE: list[tuple[threading.Thread, MasterCache]] = []  # the caches made in this process, by thread
-_MADE_LOCK = threading.Lock()
+_LOCAL = threading.local()  # a Dask worker's cache, one per thread of the worker (each takes its masters alone)
 
 
 def _worker_cache() -> MasterCache:
     cache = getattr(_LOCAL, "cache", None)
     if cache is None or cache.closed:
         cache = _LOCAL.cache = MasterCache()
-        with _MADE_LOCK:
-            _MADE.append((threading.current_thread(), cache))
         # not atexit: a Dask worker is a multiprocessing child, which leaves by os._exit after
         # running multiprocessing's finalizers only (its extracted FMUs stayed in /tmp)
         Finalize(cache, cache.close, exitpriority=10)
     return cache
-
-
-def _close_worker_caches() -> None:
-    """Close the caches of the threads of this process that have ended (a
-    threads cluster ended: its masters' FMUs freed, their extracted files
-    removed now). A thread still running (a cluster whose close timed out
-    with a run in flight) keeps its cache: freeing the FMUs under its loop
-    would crash; its finalizer closes it later."""
-    with _MADE_LOCK:
-        ended = [(t, c) for t, c in _MADE if not t.is_alive()]
-        _MADE[:] = [(t, c) for t, c in _MADE if t.is_alive()]
-    for _, cache in ended:
-        cache.close()
 
 
 def _message(exc: BaseException) -> str:
@@ -296,6 +315,7 @@ def execute(raw: Mapping[str, Any], source: str | None, run: Run, metrics: Metri
         cache.drop(master)
         record["error"] = _message(exc)
         return record
+    cache.release(master)
     record.update(status=result.status, error=result.error, wall_time_s=result.wall_time)
     if metrics is not None:
         try:
@@ -352,9 +372,10 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
     ``workers = 1`` without ``scheduler``: in this process; else on Dask
     (see the module's docstring), ``window`` batches in flight per worker
     thread; ``total``, the number of ``runs`` if known, lets the batches
-    shrink toward the end (:func:`batch_size`). ``threads``: the local
-    cluster is ``workers`` threads of this process, not processes (the
-    module's docstring says when that is safe). On Dask, when the cluster
+    shrink toward the end (:func:`batch_size`). ``threads``: without
+    ``scheduler``, the runs fly on Dask's threaded scheduler, ``workers``
+    threads of this process, not on a cluster of processes (the module's
+    docstring says when that is safe). On a cluster, when it
     has had no worker for ``worker_timeout`` seconds (``None``: wait for
     ever), a :class:`~cosim.errors.CosimError` says so and the flight stops
     (the records yielded so far are kept by the caller)."""
@@ -367,17 +388,113 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
         finally:
             cache.close()
         return
-    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total,
-                         threads and scheduler is None)
+    if threads and scheduler is None:
+        yield from _run_threaded(raw, source, runs, workers, metrics)
+        return
+    yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total)
 
 
-def _client(workers: int, scheduler: str | None, scratch: Path | None = None, threads: bool = False):
+CHUNK = 1000  # runs per graph of Dask's threaded scheduler (_run_threaded): the driver's memory stays flat
+_END = object()  # the driver thread's last word
+
+
+def pieces(chunk: list[Run], threads: int) -> Iterator[list[Run]]:
+    """The tasks of ``chunk`` (consecutive runs of a plan) on Dask's threaded
+    scheduler: consecutive runs of one case, at most ``ceil(left /
+    threads)`` of the ``left`` runs of the chunk not yet in a task (guided
+    self-scheduling: the tasks shrink toward the end, so the threads finish
+    together). A case's runs mostly share a master (the plan's seeds and
+    points inside a case), and a master serves one run at a time: a case
+    flown by one thread at a time is built once, where consecutive runs
+    given to every thread built it once per thread."""
+    start = 0
+    while start < len(chunk):
+        cap = -(-(len(chunk) - start) // max(1, threads))
+        end = start + 1
+        while end < len(chunk) and end - start < cap and chunk[end].case == chunk[start].case:
+            end += 1
+        yield chunk[start:end]
+        start = end
+
+
+def _run_threaded(raw, source, runs, workers: int, metrics) -> Iterator[dict[str, Any]]:
+    """Fly ``runs`` on Dask's threaded scheduler (``dask.threaded``, no
+    ``distributed``, no cluster), ``workers`` threads of this process; yield
+    each record as its run finishes.
+
+    A driver thread takes the plan :data:`CHUNK` runs at a time (it is
+    never listed whole) and computes a graph of its :func:`pieces`; each
+    run's record is put on a queue as the run ends, which this generator
+    empties, so the rows stream run by run (a stopped study loses only the
+    runs in flight). The threads share one :class:`MasterCache` (a master
+    built once per structure, handed to one run at a time). The threads
+    are an executor made for this study (Dask's ``pool=``) and shut down
+    when it ends, and the cache is closed then (its FMUs freed, its files
+    removed): a pool Dask keeps per calling thread would outlive the study."""
+    import queue
+    from functools import partial
+
+    import dask.threaded
+
+    records: queue.Queue = queue.Queue()
+    stop = threading.Event()  # the consumer is gone: the runs not yet started are not flown
+    executor = getattr(dask.threaded, "ContextAwareThreadPoolExecutor", None)
+    if executor is None:  # an older Dask: its threads start with the driver's context anyway
+        from concurrent.futures import ThreadPoolExecutor as executor
+    threads = max(1, workers)
+    pool = executor(threads, thread_name_prefix="cosim-run")
+    cache = MasterCache(size=max(8, 2 * threads))
+
+    def flown(piece: list[Run]) -> None:
+        for run in piece:
+            if stop.is_set():
+                return
+            try:
+                record = execute(raw, source, run, metrics, cache)
+            except BaseException as exc:  # execute keeps a run's failures in its record: this is a bug
+                record = _failed(run, f"worker: {_message(exc)}", os.getpid())
+            records.put(record)
+
+    def drive() -> None:
+        try:
+            pending = iter(runs)
+            while not stop.is_set():
+                chunk = list(itertools.islice(pending, CHUNK))
+                if not chunk:
+                    break
+                tasks = list(pieces(chunk, threads))
+                # names that Dask's ordering of independent tasks (by name, the last first) runs in plan order
+                n = len(tasks)
+                graph = {f"runs-{n - 1 - i:012d}": (partial(flown, piece),) for i, piece in enumerate(tasks)}
+                dask.threaded.get(graph, list(graph), pool=pool)
+        except BaseException as exc:  # the plan itself raised: the study's error, raised in the consumer
+            records.put(exc)
+        finally:
+            records.put(_END)
+
+    driver = threading.Thread(target=drive, name="cosim-study-driver", daemon=True)
+    driver.start()
+    try:
+        while True:
+            item = records.get()
+            if item is _END:
+                break
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()  # the runs in flight finish (a master is never freed under its loop), no other starts
+        driver.join()
+        pool.shutdown(wait=True)
+        cache.close()
+
+
+def _client(workers: int, scheduler: str | None, scratch: Path | None = None):
     """A Dask client: of the cluster at ``scheduler``, or of a local cluster of
     ``workers`` processes whose scratch space (Dask's ``dask-scratch-space``:
     the workers' folders, its locks) is the folder ``scratch``, which the
     caller makes and removes: it was left in the system's temporary folder
-    after every study. ``threads``: the local cluster is one worker of
-    ``workers`` threads in this process."""
+    after every study."""
     import logging
 
     import dask
@@ -406,20 +523,17 @@ def _client(workers: int, scheduler: str | None, scratch: Path | None = None, th
         # warning on stderr when another cluster held that port) on a free port
         quiet = {"dashboard_address": ":0", "scheduler_kwargs": {"dashboard": False},
                  "silence_logs": logging.ERROR, "local_directory": scratch}
-        if threads:  # the runs' loops release the GIL (ctypes): N threads fly N runs at once
-            cluster = LocalCluster(n_workers=1, threads_per_worker=max(1, workers), processes=False, **quiet)
-        else:
-            cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, **quiet)
+        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, **quiet)
         return Client(cluster), cluster
 
 
 def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
-              worker_timeout: float | None, total: int | None, threads: bool = False) -> Iterator[dict[str, Any]]:
+              worker_timeout: float | None, total: int | None) -> Iterator[dict[str, Any]]:
     from dask.distributed import wait
 
     scratch = Path(tempfile.mkdtemp(prefix="cosim-dask-")) if scheduler is None else None
     try:
-        client, cluster = _client(workers, scheduler, scratch, threads)
+        client, cluster = _client(workers, scheduler, scratch)
     except BaseException:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
@@ -493,7 +607,5 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
         client.close()
         if cluster is not None:
             cluster.close()
-        if threads:
-            _close_worker_caches()
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)

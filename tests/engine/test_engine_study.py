@@ -370,10 +370,11 @@ def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, m
 
 def test_a_local_cluster_of_threads_gives_the_rows_of_this_process_and_frees_its_masters(folder, tmp_path,
                                                                                           monkeypatch):
-    """``threads``: the runs fly on threads of this process (each its own
-    masters and FMU instances), to the same bits as one after the other here;
-    the threads' caches are closed when the cluster ends (their extracted
-    FMUs removed)."""
+    """``threads``: the runs fly on threads of this process (Dask's threaded
+    scheduler; the threads share the study's masters, one run at a time on
+    each), to the same bits as one after the other here; the cache is closed
+    when the study ends (its FMUs freed, its extracted files removed), and
+    no ``distributed`` cluster was started."""
     from cosim import dask_runner
 
     (folder / "toy_by_path.toml").write_text(toy_models.LOOP_BY_PATH.format(lag=toy_models.lag_fmu_path(2)))
@@ -382,15 +383,14 @@ def test_a_local_cluster_of_threads_gives_the_rows_of_this_process_and_frees_its
     (folder / "threads.toml").write_text(body)
     study = load_study(folder / "threads.toml")
     made = []
-    real = dask_runner._worker_cache
 
-    def spied():
-        cache = real()
-        if cache not in made:
-            made.append(cache)
-        return cache
+    class Spied(dask_runner.MasterCache):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
 
-    monkeypatch.setattr(dask_runner, "_worker_cache", spied)
+    monkeypatch.setattr(dask_runner, "MasterCache", Spied)
+    monkeypatch.setattr(dask_runner, "_client", lambda *args, **kwargs: pytest.fail("a distributed client"))
     here = run_study(study, tmp_path / "here", metrics=final_y, metric_names=["final_y"], plots=False)
     there = run_study(study, tmp_path / "threads", workers=2, threads=True, metrics=final_y,
                       metric_names=["final_y"], plots=False)
@@ -402,7 +402,8 @@ def test_a_local_cluster_of_threads_gives_the_rows_of_this_process_and_frees_its
         assert {c: v for c, v in a[k].items() if c != "wall_time_s"} == {c: v for c, v in b[k].items()
                                                                           if c != "wall_time_s"}
     assert here.summary["cells"] == there.summary["cells"]
-    assert made and all(cache.closed and not cache.masters and cache._tmp is None for cache in made)
+    assert made and all(cache.closed and not cache.masters and not cache._busy and cache._tmp is None
+                        for cache in made)
 
 
 def test_a_cluster_without_a_worker_stops_the_study_in_one_line(folder, tmp_path):

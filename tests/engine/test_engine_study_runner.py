@@ -266,3 +266,90 @@ def test_fmus_instantiated_by_two_threads_at_once_leave_the_working_directory_as
     finally:
         for fmu in fmus:
             fmu.close()
+
+
+# ---- Dask's threaded scheduler -------------------------------------------------------------------
+
+def _case_runs(cases: list[tuple[str, int]]) -> list[Run]:
+    runs = []
+    for case, n in cases:
+        runs += [Run(len(runs), case, (), None, seed, {}, {}) for seed in range(n)]
+    return runs
+
+
+def test_the_tasks_of_a_threaded_study_are_consecutive_runs_of_one_case_shrinking_toward_the_end():
+    runs = _case_runs([("a", 30), ("b", 30), ("c", 9), ("d", 9)])
+    tasks = list(dask_runner.pieces(runs, 2))
+    assert [run for task in tasks for run in task] == runs  # every run once, in plan order
+    assert all(len({run.case for run in task}) == 1 for task in tasks)
+    # a case whole while it is at most half of the runs left (a: 30 of 78), else cut (b: 24 of 48, then 6)
+    assert [len(t) for t in tasks] == [30, 24, 6, 9, 5, 2, 1, 1]
+    left = len(runs)
+    for task in tasks:  # guided self-scheduling: never more than 1 / threads of the runs not yet in a task
+        assert len(task) <= -(-left // 2)
+        left -= len(task)
+    assert [len(t) for t in dask_runner.pieces(_case_runs([(None, 8)]), 4)] == [2, 2, 1, 1, 1, 1]
+    assert list(dask_runner.pieces([], 2)) == []
+
+
+def test_a_master_is_taken_out_by_one_run_at_a_time_and_serves_the_next_once_given_back(base):
+    cache = MasterCache()
+    try:
+        scenario = cache.scenario(base.raw, str(base.source), {})
+        first = cache.get(scenario)
+        second = cache.get(scenario)  # the first is flying: another is built
+        assert second is not first and not cache.masters
+        cache.release(first)
+        assert cache.get(scenario) is first  # given back: the next run of its structure takes it
+        cache.release(first)
+        cache.release(second)
+        assert len(cache.masters) == 2
+    finally:
+        cache.close()
+    assert not cache.masters and not cache._busy
+
+
+def test_a_threaded_study_flies_every_run_once_to_the_bits_of_this_process_without_distributed(base, monkeypatch):
+    """Dask's threaded scheduler (``fly(threads=True)``): the records of
+    the runs flown here one by one, each once; ``dask.distributed`` is not
+    imported (made unimportable here)."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    runs = [Run(i, f"kp{i // 4}", (), None, i % 4, {}, {"toy_controller.kp": 0.5 + i // 4}) for i in range(12)]
+    records = list(fly(base, runs, workers=2, metrics=trace, threads=True, total=len(runs)))
+    assert sorted(r["key"] for r in records) == list(range(12))
+    assert all(_same_record(r, _fresh(base, runs[r["key"]])) for r in records)
+
+
+def test_a_threaded_study_stopped_by_its_reader_starts_no_other_run_and_frees_its_masters(base, monkeypatch):
+    """A reader that stops (a driver interrupted mid-study) ends the flight:
+    the runs in flight finish, no other starts, the study's masters are
+    closed and its files removed."""
+    import threading
+
+    made = []
+
+    class Spied(MasterCache):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(dask_runner, "MasterCache", Spied)
+    gate, calls = threading.Event(), []
+
+    def held(scenario, result):  # every run but the first waits until the reader has stopped
+        calls.append(1)
+        if len(calls) > 1:
+            gate.wait()
+        return trace(scenario, result)
+
+    runs = [_run(i, {}) for i in range(200)]
+    records = fly(base, runs, workers=2, metrics=held, threads=True, total=len(runs))
+    first = next(records)
+    gate.set()
+    records.close()  # as a driver stopped mid-study
+    assert first["status"] == "ok"
+    assert len(calls) < len(runs)
+    assert made and all(c.closed and not c.masters and not c._busy and c._tmp is None for c in made)
