@@ -1,0 +1,122 @@
+"""What an FMU component reads of an FMU file is kept under the file's
+content hash (cosim.description_cache): read again, the same bytes give
+fmpy's same description (every field, shared variables shared), the same
+declared period and entry names, without parsing the XML; other bytes are
+read again; a kept entry that is not what the module writes is read again,
+never trusted."""
+from __future__ import annotations
+
+import json
+import shutil
+
+import attrs
+import pytest
+from fmpy import read_model_description
+
+import cosim.description_cache as description_cache
+import cosim.fmu_component as fmu_component
+from cosim import registry
+from cosim.fmu_component import FmuComponent
+from toy_models import lag_fmu2, lag_fmu3  # noqa: F401  (fixtures)
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """An empty cache folder registered for the test, and nothing read in this process yet."""
+    folder = tmp_path / "cache"
+    monkeypatch.setattr(registry, "_CACHE", [lambda: folder])
+    monkeypatch.setattr(description_cache, "_MEMO", {})
+    return folder
+
+
+@pytest.fixture
+def parses(monkeypatch):
+    """The FMU files fmpy parses from now on."""
+    calls = []
+    parse = fmu_component.read_model_description
+
+    def counted(path, *args, **kwargs):
+        calls.append(path)
+        return parse(path, *args, **kwargs)
+
+    monkeypatch.setattr(fmu_component, "read_model_description", counted)
+    fmu_component._parsed_model_description.cache_clear()
+    return calls
+
+
+def _same(a, b, seen) -> bool:
+    """``a`` and ``b`` equal field by field, objects shared the same way."""
+    if type(a) is not type(b):
+        return False
+    if attrs.has(type(a)):
+        if id(a) in seen:
+            return seen[id(a)] is b
+        seen[id(a)] = b
+        return all(_same(getattr(a, f.name), getattr(b, f.name), seen) for f in attrs.fields(type(a)))
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y, seen) for x, y in zip(a, b))
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k], seen) for k in a)
+    return a == b or (a != a and b != b)  # NaN
+
+
+@pytest.mark.parametrize("fixture", ["lag_fmu2", "lag_fmu3", "controller_fmu"])
+def test_an_fmu_read_again_is_served_as_read(fixture, request, cache, parses, tmp_path):
+    if fixture == "controller_fmu":  # a sampled-data FMU: it declares its period
+        from fmu_models.export.build import cached_fmu
+        from fnn_controller.controller_fmu import controller_model
+
+        source = cached_fmu(controller_model("pd+lm"), 2)
+    else:
+        source = request.getfixturevalue(fixture)
+    path = tmp_path / source.name
+    shutil.copyfile(source, path)
+    first = FmuComponent("first", path)
+    assert len(parses) == 1 and list((cache / "descriptions").glob("*.json"))
+    description_cache._MEMO.clear()  # as a new process would
+    again = FmuComponent("again", path)
+    assert len(parses) == 1  # no XML parsed
+    assert _same(again.model_description, read_model_description(str(path), validate=False), {})
+    assert again.sample_period == first.sample_period and (fixture != "controller_fmu" or again.sample_period == "dt")
+    assert again._file_names() == first._file_names()
+    assert (again.inputs, again.outputs, again.parameters, again.feedthrough) == \
+        (first.inputs, first.outputs, first.parameters, first.feedthrough)
+    for fmu in (first, again):
+        fmu.close()
+
+
+def test_other_bytes_and_a_foreign_entry_are_read_again(lag_fmu2, cache, parses, tmp_path):
+    path = tmp_path / "lag.fmu"
+    shutil.copyfile(lag_fmu2, path)
+    FmuComponent("lag", path).close()
+    entry, = (cache / "descriptions").glob("*.json")
+    description_cache._MEMO.clear()
+    with open(path, "ab") as f:  # other bytes (a zip archive still: a comment after its end)
+        f.write(b"\0")
+    FmuComponent("lag", path).close()
+    assert len(parses) == 2 and len(list((cache / "descriptions").glob("*.json"))) == 2
+    # an entry naming what fmpy's classes are not, or a field they do not have: read the file again
+    shutil.copyfile(lag_fmu2, path)
+    kept = json.loads(entry.read_text())
+    for foreign in ({"o": ["Path", {}]}, {"o": ["ModelDescription", {"__class__": 1}]}, {"x": 1}):
+        entry.write_text(json.dumps({**kept, "description": foreign}))
+        description_cache._MEMO.clear()
+        fmu_component._parsed_model_description.cache_clear()
+        fmu = FmuComponent("lag", path)
+        assert type(fmu.model_description).__name__ == "ModelDescription" and fmu.outputs
+        fmu.close()
+    assert len(parses) == 5
+
+
+def test_nothing_is_kept_without_a_cache_folder_or_when_validating(lag_fmu2, monkeypatch, parses, tmp_path):
+    monkeypatch.setattr(registry, "_CACHE", [])
+    monkeypatch.setattr(description_cache, "_MEMO", {})
+    path = tmp_path / "lag.fmu"
+    shutil.copyfile(lag_fmu2, path)
+    FmuComponent("lag", path).close()
+    FmuComponent("lag", path).close()
+    assert len(parses) == 1  # the process's own memo of fmpy's parse (fmu_component)
+    folder = tmp_path / "cache"
+    monkeypatch.setattr(registry, "_CACHE", [lambda: folder])
+    FmuComponent("lag", path, validate=True).close()
+    assert not folder.exists()
