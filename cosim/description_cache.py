@@ -22,6 +22,7 @@ or decoded is derived again; a cache that cannot be written keeps nothing.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import stat
@@ -49,6 +50,7 @@ class KeptDescription:
     names: tuple[str, ...]
 
 
+@functools.cache
 def _classes() -> dict[str, tuple[type, frozenset[str], bool]]:
     """fmpy's model-description classes (``attrs`` classes) by name, each
     with its fields and whether it takes no argument: the only objects an
@@ -186,11 +188,14 @@ def _defaults(cls: type) -> dict[str, Any]:
     return {a.name: getattr(new, a.name) for a in cls.__attrs_attrs__}
 
 
+_SCALARS = (str, float, int, bool, type(None))
+
+
 def _decode(value: Any, classes: dict[str, tuple[type, frozenset[str], bool]], made: list) -> Any:
-    if value is None or isinstance(value, (bool, int, float, str)):
+    if type(value) in _SCALARS:
         return value
-    if isinstance(value, list):
-        return [_decode(v, classes, made) for v in value]
+    if type(value) is list:
+        return [v if type(v) in _SCALARS else _decode(v, classes, made) for v in value]
     (key, body), = value.items()
     if key == "o":
         name, fields = body
@@ -198,10 +203,10 @@ def _decode(value: Any, classes: dict[str, tuple[type, frozenset[str], bool]], m
         # a new object holds the defaults (new lists each); a class that takes arguments has every field written
         obj = cls() if plain else object.__new__(cls)
         made.append(obj)  # before its fields: they may name it again
+        if not names.issuperset(fields):
+            raise ValueError(f"{name} has no field {sorted(set(fields) - names)[0]!r}")
         for field, v in fields.items():
-            if field not in names:
-                raise ValueError(f"{name} has no field {field!r}")
-            object.__setattr__(obj, field, _decode(v, classes, made))
+            object.__setattr__(obj, field, v if type(v) in _SCALARS else _decode(v, classes, made))
         return obj
     if key == "r":
         return made[body]
