@@ -100,6 +100,24 @@ def _entry(digest: str) -> Path | None:
     return folder / "descriptions" / f"{digest}.json" if folder is not None else None
 
 
+def _read(where: Path) -> Any:
+    """The JSON at ``where`` (orjson, a third of the time of :func:`json.loads`;
+    a value orjson does not read, such as a NaN, by :func:`json.loads`),
+    or ``None``."""
+    import orjson
+
+    try:
+        text = where.read_bytes()
+    except OSError:
+        return None
+    try:
+        return orjson.loads(text)
+    except orjson.JSONDecodeError:
+        from .cache import kept
+
+        return kept(where)
+
+
 def kept_description(path: Path) -> KeptDescription | None:
     """What was kept of the FMU file ``path`` (its bytes), or ``None``."""
     path = Path(path)
@@ -114,9 +132,7 @@ def kept_description(path: Path) -> KeptDescription | None:
     where = _entry(found[0]) if found is not None else None
     if where is None:
         return None
-    from .cache import kept
-
-    data = kept(where)
+    data = _read(where)
     try:
         out = KeptDescription(_decode(data["description"], _classes(), []),
                               (bool(data["period"][0]), data["period"][1]), tuple(data["names"]))

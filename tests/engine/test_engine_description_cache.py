@@ -120,3 +120,13 @@ def test_nothing_is_kept_without_a_cache_folder_or_when_validating(lag_fmu2, mon
     monkeypatch.setattr(registry, "_CACHE", [lambda: folder])
     FmuComponent("lag", path, validate=True).close()
     assert not folder.exists()
+
+
+def test_an_entry_is_read_with_what_json_holds_beyond_orjson(tmp_path):
+    """orjson reads an entry unless it holds what Python's json writes and
+    orjson refuses (a NaN start value): then Python's json reads it."""
+    where = tmp_path / "entry.json"
+    where.write_text(json.dumps({"start": float("nan"), "x": [1.5, "a"]}))
+    data = description_cache._read(where)
+    assert data["start"] != data["start"] and data["x"] == [1.5, "a"]
+    assert description_cache._read(tmp_path / "missing.json") is None
