@@ -26,11 +26,12 @@ import functools
 import hashlib
 import os
 import stat
-from dataclasses import dataclass
+import threading
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-__all__ = ["KeptDescription", "kept_description", "keep_description"]
+__all__ = ["KeptDescription", "kept_description", "keep_description", "claim_extracted"]
 
 FORMAT = 1  # bumped when what is kept, or how, changes
 MAX_HASHED_BYTES = 64 * 2 ** 20  # a larger FMU is parsed every time: hashing it would cost more than the parse
@@ -48,6 +49,7 @@ class KeptDescription:
     model_description: Any
     period: tuple[bool, str | None]
     names: tuple[str, ...]
+    digest: str = ""  # the key it is kept under (not kept itself)
 
 
 @functools.cache
@@ -135,7 +137,7 @@ def kept_description(path: Path) -> KeptDescription | None:
     data = _read(where)
     try:
         out = KeptDescription(_decode(data["description"], _classes(), []),
-                              (bool(data["period"][0]), data["period"][1]), tuple(data["names"]))
+                              (bool(data["period"][0]), data["period"][1]), tuple(data["names"]), found[0])
         if not (isinstance(out.period[1], (str, type(None))) and all(isinstance(n, str) for n in out.names)):
             return None
     except (TypeError, KeyError, IndexError, ValueError, AttributeError, RecursionError):
@@ -157,7 +159,63 @@ def keep_description(path: Path, kept: KeptDescription) -> None:
     except (TypeError, ValueError, RecursionError):  # something fmpy may hold that this format does not carry
         return
     keep(where, {"description": encoded, "period": list(kept.period), "names": list(kept.names)})
-    _MEMO[(str(path), found[1].st_size, found[1].st_mtime_ns)] = kept
+    _MEMO[(str(path), found[1].st_size, found[1].st_mtime_ns)] = replace(kept, digest=found[0])
+
+
+# ---- the extracted folder -------------------------------------------------------------------
+
+_CLAIMED: set[str] = set()  # extracted folders an instance of this process loaded its library from
+_CLAIM = threading.Lock()
+
+
+def claim_extracted(path: Path, kept: KeptDescription, names: set[str]) -> Path | None:
+    """The folder of the cache where the entries ``names`` of the FMU file
+    ``path`` (kept as ``kept``) are extracted once, for all processes, under
+    its content hash (``extracted/<sha256>/``, made whole by a rename), for
+    the first instance of this process that asks; ``None`` (extract it for
+    the instance, as before) for a file outside the cache folder (the FMUs
+    this tool built: they write nothing into their folder), when no cache
+    is registered, when the folder cannot be made, and for any later
+    instance of this process: a library loaded from one path is one library
+    for the process, and stays loaded when its instance is freed, so every
+    instance loads a copy of its own, with its own global state, as before
+    (a study's second run in a process starts from a fresh library, not
+    from what the first left in it)."""
+    from .registry import cache_folder
+
+    folder = cache_folder()
+    if folder is None or not kept.digest:
+        return None
+    try:
+        if not Path(path).resolve().is_relative_to(Path(folder).resolve()):
+            return None
+    except OSError:
+        return None
+    target = Path(folder) / "extracted" / kept.digest
+    with _CLAIM:
+        if str(target) in _CLAIMED:
+            return None
+        if not target.is_dir():
+            import shutil
+            import tempfile
+
+            from .errors import ScenarioError
+            from .files import extract_zip
+
+            try:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                made = Path(tempfile.mkdtemp(prefix=f".{kept.digest[:16]}-", dir=target.parent))
+                extract_zip(path, made, "cannot extract the archive", only=names)
+                try:
+                    os.rename(made, target)
+                except OSError:  # another process made it first (a folder is renamed onto no folder but an empty one)
+                    shutil.rmtree(made, ignore_errors=True)
+            except (OSError, ScenarioError):  # no room, no right to write, an entry that does not extract: as before
+                return None
+            if not target.is_dir():
+                return None
+        _CLAIMED.add(str(target))
+    return target
 
 
 # ---- the format ------------------------------------------------------------------------------

@@ -406,6 +406,18 @@ class FmuComponent:
             keep_description(self.path, KeptDescription(self.model_description, self._period_declaration(),
                                                         tuple(self._file_names())))
 
+    def _claim_extracted(self) -> Path | None:
+        """The folder the cache holds this FMU's run-time entries in, extracted
+        once for every run (:func:`cosim.description_cache.claim_extracted`:
+        an FMU this tool built, read from the cache before, the first instance
+        of its file in this process), or ``None``: extract it here."""
+        kept = getattr(self, "_kept", None)
+        if kept is None:
+            return None
+        from .description_cache import claim_extracted
+
+        return claim_extracted(self.path, kept, self._run_time_files())
+
     def _period_declaration(self) -> tuple[bool, str | None]:
         """Whether the FMU declares a period (:data:`PERIOD_ANNOTATION`), and
         the parameter it names as written (``None`` if it names none)."""
@@ -559,14 +571,16 @@ class FmuComponent:
         if self.path.is_dir():
             self._unzipdir = self.path
         else:
-            from .files import extract_zip
+            self._unzipdir = self._claim_extracted()
+            if self._unzipdir is None:
+                from .files import extract_zip
 
-            try:
-                self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"), "cannot extract the archive",
-                                             only=self._run_time_files())
-            except ScenarioError as exc:
-                raise FmuLoadError(self.name, self.path, str(exc)) from None
-            self._owns_unzipdir = True
+                try:
+                    self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"),
+                                                 "cannot extract the archive", only=self._run_time_files())
+                except ScenarioError as exc:
+                    raise FmuLoadError(self.name, self.path, str(exc)) from None
+                self._owns_unzipdir = True
             folder = Path(self._unzipdir)
             forms = {folder.as_uri(): self.path.name, str(folder): self.path.name,
                      folder.resolve().as_uri(): self.path.name, str(folder.resolve()): self.path.name}

@@ -130,3 +130,57 @@ def test_an_entry_is_read_with_what_json_holds_beyond_orjson(tmp_path):
     data = description_cache._read(where)
     assert data["start"] != data["start"] and data["x"] == [1.5, "a"]
     assert description_cache._read(tmp_path / "missing.json") is None
+
+
+def _flown(fmu: FmuComponent) -> dict[str, float]:
+    """The lag's output after 10 steps of 0.01 s with u = 1 (Model Exchange, the master's solver)."""
+    fmu.start(0.0, {"tau": 0.2})
+    fmu.set_reals({"u": 1.0}, 0.0)
+    for n in range(10):
+        fmu.do_step(n * 0.01, 0.01)
+    return fmu.get_reals(["rate"])
+
+
+def test_an_fmu_of_the_cache_read_before_runs_from_one_extracted_folder(lag_fmu2, cache, parses, monkeypatch):
+    """An FMU file inside the cache folder, read before, is extracted once
+    into the cache (extracted/<sha256>/) and flown from there, the same
+    values as from its own extraction; the folder outlives its instance; any
+    other instance of the file in this process, live or later, loads a copy
+    of its own (one library per instance, as before)."""
+    monkeypatch.setattr(description_cache, "_CLAIMED", set())
+    path = cache / "built" / "lag.fmu"
+    path.parent.mkdir(parents=True)
+    shutil.copyfile(lag_fmu2, path)
+    first = FmuComponent("first", path)  # read: its description kept
+    first.instantiate()
+    assert first._owns_unzipdir and not str(first._unzipdir).startswith(str(cache))
+    expected = _flown(first)
+    first.close()
+    shared = FmuComponent("shared", path)
+    shared.instantiate()
+    folder = shared._unzipdir
+    assert folder.parent == cache / "extracted" and not shared._owns_unzipdir
+    assert sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()) == \
+        sorted(shared._run_time_files())
+    other = FmuComponent("other", path)
+    other.instantiate()
+    assert other._owns_unzipdir and other._unzipdir != folder
+    assert _flown(shared) == _flown(other) == expected
+    shared.close()
+    other.close()
+    assert folder.is_dir()
+    again = FmuComponent("again", path)
+    again.instantiate()
+    assert again._owns_unzipdir and again._unzipdir != folder
+    again.close()
+    assert len(parses) == 1
+
+
+def test_an_fmu_outside_the_cache_is_extracted_for_its_instance_only(lag_fmu2, cache, tmp_path):
+    path = tmp_path / "lag.fmu"
+    shutil.copyfile(lag_fmu2, path)
+    FmuComponent("first", path).close()
+    fmu = FmuComponent("again", path)
+    fmu.instantiate()
+    assert fmu._kept is not None and fmu._owns_unzipdir and not (cache / "extracted").exists()
+    fmu.close()
