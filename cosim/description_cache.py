@@ -2,14 +2,15 @@
 (:func:`cosim.registry.cache_folder`) under the file's content hash, so a
 run of FMUs it has seen before parses no XML and opens no archive before
 extracting it: fmpy's parse of the modelDescription (lxml, imported for it,
-and the Python objects fmpy builds: about a tenth of a run of the shipped
-mission as a whole process), the sampled-data period the FMU declares (an
-annotation fmpy does not read) and the archive's entry names (where the
-binary is looked for, what is extracted).
+and the Python objects fmpy builds), the sampled-data period the FMU
+declares (an annotation fmpy does not read) and the archive's entry names
+(where the binary is looked for, what is extracted); and the run-time
+entries of an FMU this tool built, extracted there once
+(:func:`claim_extracted`). docs/cosim.md, "Start-up of a run".
 
 The entry is JSON data (``descriptions/<sha256>.json``, written whole by
 :func:`cosim.cache.keep`), never pickle: decoding makes objects of fmpy's
-own model-description classes only (:data:`_CLASSES`) and sets only their
+own model-description classes only (:func:`_classes`) and sets only their
 declared fields, so a file in a folder others may write can at worst
 describe an FMU wrongly, as a modelDescription.xml could (docs/security.md).
 The key is the file's bytes (SHA-256) with what the reading depended on:
@@ -177,10 +178,11 @@ def claim_extracted(path: Path, kept: KeptDescription, names: set[str]) -> Path 
     this tool built: they write nothing into their folder), when no cache
     is registered, when the folder cannot be made, and for any later
     instance of this process: a library loaded from one path is one library
-    for the process, and stays loaded when its instance is freed, so every
-    instance loads a copy of its own, with its own global state, as before
-    (a study's second run in a process starts from a fresh library, not
-    from what the first left in it)."""
+    for the process, and may outlive its instance (one that returned
+    fmiFatal is never freed; unloading is the system's ``dlclose``), so every
+    later instance loads a copy of its own, with its own global state, as
+    before (a study's second run in a process starts from a fresh library,
+    not from what the first left in it)."""
     from .registry import cache_folder
 
     folder = cache_folder()
