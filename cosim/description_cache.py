@@ -139,7 +139,8 @@ def kept_description(path: Path) -> KeptDescription | None:
     try:
         out = KeptDescription(_decode(data["description"], _classes(), []),
                               (bool(data["period"][0]), data["period"][1]), tuple(data["names"]), found[0])
-        if not (isinstance(out.period[1], (str, type(None))) and all(isinstance(n, str) for n in out.names)):
+        if not (type(out.model_description) is _classes()["ModelDescription"][0]
+                and isinstance(out.period[1], (str, type(None))) and all(isinstance(n, str) for n in out.names)):
             return None
     except (TypeError, KeyError, IndexError, ValueError, AttributeError, RecursionError):
         return None  # nothing kept, or not what this module writes: read the file

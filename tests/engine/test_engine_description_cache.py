@@ -98,14 +98,15 @@ def test_other_bytes_and_a_foreign_entry_are_read_again(lag_fmu2, cache, parses,
     # an entry naming what fmpy's classes are not, or a field they do not have: read the file again
     shutil.copyfile(lag_fmu2, path)
     kept = json.loads(entry.read_text())
-    for foreign in ({"o": ["Path", {}]}, {"o": ["ModelDescription", {"__class__": 1}]}, {"x": 1}):
+    for foreign in ({"o": ["Path", {}]}, {"o": ["ModelDescription", {"__class__": 1}]}, {"x": 1},
+                    {"o": ["Unit", {}]}, {"r": 3}, [1, 2]):
         entry.write_text(json.dumps({**kept, "description": foreign}))
         description_cache._MEMO.clear()
         fmu_component._parsed_model_description.cache_clear()
         fmu = FmuComponent("lag", path)
         assert type(fmu.model_description).__name__ == "ModelDescription" and fmu.outputs
         fmu.close()
-    assert len(parses) == 5
+    assert len(parses) == 8
 
 
 def test_nothing_is_kept_without_a_cache_folder_or_when_validating(lag_fmu2, monkeypatch, parses, tmp_path):
