@@ -1,5 +1,5 @@
 """What an FMU component reads of an FMU file, kept in the cache folder
-(:func:`cosim.registry.cache_folder`) under the file's content hash, so a
+(:func:`cosim.cache.cache_folder`) under the file's content hash, so a
 run of FMUs it has seen before parses no XML and opens no archive before
 extracting it: fmpy's parse of the modelDescription (lxml, imported for it,
 and the Python objects fmpy builds), the sampled-data period the FMU
@@ -97,7 +97,7 @@ def _digest(path: Path) -> tuple[str, os.stat_result] | None:
 
 
 def _entry(digest: str) -> Path | None:
-    from .registry import cache_folder
+    from .cache import cache_folder
 
     folder = cache_folder()
     return folder / "descriptions" / f"{digest}.json" if folder is not None else None
@@ -184,7 +184,7 @@ def claim_extracted(path: Path, kept: KeptDescription, names: set[str]) -> Path 
     later instance loads a copy of its own, with its own global state, as
     before (a study's second run in a process starts from a fresh library,
     not from what the first left in it)."""
-    from .registry import cache_folder
+    from .cache import cache_folder
 
     folder = cache_folder()
     if folder is None or not kept.digest:

@@ -13,9 +13,9 @@ import attrs
 import pytest
 from fmpy import read_model_description
 
+import cosim.cache
 import cosim.description_cache as description_cache
 import cosim.fmu_component as fmu_component
-from cosim import registry
 from cosim.fmu_component import FmuComponent
 from toy_models import lag_fmu2, lag_fmu3  # noqa: F401  (fixtures)
 
@@ -24,7 +24,7 @@ from toy_models import lag_fmu2, lag_fmu3  # noqa: F401  (fixtures)
 def cache(tmp_path, monkeypatch):
     """An empty cache folder registered for the test, and nothing read in this process yet."""
     folder = tmp_path / "cache"
-    monkeypatch.setattr(registry, "_CACHE", [lambda: folder])
+    monkeypatch.setattr(cosim.cache, "_CACHE", [lambda: folder])
     monkeypatch.setattr(description_cache, "_MEMO", {})
     return folder
 
@@ -110,7 +110,7 @@ def test_other_bytes_and_a_foreign_entry_are_read_again(lag_fmu2, cache, parses,
 
 
 def test_nothing_is_kept_without_a_cache_folder_or_when_validating(lag_fmu2, monkeypatch, parses, tmp_path):
-    monkeypatch.setattr(registry, "_CACHE", [])
+    monkeypatch.setattr(cosim.cache, "_CACHE", [])
     monkeypatch.setattr(description_cache, "_MEMO", {})
     path = tmp_path / "lag.fmu"
     shutil.copyfile(lag_fmu2, path)
@@ -118,7 +118,7 @@ def test_nothing_is_kept_without_a_cache_folder_or_when_validating(lag_fmu2, mon
     FmuComponent("lag", path).close()
     assert len(parses) == 1  # the process's own memo of fmpy's parse (fmu_component)
     folder = tmp_path / "cache"
-    monkeypatch.setattr(registry, "_CACHE", [lambda: folder])
+    monkeypatch.setattr(cosim.cache, "_CACHE", [lambda: folder])
     FmuComponent("lag", path, validate=True).close()
     assert not folder.exists()
 
