@@ -13,11 +13,16 @@ Times, alternating, in fresh interpreters:
   built FMUs builds no model and imports no Dask, matplotlib,
   python-control or pydantic: docs/cosim.md, "Start-up of a run").
 
-and prints the medians and their ratios. Tests check what is imported
-(``tests/paper/test_cli.py``), this script the clock. Run it with the
-bytecode cache on (``PYTHONDONTWRITEBYTECODE`` unset), as users run.
+and prints the medians and their ratios. ``--before TREE`` adds the same
+run with another checkout's packages first on ``PYTHONPATH`` (e.g. a
+detached worktree of ``main``: ``git worktree add --detach ../before main``),
+alternated with the others, so a change is measured side by side on the
+same machine in the same minutes. Tests check what is imported
+(``tests/paper/test_cli.py``, ``tests/paper/test_run_startup.py``), this
+script the clock. Run it with the bytecode cache on
+(``PYTHONDONTWRITEBYTECODE`` unset), as users run.
 
-    .venv/bin/python benchmarks/cli_startup.py [--repeats 9]
+    .venv/bin/python benchmarks/cli_startup.py [--repeats 9] [--before TREE]
 """
 from __future__ import annotations
 
@@ -34,6 +39,8 @@ from processes import cli, timed
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--repeats", type=int, default=9)
+    p.add_argument("--before", type=Path, default=None, metavar="TREE",
+                   help="also time the run with this checkout's packages first on PYTHONPATH")
     args = p.parse_args(argv)
     if os.environ.get("PYTHONDONTWRITEBYTECODE"):
         print("note: PYTHONDONTWRITEBYTECODE is set: a module with no bytecode cached yet is compiled in "
@@ -47,6 +54,10 @@ def main(argv=None) -> int:
                                                              "--out", str(Path(tmp) / "run")),
             'python -c "import numpy, fmpy"': [sys.executable, "-c", "import numpy, fmpy"],
         }
+        if args.before is not None:  # the same run, another tree's code: env puts it first on sys.path
+            before = ["env", f"PYTHONPATH={args.before.resolve()}"]
+            pairs[f"  the same, {args.before.name}"] = before + cli("run", "circles", "--no-plots", "--quiet",
+                                                                    "--out", str(Path(tmp) / "before"))
         for command in pairs.values():  # builds the FMUs and keeps the validated scenario (first run), warms the file cache
             timed(command)
         times: dict[str, list[tuple[float, float]]] = {label: [] for label in pairs}
@@ -64,6 +75,10 @@ def main(argv=None) -> int:
             print(f"  {label:45s} {wall[label] * 1e3:5.0f} ms {cpu[label] * 1e3:5.0f} ms")
         print(f"  {'ratio':45s} {wall[command] / wall[reference]:8.2f} {cpu[command] / cpu[reference]:8.2f}"
               f"  (target <= 1.5)")
+    if args.before is not None:
+        label, reference = labels[4], labels[3]
+        print(f"  {label:45s} {wall[label] * 1e3:5.0f} ms {cpu[label] * 1e3:5.0f} ms")
+        print(f"  {'  its ratio':45s} {wall[label] / wall[reference]:8.2f} {cpu[label] / cpu[reference]:8.2f}")
     return 0
 
 

@@ -4,8 +4,11 @@ data (never pickle: a cache folder is a place others may write,
 docs/security.md), each entry kept only while what it was derived from is
 unchanged.
 
-Two entries use it: the installed plugins (:mod:`cosim.registry`) and
-validated scenarios (:func:`cosim.scenario.load_scenario`). An entry that
+Three entries use it: the installed plugins (:mod:`cosim.registry`),
+validated scenarios (:func:`cosim.scenario.load_scenario`) and what was
+read of FMU files (:mod:`cosim.description_cache`). Which folder is this
+module's to hold (:func:`register_cache`, :func:`cache_folder`), so a module
+below the registry reads it too. An entry that
 cannot be read is derived again; a folder that cannot be written keeps
 nothing: a cache is never an error.
 """
@@ -16,11 +19,29 @@ import json
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from .files import write_whole
 
-__all__ = ["keep", "kept", "code_files", "unchanged", "keep_code", "code_unchanged"]
+__all__ = ["keep", "kept", "code_files", "unchanged", "keep_code", "code_unchanged", "register_cache", "cache_folder"]
+
+_CACHE: list[Callable[[], Path]] = []  # at most one: where derived data may be kept
+
+
+def register_cache(folder: Callable[[], Path]) -> None:
+    """Where the engine may keep derived data: ``folder()`` is asked each
+    time (it may follow the environment). One per process: a second,
+    different one is refused (:func:`cosim.registry.register_cache` is
+    this function)."""
+    if _CACHE and _CACHE[0] != folder:
+        raise ValueError("a cache folder is registered twice, differently")
+    if not _CACHE:
+        _CACHE.append(folder)
+
+
+def cache_folder() -> Path | None:
+    """The registered cache folder (:func:`register_cache`), or ``None``."""
+    return _CACHE[0]() if _CACHE else None
 
 
 def keep(path: Path, data: Any) -> None:

@@ -78,7 +78,6 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from lxml import etree
 from fmpy import platform, platform_tuple, read_model_description, sharedLibraryExtension
 from fmpy.fmi1 import FMICallException
 
@@ -347,6 +346,7 @@ class FmuComponent:
         self._u_set: np.ndarray | None = None  # Model Exchange: the inputs last set (the solver restarts on a change)
         self._t = 0.0
         self.bind((), ())
+        self._keep_description(validate)
 
     def python_loop_reason(self, signals: Sequence[str] = ()) -> str | None:
         """Why the master's compiled loop, which makes set, get and doStep
@@ -385,21 +385,59 @@ class FmuComponent:
         return out
 
     def _read_model_description(self, validate: bool):
+        """fmpy's ModelDescription of the FMU: kept from an earlier reading of
+        the same bytes (:mod:`cosim.description_cache`: no XML parsed, no
+        archive opened), else read (:func:`read_description`)."""
+        from .description_cache import kept_description
+
+        self._kept = None if validate or self.path.is_dir() else kept_description(self.path)
+        if self._kept is not None:
+            self._description_xml = None
+            return self._kept.model_description
         md, self._description_xml = read_description(self.name, self.path, validate)
         return md
+
+    def _keep_description(self, validate: bool) -> None:
+        """Keep what was read of an FMU file, now checked in full
+        (:mod:`cosim.description_cache`), for the next reading of its bytes."""
+        if getattr(self, "_kept", None) is None and not validate and not self.path.is_dir():
+            from .description_cache import KeptDescription, keep_description
+
+            keep_description(self.path, KeptDescription(self.model_description, self._period_declaration(),
+                                                        tuple(self._file_names())))
+
+    def _claim_extracted(self) -> Path | None:
+        """The folder the cache holds this FMU's run-time entries in, extracted
+        once for every run (:func:`cosim.description_cache.claim_extracted`:
+        an FMU this tool built, read from the cache before, the first instance
+        of its file in this process), or ``None``: extract it here."""
+        kept = getattr(self, "_kept", None)
+        if kept is None:
+            return None
+        from .description_cache import claim_extracted
+
+        return claim_extracted(self.path, kept, self._run_time_files())
+
+    def _period_declaration(self) -> tuple[bool, str | None]:
+        """Whether the FMU declares a period (:data:`PERIOD_ANNOTATION`), and
+        the parameter it names as written (``None`` if it names none)."""
+        kept = getattr(self, "_kept", None)
+        if kept is not None:
+            return kept.period
+        root = self._extras()
+        annotation = (f"VendorAnnotations/Tool[@name='{PERIOD_ANNOTATION}']" if self.fmi_version == 2 else
+                      f"Annotations/Annotation[@type='{PERIOD_ANNOTATION}']")
+        declaration = root.find(f"{annotation}/SampledData")
+        return (False, None) if declaration is None else (True, declaration.get("periodParameter"))
 
     def _declared_period(self) -> str | None:
         """The parameter a sampled-data FMU declares as its period
         (:data:`PERIOD_ANNOTATION`), or ``None`` for an FMU that declares
         none. fmpy does not read annotations, so the modelDescription (which
         fmpy has read already) is parsed here, entities and network off."""
-        root = self._extras()
-        annotation = (f"VendorAnnotations/Tool[@name='{PERIOD_ANNOTATION}']" if self.fmi_version == 2 else
-                      f"Annotations/Annotation[@type='{PERIOD_ANNOTATION}']")
-        declaration = root.find(f"{annotation}/SampledData")
-        if declaration is None:
+        declared, name = self._period_declaration()
+        if not declared:
             return None
-        name = declaration.get("periodParameter")
         if getattr(self.variables.get(name), "causality", None) != "parameter":
             raise FmuLoadError(self.name, self.path, f"its {PERIOD_ANNOTATION} annotation declares "
                                f"periodParameter = {name!r}, which is no parameter of the FMU")
@@ -412,6 +450,8 @@ class FmuComponent:
         file's size was checked by :meth:`_read_model_description`)."""
         root = getattr(self, "_extras_root", None)
         if root is None:
+            from lxml import etree
+
             if self.path.is_dir():
                 xml = (self.path / "modelDescription.xml").read_bytes()
             else:
@@ -453,6 +493,9 @@ class FmuComponent:
         return run_time_entries(self._file_names())
 
     def _file_names(self) -> list[str]:
+        kept = getattr(self, "_kept", None)
+        if kept is not None:
+            return list(kept.names)
         if self.path.is_dir():
             return [Path(root, f).relative_to(self.path).as_posix()
                     for root, _, files in os.walk(self.path) for f in files]
@@ -528,14 +571,16 @@ class FmuComponent:
         if self.path.is_dir():
             self._unzipdir = self.path
         else:
-            from .files import extract_zip
+            self._unzipdir = self._claim_extracted()
+            if self._unzipdir is None:
+                from .files import extract_zip
 
-            try:
-                self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"), "cannot extract the archive",
-                                             only=self._run_time_files())
-            except ScenarioError as exc:
-                raise FmuLoadError(self.name, self.path, str(exc)) from None
-            self._owns_unzipdir = True
+                try:
+                    self._unzipdir = extract_zip(self.path, tempfile.mkdtemp(prefix="fmu-"),
+                                                 "cannot extract the archive", only=self._run_time_files())
+                except ScenarioError as exc:
+                    raise FmuLoadError(self.name, self.path, str(exc)) from None
+                self._owns_unzipdir = True
             folder = Path(self._unzipdir)
             forms = {folder.as_uri(): self.path.name, str(folder): self.path.name,
                      folder.resolve().as_uri(): self.path.name, str(folder.resolve()): self.path.name}

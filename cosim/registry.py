@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+from .cache import cache_folder, register_cache
+
 __all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
            "register_section", "register_fmu_model", "register_scenarios", "register_studies", "register_case", "component_kinds",
            "sections", "fmu_models", "cases", "aliases", "scenario_folders", "study_folders", "files_by_name", "scoped", "with_connections", "version",
@@ -174,7 +176,6 @@ _CASES: dict[str, Case] = {}
 _SCENARIO_FOLDERS: list[Path] = []
 _STUDY_FOLDERS: list[Path] = []
 _TABLE_FMU: list[Callable[[Any, int], Path]] = []  # at most one: the builder of the signal table's FMU
-_CACHE: list[Callable[[], Path]] = []  # at most one: where derived data may be kept
 _plugins_loaded = False
 _VERSION = [0]  # bumped by every change of the registry (the scenario's declaration is rebuilt)
 
@@ -271,19 +272,9 @@ def register_studies(folder: str | Path) -> None:
         _STUDY_FOLDERS.append(folder)
 
 
-def register_cache(folder: Callable[[], Path]) -> None:
-    """Where the engine may keep derived data: ``folder()`` is asked each
-    time (it may follow the environment). One per process: a second,
-    different one is refused."""
-    if _CACHE and _CACHE[0] != folder:
-        raise ValueError("a cache folder is registered twice, differently")
-    if not _CACHE:
-        _CACHE.append(folder)
-
-
-def cache_folder() -> Path | None:
-    """The registered cache folder (:func:`register_cache`), or ``None``."""
-    return _CACHE[0]() if _CACHE else None
+# register_cache and cache_folder (imported above, part of this module's API): where the engine may keep
+# derived data is held by cosim.cache, which every module keeping data there reads (an FMU component's
+# description too, and cosim.fmu_component may not import this module: cosim.table, which it imports, does).
 
 
 def _path_signature() -> list[list[Any]]:

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
 def cache(tmp_path, monkeypatch):
     """An empty cache folder registered for the test (the process's own is left as it was)."""
     folder = tmp_path / "cache"
-    monkeypatch.setattr(registry, "_CACHE", [lambda: folder])
+    monkeypatch.setattr(cosim.cache, "_CACHE", [lambda: folder])
     monkeypatch.setattr(cosim.cache, "_UNCHANGED", {})
     return folder
 

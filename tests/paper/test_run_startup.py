@@ -1,8 +1,9 @@
 """A run of the shipped mission, its FMUs built and its scenario validated
 before, starts only what it needs (issue 26): no CasADi, Dask, matplotlib or
-python-control, and no pydantic (the scenario served from the cache, the
-controller built from its validated values), and writes what a validated
-run writes. What is imported is checked here, in a fresh interpreter
+python-control, no pydantic (the scenario served from the cache, the
+controller built from its validated values) and no lxml (the FMUs' model
+descriptions served from the cache, cosim.description_cache), and writes
+what a validated run writes. What is imported is checked here, in a fresh interpreter
 (``sys.modules``); the time it takes, by ``benchmarks/cli_startup.py``."""
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 
 NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scipy", "pydantic", "pydantic_core",
                  "importlib.metadata", "fnn_controller.fast", "fmu_models.export.build", "cosim.scenario_tables",
-                 "quadrotor_paper.section_tables")
+                 "quadrotor_paper.section_tables", "lxml")
 
 _RUN = """
 import json, sys
@@ -30,7 +31,7 @@ def _run(out: Path, cwd: Path) -> tuple[int, set[str]]:
     return report["code"], set(report["modules"])
 
 
-def test_a_run_of_the_shipped_mission_imports_no_casadi_dask_matplotlib_or_pydantic(tmp_path):
+def test_a_run_of_the_shipped_mission_imports_no_casadi_dask_matplotlib_pydantic_or_lxml(tmp_path):
     first_code, _ = _run(tmp_path / "first", tmp_path)  # builds or finds the FMUs, keeps the validated scenario
     code, modules = _run(tmp_path / "again", tmp_path)
     assert first_code == code == 0
