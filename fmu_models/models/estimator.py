@@ -1,7 +1,7 @@
 """A state estimator as a sampled-data FMU: an extended Kalman filter written
 in CasADi that predicts with the IMU and corrects with the drag-model
 accelerometer and with GNSS or motion capture, each measurement gated and
-fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E26;
+fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E27;
 the numbers below are those equations').
 
 State (18): position ``x y z`` and velocity ``u v w`` (world frame, z down,
