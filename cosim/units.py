@@ -122,6 +122,33 @@ def _pint_quantity(name: str):
     return None
 
 
+# one power of an FMI base unit as a name writes it: m, s2, s-1, m^2
+_BASE_POWER = re.compile(r"(kg|mol|cd|rad|m|s|A|K)(?:\^?(-?\d+))?")
+
+
+def _base_units_only(name: str) -> Unit | None:
+    """The :class:`Unit` of a name written with the FMI base units alone
+    (``m``, ``rad/s``, ``m/s2``, ``kg.m2``, ``1/s``: powers of
+    :data:`BASE_UNITS` joined by ``.`` or ``*``, at most one ``/``), read
+    from the name itself: factor 1, no offset, what pint gives for it
+    (test). ``None`` for any other name (``ms``, ``Hz``, ``km/h``,
+    parentheses), which pint reads. Most ports are named so, and pint's
+    registry costs about a second to build."""
+    numerator, slash, denominator = name.partition("/")
+    if "/" in denominator:
+        return None
+    exponents = dict.fromkeys(BASE_UNITS, 0)
+    for part, sign in ((numerator, 1), (denominator, -1)) if slash else ((numerator, 1),):
+        if slash and sign == 1 and part.strip() == "1":
+            continue  # 1/s
+        for token in re.split(r"[.*]", part):
+            power = _BASE_POWER.fullmatch(token.strip())
+            if power is None:
+                return None
+            exponents[power[1]] += sign * int(power[2] or 1)
+    return Unit(name, tuple(exponents[b] for b in BASE_UNITS))
+
+
 @lru_cache(maxsize=1024)
 def parse(name: str) -> Unit | None:
     """The :class:`Unit` of a unit name, by pint (``None`` if pint does not
@@ -129,10 +156,14 @@ def parse(name: str) -> Unit | None:
 
     The name is read as pint reads it, and failing that in Modelica's
     syntax (``m/s2``, ``kg.m2``); an offset unit (``degC``, ``degF``) takes
-    its factor and offset from pint's definition of it.
+    its factor and offset from pint's definition of it. A name of base
+    units alone is read without pint (:func:`_base_units_only`).
     """
     if name.strip() in _DIMENSIONLESS_NAMES:
         return Unit(name, DIMENSIONLESS.exponents)
+    plain = _base_units_only(name)
+    if plain is not None:
+        return plain
     quantity = _pint_quantity(name)
     if quantity is None:
         return None

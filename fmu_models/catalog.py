@@ -30,6 +30,7 @@ _WHERE: dict[str, tuple[str, str]] = {
     "Magnetometer3": ("fmu_models.models.magnetometer", "MAGNETOMETER"),
     "Estimator": ("fmu_models.models.estimator", "ESTIMATOR"),
     "EstimatorMag": ("fmu_models.models.estimator", "ESTIMATOR_MAG"),
+    "EstimatorGM": ("fmu_models.models.estimator", "ESTIMATOR_GM"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 

@@ -72,8 +72,22 @@ def oscillation_period(x: np.ndarray, step: float, longest: float = 5.0) -> tupl
 
 def nees(error: np.ndarray, covariance: np.ndarray) -> np.ndarray:
     """NEES per row (eq. E15): ``e_n^T P_n^-1 e_n`` for errors of shape (N, k)
-    and covariances of shape (N, k, k); NaN where P_n is singular."""
+    and covariances of shape (N, k, k); NaN where P_n is singular. A
+    component whose variance is exactly 0 is one the filter holds, not
+    estimates (the vertical wind of a filter without that state,
+    docs/estimation.md): it is left out of the row's NEES, which then has
+    one degree of freedom fewer, when its error is 0, and makes it infinite
+    when not (a filter certain of a wrong value)."""
     error, covariance = np.asarray(error, dtype=float), np.asarray(covariance, dtype=float)
+    held = np.diagonal(covariance, axis1=1, axis2=2) == 0 if covariance.ndim == 3 else np.zeros(error.shape, bool)
+    if np.any(held):
+        wrong = np.any(held & (error != 0), axis=1)
+        error = np.where(held, 0.0, error)
+        covariance = covariance + np.einsum("ni,ij->nij", held.astype(float), np.eye(error.shape[1]))
+        out = nees(error, covariance)
+        out[wrong] = np.inf
+        out[np.all(held, axis=1)] = np.nan  # nothing estimated
+        return out
     try:  # every row in one call (LAPACK's gesv per matrix, as row by row below)
         return (error[:, None, :] @ np.linalg.solve(covariance, error[..., None]))[:, 0, 0]  # e @ x as below
     except np.linalg.LinAlgError:  # one singular P: row by row, NaN where singular

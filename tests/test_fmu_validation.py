@@ -22,6 +22,18 @@ def _renamed(source, target, old: str, new: str):
     return target
 
 
+def _as_reported(problems: list[str]) -> list[tuple[str, frozenset[str]]]:
+    """Each problem with the parser's "Expected one of" list as a set: lark
+    lists the terminals of a set, in an order that changes with the
+    process's string hashing, so two processes word one verdict in two
+    orders (and the verdict kept on disk was worded by another process)."""
+    out = []
+    for text in problems:
+        head, _, expected = text.partition("Expected one of:")
+        out.append((head, frozenset(line.strip() for line in expected.splitlines() if line.strip())))
+    return out
+
+
 def test_an_illegal_name_is_reported_as_fmpy_reports_it_every_time_it_is_met(tmp_path):
     stock = cached_fmu(WIND_GUST, 2)
     assert validate_fmu(str(stock)) == fmpy_validate_fmu(str(stock)) == []
@@ -32,5 +44,5 @@ def test_an_illegal_name_is_reported_as_fmpy_reports_it_every_time_it_is_met(tmp
         z.writestr("documentation/readme.txt", "other bytes, same names")
     for fmu in (first, second):
         problems = validate_fmu(str(fmu))
-        assert problems == fmpy_validate_fmu(str(fmu))
+        assert _as_reported(problems) == _as_reported(fmpy_validate_fmu(str(fmu)))
         assert len(problems) == 1 and '"1v_wind_x"' in problems[0] and "not a legal variable name" in problems[0]

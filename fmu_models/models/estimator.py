@@ -1,7 +1,7 @@
 """A state estimator as a sampled-data FMU: an extended Kalman filter written
 in CasADi that predicts with the IMU and corrects with the drag-model
 accelerometer and with GNSS or motion capture, each measurement gated and
-fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E27;
+fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E28;
 the numbers below are those equations').
 
 State (18): position ``x y z`` and velocity ``u v w`` (world frame, z down,
@@ -32,6 +32,10 @@ with the IMU's ``gyro, acc`` stamped ``t_imu`` and the fix ``y`` stamped
    the NIS of both corrections, the time they describe (``t_estimate``) and
    the gate's counts.
 
+``EstimatorGM`` is the same filter with the fix's position error correlated
+in time as three more states (E27: a first-order Gauss-Markov process, the
+receiver ``GNSS6GM``'s E25), in the fix's measurement and its restart.
+
 In our master's feedthrough ordering ``t_imu = t`` and the output is the
 posterior: the controller reading the estimate at t_n flies on the
 measurements of t_n. In a Jacobi importer the samples arrive a step old,
@@ -53,7 +57,8 @@ from .quadrotor import (DEFAULTS, aerodynamic_drag, body_angular_acceleration, e
 from .rotor import thrust_and_torques
 from .sensors import DT_DEFAULT
 
-__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATED_STATES", "FIX_NAMES", "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
+__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATOR_GM", "ESTIMATED_STATES", "FIX_BIAS_STATES", "FIX_NAMES",
+           "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
            "chi2_quantile_even", "chi2_quantile_odd", "magnetometer_measurement",
            "body_drag_acceleration", "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
 
@@ -63,6 +68,11 @@ ESTIMATED_STATES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi",
                     "wind_x", "wind_y", "wind_z")
 _N = len(ESTIMATED_STATES)
 _UNITS = ("m",) * 3 + ("m/s",) * 3 + ("rad",) * 3 + ("rad/s",) * 3 + ("m/s2",) * 3 + ("m/s",) * 3
+# EstimatorGM's three more states (E27): the fix's position error correlated in time (first-order
+# Gauss-Markov, the receiver's E25), appended so that the 18 above keep their indices
+FIX_BIAS_STATES = ("fix_bias_x", "fix_bias_y", "fix_bias_z")
+_ALL_STATES = ESTIMATED_STATES + FIX_BIAS_STATES
+_WIND = (15, 16, 17)  # the wind's indices in the state
 FIX_NAMES = ("x", "y", "z", "u", "v", "w")  # the fix: position and velocity (GNSS or motion capture)
 # Tuning (docs/estimation.md, "Tuning"); the sensor values are the IMU's defaults.
 ESTIMATOR_DEFAULTS = {
@@ -83,20 +93,25 @@ _P0 = {"x": "P0_position", "u": "P0_velocity", "phi": "P0_attitude", "gyro_bias_
        "accel_bias_x": "P0_accel_bias", "wind_x": "P0_wind"}
 
 
-def covariance_names() -> list[tuple[str, int, int]]:
+def covariance_names(fix_bias: bool = False) -> list[tuple[str, int, int]]:
     """``(output name, i, j)`` of the covariance outputs: ``var_<s>`` for every
-    state, ``cov_<a>_<b>`` (a before b) within each block of COVARIANCE_BLOCKS."""
+    state, ``cov_<a>_<b>`` (a before b) within each block of COVARIANCE_BLOCKS;
+    with ``fix_bias`` (EstimatorGM, E27) then ``var_fix_bias_*`` and the
+    covariances ``cov_<p>_fix_bias_<p>`` of each position axis with its fix error."""
     index = {s: k for k, s in enumerate(ESTIMATED_STATES)}
     names = [(f"var_{s}", k, k) for k, s in enumerate(ESTIMATED_STATES)]
     for block in COVARIANCE_BLOCKS.values():
         names += [(covariance_output(a, b, block), index[a], index[b]) for k, a in enumerate(block)
                   for b in block[k + 1:]]
+    if fix_bias:
+        names += [(f"var_{s}", _N + k, _N + k) for k, s in enumerate(FIX_BIAS_STATES)]
+        names += [(f"cov_{a}_{s}", k, _N + k) for k, (a, s) in enumerate(zip("xyz", FIX_BIAS_STATES))]
     return names
 
 
 def _upper(i, j):
     i, j = min(i, j), max(i, j)
-    return f"P_{ESTIMATED_STATES[i]}__{ESTIMATED_STATES[j]}"
+    return f"P_{_ALL_STATES[i]}__{_ALL_STATES[j]}"
 
 
 def _split(xs):
@@ -115,15 +130,20 @@ def process_model(xs, gyro, acc, noise, v):
     bias drive the attitude (eq. 3), the specific force (drag model on the
     horizontal body axes, accelerometer less its bias on z_B) drives the
     velocity (eqs. 9-11). ``noise`` (15): gyro, accel z, drag x y, the two
-    bias walks and the wind walk, white with the densities of E13."""
+    bias walks and the wind walk, white with the densities of E13. With the
+    fix's correlated error (21 states, 18 noises; EstimatorGM) also E27:
+    ``b_p' = -b_p / gm_tau + n_b``."""
     _, velocity, attitude, b_g, b_a, _ = _split(xs)
     drag = body_drag_acceleration(xs, v["m"], v["k_drag_lin"], v["k_drag_quad"])
     rates = gyro - b_g - noise[0:3]
     force = ca.vertcat(drag[0] + noise[4], drag[1] + noise[5], acc[2] - b_a[2] - noise[3])
     R = rotation_matrix(attitude[0], attitude[1], attitude[2])
-    return ca.vertcat(velocity, R @ force + ca.vertcat(0, 0, v["g"]),
-                      euler_rate_matrix(attitude[0], attitude[1]) @ rates,
-                      noise[6:9], noise[9:12], noise[12:15])
+    derivative = [velocity, R @ force + ca.vertcat(0, 0, v["g"]),
+                  euler_rate_matrix(attitude[0], attitude[1]) @ rates,
+                  noise[6:9], noise[9:12], noise[12:15]]
+    if xs.shape[0] > _N:  # E27: the fix's position error, a first-order Gauss-Markov process (the receiver's E25)
+        derivative.append(-xs[_N:_N + 3] / v["gm_tau"] + noise[15:18])
+    return ca.vertcat(*derivative)
 
 
 def drag_measurement(xs, v):
@@ -147,7 +167,7 @@ def scalar_update(xs, P, h, H, measured, variance):
 def _sequential(xs, P, measure, measured, variances):
     """Scalar updates one channel after another; each channel's Jacobian at the
     state corrected by the channels before it (E11)."""
-    xs_sym = ca.SX.sym("xs", _N)
+    xs_sym = ca.SX.sym("xs", xs.shape[0])
     predicted = measure(xs_sym)
     nis = 0
     for k in range(measured.shape[0]):
@@ -157,7 +177,7 @@ def _sequential(xs, P, measure, measured, variances):
     return xs, P, nis
 
 
-def _variables(magnetometer: bool):
+def _variables(magnetometer: bool, fix_bias: bool = False):
     variables = [
         *(input_(f"gyro_{i}", "rad/s", f"IMU angular rate about {i}_B", 0.0) for i in AXES),
         input_("acc_x", "m/s2", "IMU specific force along x_B", 0.0),
@@ -228,8 +248,11 @@ def _variables(magnetometer: bool):
         *(parameter(p0, unit, f"initial standard deviation of the {p0[3:].replace('_', ' ')} estimate (each axis)",
                     ESTIMATOR_DEFAULTS[p0], min=1e-9)
           for p0, unit in (("P0_position", "m"), ("P0_velocity", "m/s"), ("P0_attitude", "rad"),
-                           ("P0_gyro_bias", "rad/s"), ("P0_accel_bias", "m/s2"), ("P0_wind", "m/s"),
-                           ("P0_wind_z", "m/s"))),
+                           ("P0_gyro_bias", "rad/s"), ("P0_accel_bias", "m/s2"), ("P0_wind", "m/s"))),
+        # 0 with wind_walk_z = 0: no vertical wind state, the vertical wind held at wind_z_0 (its variance stays 0)
+        parameter("P0_wind_z", "m/s", "initial standard deviation of the vertical wind estimate; 0 (with "
+                  "wind_walk_z = 0): the filter has no vertical wind state, it holds wind_z_0",
+                  ESTIMATOR_DEFAULTS["P0_wind_z"], min=0.0),
         parameter("dt", "s", "communication step = sample period of the filter (every doStep must be dt)",
                   DT_DEFAULT, min=1e-6, max=10.0),
         discrete("started", "1", "0 before the first step (the initial estimate is the first prior), 1 after"),
@@ -275,30 +298,49 @@ def _variables(magnetometer: bool):
         *(discrete(f"command_{i}", "rad/s", f"rotor {i}'s command received at the step before (E26)")
           for i in _ROTORS),
     ]
-    if magnetometer:  # the offset and the first heading (E27), last so that the variables above keep their references
+    if fix_bias:  # the fix's correlated error (E27), appended last so that the variables above keep their references
+        variables += [
+            *(output(name, "m", f"estimate of the fix's correlated position error along {a} (E27)")
+              for a, name in zip("xyz", FIX_BIAS_STATES)),
+            *(output(name, "1", f"posterior covariance entry ({_ALL_STATES[i]}, {_ALL_STATES[j]}), in the states' "
+                                "units squared")
+              for name, i, j in covariance_names(fix_bias=True)[len(covariance_names()):]),
+            parameter("gm_tau", "s", "correlation time of the fix's position error the filter assumes (the "
+                      "receiver's, E25, E27)", 60.0, min=1e-6),
+            *(parameter(f"gm_sigma_{a}_m", "m", f"stationary standard deviation of the fix's correlated error "
+                        f"along {a} the filter assumes (the receiver's gm_sigma_{a}, E27); its white part is "
+                        f"sigma_{a}_m", 0.0, min=0.0) for a in "xyz"),
+            *(discrete(f"xhat_{name}", "m", f"posterior estimate of {name} at the previous step")
+              for name in FIX_BIAS_STATES),
+            *(discrete(_upper(i, j), "1", "posterior covariance entry at the previous step")
+              for j in range(_N, _N + 3) for i in range(j + 1)),
+        ]
+    if magnetometer:  # the offset and the first heading (E28), last so that the variables above keep their references
         variables += [
         *(parameter(f"mag_bias_{i}", "T", f"hard-iron offset along {i}_B the magnetometer's calibration found: "
                     "subtracted from each sample (its residual belongs in sigma_mag)", 0.0) for i in AXES),
         parameter("heading_from_mag", "1", "1: the heading starts from the first magnetometer sample the gate "
-                  "accepts at that heading (E27, psi_0 then unused); 0: from psi_0", 1.0, min=0.0, max=1.0,
+                  "accepts at that heading (E28, psi_0 then unused); 0: from psi_0", 1.0, min=0.0, max=1.0,
                   integer=True),
-        discrete("heading_set", "1", "1 once a magnetometer sample has set the heading (E27)"),
+        discrete("heading_set", "1", "1 once a magnetometer sample has set the heading (E28)"),
         ]
     return tuple(variables)
 
 
-def _state(v):
-    xs = ca.vertcat(*(v[f"xhat_{name}"] for name in ESTIMATED_STATES))
-    P = ca.SX(_N, _N)
-    for i in range(_N):
-        for j in range(_N):
+def _state(v, n: int = _N):
+    """The posterior of the first ``n`` states of ``_ALL_STATES`` from the discrete variables."""
+    xs = ca.vertcat(*(v[f"xhat_{name}"] for name in _ALL_STATES[:n]))
+    P = ca.SX(n, n)
+    for i in range(n):
+        for j in range(n):
             P[i, j] = v[_upper(i, j)]
     return xs, P
 
 
 def _discrete(xs, P):
-    z = {f"xhat_{name}": xs[k] for k, name in enumerate(ESTIMATED_STATES)}
-    z.update({_upper(i, j): P[i, j] for i in range(_N) for j in range(i, _N)})
+    n = xs.shape[0]
+    z = {f"xhat_{name}": xs[k] for k, name in enumerate(_ALL_STATES[:n])}
+    z.update({_upper(i, j): P[i, j] for i in range(n) for j in range(i, n)})
     return z
 
 
@@ -368,17 +410,21 @@ def _predict(xs, P, gyro, acc, v, h):
     """The state and covariance ``h`` seconds later with the IMU's averages
     held (E7-E8, E13): explicit Euler over h, the covariance by F and G
     linearized at the estimate, noise-free. ``h = 0`` leaves both unchanged."""
-    xs_sym, noise = ca.SX.sym("xs", _N), ca.SX.sym("n", 15)
+    n = xs.shape[0]
+    fix_bias = n > _N  # EstimatorGM (E27): three more states, three more noises
+    xs_sym, noise = ca.SX.sym("xs", n), ca.SX.sym("n", 18 if fix_bias else 15)
     f = process_model(xs_sym, gyro, acc, noise, v)
-    at_estimate = [xs_sym, noise], [xs, ca.DM.zeros(15)]  # linearized at the posterior, noise-free
+    at_estimate = [xs_sym, noise], [xs, ca.DM.zeros(noise.shape[0])]  # linearized at the posterior, noise-free
     # the position also takes the velocity's change over the step, h^2/2 dv/dt (E8): with a 0.1 mm fix,
     # the first-order step's h^2/2 |a| (50 um at 1 m/s2) would be half the fix's noise
-    second = ca.vertcat(h / 2 * f[3:6], ca.SX.zeros(_N - 3))
+    second = ca.vertcat(h / 2 * f[3:6], ca.SX.zeros(n - 3))
     f = f + second
     F, G, f_hat = ca.substitute([ca.jacobian(f, xs_sym), ca.jacobian(f, noise), f], *at_estimate)
-    F, G = ca.SX.eye(_N) + h * F, h * G
+    F, G = ca.SX.eye(n) + h * F, h * G
     density = [v["gyro_noise_density"]] * 3 + [v["accel_noise_density"]] + [v["drag_noise_density"]] * 2 + \
         [v["gyro_bias_walk"]] * 3 + [v["accel_bias_walk"]] * 3 + [v["wind_walk"]] * 2 + [v["wind_walk_z"]]
+    if fix_bias:  # E27: sqrt(2 sigma_gm^2 / tau_gm), the density whose stationary variance is sigma_gm^2
+        density += [ca.sqrt(2 / v["gm_tau"]) * v[f"gm_sigma_{a}_m"] for a in "xyz"]
     # continuous density -> covariance of a dt-averaged sample (the IMU's), held over h (E13)
     Q = ca.diag(ca.vertcat(*density) ** 2 / v["dt"])
     P_next = F @ P @ F.T + G @ Q @ G.T
@@ -388,10 +434,11 @@ def _predict(xs, P, gyro, acc, v, h):
 def _reset(P, states, variances):
     """``P`` with the rows and columns of ``states`` (indices) cleared and
     their variances set (E21): those states start again, uncorrelated."""
-    keep = ca.DM.ones(_N)
+    n = P.shape[0]
+    keep = ca.DM.ones(n)
     for k in states:
         keep[k] = 0.0
-    fresh = ca.SX.zeros(_N)
+    fresh = ca.SX.zeros(n)
     for k, variance in zip(states, variances):
         fresh[k] = variance
     return ca.diag(keep) @ P @ ca.diag(keep) + ca.diag(fresh)
@@ -402,8 +449,8 @@ def _gated(accept, corrected, before):
     return tuple(ca.if_else(accept, c, b) for c, b in zip(corrected, before))
 
 
-def _update(t, v, magnetometer: bool = False):
-    xs, P = _state(v)
+def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
+    xs, P = _state(v, len(_ALL_STATES) if fix_bias else _N)
     gyro = ca.vertcat(*(v[f"gyro_{i}"] for i in AXES))
     acc = ca.vertcat(*(v[f"acc_{i}"] for i in AXES))
     started = v["started"] > 0
@@ -428,8 +475,7 @@ def _update(t, v, magnetometer: bool = False):
     run_acc = ca.if_else(new_imu, ca.if_else(refused_acc, v["refusal_run_acc"] + 1, 0.0), v["refusal_run_acc"])
     reset_acc = run_acc >= v["reset_after_drag"]
     # the wind starts again from its initial uncertainty, and the measurement that found the step is fused
-    wind = [_N - 3, _N - 2, _N - 1]
-    P_wind = _reset(P, wind, [v["P0_wind"] ** 2] * 2 + [v["P0_wind_z"] ** 2])
+    P_wind = _reset(P, _WIND, [v["P0_wind"] ** 2] * 2 + [v["P0_wind_z"] ** 2])
     restarted = _sequential(xs, P_wind, lambda s: drag_measurement(s, v), acc[0:2], [r_acc, r_acc])
     xs, P = _gated(reset_acc, restarted[:2], (xs, P))
     run_acc = ca.if_else(reset_acc, 0.0, run_acc)
@@ -442,7 +488,7 @@ def _update(t, v, magnetometer: bool = False):
         mag = ca.vertcat(*(v[f"mag_{i}"] - v[f"mag_bias_{i}"] for i in AXES))
         r_mag = v["sigma_mag"] ** 2
         new_mag = ca.logic_and(new_imu, v["fresh_mag"] > 0.5)
-        # E27: until a sample has set it, the heading is taken from the sample (the tilt-compensated compass) and
+        # E28: until a sample has set it, the heading is taken from the sample (the tilt-compensated compass) and
         # the sample fused at that heading, through the same gate: its heading-free part (the field's size and
         # dip) is then all the NIS sees, and a sample failing it sets nothing and waits for the next
         first = ca.logic_and(new_mag, ca.logic_and(v["heading_from_mag"] > 0.5, v["heading_set"] < 0.5))
@@ -464,7 +510,10 @@ def _update(t, v, magnetometer: bool = False):
     tau = ca.fmax(t_filter - t_fix, 0.0)
 
     def retrodicted(s):  # first order in tau: the velocity's change over tau (< 0.1 of its noise) left out
-        return ca.vertcat(s[0:3] - tau * s[3:6], s[3:6])
+        position = s[0:3] - tau * s[3:6]
+        if fix_bias:  # E27: the fix also carries its correlated error, a state; its covariance enters s (E11)
+            position = position + s[_N:_N + 3]
+        return ca.vertcat(position, s[3:6])
 
     corrected = _sequential(xs, P, retrodicted, fix, sigma2)
     nis_fix = corrected[2]
@@ -474,10 +523,21 @@ def _update(t, v, magnetometer: bool = False):
     run_fix = ca.if_else(new_fix, ca.if_else(refused_fix, v["refusal_run_fix"] + 1, 0.0), v["refusal_run_fix"])
     reset_fix = run_fix >= v["reset_after_fix"]
     # position and velocity start again from the fix (brought forward over tau), at its noise (E21)
-    restart = ca.vertcat(fix[0:3] + tau * fix[3:6], fix[3:6], xs[6:])
+    restart = ca.vertcat(fix[0:3] + tau * fix[3:6], fix[3:6], xs[6:_N], ca.DM.zeros(xs.shape[0] - _N))
     xs = ca.if_else(reset_fix, restart, xs)
-    P = ca.if_else(reset_fix, _reset(P, range(6), [sigma2[k] + (tau ** 2 * sigma2[k + 3] if k < 3 else 0.0)
-                                                    for k in range(6)]), P)
+    variances = [sigma2[k] + (tau ** 2 * sigma2[k + 3] if k < 3 else 0.0) for k in range(6)]
+    if fix_bias:
+        # E27: the fix's correlated error starts again from its stationary prior N(0, sigma_gm^2), and the
+        # position, taken as the fix less that error, carries it too: var p += sigma_gm^2, cov(p, b_p) = -sigma_gm^2
+        gm2 = [v[f"gm_sigma_{a}_m"] ** 2 for a in "xyz"]
+        P_restart = _reset(P, [*range(6), _N, _N + 1, _N + 2],
+                           [variances[k] + (gm2[k] if k < 3 else 0.0) for k in range(6)] + gm2)
+        for k in range(3):
+            P_restart[k, _N + k] = -gm2[k]
+            P_restart[_N + k, k] = -gm2[k]
+    else:
+        P_restart = _reset(P, range(6), variances)
+    P = ca.if_else(reset_fix, P_restart, P)
     run_fix = ca.if_else(reset_fix, 0.0, run_fix)
 
     # the output predictor (E23): the posterior at t_filter brought to the FMU's time t with the IMU's
@@ -509,14 +569,14 @@ def _update(t, v, magnetometer: bool = False):
     if magnetometer:
         events["outliers_mag"] = refused_mag
     counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in counted}
-    out = {name: xs_out[k] for k, name in enumerate(ESTIMATED_STATES)}
+    out = {name: xs_out[k] for k, name in enumerate(_ALL_STATES[:xs_out.shape[0]])}
     # the body rate at t_out: from the commands (E26), or the IMU's trend (E23) when they are not connected
     rates = ca.if_else(modelled, rate_start + h_out * alpha, gyro + change[0:3] * (h_out / v["dt"] + 0.5) - xs_out[9:12])
     out.update({"p": rates[0], "q": rates[1], "r": rates[2],
                 "nis_acc": ca.if_else(new_imu, nis_acc, 0.0), "nis_fix": ca.if_else(new_fix, nis_fix, 0.0),
                 "fix_used": ca.if_else(used, 1.0, 0.0), "t_estimate": t_out, "t_filter": t_filter,
                 "fix_age": ca.if_else(new_fix, tau, 0.0), **counts})
-    out.update({name: P_out[i, j] for name, i, j in covariance_names()})
+    out.update({name: P_out[i, j] for name, i, j in covariance_names(fix_bias)})
     if magnetometer:
         out["nis_mag"] = ca.if_else(new_mag, nis_mag, 0.0)
     discrete_next = {"heading_set": heading_set} if magnetometer else {}
@@ -530,9 +590,12 @@ def _update(t, v, magnetometer: bool = False):
 _NEVER = -1.0e300  # s: the time of the last fix before any: every fix's stamp is later
 
 
-def _initial(v, r, magnetometer: bool = False):
+def _initial(v, r, magnetometer: bool = False, fix_bias: bool = False):
     xs = ca.vertcat(*(v[f"{name}_0"] for name in ESTIMATED_STATES))
     sigma = [v[_P0[ESTIMATED_STATES[3 * (k // 3)]]] for k in range(_N - 1)] + [v["P0_wind_z"]]
+    if fix_bias:  # E27: the receiver's error is stationary from its start (E25): N(0, sigma_gm^2)
+        xs = ca.vertcat(xs, ca.DM.zeros(3))
+        sigma += [v[f"gm_sigma_{a}_m"] for a in "xyz"]
     return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
             "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ())},
             **{f"command_{i}": -1.0 for i in _ROTORS}, **({"heading_set": 0.0} if magnetometer else {}),
@@ -557,5 +620,17 @@ ESTIMATOR_MAG = FmuModel(
                 "three-axis magnetometer sampled with the IMU (E24), gated; z axis down",
     variables=_variables(magnetometer=True),
     sampled=Sampled(update=partial(_update, magnetometer=True), initial=partial(_initial, magnetometer=True),
+                    n_random=0, seed=None, sample_period="dt"),
+)
+
+# The same filter with the fix's position error correlated in time as three more states (E27): a model of its own,
+# so that a mission whose fix is white (motion capture, GNSS6) keeps its 18-state filter bit for bit
+ESTIMATOR_GM = FmuModel(
+    identifier="EstimatorGM",
+    description="the Estimator's extended Kalman filter (docs/estimation.md) with the fix's position error "
+                "correlated in time, a first-order Gauss-Markov process per axis estimated as three more states "
+                "(E27; the receiver GNSS6GM's E25); z axis down",
+    variables=_variables(magnetometer=False, fix_bias=True),
+    sampled=Sampled(update=partial(_update, fix_bias=True), initial=partial(_initial, fix_bias=True),
                     n_random=0, seed=None, sample_period="dt"),
 )

@@ -51,13 +51,13 @@ def body_field(attitude, field_world):
 def heading_from_field(roll, pitch, mag, field_world):
     """The heading ``psi`` (rad, in [-pi, pi]) at which the body-frame field
     ``mag`` is the world field ``field_world`` seen at ``roll`` and ``pitch``
-    (E27, docs/estimation.md "Heading"): E24 solved for the yaw. With
+    (E28, docs/estimation.md "Heading"): E24 solved for the yaw. With
     ``R = R_z(psi) R_y(theta) R_x(phi)`` (eq. 8), ``R_y R_x mag = R_z(psi)^T m_W``
     is the field in the vehicle's level frame, whose horizontal direction is
     the site's (``atan2(m_E, m_N)``, the declination) turned by ``-psi``::
 
         h   = R(phi, theta, 0) mag
-        psi = atan2(m_E, m_N) - atan2(h_y, h_x)                         (E27)
+        psi = atan2(m_E, m_N) - atan2(h_y, h_x)                         (E28)
 
     The tilt-compensated compass of every flight controller's start; numbers
     or CasADi expressions (the estimator's law)."""

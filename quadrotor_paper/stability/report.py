@@ -81,7 +81,8 @@ def _figure_bode_outer(a, loops: list, dt: float):
     """Bode plot of the three outer PD loops of one operating point (discrete)."""
     fig = plt.figure(figsize=(7, 6))
     ct.bode_plot(_bode_data(loops, dt), label=[f"outer {ax}" for ax in AXES],
-                 title=f"Outer PD loops broken at the PD output, {a.op.name} (discrete, h = {dt} s)")
+                 title=f"Outer PD loops broken at the PD output, {a.op.name} (discrete, h = {dt} s)",
+                 title_frame="figure")  # "axes" centres it by a tight_layout: a third of the figure's time
     return fig
 
 
@@ -91,7 +92,7 @@ def _figure_bode_inner(a, dt: float):
     fig = plt.figure(figsize=(7, 6))
     inner = [model.velocity_loop(ax) for ax in AXES] + [model.rotor_loop(1)]
     ct.bode_plot(_bode_data(inner, dt), label=[f"velocity {ax}" for ax in AXES] + ["rotor 1"],
-                 title=f"Inner loop broken at the measured velocity / rotor 1, {a.op.name}")
+                 title=f"Inner loop broken at the measured velocity / rotor 1, {a.op.name}", title_frame="figure")
     return fig
 
 
@@ -99,7 +100,7 @@ def _figure_nyquist_outer(a, loops: list):
     """Nyquist plot of the three outer PD loops of one operating point, near -1."""
     fig = plt.figure(figsize=(6.5, 6))
     ct.nyquist_plot(loops, label=[f"outer {ax}" for ax in AXES], max_curve_magnitude=4,
-                    title=f"Nyquist, outer loops, {a.op.name} (discrete)")
+                    title=f"Nyquist, outer loops, {a.op.name} (discrete)", title_frame="figure")
     ax_ = plt.gca()
     ax_.set_xlim(-2.0, 1.0)
     ax_.set_ylim(-2.5, 2.5)
@@ -267,31 +268,41 @@ def _figure_perturbation(study):
 _POINT_FIGURES = ("bode_outer", "bode_inner", "nyquist_outer", "pzmap")  # per operating point, in this order
 
 
-def point_figures(analyses, out_dir: Path) -> dict[str, Path]:
+def point_figures(analyses, out_dir: Path, names=None) -> dict[str, Path]:
     """Per operating point (``analyses``: the study's
     :class:`~quadrotor_paper.stability.analysis.OperatingPointAnalysis`) the
     outer-loop Bode, inner-loop Bode, Nyquist and pole-zero plots into
-    ``out_dir`` (created); returns name -> path."""
+    ``out_dir`` (created); returns name -> path. ``names``: only these
+    (default: every one)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     figures: dict[str, Path] = {}
     for a in analyses:
         name, dt = a.op.name, a.dt
-        loops = [a.models["discrete"].outer_loop(ax) for ax in AXES]
-        _save(_figure_bode_outer(a, loops, dt), out, f"bode_outer_{name}", figures)
-        _save(_figure_bode_inner(a, dt), out, f"bode_inner_{name}", figures)
-        _save(_figure_nyquist_outer(a, loops), out, f"nyquist_outer_{name}", figures)
-        _save(_figure_pzmap(a, dt), out, f"pzmap_{name}", figures)
+        wanted = [kind for kind in _POINT_FIGURES if names is None or f"{kind}_{name}" in names]
+        loops = [a.models["discrete"].outer_loop(ax) for ax in AXES] if wanted else []
+        draw = {"bode_outer": lambda: _figure_bode_outer(a, loops, dt), "bode_inner": lambda: _figure_bode_inner(a, dt),
+                "nyquist_outer": lambda: _figure_nyquist_outer(a, loops), "pzmap": lambda: _figure_pzmap(a, dt)}
+        for kind in wanted:
+            _save(draw[kind](), out, f"{kind}_{name}", figures)
     return figures
 
 
-def point_figures_aside(analyses, out_dir: Path):
+POINT_FIGURES_HERE = 2  # of the operating points' figures, drawn by the command itself (see point_figures_aside)
+
+
+def point_figures_aside(analyses, out_dir: Path, here: int = POINT_FIGURES_HERE):
     """Start :func:`point_figures` in a second process (forked: it inherits
-    the analyses, nothing is pickled) and return a function that waits for
-    it and returns name -> path, as :func:`point_figures` would. The study
-    goes on meanwhile: on two cores the operating points' figures (12 of the
-    default's 15, about a third of its time) cost no wall time. Where a
-    process cannot be forked, they are drawn here and now."""
+    the analyses, nothing is pickled) and return a function that draws the
+    last ``here`` of them in this process, waits for the second and returns
+    name -> path, as :func:`point_figures` would. The study goes on
+    meanwhile and the command calls that function once its own figures are
+    drawn (:func:`make_figures`): on two cores the 12 figures of the
+    operating points cost no wall time. ``here`` balances the two
+    processes: the second has the 12 figures (about 1 s of CPU each), the
+    command the rest of the study and 3 figures, about 2 s less, hence 2
+    of the 12 drawn here. Where a process cannot be forked, they are all
+    drawn here and now."""
     import multiprocessing
     import sys
 
@@ -300,13 +311,16 @@ def point_figures_aside(analyses, out_dir: Path):
         figures = point_figures(analyses, out)
         return lambda: figures
     names = {f"{kind}_{a.op.name}": out / f"{kind}_{a.op.name}.png" for a in analyses for kind in _POINT_FIGURES}
+    split = max(len(names) - here, 0)
+    there, mine = list(names)[:split], list(names)[split:]
     sys.stdout.flush()  # the child would write what is still buffered a second time
     sys.stderr.flush()
-    child = multiprocessing.get_context("fork").Process(target=point_figures, args=(analyses, out),
+    child = multiprocessing.get_context("fork").Process(target=point_figures, args=(analyses, out, there),
                                                         name="stability figures")
     child.start()
 
     def drawn() -> dict[str, Path]:
+        point_figures(analyses, out, mine)
         child.join()
         if child.exitcode != 0:
             raise RuntimeError(f"drawing the operating points' figures failed (exit code {child.exitcode}; "
@@ -316,17 +330,18 @@ def point_figures_aside(analyses, out_dir: Path):
     return drawn
 
 
-def make_figures(study, out_dir: Path, drawn: dict[str, Path] | None = None) -> dict[str, Path]:
+def make_figures(study, out_dir: Path, drawn=None) -> dict[str, Path]:
     """Write every figure into ``out_dir``; returns name -> path.
 
     Per operating point the outer-loop Bode, inner-loop Bode, Nyquist and
-    pole-zero plots (:func:`point_figures`; ``drawn``: those already drawn,
-    name -> path, e.g. by :func:`point_figures_aside`); then the gain sweep
-    and, when the study ran them, the step checks, the gain checks and the
+    pole-zero plots (:func:`point_figures`; ``drawn``: a function returning
+    them, name -> path, called after the others are drawn, as
+    :func:`point_figures_aside` gives it); then the gain sweep and, when
+    the study ran them, the step checks, the gain checks and the
     finite-time runs.
     """
     out = Path(out_dir)
-    figures = dict(drawn) if drawn is not None else point_figures(study.analyses, out)
+    figures = {} if drawn is not None else point_figures(study.analyses, out)
     _save(_figure_gain_sweep(study), out, "gain_sweep", figures)
     if study.step_checks:
         _save(_figure_steps(study), out, "steps_linear_vs_nonlinear", figures)
@@ -337,7 +352,7 @@ def make_figures(study, out_dir: Path, drawn: dict[str, Path] | None = None) -> 
     if any(f.points for f in study.along_flight):
         _save(_figure_along_flight(study), out, "along_flight", figures)
         _save(_figure_perturbation(study), out, "perturbation_check", figures)
-    return figures
+    return figures if drawn is None else {**drawn(), **figures}
 
 
 # ---- markdown --------------------------------------------------------------------------
@@ -610,10 +625,10 @@ def _markdown(study, figures: dict[str, Path]) -> str:
     return "\n".join(md + _section_figures(figures))
 
 
-def write_report(study, out_dir: str | Path, drawn: dict[str, Path] | None = None) -> Path:
+def write_report(study, out_dir: str | Path, drawn=None) -> Path:
     """Write the figures and ``stability.md`` into ``out_dir`` (created);
     sets ``study.figures`` and ``study.report_path``; returns the path.
-    ``drawn``: the operating points' figures if already drawn (:func:`make_figures`)."""
+    ``drawn``: what returns the operating points' figures once the others are drawn (:func:`make_figures`)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     study.figures = make_figures(study, out, drawn)

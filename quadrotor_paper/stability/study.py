@@ -246,5 +246,5 @@ def run_stability_analysis(out_dir: str | Path = "results/stability",
     aside = []
     analysed = (lambda analyses: aside.append(point_figures_aside(analyses, out_dir))) if workers > 1 else None
     study = stability_study(settings, workers=workers, show_progress=show_progress, analysed=analysed)
-    write_report(study, out_dir, aside[0]() if aside else None)
+    write_report(study, out_dir, aside[0] if aside else None)
     return study

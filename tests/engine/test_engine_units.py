@@ -70,6 +70,41 @@ def test_rad_is_a_base_unit_and_dimensionless_is_1():
     assert conversion("rpm", "rad/s")[0] == pytest.approx(2 * np.pi / 60, rel=1e-15)
 
 
+@pytest.mark.parametrize("name", ["m", "s", "kg", "rad", "A", "K", "mol", "cd", "m/s", "rad/s", "m/s2", "m/s^2",
+                                  "kg.m2", "kg*m^2/s2", "N", "1/s", "s-1", "m.s-2", "rad/s2", "kg.m2.s-2"])
+def test_a_name_of_base_units_is_read_without_pint_as_pint_reads_it(name):
+    """Names written with the FMI base units alone are read from the name
+    (no pint registry to build): the same Unit, factor and offset included,
+    as pint's reading; other names (N here) go to pint."""
+    from cosim import units
+
+    assert units.parse(name) == Unit(name, *_by_pint(name))
+    plain = units._base_units_only(name)
+    assert plain is None if name == "N" else plain == units.parse(name)
+
+
+def _by_pint(name):
+    from cosim import units
+
+    units.parse.cache_clear()
+    real = units._base_units_only
+    try:
+        units._base_units_only = lambda _: None
+        u = units.parse(name)
+    finally:
+        units._base_units_only = real
+        units.parse.cache_clear()
+    return u.exponents, u.factor, u.offset
+
+
+def test_names_that_only_look_like_base_units_go_to_pint():
+    from cosim.units import _base_units_only
+
+    for name in ("ms", "Hz", "km/h", "m/s/s", "kg/(m.s)", "degC", "mm", "furlongs_per_blob", "m s"):
+        assert _base_units_only(name) is None, name
+    assert parse("ms").exponents == parse("s").exponents and parse("ms").factor == pytest.approx(1e-3)
+
+
 def test_incompatible_units_name_both():
     with pytest.raises(ConnectionCheckError, match=re.escape("units m and s are not one quantity")):
         conversion("m", "s")

@@ -12,7 +12,7 @@ import pytest
 from tests.fmu_validation import validate_fmu
 
 from fmu_models.export.build import cached_fmu
-from fmu_models.models.estimator import ESTIMATOR, ESTIMATOR_MAG, ESTIMATED_STATES
+from fmu_models.models.estimator import ESTIMATOR, ESTIMATOR_GM, ESTIMATOR_MAG, ESTIMATED_STATES
 from fmu_models.models.imu import IMU
 from fmu_models.models.sensors import GNSS_6
 
@@ -32,7 +32,7 @@ def _outputs(model, rows, names):
     return rows[:, [index.index(n) for n in names]]
 
 
-@pytest.mark.parametrize("model", [IMU, GNSS_6, ESTIMATOR, ESTIMATOR_MAG], ids=lambda m: m.identifier)
+@pytest.mark.parametrize("model", [IMU, GNSS_6, ESTIMATOR, ESTIMATOR_MAG, ESTIMATOR_GM], ids=lambda m: m.identifier)
 def test_builds_and_validates(model):
     assert validate_fmu(str(cached_fmu(model, 2))) == []
 
@@ -152,21 +152,23 @@ def test_estimator_on_a_straight_line_finds_the_known_answer():
     assert last["outliers_fix"] == last["resets_fix"] == 0.0
 
 
-def test_estimator_fmu_is_its_casadi_function_step_for_step():
+@pytest.mark.parametrize("model, values", [(ESTIMATOR, {}), (ESTIMATOR_GM, {"gm_sigma_x_m": 0.02, "gm_sigma_z_m": 0.03})],
+                         ids=lambda m: getattr(m, "identifier", ""))
+def test_estimator_fmu_is_its_casadi_function_step_for_step(model, values):
     """The FMU's C (generated from CasADi) and CasADi's own evaluation of
     ``dstep`` agree bit for bit on every output and discrete state over 300
-    noisy steps."""
+    noisy steps (EstimatorGM: with the fix's correlated error, E27)."""
     rng = np.random.default_rng(5)
     _, _, inputs = _straight_line(300)
-    inputs = np.array(inputs) + rng.normal(scale=0.01, size=(300, len(ESTIMATOR.inputs)))
-    names = [v.name for v in ESTIMATOR.inputs]
+    inputs = np.array(inputs) + rng.normal(scale=0.01, size=(300, len(model.inputs)))
+    names = [v.name for v in model.inputs]
     inputs[:, names.index("fresh")] = (np.arange(300) % 10 == 0)
     inputs[:, names.index("t_imu")] = inputs[:, names.index("t_fix")] = np.arange(300) * DT
-    parameters = ESTIMATOR.parameter_values(z_0=-10.0)
-    fmu = Sensor(ESTIMATOR, parameters={"z_0": -10.0})
-    f = ESTIMATOR.functions
+    parameters = model.parameter_values(z_0=-10.0, **values)
+    fmu = Sensor(model, parameters={"z_0": -10.0, **values})
+    f = model.functions
     z = np.array(f["dinit"](parameters, [])).ravel()
-    discrete = [fmu.vr[v.name] for v in ESTIMATOR.discrete_states]
+    discrete = [fmu.vr[v.name] for v in model.discrete_states]
     for n, u in enumerate(inputs):
         y_fmu = fmu.sample(u, read_before=False)
         y, z = (np.array(a).ravel() for a in f["dstep"](n * DT, u, parameters, z))

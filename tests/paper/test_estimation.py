@@ -23,7 +23,13 @@ def test_nees_is_the_error_weighted_by_the_inverse_covariance():
     e = np.array([[1.0, 2.0], [0.0, 0.0], [3.0, -1.0]])
     expected = [float(x @ np.linalg.inv(P) @ x) for x in e]
     np.testing.assert_allclose(nees(e, np.stack([P] * 3)), expected, rtol=1e-14)
-    assert np.isnan(nees(e[:1], np.zeros((1, 2, 2)))[0])  # singular: NaN
+    assert np.isnan(nees(e[:1], np.ones((1, 2, 2)))[0])  # singular: NaN
+    # a component held, not estimated (variance 0: no vertical wind state): left out when its error is 0
+    held = np.zeros((3, 3, 3))
+    held[:, :2, :2] = P
+    np.testing.assert_allclose(nees(np.c_[e, np.zeros(3)], held), expected, rtol=1e-14)
+    assert nees(np.array([[1.0, 2.0, 0.1]]), held[:1])[0] == np.inf  # certain of a wrong value
+    assert np.isnan(nees(e[:1], np.zeros((1, 2, 2)))[0])  # nothing estimated
     # a consistent filter's NEES averages its degrees of freedom
     rng = np.random.default_rng(0)
     L = np.linalg.cholesky(P)

@@ -198,9 +198,10 @@ def _rmse(result):
 def test_circles_estimated_in_the_jacobi_ordering_flies_near_the_feedthrough_one():
     """The exchange ordering (libcosim's; a step of latency per hop of plant ->
     IMU -> estimator -> controller) against our master's default: tracking
-    within 3 % (measured -0.6 % on seed 0: docs/estimation.md, "Timing"; 8 %
-    before the measurements were fused at their own time, 3.1 % before the
-    output predictor's rates came from the command, E26), and the estimate,
+    within 3 % (measured -0.7 % on seed 0, -0.6 % with the white receiver:
+    docs/ssp.md; 8 % before the measurements were fused at their own time,
+    3.1 % before the output predictor's rates came from the command, E26),
+    and the estimate,
     judged against the truth at the time it describes, consistent."""
     from quadrotor_paper.experiments import estimation_metrics
 
@@ -214,7 +215,8 @@ def test_circles_estimated_in_the_jacobi_ordering_flies_near_the_feedthrough_one
     ratio = _rmse(results["exchange"][1]) / _rmse(results["feedthrough"][1])
     assert abs(ratio - 1.0) < 0.03, ratio
     metrics = estimation_metrics(*results["exchange"])
-    assert 2.0 < metrics["nees_position"] < 4.2 and metrics["est_rmse_position_m"] < 0.02
+    # the receiver's correlated error (E25, about 2 cm in all) is mostly not separable from the position
+    assert 2.0 < metrics["nees_position"] < 4.2 and metrics["est_rmse_position_m"] < 0.03
     # 655 before the stamps (the estimate judged against the truth 2 steps later), 4.9 before E26
     assert metrics["nees_attitude"] < 4.2 and metrics["nees_velocity"] < 4.2
 
@@ -224,9 +226,9 @@ def test_fmpy_simulate_ssp_flies_circles_estimated_without_chasing_its_first_fix
     receiver's first fix samples the vehicle at z = 0, 15 m from the start.
     The gate refuses it (counted at once), so the first 5 s fly as libcosim's
     Jacobi run does (1.4-1.6 m RMS before, as the controller chased it), and
-    the mission within 3 % of our master's (measured +0.8 %: 0.2281 m against
-    0.2262 m; +7.0 % before the output predictor's rates came from the
-    command, E26, docs/ssp.md)."""
+    the mission within 3 % of our master's (measured +1.2 %: 0.2341 m against
+    0.2313 m; +0.8 % with the white receiver; +7.0 % before the output
+    predictor's rates came from the command, E26, docs/ssp.md)."""
     from fmpy.ssp.simulation import simulate_ssp
 
     from cosim.ssp import load_ssp

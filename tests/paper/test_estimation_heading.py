@@ -1,4 +1,4 @@
-"""The heading (issue 29, docs/estimation.md "Heading", E24, E27): the
+"""The heading (issue 29, docs/estimation.md "Heading", E24, E28): the
 magnetometer's gate quantile for 3 degrees of freedom, a heading error
 corrected by the magnetometer (and not without it), a disturbed field
 refused and counted, the heading started from the first sample the gate
@@ -59,16 +59,16 @@ def _hover(n, fresh_mag, disturbed=(), missing=(), psi=PSI, offset=(0.0, 0.0, 0.
 
 @pytest.mark.parametrize("attitude", [(0.1, -0.2, 2.5), (0.0, 0.0, -3.0), (-0.3, 0.25, 0.15)])
 def test_the_heading_from_the_field_is_the_one_that_made_it(attitude):
-    """E27 inverts E24: the field seen at (phi, theta, psi) gives psi back."""
+    """E28 inverts E24: the field seen at (phi, theta, psi) gives psi back."""
     field = body_field(attitude, FIELD)
     assert float(heading_from_field(attitude[0], attitude[1], field, FIELD)) == pytest.approx(attitude[2], abs=1e-12)
 
 
 def test_the_heading_starts_from_the_first_sample_the_gate_accepts():
     """A heading 2.5 rad from psi_0 with a start sure to 0.05 rad: from the
-    first sample (E27) the heading is the field's; the first sample, 0 as in
+    first sample (E28) the heading is the field's; the first sample, 0 as in
     fmpy's start, fails the gate at any heading (its size is not the field's):
-    refused, counted, and the heading set by the second. Without E27 every
+    refused, counted, and the heading set by the second. Without E28 every
     sample is refused, the heading stays at psi_0."""
     start = {"P0_attitude": 0.05, "sigma_mag": 0.6e-6}
     rows = _run(_hover(30, 1.0, psi=2.5, zero=(0,)), **start)
@@ -96,7 +96,7 @@ def test_the_calibrated_offset_is_taken_off():
 
 def test_a_heading_error_is_corrected_by_the_magnetometer():
     start = {"P0_attitude": 0.2, "sigma_mag": 0.6e-6,  # the start knows it does not know its heading
-             "heading_from_mag": 0}  # and is not told it from the first sample (E27): the correction alone
+             "heading_from_mag": 0}  # and is not told it from the first sample (E28): the correction alone
     with_mag = _run(_hover(500, 1.0), **start)
     without = _run(_hover(500, 0.0), **start)  # fresh_mag = 0: the Estimator's filter (no magnetometer)
     assert abs(_col(with_mag, "psi")[-1] - PSI) < 1e-3

@@ -279,6 +279,29 @@ def test_batched_frequency_response_is_python_controls_to_the_bit(ops):
     assert np.array_equal(frequency_response(tf, w), tf(np.exp(1j * w * H), squeeze=False))
 
 
+def test_margins_with_the_spline_evaluated_at_once_are_python_controls_to_the_bit(ops, monkeypatch):
+    """``loop_margins`` evaluates python-control's interpolating spline at
+    every frequency in one ``splev`` call: its margins and crossovers are
+    those of python-control's own per-frequency loop to the bit, in every
+    time base and on loops with several crossovers (rotor, velocity); and
+    python-control's ``FRD.eval`` is its own again afterwards."""
+    import contextlib
+
+    from control import frdata
+
+    from quadrotor_paper.stability import analysis
+
+    own = frdata.FRD.eval
+    loops = [L for dt, delay in ((None, 0), (H, 0), (H, 1))
+             for model in [LoopModel(ops["forward_wind"], dt, delay)]
+             for L in (model.outer_loop("y"), model.velocity_loop("z"), model.rotor_loop(3))]
+    at_once = np.array([astuple(loop_margins(L))[1:] for L in loops])
+    assert frdata.FRD.eval is own
+    monkeypatch.setattr(analysis, "_spline_evaluated_at_once", contextlib.nullcontext)
+    one_by_one = np.array([astuple(loop_margins(L))[1:] for L in loops])
+    np.testing.assert_array_equal(at_once, one_by_one)  # NaN where python-control finds no crossover
+
+
 def test_the_study_takes_every_loop_in_the_sampled_loop_and_the_outer_loops_elsewhere(ops):
     res = analyze(ops["hover"], H, every_loop=("discrete",))
     assert [m.loop for m in res.margins["discrete"]] == list(res.models["discrete"].loops())
