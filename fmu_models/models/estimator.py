@@ -1,7 +1,7 @@
 """A state estimator as a sampled-data FMU: an extended Kalman filter written
 in CasADi that predicts with the IMU and corrects with the drag-model
 accelerometer and with GNSS or motion capture, each measurement gated and
-fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E26;
+fused at the time it was taken (docs/estimation.md, eqs. E5-E14 and E19-E28;
 the numbers below are those equations').
 
 State (18): position ``x y z`` and velocity ``u v w`` (world frame, z down,
@@ -51,7 +51,7 @@ from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter
 from .estimator_outputs import COUNTS, COVARIANCE_BLOCKS, MAGNETOMETER_COUNTS, MAGNETOMETER_MODEL, covariance_output
 from .imu import AXES, IMU_DEFAULTS
-from .magnetometer import MAGNETOMETER_DEFAULTS, body_field
+from .magnetometer import MAGNETOMETER_DEFAULTS, body_field, heading_from_field
 from .quadrotor import (DEFAULTS, aerodynamic_drag, body_angular_acceleration, euler_rate_matrix, rotation_matrix,
                         rotor_clip)
 from .rotor import thrust_and_torques
@@ -315,6 +315,15 @@ def _variables(magnetometer: bool, fix_bias: bool = False):
             *(discrete(_upper(i, j), "1", "posterior covariance entry at the previous step")
               for j in range(_N, _N + 3) for i in range(j + 1)),
         ]
+    if magnetometer:  # the offset and the first heading (E28), last so that the variables above keep their references
+        variables += [
+        *(parameter(f"mag_bias_{i}", "T", f"hard-iron offset along {i}_B the magnetometer's calibration found: "
+                    "subtracted from each sample (its residual belongs in sigma_mag)", 0.0) for i in AXES),
+        parameter("heading_from_mag", "1", "1: the heading starts from the first magnetometer sample the gate "
+                  "accepts at that heading (E28, psi_0 then unused); 0: from psi_0", 1.0, min=0.0, max=1.0,
+                  integer=True),
+        discrete("heading_set", "1", "1 once a magnetometer sample has set the heading (E28)"),
+        ]
     return tuple(variables)
 
 
@@ -475,13 +484,22 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
     # gated; no restart after refusals: a refused field is a disturbed one (steel, currents), not a wrong
     # heading, and the heading coasts on the gyro until the field is clean again
     if magnetometer:
-        mag = ca.vertcat(*(v[f"mag_{i}"] for i in AXES))
+        # less the hard-iron offset the calibration found (a parameter; its residual is in sigma_mag)
+        mag = ca.vertcat(*(v[f"mag_{i}"] - v[f"mag_bias_{i}"] for i in AXES))
         r_mag = v["sigma_mag"] ** 2
-        corrected = _sequential(xs, P, lambda s: magnetometer_measurement(s, v), mag, [r_mag] * 3)
-        nis_mag = corrected[2]
         new_mag = ca.logic_and(new_imu, v["fresh_mag"] > 0.5)
+        # E28: until a sample has set it, the heading is taken from the sample (the tilt-compensated compass) and
+        # the sample fused at that heading, through the same gate: its heading-free part (the field's size and
+        # dip) is then all the NIS sees, and a sample failing it sets nothing and waits for the next
+        first = ca.logic_and(new_mag, ca.logic_and(v["heading_from_mag"] > 0.5, v["heading_set"] < 0.5))
+        heading = heading_from_field(xs[6], xs[7], mag, ca.vertcat(v["field_north"], v["field_east"], v["field_down"]))
+        xs_mag = ca.if_else(first, ca.vertcat(xs[0:8], heading, xs[9:]), xs)
+        corrected = _sequential(xs_mag, P, lambda s: magnetometer_measurement(s, v), mag, [r_mag] * 3)
+        nis_mag = corrected[2]
         refused_mag = ca.logic_and(new_mag, nis_mag > chi2_quantile_odd(3, level))
-        xs, P = _gated(ca.logic_and(new_mag, ca.logic_not(refused_mag)), corrected[:2], (xs, P))
+        accepted_mag = ca.logic_and(new_mag, ca.logic_not(refused_mag))
+        xs, P = _gated(accepted_mag, corrected[:2], (xs, P))
+        heading_set = ca.if_else(ca.logic_and(first, accepted_mag), 1.0, v["heading_set"])
 
     # E10: the fix, when fresh and newer than the last one seen, fused at its own time t_fix: compared
     # with the state retrodicted over tau = t_filter - t_fix through the process model (E20), gated
@@ -561,7 +579,8 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
     out.update({name: P_out[i, j] for name, i, j in covariance_names(fix_bias)})
     if magnetometer:
         out["nis_mag"] = ca.if_else(new_mag, nis_mag, 0.0)
-    return out, {"started": 1.0, "t_posterior": t_filter, "t_last_fix": ca.if_else(new_fix, t_fix, v["t_last_fix"]),
+    discrete_next = {"heading_set": heading_set} if magnetometer else {}
+    return out, {**discrete_next, "started": 1.0, "t_posterior": t_filter, "t_last_fix": ca.if_else(new_fix, t_fix, v["t_last_fix"]),
                  "refusal_run_fix": run_fix, "refusal_run_acc": run_acc,
                  **{f"previous_{name}": ca.if_else(new_imu, v[name], v[f"previous_{name}"]) for name in _IMU}, **{f"total_{c}": n for c, n in counts.items()},
                  **{f"command_{i}": v[f"Omega_{i}"] for i in _ROTORS},
@@ -579,7 +598,7 @@ def _initial(v, r, magnetometer: bool = False, fix_bias: bool = False):
         sigma += [v[f"gm_sigma_{a}_m"] for a in "xyz"]
     return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
             "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ())},
-            **{f"command_{i}": -1.0 for i in _ROTORS},
+            **{f"command_{i}": -1.0 for i in _ROTORS}, **({"heading_set": 0.0} if magnetometer else {}),
             **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
 
 

@@ -30,7 +30,7 @@ from .imu import AXES
 from .quadrotor import rotation_matrix
 from .sensors import DT_DEFAULT, gaussian
 
-__all__ = ["MAGNETOMETER", "MAGNETOMETER_DEFAULTS", "body_field"]
+__all__ = ["MAGNETOMETER", "MAGNETOMETER_DEFAULTS", "body_field", "heading_from_field"]
 
 # docs/sensors.md, "Magnetometer": BMM150 noise (regular preset); a WMM mid-latitude field (NED, tesla)
 MAGNETOMETER_DEFAULTS = {
@@ -46,6 +46,24 @@ def body_field(attitude, field_world):
     ``R(phi, theta, psi)^T m_W``; numbers or CasADi expressions (the FMU's and
     the estimator's law)."""
     return rotation_matrix(attitude[0], attitude[1], attitude[2]).T @ field_world
+
+
+def heading_from_field(roll, pitch, mag, field_world):
+    """The heading ``psi`` (rad, in [-pi, pi]) at which the body-frame field
+    ``mag`` is the world field ``field_world`` seen at ``roll`` and ``pitch``
+    (E28, docs/estimation.md "Heading"): E24 solved for the yaw. With
+    ``R = R_z(psi) R_y(theta) R_x(phi)`` (eq. 8), ``R_y R_x mag = R_z(psi)^T m_W``
+    is the field in the vehicle's level frame, whose horizontal direction is
+    the site's (``atan2(m_E, m_N)``, the declination) turned by ``-psi``::
+
+        h   = R(phi, theta, 0) mag
+        psi = atan2(m_E, m_N) - atan2(h_y, h_x)                         (E28)
+
+    The tilt-compensated compass of every flight controller's start; numbers
+    or CasADi expressions (the estimator's law)."""
+    h = rotation_matrix(roll, pitch, 0.0) @ mag
+    psi = ca.atan2(field_world[1], field_world[0]) - ca.atan2(h[1], h[0])
+    return ca.atan2(ca.sin(psi), ca.cos(psi))
 
 
 _VARIABLES = (
