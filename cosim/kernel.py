@@ -28,8 +28,10 @@ import os
 import shutil
 import subprocess
 import tempfile
+from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -203,22 +205,50 @@ def compiled_library(source: bytes, stem: str, flags: tuple[str, ...] = (), incl
         return None
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        # compile beside the target and rename: parallel processes never load half a library
-        fd, tmp = tempfile.mkstemp(suffix=".so.part", dir=target.parent)
-        os.close(fd)
-        with tempfile.TemporaryDirectory() as folder:
-            for name, text in (include or {}).items():
-                Path(folder, name).write_bytes(text)
-            src = Path(folder, f"{stem}.c")
-            src.write_bytes(source)
-            result = subprocess.run([cc, *flags, "-shared", "-fPIC", f"-I{folder}", "-o", tmp, str(src)],
-                                    capture_output=True, text=True)
-        if result.returncode != 0:
-            os.unlink(tmp)
-            raise RuntimeError(f"compiling {stem}.c with {cc} failed: {result.stderr.strip()}")
-        os.replace(tmp, target)
+        with _held(target.with_suffix(".lock")):
+            if target.exists():  # compiled by the process that held the lock before us
+                return target
+            return _compile_library(cc, source, stem, flags, include, target)
     except OSError:
         return None
+
+
+@contextmanager
+def _held(lock: Path) -> Iterator[None]:
+    """One compiler per library at a time across processes (POSIX ``flock``):
+    two test processes or study workers asking for the same library at once
+    (the calibration's segments take 5-20 s of CPU each) compile it once, the
+    other loads what the first compiled. Without POSIX locks both compile
+    (each library still renamed into place whole)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    with open(lock, "w") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(held, fcntl.LOCK_UN)
+
+
+def _compile_library(cc: str, source: bytes, stem: str, flags: tuple[str, ...], include: dict[str, bytes] | None,
+                     target: Path) -> Path:
+    # compile beside the target and rename: parallel processes never load half a library
+    fd, tmp = tempfile.mkstemp(suffix=".so.part", dir=target.parent)
+    os.close(fd)
+    with tempfile.TemporaryDirectory() as folder:
+        for name, text in (include or {}).items():
+            Path(folder, name).write_bytes(text)
+        src = Path(folder, f"{stem}.c")
+        src.write_bytes(source)
+        result = subprocess.run([cc, *flags, "-shared", "-fPIC", f"-I{folder}", "-o", tmp, str(src)],
+                                capture_output=True, text=True)
+    if result.returncode != 0:
+        os.unlink(tmp)
+        raise RuntimeError(f"compiling {stem}.c with {cc} failed: {result.stderr.strip()}")
+    os.replace(tmp, target)
     return target
 
 

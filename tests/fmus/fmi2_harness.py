@@ -2,7 +2,9 @@
 messages, value references by name, and stepping by a step counter."""
 from __future__ import annotations
 
+import os
 import shutil
+from functools import lru_cache
 
 import numpy as np
 from fmpy import extract, read_model_description
@@ -23,6 +25,22 @@ def logged(value: float) -> str:
     return text
 
 
+def model_description(fmu_path):
+    """fmpy's ``read_model_description`` of ``fmu_path`` (an FMU or its extracted folder), parsed once
+    while the file is unchanged: a test of every parameter of every model instantiates an FMU several
+    times a parameter, and parsing the XML took more than half of its time (the EKFs' descriptions are
+    large). The object is shared: read it, never change it."""
+    path = os.fspath(fmu_path)
+    xml = os.path.join(path, "modelDescription.xml") if os.path.isdir(path) else path
+    stat = os.stat(xml)
+    return _parsed(os.path.realpath(path), stat.st_mtime_ns, stat.st_size, stat.st_ino)
+
+
+@lru_cache(maxsize=256)
+def _parsed(path, mtime_ns, size, inode):
+    return read_model_description(path)
+
+
 class LogCollector:
     """Receives the log messages of one FMI 2.0 instance (see
     :func:`cosim.fmu_component.fmi2_callbacks`, which holds ``receive`` weakly: keep the
@@ -40,7 +58,7 @@ class Fmi2Instance:
     """One instantiated, initialized FMI 2.0 instance (CS by default)."""
 
     def __init__(self, fmu_path, parameters=None, model_exchange=False, unzip_dir=None, initialize=True):
-        self.md = read_model_description(fmu_path)
+        self.md = model_description(fmu_path)
         self._own_dir = unzip_dir is None
         self.unzip_dir = unzip_dir or extract(fmu_path)
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}

@@ -17,7 +17,7 @@ from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel
 from fmu_models.catalog import MODELS
 from fmu_models.models.quadrotor import DEFAULTS, QUADROTOR, ROTOR_STATE_NAMES, STATE_NAMES, hover_rotor_speed
-from fmi2_harness import STATES, Fmi2Instance, LogCollector, logged
+from fmi2_harness import STATES, Fmi2Instance, LogCollector, logged, model_description
 
 HOVER = hover_rotor_speed()
 ROTORS_AT_HOVER = {f"Omega_{i}": HOVER for i in range(1, 5)}
@@ -475,7 +475,7 @@ def unzipped_fmu2(tmp_path_factory):
 
 def _declared_range(directory, name):
     """(min, max) of parameter ``name`` in the modelDescription; +-inf where none is declared."""
-    variable = next(v for v in read_model_description(directory).modelVariables if v.name == name)
+    variable = next(v for v in model_description(directory).modelVariables if v.name == name)
     low = -math.inf if variable.min is None else float(variable.min)
     high = math.inf if variable.max is None else float(variable.max)
     return low, high

@@ -93,8 +93,10 @@ def test_a_parameter_the_flight_does_not_excite_is_not_identifiable(tmp_path, fl
 
 
 def test_an_instance_of_a_scenario_driven_by_the_log(tmp_path, flight_log, capsys):
-    fix = [a for k, v in HIDDEN.items() if k != "Ix" for a in ("--fix", f"{k}={v}")]
-    code, out = _calibrate(tmp_path, flight_log, "--scenario", "circles", "--fit", "Ix,wind_x,wind_y", *fix)
+    # four fitted names, as the CasADi-and-FMU test's: the same compiled segment libraries (the
+    # directions' count is their key; a fresh clone compiles each once, 5-20 s of CPU)
+    fix = [a for k, v in HIDDEN.items() if k not in ("b", "Ix") for a in ("--fix", f"{k}={v}")]
+    code, out = _calibrate(tmp_path, flight_log, "--scenario", "circles", "--fit", "b,Ix,wind_x,wind_y", *fix)
     assert code == 0, capsys.readouterr().err
     doc = json.loads((out / "calibration.json").read_text())
     assert doc["instance"] == "Quadrotor"
@@ -113,8 +115,10 @@ def test_the_calibrated_parameter_set_flies_in_a_run_and_in_an_exported_archive(
     from cosim.scenario import load_scenario
     from cosim.ssp import load_ssp
 
-    fix = [a for k, v in HIDDEN.items() if k != "Ix" for a in ("--fix", f"{k}={v}")]
-    code, out = _calibrate(tmp_path, flight_log, "--fmu", "Quadrotor", "--fit", "Ix,wind_x,wind_y", *fix)
+    # four fitted names (the segment libraries of the tests above); b stays fixed, to check it is carried
+    fix = [a for k, v in HIDDEN.items() if k not in ("Ix", "tau_m") for a in ("--fix", f"{k}={v}")]
+    code, out = _calibrate(tmp_path, flight_log, "--fmu", "Quadrotor", "--fit", "Ix,tau_m,wind_x,wind_y", *fix,
+                           "--guess", "tau_m=0.02")
     assert code == 0, capsys.readouterr().err
     ssv = out / "parameters.ssv"
     scenario = load_scenario("circles", {"fmus.Quadrotor.parameter_set": str(ssv)})
