@@ -46,18 +46,24 @@ def _line(n, imu_lag=0, fix_lag=0):
     return rows
 
 
-def _run(inputs, model=ESTIMATOR, **parameters):
-    """An estimator model's outputs (default the Estimator's), row per step,
-    from its CasADi step function (the FMU's, bit for bit:
-    tests/fmus/test_estimation_fmu.py)."""
+def outputs(model, inputs, parameters: dict) -> np.ndarray:
+    """A sampled model's outputs, row per step of ``DT``, from its CasADi
+    step function (the FMU's, bit for bit: tests/fmus/test_estimation_fmu.py),
+    with ``parameters`` over its defaults."""
     f = model.functions
-    p = model.parameter_values(**{"z_0": -10.0, "P0_velocity": 3.0, **FIX_SIGMA, **parameters})
+    p = model.parameter_values(**parameters)
     z = np.array(f["dinit"](p, [])).ravel()
     out = []
     for n, u in enumerate(inputs):
         y, z = (np.array(a).ravel() for a in f["dstep"](n * DT, u, p, z))
         out.append(y)
     return np.array(out)
+
+
+def _run(inputs, model=ESTIMATOR, **parameters):
+    """An estimator model's outputs (default the Estimator's), row per step,
+    with this file's fix noise and start."""
+    return outputs(model, inputs, {"z_0": -10.0, "P0_velocity": 3.0, **FIX_SIGMA, **parameters})
 
 
 def _col(rows, name):

@@ -15,6 +15,8 @@ import numpy as np
 
 from fmu_models.models.estimator import ESTIMATOR, ESTIMATOR_GM, FIX_BIAS_STATES
 
+from test_estimation_gating import outputs
+
 DT = 0.01
 G = 9.81
 WHITE = {**{f"sigma_{a}_m": 0.01 for a in "xyz"}, **{f"sigma_{a}_m": 0.05 for a in "uvw"}}
@@ -33,14 +35,7 @@ def _rows(model, n, x_fix=lambda k: 0.0, every=10):
 
 def _run(model, inputs, **parameters):
     """The model's outputs, row per step, from its CasADi step function (the FMU's)."""
-    f = model.functions
-    p = model.parameter_values(**{"z_0": -10.0, **WHITE, **parameters})
-    z = np.array(f["dinit"](p, [])).ravel()
-    out = []
-    for n, u in enumerate(inputs):
-        y, z = (np.array(a).ravel() for a in f["dstep"](n * DT, u, p, z))
-        out.append(y)
-    return np.array(out)
+    return outputs(model, inputs, {"z_0": -10.0, **WHITE, **parameters})
 
 
 def _col(rows, name, model=ESTIMATOR_GM):
