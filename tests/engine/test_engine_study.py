@@ -346,6 +346,17 @@ def test_an_unwritable_or_file_out_is_refused_before_any_run(folder, tmp_path):
 
 # ---- Dask ---------------------------------------------------------------------------------------
 
+def _same_rows(a: Path, b: Path) -> None:
+    """The studies written into folders ``a`` and ``b`` have the same runs,
+    each with the same row to the bit but for its wall time."""
+    ra = {r["run"]: r for r in read_runs(a / "runs.csv")}
+    rb = {r["run"]: r for r in read_runs(b / "runs.csv")}
+    assert ra.keys() == rb.keys()
+    for k in ra:
+        assert {c: v for c, v in ra[k].items() if c != "wall_time_s"} == {c: v for c, v in rb[k].items()
+                                                                           if c != "wall_time_s"}
+
+
 def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, monkeypatch):
     """The engine's Dask path on toy models: the workers (separate processes)
     find the toy components by their factory on PYTHONPATH and the FMU by path."""
@@ -359,12 +370,7 @@ def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, m
                                                       os.environ.get("PYTHONPATH", "")]))
     there = run_study(study, tmp_path / "dask", workers=2, metrics=final_y, metric_names=["final_y"], plots=False)
     assert (here.total, there.total, there.counts) == (8, 8, {"ok": 8})
-    a = {r["run"]: r for r in read_runs(tmp_path / "here" / "runs.csv")}
-    b = {r["run"]: r for r in read_runs(tmp_path / "dask" / "runs.csv")}
-    assert a.keys() == b.keys()
-    for k in a:
-        assert {c: v for c, v in a[k].items() if c != "wall_time_s"} == {c: v for c, v in b[k].items()
-                                                                          if c != "wall_time_s"}
+    _same_rows(tmp_path / "here", tmp_path / "dask")
     assert here.summary["cells"] == there.summary["cells"]
 
 
@@ -395,12 +401,7 @@ def test_a_local_cluster_of_threads_gives_the_rows_of_this_process_and_frees_its
     there = run_study(study, tmp_path / "threads", workers=2, threads=True, metrics=final_y,
                       metric_names=["final_y"], plots=False)
     assert (here.total, there.total, there.counts) == (12, 12, {"ok": 12})
-    a = {r["run"]: r for r in read_runs(tmp_path / "here" / "runs.csv")}
-    b = {r["run"]: r for r in read_runs(tmp_path / "threads" / "runs.csv")}
-    assert a.keys() == b.keys()
-    for k in a:
-        assert {c: v for c, v in a[k].items() if c != "wall_time_s"} == {c: v for c, v in b[k].items()
-                                                                          if c != "wall_time_s"}
+    _same_rows(tmp_path / "here", tmp_path / "threads")
     assert here.summary["cells"] == there.summary["cells"]
     assert made and all(cache.closed and not cache.masters and not cache._busy and cache._tmp is None
                         for cache in made)
