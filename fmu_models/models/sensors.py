@@ -313,3 +313,13 @@ GNSS_6_GM = sensors_model(
     fresh=True,
     correlated=True,
 )
+
+MOCAP_9 = sensors_model(
+    "Mocap9",
+    "motion capture (plant -> estimator; OptiTrack): the rigid body's pose and velocity, position, velocity and "
+    "Euler angles with Gaussian noise, sampled at sample_rate, with a fresh flag and the frame's time; seeded; "
+    "z axis down",
+    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES[:9]],
+    suffix="_m",
+    fresh=True,
+)
