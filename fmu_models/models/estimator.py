@@ -35,6 +35,10 @@ with the IMU's ``gyro, acc`` stamped ``t_imu`` and the fix ``y`` stamped
 ``EstimatorGM`` is the same filter with the fix's position error correlated
 in time as three more states (E27: a first-order Gauss-Markov process, the
 receiver ``GNSS6GM``'s E25), in the fix's measurement and its restart.
+``EstimatorMocap`` is the same filter also fed the motion capture's
+attitude with the fix of the same frame (E29: gated, counted, restarted
+after a run of refusals), with the attitude integrated to second order
+(E30) and the extrapolated rate's noise in its output predictor (E31).
 
 In our master's feedthrough ordering ``t_imu = t`` and the output is the
 posterior: the controller reading the estimate at t_n flies on the
@@ -58,7 +62,8 @@ from .quadrotor import (DEFAULTS, aerodynamic_drag, body_angular_acceleration, e
 from .rotor import thrust_and_torques
 from .sensors import DT_DEFAULT
 
-__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATOR_GM", "ESTIMATOR_MOCAP", "ESTIMATED_STATES", "ANGLES", "FIX_BIAS_STATES", "FIX_NAMES",
+__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATOR_GM", "ESTIMATOR_MOCAP", "ESTIMATED_STATES", "ANGLES",
+           "FIX_BIAS_STATES", "FIX_NAMES",
            "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
            "chi2_quantile_even", "chi2_quantile_odd", "magnetometer_measurement", "attitude_fix_measurement",
            "body_drag_acceleration", "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
@@ -465,8 +470,13 @@ def magnetometer_measurement(xs, v):
 
 def _predict(xs, P, gyro, acc, v, h, second_order: bool = False, rate_noise=None):
     """The state and covariance ``h`` seconds later with the IMU's averages
-    held (E7-E8, E13): explicit Euler over h, the covariance by F and G
-    linearized at the estimate, noise-free. ``h = 0`` leaves both unchanged."""
+    held (E7-E8, E13): explicit Euler over h (the position with its
+    ``h^2/2 dv/dt``), the covariance by F and G linearized at the estimate,
+    noise-free. ``h = 0`` leaves both unchanged. ``second_order``: the
+    attitude with its ``h^2/2`` term too (E30); ``rate_noise``: the gyro's
+    white density times this factor (E31: a rate extrapolated from two
+    samples). The filters without the motion capture's attitude use neither
+    (their laws bit for bit as before)."""
     n = xs.shape[0]
     fix_bias = n > _N  # EstimatorGM (E27): three more states, three more noises
     xs_sym, noise = ca.SX.sym("xs", n), ca.SX.sym("n", 18 if fix_bias else 15)
