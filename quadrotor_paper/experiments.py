@@ -139,7 +139,7 @@ def study_metric_names(scenario: Scenario) -> tuple[str, ...]:
     spec = estimation_spec(scenario)
     if spec is None:
         return STUDY_METRICS
-    # the magnetometer's refusals (E24) beside the other counts, for the filter that has one
+    # a filter's own counts beside the gate's (the magnetometer's refusals, E24; the motion-capture attitude's, E29)
     return STUDY_METRICS + ESTIMATION_METRICS + tuple(c for c in spec[3] if c not in COUNTS)
 
 

@@ -100,9 +100,9 @@ class Estimation:
     """The estimate's consistency and accuracy over one run (docs/estimation.md,
     E15-E17): per block (position, velocity, attitude, wind) the mean NEES and
     the RMSE of the estimate (Euclidean over the block's three axes; yaw
-    wrapped) and the wind's degrees of freedom (``nees_wind_dof``: the components
-    it estimates, 2 without a vertical wind state); the mean NIS of the fix (over the steps that used one) and of
-    the drag measurement (over the rows where the true wind has been steady
+    wrapped) and the wind's degrees of freedom (``nees_wind_dof``: the
+    components it estimates, 2 without a vertical wind state); the mean NIS
+    of the fix (over the steps that used one) and of the drag measurement (over the rows where the true wind has been steady
     for ``settle`` s, as the wind's NEES); and the wind RMSE over those rows; the length of the position estimate's
     mean error (its bias) and the RMSE of reference - estimate over the whole
     run (the error the controller sees, beside ``rmse_m``, the true one).

@@ -7,6 +7,7 @@ lab in libcosim's ordering on seeds its attitude NEES was out of band on."""
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -119,3 +120,21 @@ def test_the_lab_in_the_exchange_ordering_has_its_attitude_nees_in_band(tmp_path
         assert 2.02 <= summary[f"nees_{block}"] <= 4.16, (block, summary[f"nees_{block}"])
     assert summary["outliers_attitude"] <= 3 and summary["resets_attitude"] == 0
     assert f"motion-capture attitudes refused {summary['outliers_attitude']:.0f}" in (out / "summary.md").read_text()
+
+
+@pytest.mark.parametrize("dof, said", [(2.0, "(3, 3, 3 and 2 when consistent)"), (3.0, "(3 each when consistent)"),
+                                       (None, "(3 each when consistent)")])
+def test_the_run_summary_says_what_a_consistent_wind_nees_is(dof, said):
+    """The summary line's consistent values: 3 for position, velocity and
+    attitude, the wind's own count (``nees_wind_dof``: 2 without a vertical
+    wind state, as ``circles_estimated``'s filter; 3 with one, as the lab's;
+    3 when the wind was judged on no row)."""
+    from quadrotor_paper.run_summary import summary_lines
+
+    summary = {"status": "ok", "error": None, "seed": 0, "variant": None, "wall_time_s": 1.0,
+               "real_time_factor": 50.0, "nees_position": 3.0, "nees_velocity": 3.0, "nees_attitude": 3.0,
+               "nees_wind": 2.0, "nees_wind_dof": dof, "nis_fix": 6.0}
+    lines = summary_lines(SimpleNamespace(name="m", description="d"), SimpleNamespace(span=(0.0, 50.0)), summary,
+                          [], None)
+    estimate = next(line for line in lines if line.startswith("- estimate:"))
+    assert said in estimate
