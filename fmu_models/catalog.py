@@ -31,6 +31,8 @@ _WHERE: dict[str, tuple[str, str]] = {
     "Estimator": ("fmu_models.models.estimator", "ESTIMATOR"),
     "EstimatorMag": ("fmu_models.models.estimator", "ESTIMATOR_MAG"),
     "EstimatorGM": ("fmu_models.models.estimator", "ESTIMATOR_GM"),
+    "EstimatorMocap": ("fmu_models.models.estimator", "ESTIMATOR_MOCAP"),
+    "Mocap9": ("fmu_models.models.sensors", "MOCAP_9"),
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_WHERE)
 

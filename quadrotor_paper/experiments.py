@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from cosim.study import Study
     from cosim.study_run import StudyResult
 
-from fmu_models.models.estimator_outputs import COUNTS, MAGNETOMETER_COUNTS
+from fmu_models.models.estimator_outputs import COUNTS
 
 from .controller_component import controller_variant
 from .sections import estimation_spec, metric_signals
@@ -139,8 +139,8 @@ def study_metric_names(scenario: Scenario) -> tuple[str, ...]:
     spec = estimation_spec(scenario)
     if spec is None:
         return STUDY_METRICS
-    # the magnetometer's refusals (E24) beside the other counts, for the filter that has one
-    return STUDY_METRICS + ESTIMATION_METRICS + tuple(c for c in spec[3] if c in MAGNETOMETER_COUNTS)
+    # a filter's own counts beside the gate's (the magnetometer's refusals, E24; the motion-capture attitude's, E29)
+    return STUDY_METRICS + ESTIMATION_METRICS + tuple(c for c in spec[3] if c not in COUNTS)
 
 
 def estimation_signals(scenario: Scenario) -> list[str]:

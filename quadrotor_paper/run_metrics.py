@@ -100,8 +100,9 @@ class Estimation:
     """The estimate's consistency and accuracy over one run (docs/estimation.md,
     E15-E17): per block (position, velocity, attitude, wind) the mean NEES and
     the RMSE of the estimate (Euclidean over the block's three axes; yaw
-    wrapped); the mean NIS of the fix (over the steps that used one) and of
-    the drag measurement (over the rows where the true wind has been steady
+    wrapped) and the wind's degrees of freedom (``nees_wind_dof``: the
+    components it estimates, 2 without a vertical wind state); the mean NIS
+    of the fix (over the steps that used one) and of the drag measurement (over the rows where the true wind has been steady
     for ``settle`` s, as the wind's NEES); and the wind RMSE over those rows; the length of the position estimate's
     mean error (its bias) and the RMSE of reference - estimate over the whole
     run (the error the controller sees, beside ``rmse_m``, the true one).
@@ -134,6 +135,7 @@ class Estimation:
         self._nees = {b: Sum() for b in BLOCKS}
         self._squares = {b: Sum() for b in BLOCKS}
         self._wind_settled_squares = Sum()
+        self._wind_dof = Maximum()
         self._bias = ColumnSum()
         self._nis_fix, self._nis_acc = Sum(), Sum()
         self._seen = Tracking([f"{estimator}.{e}" for e in BLOCKS["position"][0]], reference, ("rmse_seen_m",))
@@ -162,6 +164,9 @@ class Estimation:
             if block == "wind":
                 self._wind_settled_squares.add(np.sum(error[judged] ** 2, axis=1))
                 steady = judged
+                # its degrees of freedom: the components the filter estimates (a held one, variance exactly 0, is
+                # left out of the NEES: a filter without a vertical wind state has 2)
+                self._wind_dof.add(np.sum(np.diagonal(covariance[judged], axis1=1, axis2=2) != 0, axis=1))
             if block == "position":  # the estimate's bias: the length of its mean error
                 self._bias.add(error[after_start])
         used = rows[f"{estimator}.fix_used"] > 0.5
@@ -193,6 +198,7 @@ class Estimation:
             out[f"est_rmse_{block}_{unit}"] = _rms(self._squares[block])
             if block == "wind":
                 out["est_rmse_wind_settled_mps"] = _rms(self._wind_settled_squares)
+                out["nees_wind_dof"] = self._wind_dof.value
             if block == "position":
                 bias = self._bias.mean()
                 out["est_bias_position_m"] = None if bias is None else float(np.linalg.norm(bias))

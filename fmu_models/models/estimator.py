@@ -35,6 +35,10 @@ with the IMU's ``gyro, acc`` stamped ``t_imu`` and the fix ``y`` stamped
 ``EstimatorGM`` is the same filter with the fix's position error correlated
 in time as three more states (E27: a first-order Gauss-Markov process, the
 receiver ``GNSS6GM``'s E25), in the fix's measurement and its restart.
+``EstimatorMocap`` is the same filter also fed the motion capture's
+attitude with the fix of the same frame (E29: gated, counted, restarted
+after a run of refusals), with the attitude integrated to second order
+(E30) and the extrapolated rate's noise in its output predictor (E31).
 
 In our master's feedthrough ordering ``t_imu = t`` and the output is the
 posterior: the controller reading the estimate at t_n flies on the
@@ -49,7 +53,8 @@ from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter
-from .estimator_outputs import COUNTS, COVARIANCE_BLOCKS, MAGNETOMETER_COUNTS, MAGNETOMETER_MODEL, covariance_output
+from .estimator_outputs import (ATTITUDE_FIX_COUNTS, ATTITUDE_FIX_MODEL, COUNTS, COVARIANCE_BLOCKS, MAGNETOMETER_COUNTS,
+                                MAGNETOMETER_MODEL, covariance_output)
 from .imu import AXES, IMU_DEFAULTS
 from .magnetometer import MAGNETOMETER_DEFAULTS, body_field, heading_from_field
 from .quadrotor import (DEFAULTS, aerodynamic_drag, body_angular_acceleration, euler_rate_matrix, rotation_matrix,
@@ -57,9 +62,10 @@ from .quadrotor import (DEFAULTS, aerodynamic_drag, body_angular_acceleration, e
 from .rotor import thrust_and_torques
 from .sensors import DT_DEFAULT
 
-__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATOR_GM", "ESTIMATED_STATES", "FIX_BIAS_STATES", "FIX_NAMES",
+__all__ = ["ESTIMATOR", "ESTIMATOR_MAG", "ESTIMATOR_GM", "ESTIMATOR_MOCAP", "ESTIMATED_STATES", "ANGLES",
+           "FIX_BIAS_STATES", "FIX_NAMES",
            "ESTIMATOR_DEFAULTS", "process_model", "drag_measurement",
-           "chi2_quantile_even", "chi2_quantile_odd", "magnetometer_measurement",
+           "chi2_quantile_even", "chi2_quantile_odd", "magnetometer_measurement", "attitude_fix_measurement",
            "body_drag_acceleration", "scalar_update", "covariance_names", "COVARIANCE_BLOCKS"]
 
 # The filter's state, in order: the 9 plant states it estimates, then the biases and the wind.
@@ -86,6 +92,7 @@ ESTIMATOR_DEFAULTS = {
     "reset_after_fix": 5.0,       # fixes refused in a row before position and velocity restart (E21)
     "reset_after_drag": 1.0,      # drag measurements refused in a row before the wind restarts (E21)
     "sigma_mag": 1.0e-6,          # T: the magnetometer's noise (BMM150, 0.6 uT) and its calibration's residual (E24)
+    "sigma_attitude_fix": 1.0e-3,  # rad: the motion capture's angles (E29; the lab's, OptiTrack's: docs/sensors.md)
 }
 _IMU = tuple(f"gyro_{i}" for i in AXES) + tuple(f"acc_{i}" for i in AXES)
 _ROTORS = (1, 2, 3, 4)
@@ -177,7 +184,7 @@ def _sequential(xs, P, measure, measured, variances):
     return xs, P, nis
 
 
-def _variables(magnetometer: bool, fix_bias: bool = False):
+def _variables(magnetometer: bool, fix_bias: bool = False, attitude_fix: bool = False):
     variables = [
         *(input_(f"gyro_{i}", "rad/s", f"IMU angular rate about {i}_B", 0.0) for i in AXES),
         input_("acc_x", "m/s2", "IMU specific force along x_B", 0.0),
@@ -324,6 +331,23 @@ def _variables(magnetometer: bool, fix_bias: bool = False):
                   integer=True),
         discrete("heading_set", "1", "1 once a magnetometer sample has set the heading (E28)"),
         ]
+    if attitude_fix:  # the motion capture's attitude (E29), last so that the variables above keep their references
+        variables += [
+            *(input_(f"{a}_m", "rad", f"the motion capture's {a} (its rigid body's attitude), taken with the fix: "
+                     "fused when the fix is fresh, at its time t_fix (E29)", 0.0) for a in ANGLES),
+            *(parameter(f"sigma_{a}_m", "rad", f"standard deviation of the motion capture's {a} (E29)",
+                        ESTIMATOR_DEFAULTS["sigma_attitude_fix"], min=1e-9) for a in ANGLES),
+            parameter("reset_after_attitude", "1", "motion-capture attitudes refused in a row after which the "
+                      "attitude starts again from the frame (E21, E29)", ESTIMATOR_DEFAULTS["reset_after_fix"],
+                      min=1.0, max=1.0e6, integer=True),
+            output("nis_attitude", "1", "normalized innovation squared of the motion capture's attitude (3 degrees of "
+                                        "freedom; 0 without a fresh frame)"),
+            output("outliers_attitude", "1", "motion-capture attitudes refused by the gate since the start (E19)"),
+            output("resets_attitude", "1", "restarts of the attitude from the motion capture after "
+                                           "reset_after_attitude refusals in a row (E21)"),
+            discrete("refusal_run_attitude", "1", "motion-capture attitudes refused in a row"),
+            *(discrete(f"total_{c}", "1", f"{c.replace('_', ' of the ')} so far") for c in ATTITUDE_FIX_COUNTS),
+        ]
     return tuple(variables)
 
 
@@ -400,16 +424,59 @@ def chi2_quantile_odd(k: int, level, iterations: int = 40):
     return x
 
 
+ANGLES = ESTIMATED_STATES[6:9]  # the attitude's states: phi, theta, psi (indices 6, 7, 8)
+
+
+def attitude_fix_measurement(xs, gyro, tau):
+    """The motion capture's Euler angles predicted from the state, eq. E29:
+    the state's attitude retrodicted over the frame's age ``tau`` (its
+    ``t_fix``, E20) with the IMU's rate less the gyro bias through eq. 3,
+    ``o - tau T(o) (gyro - b_g)``."""
+    return xs[6:9] - tau * euler_rate_matrix(xs[6], xs[7]) @ (gyro - xs[9:12])
+
+
+def _attitude_fix(xs, P, v, gyro, tau, new_fix, level):
+    """The motion capture's attitude fused (E29) by three sequential scalar
+    updates (E11-E12), gated by its chi-square test with 3 degrees of
+    freedom (E19) and restarted from it after ``reset_after_attitude``
+    refusals in a row (E21). Returns the state and covariance, whether it was
+    refused, whether it restarted, the run of refusals and the NIS."""
+    def measure(s):
+        return attitude_fix_measurement(s, gyro, tau)
+
+    predicted = measure(xs)
+    raw = ca.vertcat(*(v[f"{a}_m"] for a in ANGLES))
+    # each measured angle taken within pi of its prediction: a heading near +-pi is one angle, not two
+    measured = predicted + ca.atan2(ca.sin(raw - predicted), ca.cos(raw - predicted))
+    variances = [v[f"sigma_{a}_m"] ** 2 for a in ANGLES]
+    corrected = _sequential(xs, P, measure, measured, variances)
+    nis = corrected[2]
+    refused = ca.logic_and(new_fix, nis > chi2_quantile_odd(3, level))
+    xs, P = _gated(ca.logic_and(new_fix, ca.logic_not(refused)), corrected[:2], (xs, P))
+    run = ca.if_else(new_fix, ca.if_else(refused, v["refusal_run_attitude"] + 1, 0.0), v["refusal_run_attitude"])
+    reset = run >= v["reset_after_attitude"]
+    # the attitude starts again from the frame brought forward over tau, at its noise, uncorrelated with the rest
+    restart = ca.vertcat(xs[0:6], measured + tau * euler_rate_matrix(xs[6], xs[7]) @ (gyro - xs[9:12]), xs[9:])
+    xs = ca.if_else(reset, restart, xs)
+    P = ca.if_else(reset, _reset(P, range(6, 9), variances), P)
+    return (xs, P), refused, reset, ca.if_else(reset, 0.0, run), nis
+
+
 def magnetometer_measurement(xs, v):
     """The magnetometer predicted from the state, eq. E24 less its noise: the
     site's field rotated into the body frame by the estimated attitude."""
     return body_field(xs[6:9], ca.vertcat(v["field_north"], v["field_east"], v["field_down"]))
 
 
-def _predict(xs, P, gyro, acc, v, h):
+def _predict(xs, P, gyro, acc, v, h, second_order: bool = False, rate_noise=None):
     """The state and covariance ``h`` seconds later with the IMU's averages
-    held (E7-E8, E13): explicit Euler over h, the covariance by F and G
-    linearized at the estimate, noise-free. ``h = 0`` leaves both unchanged."""
+    held (E7-E8, E13): explicit Euler over h (the position with its
+    ``h^2/2 dv/dt``), the covariance by F and G linearized at the estimate,
+    noise-free. ``h = 0`` leaves both unchanged. ``second_order``: the
+    attitude with its ``h^2/2`` term too (E30); ``rate_noise``: the gyro's
+    white density times this factor (E31: a rate extrapolated from two
+    samples). The filters without the motion capture's attitude use neither
+    (their laws bit for bit as before)."""
     n = xs.shape[0]
     fix_bias = n > _N  # EstimatorGM (E27): three more states, three more noises
     xs_sym, noise = ca.SX.sym("xs", n), ca.SX.sym("n", 18 if fix_bias else 15)
@@ -418,10 +485,14 @@ def _predict(xs, P, gyro, acc, v, h):
     # the position also takes the velocity's change over the step, h^2/2 dv/dt (E8): with a 0.1 mm fix,
     # the first-order step's h^2/2 |a| (50 um at 1 m/s2) would be half the fix's noise
     second = ca.vertcat(h / 2 * f[3:6], ca.SX.zeros(n - 3))
+    if second_order:  # E30: the attitude's too, h^2/2 (d/do of T(o) omega) T(o) omega (omega held over h)
+        turn = f[6:9]
+        second[6:9] = h / 2 * ca.jacobian(turn, xs_sym[6:9]) @ turn
     f = f + second
     F, G, f_hat = ca.substitute([ca.jacobian(f, xs_sym), ca.jacobian(f, noise), f], *at_estimate)
     F, G = ca.SX.eye(n) + h * F, h * G
-    density = [v["gyro_noise_density"]] * 3 + [v["accel_noise_density"]] + [v["drag_noise_density"]] * 2 + \
+    gyro_density = v["gyro_noise_density"] if rate_noise is None else v["gyro_noise_density"] * rate_noise
+    density = [gyro_density] * 3 + [v["accel_noise_density"]] + [v["drag_noise_density"]] * 2 + \
         [v["gyro_bias_walk"]] * 3 + [v["accel_bias_walk"]] * 3 + [v["wind_walk"]] * 2 + [v["wind_walk_z"]]
     if fix_bias:  # E27: sqrt(2 sigma_gm^2 / tau_gm), the density whose stationary variance is sigma_gm^2
         density += [ca.sqrt(2 / v["gm_tau"]) * v[f"gm_sigma_{a}_m"] for a in "xyz"]
@@ -449,7 +520,7 @@ def _gated(accept, corrected, before):
     return tuple(ca.if_else(accept, c, b) for c, b in zip(corrected, before))
 
 
-def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
+def _update(t, v, magnetometer: bool = False, fix_bias: bool = False, attitude_fix: bool = False):
     xs, P = _state(v, len(_ALL_STATES) if fix_bias else _N)
     gyro = ca.vertcat(*(v[f"gyro_{i}"] for i in AXES))
     acc = ca.vertcat(*(v[f"acc_{i}"] for i in AXES))
@@ -462,7 +533,7 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
     t_imu = ca.if_else(v["t_imu"] < 0, t, v["t_imu"])  # no stamp: the sample is current
     new_imu = ca.logic_or(ca.logic_not(started), t_imu > v["t_posterior"] + v["dt"] / 2)
     h = ca.if_else(ca.logic_and(started, new_imu), t_imu - v["t_posterior"], 0.0)
-    xs, P = _predict(xs, P, gyro, acc, v, h)
+    xs, P = _predict(xs, P, gyro, acc, v, h, second_order=attitude_fix)
     t_filter = ca.if_else(new_imu, t_imu, v["t_posterior"])
 
     # E9: the drag model's measurement, once per IMU sample, gated (E19-E21): after reset_after refusals
@@ -540,6 +611,14 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
     P = ca.if_else(reset_fix, P_restart, P)
     run_fix = ca.if_else(reset_fix, 0.0, run_fix)
 
+    # E29: the motion capture's attitude (the rigid body's Euler angles), taken with the fix (the same frame: its
+    # fresh flag and its stamp t_fix), compared with the state retrodicted over tau, gated on its own (a rigid body
+    # the motion capture mislabels flips its attitude, not its position), restarted from the frame after
+    # reset_after_attitude refusals in a row (E21's rule)
+    if attitude_fix:
+        (xs, P), refused_attitude, reset_attitude, run_attitude, nis_attitude = _attitude_fix(
+            xs, P, v, gyro, tau, new_fix, level)
+
     # the output predictor (E23): the posterior at t_filter brought to the FMU's time t with the IMU's
     # averages extrapolated along their trend over the last two samples (rates change within a step)
     t_out = ca.fmax(t, t_filter)
@@ -561,13 +640,20 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
     alpha = body_angular_acceleration(rate_start, ca.vertcat(v["Ix"], v["Iy"], v["Iz"]), ca.vertcat(*torque))
     # the attitude predicted with the mean rate over the span; unconnected: the IMU's averages along their trend
     gyro_out = ca.if_else(modelled, rate_start + alpha * h_out / 2 + xs[9:12], gyro + trend[0:3])
-    xs_out, P_out = _predict(xs, P, gyro_out, acc + trend[3:6], v, h_out)
+    # E31 (with the motion capture's attitude): the rate held over the span is extrapolated from the last two gyro
+    # samples, so its white noise is that of 1.5 g_n - 0.5 g_{n-1} (E26) or (1 + h/dt) g_n - (h/dt) g_{n-1} (E23)
+    ratio = h_out / v["dt"]
+    extrapolated = ca.if_else(modelled, ca.sqrt(1.5 ** 2 + 0.5 ** 2), ca.sqrt((1 + ratio) ** 2 + ratio ** 2))
+    xs_out, P_out = _predict(xs, P, gyro_out, acc + trend[3:6], v, h_out, second_order=attitude_fix,
+                             rate_noise=extrapolated if attitude_fix else None)
 
-    counted = COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ())
+    counted = _counted(magnetometer, attitude_fix)
     events = {"outliers_fix": refused_fix, "outliers_acc": refused_acc, "resets_fix": reset_fix,
               "resets_acc": reset_acc}
     if magnetometer:
         events["outliers_mag"] = refused_mag
+    if attitude_fix:
+        events.update(outliers_attitude=refused_attitude, resets_attitude=reset_attitude)
     counts = {c: v[f"total_{c}"] + ca.if_else(events[c], 1.0, 0.0) for c in counted}
     out = {name: xs_out[k] for k, name in enumerate(_ALL_STATES[:xs_out.shape[0]])}
     # the body rate at t_out: from the commands (E26), or the IMU's trend (E23) when they are not connected
@@ -580,6 +666,9 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
     if magnetometer:
         out["nis_mag"] = ca.if_else(new_mag, nis_mag, 0.0)
     discrete_next = {"heading_set": heading_set} if magnetometer else {}
+    if attitude_fix:
+        out["nis_attitude"] = ca.if_else(new_fix, nis_attitude, 0.0)
+        discrete_next["refusal_run_attitude"] = run_attitude
     return out, {**discrete_next, "started": 1.0, "t_posterior": t_filter, "t_last_fix": ca.if_else(new_fix, t_fix, v["t_last_fix"]),
                  "refusal_run_fix": run_fix, "refusal_run_acc": run_acc,
                  **{f"previous_{name}": ca.if_else(new_imu, v[name], v[f"previous_{name}"]) for name in _IMU}, **{f"total_{c}": n for c, n in counts.items()},
@@ -590,14 +679,20 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False):
 _NEVER = -1.0e300  # s: the time of the last fix before any: every fix's stamp is later
 
 
-def _initial(v, r, magnetometer: bool = False, fix_bias: bool = False):
+def _counted(magnetometer: bool, attitude_fix: bool) -> tuple[str, ...]:
+    """The counts a filter outputs: the gate's (E19-E21), the magnetometer's refusals, the motion-capture attitude's."""
+    return COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ()) + (ATTITUDE_FIX_COUNTS if attitude_fix else ())
+
+
+def _initial(v, r, magnetometer: bool = False, fix_bias: bool = False, attitude_fix: bool = False):
     xs = ca.vertcat(*(v[f"{name}_0"] for name in ESTIMATED_STATES))
     sigma = [v[_P0[ESTIMATED_STATES[3 * (k // 3)]]] for k in range(_N - 1)] + [v["P0_wind_z"]]
     if fix_bias:  # E27: the receiver's error is stationary from its start (E25): N(0, sigma_gm^2)
         xs = ca.vertcat(xs, ca.DM.zeros(3))
         sigma += [v[f"gm_sigma_{a}_m"] for a in "xyz"]
     return {"started": 0.0, "t_posterior": 0.0, "t_last_fix": _NEVER, "refusal_run_fix": 0.0,
-            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in COUNTS + (MAGNETOMETER_COUNTS if magnetometer else ())},
+            "refusal_run_acc": 0.0, **{f"previous_{name}": 0.0 for name in _IMU}, **{f"total_{c}": 0.0 for c in _counted(magnetometer, attitude_fix)},
+            **({"refusal_run_attitude": 0.0} if attitude_fix else {}),
             **{f"command_{i}": -1.0 for i in _ROTORS}, **({"heading_set": 0.0} if magnetometer else {}),
             **_discrete(xs, ca.diag(ca.vertcat(*sigma) ** 2))}
 
@@ -632,5 +727,19 @@ ESTIMATOR_GM = FmuModel(
                 "(E27; the receiver GNSS6GM's E25); z axis down",
     variables=_variables(magnetometer=False, fix_bias=True),
     sampled=Sampled(update=partial(_update, fix_bias=True), initial=partial(_initial, fix_bias=True),
+                    n_random=0, seed=None, sample_period="dt"),
+)
+
+
+# The same filter fed by a motion capture's full pose (E29): position, velocity and attitude of the same frame, gated
+# and fused at its time; with an attitude known to a tenth of a milliradian it also integrates the attitude to second
+# order (E30) and counts the extrapolated rate's noise in its output predictor (E31), which the other filters leave
+# out (their laws, and every number they gave, bit for bit as before; docs/estimation.md, "The lab's attitude")
+ESTIMATOR_MOCAP = FmuModel(
+    identifier=ATTITUDE_FIX_MODEL,
+    description="the Estimator's extended Kalman filter (docs/estimation.md) also correcting its attitude with the "
+                "motion capture's (the rigid body's Euler angles, taken with the fix), gated (E29); z axis down",
+    variables=_variables(magnetometer=False, attitude_fix=True),
+    sampled=Sampled(update=partial(_update, attitude_fix=True), initial=partial(_initial, attitude_fix=True),
                     n_random=0, seed=None, sample_period="dt"),
 )

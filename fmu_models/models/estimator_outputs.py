@@ -8,11 +8,14 @@ outputs (the application's metrics), without building it (no CasADi).
   states, ``var_<a>`` or ``cov_<a>_<b>`` (a before b in its block);
 * :data:`COUNTS`: the gate's counts of refused measurements and restarts (E19-E21);
   :func:`counts_of` the counts of a model (the magnetometer's refusals,
-  :data:`MAGNETOMETER_COUNTS`, in :data:`MAGNETOMETER_MODEL`'s only).
+  :data:`MAGNETOMETER_COUNTS`, in :data:`MAGNETOMETER_MODEL`'s only; the
+  motion-capture attitude's, :data:`ATTITUDE_FIX_COUNTS`, in
+  :data:`ATTITUDE_FIX_MODEL`'s).
 """
 from __future__ import annotations
 
-__all__ = ["COVARIANCE_BLOCKS", "COUNTS", "MAGNETOMETER_COUNTS", "MAGNETOMETER_MODEL", "counts_of",
+__all__ = ["ATTITUDE_FIX_COUNTS", "ATTITUDE_FIX_MODEL", "COVARIANCE_BLOCKS", "COUNTS", "MAGNETOMETER_COUNTS",
+           "MAGNETOMETER_MODEL", "counts_of",
            "covariance_output"]
 
 COVARIANCE_BLOCKS = {"position": ("x", "y", "z"), "velocity": ("u", "v", "w"), "attitude": ("phi", "theta", "psi"),
@@ -21,13 +24,18 @@ COUNTS = ("outliers_fix", "outliers_acc", "resets_fix", "resets_acc")
 # the filter with the magnetometer's correction (E24) is a model of its own, which also counts its refusals
 MAGNETOMETER_MODEL = "EstimatorMag"
 MAGNETOMETER_COUNTS = ("outliers_mag",)
+# the filter with the motion capture's attitude (E29) is one too, and counts its refusals and restarts
+ATTITUDE_FIX_MODEL = "EstimatorMocap"
+ATTITUDE_FIX_COUNTS = ("outliers_attitude", "resets_attitude")
+_MORE_COUNTS = {MAGNETOMETER_MODEL: MAGNETOMETER_COUNTS, ATTITUDE_FIX_MODEL: ATTITUDE_FIX_COUNTS}
 
 
 def counts_of(model: str | None) -> tuple[str, ...]:
     """The counts the estimator model ``model`` (a registered model's name;
-    ``None`` for an FMU file) outputs: :data:`COUNTS`, and the
-    magnetometer's refusals for :data:`MAGNETOMETER_MODEL`."""
-    return COUNTS + MAGNETOMETER_COUNTS if model == MAGNETOMETER_MODEL else COUNTS
+    ``None`` for an FMU file) outputs: :data:`COUNTS`, the magnetometer's
+    refusals for :data:`MAGNETOMETER_MODEL` and the motion-capture attitude's
+    refusals and restarts for :data:`ATTITUDE_FIX_MODEL`."""
+    return COUNTS + _MORE_COUNTS.get(model, ())
 
 
 def covariance_output(a: str, b: str, order: tuple[str, ...]) -> str:

@@ -1,7 +1,7 @@
 """Sensors and links as FMUs: noise, bias, sample-and-hold and transport delay.
 
 One generic sampled-data model family, :func:`sensors_model`, with N
-channels; four members are shipped (``docs/sensors.md``):
+channels; its members (``docs/sensors.md``):
 
 * ``Measurement12``: the measurement path, plant -> controller. Inputs the 12
   rigid-body states ``x y z u v w phi theta psi p q r``, outputs the measured
@@ -16,6 +16,10 @@ channels; four members are shipped (``docs/sensors.md``):
 * ``GNSS6``: a GNSS receiver, plant -> estimator. Inputs ``x y z u v w``,
   outputs ``x_m .. w_m``, ``fresh`` (1 on the step a new fix arrives,
   ``fresh=True`` below; docs/estimation.md);
+* ``Mocap9``: a motion capture (OptiTrack), plant -> estimator. Inputs
+  ``x y z u v w phi theta psi``, outputs ``x_m .. psi_m``, ``fresh`` and the
+  frame's ``t_sample`` (``fresh=True``): the rigid body's pose and velocity
+  in one frame (issue 29, docs/sensors.md);
 * ``GNSS6GM``: ``GNSS6`` whose errors are also correlated in time, a
   first-order Gauss-Markov error per channel (``correlated=True`` below; E25
   of docs/estimation.md)::
@@ -68,7 +72,8 @@ from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter, seed_parameter
 from .quadrotor import QUADROTOR, STATE_NAMES
 
-__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "VELOCITY_LINK_3", "GNSS_6", "GNSS_6_GM", "DELAY_MAX",
+__all__ = ["sensors_model", "MEASUREMENT_12", "COMMAND_LINK_4", "VELOCITY_LINK_3", "GNSS_6", "GNSS_6_GM", "MOCAP_9",
+           "DELAY_MAX",
            "SAMPLE_RATE_MAX",
            "hold_period", "hold_steps", "gaussian"]
 
@@ -312,4 +317,14 @@ GNSS_6_GM = sensors_model(
     suffix="_m",
     fresh=True,
     correlated=True,
+)
+
+MOCAP_9 = sensors_model(
+    "Mocap9",
+    "motion capture (plant -> estimator; OptiTrack): the rigid body's pose and velocity, position, velocity and "
+    "Euler angles with Gaussian noise, sampled at sample_rate, with a fresh flag and the frame's time; seeded; "
+    "z axis down",
+    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES[:9]],
+    suffix="_m",
+    fresh=True,
 )

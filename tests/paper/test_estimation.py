@@ -52,15 +52,17 @@ def test_the_estimated_scenarios_name_their_estimator_and_record_what_it_needs()
         assert set(estimation_signals(scenario)) <= set(scenario.record)
         assert set(estimation_signals(scenario)) <= set(lean_signals(scenario))
     assert "nees_wind" not in study_metric_names(load_scenario("circles"))
-    # the magnetometer's refusals are a study column where the filter has a magnetometer (the lab's), only there
-    assert "outliers_mag" in study_metric_names(load_scenario("figure8_lab_estimated"))
-    assert "outliers_mag" not in study_metric_names(load_scenario("circles_estimated"))
-    assert "Estimator.outliers_mag" in estimation_signals(load_scenario("figure8_lab_estimated"))
+    # the motion-capture attitude's refusals and restarts are study columns where the filter fuses it (the lab's),
+    # only there
+    for count in ("outliers_attitude", "resets_attitude"):
+        assert count in study_metric_names(load_scenario("figure8_lab_estimated"))
+        assert count not in study_metric_names(load_scenario("circles_estimated"))
+        assert f"Estimator.{count}" in estimation_signals(load_scenario("figure8_lab_estimated"))
 
 
 @pytest.mark.parametrize("name, parts", [
     ("circles_estimated", ("IMU", "GNSS", "Estimator", "controller", "reference")),
-    ("figure8_lab_estimated", ("IMU", "Magnetometer", "Mocap", "Estimator", "Ground", "WiFi", "Onboard", "reference")),
+    ("figure8_lab_estimated", ("IMU", "Mocap", "Estimator", "Ground", "WiFi", "Onboard", "reference")),
 ])
 def test_the_estimated_missions_as_fmus_fly_in_libcosim_as_in_our_master(tmp_path, name, parts):
     """``fnn-cosim export-ssp``: the plant, the gust, the sensors, the

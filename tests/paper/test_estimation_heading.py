@@ -116,27 +116,3 @@ def test_a_disturbed_field_is_refused_counted_and_leaves_the_heading():
     assert _col(disturbed, "nis_mag")[300] > chi2_quantile_odd(3, 0.9999)
     for name in ("phi", "theta", "psi", "x", "u", "var_psi"):  # the refused sample changed nothing
         np.testing.assert_array_equal(_col(disturbed, name), _col(clean, name))
-
-
-@pytest.mark.parametrize("seed", [6, 9])
-def test_the_lab_flown_with_the_magnetometer_has_its_attitude_nees_in_band(tmp_path, seed):
-    """``figure8_lab_estimated`` (IMU, magnetometer, motion capture): the
-    attitude's NEES inside Bar-Shalom's 95 % band for k = 3 over 20 runs,
-    [2.02, 4.16], on the two seeds furthest out before the lab's wind model
-    was its fan's (8.34 and 7.11 with the gusts' wind walk; "Tuning on the
-    lab"), and the velocity's too (1.83, 1.80 before)."""
-    import json
-
-    from quadrotor_paper.cli import main
-
-    out = tmp_path / "r"
-    assert main(["run", "figure8_lab_estimated", "--set", f"simulation.seed={seed}", "--out", str(out),
-                 "--quiet", "--no-plots"]) == 0
-    summary = json.loads((out / "summary.json").read_text())
-    assert 2.02 <= summary["nees_attitude"] <= 4.16, summary["nees_attitude"]
-    assert 2.02 <= summary["nees_position"] <= 4.16
-    assert 2.02 <= summary["nees_velocity"] <= 4.16, summary["nees_velocity"]
-    # the magnetometer's refusals beside the other counts, in the summary and its page (a clean field: few,
-    # the gate's level refuses one good sample in 10^4)
-    assert summary["outliers_mag"] <= 3
-    assert f"magnetometer samples refused {summary['outliers_mag']:.0f}" in (out / "summary.md").read_text()

@@ -52,7 +52,7 @@ def test_the_streamed_summary_equals_the_one_recomputed_from_the_csv(tmp_path):
     result, summary = run_once(scenario, tmp_path, keep=None)
     streamed = {k: summary[k] for k in summary
                 if k.startswith(("rmse", "max_", "final_", "nees", "nis", "est_", "outliers_", "resets_"))}
-    assert len(streamed) == 20 and all(v is not None for v in streamed.values()), streamed
+    assert len(streamed) == 21 and all(v is not None for v in streamed.values()), streamed
     for block_rows in (7, 4096):
         assert from_results(scenario, tmp_path / "results.csv", block_rows) == streamed
     held = RunMetrics(scenario)
