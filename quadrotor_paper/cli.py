@@ -33,6 +33,7 @@ partial results.
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 from pathlib import Path
@@ -137,6 +138,7 @@ def _cmd_run(args) -> int:
     from cosim.assembly import build_master
 
     with build_master(scenario) as master:  # every input refused before anything is written
+        _started()
         # every place a result goes is checked before the run: nothing computed is lost for want of it
         out = not_others_results(output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}"), "run")
         learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
@@ -653,12 +655,40 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+# The command's own process (main() of the command line, not a caller's main([...])) starts with Python's
+# cycle collector off: start-up (imports, the parser, the master's build) makes thousands of objects that
+# live as long as the process and few cycles, and the collector scanned them again and again (a tenth of a
+# run's start-up). When start-up is over (_started), they are set aside for good (gc.freeze) and the
+# collector runs as before on what the command makes from then on.
+_START_UP = [False]
+
+
+def _started() -> None:
+    """Start-up is over: the cycle collector on again, what start-up made set aside (see above)."""
+    if _START_UP[0]:
+        _START_UP[0] = False
+        gc.freeze()
+        gc.enable()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    if argv is None and gc.isenabled():  # the process is the command: see _started
+        gc.disable()
+        _START_UP[0] = True
+    try:
+        return _main(argv)
+    finally:
+        _started()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     from cosim.errors import ConnectionCheckError, CosimError, FmuLoadError, ScenarioError, one_line
 
     args = _parser().parse_args(argv)
     try:
         apply_fmu_log(getattr(args, "fmu_log", ()))
+        if args.func is not _cmd_run:  # a run's start-up ends when its master is built
+            _started()
         return args.func(args)
     except CosimError as exc:
         if args.debug:
