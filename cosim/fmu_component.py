@@ -320,9 +320,7 @@ class FmuComponent:
             has = "Model Exchange" if md.modelExchange is not None else "Co-Simulation"
             raise FmuLoadError(name, self.path, f"the FMU has no {'Co-Simulation' if interface == 'CoSimulation' else 'Model Exchange'} "
                                f"interface (it has {has} only)", setting=("interface", interface))
-        from .model_exchange import SolverSettings
-
-        self.solver = (solver if solver is not None else SolverSettings()).for_fmu(md)
+        self._solver_given, self._solver = solver, None  # resolved when first asked for (solver)
         self._check_binary()
         groups = fmu_ports(md)
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
@@ -351,6 +349,19 @@ class FmuComponent:
         self._t = 0.0
         self.bind((), ())
         self._keep_description(validate)
+
+    @property
+    def solver(self):
+        """How the master integrates this FMU in Model Exchange
+        (:class:`cosim.model_exchange.SolverSettings`, the one given or the
+        defaults, its tolerance resolved for this FMU), made when first asked
+        for: a Co-Simulation FMU never asks."""
+        if self._solver is None:
+            from .model_exchange import SolverSettings
+
+            given = self._solver_given
+            self._solver = (given if given is not None else SolverSettings()).for_fmu(self.model_description)
+        return self._solver
 
     @property
     def logger(self):

@@ -16,7 +16,9 @@ NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scip
                  "importlib.metadata", "fnn_controller.fast", "fmu_models.export.build", "cosim.scenario_tables",
                  "quadrotor_paper.section_tables", "lxml",
                  # nor what only another path uses: TOML parsed (the document kept), an archive opened, a log shown
-                 "tomllib", "zipfile", "logging", "cosim.fmu_log")
+                 "tomllib", "zipfile", "logging", "cosim.fmu_log",
+                 # the cases (a study's), a Model Exchange solver (the shipped FMUs are Co-Simulation)
+                 "quadrotor_paper.options", "cosim.model_exchange")
 
 _RUN = """
 import json, sys
