@@ -17,8 +17,8 @@ NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scip
                  "quadrotor_paper.section_tables", "lxml",
                  # nor what only another path uses: TOML parsed (the document kept), an archive opened, a log shown
                  "tomllib", "zipfile", "logging", "cosim.fmu_log",
-                 # the cases (a study's), a Model Exchange solver (the shipped FMUs are Co-Simulation)
-                 "quadrotor_paper.options", "cosim.model_exchange")
+                 # the cases (a study's), a Model Exchange solver (the shipped FMUs are Co-Simulation), a results reader
+                 "quadrotor_paper.options", "cosim.model_exchange", "csv")
 
 _RUN = """
 import json, sys
