@@ -119,9 +119,12 @@ def fmu_component(name: str, spec: Mapping[str, Any], path: Path):
     """The :class:`~cosim.fmu_component.FmuComponent` of an ``[fmus.X]``
     entry (its seeding, interface and solver) for the FMU file ``path``."""
     from .fmu_component import FmuComponent
-    from .model_exchange import SolverSettings
 
-    solver = SolverSettings(**spec["solver"]) if "solver" in spec else None
+    solver = None
+    if "solver" in spec:
+        from .model_exchange import SolverSettings  # only then: a Co-Simulation run loads no solver
+
+        solver = SolverSettings(**spec["solver"])
     return FmuComponent(name, path, seed_parameter=spec.get("seed_parameter"), seed_stream=spec.get("seed_stream", 0),
                         interface=spec.get("interface"), solver=solver)
 

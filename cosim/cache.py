@@ -4,9 +4,10 @@ data (never pickle: a cache folder is a place others may write,
 docs/security.md), each entry kept only while what it was derived from is
 unchanged.
 
-Three entries use it: the installed plugins (:mod:`cosim.registry`),
-validated scenarios (:func:`cosim.scenario.load_scenario`) and what was
-read of FMU files (:mod:`cosim.description_cache`). Which folder is this
+Four entries use it: the installed plugins (:mod:`cosim.registry`),
+validated scenarios and the parse of scenario files
+(:func:`cosim.scenario.load_scenario`) and what was read of FMU files
+(:mod:`cosim.description_cache`). Which folder is this
 module's to hold (:func:`register_cache`, :func:`cache_folder`), so a module
 below the registry reads it too. An entry that
 cannot be read is derived again; a folder that cannot be written keeps

@@ -25,15 +25,21 @@ Two optional parts of the contract:
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Mapping
-
-import numpy as np
 
 if TYPE_CHECKING:
     from .units import Unit
 
 __all__ = ["Port", "PythonComponent", "ports", "TYPES", "FLOAT_HELD", "element_ports", "element_of", "typed_value"]
+
+
+def _numpy_floating(value: Any) -> bool:
+    """Whether ``value`` is a numpy floating-point scalar (numpy is not imported for it: a value of numpy's
+    means numpy is loaded already; registering components, at fnn-cosim's start, loads no numpy)."""
+    np = sys.modules.get("numpy")
+    return np is not None and isinstance(value, np.floating)
 
 # The signal types (docs/cosim.md, "Signal types"): FMI 3.0's names (FMI 3.0
 # section 2.4.7.4); FMI 2.0's Real, Integer, Boolean, String and Enumeration
@@ -165,7 +171,7 @@ def typed_value(type_: str, value, what: str):
             number = int(value.strip())
         except ValueError:
             raise ValueError(f"{what} = {value!r}: expected a whole number ({type_})") from None
-    elif isinstance(value, (float, np.floating)):
+    elif isinstance(value, float) or _numpy_floating(value):
         if not float(value).is_integer():
             raise ValueError(f"{what} = {value!r}: expected a whole number ({type_})")
         number = int(value)
@@ -219,6 +225,8 @@ class PythonComponent:
     def internal_values(self) -> np.ndarray:
         """The current values of ``internals``, in their order (after the
         step just taken)."""
+        import numpy as np
+
         return np.zeros(0)
 
     def step(self, n: int, t: float, u: np.ndarray | None) -> np.ndarray:  # pragma: no cover - abstract

@@ -20,8 +20,6 @@ import re
 import shutil
 import stat
 import threading
-import tomllib
-import zipfile
 import zlib
 from pathlib import Path
 from typing import Any, Iterable
@@ -29,7 +27,7 @@ from typing import Any, Iterable
 from .errors import ScenarioError, one_line, shown_text
 from .limits import MAX_ARCHIVE_BYTES, MAX_DOCUMENT_BYTES, MAX_ENTRY_BYTES, MAX_NESTING, MAX_RATIO
 
-__all__ = ["regular_file", "read_text", "read_toml", "toml_value", "check_document", "read_json", "json_document",
+__all__ = ["regular_file", "read_text", "read_toml", "toml_text", "toml_value", "check_document", "read_json", "json_document",
            "repeated", "given_twice", "put_once", "write_whole", "write_json", "is_ssp", "SSD_NAME", "safe_name", "output_folder",
            "not_others_results", "output_file", "room_for", "zip_members", "read_entry", "extract_zip"]
 
@@ -113,7 +111,14 @@ def read_toml(path: str | Path, what: str = "scenario") -> dict[str, Any]:
     if is_ssp(path):  # its bytes are a zip's: "not UTF-8 text (byte 11)" said nothing of use
         raise ScenarioError(f"{what} {str(path)!r}: an SSP archive, not a TOML file: `fnn-cosim run {path}` flies it "
                             f"(a study, export-ssp and linearize --scenario take a TOML scenario)")
-    text = read_text(path, what)
+    return toml_text(read_text(path, what), path)
+
+
+def toml_text(text: str, path: str | Path) -> dict[str, Any]:
+    """The document of ``text``, the TOML read from the file ``path``
+    (:func:`read_toml`'s parse and checks; the one-line refusals name ``path``)."""
+    import tomllib  # here: a scenario kept by the cache is not parsed again (cosim.scenario.load_scenario)
+
     try:
         doc = _loads_toml(text, str(path), lines=True)
     except tomllib.TOMLDecodeError as exc:
@@ -129,6 +134,8 @@ def toml_value(text: str, where: str, depth: int = 0) -> Any:
     document's values are (:func:`check_document`): ``where`` names it in a
     refusal (``--set KEY``), ``depth`` is how deep in a document it goes (the
     key's parts)."""
+    import tomllib
+
     try:
         value = _loads_toml(f"v = {text}", where, lines=False)["v"]
     except tomllib.TOMLDecodeError:
@@ -144,6 +151,8 @@ def _loads_toml(text: str, where: str, lines: bool) -> dict[str, Any]:
     """``tomllib.loads``, its faults other than TOML syntax one line each:
     an integer beyond Python's conversion limit (no physical value has
     thousands of digits), nesting that exhausts the parser."""
+    import tomllib
+
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError:
@@ -335,7 +344,10 @@ def run_time_entries(names: Iterable[str]) -> set[str]:
 
 # What reading an entry's data may raise when the data is corrupt: a bad CRC, a deflate stream that
 # does not decompress (zlib's "Error -3"), data that ends early, an unsupported compression.
-_CORRUPT = (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError, ValueError, OSError)
+def _corrupt_data() -> tuple[type[BaseException], ...]:
+    import zipfile  # here: only what opens an archive loads it
+
+    return zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError, ValueError, OSError
 
 
 def _corrupt(what: str, info: zipfile.ZipInfo, exc: BaseException) -> ScenarioError:
@@ -352,7 +364,7 @@ def read_entry(archive: zipfile.ZipFile, info: zipfile.ZipInfo, what: str) -> by
     ``what`` (the archive) and the entry."""
     try:
         return archive.read(info)
-    except _CORRUPT as exc:
+    except _corrupt_data() as exc:
         raise _corrupt(what, info, exc) from None
 
 
@@ -364,6 +376,8 @@ def extract_zip(path: str | Path, target: str | Path, what: str, only: set[str] 
     bad CRC, data that does not decompress) is a one-line
     :class:`ScenarioError` naming the archive, and the entry. The folder is
     left as it was found (removed if this made it) when extraction fails."""
+    import zipfile
+
     path, target = Path(path), Path(target)
     regular_file(path, what)
     made = not target.exists()
@@ -387,7 +401,7 @@ def extract_zip(path: str | Path, target: str | Path, what: str, only: set[str] 
                                     raise ScenarioError(f"{what}: entry {info.filename!r} is larger than its header "
                                                         f"says")
                                 sink.write(chunk)
-                    except _CORRUPT as exc:
+                    except _corrupt_data() as exc:
                         if isinstance(exc, OSError) and exc.errno is not None:  # the disk, not the archive
                             raise
                         raise _corrupt(what, info, exc) from None

@@ -66,13 +66,12 @@ from __future__ import annotations
 import ctypes
 import functools
 import itertools
-import logging
 import os
 import shutil
+import sys
 import tempfile
 import threading
 import weakref
-import zipfile
 from collections import deque
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -83,7 +82,6 @@ from fmpy.fmi1 import FMICallException
 
 from .component import element_of, typed_value
 from .fmu_description import TYPE_OF, PERIOD_ANNOTATION, shape_of, fmu_ports, start_value_rule
-from .fmu_log import STATUS_LABEL, STATUS_LEVEL, FMU_LOGGER, LOG_LEVELS, fmu_log
 from .errors import FmuCallError, FmuLoadError, ScenarioError, SimulationTerminated
 from .limits import SEED_LIMIT
 from .kernel import Call, KernelFmu
@@ -95,6 +93,11 @@ __all__ = ["FmuComponent", "fmi2_callbacks", "stream_seed", "read_description"]
 # study on a cluster of threads) left the process in one FMU's extracted folder, removed later with
 # its cache: every later os.getcwd() failed. One constructor at a time in this process.
 _LOADING = threading.Lock()
+
+# The FMUs' log goes through the logging module (cosim.fmu_log), imported when an FMU first logs: a
+# process that has not imported logging has configured no logger, so every level is the root's default
+# (logging.WARNING) and nothing below it is asked for (a run of FMUs that log nothing imports no logging).
+_UNCONFIGURED_LEVEL, _DEBUG = 30, 10  # logging.WARNING, logging.DEBUG
 
 
 @functools.lru_cache(maxsize=64)
@@ -113,6 +116,8 @@ def read_description(name: str, path: Path, validate: bool = False):
     one line (:class:`FmuLoadError`). The archive is looked at first (a
     regular file, every entry within the limits of :mod:`cosim.files`): an
     FMU file is data from anyone. Loads nothing."""
+    import zipfile
+
     from .files import read_entry, regular_file, zip_members
     from .limits import MAX_DOCUMENT_BYTES
 
@@ -315,9 +320,7 @@ class FmuComponent:
             has = "Model Exchange" if md.modelExchange is not None else "Co-Simulation"
             raise FmuLoadError(name, self.path, f"the FMU has no {'Co-Simulation' if interface == 'CoSimulation' else 'Model Exchange'} "
                                f"interface (it has {has} only)", setting=("interface", interface))
-        from .model_exchange import SolverSettings
-
-        self.solver = (solver if solver is not None else SolverSettings()).for_fmu(md)
+        self._solver_given, self._solver = solver, None  # resolved when first asked for (solver)
         self._check_binary()
         groups = fmu_ports(md)
         self.inputs, self.outputs, self.parameters = groups["input"], groups["output"], groups["parameter"]
@@ -332,8 +335,7 @@ class FmuComponent:
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
         self.feedthrough = self._feedthrough(md)
         self.messages: deque[str] = deque(maxlen=20)
-        self.logger = logging.getLogger(f"{FMU_LOGGER}.{name}")
-        self._log_level = logging.WARNING  # the logger's, read at instantiation
+        self._log_level = _UNCONFIGURED_LEVEL  # the logger's, read at instantiation
         self._hidden: tuple[tuple[str, str], ...] = ()  # (the extraction folder as written, what stands for it)
         self._fatal = False  # the FMU returned fmiFatal: no call may follow
         self._slave = None
@@ -347,6 +349,29 @@ class FmuComponent:
         self._t = 0.0
         self.bind((), ())
         self._keep_description(validate)
+
+    @property
+    def solver(self):
+        """How the master integrates this FMU in Model Exchange
+        (:class:`cosim.model_exchange.SolverSettings`, the one given or the
+        defaults, its tolerance resolved for this FMU), made when first asked
+        for: a Co-Simulation FMU never asks."""
+        if self._solver is None:
+            from .model_exchange import SolverSettings
+
+            given = self._solver_given
+            self._solver = (given if given is not None else SolverSettings()).for_fmu(self.model_description)
+        return self._solver
+
+    @property
+    def logger(self):
+        """The Python logger of this instance's FMU log, ``cosim.fmu.<instance>``
+        (:mod:`cosim.fmu_log`; logging imported when first asked for)."""
+        import logging
+
+        from .fmu_log import FMU_LOGGER
+
+        return logging.getLogger(f"{FMU_LOGGER}.{self.name}")
 
     def python_loop_reason(self, signals: Sequence[str] = ()) -> str | None:
         """Why the master's compiled loop, which makes set, get and doStep
@@ -457,6 +482,8 @@ class FmuComponent:
             else:
                 xml = getattr(self, "_description_xml", None)  # read, and checked, by _read_model_description
                 if xml is None:
+                    import zipfile
+
                     from .files import read_entry
 
                     with zipfile.ZipFile(self.path) as archive:
@@ -499,6 +526,8 @@ class FmuComponent:
         if self.path.is_dir():
             return [Path(root, f).relative_to(self.path).as_posix()
                     for root, _, files in os.walk(self.path) for f in files]
+        import zipfile
+
         with zipfile.ZipFile(self.path) as archive:
             return archive.namelist()
 
@@ -534,6 +563,10 @@ class FmuComponent:
         kept for the errors that quote it (every message of status warning or
         worse; those of status OK only at level info or debug, when asked
         for, so that chatter never pushes the reason out)."""
+        import logging
+
+        from .fmu_log import STATUS_LABEL, STATUS_LEVEL
+
         text = self._hide_folder(message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message))
         known = 0 <= status < len(STATUS_LABEL)
         label = STATUS_LABEL[status] if known else str(status)
@@ -553,7 +586,7 @@ class FmuComponent:
         step's exception without a category, and drops it once categories are
         named), and an error must quote every message of status warning or
         worse."""
-        if self._log_level > logging.DEBUG:
+        if self._log_level > _DEBUG:
             return
         try:
             self._slave.setDebugLogging(True, [])
@@ -589,7 +622,7 @@ class FmuComponent:
         common = dict(guid=md.guid, unzipDirectory=str(self._unzipdir),
                       modelIdentifier=self.kind.modelIdentifier, instanceName=self.name)
         self.messages.clear()
-        self._log_level = self.logger.getEffectiveLevel()
+        self._log_level = self.logger.getEffectiveLevel() if "logging" in sys.modules else _UNCONFIGURED_LEVEL
         model_exchange = self.interface == "ModelExchange"
         try:
             if self.fmi_version == 2:

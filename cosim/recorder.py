@@ -37,7 +37,6 @@ Reference FMUs' ``_out.csv`` files write them.
 """
 from __future__ import annotations
 
-import csv
 import io
 import itertools
 import json
@@ -387,6 +386,8 @@ def read_results(path: str | Path) -> tuple[list[str], np.ndarray]:
 
 
 def _header(path: str | Path) -> list[str]:
+    import csv  # here: reading results back; a run writes them with orjson
+
     with open(path, encoding="utf-8", newline="") as f:
         header = next(csv.reader(f), None)
     if header is None:
@@ -400,6 +401,8 @@ def iter_results(path: str | Path, block_rows: int = CHUNK_ROWS) -> Iterator[Row
     what :func:`read_results` returns, block by block (no block for a file
     without rows). A file of numbers only is parsed a block at a time by
     numpy (each number read back to its bits, as ``float`` reads it)."""
+    import csv
+
     path = Path(path)
     with open(path, "rb") as raw:
         raw.seek(0, io.SEEK_END)
@@ -434,6 +437,8 @@ def iter_results(path: str | Path, block_rows: int = CHUNK_ROWS) -> Iterator[Row
 def _number_blocks(f, n_columns: int, block_rows: int, whole: bool) -> Iterator[np.ndarray]:
     """Blocks of rows of a file of numbers: numpy's parser, a block at a time;
     a block it refuses (a line that is no row) read line by line, up to that line."""
+    import csv
+
     while True:
         lines = list(itertools.islice(f, block_rows))
         if not lines:

@@ -39,12 +39,12 @@ import sys
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from .cache import cache_folder, register_cache
 
 __all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
-           "register_section", "register_fmu_model", "register_scenarios", "register_studies", "register_case", "component_kinds",
+           "register_section", "register_fmu_model", "register_scenarios", "register_studies", "register_case", "register_cases", "component_kinds",
            "sections", "fmu_models", "cases", "aliases", "scenario_folders", "study_folders", "files_by_name", "scoped", "with_connections", "version",
            "register_table_fmu", "table_fmu", "register_cache", "cache_folder", "signature", "PLUGIN_GROUP"]
 
@@ -173,6 +173,7 @@ _KINDS: dict[str, ComponentKind] = {}
 _SECTIONS: dict[str, Section] = {}
 _MODELS: dict[str, RegisteredModel] = {}
 _CASES: dict[str, Case] = {}
+_CASE_SOURCES: list[Callable[[], Iterable[Case]]] = []  # cases registered when cases are first read
 _SCENARIO_FOLDERS: list[Path] = []
 _STUDY_FOLDERS: list[Path] = []
 _TABLE_FMU: list[Callable[[Any, int], Path]] = []  # at most one: the builder of the signal table's FMU
@@ -253,8 +254,22 @@ def table_fmu() -> Callable[[Any, int], Path] | None:
 
 
 def register_case(case: Case) -> Case:
+    _sourced_cases()
     _register(_CASES, case.name, case, "case")
     return case
+
+
+def register_cases(source: Callable[[], Iterable[Case]]) -> None:
+    """Cases registered when cases are first read (:func:`cases`):
+    ``source()`` returns them, in order. A run names no case: what defines
+    the cases (their module, their classes) is loaded only for a study."""
+    _CASE_SOURCES.append(source)
+
+
+def _sourced_cases() -> None:
+    while _CASE_SOURCES:
+        for case in _CASE_SOURCES.pop(0)():
+            _register(_CASES, case.name, case, "case")
 
 
 def register_scenarios(folder: str | Path) -> None:
@@ -388,6 +403,7 @@ def fmu_models() -> dict[str, RegisteredModel]:
 def cases() -> dict[str, Case]:
     """The registered cases, in registration order."""
     _load_plugins()
+    _sourced_cases()
     return dict(_CASES)
 
 
@@ -416,6 +432,7 @@ def scoped():
     """Registrations made inside the ``with`` block are undone at its end
     (tests that register toys leave the process's registry as they found it)."""
     _load_plugins()
+    _sourced_cases()
     saved = (dict(_KINDS), dict(_SECTIONS), dict(_MODELS), dict(_CASES), list(_SCENARIO_FOLDERS), list(_STUDY_FOLDERS))
     try:
         yield

@@ -22,7 +22,6 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
-import tomllib
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
@@ -30,7 +29,7 @@ from typing import Any, Mapping
 from . import registry
 from .cache import code_unchanged, keep, keep_code, kept
 from .errors import ScenarioError, shown_text
-from .files import read_toml
+from .files import is_ssp, read_text, read_toml, toml_text
 from .limits import MAX_NESTING
 
 __all__ = ["Scenario", "Simulation", "FmuSpec", "Record", "ConnectionTable", "scenario_model", "scenario_json_schema",
@@ -140,6 +139,8 @@ def dotted_key(dotted: str, where: str | None = None) -> list[str]:
         if all(parts):
             parts = [p.strip() for p in parts]
             return _few_parts(parts, where)
+    import tomllib  # a quoted part only: a run's --set keys are plain
+
     try:
         node: Any = tomllib.loads(f"{dotted} = 0")
     except (tomllib.TOMLDecodeError, ValueError, RecursionError):
@@ -210,10 +211,10 @@ def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None 
     what its validation gave is kept in the registered cache folder
     (:func:`_kept_state`)."""
     path = scenario_path(name_or_path)
-    document = json.loads(json.dumps(apply_overrides(read_toml(path), overrides or {})))
     folder = registry.cache_folder()
     if folder is None:
-        return Scenario(document, path)
+        return Scenario(json.loads(json.dumps(apply_overrides(read_toml(path), overrides or {}))), path)
+    document = json.loads(json.dumps(apply_overrides(_read_document(folder, path), overrides or {})))
     entry = folder / "scenarios" / f"{_state_key(document, path)}.json"
     state = _kept_state(folder, entry)
     if state is None:
@@ -221,6 +222,28 @@ def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None 
         if _keepable(document, state):
             keep(entry, {"code": keep_code(folder), "state": state})
     return Scenario._of(document, path, state)
+
+
+def _read_document(folder: Path, path: Path) -> dict[str, Any]:
+    """:func:`~cosim.files.read_toml` of ``path``, its parse kept in ``folder``
+    by the text's digest (the same text is the same document: a file read
+    before is not parsed again, and no TOML parser is imported). The file
+    is read, and refused, as ``read_toml`` reads it; a document JSON does
+    not give back exactly is parsed every time."""
+    if is_ssp(path):
+        return read_toml(path)  # its refusal
+    text = read_text(path, "scenario")
+    entry = folder / "documents" / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.json"
+    document = kept(entry)
+    if isinstance(document, dict):
+        return document
+    document = toml_text(text, path)
+    try:
+        if _same(json.loads(json.dumps(document)), document):
+            keep(entry, document)
+    except (TypeError, ValueError):  # a value JSON does not hold
+        pass
+    return document
 
 
 # A scenario's validation is kept (cosim.cache) when it depends on nothing but

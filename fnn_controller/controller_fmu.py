@@ -48,6 +48,8 @@ from .step import OUTPUTS, state_ports
 from .geometric import GeometricParams
 from .parametric import initial_state_function, parameter_table, parametric_step_function, geometric_structure
 from .position_parameters import PositionParams
+
+_POSITION, _GEOMETRIC = PositionParams(), GeometricParams()  # the defaults: one (frozen) instance for every signature
 from .variants import Variant, variant as lookup
 
 __all__ = ["controller_model", "step_model", "STATE", "PARAMETERS", "fmu_identifier", "REFERENCE_INPUTS", "PSI_REF",
@@ -111,8 +113,8 @@ def step_model(identifier: str, description: str, inputs: Sequence, arguments: S
 
 
 @lru_cache(maxsize=None)
-def controller_model(variant: str, position: PositionParams = PositionParams(),
-                     geometric: GeometricParams = GeometricParams()) -> FmuModel:
+def controller_model(variant: str, position: PositionParams = _POSITION,
+                     geometric: GeometricParams = _GEOMETRIC) -> FmuModel:
     """The FMU model of ``variant``; ``position`` and ``geometric`` give the
     parameters' start values and the structural choices."""
     v = lookup(variant)

@@ -109,6 +109,9 @@ class GeometricParams:
         check_ranges(self)
 
 
+_GEOMETRIC = GeometricParams()  # the defaults: one (frozen) instance for every signature
+
+
 def hat(w):
     """Hat map R^3 -> so(3): ``hat(w) @ x = w x x``."""
     return ca.vertcat(
@@ -124,7 +127,7 @@ def vee(S):
     return 0.5 * ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
 
 
-def desired_force(v_ref, v, params: GeometricParams = GeometricParams(), a_ref=None):
+def desired_force(v_ref, v, params: GeometricParams = _GEOMETRIC, a_ref=None):
     """Desired force along ``+z_B*`` (N), the numerator of eq. (13) with the
     sign fixed for z down, tilt-limited.
 
@@ -176,7 +179,7 @@ def angular_velocity_error(omega_b, R, R_ref, omega_ref):
     return omega_b - R.T @ R_ref @ omega_ref
 
 
-def thrust_and_torque(force, R, e_R, e_omega, omega_b, params: GeometricParams = GeometricParams()):
+def thrust_and_torque(force, R, e_R, e_omega, omega_b, params: GeometricParams = _GEOMETRIC):
     """Control inputs (1) by eq. (18).
 
     .. math:: T = F^T R e_3, \\qquad
@@ -202,7 +205,7 @@ def rotor_speeds(thrust, tau, vehicle: VehicleParams = VehicleParams()):
     return ca.vertcat(*[ca.sqrt(ca.fmin(ca.fmax(s, 0.0), vehicle.Omega_max**2)) for s in squares])
 
 
-def velocity_controller(v_ref, v, euler, omega_b, psi_ref, vel_state, params: GeometricParams = GeometricParams(),
+def velocity_controller(v_ref, v, euler, omega_b, psi_ref, vel_state, params: GeometricParams = _GEOMETRIC,
                         a_ref=None):
     """The geometric velocity controller as CasADi expressions.
 
@@ -253,7 +256,7 @@ def velocity_controller(v_ref, v, euler, omega_b, psi_ref, vel_state, params: Ge
     }
 
 
-def velocity_controller_function(params: GeometricParams = GeometricParams()) -> ca.Function:
+def velocity_controller_function(params: GeometricParams = _GEOMETRIC) -> ca.Function:
     """The geometric velocity controller as one CasADi function.
 
     ``velocity_controller(v_ref[3], v[3], euler[3], omega_b[3], psi_ref,

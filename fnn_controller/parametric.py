@@ -45,6 +45,8 @@ from .step import STEP_INPUT_NAMES, Y_PARTS, state_size, step_symbols
 from .variants import Variant, variant as lookup
 from .variants.registry import identifier
 
+_POSITION, _GEOMETRIC = PositionParams(), GeometricParams()  # the defaults: one (frozen) instance for every signature
+
 __all__ = ["Parameter", "parameter_table", "parametric_step_function", "parameter_vector", "geometric_structure",
            "outer_parameter_table", "inner_parameter_table", "outer_step_function", "inner_step_function",
            "outer_initial_function", "OUTER_Y", "INNER_Y", "bound_function", "bound_outer_function", "bound_inner_function",
@@ -89,8 +91,8 @@ def _scalars(obj, prefix: str, path: tuple, fields: set[str] | None):
                 yield f"{prefix}{f.name}", path + (f.name,), float(value), info
 
 
-def parameter_table(variant: str, position: PositionParams = PositionParams(),
-                    geometric: GeometricParams = GeometricParams()) -> tuple[Parameter, ...]:
+def parameter_table(variant: str, position: PositionParams = _POSITION,
+                    geometric: GeometricParams = _GEOMETRIC) -> tuple[Parameter, ...]:
     """The parameters of ``variant``'s parametric step, defaults from
     ``position`` and ``geometric``: the PD's ``kp``, ``kd``, ``dt``, the
     fields the variant reads (:attr:`Variant.parameters`), and every field of
@@ -138,13 +140,13 @@ def _symbolic(table: tuple[Parameter, ...], position: PositionParams, geometric:
     return params["position"], params["geometric"]
 
 
-def outer_parameter_table(variant: str, position: PositionParams = PositionParams()) -> tuple[Parameter, ...]:
+def outer_parameter_table(variant: str, position: PositionParams = _POSITION) -> tuple[Parameter, ...]:
     """The step's parameters that the outer loop reads: the PD's, ``dt`` and
     the variant's learning parameters."""
     return tuple(p for p in parameter_table(variant, position) if p.path[0] == "position")
 
 
-def inner_parameter_table(geometric: GeometricParams = GeometricParams()) -> tuple[Parameter, ...]:
+def inner_parameter_table(geometric: GeometricParams = _GEOMETRIC) -> tuple[Parameter, ...]:
     """The step's parameters that the inner loop reads: the geometric gains,
     the nominal vehicle and ``dt`` (its sample period, ``geometric.dt``)."""
     position = dataclasses.replace(PositionParams(), dt=geometric.dt)
@@ -162,7 +164,7 @@ def _check(*parts) -> ca.SX:
 
 
 @lru_cache(maxsize=None)
-def outer_step_function(variant: str, position: PositionParams = PositionParams()) -> ca.Function:
+def outer_step_function(variant: str, position: PositionParams = _POSITION) -> ca.Function:
     """The outer loop of Fig. 2 (eqs. 12, 19, 24-26 and the variant's
     learning laws) with its parameters (:func:`outer_parameter_table`) as the
     input ``p``: ``(p_ref[3], p_ref_dot[3], x[6], state[n], p[m],
@@ -189,7 +191,7 @@ def outer_step_function(variant: str, position: PositionParams = PositionParams(
 
 
 @lru_cache(maxsize=None)
-def inner_step_function(geometric: GeometricParams = GeometricParams()) -> ca.Function:
+def inner_step_function(geometric: GeometricParams = _GEOMETRIC) -> ca.Function:
     """The inner loop of Fig. 2 (eqs. 13-18 and the rotor inversion) with
     its parameters (:func:`inner_parameter_table`) as the input ``p``:
     ``(v_ref[3], x[9], psi_ref, state[10], p[k], a_ref[3]) -> (y[8],
@@ -216,8 +218,8 @@ def _part(p: ca.SX, table: tuple[Parameter, ...], part: tuple[Parameter, ...]) -
 
 
 @lru_cache(maxsize=None)
-def parametric_step_function(variant: str, position: PositionParams = PositionParams(),
-                             geometric: GeometricParams = GeometricParams()) -> ca.Function:
+def parametric_step_function(variant: str, position: PositionParams = _POSITION,
+                             geometric: GeometricParams = _GEOMETRIC) -> ca.Function:
     """``controller_step_<variant>_parametric(p_ref[3], p_ref_dot[3], x[12],
     psi_ref, state[n], p[m], p_ref_ddot[3]) -> (y[17], state_next[n], check)``:
     the whole step (inputs and outputs in :mod:`fnn_controller.step`) with the
@@ -249,13 +251,13 @@ def parametric_step_function(variant: str, position: PositionParams = PositionPa
                        [*STEP_INPUT_NAMES[:5], "p", *STEP_INPUT_NAMES[5:]], ["y", "state_next", "check"])
 
 
-def parameter_vector(variant: str, position: PositionParams = PositionParams(),
-                     geometric: GeometricParams = GeometricParams()) -> np.ndarray:
+def parameter_vector(variant: str, position: PositionParams = _POSITION,
+                     geometric: GeometricParams = _GEOMETRIC) -> np.ndarray:
     """The values of :func:`parameter_table` for these parameters, in table order."""
     return np.array([p.default for p in parameter_table(variant, position, geometric)])
 
 
-def geometric_structure(geometric: GeometricParams = GeometricParams()) -> GeometricParams:
+def geometric_structure(geometric: GeometricParams = _GEOMETRIC) -> GeometricParams:
     """The structural choice of ``geometric`` (``desired_rate``, the form of
     eq. 17) with every parameter at its default: what a run's step function
     is built on, the parameters going in through ``p``, so one build serves
@@ -263,8 +265,8 @@ def geometric_structure(geometric: GeometricParams = GeometricParams()) -> Geome
     return GeometricParams(desired_rate=geometric.desired_rate)
 
 
-def parametric_step(variant: str, position: PositionParams = PositionParams(),
-                    geometric: GeometricParams = GeometricParams()) -> tuple[ca.Function, np.ndarray]:
+def parametric_step(variant: str, position: PositionParams = _POSITION,
+                    geometric: GeometricParams = _GEOMETRIC) -> tuple[ca.Function, np.ndarray]:
     """The step a run with these parameters evaluates: the one function of
     ``variant`` (:func:`parametric_step_function` on :func:`geometric_structure`,
     cached) and the parameter vector ``p`` to feed it."""
@@ -284,8 +286,8 @@ def bound_function(f: ca.Function, p: np.ndarray, name: str | None = None) -> ca
     return ca.Function(name or f"{f.name()}_bound", args, [out[n] for n in f.name_out()], names, f.name_out())
 
 
-def bound_step_function(variant: str, position: PositionParams = PositionParams(),
-                        geometric: GeometricParams = GeometricParams()) -> ca.Function:
+def bound_step_function(variant: str, position: PositionParams = _POSITION,
+                        geometric: GeometricParams = _GEOMETRIC) -> ca.Function:
     """Fixed gains: ``controller_step_<variant>(p_ref[3], p_ref_dot[3], x[12],
     psi_ref, state[n], p_ref_ddot[3]) -> (y[17], state_next[n], check)``, the
     function of :func:`parametric_step` with ``p`` bound to the values of
@@ -294,7 +296,7 @@ def bound_step_function(variant: str, position: PositionParams = PositionParams(
     return bound_function(f, p, f"controller_step_{identifier(variant)}")
 
 
-def bound_outer_function(variant: str, position: PositionParams = PositionParams()) -> ca.Function:
+def bound_outer_function(variant: str, position: PositionParams = _POSITION) -> ca.Function:
     """Fixed gains: the outer loop of :func:`outer_step_function` with ``p``
     bound to the values of ``position``: ``(p_ref, p_ref_dot, x[6], state,
     p_ref_ddot) -> (y, state_next, check)``."""
@@ -302,7 +304,7 @@ def bound_outer_function(variant: str, position: PositionParams = PositionParams
                           np.array([e.default for e in outer_parameter_table(variant, position)]))
 
 
-def bound_inner_function(geometric: GeometricParams = GeometricParams()) -> ca.Function:
+def bound_inner_function(geometric: GeometricParams = _GEOMETRIC) -> ca.Function:
     """Fixed gains: the inner loop of :func:`inner_step_function` with ``p``
     bound to the values of ``geometric``: ``(v_ref, x[9], psi_ref, state,
     a_ref) -> (y, state_next, check)``."""
@@ -318,7 +320,7 @@ def initial_fnn_expression(variant: Variant, position: PositionParams, r: ca.SX)
 
 
 @lru_cache(maxsize=None)
-def outer_initial_function(variant: str, position: PositionParams = PositionParams()) -> ca.Function:
+def outer_initial_function(variant: str, position: PositionParams = _POSITION) -> ca.Function:
     """``(p[m], r[3 n_random]) -> state0``: the outer loop's state after
     reset, ``p`` laid out as :func:`outer_parameter_table` (the whole
     controller's learned part, :func:`initial_fnn_expression`)."""
@@ -332,8 +334,8 @@ def outer_initial_function(variant: str, position: PositionParams = PositionPara
 
 
 @lru_cache(maxsize=None)
-def initial_state_function(variant: str, position: PositionParams = PositionParams(),
-                           geometric: GeometricParams = GeometricParams()) -> ca.Function:
+def initial_state_function(variant: str, position: PositionParams = _POSITION,
+                           geometric: GeometricParams = _GEOMETRIC) -> ca.Function:
     """``initial_state_<variant>(p[m], r[3 n_random]) -> state0[n]``: the
     controller state after reset from the parameters and the uniform numbers
     of the three axes (x, y, z, in that order), then the velocity controller's."""

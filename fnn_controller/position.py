@@ -28,6 +28,8 @@ import numpy as np
 
 from .fnn import AXIS_STATE_SIZE
 from .position_parameters import PositionParams
+
+_POSITION = PositionParams()  # the defaults: one (frozen) instance for every signature
 from .variants.registry import Variant, identifier, initial_axis_state
 
 __all__ = [
@@ -53,7 +55,7 @@ def pd_law(e, e_dot, kp, kd):
     return kp * e + kd * e_dot
 
 
-def position_axis(variant: Variant, e, e_dot, axis_state, axis: int, params: PositionParams = PositionParams(),
+def position_axis(variant: Variant, e, e_dot, axis_state, axis: int, params: PositionParams = _POSITION,
                   p_ref_dot=None):
     """One step of the position controller of one axis, eqs. (19), (24)-(26).
 
@@ -92,7 +94,7 @@ def is_zero(gain) -> bool:
     return isinstance(gain, (int, float)) and gain == 0
 
 
-def position_controller(variant: Variant, e, e_dot, fnn_state, params: PositionParams = PositionParams(),
+def position_controller(variant: Variant, e, e_dot, fnn_state, params: PositionParams = _POSITION,
                         p_ref_dot=None, p_ref_ddot=None):
     """The three-axis position controller as CasADi expressions (section 3.1).
 
@@ -132,7 +134,7 @@ def position_controller(variant: Variant, e, e_dot, fnn_state, params: PositionP
     }
 
 
-def position_controller_function(variant: Variant, params: PositionParams = PositionParams()) -> ca.Function:
+def position_controller_function(variant: Variant, params: PositionParams = _POSITION) -> ca.Function:
     """The position controller as one CasADi function.
 
     ``position_controller_<variant>(e[3], e_dot[3], fnn_state[n])
@@ -154,7 +156,7 @@ def position_controller_function(variant: Variant, params: PositionParams = Posi
 
 
 def initial_fnn_state(variant: Variant, rng: np.random.Generator | int,
-                      params: PositionParams = PositionParams()) -> np.ndarray:
+                      params: PositionParams = _POSITION) -> np.ndarray:
     """Position-controller state of ``variant`` at t = 0 (section 5.1) for the three axes.
 
     ``rng`` is a ``numpy.random.Generator`` or an integer seed (there is no

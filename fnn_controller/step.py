@@ -55,6 +55,8 @@ from fmu_models.models.quadrotor import STATE_NAMES
 from .geometric import VEL_STATE_SIZE, initial_velocity_state
 from .position import FNN_STATE_SIZE, fnn_state_size, initial_fnn_state
 from .position_parameters import PositionParams
+
+_POSITION = PositionParams()  # the defaults: one (frozen) instance for every signature
 from .variants.registry import Variant
 
 __all__ = [
@@ -164,7 +166,7 @@ def raise_non_finite(inputs: dict[str, np.ndarray]) -> None:
 
 
 def initial_state(variant: Variant, seed: int | np.random.Generator,
-                  position: PositionParams = PositionParams()) -> np.ndarray:
+                  position: PositionParams = _POSITION) -> np.ndarray:
     """Controller state after reset: the variant's initial values of section 5.1
     (f_ij(0) from ``seed``) followed by the velocity-controller state."""
     return np.concatenate([initial_fnn_state(variant, seed, position), initial_velocity_state()])

@@ -33,6 +33,7 @@ partial results.
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 from pathlib import Path
@@ -137,6 +138,7 @@ def _cmd_run(args) -> int:
     from cosim.assembly import build_master
 
     with build_master(scenario) as master:  # every input refused before anything is written
+        _started()
         # every place a result goes is checked before the run: nothing computed is lost for want of it
         out = not_others_results(output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}"), "run")
         learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
@@ -483,20 +485,45 @@ class _Parser(argparse.ArgumentParser):
                   if self.prog != "fnn-cosim" else f"fnn-cosim: error: {message}\n")
 
 
+class _Commands(argparse._SubParsersAction):
+    """The subcommands, each one's own arguments added when it is the one
+    given: ``fnn-cosim run`` builds the run's parser and not every other
+    command's, and imports nothing only another command's options need
+    (start-up, docs/cosim.md). What a command accepts, refuses and prints is
+    what it would be with every parser built at once."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._arguments: dict[str, Any] = {}  # command -> adds its arguments to its parser
+
+    def add_parser(self, name, arguments=None, **kwargs):
+        """``arguments(parser)``: adds the command's arguments, when it is given."""
+        parser = super().add_parser(name, **kwargs)
+        if arguments is not None:
+            self._arguments[name] = arguments
+        return parser
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        arguments = self._arguments.pop(values[0], None)
+        if arguments is not None:
+            arguments(self.choices[values[0]])
+        super().__call__(parser, namespace, values, option_string)
+
+
 def _parser() -> argparse.ArgumentParser:
-    from fnn_controller.variants import variant_names
-
-    from .options import DEFAULT_OPTIONS, OPTION_SEEDS, option_names
-
     p = _Parser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, action=_Commands)
 
     def common(sp, seeds=True):
         sp.add_argument("--out", help="output directory (default: under results/)")
         fmu_log_option(sp)
         sp.add_argument("--quiet", action="store_true", help="no progress bar")
         if seeds:
+            from fnn_controller.variants import variant_names
+
+            from .options import DEFAULT_OPTIONS, OPTION_SEEDS, option_names
+
             sp.add_argument("--seeds", type=int, help="runs per cell of the variants' rows, seeds 0..N-1 "
                                                       "(default: the study's, 10)")
             sp.add_argument("--duration", type=float, help="override the missions' duration (s)")
@@ -515,95 +542,108 @@ def _parser() -> argparse.ArgumentParser:
                             help=f"runs per option cell (default: the smaller of --seeds and {OPTION_SEEDS}; "
                                  f"without --seeds the study's, {OPTION_SEEDS})")
 
-    r = sub.add_parser("run", help="run one scenario: results CSV, plots, summary")
-    r.add_argument("scenario", help="TOML file, shipped scenario name (see fnn-cosim scenarios), or SSP archive (.ssp)")
-    r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scenario value, e.g. --set wind.speed=5 (repeatable)")
-    r.add_argument("--seed", type=int, help="the run's seed (simulation.seed): every seeded component and FMU "
-                   "draws from it (the FNN's initial weights, sensor noise, wind)")
-    r.add_argument("--variant", choices=variant_names(), help="controller variant")
-    r.add_argument("--no-plots", action="store_true")
-    r.add_argument("--record-every", type=_record_every, default=1, metavar="K",
-                   help="write every K-th row to results.csv (rows 0, K, 2K, ...): a long mission in less disk; "
-                        "the metrics still take every row (default 1)")
-    r.add_argument("--profile", action="store_true",
-                   help="time each phase of the loop (summary.json: cost_per_step_us; python_loop: why the "
-                        "compiled loop cannot run the plan)")
-    r.add_argument("--save-learned", metavar="FILE", help="write the controller's learned state after the run")
-    r.add_argument("--load-learned", metavar="FILE",
-                   help="start the controller from a saved learned state (resume learning)")
-    common(r, seeds=False)
-    r.set_defaults(func=_cmd_run)
+    def run(r):
+        from fnn_controller.variants import variant_names
 
-    t2 = sub.add_parser("table2", help="Table 2: every controller variant at 1, 3, 5 m/s wind")
-    t2.add_argument("--winds", type=_wind_list, help="wind speeds in m/s (default: the study's, 1,3,5)")
-    t2.add_argument("--scenario",
-                    help="the mission (default circles; e.g. circles_sensors: the same with measurement noise)")
-    t2.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help='override a scenario value, e.g. --set simulation.ordering=\'"exchange"\'')
-    common(t2)
-    t2.set_defaults(func=_cmd_table2)
+        r.add_argument("scenario", help="TOML file, shipped scenario name (see fnn-cosim scenarios), or SSP archive "
+                                        "(.ssp)")
+        r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a scenario value, e.g. --set wind.speed=5 (repeatable)")
+        r.add_argument("--seed", type=int, help="the run's seed (simulation.seed): every seeded component and FMU "
+                       "draws from it (the FNN's initial weights, sensor noise, wind)")
+        r.add_argument("--variant", choices=variant_names(), help="controller variant")
+        r.add_argument("--no-plots", action="store_true")
+        r.add_argument("--record-every", type=_record_every, default=1, metavar="K",
+                       help="write every K-th row to results.csv (rows 0, K, 2K, ...): a long mission in less disk; "
+                            "the metrics still take every row (default 1)")
+        r.add_argument("--profile", action="store_true",
+                       help="time each phase of the loop (summary.json: cost_per_step_us; python_loop: why the "
+                            "compiled loop cannot run the plan)")
+        r.add_argument("--save-learned", metavar="FILE", help="write the controller's learned state after the run")
+        r.add_argument("--load-learned", metavar="FILE",
+                       help="start the controller from a saved learned state (resume learning)")
+        common(r, seeds=False)
 
-    t3 = sub.add_parser("table3", help="Table 3: the figure-8")
-    t3.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
-    t3.add_argument("--scenario", help="the mission (default: the study's, figure8)")
-    common(t3)
-    t3.set_defaults(func=_cmd_table3)
+    sub.add_parser("run", run, help="run one scenario: results CSV, plots, summary").set_defaults(func=_cmd_run)
 
-    rp = sub.add_parser("reproduce", help="Tables 2 and 3 and the figures into results/report.md")
-    common(rp)
-    rp.set_defaults(func=_cmd_reproduce)
+    def table2(t2):
+        t2.add_argument("--winds", type=_wind_list, help="wind speeds in m/s (default: the study's, 1,3,5)")
+        t2.add_argument("--scenario",
+                        help="the mission (default circles; e.g. circles_sensors: the same with measurement noise)")
+        t2.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help='override a scenario value, e.g. --set simulation.ordering=\'"exchange"\'')
+        common(t2)
 
-    sw = sub.add_parser("sweep", help="a study: a scenario over a grid and/or random samples of its keys")
-    sw.add_argument("study", help="study TOML file (docs/studies.md) or a shipped study's name")
-    sw.add_argument("--workers", type=worker_count, help="local worker processes, 1 to the cores (default: one per "
-                                                        "core; 1: in this process)")
-    sw.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster at ADDRESS (e.g. tcp://host:8786)")
-    _worker_timeout(sw)
-    sw.add_argument("--no-plots", action="store_true")
-    common(sw, seeds=False)
-    sw.set_defaults(func=_cmd_sweep)
+    sub.add_parser("table2", table2, help="Table 2: every controller variant at 1, 3, 5 m/s wind").set_defaults(
+        func=_cmd_table2)
 
-    e = sub.add_parser("export-ssp", help="write a scenario as an SSP 1.0 archive, every component an FMU")
-    e.add_argument("scenario", help="TOML file or shipped scenario name (see fnn-cosim scenarios)")
-    e.add_argument("--out", required=True, help="the .ssp file to write")
-    e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
-    e.set_defaults(func=_cmd_export_ssp)
+    def table3(t3):
+        t3.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
+        t3.add_argument("--scenario", help="the mission (default: the study's, figure8)")
+        common(t3)
 
-    js = sub.add_parser("schema", help="print the JSON Schema of a scenario, study or calibration file (for editors)")
-    js.add_argument("kind", choices=("scenario", "study", "settings", "column-map"),
-                    help="settings, column-map: fnn-cosim calibrate's --settings and --columns files")
-    js.add_argument("--out", help="write it to this file instead")
-    js.set_defaults(func=_cmd_schema)
+    sub.add_parser("table3", table3, help="Table 3: the figure-8").set_defaults(func=_cmd_table3)
+    sub.add_parser("reproduce", common, help="Tables 2 and 3 and the figures into results/report.md").set_defaults(
+        func=_cmd_reproduce)
 
-    sc = sub.add_parser("scenarios", help="list the shipped scenarios")
-    sc.set_defaults(func=_cmd_scenarios)
+    def sweep(sw):
+        sw.add_argument("study", help="study TOML file (docs/studies.md) or a shipped study's name")
+        sw.add_argument("--workers", type=worker_count, help="local worker processes, 1 to the cores (default: one "
+                                                            "per core; 1: in this process)")
+        sw.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run on the Dask cluster at ADDRESS (e.g. tcp://host:8786)")
+        _worker_timeout(sw)
+        sw.add_argument("--no-plots", action="store_true")
+        common(sw, seeds=False)
 
-    b = sub.add_parser("build-fmu", help="build every model as FMI 2.0 (and 3.0) FMUs")
-    b.add_argument("--out", default="build/fmus", help="output directory (default build/fmus)")
-    b.set_defaults(func=_cmd_build_fmu)
+    sub.add_parser("sweep", sweep, help="a study: a scenario over a grid and/or random samples of its keys"
+                   ).set_defaults(func=_cmd_sweep)
 
-    lz = sub.add_parser("linearize", help="linearize an FMU (Model Exchange, or a sampled-data Co-Simulation "
-                        "FMU's step): system (.npz, .json), poles, Bode plots")
-    lz.add_argument("fmu", help="an FMU file, or the name of a model fnn-cosim builds (e.g. Quadrotor, ControllerPDLM); "
-                    "with --scenario, an FMU instance of the scenario (e.g. Quadrotor, controller)")
-    lz.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
-    lz.add_argument("--parameter", action="append", default=[], metavar="NAME=VALUE", help="a parameter (repeatable)")
-    lz.add_argument("--input", action="append", default=[], metavar="NAME=VALUE", help="an input (repeatable)")
-    lz.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
-                    help="a continuous (ME) or discrete (CS) state (repeatable)")
-    lz.add_argument("--method", choices=("auto", "derivatives", "differences"), default="auto")
-    lz.add_argument("--interface", choices=("auto", "me", "cs"), default="auto")
-    lz.add_argument("--bode", action="append", default=[], metavar="INPUT:OUTPUT", help="a Bode plot (repeatable)")
-    lz.add_argument("--scenario", default=None, metavar="NAME|FILE",
-                    help="take the operating point from a run of this scenario at --time: the instance's FMU state, "
-                         "inputs and parameters then")
-    lz.add_argument("--time", type=float, default=None, metavar="T", help="the run's time (s) for --scenario")
-    lz.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="override a value of --scenario (repeatable)")
-    lz.add_argument("--out", default=None, help="output directory (default results/linearize)")
-    fmu_log_option(lz)
-    lz.set_defaults(func=_cmd_linearize)
+    def export_ssp(e):
+        e.add_argument("scenario", help="TOML file or shipped scenario name (see fnn-cosim scenarios)")
+        e.add_argument("--out", required=True, help="the .ssp file to write")
+        e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
+
+    sub.add_parser("export-ssp", export_ssp, help="write a scenario as an SSP 1.0 archive, every component an FMU"
+                   ).set_defaults(func=_cmd_export_ssp)
+
+    def schema(js):
+        js.add_argument("kind", choices=("scenario", "study", "settings", "column-map"),
+                        help="settings, column-map: fnn-cosim calibrate's --settings and --columns files")
+        js.add_argument("--out", help="write it to this file instead")
+
+    sub.add_parser("schema", schema, help="print the JSON Schema of a scenario, study or calibration file (for "
+                                          "editors)").set_defaults(func=_cmd_schema)
+    sub.add_parser("scenarios", help="list the shipped scenarios").set_defaults(func=_cmd_scenarios)
+
+    def build_fmu(b):
+        b.add_argument("--out", default="build/fmus", help="output directory (default build/fmus)")
+
+    sub.add_parser("build-fmu", build_fmu, help="build every model as FMI 2.0 (and 3.0) FMUs").set_defaults(
+        func=_cmd_build_fmu)
+
+    def linearize(lz):
+        lz.add_argument("fmu", help="an FMU file, or the name of a model fnn-cosim builds (e.g. Quadrotor, ControllerPDLM); "
+                        "with --scenario, an FMU instance of the scenario (e.g. Quadrotor, controller)")
+        lz.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
+        lz.add_argument("--parameter", action="append", default=[], metavar="NAME=VALUE", help="a parameter (repeatable)")
+        lz.add_argument("--input", action="append", default=[], metavar="NAME=VALUE", help="an input (repeatable)")
+        lz.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
+                        help="a continuous (ME) or discrete (CS) state (repeatable)")
+        lz.add_argument("--method", choices=("auto", "derivatives", "differences"), default="auto")
+        lz.add_argument("--interface", choices=("auto", "me", "cs"), default="auto")
+        lz.add_argument("--bode", action="append", default=[], metavar="INPUT:OUTPUT", help="a Bode plot (repeatable)")
+        lz.add_argument("--scenario", default=None, metavar="NAME|FILE",
+                        help="take the operating point from a run of this scenario at --time: the instance's FMU state, "
+                             "inputs and parameters then")
+        lz.add_argument("--time", type=float, default=None, metavar="T", help="the run's time (s) for --scenario")
+        lz.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a value of --scenario (repeatable)")
+        lz.add_argument("--out", default=None, help="output directory (default results/linearize)")
+        fmu_log_option(lz)
+
+    sub.add_parser("linearize", linearize, help="linearize an FMU (Model Exchange, or a sampled-data Co-Simulation "
+                   "FMU's step): system (.npz, .json), poles, Bode plots").set_defaults(func=_cmd_linearize)
 
     # the subcommand's own module: argparse only; python-control loads when it runs
     from .stability.cli import add_parser as add_stability_parser
@@ -615,12 +655,40 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+# The command's own process (main() of the command line, not a caller's main([...])) starts with Python's
+# cycle collector off: start-up (imports, the parser, the master's build) makes thousands of objects that
+# live as long as the process and few cycles, and the collector scanned them again and again (a tenth of a
+# run's start-up). When start-up is over (_started), they are set aside for good (gc.freeze) and the
+# collector runs as before on what the command makes from then on.
+_START_UP = [False]
+
+
+def _started() -> None:
+    """Start-up is over: the cycle collector on again, what start-up made set aside (see above)."""
+    if _START_UP[0]:
+        _START_UP[0] = False
+        gc.freeze()
+        gc.enable()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    if argv is None and gc.isenabled():  # the process is the command: see _started
+        gc.disable()
+        _START_UP[0] = True
+    try:
+        return _main(argv)
+    finally:
+        _started()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     from cosim.errors import ConnectionCheckError, CosimError, FmuLoadError, ScenarioError, one_line
 
     args = _parser().parse_args(argv)
     try:
         apply_fmu_log(getattr(args, "fmu_log", ()))
+        if args.func is not _cmd_run:  # a run's start-up ends when its master is built
+            _started()
         return args.func(args)
     except CosimError as exc:
         if args.debug:

@@ -143,12 +143,7 @@ def register() -> None:
     for name in TRAJECTORIES:
         registry.register_component_kind(_trajectory_kind(name))
     registry.register_component_kind(_controller_kind())
-    from .options import OPTIONS, variant_case
-
-    for name in variant_names():  # a case per variant (a table's row), then the option rows
-        registry.register_case(variant_case(name))
-    for case in OPTIONS.values():
-        registry.register_case(case)
+    registry.register_cases(_cases)
     registry.register_section(registry.Section("wind", partial(_section, "Wind"), partial(_section, "apply_wind"),
                                                "shorthand for the WindGust FMU's parameters"))
     registry.register_section(registry.Section("metrics", partial(_section, "Metrics"),
@@ -157,6 +152,16 @@ def register() -> None:
     registry.register_studies(Path(__file__).parent / "studies")
     registry.register_table_fmu(_table_fmu)
     registry.register_cache(cache_root)  # the FMUs' cache folder also keeps the engine's derived data
+
+
+def _cases() -> list[registry.Case]:
+    """A case per variant (a table's row), then the option rows (:mod:`.options`,
+    imported when a study first reads the cases)."""
+    from fnn_controller.variants import variant_names
+
+    from .options import OPTIONS, variant_case
+
+    return [*(variant_case(name) for name in variant_names()), *OPTIONS.values()]
 
 
 def _section(name: str, *args):

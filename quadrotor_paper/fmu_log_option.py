@@ -21,6 +21,8 @@ def fmu_log_option(parser) -> None:
 def apply_fmu_log(values: Sequence[str]) -> None:
     """Each ``[INSTANCE=]LEVEL`` given: that level for that instance's FMU
     log (every instance without one); an unknown level is one line."""
+    if not values:  # none asked for: the logging module stays unloaded (cosim.fmu_component)
+        return
     from cosim.errors import ScenarioError
     from cosim.fmu_log import LOG_LEVELS, fmu_log
 

@@ -32,8 +32,6 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Mapping
 
-import numpy as np
-
 from cosim.component import Port, PythonComponent
 from fmu_models.models import reference as _reference
 
@@ -71,6 +69,8 @@ class _CasadiReference:
     def acceleration(self, t) -> np.ndarray:
         """d²p*/dt² (m/s², shape (n, 3)) at the times ``t``: the symbolic
         derivative of the same CasADi v* (``fmu_models.models.reference``)."""
+        import numpy as np  # here: registering the trajectories (fnn-cosim's start) loads no numpy
+
         return np.ascontiguousarray(_reference.evaluate_outputs(self.model, t, self.fmu_parameters())[:, 6:9])
 
 
@@ -194,6 +194,8 @@ class ReferenceComponent(PythonComponent):
     BLOCK = 1000  # points evaluated at once
 
     def __init__(self, trajectory, name: str = "reference"):
+        import numpy as np
+
         super().__init__(name)
         self.trajectory = trajectory
         self._table = np.zeros((1, len(REFERENCE_OUTPUTS)))
@@ -212,6 +214,8 @@ class ReferenceComponent(PythonComponent):
         self._fill(0)
 
     def _fill(self, first: int) -> None:
+        import numpy as np
+
         n = np.arange(first, min(first + self.BLOCK, self._last + 1))
         t = self._t0 + self._h * n  # the master's own t_n, from the step counter
         p, v = self.trajectory.reference(t)

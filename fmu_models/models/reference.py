@@ -51,8 +51,6 @@ import math
 from dataclasses import replace
 from typing import Mapping
 
-import numpy as np
-
 from ..export.model import FmuModel
 from ..lazy_casadi import ca
 from ..export.variables import Variable, output, parameter
@@ -277,6 +275,8 @@ def evaluate_outputs(model: FmuModel, t, parameters: Mapping[str, float]) -> np.
     at the times ``t`` (s, shape (n,)), shape (n, 9), for the parameter
     values ``parameters`` (by name; the others at their start values). The
     values are not checked here: see :func:`check_parameter`."""
+    import numpy as np  # here: registering the trajectories (fnn-cosim's start) loads no numpy
+
     t = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
     if t.size == 0:
         return np.zeros((0, len(OUTPUT_NAMES)))
@@ -286,6 +286,8 @@ def evaluate_outputs(model: FmuModel, t, parameters: Mapping[str, float]) -> np.
 
 def evaluate(model: FmuModel, t, parameters: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
     """(p*, v*) of shape (n, 3) each: the first six columns of :func:`evaluate_outputs`."""
+    import numpy as np
+
     y = evaluate_outputs(model, t, parameters)
     return np.ascontiguousarray(y[:, 0:3]), np.ascontiguousarray(y[:, 3:6])
 

@@ -40,8 +40,6 @@ import re
 from dataclasses import dataclass
 from typing import Any, Callable
 
-import numpy as np
-
 from ..position_parameters import PositionParams
 
 __all__ = ["Variant", "register_variant", "variants", "variant", "variant_names", "initial_axis_state", "identifier"]
@@ -116,6 +114,7 @@ def initial_axis_state(v: Variant, rng, params):
     """One axis's state at reset, as numbers: ``v.initial_axis(params, r)``
     with ``r = rng.random(v.n_random)``."""
     import casadi as ca  # the law's expression evaluated (the registry itself needs no CasADi)
+    import numpy as np  # here too: registering the variants (fnn-cosim's start) loads no numpy
 
     state = np.array(ca.DM(v.initial_axis(params, rng.random(v.n_random)))).ravel()
     if state.shape != (v.axis_state_size,):

@@ -6,8 +6,6 @@ The laws' modules (CasADi) are imported when a law is first built: a
 variant is registered, and its metadata read, without them."""
 from __future__ import annotations
 
-import numpy as np
-
 from ..axis_state import ALPHA, AXIS_STATE_SIZE, C1, C2, F, N_RULES, PRIMED, SIGMA1, SIGMA2, X1_PREV, X2_PREV
 
 
@@ -24,6 +22,8 @@ def type1_initial_axis(params, r):
 def type1_axis_state_bounds(params):
     """The projection box of eqs. (27)-(29) and the floors (:class:`LearningBounds`),
     per element of the type-1 axis state; the previous inputs are clipped inputs."""
+    import numpy as np  # here: registering the variants (fnn-cosim's start) loads no numpy
+
     b = params.bounds
     low, high = np.full(AXIS_STATE_SIZE, -np.inf), np.full(AXIS_STATE_SIZE, np.inf)
     for sl, lo, hi in ((C1, -b.c1_max, b.c1_max), (C2, -b.c2_max, b.c2_max),

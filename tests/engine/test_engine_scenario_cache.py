@@ -137,3 +137,22 @@ def test_an_entry_point_value_names_its_object():
     assert registry._load_entry("cosim.registry") is registry
     with pytest.raises(ValueError, match="expected 'module:attribute'"):
         registry._load_entry("not a value")
+
+
+def test_a_scenario_file_is_parsed_once_for_its_text(tmp_path, cache, monkeypatch):
+    """The TOML of a scenario file is parsed once for a text (its document
+    kept under the text's digest): read again, the same document; another
+    text, parsed again; a text that is no TOML, refused in its own words."""
+    import cosim.scenario
+
+    parsed = []
+    parse = cosim.scenario.toml_text
+    monkeypatch.setattr(cosim.scenario, "toml_text", lambda text, path: parsed.append(text) or parse(text, path))
+    path = _written(tmp_path, SCENARIO)
+    first, again = load_scenario(path), load_scenario(path)
+    assert len(parsed) == 1 and _as_data(first) == _as_data(again) and first.duration == 3.0
+    path.write_text(SCENARIO.replace("duration = 3.0", "duration = 2.0"))
+    assert load_scenario(path).duration == 2.0 and len(parsed) == 2
+    path.write_text(SCENARIO + "\n[toy_lag\n")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load_scenario(path)

@@ -14,7 +14,11 @@ from pathlib import Path
 
 NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scipy", "pydantic", "pydantic_core",
                  "importlib.metadata", "fnn_controller.fast", "fmu_models.export.build", "cosim.scenario_tables",
-                 "quadrotor_paper.section_tables", "lxml")
+                 "quadrotor_paper.section_tables", "lxml",
+                 # nor what only another path uses: TOML parsed (the document kept), an archive opened, a log shown
+                 "tomllib", "zipfile", "logging", "cosim.fmu_log",
+                 # the cases (a study's), a Model Exchange solver (the shipped FMUs are Co-Simulation), a results reader
+                 "quadrotor_paper.options", "cosim.model_exchange", "csv")
 
 _RUN = """
 import json, sys
@@ -66,3 +70,35 @@ def test_the_shipped_mission_served_from_the_cache_is_the_validated_one(tmp_path
         assert (given.variant, given.psi_ref, given.position, given.geometric) == \
             (checked.variant, checked.psi_ref, checked.position, checked.geometric)
         assert given.fmu_entry() == checked.fmu_entry()
+
+
+_COLLECTOR = """
+import gc, json, sys
+from quadrotor_paper.cli import main
+numpy_before_main = "numpy" in sys.modules  # the registrations load none: its import falls in main's start-up
+out = sys.argv[1]
+called = main(["run", "circles", "--no-plots", "--quiet", "--out", out + "/called"])  # a caller's main([...])
+after_call = [gc.isenabled(), gc.get_freeze_count()]
+sys.argv = ["fnn-cosim", "run", "circles", "--no-plots", "--quiet", "--out", out + "/command"]
+command = main()  # the entry point's call
+print(json.dumps({"codes": [called, command], "after_call": after_call, "numpy_before_main": numpy_before_main,
+                  "after_command": [gc.isenabled(), gc.get_freeze_count()]}))
+"""
+
+
+def test_the_command_collects_cycles_again_once_started(tmp_path):
+    """fnn-cosim's own process runs its start-up with the cycle collector off
+    and turns it on again once started, start-up's objects set aside
+    (gc.freeze); a caller's main([...]) leaves the collector as it is. Both
+    write the same results. Importing the command line (the application's
+    registrations with it) loads no numpy: its import is part of the start-up
+    the collector is off for."""
+    proc = subprocess.run([sys.executable, "-c", _COLLECTOR, str(tmp_path)], capture_output=True, text=True,
+                          cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert report["codes"] == [0, 0] and report["numpy_before_main"] is False
+    assert report["after_call"] == [True, 0]
+    enabled, frozen = report["after_command"]
+    assert enabled and frozen > 0
+    assert (tmp_path / "called" / "results.csv").read_bytes() == (tmp_path / "command" / "results.csv").read_bytes()
