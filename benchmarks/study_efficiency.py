@@ -31,8 +31,8 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   and the Dask overhead per run, (workers x wall - sum of the runs' times)
   / runs, as a share of ``L``. ``--before TREE`` times the command with
   another checkout's packages first on ``PYTHONPATH`` too (e.g. a detached
-  worktree of ``main``), alternated with this tree's, against the same
-  ``L``;
+  worktree of ``main``), alternated with this tree's (each first in
+  turn), against the same ``L``;
 * **CPU time** beside each wall time (this process's, and its child
   processes' polled every 20 ms: worker processes; the command's own,
   exact, from ``wait4``): on a machine others load, wall time measures the
@@ -449,13 +449,15 @@ def main() -> None:
                     walls[kind].append(wall)
                     cpus[kind].append(cpu)
                     sums[kind].append(sum(times))
-                for tag, tree in trees.items():
+                # the trees in turn first: the first command after the studies above ran slower, whichever it was
+                order = list(trees.items()) if i % 2 == 0 else list(trees.items())[::-1]
+                for tag, tree in order:
                     wall, cpu = _command(tmp / f"command-{tag}{i}", args.workers, tree)
                     commands[tag].append(wall)
                     command_cpus[tag].append(cpu)
                 loops.sample()
                 if args.phases:
-                    for tag, tree in trees.items():
+                    for tag, tree in order:
                         phases[tag].append(_phases(args.workers, tmp, tree, f"{tag}{i}"))
                     loops.sample()
             if not args.no_memory:
