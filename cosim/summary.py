@@ -62,7 +62,7 @@ def _quantiles_file():
     folder = cache_folder()
     try:
         spec = importlib.util.find_spec("scipy")
-        version = next(iter(spec.submodule_search_locations or ())) if spec is not None else None
+        version = next(iter(spec.submodule_search_locations or ()), None) if spec is not None else None
         if folder is None or version is None:
             return None
         with open(f"{version}/version.py", "rb") as f:
