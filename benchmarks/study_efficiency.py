@@ -262,8 +262,6 @@ def _phases_child(out: str, argv: list[str]) -> int:
     them to ``out`` (JSON) when the process exits. Functions are wrapped by
     name where they exist, so another checkout's tree is timed alike."""
     import atexit
-    import os
-    import threading
 
     events: list[tuple] = []  # (time.time(), thread, what, wall s, CPU s)
     kernel_cpu: dict[str, float] = {}  # thread -> CPU s in the compiled loop's calls
