@@ -3,29 +3,48 @@
 Prints, for Table 2 (the shipped study ``table2``: 186 runs of the 50 s
 circles, every variant and option row at 1, 3 and 5 m/s):
 
-* **one run's loop time** ``L``: the mean of the runs' own times (each
-  row's ``wall_time_s``: ``Master.run``, which starts the FMUs -- reset,
-  parameters, initialization -- and flies the 5000 steps, as
-  ``benchmarks/loop_speed.py`` times a run), measured here by flying the
-  study in this process (``--workers 1``, no Dask);
+* **one run's loop time** ``L``: a run as the compiled kernel flies it in a
+  study, alone in this process: ``Master.run`` of the run's master, built
+  and warmed beforehand (it starts the FMUs -- reset, parameters,
+  initialization -- and flies the 5000 steps in the compiled loop, as the
+  study's rows' ``wall_time_s`` and ``benchmarks/loop_speed.py`` time a
+  run; the scenario, the master's build and the row are not in it). One
+  **round** flies each of Table 2's 27 cells (case and wind speed) once,
+  on the same path as a study's run (:func:`cosim.dask_runner.execute`),
+  and weighs each cell by its runs: the round's ``L`` is the mean loop time
+  of Table 2's runs. Rounds run before the first study, between the
+  repeats and after the last, interleaved with what they are compared
+  with; ``L`` is their median, printed with every round (its spread is the
+  machine's: one sample of ``L`` moved by 50 % between invocations);
 * **the overhead per run** in this process, (wall - sum of the runs' times)
   / runs, and as a share of ``L``: what a run costs besides its loop (its
   scenario, its master when it needs a new one, its metrics, its row, the
-  summary);
+  summary), the study flown with ``--workers 1`` (no Dask);
 * **Table 2 on Dask** (``measure``, its start and stop included) on
   ``--workers`` threads of this process (Dask's threaded scheduler, no
   cluster: what ``measure`` chooses for the project's own FMUs,
   :func:`quadrotor_paper.experiments.threads_safe`) and on a LocalCluster
-  of ``--workers`` worker processes (what any other study gets), and the whole command
-  ``fnn-cosim table2 --workers N`` (a new process: imports included), each
-  against the ideal, ``runs x L / workers``: target ``fnn-cosim table2`` <=
-  1.6x on 2 workers; and the Dask overhead per run, (workers x wall - sum
-  of the runs' times) / runs, as a share of ``L``;
+  of ``--workers`` worker processes (what any other study gets; skipped
+  with ``--no-processes``), and the whole command ``fnn-cosim table2
+  --workers N`` (a new process: imports included), each against the ideal,
+  ``runs x L / workers``: target ``fnn-cosim table2`` <= 1.6x on 2 workers;
+  and the Dask overhead per run, (workers x wall - sum of the runs' times)
+  / runs, as a share of ``L``. ``--before TREE`` times the command with
+  another checkout's packages first on ``PYTHONPATH`` too (e.g. a detached
+  worktree of ``main``), alternated with this tree's (each first in
+  turn), against the same ``L``;
 * **CPU time** beside each wall time (this process's, and its child
-  processes' polled every 20 ms: worker processes, the command's tree): on
-  a machine others load, wall time measures the load, CPU time what a
-  study costs; the in-process study's CPU is the reference (no Dask, one
-  core, every master built once);
+  processes' polled every 20 ms: worker processes; the command's own,
+  exact, from ``wait4``): on a machine others load, wall time measures the
+  load, CPU time what a study costs; the in-process study's CPU is the
+  reference (no Dask, one core, every master built once);
+* ``--phases``: where the command's time goes, from a run of it with its
+  phases timed inside (``--phases-child``): the process's start and
+  imports, the study's validation, the first run's start, the runs (the
+  masters built, the CPU in the compiled loop and in Python around it, a
+  run's ``Master.run`` on the workers' threads against ``L``), the last
+  run's end, the files and the exit; and the wall time above the ideal
+  split into the start, the runs and the end;
 * whether the compiled loop leaves the GIL free: a Python counter in
   this thread while another thread flies runs of one kernel call each;
 * the driver's peak Python memory (tracemalloc) for a study of 200 and of
@@ -35,14 +54,17 @@ circles, every variant and option row at 1, 3 and 5 m/s):
 
 Printed, never asserted: a slow or busy machine changes the figures, not
 the verdict of the test suite. On a shared machine, repeat (``--repeats``):
-the Dask figures are the median of the repeats.
+the Dask figures are the median of the repeats. Run it with the bytecode
+cache on (``PYTHONDONTWRITEBYTECODE`` unset), as users run.
 
-    .venv/bin/python benchmarks/study_efficiency.py [--workers 2] [--repeats 1] [--no-memory] [--json out.json]
+    .venv/bin/python benchmarks/study_efficiency.py [--workers 2] [--repeats 1] [--no-memory] [--no-processes]
+        [--phases] [--before TREE] [--json out.json]
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -129,15 +151,59 @@ def _run(study, out: Path, workers: int, threads: bool | None = None) -> tuple[f
     return wall, cpu.cpu, [float(r["wall_time_s"]) for r in read_runs(out / "runs.csv") if r["wall_time_s"]]
 
 
-def _command(out: Path, workers: int) -> tuple[float, float]:
-    """Wall and CPU time (s) of ``fnn-cosim table2`` in a new process (its whole tree)."""
-    t = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "quadrotor_paper.cli", "table2", "--out", str(out), "--quiet",
-                             "--workers", str(workers)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    with _Cpu(proc.pid) as cpu:
-        if proc.wait():
-            raise SystemExit(f"fnn-cosim table2 exited with {proc.returncode}")
-    return time.perf_counter() - t, cpu.cpu
+def _command(out: Path, workers: int, tree: Path | None = None) -> tuple[float, float]:
+    """Wall and CPU time (s) of ``fnn-cosim table2`` in a new process (``tree``: that checkout's packages first)."""
+    from processes import measured
+
+    env = ["env", f"PYTHONPATH={tree.resolve()}"] if tree is not None else []
+    wall, cpu, _ = measured(env + [sys.executable, "-m", "quadrotor_paper.cli", "table2", "--out", str(out),
+                                   "--quiet", "--workers", str(workers)])
+    return wall, cpu
+
+
+class _Loops:
+    """Rounds of ``L``: each of the study's cells (case and grid point) flown
+    once on a master built and warmed beforehand, on a study's run path
+    (:func:`cosim.dask_runner.execute`: the lean record, the metrics taken
+    as the rows stream); a round's ``L`` is the cells' ``Master.run`` times
+    weighed by their runs (the mean loop time of the study's runs)."""
+
+    def __init__(self, study):
+        from cosim.dask_runner import MasterCache, execute
+        from cosim.scenario import apply_overrides, parse_scenario
+        from cosim.study import cell_of, cells, runs
+        from quadrotor_paper.experiments import lean_signals, study_metrics
+
+        base = study.scenario
+        base = parse_scenario(apply_overrides(base.raw, {"record.signals": lean_signals(base)}), source=base.source)
+        self.raw, self.source, self.metrics = base.raw, str(base.source), study_metrics
+        self.execute = execute
+        self.first, self.weights = {}, [0] * len(cells(study))
+        for run in runs(study):
+            cell = cell_of(study, run.index)
+            self.first.setdefault(cell, run)
+            self.weights[cell] += 1
+        self.cache = MasterCache(size=len(self.first) + 1, scenarios=len(self.first) + 1)
+        self.rounds: list[float] = []
+        self._round(keep=False)  # builds every master, loads every library
+
+    def _round(self, keep: bool = True) -> float:
+        times = {}
+        for cell, run in self.first.items():
+            rec = self.execute(self.raw, self.source, run, self.metrics, self.cache)
+            if rec["status"] != "ok":
+                raise SystemExit(f"L: run {run.index} {rec['status']}: {rec['error']}")
+            times[cell] = rec["wall_time_s"]
+        value = sum(self.weights[c] * t for c, t in times.items()) / sum(self.weights)
+        if keep:
+            self.rounds.append(value)
+        return value
+
+    def sample(self) -> None:
+        self._round()
+
+    def close(self) -> None:
+        self.cache.close()
 
 
 def _gil_free(runs: int = 5) -> tuple[float, float]:
@@ -188,61 +254,253 @@ def _driver_peak_bytes(study, out: Path, workers: int) -> int:
         tracemalloc.stop()
 
 
+PHASES_CHILD = "--phases-child"  # this script run as the command, its phases timed: --phases-child OUT.json ARGS...
+
+
+def _phases_child(out: str, argv: list[str]) -> int:
+    """Run ``fnn-cosim ARGV`` in this process with its phases timed; write
+    them to ``out`` (JSON) when the process exits. Functions are wrapped by
+    name where they exist, so another checkout's tree is timed alike."""
+    import atexit
+
+    events: list[tuple] = []  # (time.time(), thread, what, wall s, CPU s)
+    kernel_cpu: dict[str, float] = {}  # thread -> CPU s in the compiled loop's calls
+    ended: dict[str, float] = {}  # thread -> its CPU s when it ended
+
+    def note(what: str, wall: float = 0.0, cpu: float = 0.0, at: float | None = None) -> None:
+        events.append((time.time() if at is None else at, threading.current_thread().name, what, wall, cpu))
+
+    note("interpreter started")
+    from quadrotor_paper import cli
+
+    note("imports done")
+    import cosim.dask_runner as runner
+    import cosim.kernel as kernel
+    import cosim.study_run as study_run
+    import quadrotor_paper.report as report
+
+    def timed(owner, name: str, what: str) -> None:
+        f = getattr(owner, name, None)
+        if f is None:
+            return
+
+        def wrapper(*args, **kwargs):
+            at, c = time.time(), time.thread_time()
+            try:
+                return f(*args, **kwargs)
+            finally:
+                note(what, time.time() - at, time.thread_time() - c, at)
+        setattr(owner, name, wrapper)
+
+    timed(report, "table_study", "validation")
+    timed(runner, "execute", "run")
+    timed(runner, "build_master", "build")
+    timed(runner.MasterCache, "close", "cache closed")
+    timed(study_run, "summary_of", "summary")
+    timed(study_run, "write_parquet", "parquet")
+    loop = kernel.load()
+    if loop is not None:
+        def counted(*args):
+            c = time.thread_time()
+            try:
+                return loop(*args)
+            finally:
+                name = threading.current_thread().name
+                kernel_cpu[name] = kernel_cpu.get(name, 0.0) + time.thread_time() - c
+        kernel.load = lambda: counted
+
+    run_thread = threading.Thread.run
+
+    def run(self):
+        try:
+            run_thread(self)
+        finally:
+            ended[self.name] = time.thread_time()
+    threading.Thread.run = run
+
+    def dump() -> None:
+        note("exit")
+        ended["MainThread"] = time.thread_time()
+        total = sum(os.times()[:2])
+        Path(out).write_text(json.dumps({"events": events, "kernel_cpu": kernel_cpu, "ended": ended,
+                                         "process_cpu": total}))
+    atexit.register(dump)
+    code = cli.main(argv)
+    note("main returned")
+    return code
+
+
+def _phases(workers: int, tmp: Path, tree: Path | None, tag: str) -> dict[str, float]:
+    """One ``fnn-cosim table2`` with its phases timed: seconds from its start."""
+    out = tmp / f"phases-{tag}.json"
+    env = ["env", f"PYTHONPATH={tree.resolve()}"] if tree is not None else []
+    started = time.time()
+    subprocess.run(env + [sys.executable, str(Path(__file__).resolve()), PHASES_CHILD, str(out), "table2", "--out",
+                          str(tmp / f"phases-{tag}"), "--quiet", "--workers", str(workers)],
+                   check=True, stdout=subprocess.DEVNULL)
+    ends = time.time() - started
+    got = json.loads(out.read_text())
+    events = [(at - started, thread, what, wall, cpu) for at, thread, what, wall, cpu in got["events"]]
+    first = {}
+    for at, _, what, _, _ in events:
+        first.setdefault(what, at)
+    runs = [e for e in events if e[2] == "run"]
+    builds = [e for e in events if e[2] == "build"]
+    workers_cpu = {t: c for t, c in got["ended"].items() if t.startswith("cosim-run")}
+    runs_cpu = sum(e[4] for e in runs)
+    in_loop = sum(c for t, c in got["kernel_cpu"].items() if t.startswith("cosim-run"))
+    validation = next((e for e in events if e[2] == "validation"), None)
+    return {
+        "imports_done_s": first["imports done"],
+        "validated_s": validation[0] + validation[3] if validation else float("nan"),
+        "first_run_s": runs[0][0], "last_run_end_s": max(at + wall for at, _, _, wall, _ in runs),
+        "main_returned_s": first["main returned"], "process_end_s": ends,
+        "runs": len(runs), "builds": len(builds), "builds_cpu_s": sum(e[4] for e in builds),
+        "run_mean_ms": statistics.mean(e[3] for e in runs) * 1e3,
+        "runs_cpu_s": runs_cpu, "in_loop_cpu_s": in_loop, "around_loop_cpu_s": runs_cpu - in_loop,
+        "main_cpu_s": got["ended"].get("MainThread", float("nan")), "worker_threads_cpu_s": sum(workers_cpu.values()),
+        "other_threads_cpu_s": sum(c for t, c in got["ended"].items()
+                                   if t != "MainThread" and not t.startswith("cosim-run")),
+        "process_cpu_s": got["process_cpu"],
+    }
+
+
+_PHASE_LINES = (  # key, label, how it is shown
+    ("imports_done_s", "imports done (interpreter, fnn-cosim's modules)", "{:8.2f} s"),
+    ("validated_s", "the study read and validated", "{:8.2f} s"),
+    ("first_run_s", "first run starts", "{:8.2f} s"),
+    ("last_run_end_s", "last run ends", "{:8.2f} s"),
+    ("main_returned_s", "files written, table printed", "{:8.2f} s"),
+    ("process_end_s", "process ends", "{:8.2f} s"),
+    ("builds", "masters built", "{:8.0f}  "),
+    ("builds_cpu_s", "  their CPU (in the runs' threads)", "{:8.2f} s"),
+    ("run_mean_ms", "a run's time on the threads (execute: scenario, master, Master.run, metrics)", "{:8.1f} ms"),
+    ("runs_cpu_s", "CPU of the runs (execute, builds included)", "{:8.2f} s"),
+    ("in_loop_cpu_s", "  in the compiled loop's calls", "{:8.2f} s"),
+    ("around_loop_cpu_s", "  in Python around them (per run: /runs)", "{:8.2f} s"),
+    ("main_cpu_s", "CPU: main thread", "{:8.2f} s"),
+    ("worker_threads_cpu_s", "CPU: the run threads", "{:8.2f} s"),
+    ("other_threads_cpu_s", "CPU: other threads (Dask's driver, imports ahead)", "{:8.2f} s"),
+    ("process_cpu_s", "CPU: the whole process", "{:8.2f} s"),
+)
+
+
+def _print_phases(phases: dict[str, list[dict[str, float]]], ideal: float, loop: float) -> None:
+    med = statistics.median
+    kinds = list(phases)
+    n = len(next(iter(phases.values())))
+    print(f"where fnn-cosim table2's time goes (medians of {n}; s from the process's start)"
+          + "".join(f"{k:>14s}" for k in kinds))
+    for key, label, fmt in _PHASE_LINES:
+        print(f"  {label:78s}" + "".join(f"{fmt.format(med(p[key] for p in phases[k])):>14s}" for k in kinds))
+    print(f"  {'a run on the threads / L':78s}"
+          + "".join(f"{med(p['run_mean_ms'] for p in phases[k]) / (loop * 1e3):12.2f} x" for k in kinds))
+    print(f"  above the ideal ({ideal:.2f} s):")
+    for k in kinds:
+        start = med(p["first_run_s"] for p in phases[k])
+        runs = med(p["last_run_end_s"] - p["first_run_s"] for p in phases[k])
+        end = med(p["process_end_s"] - p["last_run_end_s"] for p in phases[k])
+        print(f"    {k}: before the first run {start:.2f} s + the runs {runs:.2f} s (ideal {ideal:.2f}: "
+              f"{runs - ideal:+.2f} s) + after the last {end:.2f} s = {start + runs + end - ideal:+.2f} s")
+
+
 def main() -> None:
+    if len(sys.argv) > 2 and sys.argv[1] == PHASES_CHILD:
+        raise SystemExit(_phases_child(sys.argv[2], sys.argv[3:]))
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--repeats", type=int, default=1, help="Dask runs of Table 2 (median; default 1)")
     p.add_argument("--no-memory", action="store_true", help="skip the driver-memory studies")
+    p.add_argument("--no-processes", action="store_true", help="skip measure on a LocalCluster of processes")
+    p.add_argument("--phases", action="store_true", help="also time the command's phases (one more run a repeat)")
+    p.add_argument("--before", type=Path, default=None, metavar="TREE",
+                   help="also time the command with this checkout's packages first on PYTHONPATH")
     p.add_argument("--json", help="also write the figures to this JSON file")
     args = p.parse_args()
+    if os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        print("note: PYTHONDONTWRITEBYTECODE is set: a module with no bytecode cached yet is compiled in every "
+              "process")
+
+    from cosim.study import count
 
     study = _table2()
+    runs = count(study)
     med = statistics.median
-    with tempfile.TemporaryDirectory() as tmp:
-        here_wall, here_cpu, here_times = _run(study, Path(tmp) / "here", 1)
-        runs = len(here_times)
-        loop = sum(here_times) / runs
-        ideal = runs * loop / args.workers
-        kinds = {"threads": True, "processes": False}
-        walls = {k: [] for k in kinds}
-        cpus = {k: [] for k in kinds}
-        sums = {k: [] for k in kinds}
-        commands, command_cpus = [], []
-        for i in range(args.repeats):  # alternated, so that a change of the machine's load hits each alike
-            for kind, threads in kinds.items():
-                wall, cpu, times = _run(study, Path(tmp) / f"{kind}{i}", args.workers, threads)
-                walls[kind].append(wall)
-                cpus[kind].append(cpu)
-                sums[kind].append(sum(times))
-            wall, cpu = _command(Path(tmp) / f"command{i}", args.workers)
-            commands.append(wall)
-            command_cpus.append(cpu)
-        dask_walls, dask_sums = walls["threads"], sums["threads"]
-        dask_wall, dask_sum, command = med(dask_walls), med(dask_sums), med(commands)
-        if not args.no_memory:
-            small, large = _memory_study(40), _memory_study(160)
-            peak_small = _driver_peak_bytes(small, Path(tmp) / "small", args.workers)
-            peak_large = _driver_peak_bytes(large, Path(tmp) / "large", args.workers)
+    kinds = {"threads": True} if args.no_processes else {"threads": True, "processes": False}
+    trees = {"after": None, **({"before": args.before} if args.before is not None else {})}
+    loops = _Loops(study)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = Path(tmp)
+            loops.sample()
+            here_wall, here_cpu, here_times = _run(study, tmp / "here", 1)
+            loops.sample()
+            walls = {k: [] for k in kinds}
+            cpus = {k: [] for k in kinds}
+            sums = {k: [] for k in kinds}
+            commands = {t: [] for t in trees}
+            command_cpus = {t: [] for t in trees}
+            phases = {t: [] for t in trees}
+            for i in range(args.repeats):  # alternated, so that a change of the machine's load hits each alike
+                for kind, threads in kinds.items():
+                    wall, cpu, times = _run(study, tmp / f"{kind}{i}", args.workers, threads)
+                    walls[kind].append(wall)
+                    cpus[kind].append(cpu)
+                    sums[kind].append(sum(times))
+                # the trees in turn first: the first command after the studies above ran slower, whichever it was
+                order = list(trees.items()) if i % 2 == 0 else list(trees.items())[::-1]
+                for tag, tree in order:
+                    wall, cpu = _command(tmp / f"command-{tag}{i}", args.workers, tree)
+                    commands[tag].append(wall)
+                    command_cpus[tag].append(cpu)
+                loops.sample()
+                if args.phases:
+                    for tag, tree in order:
+                        phases[tag].append(_phases(args.workers, tmp, tree, f"{tag}{i}"))
+                    loops.sample()
+            if not args.no_memory:
+                small, large = _memory_study(40), _memory_study(160)
+                peak_small = _driver_peak_bytes(small, tmp / "small", args.workers)
+                peak_large = _driver_peak_bytes(large, tmp / "large", args.workers)
+    finally:
+        loops.close()
 
+    loop = med(loops.rounds)
+    ideal = runs * loop / args.workers
+    here_mean = sum(here_times) / len(here_times)
+    dask_walls, dask_sums = walls["threads"], sums["threads"]
+    dask_wall, dask_sum = med(dask_walls), med(dask_sums)
     here_overhead = (here_wall - sum(here_times)) / runs
     dask_overhead = (args.workers * dask_wall - dask_sum) / runs
+    command, command_cpu = med(commands["after"]), med(command_cpus["after"])
     figures = {
-        "runs": runs, "workers": args.workers, "loop_s": loop,
+        "runs": runs, "workers": args.workers, "loop_s": loop, "loop_rounds_s": loops.rounds,
+        "in_process_mean_run_s": here_mean,
         "in_process_wall_s": here_wall, "in_process_overhead_per_run_ms": here_overhead * 1e3,
         "in_process_overhead_share_of_loop": here_overhead / loop,
         "dask_wall_s": dask_wall, "dask_walls_s": dask_walls, "dask_sum_of_run_times_s": dask_sum,
         "dask_overhead_per_run_ms": dask_overhead * 1e3, "dask_overhead_share_of_loop": dask_overhead / loop,
         "efficiency": dask_sum / (args.workers * dask_wall), "ideal_s": ideal,
-        "dask_wall_over_ideal": dask_wall / ideal, "command_wall_s": command, "command_walls_s": commands,
+        "dask_wall_over_ideal": dask_wall / ideal, "command_wall_s": command, "command_walls_s": commands["after"],
         "command_wall_over_ideal": command / ideal,
-        "in_process_cpu_s": here_cpu, "command_cpu_s": med(command_cpus), "command_cpus_s": command_cpus,
+        "in_process_cpu_s": here_cpu, "command_cpu_s": command_cpu, "command_cpus_s": command_cpus["after"],
         **{f"{kind}_{what}": value for kind in kinds for what, value in
            (("wall_s", med(walls[kind])), ("cpu_s", med(cpus[kind])), ("walls_s", walls[kind]),
             ("cpus_s", cpus[kind]), ("wall_over_ideal", med(walls[kind]) / ideal))},
     }
+    if args.before is not None:
+        figures.update({"before_command_walls_s": commands["before"], "before_command_cpus_s": command_cpus["before"],
+                        "before_command_wall_over_ideal": med(commands["before"]) / ideal})
+    if args.phases:
+        figures["phases"] = phases
+    spread = (max(loops.rounds) - min(loops.rounds)) / loop
     print(f"Table 2: {runs} runs of the 50 s circles")
-    print(f"  one run's loop time L (mean Master.run)      {loop * 1e3:8.1f} ms")
-    print(f"  in this process: wall                        {here_wall:8.2f} s")
+    print(f"  one run's loop time L (Master.run of a run alone, compiled loop; median of {len(loops.rounds)} rounds "
+          f"of the 27 cells)  {loop * 1e3:6.1f} ms")
+    print(f"    rounds, in order: {', '.join(f'{r * 1e3:.1f}' for r in loops.rounds)} ms (min {min(loops.rounds) * 1e3:.1f},"
+          f" max {max(loops.rounds) * 1e3:.1f}: spread {spread:.0%} of L)")
+    print(f"  in this process: wall                        {here_wall:8.2f} s (its runs' mean Master.run "
+          f"{here_mean * 1e3:.1f} ms)")
     print(f"    overhead per run                           {here_overhead * 1e3:8.1f} ms = "
           f"{here_overhead / loop:5.0%} of L")
     print(f"    CPU                                        {here_cpu:8.2f} s = {here_cpu / runs * 1e3:.1f} ms a run "
@@ -254,9 +512,14 @@ def main() -> None:
               f"{wall / ideal:5.2f} x ideal;  CPU {cpu:6.2f} s = {cpu / here_cpu:4.2f} x in-process")
     print(f"    threads: overhead per run (workers x wall - runs) {dask_overhead * 1e3:6.1f} ms = "
           f"{dask_overhead / loop:5.0%} of L;  efficiency {figures['efficiency']:.2f}")
-    print(f"  fnn-cosim table2 (a new process) / ideal     {command / ideal:8.2f} x   ({command:.2f} s; "
-          f"target <= 1.6 on 2 workers);  CPU {med(command_cpus):6.2f} s = "
-          f"{med(command_cpus) / here_cpu:4.2f} x in-process")
+    for tag in trees:
+        wall, cpu = med(commands[tag]), med(command_cpus[tag])
+        name = "fnn-cosim table2 (a new process)" if tag == "after" else f"  the same, {args.before.name}"
+        print(f"  {name:44s} {wall / ideal:8.2f} x ideal ({wall:.2f} s; "
+              f"{', '.join(f'{w:.2f}' for w in commands[tag])});  CPU {cpu:6.2f} s = {cpu / here_cpu:4.2f} x "
+              f"in-process" + ("  (target <= 1.6 on 2 workers)" if tag == "after" else ""))
+    if args.phases:
+        _print_phases(phases, ideal, loop)
     beside_kernel, beside_python = _gil_free()
     figures.update({"counts_per_s_beside_the_kernel": beside_kernel, "counts_per_s_beside_python": beside_python})
     print(f"the GIL during the compiled loop: a Python counter in another thread {beside_kernel:,.0f}/s while a "

@@ -572,14 +572,19 @@ class Master:
                        marks=frozenset()) -> None:
         """The plan run by the compiled loop (:mod:`cosim.kernel`): one call
         per block of recorded rows (:class:`_Blocks`, as :meth:`_loop_python`
-        writes them), a call also ending before a snapshot's row (``marks``,
-        taken by ``take``)."""
+        writes them) when a block has somewhere to go (the CSV, the
+        progress), else one call per chunk of the recorder (the observers
+        and the kept rows get a chunk at a time either way, so the same rows
+        reach them: a study's 50 s run returns to Python twice, not 51
+        times, and each return waits for the GIL); a call also ends before
+        a snapshot's row (``marks``, taken by ``take``)."""
         import ctypes
 
         from . import kernel
 
         recorder = blocks.recorder
         h, signals, block, chunk = self.step, self.signals, recorder.block_rows, recorder.chunk
+        span = block if recorder.path is not None or blocks.progress is not None else chunk  # rows a call flies
         low, high = self.guard.limits
         args = kernel.prepare(self.plan, self.fmus, signals, recorder.data, low, high, t0, h, n_steps)
         stop = kernel.KernelStop()
@@ -594,7 +599,7 @@ class Master:
                     signals[0] = t0 + n * h
                     phase(n, t0 + n * h)
                 take(n)
-            last = min((n // block + 1) * block - 1, n_steps)  # the Python loop flushes at the same rows
+            last = min((n // span + 1) * span - 1, n_steps)  # the Python loop flushes at the same rows
             last = min([last] + [m - 1 for m in marks if m > n])  # a snapshot is taken between kernel calls
             args.data_first = n - n % chunk  # the recorder's chunk in memory (a call never crosses one)
             code = run(ctypes.byref(args), n, last, ctypes.byref(stop))

@@ -211,8 +211,24 @@ def _sidecar(out: Path, study: Study, total: int, rows: int, status: str) -> Non
 
 # What a study imports once its runs are over: the summary's t quantile (scipy.special, about 0.4 s
 # of CPU) and the Parquet writer. Imported by a thread while the runs fly, whose compiled loops leave
-# the GIL free most of the time, rather than after the last run, when every other core is idle.
+# the GIL free most of the time, rather than after the last run, when every other core is idle; from
+# the first row on, not before: until then the runner's own start (its imports, the first masters'
+# builds) is all Python, which the thread would only slow down.
+# SciPy only when the summary's t quantiles are not kept for the cells' planned runs (cosim.summary).
 AFTER_THE_RUNS = ("scipy.special", "pyarrow.csv", "pyarrow.parquet")
+
+
+def _after_the_runs(study: Study, files: bool) -> tuple[str, ...]:
+    """What to import while the runs fly (:data:`AFTER_THE_RUNS`): the
+    Parquet writer when there are ``files``; SciPy when the t quantile of a
+    full cell (its samples x seeds ok runs) is not kept
+    (:func:`cosim.summary.kept_t975`)."""
+    from .summary import kept_t975
+
+    dofs = {(study.samples or 1) * len(study.case_seeds(case)) - 1 for case in study.cases or (None,)}
+    kept = kept_t975()
+    modules = AFTER_THE_RUNS if files else AFTER_THE_RUNS[:1]
+    return tuple(m for m in modules if m != "scipy.special" or not all(d in kept for d in dofs if d >= 1))
 
 
 def _import_ahead(modules: Sequence[str]) -> None:
@@ -308,13 +324,13 @@ def run_study(study: Study, out_dir: str | Path | None = None, *, workers: int =
                 writer.writerow(header)
                 f.flush()
         try:
-            if total > skipped:
-                _import_ahead(AFTER_THE_RUNS if out is not None else AFTER_THE_RUNS[:1])
             if progress is not None:
                 progress(0, total - skipped)
             for n, rec in enumerate(fly(base, todo(), workers=workers, scheduler=scheduler, metrics=metrics,
                                         worker_timeout=worker_timeout, total=total - skipped,
                                         threads=threads), 1):
+                if n == 1:
+                    _import_ahead(_after_the_runs(study, out is not None))
                 run = pending.pop(rec["key"])
                 # every metric the function gave stays in a row kept in memory (an analysis may return
                 # more than numbers); the metric_names are the table's columns

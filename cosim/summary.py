@@ -18,18 +18,75 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["summarize", "interval95", "metric_value", "STATUSES", "MAX_ERRORS"]
+__all__ = ["summarize", "interval95", "metric_value", "kept_t975", "STATUSES", "MAX_ERRORS"]
 
 STATUSES = ("ok", "diverged", "failed")
 MAX_ERRORS = 5  # messages kept per cell: the first ones in plan order
 
 
-def _t975(dof: int) -> float:
-    """``scipy.stats.t.ppf(0.975, dof)``, bit for bit: the function it calls,
-    without importing ``scipy.stats`` (about 0.7 s at the end of every study)."""
-    from scipy.special import stdtrit
+_T975: dict[int, float] = {}  # t(0.975, dof) by dof, in this process
 
-    return float(stdtrit(dof, 0.975))
+
+def _t975(dof: int) -> float:
+    """``scipy.stats.t.ppf(0.975, dof)``, bit for bit: the function it calls
+    (``scipy.special.stdtrit``), without importing ``scipy.stats`` (about
+    0.7 s at the end of every study). A value computed once is kept in the
+    registered cache folder for this version of SciPy (:func:`kept_t975`),
+    so a summary whose degrees of freedom were seen before imports no SciPy
+    at all (``scipy.special``: about 170 modules, 0.35-0.5 s of CPU, and
+    their teardown when the process exits)."""
+    if dof not in _T975:
+        _T975.update(kept_t975())
+    if dof not in _T975:
+        from scipy.special import stdtrit
+
+        _T975[dof] = float(stdtrit(dof, 0.975))
+        path = _quantiles_file()
+        if path is not None:
+            from .cache import keep
+
+            keep(path, {str(k): v for k, v in sorted({**kept_t975(), **_T975}.items())})
+    return _T975[dof]
+
+
+def _quantiles_file():
+    """Where the t quantiles of the installed SciPy are kept: the registered
+    cache folder's ``quantiles/t975-<hash of scipy/version.py>.json`` (its
+    version and commit, read without importing SciPy), or ``None`` (no
+    cache folder, no SciPy found)."""
+    import hashlib
+    import importlib.util
+
+    from .cache import cache_folder
+
+    folder = cache_folder()
+    try:
+        spec = importlib.util.find_spec("scipy")
+        version = next(iter(spec.submodule_search_locations or ()), None) if spec is not None else None
+        if folder is None or version is None:
+            return None
+        with open(f"{version}/version.py", "rb") as f:
+            digest = hashlib.sha256(f.read()).hexdigest()[:16]
+    except (OSError, ValueError, ImportError):
+        return None
+    return folder / "quantiles" / f"t975-{digest}.json"
+
+
+def kept_t975() -> dict[int, float]:
+    """The t quantiles kept for the installed SciPy (:func:`_t975`), by
+    degrees of freedom; none when nothing is kept (or cannot be read)."""
+    path = _quantiles_file()
+    if path is None:
+        return {}
+    from .cache import kept
+
+    data = kept(path)
+    if not isinstance(data, dict):
+        return {}
+    try:
+        return {int(k): float(v) for k, v in data.items() if isinstance(v, float)}
+    except ValueError:
+        return {}
 
 
 def interval95(values: Sequence[float]) -> tuple[float, float] | None:

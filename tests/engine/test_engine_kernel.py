@@ -92,6 +92,64 @@ def test_an_fmu_failure_is_the_same_error_with_the_same_rows(monkeypatch):
         master.run(2.0)
 
 
+class _Chunks:
+    """An observer of a run's rows (as a study's metrics): what it was handed, chunk by chunk."""
+
+    def __init__(self):
+        self.chunks = []
+
+    def add(self, rows) -> None:
+        self.chunks.append((rows.first, rows.data.copy()))
+
+
+def _observed(monkeypatch, compiled: bool, duration: float, calls: list, bounds=None):
+    """A run of ``duration`` s with no CSV and no progress, as a study flies
+    it: its result, the chunks its observer got, and (compiled) the kernel
+    calls in ``calls``."""
+    monkeypatch.setenv("COSIM_PYTHON_LOOP", "" if compiled else "1")
+    kernel.load.cache_clear()
+    run = kernel.load()
+    if run is not None:
+        def counted(*args):
+            calls.append(1)
+            return run(*args)
+        monkeypatch.setattr(kernel, "load", lambda: counted)
+    seen = _Chunks()
+    try:
+        with _master(2, "feedthrough", bounds=bounds) as master:
+            result = master.run(duration, block_rows=16, keep=0, observers=[seen], raise_on_error=False)
+    finally:
+        monkeypatch.undo()
+        kernel.load.cache_clear()
+    return result, seen.chunks
+
+
+def test_a_run_with_no_csv_and_no_progress_returns_to_python_once_a_chunk(monkeypatch):
+    """Nothing waits for a block (no CSV, no progress bar): the compiled loop
+    flies a whole chunk of the recorder per call, and the observers get the
+    same rows, in the same chunks, as from the Python loop (a study's
+    metrics, to the bit)."""
+    from cosim.recorder import CHUNK_ROWS
+
+    calls = []
+    fast, fast_chunks = _observed(monkeypatch, True, 50.0, calls)
+    slow, slow_chunks = _observed(monkeypatch, False, 50.0, [])
+    assert fast.status == slow.status == "ok" and fast.rows == slow.rows == 5001
+    assert len(calls) == -(-5001 // CHUNK_ROWS) == 2  # per block of 16 rows it was 313 calls
+    assert [first for first, _ in fast_chunks] == [first for first, _ in slow_chunks] == [0, 4096]
+    for (_, a), (_, b) in zip(fast_chunks, slow_chunks):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_divergence_mid_chunk_stops_at_the_same_row_in_both_loops(monkeypatch):
+    bounds = {"A.y": (-10.0, 0.9)}
+    fast, fast_chunks = _observed(monkeypatch, True, 50.0, [], bounds=bounds)
+    slow, slow_chunks = _observed(monkeypatch, False, 50.0, [], bounds=bounds)
+    assert fast.status == slow.status == "diverged" and fast.error == slow.error and fast.rows == slow.rows
+    assert len(fast_chunks) == len(slow_chunks) == 1
+    np.testing.assert_array_equal(fast_chunks[0][1], slow_chunks[0][1])
+
+
 def test_a_profiled_run_and_a_python_component_take_the_python_loop(monkeypatch):
     """Profiling times phases of the Python loop; a Python component needs it;
     the run says why it took that loop (the plan decides, Plan.python_loop_for)."""

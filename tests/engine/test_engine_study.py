@@ -190,6 +190,32 @@ def test_the_summary_is_a_t_interval_over_the_ok_runs(folder):
         == (1, 3.0, None, None)
 
 
+def test_the_t_quantiles_are_scipys_to_the_bit_and_kept_so_a_later_summary_imports_no_scipy(tmp_path):
+    """The summary's t(0.975, dof) is scipy.special.stdtrit's double; once
+    computed it is kept in the cache folder, and a later process reads it
+    there without importing SciPy (about 170 modules)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    from scipy.special import stdtrit
+
+    code = textwrap.dedent(f"""
+        import sys
+        from pathlib import Path
+        from cosim import cache, summary
+        cache.register_cache(lambda: Path({str(tmp_path)!r}))
+        print(repr([summary._t975(d) for d in (1, 2, 9, 19)]), "scipy.special" in sys.modules)
+    """)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    first, second = (subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                                    env=env).stdout.split() for _ in range(2))
+    expected = repr([float(stdtrit(d, 0.975)) for d in (1, 2, 9, 19)]).split()
+    assert first[:-1] == second[:-1] == expected
+    assert (first[-1], second[-1]) == ("True", "False")
+    assert len(list((tmp_path / "quantiles").glob("t975-*.json"))) == 1
+
+
 RESUME = """
 [sweep]
 seeds = 3
