@@ -679,6 +679,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _main(argv)
     finally:
         _started()
+        if argv is None:  # the process ends with the command: its exit need not scan what the command made
+            gc.freeze()
 
 
 def _main(argv: Sequence[str] | None) -> int:
