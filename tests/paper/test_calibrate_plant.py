@@ -14,7 +14,7 @@ from quadrotor_paper.synthetic_log import HIDDEN, fly_synthetic_log
 
 @pytest.fixture(scope="module")
 def flight_log(tmp_path_factory):
-    return fly_synthetic_log(tmp_path_factory.mktemp("flight"), duration=8.0)
+    return fly_synthetic_log(tmp_path_factory.mktemp("flight"), duration=4.0)
 
 
 def _calibrate(tmp_path, log, *args):

@@ -61,7 +61,8 @@ def test_fmpy_flies_the_circles_archive_within_3_percent_of_our_master(tmp_path)
     sample sees the vehicle at the origin (0.0 m); the learning takes that in and
     the mission ends within 0.1 % of our RMSE (measured: 0.22782 m against
     0.22801 m). With the stock FMUs, the values in the bindings only, it
-    flies another mission (2.77 m)."""
+    flies another mission (2.77 m; 6.17 m over the first 10 s, which the
+    test flies)."""
     from fmpy.ssp.simulation import simulate_ssp
 
     from quadrotor_paper.cli import main
@@ -88,7 +89,8 @@ def test_fmpy_flies_the_circles_archive_within_3_percent_of_our_master(tmp_path)
     # (measured: 0.061 m along x; the one-step delay of every coupling changes the oscillation)
     final = np.array([theirs[p][4999] for p in POSITION])
     assert np.max(np.abs(final - [ours[p][-1] for p in POSITION])) < 0.1
-    # what it flew with the stock FMUs, the values in the bindings only: another mission (2.77 m)
+    # what it flew with the stock FMUs, the values in the bindings only: another mission (2.77 m over the
+    # 50 s, docs/ssp.md); its first 10 s show it (6.17 m: the start far from the reference) at a fifth of the cost
     stock = export_ssp(all_fmu(scenario), tmp_path / "stock.ssp",
                        fmu_files={c: fmu_file(s) for c, s in all_fmu(scenario).fmus.items()})
-    assert rmse(simulate_ssp(str(stock), stop_time=50.0, step_size=0.01), POSITION, REFERENCE) > 10 * ours_rmse
+    assert rmse(simulate_ssp(str(stock), stop_time=10.0, step_size=0.01), POSITION, REFERENCE) > 10 * ours_rmse

@@ -245,10 +245,33 @@ def test_smc_step_run_converges_and_alpha_adapts(fmu):
 
 # ---- the report and the command ---------------------------------------------------------
 
-def test_command_writes_the_report_and_figures(tmp_path, capsys):
-    from quadrotor_paper.cli import main
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    """``fnn-cosim stability --no-cosim --workers 2`` run once (its report and figures are about 20 s of
+    CPU): its folder, what it printed, and the study it wrote (kept as ``run_stability_analysis`` returned
+    it), for the command's test and for the test of the figures it drew in its second process."""
+    import contextlib
+    import io
 
-    assert main(["stability", "--out", str(tmp_path), "--no-cosim"]) == 0
+    from quadrotor_paper.cli import main
+    from quadrotor_paper.stability import study as study_module
+
+    out = tmp_path_factory.mktemp("stability")
+    studies = []
+    original = study_module.run_stability_analysis
+
+    def kept(*args, **kwargs):
+        studies.append(original(*args, **kwargs))
+        return studies[-1]
+
+    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(io.StringIO()) as printed:
+        patch.setattr(study_module, "run_stability_analysis", kept)
+        assert main(["stability", "--out", str(out), "--no-cosim", "--workers", "2"]) == 0
+    return out, printed.getvalue(), studies[0]
+
+
+def test_command_writes_the_report_and_figures(report):
+    tmp_path, out, _ = report
     text = (tmp_path / "stability.md").read_text()
     for needle in ("## Closed-loop poles", "## Margins", "## Where stability stops", "## Ramp error",
                    "| hover | discrete h (co-sim) | **yes**", "| forward_wind | outer x |"):
@@ -260,7 +283,6 @@ def test_command_writes_the_report_and_figures(tmp_path, capsys):
     assert "## The learning loop along the flight" not in text and "## The learning laws' finite-time" not in text
     assert "`fnn-cosim stability --along-flight` adds them" in text
     assert not (tmp_path / "along_flight.csv").exists() and not (tmp_path / "along_flight.png").exists()
-    out = capsys.readouterr().out
     assert "hover: stable" in out and "report:" in out and "fnn-cosim stability --along-flight" in out
 
 
@@ -307,15 +329,17 @@ def test_feed_forward_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fm
     assert lag < 0.06 * ramp_lag(op, 2.5, duration=15.0, fmu=fmu)[0]
 
 
-def test_operating_point_figures_drawn_aside_are_the_same_files(tmp_path):
-    """The forked process of ``run_stability_analysis(workers > 1)`` writes what one process writes."""
-    from quadrotor_paper.stability.analysis import analyze
-    from quadrotor_paper.stability.operating_points import hover
-    from quadrotor_paper.stability.report import point_figures, point_figures_aside
+def test_operating_point_figures_drawn_aside_are_the_same_files(report, tmp_path):
+    """The forked process of ``run_stability_analysis(workers > 1)`` writes what one process writes: the
+    command's hover figures, the first drawn in its second process, are the files drawn here from the
+    command's own analyses."""
+    from quadrotor_paper.stability.report import POINT_FIGURES_HERE, point_figures
 
-    analyses = [analyze(hover(), 0.01, time_bases=("discrete",))]
-    here = point_figures(analyses, tmp_path / "here")
-    aside = point_figures_aside(analyses, tmp_path / "aside")()
-    assert list(aside) == list(here) == ["bode_outer_hover", "bode_inner_hover", "nyquist_outer_hover", "pzmap_hover"]
+    folder, _, study = report
+    names = ["bode_outer_hover", "bode_inner_hover", "nyquist_outer_hover", "pzmap_hover"]
+    assert [a.op.name for a in study.analyses][0] == "hover" and len(study.analyses) * 4 - POINT_FIGURES_HERE >= 4
+    assert list(study.figures)[:4] == names and all(study.figures[n] == folder / f"{n}.png" for n in names)
+    here = point_figures([a for a in study.analyses if a.op.name == "hover"], tmp_path / "here")
+    assert list(here) == names
     for name, path in here.items():
-        assert aside[name].read_bytes() == path.read_bytes(), name
+        assert study.figures[name].read_bytes() == path.read_bytes(), name
