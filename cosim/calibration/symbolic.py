@@ -37,6 +37,12 @@ import time
 import numpy as np
 
 from ..errors import FmuCallError
+
+# -O1, as the FMUs' generated C (docs/fmi-export.md): -O2 took twice the compiler's time (a segment
+# library 4-7 CPU-s against 2-4) for the same fit time, and the same estimates and standard errors bit for
+# bit (no -ffast-math: the optimizer may not change a double's value; measured on the plant's fits of
+# tests/paper/test_calibrate_plant.py).
+CFLAGS = ("-O1",)
 from .model import LogModel, Trajectory
 from .problem import _float
 
@@ -218,7 +224,7 @@ class SymbolicModel:
         cg.add(fn)
         started = time.perf_counter()
         try:
-            library = compiled_library(cg.dump().encode(), f"calibration_{self.definition.identifier}", ("-O2",))
+            library = compiled_library(cg.dump().encode(), f"calibration_{self.definition.identifier}", CFLAGS)
         except RuntimeError:
             library = None
         self.compile_seconds += time.perf_counter() - started
