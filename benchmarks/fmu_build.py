@@ -10,10 +10,13 @@ children (the compilers), the number of compiler calls and their CPU by
 what they compiled (each model's generated C, the generic core and FMI
 layers, the links), the Python phases (staging: CasADi's code generation,
 the sources and modelDescription written; zipping), and the largest
-compiler calls. The machine may be shared: the CPU seconds are the
+compiler calls. Then each scenario of ``--export`` exported as an SSP
+archive (``fnn-cosim export-ssp``: an FMU of each model with the
+scenario's values as its start values, what the tests of the archives do
+many times): its compiler calls and CPU. The machine may be shared: the CPU seconds are the
 figures to compare, the wall time says how well the cores were used.
 
-    .venv/bin/python benchmarks/fmu_build.py [--versions 2 3] [--top 10]
+    .venv/bin/python benchmarks/fmu_build.py [--versions 2 3] [--top 10] [--export circles circles_estimated]
 """
 from __future__ import annotations
 
@@ -103,6 +106,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--versions", type=int, nargs="+", default=[2, 3])
     parser.add_argument("--top", type=int, default=10, help="how many of the largest compiler calls to list")
+    parser.add_argument("--export", nargs="*", default=["circles", "circles_estimated"],
+                        help="shipped scenarios exported as SSP archives after the build")
     args = parser.parse_args()
     empty = tempfile.mkdtemp(prefix="fmu-build-")
     os.environ["FNN_COSIM_CACHE"] = str(Path(empty, "fmu-cache"))
@@ -148,6 +153,20 @@ def main() -> None:
     for cmd, seconds in sorted(calls.calls, key=lambda c: -c[1])[:args.top]:
         span = calls.spans[calls.calls.index((cmd, seconds))]
         print(f"    {seconds:6.2f} s  {_what(cmd):<20} {calls.model(cmd):<32} {span[0] - t:6.1f} -> {span[1] - t:6.1f} s")
+    for name in args.export:
+        from cosim.scenario import load_scenario
+        from cosim.ssp_export import export_ssp
+        from quadrotor_paper.portable import all_fmu
+
+        calls.calls.clear()
+        own0, kids0 = _cpu()
+        t = time.perf_counter()
+        export_ssp(all_fmu(load_scenario(name)), Path(empty, f"{name}.ssp"))  # as fnn-cosim export-ssp
+        own, kids = _cpu()
+        by_kind = collections.Counter(_what(cmd) for cmd, _ in calls.calls)
+        print(f"export-ssp {name} after it: wall {time.perf_counter() - t:.1f} s, CPU {own - own0 + kids - kids0:.1f} s "
+              f"(compilers {kids - kids0:.1f} s), compiler calls: "
+              + (", ".join(f"{kind} {n}" for kind, n in sorted(by_kind.items())) or "none"))
     sys.stdout.flush()
 
 
