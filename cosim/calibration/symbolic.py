@@ -37,14 +37,14 @@ import time
 import numpy as np
 
 from ..errors import FmuCallError
+from .model import LogModel, Trajectory
+from .problem import _float
 
 # -O1, as the FMUs' generated C (docs/fmi-export.md): -O2 took about twice the compiler's time (the two
 # largest segment libraries 6.8 and 6.2 CPU-s against 3.3 and 4.6) for the same fit time, and gave the same
 # estimates and standard errors bit for bit (no -ffast-math: the optimizer may not change a double's value;
 # measured on the plant's fits of tests/paper/test_calibrate_plant.py).
 CFLAGS = ("-O1",)
-from .model import LogModel, Trajectory
-from .problem import _float
 
 __all__ = ["SymbolicModel", "symbolic_model", "definition_of", "CHUNK"]
 
