@@ -40,6 +40,12 @@ from ..errors import FmuCallError
 from .model import LogModel, Trajectory
 from .problem import _float
 
+# -O1, as the FMUs' generated C (docs/fmi-export.md): -O2 took about twice the compiler's time (the two
+# largest segment libraries 6.8 and 6.2 CPU-s against 3.3 and 4.6) for the same fit time, and gave the same
+# estimates and standard errors bit for bit (no -ffast-math: the optimizer may not change a double's value;
+# measured on the plant's fits of tests/paper/test_calibrate_plant.py).
+CFLAGS = ("-O1",)
+
 __all__ = ["SymbolicModel", "symbolic_model", "definition_of", "CHUNK"]
 
 # rows a compiled call integrates: the compiled code depends on the model, the RK4 steps a row and the
@@ -218,7 +224,7 @@ class SymbolicModel:
         cg.add(fn)
         started = time.perf_counter()
         try:
-            library = compiled_library(cg.dump().encode(), f"calibration_{self.definition.identifier}", ("-O2",))
+            library = compiled_library(cg.dump().encode(), f"calibration_{self.definition.identifier}", CFLAGS)
         except RuntimeError:
             library = None
         self.compile_seconds += time.perf_counter() - started

@@ -103,8 +103,9 @@ def _object_digest(c_file: Path, compiler: list[str]) -> str:
     file and every header of its folder it includes, directly or not. Two
     builds whose file and headers are the same get the same object: a
     model's second FMI version compiles its API layer only, a model built
-    with other start values (a new ``model_config.h``) its core and API
-    layer only, never its generated C again."""
+    with other start values its ``model_start.c`` only (the GUID and the
+    start values: :func:`fmu_models.export.codegen.generate_sources`), never
+    its core, API layer or generated C again."""
     digest = hashlib.sha256(" ".join(compiler).encode() + b"\0")
     seen, pending = set(), [c_file.name]
     while pending:

@@ -24,8 +24,10 @@ __all__ = ["fmi2_model_description", "fmi3_model_description", "fmi3_build_descr
            "derivative_unit", "dependency_kinds", "clock_reference", "SOURCE_FILES_FMI2", "SOURCE_FILES_FMI3",
            "PERIOD_ANNOTATION", "CLOCK_NAME"]
 
-SOURCE_FILES_FMI2 = ("fmu_core.c", "numpy_random.c", "signal_table.c", "fmi2_functions.c", "model_generated.c")
-SOURCE_FILES_FMI3 = ("fmu_core.c", "numpy_random.c", "signal_table.c", "fmi3_functions.c", "model_generated.c")
+SOURCE_FILES_FMI2 = ("fmu_core.c", "numpy_random.c", "signal_table.c", "fmi2_functions.c", "model_generated.c",
+                     "model_start.c")
+SOURCE_FILES_FMI3 = ("fmu_core.c", "numpy_random.c", "signal_table.c", "fmi3_functions.c", "model_generated.c",
+                     "model_start.c")
 
 _DERIVATIVE_UNIT = {"m": "m/s", "m/s": "m/s2", "rad": "rad/s", "rad/s": "rad/s2", "1": "1"}
 

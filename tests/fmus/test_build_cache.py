@@ -1,6 +1,6 @@
 """The builder's objects (docs/fmi-export.md, "How a build spends its time"): each C
 file is compiled once for what it includes, so a model's second FMI version compiles
-only its API layer and new start values never compile the generated model again; and
+only its API layer and new start values only the file that holds them; and
 compiling file by file then linking makes the very shared library one compiler call
 over every file makes."""
 from __future__ import annotations
@@ -11,6 +11,7 @@ import zipfile
 from pathlib import Path
 
 import fmpy
+import numpy as np
 import pytest
 from tests.fmu_validation import validate_fmu
 
@@ -38,8 +39,22 @@ def _toy() -> FmuModel:
 
 @pytest.fixture
 def private_cache(tmp_path, monkeypatch):
+    """An empty cache of this test's own."""
     monkeypatch.setenv("FNN_COSIM_CACHE", str(tmp_path / "cache"))
     return tmp_path / "cache"
+
+
+@pytest.fixture(scope="module")
+def _module_cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture
+def shared_cache(_module_cache, monkeypatch):
+    """A cache of this module's tests that need no empty one: the toy's objects are compiled once for
+    them (each compiles its variant, whatever ran before it)."""
+    monkeypatch.setenv("FNN_COSIM_CACHE", str(_module_cache))
+    return _module_cache
 
 
 @pytest.fixture
@@ -60,30 +75,39 @@ def test_the_second_fmi_version_compiles_only_its_api_layer(private_cache, compi
     model = _toy()
     fmi2 = build.cached_fmu(model, 2)
     fmi3 = build.cached_fmu(model, 3)
-    assert compiled == [{"fmi2_functions.c", "fmu_core.c", "model_generated.c", "numpy_random.c", "signal_table.c"},
-                        {"fmi3_functions.c"}]
+    assert compiled == [{"fmi2_functions.c", "fmu_core.c", "model_generated.c", "model_start.c", "numpy_random.c",
+                         "signal_table.c"}, {"fmi3_functions.c"}]
     assert [p.name for p in (private_cache / "objects").iterdir()] and fmi2.parent.parent != fmi3.parent.parent
     assert validate_fmu(str(fmi2)) == [] and validate_fmu(str(fmi3)) == []
     result = fmpy.simulate_fmu(str(fmi3), stop_time=1.0, output_interval=0.5, start_values={"y_0": 1.0})
     assert result["y"][0] == 1.0 and 0.0 < result["y"][-1] < 1.0  # decays towards u = 0
 
 
-def test_new_start_values_compile_the_core_again_but_not_the_generated_model(private_cache, compiled):
+def test_new_start_values_compile_only_the_file_that_holds_them(shared_cache, compiled):
+    # export-ssp bakes a scenario's values into an FMU of each model it flies: the GUID and the start values
+    # are in model_start.c, so the core, the API layer and the generated model are the first build's objects
     build.cached_fmu(_toy(), 2)
-    build.cached_fmu(_toy().with_defaults({"tau": 0.5}), 3)  # another variable table: another model_config.h
-    assert compiled[1] == {"fmi3_functions.c", "fmu_core.c"}
+    slower = build.cached_fmu(_toy().with_defaults({"tau": 0.5}), 2)
+    assert compiled[-1] == {"model_start.c"}  # the last build's: the toy's may be in the cache already
+    assert validate_fmu(str(slower)) == []
+    result = fmpy.simulate_fmu(str(slower), stop_time=0.5, output_interval=0.5, start_values={"y_0": 1.0})
+    assert result["y"][-1] == pytest.approx(float(np.exp(-0.5 / 0.5)), rel=1e-6)  # tau = 0.5 s compiled in
 
 
-def test_new_equations_compile_the_generated_model_again(private_cache, compiled):
+def test_new_equations_compile_the_generated_model_again(shared_cache, compiled):
     build.cached_fmu(_toy(), 2)
     faster = dataclasses.replace(_toy(), equations=lambda t, v: ({"y": 2 * (v["u"] - v["y"]) / v["tau"]},
                                                                  {"rate": 2 * (v["u"] - v["y"]) / v["tau"]}))
-    build.cached_fmu(faster, 2)
-    assert compiled[1] == {"fmi2_functions.c", "fmu_core.c", "model_generated.c"}  # the GUID is in model_config.h
+    fmu = build.cached_fmu(faster, 2)
+    # the same sizes: the same model_config.h and model_generated.h, so the core and the API layer are the
+    # first build's objects; the new GUID is in model_start.c
+    assert compiled[-1] == {"model_generated.c", "model_start.c"}
+    result = fmpy.simulate_fmu(str(fmu), stop_time=0.5, output_interval=0.5, start_values={"y_0": 1.0})
+    assert result["y"][-1] == pytest.approx(float(np.exp(-2 * 0.5 / 0.25)), rel=1e-6)  # the new equations
 
 
 @pytest.mark.parametrize("version", sorted(build.FMI_VERSIONS))
-def test_the_library_is_the_one_a_single_compiler_call_makes(private_cache, tmp_path, version):
+def test_the_library_is_the_one_a_single_compiler_call_makes(shared_cache, tmp_path, version):
     fmu = build.cached_fmu(_toy(), version)
     with zipfile.ZipFile(fmu) as zf:
         zf.extractall(tmp_path / "unzipped")

@@ -57,8 +57,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         /* both GUIDs, as the FMI 3.0 layer does: the given one says which
          * modelDescription the importer read; cut, it can be any length */
         char message[256];
-        snprintf(message, sizeof message, "fmi2Instantiate: wrong GUID \"%.64s\", this FMU is " MODEL_GUID,
-                 fmuGUID ? fmuGUID : "(null)");
+        snprintf(message, sizeof message, "fmi2Instantiate: wrong GUID \"%.64s\", this FMU is %s",
+                 fmuGUID ? fmuGUID : "(null)", MODEL_GUID);
         forward_log(env, name, CORE_ERROR, "logStatusError", message);
         free(env);
         return NULL;

@@ -119,8 +119,8 @@ static fmi3Instance instantiate(Fmi3Env *env, const char *function, fmi3String i
     const char *name = instanceName ? instanceName : "";
     if (!instantiationToken || strcmp(instantiationToken, MODEL_GUID) != 0) {
         char message[256];
-        snprintf(message, sizeof message, "%s: wrong instantiation token \"%.64s\", this FMU is " MODEL_GUID,
-                 function, instantiationToken ? instantiationToken : "(null)");
+        snprintf(message, sizeof message, "%s: wrong instantiation token \"%.64s\", this FMU is %s",
+                 function, instantiationToken ? instantiationToken : "(null)", MODEL_GUID);
         forward_log(env, name, CORE_ERROR, "logStatusError", message);
         free(env);
         return NULL;
