@@ -76,13 +76,18 @@ def talker(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def broken(talker) -> Path:
     """The same FMU whose class imports a module it does not carry (the
-    issue's PythonFMU exported from a package: ``No module named 'examples'``)."""
+    issue's PythonFMU exported from a package: ``No module named 'examples'``).
+    Its module has a name of its own: a PythonFMU runs in this process, so
+    once a test has instantiated the talker, ``import talker`` would find
+    that one in ``sys.modules`` and never reach the missing import."""
     target = talker.with_name("Broken.fmu")
     with zipfile.ZipFile(talker) as src, zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as dst:
         for info in src.infolist():
             data = src.read(info)
             if info.filename == "resources/talker.py":
-                data = b"import examples\n" + data
+                info.filename, data = "resources/broken_talker.py", b"import examples\n" + data
+            elif info.filename == "resources/slavemodule.txt":
+                data = b"broken_talker"
             dst.writestr(info, data)
     return target
 
