@@ -269,11 +269,16 @@ def sensors_model(identifier: str, description: str, channels: Sequence[tuple[st
     )
 
 
+def _plant_channels(names) -> list[tuple[str, str, str, float]]:
+    """The channels of a sensor of the plant's states: each state's name, unit and description, starting at 0."""
+    return [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in names]
+
+
 MEASUREMENT_12 = sensors_model(
     "Measurement12",
     "measurement path (plant states -> controller): per-state Gaussian noise, bias, sample-and-hold at "
     "sample_rate and a transport delay of delay_steps communication steps; seeded; z axis down",
-    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES],
+    _plant_channels(STATE_NAMES),
     suffix="_m",
 )
 
@@ -303,7 +308,7 @@ GNSS_6 = sensors_model(
     "GNSS receiver (plant -> estimator): position and velocity with Gaussian noise, sampled at sample_rate "
     "(5-10 Hz), held, delivered delay_steps communication steps late (the receiver's latency), with a fresh "
     "flag set when a new fix arrives; seeded; z axis down",
-    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES[:6]],
+    _plant_channels(STATE_NAMES[:6]),
     suffix="_m",
     fresh=True,
 )
@@ -313,7 +318,7 @@ GNSS_6_GM = sensors_model(
     "GNSS receiver (plant -> estimator) whose errors are correlated in time: GNSS6's white noise, hold, "
     "latency and fresh flag, plus a first-order Gauss-Markov error per channel (gm_tau, gm_sigma_*); seeded; "
     "z axis down",
-    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES[:6]],
+    _plant_channels(STATE_NAMES[:6]),
     suffix="_m",
     fresh=True,
     correlated=True,
@@ -324,7 +329,7 @@ MOCAP_9 = sensors_model(
     "motion capture (plant -> estimator; OptiTrack): the rigid body's pose and velocity, position, velocity and "
     "Euler angles with Gaussian noise, sampled at sample_rate, with a fresh flag and the frame's time; seeded; "
     "z axis down",
-    [(name, QUADROTOR.variable(name).unit, QUADROTOR.variable(name).description, 0.0) for name in STATE_NAMES[:9]],
+    _plant_channels(STATE_NAMES[:9]),
     suffix="_m",
     fresh=True,
 )
