@@ -28,12 +28,12 @@ import os
 import shutil
 import subprocess
 import tempfile
-from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
+
+from .file_lock import exclusive
 
 __all__ = ["KernelFmu", "KernelRun", "KernelStop", "Stop", "Call", "header", "load", "prepare", "compiled_library"]
 
@@ -205,32 +205,13 @@ def compiled_library(source: bytes, stem: str, flags: tuple[str, ...] = (), incl
         return None
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        with _held(target.with_suffix(".lock")):
+        # one compiler per library across processes (the calibration's segments take 5-20 s of CPU each)
+        with exclusive(target.with_suffix(".lock")):
             if target.exists():  # compiled by the process that held the lock before us
                 return target
             return _compile_library(cc, source, stem, flags, include, target)
     except OSError:
         return None
-
-
-@contextmanager
-def _held(lock: Path) -> Iterator[None]:
-    """One compiler per library at a time across processes (POSIX ``flock``):
-    two test processes or study workers asking for the same library at once
-    (the calibration's segments take 5-20 s of CPU each) compile it once, the
-    other loads what the first compiled. Without POSIX locks both compile
-    (each library still renamed into place whole)."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
-        yield
-        return
-    with open(lock, "w") as held:
-        fcntl.flock(held, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(held, fcntl.LOCK_UN)
 
 
 def _compile_library(cc: str, source: bytes, stem: str, flags: tuple[str, ...], include: dict[str, bytes] | None,

@@ -18,10 +18,10 @@ import threading
 import uuid
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable
 
 import fmpy
 
@@ -143,24 +143,13 @@ def _run_compilers(commands: list[tuple[list[str], str]]) -> None:
             raise FmuBuildError(f"compiling {what} failed:\n{' '.join(cmd)}\n{result.stdout}")
 
 
-@contextmanager
-def _exclusive(folder: Path) -> Iterator[None]:
+def _exclusive(folder: Path):
     """Hold ``folder``'s lock: one builder (thread or process) compiles an
-    object while the others wait, then find it compiled. Where
-    there are no POSIX file locks the builders compile side by side (each
-    object still renamed into place whole)."""
+    object while the others wait, then find it compiled (:func:`cosim.file_lock.exclusive`)."""
+    from cosim.file_lock import exclusive
+
     folder.mkdir(parents=True, exist_ok=True)
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
-        yield
-        return
-    with open(folder / ".lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
+    return exclusive(folder / ".lock")
 
 
 def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
