@@ -174,9 +174,12 @@ def test_a_running_scheduler_and_two_workers_by_address(in_process, study, tmp_p
         assert main(["sweep", str(study), "--scheduler", address, "--out", str(out), "--quiet", "--no-plots"]) == 0
         _same_rows(in_process, out)
     finally:
-        for p in reversed(procs):  # SIGINT: the dask CLI's clean shutdown (SIGTERM can leave a worker hanging)
-            p.send_signal(signal.SIGINT)
+        # SIGINT: the dask CLI's clean shutdown (SIGTERM can leave a worker
+        # hanging). The workers first, each waited for while the scheduler is
+        # still up: a worker closing while the scheduler closes under it can
+        # hang until the timeout (seen: 20 s of a loaded run).
         for p in reversed(procs):
+            p.send_signal(signal.SIGINT)
             try:
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
