@@ -176,11 +176,18 @@ class MasterCache:
         return scenario
 
     def _fmu_dirs(self, scenario: Scenario) -> dict[str, Path]:
+        """The folders the ``[fmus]`` archives of ``scenario`` are extracted
+        to, once per cache; not an FMU this tool built, which every master
+        loads from the one folder its cache extracted it to (built within
+        :func:`~cosim.description_cache.shared_extraction`: :meth:`get`)."""
+        from .description_cache import in_cache_folder
         from .files import extract_zip, run_time_entries
 
         dirs = {}
         for name, spec in scenario.fmus.items():
             archive = str(fmu_file(spec))
+            if in_cache_folder(Path(archive)):
+                continue
             if archive not in self._extracted:
                 if Path(archive).is_dir():
                     self._extracted[archive] = Path(archive)
@@ -216,8 +223,11 @@ class MasterCache:
                 self._serial += 1
                 key = (structure, self._serial)
         if built is None:  # built outside the lock: another thread's run goes on meanwhile
+            from .description_cache import shared_extraction
+
             reads: set[str] = set()
-            built = _Built(build_master(scenario, dirs, reads=reads), reads, values)
+            with shared_extraction():  # the FMUs this tool built: one extracted folder for every master
+                built = _Built(build_master(scenario, dirs, reads=reads), reads, values)
         master = built.master
         with self._lock:
             self._busy[id(master)] = (key, built)

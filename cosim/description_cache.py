@@ -23,6 +23,8 @@ or decoded is derived again; a cache that cannot be written keeps nothing.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import functools
 import hashlib
 import os
@@ -32,7 +34,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-__all__ = ["KeptDescription", "kept_description", "keep_description", "claim_extracted"]
+__all__ = ["KeptDescription", "kept_description", "keep_description", "claim_extracted", "shared_extraction",
+           "in_cache_folder"]
 
 FORMAT = 1  # bumped when what is kept, or how, changes
 MAX_HASHED_BYTES = 64 * 2 ** 20  # a larger FMU is parsed every time: hashing it would cost more than the parse
@@ -168,6 +171,37 @@ def keep_description(path: Path, kept: KeptDescription) -> None:
 
 _CLAIMED: set[str] = set()  # extracted folders an instance of this process loaded its library from
 _CLAIM = threading.Lock()
+_SHARED = contextvars.ContextVar("cosim_shared_extraction", default=False)
+
+
+@contextlib.contextmanager
+def shared_extraction():
+    """While in this block (this thread's context), :func:`claim_extracted`
+    serves a folder already claimed in this process again: every instance
+    of an FMU this tool built loads the one library extracted in the cache.
+    For a study's masters (:class:`cosim.dask_runner.MasterCache`), which
+    share its FMUs' libraries already (docs/studies.md: the FMUs this tool
+    builds keep no writable global state), so that a master built after the
+    first extracts nothing and removes nothing when closed."""
+    token = _SHARED.set(True)
+    try:
+        yield
+    finally:
+        _SHARED.reset(token)
+
+
+def in_cache_folder(path: Path) -> bool:
+    """Whether ``path`` is inside the registered cache folder (an FMU this
+    tool built, which :func:`claim_extracted` may serve)."""
+    from .cache import cache_folder
+
+    folder = cache_folder()
+    if folder is None:
+        return False
+    try:
+        return Path(path).resolve().is_relative_to(Path(folder).resolve())
+    except OSError:
+        return False
 
 
 def claim_extracted(path: Path, kept: KeptDescription, names: set[str]) -> Path | None:
@@ -183,20 +217,16 @@ def claim_extracted(path: Path, kept: KeptDescription, names: set[str]) -> Path 
     fmiFatal is never freed; unloading is the system's ``dlclose``), so every
     later instance loads a copy of its own, with its own global state, as
     before (a study's second run in a process starts from a fresh library,
-    not from what the first left in it)."""
+    not from what the first left in it); within :func:`shared_extraction`,
+    every instance that asks gets the folder."""
     from .cache import cache_folder
 
     folder = cache_folder()
-    if folder is None or not kept.digest:
-        return None
-    try:
-        if not Path(path).resolve().is_relative_to(Path(folder).resolve()):
-            return None
-    except OSError:
+    if folder is None or not kept.digest or not in_cache_folder(path):
         return None
     target = Path(folder) / "extracted" / kept.digest
     with _CLAIM:
-        if str(target) in _CLAIMED:
+        if str(target) in _CLAIMED and not _SHARED.get():
             return None
         if not target.is_dir():
             import shutil

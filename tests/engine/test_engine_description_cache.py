@@ -177,6 +177,36 @@ def test_an_fmu_of_the_cache_read_before_runs_from_one_extracted_folder(lag_fmu2
     assert len(parses) == 1
 
 
+def test_within_shared_extraction_every_instance_loads_the_one_extracted_folder(lag_fmu2, cache, monkeypatch):
+    """A study's masters (cosim.dask_runner.MasterCache) build their FMUs
+    within shared_extraction: a later instance of an FMU of the cache,
+    live or after the first was freed, loads the folder the first claimed
+    (nothing extracted of its own, nothing removed when closed), the same
+    values; outside the block each later instance still extracts its own."""
+    monkeypatch.setattr(description_cache, "_CLAIMED", set())
+    path = cache / "built" / "lag.fmu"
+    path.parent.mkdir(parents=True)
+    shutil.copyfile(lag_fmu2, path)
+    FmuComponent("read", path).close()  # read: its description kept
+    with description_cache.shared_extraction():
+        first, second = FmuComponent("first", path), FmuComponent("second", path)
+        first.instantiate()
+        second.instantiate()
+    folder = first._unzipdir
+    assert folder.parent == cache / "extracted"
+    assert second._unzipdir == folder and not first._owns_unzipdir and not second._owns_unzipdir
+    expected = _flown(first)
+    assert _flown(second) == expected
+    first.close()
+    second.close()
+    assert folder.is_dir()
+    outside = FmuComponent("outside", path)
+    outside.instantiate()
+    assert outside._owns_unzipdir and outside._unzipdir != folder
+    assert _flown(outside) == expected
+    outside.close()
+
+
 def test_an_fmu_outside_the_cache_is_extracted_for_its_instance_only(lag_fmu2, cache, tmp_path):
     path = tmp_path / "lag.fmu"
     shutil.copyfile(lag_fmu2, path)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import re
 import tomllib
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -307,6 +308,28 @@ def test_a_master_is_taken_out_by_one_run_at_a_time_and_serves_the_next_once_giv
     finally:
         cache.close()
     assert not cache.masters and not cache._busy
+
+
+def test_the_masters_of_a_cache_load_an_fmu_of_the_tools_cache_from_its_one_extracted_folder(base):
+    """Masters of two structures (a gain of the Python controller) both run
+    the toy FMU, a file of the tool's cache: both load it from the one
+    folder the cache extracted it to, the cache extracts nothing of its own
+    and closing its masters removes nothing (a study's end waited for one
+    folder removed per master and FMU), and the runs give the bits of new
+    masters."""
+    runs = [_run(0, {}), _run(1, {"toy_controller.kp": 0.5})]
+    cache = MasterCache()
+    try:
+        records = [execute(base.raw, str(base.source), run, trace, cache) for run in runs]
+        masters = [built.master for built in cache.masters.values()]
+        assert len(masters) == 2
+        lags = [master.components["Lag"] for master in masters]
+        assert lags[0]._unzipdir == lags[1]._unzipdir and not any(lag._owns_unzipdir for lag in lags)
+        assert cache._tmp is None
+    finally:
+        cache.close()
+    assert lags[0]._unzipdir is None or Path(lags[0]._unzipdir).is_dir()
+    assert all(_same_record(record, _fresh(base, run)) for record, run in zip(records, runs))
 
 
 def test_a_threaded_study_flies_every_run_once_to_the_bits_of_this_process_without_distributed(base, monkeypatch):
