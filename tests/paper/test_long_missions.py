@@ -127,3 +127,19 @@ def test_an_estimate_never_judged_on_a_steady_wind_says_undefined(tmp_path):
     assert summary["nees_position"] > 0 and summary["est_rmse_wind_mps"] > 0
     text = (tmp_path / "summary.md").read_text()
     assert "wind undefined (3 each when consistent)" in text and "wind once steady undefined m/s" in text
+
+
+def test_the_streamed_largest_and_final_error_are_the_norm_of_every_row_to_the_bit(tmp_path):
+    """The tracking metrics take |e| from the squares they sum (one pass):
+    the same bits as np.linalg.norm of p* - p row by row over the rows
+    held (quadrotor_paper.metrics.euclidean_error), and the RMSE its rows'."""
+    from quadrotor_paper.metrics import euclidean_error, rmse
+    from quadrotor_paper.sections import metric_signals
+
+    scenario = load_scenario("circles", {"simulation.duration": 3.0, "wind.speed": 5.0})
+    result, summary = run_once(scenario, tmp_path, keep=None)
+    position, reference = metric_signals(scenario)
+    norm = euclidean_error(result, position, reference)
+    assert len(norm) == 301 and len(set(norm.tolist())) > 100
+    assert summary["max_error_m"] == float(np.max(norm)) and summary["final_error_m"] == float(norm[-1])
+    assert summary["rmse_m"] == rmse(result, position, reference)
