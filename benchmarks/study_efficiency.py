@@ -43,7 +43,7 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   imports, the study's validation, the first run's start, the runs (the
   masters built, the CPU in the compiled loop and in Python around it, a
   run's ``Master.run`` on the workers' threads against ``L``), the last
-  run's end, the files and the exit; and the wall time above the ideal
+  run's end, the masters freed (wall and CPU), the files and the exit; and the wall time above the ideal
   split into the start, the runs and the end;
 * whether the compiled loop leaves the GIL free: a Python counter in
   this thread while another thread flies runs of one kernel call each;
@@ -350,11 +350,13 @@ def _phases(workers: int, tmp: Path, tree: Path | None, tag: str) -> dict[str, f
     runs_cpu = sum(e[4] for e in runs)
     in_loop = sum(c for t, c in got["kernel_cpu"].items() if t.startswith("cosim-run"))
     validation = next((e for e in events if e[2] == "validation"), None)
+    closed = [e for e in events if e[2] == "cache closed"]
     return {
         "imports_done_s": first["imports done"],
         "validated_s": validation[0] + validation[3] if validation else float("nan"),
         "first_run_s": runs[0][0], "last_run_end_s": max(at + wall for at, _, _, wall, _ in runs),
         "main_returned_s": first["main returned"], "process_end_s": ends,
+        "close_wall_s": sum(e[3] for e in closed), "close_cpu_s": sum(e[4] for e in closed),
         "runs": len(runs), "builds": len(builds), "builds_cpu_s": sum(e[4] for e in builds),
         "run_mean_ms": statistics.mean(e[3] for e in runs) * 1e3,
         "runs_cpu_s": runs_cpu, "in_loop_cpu_s": in_loop, "around_loop_cpu_s": runs_cpu - in_loop,
@@ -372,6 +374,8 @@ _PHASE_LINES = (  # key, label, how it is shown
     ("last_run_end_s", "last run ends", "{:8.2f} s"),
     ("main_returned_s", "files written, table printed", "{:8.2f} s"),
     ("process_end_s", "process ends", "{:8.2f} s"),
+    ("close_wall_s", "the masters freed after the last run (MasterCache.close): wall", "{:8.3f} s"),
+    ("close_cpu_s", "  its CPU", "{:8.3f} s"),
     ("builds", "masters built", "{:8.0f}  "),
     ("builds_cpu_s", "  their CPU (in the runs' threads)", "{:8.2f} s"),
     ("run_mean_ms", "a run's time on the threads (execute: scenario, master, Master.run, metrics)", "{:8.1f} ms"),
