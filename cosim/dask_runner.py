@@ -55,7 +55,9 @@ those reuses its master (FMUs extracted and instantiated once); any other
 difference builds a new master (the components may read FMU parameters when
 built, e.g. a controller's nominal model from the plant's:
 :func:`~cosim.assembly.build_master` notes which). FMU archives are
-extracted once per worker process and shared by its masters, and a worker
+extracted once per worker process and shared by its masters (an FMU this
+tool built: the one folder its cache extracted it to, for every instance
+of every master, :func:`~cosim.description_cache.shared_extraction`), and a worker
 parses the scenario of a set of overrides once (the seeds of one cell share
 it).
 """
