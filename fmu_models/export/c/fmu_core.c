@@ -129,8 +129,8 @@ static int allocate(Instance *inst) {
         inst->rng = (NpPcg64 *)(void *)((char *)inst->s + rng_offset());
         inst->r_step = (double *)(void *)((char *)inst->s + rng_offset() + sizeof(NpPcg64));
     }
-    inst->x_start = inst->w + fmu_model.sz_w + 1;
-    inst->k_tmp = inst->x_start + NX + 1;
+    inst->x_next = inst->w + fmu_model.sz_w + 1;
+    inst->k_tmp = inst->x_next + NX + 1;
     inst->z_next = inst->k_tmp + NX + 1;
     inst->y_next = inst->z_next + NZ + 1;
     inst->r_init = inst->y_next + NY + 1;
@@ -324,7 +324,7 @@ CoreStatus core_enter_initialization(Instance *inst, double start_time) {
 }
 
 /* The index of the first non-finite of n values, or -1. */
-static int first_non_finite(const double *values, size_t n) {
+static inline int first_non_finite(const double *values, size_t n) {
     for (size_t i = 0; i < n; i++)
         if (!isfinite(values[i])) return (int)i;
     return -1;
@@ -432,7 +432,7 @@ typedef struct {
     uint64_t count;
 } StepCounter;
 
-static StepCounter count_step(const Instance *inst, double current_time, double step_size) {
+static inline StepCounter count_step(const Instance *inst, double current_time, double step_size) {
     StepCounter next = {current_time, step_size, 1};
     const CoreState *s = inst->s;
     if (step_size == s->step_size && current_time == s->step_base_time + (double)s->step_count * s->step_size) {
@@ -443,7 +443,7 @@ static StepCounter count_step(const Instance *inst, double current_time, double 
 }
 
 /* Commit a successful step: the counter, and the time it gives. */
-static void end_step(Instance *inst, StepCounter counter) {
+static inline void end_step(Instance *inst, StepCounter counter) {
     inst->s->step_base_time = counter.base;
     inst->s->step_size = counter.size;
     inst->s->step_count = counter.count;
@@ -668,26 +668,38 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
         StepCounter next = count_step(inst, current_time, step_size);
         if (check_table_time(inst, next.base + (double)next.count * next.size) != CORE_OK) return CORE_ERROR;
     }
-    memcpy(inst->x_start, X_, NX * sizeof(double));
+    /* Each RK4 step from one buffer into another (the generated step may not write its argument), x
+     * itself only read: the same arguments, the same results as copying x before each step, with one copy
+     * per doStep instead of n + 1, and x still as it was if the step fails. */
+    /* the loop's pointers read once: the step function could change what inst points to, for all the compiler
+     * knows, so it would read them again after every call */
+    double *from = X_, *to = inst->k_tmp, *other = inst->x_next, *t = &T_;
+    const double *u = U_, *p = P_;
+    const double **arg = inst->arg;
+    double **res = inst->res;
+    long long *iw = inst->iw;
+    double *w = inst->w;
+    const ModelFunction step = fmu_model.step;
     for (long k = 0; k < n; k++) {
         /* time from a step counter, never accumulated */
-        T_ = current_time + (double)k * h;
-        memcpy(inst->k_tmp, X_, NX * sizeof(double));
-        inst->arg[0] = &T_; inst->arg[1] = inst->k_tmp; inst->arg[2] = U_; inst->arg[3] = P_;
-        inst->arg[4] = &h;
-        inst->res[0] = X_;
-        fmu_model.step(inst->arg, inst->res, inst->iw, inst->w, 0);
+        *t = current_time + (double)k * h;
+        arg[0] = t; arg[1] = from; arg[2] = u; arg[3] = p; arg[4] = &h;
+        res[0] = to;
+        step(arg, res, iw, w, 0);
+        from = to;
+        to = other;
+        other = from;
     }
     inst->derived_valid = 0;
-    int bad = first_non_finite(X_, NX);
+    int bad = first_non_finite(from, NX);
     if (bad >= 0) {
-        double value = X_[bad];
-        memcpy(X_, inst->x_start, NX * sizeof(double));
+        double value = from[bad];
         T_ = current_time;
         inst->s->failed = 1;
         report_non_finite_state(inst, VR_X + (size_t)bad, value, current_time, current_time + step_size);
         return CORE_ERROR;
     }
+    memcpy(X_, from, NX * sizeof(double));
     end_step(inst, count_step(inst, current_time, step_size));
     return CORE_OK;
 }

@@ -195,7 +195,7 @@ typedef struct {
     double **res;            /* sz_res */
     long long *iw;           /* sz_iw + 1 */
     double *w;               /* sz_w + 1 */
-    double *x_start, *k_tmp; /* NX + 1 each */
+    double *k_tmp, *x_next;  /* NX + 1 each: continuous, the RK4 steps' states */
     double *z_next, *y_next; /* NZ + 1, NY + 1: sampled-data, the pending update */
     double *r_init;          /* NR + 1: sampled-data, dinit's uniform numbers */
     double *jac;             /* (NX + NY) (NX + NU) + 1 */
