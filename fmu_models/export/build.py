@@ -199,7 +199,9 @@ def _zip(root: Path, target: Path) -> None:
     # write beside the target and rename: parallel builders never see half an FMU
     fd, tmp = tempfile.mkstemp(suffix=".fmu.part", dir=target.parent)
     os.close(fd)
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
+    # deflate at level 1: a first build of every shipped FMU compresses 29 MB (sources, binaries, XML) in
+    # 0.26 CPU-s instead of 1.09 s at the default level 6, into 8.0 MB instead of 6.7 MB
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
         for path in sorted(root.rglob("*")):
             if path.is_file():
                 zf.write(path, path.relative_to(root).as_posix())
