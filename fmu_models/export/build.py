@@ -101,11 +101,12 @@ _INCLUDE = re.compile(rb'^\s*#\s*include\s*"([^"]+)"', re.MULTILINE)
 def _object_digest(c_file: Path, compiler: list[str]) -> str:
     """What compiling ``c_file`` depends on: the compiler and its flags, the
     file and every header of its folder it includes, directly or not. Two
-    builds whose file and headers are the same get the same object: a
-    model's second FMI version compiles its API layer only, a model built
-    with other start values its ``model_start.c`` only (the GUID and the
-    start values: :func:`fmu_models.export.codegen.generate_sources`), never
-    its core, API layer or generated C again."""
+    builds whose file and headers are the same get the same object: the
+    core and the API layers include no model's header (they read the
+    model's descriptor in ``model_start.c`` at run time), so every model
+    links the same objects of them; a model compiles its generated C and
+    ``model_start.c``, and built with other start values its
+    ``model_start.c`` only (:func:`fmu_models.export.codegen.generate_sources`)."""
     digest = hashlib.sha256(" ".join(compiler).encode() + b"\0")
     seen, pending = set(), [c_file.name]
     while pending:
