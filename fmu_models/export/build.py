@@ -101,11 +101,12 @@ _INCLUDE = re.compile(rb'^\s*#\s*include\s*"([^"]+)"', re.MULTILINE)
 def _object_digest(c_file: Path, compiler: list[str]) -> str:
     """What compiling ``c_file`` depends on: the compiler and its flags, the
     file and every header of its folder it includes, directly or not. Two
-    builds whose file and headers are the same get the same object: a
-    model's second FMI version compiles its API layer only, a model built
-    with other start values its ``model_start.c`` only (the GUID and the
-    start values: :func:`fmu_models.export.codegen.generate_sources`), never
-    its core, API layer or generated C again."""
+    builds whose file and headers are the same get the same object: the
+    core and the API layers include no model's header (they read the
+    model's descriptor in ``model_start.c`` at run time), so every model
+    links the same objects of them; a model compiles its generated C and
+    ``model_start.c``, and built with other start values its
+    ``model_start.c`` only (:func:`fmu_models.export.codegen.generate_sources`)."""
     digest = hashlib.sha256(" ".join(compiler).encode() + b"\0")
     seen, pending = set(), [c_file.name]
     while pending:
@@ -199,7 +200,9 @@ def _zip(root: Path, target: Path) -> None:
     # write beside the target and rename: parallel builders never see half an FMU
     fd, tmp = tempfile.mkstemp(suffix=".fmu.part", dir=target.parent)
     os.close(fd)
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
+    # deflate at level 1: a first build of every shipped FMU compresses 29 MB (sources, binaries, XML) in
+    # 0.26 CPU-s instead of 1.09 s at the default level 6, into 8.0 MB instead of 6.7 MB
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
         for path in sorted(root.rglob("*")):
             if path.is_file():
                 zf.write(path, path.relative_to(root).as_posix())

@@ -136,14 +136,28 @@ class FmuModel:
                 raise ValueError(f"model {self.identifier}: its seed {seed.name!r} must be an integer "
                                  "parameter within [0, 2^53]")
 
-    @property
+    # The table's views, each made once per model (the model is frozen): the builder reads them for every
+    # variable of every table it writes, which made them quadratic in the variables (the EKFs: ~0.5 s of a
+    # first build's CPU).
+    @cached_property
     def all_variables(self) -> tuple[Variable, ...]:
         """The table, plus the integrator's ``internal_step`` for a continuous model."""
         own = any(v.name == INTERNAL_STEP.name for v in self.variables)  # a start of its own (with_defaults)
         return self.variables + ((INTERNAL_STEP,) if self.sampled is None and not own else ())
 
+    @cached_property
+    def _by_causality(self) -> dict[str, tuple[Variable, ...]]:
+        groups: dict[str, list[Variable]] = {}
+        for v in self.all_variables:
+            groups.setdefault(v.causality, []).append(v)
+        return {causality: tuple(group) for causality, group in groups.items()}
+
+    @cached_property
+    def _by_name(self) -> dict[str, Variable]:
+        return {v.name: v for v in self.all_variables}
+
     def _of(self, causality: str) -> tuple[Variable, ...]:
-        return tuple(v for v in self.all_variables if v.causality == causality)
+        return self._by_causality.get(causality, ())
 
     @property
     def states(self) -> tuple[Variable, ...]:
@@ -166,9 +180,8 @@ class FmuModel:
         return self._of("parameter")
 
     def variable(self, name: str) -> Variable:
-        for v in self.all_variables:
-            if v.name == name:
-                return v
+        if name in self._by_name:
+            return self._by_name[name]
         known = ", ".join(v.name for v in self.all_variables)
         raise KeyError(f"model {self.identifier} has no variable {name!r}; it has: {known}")
 

@@ -1,6 +1,7 @@
 """The builder's objects (docs/fmi-export.md, "How a build spends its time"): each C
-file is compiled once for what it includes, so a model's second FMI version compiles
-only its API layer and new start values only the file that holds them; and
+file is compiled once for what it includes, so the generic core and API layers once for
+every model, a model's second FMI version only its API layer (or nothing, once another
+model compiled it) and new start values only the file that holds them; and
 compiling file by file then linking makes the very shared library one compiler call
 over every file makes."""
 from __future__ import annotations
@@ -99,11 +100,49 @@ def test_new_equations_compile_the_generated_model_again(shared_cache, compiled)
     faster = dataclasses.replace(_toy(), equations=lambda t, v: ({"y": 2 * (v["u"] - v["y"]) / v["tau"]},
                                                                  {"rate": 2 * (v["u"] - v["y"]) / v["tau"]}))
     fmu = build.cached_fmu(faster, 2)
-    # the same sizes: the same model_config.h and model_generated.h, so the core and the API layer are the
-    # first build's objects; the new GUID is in model_start.c
+    # the core and the API layer are the first build's objects; the new GUID is in model_start.c
     assert compiled[-1] == {"model_generated.c", "model_start.c"}
     result = fmpy.simulate_fmu(str(fmu), stop_time=0.5, output_interval=0.5, start_values={"y_0": 1.0})
     assert result["y"][-1] == pytest.approx(float(np.exp(-2 * 0.5 / 0.25)), rel=1e-6)  # the new equations
+
+
+def _other() -> FmuModel:
+    """Another model than the toy: other sizes, names and equations."""
+    return FmuModel(
+        identifier="ToyBuildCacheOscillator",
+        description="harmonic oscillator built into a private cache",
+        variables=(
+            state("q", "m", "position"),
+            state("w", "m/s", "velocity"),
+            input_("f", "m/s2", "force per mass", start=0.0),
+            output("q_out", "m", "position"),
+            parameter("omega", "rad/s", "natural angular frequency", 2.0, min=1e-3),
+        ),
+        equations=lambda t, v: ({"q": v["w"], "w": v["f"] - v["omega"] ** 2 * v["q"]}, {"q_out": v["q"]}),
+        initial_state=lambda v: {"q": 1.0, "w": 0.0},
+    )
+
+
+def test_another_model_compiles_only_its_own_c(private_cache, compiled):
+    # the core and the API layer include no model's header (they read the model's descriptor in
+    # model_start.c at run time): every model links the same objects of them
+    build.cached_fmu(_toy(), 2)
+    fmu = build.cached_fmu(_other(), 2)
+    assert compiled[-1] == {"model_generated.c", "model_start.c"}
+    assert validate_fmu(str(fmu)) == []
+    result = fmpy.simulate_fmu(str(fmu), stop_time=np.pi / 2, output_interval=np.pi / 4)
+    assert result["q"][-1] == pytest.approx(-1.0, abs=1e-6)  # half a period of omega = 2 rad/s
+
+
+@pytest.mark.parametrize("version", sorted(build.FMI_VERSIONS))
+def test_the_core_and_the_api_layer_are_the_same_objects_for_every_model(tmp_path, version):
+    flags = [build._compiler(), *build.CFLAGS]
+    digests = []
+    for model in (_toy(), _other()):
+        sources = build._stage(model, version, tmp_path / model.identifier) / "sources"
+        digests.append([build._object_digest(sources / name, flags)
+                        for name in ("fmu_core.c", build.FMI_VERSIONS[version].api_source)])
+    assert digests[0] == digests[1]
 
 
 @pytest.mark.parametrize("version", sorted(build.FMI_VERSIONS))

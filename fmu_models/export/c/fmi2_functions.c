@@ -86,7 +86,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     CHECK("fmi2EnterInitializationMode", IN(MODE_INSTANTIATED));
-    return (fmi2Status)core_enter_initialization(INST, INST->s.v[0]);
+    return (fmi2Status)core_enter_initialization(INST, INST->v[0]);
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
@@ -96,7 +96,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
 
 fmi2Status fmi2Terminate(fmi2Component c) {
     CHECK("fmi2Terminate", AFTER_INIT);
-    INST->s.mode = MODE_TERMINATED;
+    INST->s->mode = MODE_TERMINATED;
     return fmi2OK;
 }
 
@@ -192,7 +192,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     CoreState *s = core_deserialize(INST, (const unsigned char *)serializedState, size);
     if (!s) return fmi2Error;
     if (*FMUstate) { /* reuse the importer's state: a pointer it holds stays valid */
-        *(CoreState *)*FMUstate = *s;
+        core_copy_state((CoreState *)*FMUstate, s);
         free(s);
     } else {
         *FMUstate = s;
@@ -212,7 +212,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 
 fmi2Status fmi2EnterEventMode(fmi2Component c) {
     CHECK("fmi2EnterEventMode", ME_MODES);
-    INST->s.mode = MODE_EVENT;
+    INST->s->mode = MODE_EVENT;
     return fmi2OK;
 }
 
@@ -230,7 +230,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo) {
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) {
     CHECK("fmi2EnterContinuousTimeMode", IN(MODE_EVENT));
-    INST->s.mode = MODE_CONTINUOUS_TIME;
+    INST->s->mode = MODE_CONTINUOUS_TIME;
     return fmi2OK;
 }
 
@@ -328,7 +328,7 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
     (void)s;
     if (c && value && s == fmi2LastSuccessfulTime) {
-        *value = INST->s.v[0];
+        *value = INST->v[0];
         return fmi2OK;
     }
     return no_status(c, "fmi2GetRealStatus");

@@ -6,7 +6,7 @@
  * no event indicators and no structural parameters; the functions for those
  * return fmi3OK when asked about zero variables and fmi3Error otherwise.
  *
- * A continuous model (NZ = 0) has no clocks: Model Exchange and Co-Simulation.
+ * A continuous model (NZ = 0, not SAMPLED) has no clocks: Model Exchange and Co-Simulation.
  * A sampled-data model (NZ > 0) is clocked (docs/fmi-export.md, "Clocks"):
  * one periodic input clock, sample_clock (VR_CLOCK), ticks every sample
  * period from the start time, and its outputs and discrete states are
@@ -182,19 +182,17 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
     (void)visible;
     /* one model partition, computed in the caller's thread: nothing to call back or lock */
     (void)clockUpdate; (void)lockPreemption; (void)unlockPreemption;
-#if NZ > 0
+    if (!SAMPLED) {
+        if (logMessage)
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                       "fmi3InstantiateScheduledExecution: this FMU has no clock (a continuous model): Model Exchange "
+                       "and Co-Simulation only");
+        return NULL;
+    }
     Fmi3Env *env = new_env(instanceEnvironment, logMessage);
     if (!env) return NULL;
     return instantiate(env, "fmi3InstantiateScheduledExecution", instanceName, instantiationToken, resourcePath,
                        KIND_SCHEDULED_EXECUTION, loggingOn);
-#else
-    (void)instantiationToken; (void)loggingOn; (void)instanceName;
-    if (logMessage)
-        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
-                   "fmi3InstantiateScheduledExecution: this FMU has no clock (a continuous model): Model Exchange "
-                   "and Co-Simulation only");
-    return NULL;
-#endif
 }
 
 void fmi3FreeInstance(fmi3Instance instance) {
@@ -219,7 +217,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
     fmi3Status status = (fmi3Status)core_exit_initialization(INST);
     /* Co-Simulation with eventModeUsed starts in Event Mode, like Model Exchange */
     if (status <= fmi3Warning && INST->kind == KIND_CO_SIMULATION && ENV->event_mode_used)
-        INST->s.mode = MODE_EVENT;
+        INST->s->mode = MODE_EVENT;
     return status;
 }
 
@@ -232,13 +230,13 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
         core_log(INST, CORE_ERROR, "fmi3EnterEventMode: the instance was created with eventModeUsed = false");
         return fmi3Error;
     }
-    INST->s.mode = MODE_EVENT;
+    INST->s->mode = MODE_EVENT;
     return fmi3OK;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance) {
     CHECK("fmi3Terminate", AFTER_INIT);
-    INST->s.mode = MODE_TERMINATED;
+    INST->s->mode = MODE_TERMINATED;
     return fmi3OK;
 }
 
@@ -312,7 +310,6 @@ fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
     return no_such_variables(instance, "fmi3SetBinary", nValueReferences);
 }
 
-#if NZ > 0
 /* The clock functions take sample_clock only. */
 static fmi3Status only_the_clock(Instance *inst, const char *fn, const fmi3ValueReference vr[], size_t n) {
     if (n > 0 && !vr) {
@@ -345,42 +342,33 @@ static fmi3Status check_event_mode_clock(Instance *inst, const char *fn) {
     }
     return core_check_mode(inst, fn, IN(MODE_EVENT)) == CORE_OK ? fmi3OK : fmi3Error;
 }
-#endif
 
 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, fmi3Clock values[]) {
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3GetClock", nValueReferences);
     if (!instance) return fmi3Error;
     if (check_event_mode_clock(INST, "fmi3GetClock") != fmi3OK) return fmi3Error;
     if (only_the_clock(INST, "fmi3GetClock", valueReferences, nValueReferences) != fmi3OK) return fmi3Error;
-    for (size_t i = 0; i < nValueReferences; i++) values[i] = INST->s.clock_active ? fmi3ClockActive : fmi3ClockInactive;
+    for (size_t i = 0; i < nValueReferences; i++) values[i] = INST->s->clock_active ? fmi3ClockActive : fmi3ClockInactive;
     return fmi3OK;
-#else
-    (void)valueReferences; (void)values;
-    return no_such_variables(instance, "fmi3GetClock", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, const fmi3Clock values[]) {
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3SetClock", nValueReferences);
     if (!instance) return fmi3Error;
     if (check_event_mode_clock(INST, "fmi3SetClock") != fmi3OK) return fmi3Error;
     if (only_the_clock(INST, "fmi3SetClock", valueReferences, nValueReferences) != fmi3OK) return fmi3Error;
     for (size_t i = 0; i < nValueReferences; i++) {
         if (values[i]) {
-            if (!INST->s.clock_active && core_activate_clock(INST, "fmi3SetClock") != CORE_OK) return fmi3Error;
-        } else if (INST->s.clock_active) {
+            if (!INST->s->clock_active && core_activate_clock(INST, "fmi3SetClock") != CORE_OK) return fmi3Error;
+        } else if (INST->s->clock_active) {
             core_log(INST, CORE_ERROR, "fmi3SetClock: sample_clock cannot be deactivated (canBeDeactivated = "
                      "false); fmi3UpdateDiscreteStates computes its tick");
             return fmi3Error;
         }
     }
     return fmi3OK;
-#else
-    (void)valueReferences; (void)values;
-    return no_such_variables(instance, "fmi3SetClock", nValueReferences);
-#endif
 }
 
 /* ---- variable dependencies (the modelDescription's ModelStructure has them) -- */
@@ -456,7 +444,7 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
     CoreState *s = core_deserialize(INST, serializedState, size);
     if (!s) return fmi3Error;
     if (*FMUState) { /* overwrite the importer's state in place: its pointer stays valid */
-        *(CoreState *)*FMUState = *s;
+        core_copy_state((CoreState *)*FMUState, s);
         free(s);
     } else {
         *FMUState = s;
@@ -507,14 +495,12 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
 
 /* ---- clocks: the model has none --------------------------------------------------- */
 
-#if NZ > 0
 #define CLOCK_ONLY(fn, vrs, n)                                                                 \
     do {                                                                                        \
         if (!instance) return fmi3Error;                                                        \
         if (core_check_mode(INST, fn, ANY_MODE & ~IN(MODE_INSTANTIATED)) != CORE_OK) return fmi3Error; \
         if (only_the_clock(INST, fn, vrs, n) != fmi3OK) return fmi3Error;                        \
     } while (0)
-#endif
 
 /* The interval of sample_clock is its model's sample period parameter
  * (intervalVariability = "fixed"): read after initialization begins, set only
@@ -523,55 +509,41 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[]) {
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3GetIntervalDecimal", nValueReferences);
     CLOCK_ONLY("fmi3GetIntervalDecimal", valueReferences, nValueReferences);
     for (size_t i = 0; i < nValueReferences; i++) {
-        intervals[i] = INST->s.v[VR_SAMPLE_PERIOD];
+        intervals[i] = INST->v[VR_SAMPLE_PERIOD];
         qualifiers[i] = fmi3IntervalChanged;
     }
     return fmi3OK;
-#else
-    (void)valueReferences; (void)intervals; (void)qualifiers;
-    return no_such_variables(instance, "fmi3GetIntervalDecimal", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[],
                                    fmi3IntervalQualifier qualifiers[]) {
     (void)valueReferences; (void)counters; (void)resolutions; (void)qualifiers;
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3GetIntervalFraction", nValueReferences);
     return not_provided(instance, "fmi3GetIntervalFraction", "supportsFraction=false: fmi3GetIntervalDecimal");
-#else
-    return no_such_variables(instance, "fmi3GetIntervalFraction", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, fmi3Float64 shifts[]) {
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3GetShiftDecimal", nValueReferences);
     CLOCK_ONLY("fmi3GetShiftDecimal", valueReferences, nValueReferences);
     for (size_t i = 0; i < nValueReferences; i++) shifts[i] = 0.0;
     return fmi3OK;
-#else
-    (void)valueReferences; (void)shifts;
-    return no_such_variables(instance, "fmi3GetShiftDecimal", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[]) {
     (void)valueReferences; (void)counters; (void)resolutions;
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3GetShiftFraction", nValueReferences);
     return not_provided(instance, "fmi3GetShiftFraction", "supportsFraction=false: fmi3GetShiftDecimal");
-#else
-    return no_such_variables(instance, "fmi3GetShiftFraction", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, const fmi3Float64 intervals[]) {
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3SetIntervalDecimal", nValueReferences);
     CLOCK_ONLY("fmi3SetIntervalDecimal", valueReferences, nValueReferences);
     if (core_check_mode(INST, "fmi3SetIntervalDecimal", IN(MODE_INITIALIZATION)) != CORE_OK) return fmi3Error;
     for (size_t i = 0; i < nValueReferences; i++) {
@@ -579,42 +551,29 @@ fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReferenc
         if (core_set_float64(INST, &period, 1, &intervals[i]) != CORE_OK) return fmi3Error;
     }
     return fmi3OK;
-#else
-    (void)valueReferences; (void)intervals;
-    return no_such_variables(instance, "fmi3SetIntervalDecimal", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, const fmi3UInt64 counters[],
                                    const fmi3UInt64 resolutions[]) {
     (void)valueReferences; (void)counters; (void)resolutions;
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3SetIntervalFraction", nValueReferences);
     return not_provided(instance, "fmi3SetIntervalFraction", "supportsFraction=false: fmi3SetIntervalDecimal");
-#else
-    return no_such_variables(instance, "fmi3SetIntervalFraction", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, const fmi3Float64 shifts[]) {
     (void)valueReferences; (void)shifts;
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3SetShiftDecimal", nValueReferences);
     return not_provided(instance, "fmi3SetShiftDecimal", "sample_clock's shift is 0: it ticks at the start time");
-#else
-    return no_such_variables(instance, "fmi3SetShiftDecimal", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, const fmi3UInt64 counters[],
                                 const fmi3UInt64 resolutions[]) {
     (void)valueReferences; (void)counters; (void)resolutions;
-#if NZ > 0
+    if (!SAMPLED) return no_such_variables(instance, "fmi3SetShiftFraction", nValueReferences);
     return not_provided(instance, "fmi3SetShiftFraction", "sample_clock's shift is 0: it ticks at the start time");
-#else
-    return no_such_variables(instance, "fmi3SetShiftFraction", nValueReferences);
-#endif
 }
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
@@ -634,30 +593,26 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = fmi3False;
     if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = fmi3False;
-#if NZ > 0
-    /* the tick of an active clock is computed; the next tick is the next time event */
-    if (INST->s.clock_active && core_compute_tick(INST) != CORE_OK) return fmi3Error;
-    if (nextEventTimeDefined) *nextEventTimeDefined = fmi3True;
-    if (nextEventTime) *nextEventTime = core_next_tick(INST);
-#else
-    /* no discrete states, no time events: nothing ever changes at an event */
-    if (nextEventTimeDefined) *nextEventTimeDefined = fmi3False;
-    if (nextEventTime) *nextEventTime = 0.0;
-#endif
+    if (SAMPLED) {
+        /* the tick of an active clock is computed; the next tick is the next time event */
+        if (INST->s->clock_active && core_compute_tick(INST) != CORE_OK) return fmi3Error;
+        if (nextEventTimeDefined) *nextEventTimeDefined = fmi3True;
+        if (nextEventTime) *nextEventTime = core_next_tick(INST);
+    } else {
+        /* no discrete states, no time events: nothing ever changes at an event */
+        if (nextEventTimeDefined) *nextEventTimeDefined = fmi3False;
+        if (nextEventTime) *nextEventTime = 0.0;
+    }
     return fmi3OK;
 }
 
 /* Event Mode is left with no tick half done: an active clock's tick is computed first. */
 static fmi3Status leave_event_mode(Instance *inst, const char *fn) {
-#if NZ > 0
-    if (inst->s.clock_active) {
+    if (SAMPLED && inst->s->clock_active) {
         core_log(inst, CORE_ERROR, "%s refused: sample_clock is active and its tick not computed (call "
                  "fmi3UpdateDiscreteStates first)", fn);
         return fmi3Error;
     }
-#else
-    (void)inst; (void)fn;
-#endif
     return fmi3OK;
 }
 
@@ -666,7 +621,7 @@ static fmi3Status leave_event_mode(Instance *inst, const char *fn) {
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
     CHECK_KIND("fmi3EnterContinuousTimeMode", IN(MODE_EVENT), KIND_MODEL_EXCHANGE);
     if (leave_event_mode(INST, "fmi3EnterContinuousTimeMode") != fmi3OK) return fmi3Error;
-    INST->s.mode = MODE_CONTINUOUS_TIME;
+    INST->s->mode = MODE_CONTINUOUS_TIME;
     return fmi3OK;
 }
 
@@ -717,7 +672,7 @@ fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 
                                              size_t nContinuousStates) {
     CHECK_KIND("fmi3GetNominalsOfContinuousStates", ANY_MODE, KIND_MODEL_EXCHANGE);
     if (nContinuousStates != NX || (nContinuousStates && !nominals)) {
-        core_log(INST, CORE_ERROR, "fmi3GetNominalsOfContinuousStates: expected %d states, got %zu", NX,
+        core_log(INST, CORE_ERROR, "fmi3GetNominalsOfContinuousStates: expected %zu states, got %zu", NX,
                  nContinuousStates);
         return fmi3Error;
     }
@@ -744,7 +699,7 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nConti
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
     CHECK_KIND("fmi3EnterStepMode", IN(MODE_EVENT), KIND_CO_SIMULATION);
     if (leave_event_mode(INST, "fmi3EnterStepMode") != fmi3OK) return fmi3Error;
-    INST->s.mode = MODE_STEP_COMPLETE;
+    INST->s->mode = MODE_STEP_COMPLETE;
     return fmi3OK;
 }
 
@@ -765,16 +720,14 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     (void)noSetFMUStatePriorToCurrentPoint;
     CHECK_KIND("fmi3DoStep", IN(MODE_STEP_COMPLETE), KIND_CO_SIMULATION);
     int event_needed = 0, early = 0;
-#if NZ > 0
-    fmi3Status status = (fmi3Status)core_clocked_step(INST, currentCommunicationPoint, communicationStepSize,
-                                                      ENV->early_return_allowed, &event_needed, &early);
-#else
-    fmi3Status status = (fmi3Status)core_do_step(INST, currentCommunicationPoint, communicationStepSize);
-#endif
+    fmi3Status status = SAMPLED ? (fmi3Status)core_clocked_step(INST, currentCommunicationPoint,
+                                                                communicationStepSize, ENV->early_return_allowed,
+                                                                &event_needed, &early)
+                                : (fmi3Status)core_do_step(INST, currentCommunicationPoint, communicationStepSize);
     if (eventHandlingNeeded) *eventHandlingNeeded = event_needed ? fmi3True : fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (earlyReturn) *earlyReturn = early ? fmi3True : fmi3False;
-    if (lastSuccessfulTime) *lastSuccessfulTime = INST->s.v[0]; /* the core's time: end of step, or start if refused */
+    if (lastSuccessfulTime) *lastSuccessfulTime = INST->v[0]; /* the core's time: end of step, or start if refused */
     return status;
 }
 
@@ -782,20 +735,17 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
 
 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
                                       fmi3Float64 activationTime) {
-#if NZ > 0
+    if (!SAMPLED)
+        return not_provided(instance, "fmi3ActivateModelPartition", "a continuous model has no clock, no partition");
     CHECK_KIND("fmi3ActivateModelPartition", IN(MODE_CLOCK_ACTIVATION), KIND_SCHEDULED_EXECUTION);
     if (only_the_clock(INST, "fmi3ActivateModelPartition", &clockReference, 1) != fmi3OK) return fmi3Error;
     const double tick = core_next_tick(INST);
-    if (!(fabs(activationTime - tick) <= 1e-9 * INST->s.v[VR_SAMPLE_PERIOD])) {
+    if (!(fabs(activationTime - tick) <= 1e-9 * INST->v[VR_SAMPLE_PERIOD])) {
         core_log(INST, CORE_ERROR, "fmi3ActivateModelPartition: sample_clock ticks at t = %.17g, not at t = %.17g",
                  tick, activationTime);
         return fmi3Error;
     }
-    INST->s.v[0] = tick;  /* the tick's own time, from the tick counter */
+    INST->v[0] = tick;  /* the tick's own time, from the tick counter */
     if (core_activate_clock(INST, "fmi3ActivateModelPartition") != CORE_OK) return fmi3Error;
     return (fmi3Status)core_compute_tick(INST);
-#else
-    (void)clockReference; (void)activationTime;
-    return not_provided(instance, "fmi3ActivateModelPartition", "a continuous model has no clock, no partition");
-#endif
 }

@@ -7,15 +7,16 @@
 #include <string.h>
 
 #include "fmu_core.h"
-#include "model_generated.h"
 #include "numpy_random.h"
 
 /* The first 8 bytes of every state: "FNNC" and the version of CoreState's
  * layout (2: with the model's token; 3: with the clock's tick counter); a
  * change of the layout changes it. */
 #define STATE_MAGIC ((uint64_t)0x464E4E43 << 32 | 3u)
-/* The token field holds MODEL_GUID whole (C99: a negative array size stops the build). */
-typedef char guid_fits_the_state_header[sizeof MODEL_GUID <= STATE_TOKEN_SIZE ? 1 : -1];
+/* The fixed part of a state ends on an 8-byte boundary, so the model's part
+ * (fmu_core.h) follows it with no padding: at the offsets the core had when it
+ * was compiled per model (C99: a negative array size stops the build). */
+typedef char state_fields_end_aligned[sizeof(CoreState) % 8 == 0 && sizeof(NpPcg64) % 8 == 0 ? 1 : -1];
 /* Room for the longest message, the failed-step report with every input and
  * parameter of the plant (about 1.5 kB at worst); a longer report, of a bigger
  * model, ends in "..." (message_append). */
@@ -77,19 +78,67 @@ static void message_append(Message *msg, const char *fmt, ...) {
 
 CoreStatus core_check_mode(Instance *inst, const char *function, unsigned allowed) {
     if (!inst) return CORE_ERROR;
-    if (IN(inst->s.mode) & allowed) return CORE_OK;
-    core_log(inst, CORE_ERROR, "%s must not be called in %s", function, MODE_NAMES[inst->s.mode]);
+    if (IN(inst->s->mode) & allowed) return CORE_OK;
+    core_log(inst, CORE_ERROR, "%s must not be called in %s", function, MODE_NAMES[inst->s->mode]);
     return CORE_ERROR;
 }
 
+/* ---- the state's layout (fmu_core.h, CoreState) -------------------------------- */
+
+/* Where a stochastic model's stream begins, and the values. */
+static size_t rng_offset(void) { return sizeof(CoreState); }
+static size_t values_offset(void) {
+    return sizeof(CoreState) + (NRS > 0 ? sizeof(NpPcg64) + NRS * sizeof(double) : 0);
+}
+
+size_t core_serialized_size(void) { return values_offset() + N_VARIABLES * sizeof(double); }
+
+static const double *state_values(const CoreState *state) {
+    return (const double *)(const void *)((const char *)state + values_offset());
+}
+
+void core_copy_state(CoreState *to, const CoreState *from) { memcpy(to, from, core_serialized_size()); }
+
+/* The bytes of the GUID the token field holds: it and its NUL (model_start.c checks that they fit). */
+static size_t token_size(void) { return strlen(MODEL_GUID) + 1; }
+
 static void set_defaults(Instance *inst) {
-    memset(&inst->s, 0, sizeof inst->s);
-    inst->s.header.magic = STATE_MAGIC;
-    memcpy(inst->s.header.token, MODEL_GUID, sizeof MODEL_GUID);
-    snprintf(inst->s.header.model, sizeof inst->s.header.model, "%s", MODEL_NAME);
-    inst->s.mode = MODE_INSTANTIATED;
-    for (size_t i = 0; i < N_VARIABLES; i++) inst->s.v[i] = VAR_START[i];
+    memset(inst->s, 0, core_serialized_size());
+    inst->s->header.magic = STATE_MAGIC;
+    memcpy(inst->s->header.token, MODEL_GUID, token_size());
+    snprintf(inst->s->header.model, sizeof inst->s->header.model, "%s", MODEL_NAME);
+    inst->s->mode = MODE_INSTANTIATED;
+    for (size_t i = 0; i < N_VARIABLES; i++) inst->v[i] = VAR_START[i];
     inst->derived_valid = 0;
+}
+
+/* The state and the work memory of the model's sizes. The work arrays share
+ * one block, doubles and integers first, so that each begins 8-byte aligned. */
+static int allocate(Instance *inst) {
+    const size_t n_doubles = (fmu_model.sz_w + 1) + 2 * (NX + 1) + (NZ + 1) + (NY + 1) + (NR + 1) +
+                             (NX + NY) * (NX + NU) + 1;
+    const size_t n_integers = fmu_model.sz_iw + 1;
+    const size_t n_pointers = fmu_model.sz_arg + fmu_model.sz_res + 2;
+    inst->s = (CoreState *)calloc(1, core_serialized_size());
+    char *block = (char *)calloc(1, n_doubles * sizeof(double) + n_integers * sizeof(long long) +
+                                        n_pointers * sizeof(void *));
+    inst->w = (double *)(void *)block;
+    if (!inst->s || !block) return -1;
+    inst->v = (double *)(void *)((char *)inst->s + values_offset());
+    if (NRS > 0) {
+        inst->rng = (NpPcg64 *)(void *)((char *)inst->s + rng_offset());
+        inst->r_step = (double *)(void *)((char *)inst->s + rng_offset() + sizeof(NpPcg64));
+    }
+    inst->x_next = inst->w + fmu_model.sz_w + 1;
+    inst->k_tmp = inst->x_next + NX + 1;
+    inst->z_next = inst->k_tmp + NX + 1;
+    inst->y_next = inst->z_next + NZ + 1;
+    inst->r_init = inst->y_next + NY + 1;
+    inst->jac = inst->r_init + NR + 1;
+    inst->iw = (long long *)(void *)(block + n_doubles * sizeof(double));
+    inst->arg = (const double **)(void *)(inst->iw + n_integers);
+    inst->res = (double **)(inst->arg + fmu_model.sz_arg + 1);
+    return 0;
 }
 
 Instance *core_instantiate(const char *instance_name, CoreKind kind, void *environment,
@@ -104,25 +153,28 @@ Instance *core_instantiate(const char *instance_name, CoreKind kind, void *envir
     inst->environment = environment;
     inst->logger = logger;
     inst->logging_on = logging_on;
-    set_defaults(inst);
-#ifdef MODEL_TABLE
-    char error[512];
-    if (table_load(&inst->table, resources, resources_uri, NY, error, sizeof error) != 0) {
-        core_log(inst, CORE_ERROR, "%s", error);
+    if (allocate(inst) != 0) {
+        core_log(inst, CORE_ERROR, "instantiate: out of memory");
         core_free(inst);
         return NULL;
     }
-#else
-    (void)resources; (void)resources_uri;
-#endif
+    set_defaults(inst);
+    if (fmu_model.table) {
+        char error[512];
+        if (table_load(&inst->table, resources, resources_uri, NY, error, sizeof error) != 0) {
+            core_log(inst, CORE_ERROR, "%s", error);
+            core_free(inst);
+            return NULL;
+        }
+    }
     return inst;
 }
 
 void core_free(Instance *inst) {
     if (!inst) return;
-#ifdef MODEL_TABLE
-    table_free(&inst->table);
-#endif
+    if (fmu_model.table) table_free(&inst->table);
+    free(inst->s);
+    free(inst->w);  /* the work memory's block */
     free(inst->instance_name);
     free(inst);
 }
@@ -131,90 +183,79 @@ void core_reset(Instance *inst) { set_defaults(inst); }
 
 /* ---- calls into the CasADi-generated functions ---------------------------- */
 
-#define T_ (inst->s.v[0])
-#define X_ (inst->s.v + VR_X)
-#define DX_ (inst->s.v + VR_DX)
-#define Y_ (inst->s.v + VR_Y)
-#define U_ (inst->s.v + VR_U)
-#define P_ (inst->s.v + VR_P)
-#define Z_ (inst->s.v + VR_Z)
+#define T_ (inst->v[0])
+#define X_ (inst->v + VR_X)
+#define DX_ (inst->v + VR_DX)
+#define Y_ (inst->v + VR_Y)
+#define U_ (inst->v + VR_U)
+#define P_ (inst->v + VR_P)
+#define Z_ (inst->v + VR_Z)
 
-#if NZ > 0
-/* z0 from the parameters and NR uniform numbers of numpy's default_rng(seed). */
+/* Sampled-data: z0 from the parameters and NR uniform numbers of numpy's default_rng(seed).
+ * Continuous: x0 from the parameters. */
 static CoreStatus initial_state(Instance *inst) {
-    double r[NR + 1];
-#ifdef VR_SEED
-    /* a whole number in [0, 2^53]: its variable's range and integer flag, checked when it was set */
-    NpPcg64 rng;
-    np_default_rng(&rng, (uint64_t)P_[VR_SEED - VR_P]);
-    for (size_t i = 0; i < NR; i++) r[i] = np_random(&rng);
-#endif  /* a model without a seed draws nothing (model.py checks it) */
-    inst->arg[0] = P_; inst->arg[1] = r;
+    if (!SAMPLED) {
+        inst->arg[0] = P_;
+        inst->res[0] = X_;
+        fmu_model.init(inst->arg, inst->res, inst->iw, inst->w, 0);
+        inst->derived_valid = 0;
+        return CORE_OK;
+    }
+    NpPcg64 rng = {0, 0, 0, 0};
+    if (fmu_model.vr_seed >= 0) {  /* a model without a seed draws nothing (model.py checks it) */
+        /* a whole number in [0, 2^53]: its variable's range and integer flag, checked when it was set */
+        np_default_rng(&rng, (uint64_t)inst->v[fmu_model.vr_seed]);
+        for (size_t i = 0; i < NR; i++) inst->r_init[i] = np_random(&rng);
+    }
+    inst->arg[0] = P_; inst->arg[1] = inst->r_init;
     inst->res[0] = Z_;
-    model_dinit(inst->arg, inst->res, inst->iw, inst->w, 0);
-#if NRS > 0
-    /* the stream goes on: step 0's numbers, then NRS more at each committed step */
-    for (size_t i = 0; i < NRS; i++) inst->s.r_step[i] = np_random(&rng);
-    inst->s.rng = rng;
-#endif
+    fmu_model.dinit(inst->arg, inst->res, inst->iw, inst->w, 0);
+    if (NRS > 0) {
+        /* the stream goes on: step 0's numbers, then NRS more at each committed step */
+        for (size_t i = 0; i < NRS; i++) inst->r_step[i] = np_random(&rng);
+        *inst->rng = rng;
+    }
     inst->derived_valid = 0;
     return CORE_OK;
 }
 
-/* g and f at the current z and u: the outputs a get returns, the state doStep takes. */
+/* Sampled-data: g and f at the current z and u: the outputs a get returns, the state doStep takes. */
 static void update_pending(Instance *inst) {
     inst->arg[0] = &T_; inst->arg[1] = U_; inst->arg[2] = P_; inst->arg[3] = Z_;
-#if NRS > 0
-    inst->arg[4] = inst->s.r_step;  /* this step's draws: the same for every evaluation of it */
-#endif
+    if (NRS > 0) inst->arg[4] = inst->r_step;  /* this step's draws: the same for every evaluation of it */
     inst->res[0] = inst->y_next; inst->res[1] = inst->z_next;
-    model_dstep(inst->arg, inst->res, inst->iw, inst->w, 0);
+    fmu_model.dstep(inst->arg, inst->res, inst->iw, inst->w, 0);
 }
 
 static void update_derived(Instance *inst) {
     if (inst->derived_valid) return;
-    if (inst->s.mode == MODE_INSTANTIATED || inst->s.mode == MODE_INITIALIZATION) initial_state(inst);
-    if (!inst->s.held) {  /* sample: outputs follow the inputs just set */
-        update_pending(inst);
-        memcpy(Y_, inst->y_next, NY * sizeof(double));
+    if (inst->s->mode == MODE_INSTANTIATED || inst->s->mode == MODE_INITIALIZATION) initial_state(inst);
+    if (SAMPLED) {
+        if (!inst->s->held) {  /* sample: outputs follow the inputs just set */
+            update_pending(inst);
+            memcpy(Y_, inst->y_next, NY * sizeof(double));
+        }
+        inst->derived_valid = 1;
+        return;
     }
-    inst->derived_valid = 1;
-}
-#else
-static CoreStatus initial_state(Instance *inst) {
-    inst->arg[0] = P_;
-    inst->res[0] = X_;
-    model_init(inst->arg, inst->res, inst->iw, inst->w, 0);
-    inst->derived_valid = 0;
-    return CORE_OK;
-}
-
-static void update_derived(Instance *inst) {
-    if (inst->derived_valid) return;
-    if (inst->s.mode == MODE_INSTANTIATED || inst->s.mode == MODE_INITIALIZATION) initial_state(inst);
     inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
     inst->res[0] = DX_;
-    model_ode(inst->arg, inst->res, inst->iw, inst->w, 0);
+    fmu_model.ode(inst->arg, inst->res, inst->iw, inst->w, 0);
     inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
     inst->res[0] = Y_;
-    model_out(inst->arg, inst->res, inst->iw, inst->w, 0);
-#ifdef MODEL_TABLE
-    table_values(&inst->table, T_, Y_);  /* a table model's outputs are its table's, at the time */
-#endif
+    fmu_model.out(inst->arg, inst->res, inst->iw, inst->w, 0);
+    if (fmu_model.table) table_values(&inst->table, T_, Y_);  /* a table model's outputs are its table's, at the time */
     inst->derived_valid = 1;
 }
-#endif
 
-#ifdef MODEL_TABLE
 /* A table that refuses times outside its rows (outside = "refuse"): t must lie within them. */
 static CoreStatus check_table_time(Instance *inst, double t) {
-    if (!inst->table.refuse_outside || !table_outside(&inst->table, t)) return CORE_OK;
+    if (!fmu_model.table || !inst->table.refuse_outside || !table_outside(&inst->table, t)) return CORE_OK;
     char v[NUMBER_SIZE], first[NUMBER_SIZE], last[NUMBER_SIZE];
     core_log(inst, CORE_ERROR, "t = %s refused: outside the signal table's times [%s, %s] (outside = refuse)",
              exact(v, t), exact(first, inst->table.time[0]), exact(last, inst->table.time[inst->table.rows - 1]));
     return CORE_ERROR;
 }
-#endif
 
 /* ---- the values a variable may hold ----------------------------------------- */
 
@@ -246,7 +287,7 @@ static CoreStatus check_value(Instance *inst, const char *context, unsigned vr, 
 /* check_value on every value an instance leaves initialization with: the
  * time, the states x, the inputs and parameters, the discrete states z. The
  * derivatives and outputs are computed from these and are not checked. */
-static CoreStatus check_values(Instance *inst, const char *context, const double v[N_VARIABLES]) {
+static CoreStatus check_values(Instance *inst, const char *context, const double *v) {
     for (unsigned vr = 0; vr < N_VARIABLES; vr++) {
         if (vr >= VR_DX && vr < VR_U) continue;  /* der(x) and y */
         if (check_value(inst, context, vr, v[vr]) != CORE_OK) return CORE_ERROR;
@@ -271,33 +312,31 @@ CoreStatus core_check_stop_time(Instance *inst, const char *function, double sta
 CoreStatus core_enter_initialization(Instance *inst, double start_time) {
     if (check_value(inst, "start ", 0, start_time) != CORE_OK) return CORE_ERROR;  /* "start time = ..." */
     T_ = start_time;
-    inst->s.tick_base = start_time;
-    inst->s.tick_count = 0;
-    inst->s.clock_active = 0;
-    inst->s.step_base_time = start_time;
-    inst->s.step_size = 0.0;
-    inst->s.step_count = 0;
-    inst->s.mode = MODE_INITIALIZATION;
+    inst->s->tick_base = start_time;
+    inst->s->tick_count = 0;
+    inst->s->clock_active = 0;
+    inst->s->step_base_time = start_time;
+    inst->s->step_size = 0.0;
+    inst->s->step_count = 0;
+    inst->s->mode = MODE_INITIALIZATION;
     inst->derived_valid = 0;
     return CORE_OK;
 }
 
 /* The index of the first non-finite of n values, or -1. */
-static int first_non_finite(const double *values, size_t n) {
+static inline int first_non_finite(const double *values, size_t n) {
     for (size_t i = 0; i < n; i++)
         if (!isfinite(values[i])) return (int)i;
     return -1;
 }
 
 CoreStatus core_exit_initialization(Instance *inst) {
-#ifdef MODEL_TABLE
     if (check_table_time(inst, T_) != CORE_OK) return CORE_ERROR;
-#endif
     if (initial_state(inst) != CORE_OK) return CORE_ERROR;
     /* the initial state from the parameters, and what was set */
-    if (check_values(inst, "initial value: ", inst->s.v) != CORE_OK) return CORE_ERROR;
-    inst->s.held = 0;
-    inst->s.mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE
+    if (check_values(inst, "initial value: ", inst->v) != CORE_OK) return CORE_ERROR;
+    inst->s->held = 0;
+    inst->s->mode = inst->kind == KIND_CO_SIMULATION ? MODE_STEP_COMPLETE
                  : inst->kind == KIND_SCHEDULED_EXECUTION ? MODE_CLOCK_ACTIVATION : MODE_EVENT;
     update_derived(inst);
     return CORE_OK;
@@ -325,20 +364,20 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
              * Event Mode rests in Event Mode between its steps, so there too. Before then dinit sets
              * it; in Model Exchange and Scheduled Execution it is refused. */
             if (inst->kind != KIND_CO_SIMULATION ||
-                (inst->s.mode != MODE_STEP_COMPLETE && inst->s.mode != MODE_EVENT)) {
+                (inst->s->mode != MODE_STEP_COMPLETE && inst->s->mode != MODE_EVENT)) {
                 core_log(inst, CORE_ERROR, "%s is a discrete state and can only be set between communication "
-                         "steps (now in %s)", VAR_NAME[vr[i]], MODE_NAMES[inst->s.mode]);
+                         "steps (now in %s)", VAR_NAME[vr[i]], MODE_NAMES[inst->s->mode]);
                 return CORE_ERROR;
             }
         } else if (vr[i] >= VR_P) {
-            if (inst->s.mode != MODE_INSTANTIATED && inst->s.mode != MODE_INITIALIZATION &&
-                inst->s.mode != MODE_CONFIGURATION) {
+            if (inst->s->mode != MODE_INSTANTIATED && inst->s->mode != MODE_INITIALIZATION &&
+                inst->s->mode != MODE_CONFIGURATION) {
                 core_log(inst, CORE_ERROR, "parameter %s can only be set before initialization ends (now in %s)",
-                         VAR_NAME[vr[i]], MODE_NAMES[inst->s.mode]);
+                         VAR_NAME[vr[i]], MODE_NAMES[inst->s->mode]);
                 return CORE_ERROR;
             }
         } else if (vr[i] >= VR_U) {
-            if (inst->s.mode == MODE_TERMINATED) {
+            if (inst->s->mode == MODE_TERMINATED) {
                 core_log(inst, CORE_ERROR, "input %s cannot be set after termination", VAR_NAME[vr[i]]);
                 return CORE_ERROR;
             }
@@ -348,16 +387,14 @@ CoreStatus core_set_float64(Instance *inst, const unsigned vr[], size_t n, const
         }
         if (check_value(inst, "", vr[i], value[i]) != CORE_OK) return CORE_ERROR;
     }
-    for (size_t i = 0; i < n; i++) inst->s.v[vr[i]] = value[i];
+    for (size_t i = 0; i < n; i++) inst->v[vr[i]] = value[i];
     if (n > 0) {
         inst->derived_valid = 0;
         /* a sample opens: the outputs follow the inputs until it is committed. A
          * clocked model samples only at a tick: with the importer computing the
          * ticks, when it activates the clock; else at a tick's time, as FMI 2.0. */
-#if NZ > 0
-        if (!inst->clocked || (!inst->events && core_tick_due(inst)))
-#endif
-            inst->s.held = 0;
+        if (!SAMPLED || !inst->clocked || (!inst->events && core_tick_due(inst)))
+            inst->s->held = 0;
     }
     return CORE_OK;
 }
@@ -374,14 +411,13 @@ CoreStatus core_get_float64(Instance *inst, const char *function, const unsigned
         }
     }
     update_derived(inst);
-#if NX > 0
-    for (size_t i = 0; i < n; i++)
-        if (vr[i] >= VR_DX && vr[i] < VR_U && !isfinite(inst->s.v[vr[i]])) {
-            report_non_finite_result(inst, function, vr[i]);
-            return CORE_ERROR;
-        }
-#endif
-    for (size_t i = 0; i < n; i++) value[i] = inst->s.v[vr[i]];
+    if (!SAMPLED)
+        for (size_t i = 0; i < n; i++)
+            if (vr[i] >= VR_DX && vr[i] < VR_U && !isfinite(inst->v[vr[i]])) {
+                report_non_finite_result(inst, function, vr[i]);
+                return CORE_ERROR;
+            }
+    for (size_t i = 0; i < n; i++) value[i] = inst->v[vr[i]];
     return CORE_OK;
 }
 
@@ -396,9 +432,9 @@ typedef struct {
     uint64_t count;
 } StepCounter;
 
-static StepCounter count_step(const Instance *inst, double current_time, double step_size) {
+static inline StepCounter count_step(const Instance *inst, double current_time, double step_size) {
     StepCounter next = {current_time, step_size, 1};
-    const CoreState *s = &inst->s;
+    const CoreState *s = inst->s;
     if (step_size == s->step_size && current_time == s->step_base_time + (double)s->step_count * s->step_size) {
         next.base = s->step_base_time;
         next.count = s->step_count + 1;
@@ -407,10 +443,10 @@ static StepCounter count_step(const Instance *inst, double current_time, double 
 }
 
 /* Commit a successful step: the counter, and the time it gives. */
-static void end_step(Instance *inst, StepCounter counter) {
-    inst->s.step_base_time = counter.base;
-    inst->s.step_size = counter.size;
-    inst->s.step_count = counter.count;
+static inline void end_step(Instance *inst, StepCounter counter) {
+    inst->s->step_base_time = counter.base;
+    inst->s->step_size = counter.size;
+    inst->s->step_count = counter.count;
     T_ = counter.base + (double)counter.count * counter.size;
 }
 
@@ -420,7 +456,7 @@ static void append_values(Message *msg, const Instance *inst, const char *label,
     message_append(msg, "; %s:", label);
     if (n == 0) message_append(msg, " none");
     for (size_t i = 0; i < n; i++)
-        message_append(msg, "%s %s = %s", i ? "," : "", VAR_NAME[first + i], exact(number, inst->s.v[first + i]));
+        message_append(msg, "%s %s = %s", i ? "," : "", VAR_NAME[first + i], exact(number, inst->v[first + i]));
 }
 
 /* Everything needed to reproduce a failed step from the log alone: which state
@@ -445,31 +481,30 @@ static void report_non_finite_result(Instance *inst, const char *function, unsig
     Message msg = {{0}, 0, 0};
     char v[NUMBER_SIZE], t[NUMBER_SIZE];
     message_append(&msg, "%s: %s = %s at t = %s is not a finite number (the model overflows at these values)",
-                   function, VAR_NAME[vr], exact(v, inst->s.v[vr]), exact(t, T_));
+                   function, VAR_NAME[vr], exact(v, inst->v[vr]), exact(t, T_));
     append_values(&msg, inst, "states", VR_X, NX);
     append_values(&msg, inst, "inputs", VR_U, NU);
     append_values(&msg, inst, "parameters", VR_P, NP);
     core_log(inst, CORE_ERROR, "%s", msg.text);
 }
 
-#if NZ > 0
+/* ---- sampled-data models ---------------------------------------------------------- */
+
 /* Commit the pending sample: z <- f(z, u), outputs held at g(z, u), both at
  * the inputs in effect; a non-finite z refuses it (t0, t1: the sample's span,
  * for the report). */
 static CoreStatus commit_sample(Instance *inst, double t0, double t1) {
-    if (!inst->derived_valid || inst->s.held) update_pending(inst);  /* else g, f of this z and u are pending */
+    if (!inst->derived_valid || inst->s->held) update_pending(inst);  /* else g, f of this z and u are pending */
     int bad = first_non_finite(inst->z_next, NZ);
     if (bad >= 0) {
         report_non_finite_state(inst, VR_Z + (size_t)bad, inst->z_next[bad], t0, t1);
-        inst->s.failed = 1;
+        inst->s->failed = 1;
         return CORE_ERROR;
     }
     memcpy(Z_, inst->z_next, NZ * sizeof(double));
     memcpy(Y_, inst->y_next, NY * sizeof(double));
-#if NRS > 0
-    for (size_t i = 0; i < NRS; i++) inst->s.r_step[i] = np_random(&inst->s.rng);  /* the next step's */
-#endif
-    inst->s.held = 1;
+    for (size_t i = 0; i < NRS; i++) inst->r_step[i] = np_random(inst->rng);  /* the next step's */
+    inst->s->held = 1;
     inst->derived_valid = 1;
     return CORE_OK;
 }
@@ -479,7 +514,7 @@ static CoreStatus commit_sample(Instance *inst, double t0, double t1) {
  * from another time than the FMU's (after restoring a state saved in another
  * run) re-bases the clock instead of refusing. */
 static CoreStatus sampled_step(Instance *inst, double current_time, double step_size) {
-    const double period = inst->s.v[VR_SAMPLE_PERIOD];
+    const double period = inst->v[VR_SAMPLE_PERIOD];
     if (!isfinite(current_time)) {
         core_log(inst, CORE_ERROR, "doStep at t = %g refused: not finite", current_time);
         return CORE_ERROR;
@@ -500,10 +535,10 @@ static CoreStatus sampled_step(Instance *inst, double current_time, double step_
 
 /* Times within this of a tick are the tick (a master's t0 + n h against the
  * FMU's tick_base + k period). */
-static double tick_tolerance(const Instance *inst) { return 1e-9 * inst->s.v[VR_SAMPLE_PERIOD]; }
+static double tick_tolerance(const Instance *inst) { return 1e-9 * inst->v[VR_SAMPLE_PERIOD]; }
 
 double core_next_tick(const Instance *inst) {
-    return inst->s.tick_base + (double)inst->s.tick_count * inst->s.v[VR_SAMPLE_PERIOD];
+    return inst->s->tick_base + (double)inst->s->tick_count * inst->v[VR_SAMPLE_PERIOD];
 }
 
 int core_tick_due(const Instance *inst) { return fabs(T_ - core_next_tick(inst)) <= tick_tolerance(inst); }
@@ -516,21 +551,21 @@ CoreStatus core_activate_clock(Instance *inst, const char *function) {
         return CORE_ERROR;
     }
     T_ = core_next_tick(inst);  /* the tick's own time, from the tick counter */
-    inst->s.clock_active = 1;
-    inst->s.held = 0;           /* the outputs follow the inputs until the tick is computed */
+    inst->s->clock_active = 1;
+    inst->s->held = 0;           /* the outputs follow the inputs until the tick is computed */
     inst->derived_valid = 0;
     return CORE_OK;
 }
 
 CoreStatus core_compute_tick(Instance *inst) {
-    const double period = inst->s.v[VR_SAMPLE_PERIOD];
-    if (inst->s.failed) {
+    const double period = inst->v[VR_SAMPLE_PERIOD];
+    if (inst->s->failed) {
         core_log(inst, CORE_ERROR, "tick refused: an earlier tick failed; reset or restore a saved state");
         return CORE_ERROR;
     }
     if (commit_sample(inst, T_, T_ + period) != CORE_OK) return CORE_ERROR;
-    inst->s.tick_count++;
-    inst->s.clock_active = 0;
+    inst->s->tick_count++;
+    inst->s->clock_active = 0;
     return CORE_OK;
 }
 
@@ -540,7 +575,7 @@ CoreStatus core_clocked_step(Instance *inst, double current_time, double step_si
     char a[NUMBER_SIZE], b[NUMBER_SIZE], c[NUMBER_SIZE];
     *event_needed = 0;
     *early_return = 0;
-    if (inst->s.failed) {
+    if (inst->s->failed) {
         core_log(inst, CORE_ERROR, "fmi3DoStep refused: an earlier tick failed; reset or restore a saved state");
         return CORE_ERROR;
     }
@@ -553,8 +588,8 @@ CoreStatus core_clocked_step(Instance *inst, double current_time, double step_si
         /* a state saved in another run: its laws do not depend on time, so the clock re-bases */
         core_log(inst, CORE_OK, "fmi3DoStep at t = %.17g: clock re-based from t = %.17g", current_time, T_);
         T_ = current_time;
-        inst->s.tick_base = current_time;
-        inst->s.tick_count = 0;
+        inst->s->tick_base = current_time;
+        inst->s->tick_count = 0;
     }
     const double end = current_time + step_size;
     if (inst->events) {
@@ -573,9 +608,9 @@ CoreStatus core_clocked_step(Instance *inst, double current_time, double step_si
                 return CORE_ERROR;
             }
             T_ = tick;  /* returns early at the tick */
-            inst->s.step_base_time = tick;
-            inst->s.step_size = 0.0;
-            inst->s.step_count = 0;
+            inst->s->step_base_time = tick;
+            inst->s->step_size = 0.0;
+            inst->s->step_count = 0;
             *early_return = 1;
             *event_needed = 1;
             return CORE_OK;
@@ -604,10 +639,9 @@ CoreStatus core_clocked_step(Instance *inst, double current_time, double step_si
     if (core_tick_due(inst)) T_ = core_next_tick(inst);
     return CORE_OK;
 }
-#endif
 
 CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
-    if (inst->s.failed) {
+    if (inst->s->failed) {
         core_log(inst, CORE_ERROR, "doStep refused: an earlier step failed; reset or restore a saved state");
         return CORE_ERROR;
     }
@@ -615,14 +649,12 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
         core_log(inst, CORE_ERROR, "communication step size = %g refused: it must be positive and finite", step_size);
         return CORE_ERROR;
     }
-#if NZ > 0
-    return sampled_step(inst, current_time, step_size);
-#else
+    if (SAMPLED) return sampled_step(inst, current_time, step_size);
     if (!isfinite(current_time) || fabs(current_time - T_) > 1e-9 * fmax(1.0, fabs(T_))) {
         core_log(inst, CORE_ERROR, "doStep at t = %.17g refused: the FMU is at t = %.17g", current_time, T_);
         return CORE_ERROR;
     }
-    const double internal_step = inst->s.v[VR_INTERNAL_STEP];
+    const double internal_step = inst->v[VR_INTERNAL_STEP];
     double n_real = ceil(step_size / internal_step - 1e-9);
     if (n_real < 1) n_real = 1;
     if (n_real > 1e7) {
@@ -632,41 +664,51 @@ CoreStatus core_do_step(Instance *inst, double current_time, double step_size) {
     }
     const long n = (long)n_real;
     const double h = step_size / (double)n;
-#ifdef MODEL_TABLE
-    StepCounter next = count_step(inst, current_time, step_size);
-    if (check_table_time(inst, next.base + (double)next.count * next.size) != CORE_OK) return CORE_ERROR;
-#endif
-    memcpy(inst->x_start, X_, NX * sizeof(double));
+    if (fmu_model.table) {
+        StepCounter next = count_step(inst, current_time, step_size);
+        if (check_table_time(inst, next.base + (double)next.count * next.size) != CORE_OK) return CORE_ERROR;
+    }
+    /* Each RK4 step from one buffer into another (the generated step may not write its argument), x
+     * itself only read: the same arguments, the same results as copying x before each step, with one copy
+     * per doStep instead of n + 1, and x still as it was if the step fails. */
+    /* the loop's pointers read once: the step function could change what inst points to, for all the compiler
+     * knows, so it would read them again after every call */
+    double *from = X_, *to = inst->k_tmp, *other = inst->x_next, *t = &T_;
+    const double *u = U_, *p = P_;
+    const double **arg = inst->arg;
+    double **res = inst->res;
+    long long *iw = inst->iw;
+    double *w = inst->w;
+    const ModelFunction step = fmu_model.step;
     for (long k = 0; k < n; k++) {
         /* time from a step counter, never accumulated */
-        T_ = current_time + (double)k * h;
-        memcpy(inst->k_tmp, X_, NX * sizeof(double));
-        inst->arg[0] = &T_; inst->arg[1] = inst->k_tmp; inst->arg[2] = U_; inst->arg[3] = P_;
-        inst->arg[4] = &h;
-        inst->res[0] = X_;
-        model_step(inst->arg, inst->res, inst->iw, inst->w, 0);
+        *t = current_time + (double)k * h;
+        arg[0] = t; arg[1] = from; arg[2] = u; arg[3] = p; arg[4] = &h;
+        res[0] = to;
+        step(arg, res, iw, w, 0);
+        from = to;
+        to = other;
+        other = from;
     }
     inst->derived_valid = 0;
-    int bad = first_non_finite(X_, NX);
+    int bad = first_non_finite(from, NX);
     if (bad >= 0) {
-        double value = X_[bad];
-        memcpy(X_, inst->x_start, NX * sizeof(double));
+        double value = from[bad];
         T_ = current_time;
-        inst->s.failed = 1;
+        inst->s->failed = 1;
         report_non_finite_state(inst, VR_X + (size_t)bad, value, current_time, current_time + step_size);
         return CORE_ERROR;
     }
+    memcpy(X_, from, NX * sizeof(double));
     end_step(inst, count_step(inst, current_time, step_size));
     return CORE_OK;
-#endif
 }
 
 /* ---- model exchange --------------------------------------------------------- */
 
 CoreStatus core_set_time(Instance *inst, double time) {
     if (check_value(inst, "", 0, time) != CORE_OK) return CORE_ERROR;
-#if NZ > 0
-    if (inst->clocked) {  /* time events: the importer stops at each tick (nextEventTime) */
+    if (SAMPLED && inst->clocked) {  /* time events: the importer stops at each tick (nextEventTime) */
         char t[NUMBER_SIZE], tick[NUMBER_SIZE];
         const double next = core_next_tick(inst);
         if (time > next + tick_tolerance(inst) || (core_tick_due(inst) && time > T_ + tick_tolerance(inst))) {
@@ -676,7 +718,6 @@ CoreStatus core_set_time(Instance *inst, double time) {
         }
         if (fabs(time - next) <= tick_tolerance(inst)) time = next;
     }
-#endif
     T_ = time;
     inst->derived_valid = 0;
     return CORE_OK;
@@ -684,7 +725,7 @@ CoreStatus core_set_time(Instance *inst, double time) {
 
 CoreStatus core_set_states(Instance *inst, const double x[], size_t nx) {
     if (nx != NX || (nx > 0 && !x)) {
-        core_log(inst, CORE_ERROR, "set continuous states: expected %d states, got %zu", NX, nx);
+        core_log(inst, CORE_ERROR, "set continuous states: expected %zu states, got %zu", NX, nx);
         return CORE_ERROR;
     }
     for (size_t i = 0; i < nx; i++)
@@ -696,7 +737,7 @@ CoreStatus core_set_states(Instance *inst, const double x[], size_t nx) {
 
 CoreStatus core_get_states(Instance *inst, double x[], size_t nx) {
     if (nx != NX || (nx > 0 && !x)) {
-        core_log(inst, CORE_ERROR, "get continuous states: expected %d states, got %zu", NX, nx);
+        core_log(inst, CORE_ERROR, "get continuous states: expected %zu states, got %zu", NX, nx);
         return CORE_ERROR;
     }
     update_derived(inst);
@@ -706,7 +747,7 @@ CoreStatus core_get_states(Instance *inst, double x[], size_t nx) {
 
 CoreStatus core_get_derivatives(Instance *inst, const char *function, double dx[], size_t nx) {
     if (nx != NX || (nx > 0 && !dx)) {
-        core_log(inst, CORE_ERROR, "%s: expected %d states, got %zu", function, NX, nx);
+        core_log(inst, CORE_ERROR, "%s: expected %zu states, got %zu", function, NX, nx);
         return CORE_ERROR;
     }
     update_derived(inst);
@@ -760,16 +801,15 @@ static CoreStatus evaluate_jacobian(Instance *inst, const char *what,
             return CORE_ERROR;
         }
     }
-#if NZ > 0
-    core_log(inst, CORE_ERROR, "%s: a sampled-data model provides no derivatives", what);
-    return CORE_ERROR;
-#else
+    if (SAMPLED) {
+        core_log(inst, CORE_ERROR, "%s: a sampled-data model provides no derivatives", what);
+        return CORE_ERROR;
+    }
     update_derived(inst);
     inst->arg[0] = &T_; inst->arg[1] = X_; inst->arg[2] = U_; inst->arg[3] = P_;
     inst->res[0] = inst->jac;
-    model_jac(inst->arg, inst->res, inst->iw, inst->w, 0);
+    fmu_model.jac(inst->arg, inst->res, inst->iw, inst->w, 0);
     return CORE_OK;
-#endif
 }
 
 /* partial(unknown, known) * factor; a state as an output has d x / d x = I */
@@ -813,12 +853,12 @@ CoreStatus core_adjoint_derivative(Instance *inst,
 /* ---- FMU state ------------------------------------------------------------- */
 
 CoreState *core_get_state(Instance *inst, CoreState *reuse) {
-    CoreState *state = reuse ? reuse : (CoreState *)malloc(sizeof(CoreState));
+    CoreState *state = reuse ? reuse : (CoreState *)malloc(core_serialized_size());
     if (!state) {
         core_log(inst, CORE_ERROR, "get FMU state: out of memory");
         return NULL;
     }
-    *state = inst->s;
+    core_copy_state(state, inst->s);
     return state;
 }
 
@@ -841,7 +881,7 @@ static CoreStatus check_header(Instance *inst, const char *context, const StateH
                  (unsigned)(STATE_MAGIC & 0xFFFFu), MODEL_NAME, MODEL_GUID);
         return CORE_ERROR;
     }
-    if (memcmp(header->token, MODEL_GUID, sizeof MODEL_GUID) != 0) {
+    if (memcmp(header->token, MODEL_GUID, token_size()) != 0) {
         core_log(inst, CORE_ERROR, "%sa state of %s %s, this FMU is %s %s", context,
                  printable(model, header->model, sizeof header->model),
                  printable(token, header->token, sizeof header->token), MODEL_NAME, MODEL_GUID);
@@ -859,7 +899,7 @@ static CoreStatus check_state(Instance *inst, const char *context, const CoreSta
         core_log(inst, CORE_ERROR, "%smode %d is no mode of the FMI state machine", context, (int)state->mode);
         return CORE_ERROR;
     }
-    return check_values(inst, context, state->v);
+    return check_values(inst, context, state_values(state));
 }
 
 CoreStatus core_set_state(Instance *inst, const CoreState *state) {
@@ -868,19 +908,17 @@ CoreStatus core_set_state(Instance *inst, const CoreState *state) {
         return CORE_ERROR;
     }
     if (check_state(inst, "set FMU state: ", state) != CORE_OK) return CORE_ERROR;
-    inst->s = *state;
+    core_copy_state(inst->s, state);
     inst->derived_valid = 0;
     return CORE_OK;
 }
 
-size_t core_serialized_size(void) { return sizeof(CoreState); }
-
 CoreStatus core_serialize(Instance *inst, const CoreState *state, unsigned char *bytes, size_t size) {
-    if (!state || !bytes || size < sizeof(CoreState)) {
-        core_log(inst, CORE_ERROR, "serialize FMU state: buffer of %zu bytes, %zu needed", size, sizeof(CoreState));
+    if (!state || !bytes || size < core_serialized_size()) {
+        core_log(inst, CORE_ERROR, "serialize FMU state: buffer of %zu bytes, %zu needed", size, core_serialized_size());
         return CORE_ERROR;
     }
-    memcpy(bytes, state, sizeof(CoreState));
+    memcpy(bytes, state, core_serialized_size());
     return CORE_OK;
 }
 
@@ -889,22 +927,22 @@ CoreState *core_deserialize(Instance *inst, const unsigned char *bytes, size_t s
     StateHeader header;
     if (!bytes || size < sizeof header) {
         core_log(inst, CORE_ERROR, "%s%zu bytes, a state of %s is %zu", context, bytes ? size : 0, MODEL_NAME,
-                 sizeof(CoreState));
+                 core_serialized_size());
         return NULL;
     }
     memcpy(&header, bytes, sizeof header);
     /* whose state it is, before its size: another model's has another size */
     if (check_header(inst, context, &header) != CORE_OK) return NULL;
-    if (size != sizeof(CoreState)) {
-        core_log(inst, CORE_ERROR, "%s%zu bytes, a state of %s is %zu", context, size, MODEL_NAME, sizeof(CoreState));
+    if (size != core_serialized_size()) {
+        core_log(inst, CORE_ERROR, "%s%zu bytes, a state of %s is %zu", context, size, MODEL_NAME, core_serialized_size());
         return NULL;
     }
-    CoreState *state = (CoreState *)malloc(sizeof(CoreState));
+    CoreState *state = (CoreState *)malloc(core_serialized_size());
     if (!state) {
         core_log(inst, CORE_ERROR, "%sout of memory", context);
         return NULL;
     }
-    memcpy(state, bytes, sizeof(CoreState));
+    memcpy(state, bytes, core_serialized_size());
     if (check_state(inst, context, state) != CORE_OK) {
         free(state);
         return NULL;

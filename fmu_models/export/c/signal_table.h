@@ -1,5 +1,5 @@
 /* A signal table read from an FMU's resources: the outputs of a table model
- * (MODEL_TABLE in model_config.h), model-independent like the rest of this
+ * (`table` in the model's descriptor, fmu_core.h), model-independent like the rest of this
  * folder. The table is data from whoever packed the FMU: its file is checked
  * whole when it is loaded (size, shape, finite values, times that never go
  * back) and bounded (TABLE_MAX_ROWS), before a value of it is used.
