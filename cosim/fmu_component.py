@@ -628,16 +628,20 @@ class FmuComponent:
             if self.fmi_version == 2:
                 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
+                from .fmpy_classes import fmpy_class
+
                 with _LOADING:
-                    slave = (FMU2Model if model_exchange else FMU2Slave)(**common)
+                    slave = fmpy_class(FMU2Model if model_exchange else FMU2Slave)(**common)
                 self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
                 slave.instantiate(callbacks=self._callbacks, loggingOn=True)
             else:
                 from fmpy.fmi3 import FMU3Model, FMU3Slave
 
+                from .fmpy_classes import fmpy_class
+
                 log = lambda env, status, category, message: self._log(status, message)  # noqa: E731
                 with _LOADING:
-                    slave = (FMU3Model if model_exchange else FMU3Slave)(**common)
+                    slave = fmpy_class(FMU3Model if model_exchange else FMU3Slave)(**common)
                 if model_exchange:
                     slave.instantiate(loggingOn=True, logMessage=log)
                 else:
