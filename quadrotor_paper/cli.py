@@ -671,16 +671,52 @@ def _started() -> None:
         gc.enable()
 
 
+def _end(code: int) -> None:
+    """The command's own process ends with the command: its output flushed
+    and the ``atexit`` handlers run, as Python's exit does them, then
+    ``os._exit(code)``, without the interpreter's teardown, which frees
+    every object of the process one by one (what the system does at once
+    with the process's memory) and was a run's longest step after its loop.
+    Left to Python's exit, as before, when another thread is alive (its
+    exit waits for it) or the output cannot be flushed (Python's exit
+    reports it and its status). Every file a command writes is closed by the
+    command (docs/cosim.md, "Start-up of a run")."""
+    import atexit
+    import threading
+
+    if threading.active_count() > 1:
+        return
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:  # e.g. a closed pipe: Python's exit says so and exits with 120
+        return
+    atexit._run_exitfuncs()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:
+        return
+    os._exit(code)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """``fnn-cosim``: ``main()`` is the command's own process (the entry
+    point's call), which ends the process once the command returns
+    (:func:`_end`); ``main([...])`` runs a command for a caller (the tests,
+    an application) and returns its exit status."""
     if argv is None and gc.isenabled():  # the process is the command: see _started
         gc.disable()
         _START_UP[0] = True
     try:
-        return _main(argv)
+        code = _main(argv)
     finally:
         _started()
         if argv is None:  # the process ends with the command: its exit need not scan what the command made
             gc.freeze()
+    if argv is None:
+        _end(code)
+    return code
 
 
 def _main(argv: Sequence[str] | None) -> int:
