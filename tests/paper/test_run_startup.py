@@ -132,3 +132,22 @@ def test_the_command_ends_with_its_status_its_output_and_its_exit_handlers(tmp_p
     assert proc.stdout == "buffered, exit handler ran\n"
     assert proc.stderr.startswith("fnn-cosim: error: ") and "wind.speed" in proc.stderr
     assert proc.stderr.count("\n") == 1
+
+
+def test_a_command_makes_only_its_own_parser():
+    """fnn-cosim's parser names every command (usage, --help, the refusal of
+    an unknown one) but makes a command's parser only when it is the one
+    given (cli._Commands)."""
+    import argparse
+
+    from quadrotor_paper.cli import _parser
+
+    parser = _parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    names = set(sub.choices)
+    assert {"run", "table2", "stability", "calibrate", "linearize"} <= names
+    args = parser.parse_args(["run", "circles", "--no-plots", "--seed", "3"])
+    assert (args.scenario, args.no_plots, args.seed, args.func.__name__) == ("circles", True, 3, "_cmd_run")
+    assert {name for name, made in sub.choices.items() if made is not None} == {"run"}
+    listing = parser.format_help()
+    assert all(name in listing for name in names)
