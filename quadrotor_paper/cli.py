@@ -154,7 +154,9 @@ def _cmd_run(args) -> int:
                                        record_every=args.record_every)
         if args.load_learned:
             summary["resumed_from"] = str(args.load_learned)
-        write_json(out / "summary.json", summary)  # the run's results first; the optional parts after
+        plots = not args.no_plots and summary["rows"] > 1
+        if plots or learned_file is not None:  # the run's results first, kept if an optional part below fails
+            write_json(out / "summary.json", summary)
         learned_error = None
         if learned_file is not None:
             try:  # a state that cannot be saved (not finite after a diverged run) loses nothing else
@@ -162,7 +164,7 @@ def _cmd_run(args) -> int:
             except (CosimError, ValueError, OSError) as exc:
                 learned_error = summary["learned_state_error"] = f"--save-learned {learned_file}: {one_line(str(exc))}"
     figures = []
-    if not args.no_plots and summary["rows"] > 1:
+    if plots:
         from .plots import run_figures  # matplotlib only when there is something to draw
 
         figures = run_figures(out, result, scenario)
