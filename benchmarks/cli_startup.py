@@ -119,7 +119,8 @@ def phases(repeats: int, trees: dict[str, str | None], out: Path) -> None:
             for label, (cpu, wall) in told.items():
                 found[name].setdefault(label, []).append((cpu, wall))
     found = {name: {label: values[1:] for label, values in times.items()} for name, times in found.items()}
-    labels = ["whole process", "imports (numpy, fmpy, ours)", "main", *(label for label, _, _ in PHASES), "process end"]
+    labels = ["whole process", "imports (numpy, fmpy, ours)", "main", *(label for label, _, _ in PHASES),
+              "process end"]
     print(f"where fnn-cosim run circles --no-plots --quiet spends its time, median of {repeats} processes "
           f"(CPU: the main thread's; ms):")
     print(f"  {'':45s}" + "".join(f" {name[-18:]:>18s}" for name in trees))
