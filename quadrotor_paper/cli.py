@@ -728,6 +728,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         _START_UP[0] = True
     try:
         code = _main(argv)
+    except SystemExit as exc:  # argparse's end: --help, or arguments refused (exit 2)
+        if argv is None and (exc.code is None or isinstance(exc.code, int)):
+            code = exc.code or 0
+        else:
+            raise
     finally:
         _started()
         if argv is None:  # the process ends with the command: its exit need not scan what the command made

@@ -151,3 +151,24 @@ def test_a_command_makes_only_its_own_parser():
     assert {name for name, made in sub.choices.items() if made is not None} == {"run"}
     listing = parser.format_help()
     assert all(name in listing for name in names)
+
+
+_ARGPARSE_END = """
+import sys
+from quadrotor_paper.cli import main
+sys.argv = ["fnn-cosim", *sys.argv[1:]]
+main()
+print("main() returned")
+"""
+
+
+def test_the_command_ends_as_argparse_ends_it():
+    """--help and arguments argparse refuses end the command's process the
+    same way, with argparse's status and text."""
+    helped = subprocess.run([sys.executable, "-c", _ARGPARSE_END, "--help"], capture_output=True, text=True)
+    assert helped.returncode == 0 and helped.stdout.startswith("usage: fnn-cosim") and "returned" not in helped.stdout
+    refused = subprocess.run([sys.executable, "-c", _ARGPARSE_END, "run", "circles", "--record-every", "0"],
+                             capture_output=True, text=True)
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert refused.stderr.startswith("fnn-cosim: error: run: argument --record-every: ") and \
+        refused.stderr.count("\n") == 1
