@@ -1,13 +1,13 @@
 """fmpy's classes with each FMI function's C signature worked out once per
-class (cosim.fmpy_classes): every instance's library functions get exactly
-what fmpy's own constructor gives them, in the same order."""
+class (cosim.fmu_component._fmpy_class): every instance's library functions
+get exactly what fmpy's own constructor gives them, in the same order."""
 from __future__ import annotations
 
 import pytest
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 
-from cosim import fmpy_classes
+from cosim import fmu_component
 from cosim.fmu_component import FmuComponent
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import QUADROTOR
@@ -31,9 +31,9 @@ def test_every_instance_gets_the_signatures_fmpy_gives(fmi_version, interface):
         for c in components:
             c.instantiate()
         slaves = [c._slave for c in components]
-        assert all(type(s) is fmpy_classes.fmpy_class(base) and isinstance(s, base) for s in slaves)
+        assert all(type(s) is fmu_component._fmpy_class(base) is not base and isinstance(s, base) for s in slaves)
         assert type(slaves[0]).__name__ == base.__name__  # fmpy picks the FMI version's prefix by it
-        assert base in fmpy_classes._SIGNATURES  # kept by the first instance, used by the others
+        assert base in fmu_component._SIGNATURES  # kept by the first instance, used by the others
         own = base(guid=components[0].model_description.guid, unzipDirectory=str(components[0]._unzipdir),
                    modelIdentifier=components[0].kind.modelIdentifier, instanceName="fmpy's own")
         expected = _signatures(own)
