@@ -94,6 +94,50 @@ __all__ = ["FmuComponent", "fmi2_callbacks", "stream_seed", "read_description"]
 # its cache: every later os.getcwd() failed. One constructor at a time in this process.
 _LOADING = threading.Lock()
 
+# fmpy's constructor gives every FMI function it loads from the library its C signature
+# (fmpy.fmi1._FMU._loadFunctions, fmpy 0.3): it walks the instance's members (inspect.getmembers) and
+# reads the annotations of every fmi2.../fmi3... method (inspect.signature), about 1.5 ms per instance for
+# an answer that depends on the class only (an FMI 2.0 or 3.0 function has the same name in every
+# library). The instances are made of subclasses of fmpy's classes (_fmpy_class) whose _loadFunctions runs
+# fmpy's for the first instance of a class and keeps what it set on each function; a later instance sets
+# the same on its own library's functions, in the same order (a library missing a function fails at the
+# same name, with ctypes' own AttributeError). Decided: this reaches into fmpy's _loadFunctions and
+# _functions; when fmpy no longer has them its classes are used as they are (docs/cosim.md, "Start-up of
+# a run"). fmpy class -> ((method, C function, argnames, argtypes, restype), ...), as _loadFunctions set them.
+_SIGNATURES: dict[type, tuple[tuple[str, str, Any, Any, Any], ...]] = {}
+_FMPY_CLASSES: dict[type, type] = {}
+
+
+def _load_functions(self) -> None:
+    """fmpy's ``_loadFunctions`` for the first instance of a class, the kept signatures for the others."""
+    base = type(self).__mro__[1]
+    table = _SIGNATURES.get(base)
+    if table is None:
+        base._loadFunctions(self)
+        _SIGNATURES[base] = tuple((name, f.__name__, f.argnames, f.argtypes, f.restype)
+                                  for name, f in self._functions.items())
+        return
+    dll, functions = self.dll, self._functions
+    for name, c_name, argnames, argtypes, restype in table:
+        f = getattr(dll, c_name)
+        f.argnames, f.argtypes, f.restype = argnames, argtypes, restype
+        functions[name] = f
+
+
+def _fmpy_class(base: type) -> type:
+    """The class to construct for fmpy's ``base`` (``FMU2Slave``, ``FMU2Model``,
+    ``FMU3Slave``, ``FMU3Model``): a subclass whose FMI functions' signatures
+    are worked out once per process (see above), of the same name (fmpy's
+    ``_loadFunctions`` picks the FMI version by it)."""
+    made = _FMPY_CLASSES.get(base)
+    if made is None:
+        from fmpy.fmi1 import _FMU
+
+        kept = callable(getattr(_FMU, "_loadFunctions", None)) and "_loadFunctions" not in vars(base)
+        made = _FMPY_CLASSES[base] = type(base.__name__, (base,), {
+            "_loadFunctions": _load_functions, "__module__": __name__, "__doc__": base.__doc__}) if kept else base
+    return made
+
 # The FMUs' log goes through the logging module (cosim.fmu_log), imported when an FMU first logs: a
 # process that has not imported logging has configured no logger, so every level is the root's default
 # (logging.WARNING) and nothing below it is asked for (a run of FMUs that log nothing imports no logging).
@@ -629,7 +673,7 @@ class FmuComponent:
                 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
                 with _LOADING:
-                    slave = (FMU2Model if model_exchange else FMU2Slave)(**common)
+                    slave = _fmpy_class(FMU2Model if model_exchange else FMU2Slave)(**common)
                 self._callbacks = fmi2_callbacks(self._log)  # keep alive as long as the instance
                 slave.instantiate(callbacks=self._callbacks, loggingOn=True)
             else:
@@ -637,7 +681,7 @@ class FmuComponent:
 
                 log = lambda env, status, category, message: self._log(status, message)  # noqa: E731
                 with _LOADING:
-                    slave = (FMU3Model if model_exchange else FMU3Slave)(**common)
+                    slave = _fmpy_class(FMU3Model if model_exchange else FMU3Slave)(**common)
                 if model_exchange:
                     slave.instantiate(loggingOn=True, logMessage=log)
                 else:

@@ -8,6 +8,7 @@ input, nothing fitted.
 from __future__ import annotations
 
 import argparse
+from functools import partial
 from pathlib import Path
 
 from .workers_option import worker_count
@@ -17,12 +18,18 @@ __all__ = ["add_parser", "run"]
 DEFAULT_OUT = "results/calibration"
 
 
-def add_parser(sub, named_values, overrides) -> argparse.ArgumentParser:
-    """The subcommand on ``sub``; ``named_values`` and ``overrides``: the
-    command line's readers of ``K=V`` and ``--set`` pairs (``fnn-cosim``'s,
-    handed over: this module does not import the command line's)."""
-    c = sub.add_parser("calibrate", help="fit an FMU's parameters to a log: estimates, intervals, identifiability, "
-                       "an SSP parameter set")
+def add_parser(sub, named_values, overrides) -> None:
+    """The subcommand on ``sub`` (``fnn-cosim``'s subcommands,
+    ``quadrotor_paper.cli._Commands``: its arguments added when it is the
+    one given); ``named_values`` and ``overrides``: the command line's
+    readers of ``K=V`` and ``--set`` pairs (``fnn-cosim``'s, handed over:
+    this module does not import the command line's)."""
+    sub.add_parser("calibrate", partial(_arguments, named_values=named_values, overrides=overrides), run,
+                   help="fit an FMU's parameters to a log: estimates, intervals, identifiability, an SSP parameter "
+                        "set")
+
+
+def _arguments(c: argparse.ArgumentParser, named_values, overrides) -> None:
     c.add_argument("log", help="the log: the project's results (CSV, Parquet), any CSV with --columns, a PX4 ULog "
                    "(.ulg, needs pyulog)")
     where = c.add_mutually_exclusive_group(required=True)
@@ -48,8 +55,7 @@ def add_parser(sub, named_values, overrides) -> argparse.ArgumentParser:
     c.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
     c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
-    c.set_defaults(func=run, named_values=named_values, overrides=overrides)
-    return c
+    c.set_defaults(named_values=named_values, overrides=overrides)
 
 
 def run(args) -> int:

@@ -154,7 +154,9 @@ def _cmd_run(args) -> int:
                                        record_every=args.record_every)
         if args.load_learned:
             summary["resumed_from"] = str(args.load_learned)
-        write_json(out / "summary.json", summary)  # the run's results first; the optional parts after
+        plots = not args.no_plots and summary["rows"] > 1
+        if plots or learned_file is not None:  # the run's results first, kept if an optional part below fails
+            write_json(out / "summary.json", summary)
         learned_error = None
         if learned_file is not None:
             try:  # a state that cannot be saved (not finite after a diverged run) loses nothing else
@@ -162,7 +164,7 @@ def _cmd_run(args) -> int:
             except (CosimError, ValueError, OSError) as exc:
                 learned_error = summary["learned_state_error"] = f"--save-learned {learned_file}: {one_line(str(exc))}"
     figures = []
-    if not args.no_plots and summary["rows"] > 1:
+    if plots:
         from .plots import run_figures  # matplotlib only when there is something to draw
 
         figures = run_figures(out, result, scenario)
@@ -486,27 +488,47 @@ class _Parser(argparse.ArgumentParser):
 
 
 class _Commands(argparse._SubParsersAction):
-    """The subcommands, each one's own arguments added when it is the one
-    given: ``fnn-cosim run`` builds the run's parser and not every other
-    command's, and imports nothing only another command's options need
-    (start-up, docs/cosim.md). What a command accepts, refuses and prints is
-    what it would be with every parser built at once."""
+    """The subcommands, each one's parser made when it is the one given:
+    ``fnn-cosim run`` builds the run's parser and not every other command's
+    (argparse builds a parser per command, and asks gettext for its
+    headings' translations, several file lookups each), and imports nothing
+    only another command's options need (start-up, docs/cosim.md). The
+    names and one-line helps are there from the start, for the usage
+    lines, ``--help`` and the refusal of an unknown command. What a command
+    accepts, refuses and prints is what it would be with every parser built
+    at once."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self._arguments: dict[str, Any] = {}  # command -> adds its arguments to its parser
+        self._pending: dict[str, Any] = {}  # command -> what makes its parser, until it is given
 
-    def add_parser(self, name, arguments=None, **kwargs):
-        """``arguments(parser)``: adds the command's arguments, when it is given."""
-        parser = super().add_parser(name, **kwargs)
-        if arguments is not None:
-            self._arguments[name] = arguments
-        return parser
+    def add_parser(self, name, arguments=None, func=None, **kwargs):
+        """The command ``name``: ``arguments(parser)`` adds its arguments and
+        ``func`` is its handler (``args.func``), both when it is given;
+        ``kwargs``: the parser's (``help``: the command's line in the listing)."""
+        if name in self._name_parser_map:
+            raise argparse.ArgumentError(self, f"conflicting subparser: {name}")
+        kwargs.setdefault("prog", f"{self._prog_prefix} {name}")
+        if "help" in kwargs:
+            self._choices_actions.append(self._ChoicesPseudoAction(name, (), kwargs.pop("help")))
+        self._name_parser_map[name] = None  # one of the choices; its parser made by _made
+        self._pending[name] = (arguments, func, kwargs)
+
+    def _made(self, name: str) -> argparse.ArgumentParser:
+        """The parser of the command ``name``, made when first asked for."""
+        pending = self._pending.pop(name, None)
+        if pending is not None:
+            arguments, func, kwargs = pending
+            parser = self._name_parser_map[name] = self._parser_class(**kwargs)
+            if arguments is not None:
+                arguments(parser)
+            if func is not None:
+                parser.set_defaults(func=func)
+        return self._name_parser_map[name]
 
     def __call__(self, parser, namespace, values, option_string=None):
-        arguments = self._arguments.pop(values[0], None)
-        if arguments is not None:
-            arguments(self.choices[values[0]])
+        if values[0] in self._pending:
+            self._made(values[0])
         super().__call__(parser, namespace, values, option_string)
 
 
@@ -564,7 +586,7 @@ def _parser() -> argparse.ArgumentParser:
                        help="start the controller from a saved learned state (resume learning)")
         common(r, seeds=False)
 
-    sub.add_parser("run", run, help="run one scenario: results CSV, plots, summary").set_defaults(func=_cmd_run)
+    sub.add_parser("run", run, _cmd_run, help="run one scenario: results CSV, plots, summary")
 
     def table2(t2):
         t2.add_argument("--winds", type=_wind_list, help="wind speeds in m/s (default: the study's, 1,3,5)")
@@ -574,17 +596,15 @@ def _parser() -> argparse.ArgumentParser:
                         help='override a scenario value, e.g. --set simulation.ordering=\'"exchange"\'')
         common(t2)
 
-    sub.add_parser("table2", table2, help="Table 2: every controller variant at 1, 3, 5 m/s wind").set_defaults(
-        func=_cmd_table2)
+    sub.add_parser("table2", table2, _cmd_table2, help="Table 2: every controller variant at 1, 3, 5 m/s wind")
 
     def table3(t3):
         t3.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
         t3.add_argument("--scenario", help="the mission (default: the study's, figure8)")
         common(t3)
 
-    sub.add_parser("table3", table3, help="Table 3: the figure-8").set_defaults(func=_cmd_table3)
-    sub.add_parser("reproduce", common, help="Tables 2 and 3 and the figures into results/report.md").set_defaults(
-        func=_cmd_reproduce)
+    sub.add_parser("table3", table3, _cmd_table3, help="Table 3: the figure-8")
+    sub.add_parser("reproduce", common, _cmd_reproduce, help="Tables 2 and 3 and the figures into results/report.md")
 
     def sweep(sw):
         sw.add_argument("study", help="study TOML file (docs/studies.md) or a shipped study's name")
@@ -596,31 +616,29 @@ def _parser() -> argparse.ArgumentParser:
         sw.add_argument("--no-plots", action="store_true")
         common(sw, seeds=False)
 
-    sub.add_parser("sweep", sweep, help="a study: a scenario over a grid and/or random samples of its keys"
-                   ).set_defaults(func=_cmd_sweep)
+    sub.add_parser("sweep", sweep, _cmd_sweep, help="a study: a scenario over a grid and/or random samples of its keys")
 
     def export_ssp(e):
         e.add_argument("scenario", help="TOML file or shipped scenario name (see fnn-cosim scenarios)")
         e.add_argument("--out", required=True, help="the .ssp file to write")
         e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
 
-    sub.add_parser("export-ssp", export_ssp, help="write a scenario as an SSP 1.0 archive, every component an FMU"
-                   ).set_defaults(func=_cmd_export_ssp)
+    sub.add_parser("export-ssp", export_ssp, _cmd_export_ssp,
+                   help="write a scenario as an SSP 1.0 archive, every component an FMU")
 
     def schema(js):
         js.add_argument("kind", choices=("scenario", "study", "settings", "column-map"),
                         help="settings, column-map: fnn-cosim calibrate's --settings and --columns files")
         js.add_argument("--out", help="write it to this file instead")
 
-    sub.add_parser("schema", schema, help="print the JSON Schema of a scenario, study or calibration file (for "
-                                          "editors)").set_defaults(func=_cmd_schema)
-    sub.add_parser("scenarios", help="list the shipped scenarios").set_defaults(func=_cmd_scenarios)
+    sub.add_parser("schema", schema, _cmd_schema, help="print the JSON Schema of a scenario, study or calibration file "
+                                                       "(for editors)")
+    sub.add_parser("scenarios", None, _cmd_scenarios, help="list the shipped scenarios")
 
     def build_fmu(b):
         b.add_argument("--out", default="build/fmus", help="output directory (default build/fmus)")
 
-    sub.add_parser("build-fmu", build_fmu, help="build every model as FMI 2.0 (and 3.0) FMUs").set_defaults(
-        func=_cmd_build_fmu)
+    sub.add_parser("build-fmu", build_fmu, _cmd_build_fmu, help="build every model as FMI 2.0 (and 3.0) FMUs")
 
     def linearize(lz):
         lz.add_argument("fmu", help="an FMU file, or the name of a model fnn-cosim builds (e.g. Quadrotor, ControllerPDLM); "
@@ -642,8 +660,8 @@ def _parser() -> argparse.ArgumentParser:
         lz.add_argument("--out", default=None, help="output directory (default results/linearize)")
         fmu_log_option(lz)
 
-    sub.add_parser("linearize", linearize, help="linearize an FMU (Model Exchange, or a sampled-data Co-Simulation "
-                   "FMU's step): system (.npz, .json), poles, Bode plots").set_defaults(func=_cmd_linearize)
+    sub.add_parser("linearize", linearize, _cmd_linearize, help="linearize an FMU (Model Exchange, or a sampled-data "
+                   "Co-Simulation FMU's step): system (.npz, .json), poles, Bode plots")
 
     # the subcommand's own module: argparse only; python-control loads when it runs
     from .stability.cli import add_parser as add_stability_parser
@@ -671,16 +689,57 @@ def _started() -> None:
         gc.enable()
 
 
+def _end(code: int) -> None:
+    """The command's own process ends with the command: its output flushed
+    and the ``atexit`` handlers run, as Python's exit does them, then
+    ``os._exit(code)``, without the interpreter's teardown, which frees
+    every object of the process one by one (what the system does at once
+    with the process's memory) and was a run's longest step after its loop.
+    Left to Python's exit, as before, when another thread is alive (its
+    exit waits for it) or the output cannot be flushed (Python's exit
+    reports it and its status). Every file a command writes is closed by the
+    command (docs/cosim.md, "Start-up of a run")."""
+    import atexit
+    import threading
+
+    if threading.active_count() > 1:
+        return
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:  # e.g. a closed pipe: Python's exit says so and exits with 120
+        return
+    atexit._run_exitfuncs()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:
+        return
+    os._exit(code)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """``fnn-cosim``: ``main()`` is the command's own process (the entry
+    point's call), which ends the process once the command returns
+    (:func:`_end`); ``main([...])`` runs a command for a caller (the tests,
+    an application) and returns its exit status."""
     if argv is None and gc.isenabled():  # the process is the command: see _started
         gc.disable()
         _START_UP[0] = True
     try:
-        return _main(argv)
+        code = _main(argv)
+    except SystemExit as exc:  # argparse's end: --help, or arguments refused (exit 2)
+        if argv is None and (exc.code is None or isinstance(exc.code, int)):
+            code = exc.code or 0
+        else:
+            raise
     finally:
         _started()
         if argv is None:  # the process ends with the command: its exit need not scan what the command made
             gc.freeze()
+    if argv is None:
+        _end(code)
+    return code
 
 
 def _main(argv: Sequence[str] | None) -> int:

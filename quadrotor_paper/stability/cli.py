@@ -47,18 +47,18 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return parser
 
 
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``stability`` subcommand to an ``argparse`` subparsers object;
-    its handler is stored as ``func`` (call ``args.func(args)``)."""
-    parser = subparsers.add_parser(
-        "stability", help="linear stability analysis of the PD baseline, checked against the co-simulation",
-        description=_DESCRIPTION)
-    _arguments(parser)
-    from ..fmu_log_option import fmu_log_option
+def add_parser(subparsers) -> None:
+    """Add the ``stability`` subcommand to ``fnn-cosim``'s subcommands
+    (``quadrotor_paper.cli._Commands``: its arguments added when it is the
+    one given); its handler is stored as ``func`` (call ``args.func(args)``)."""
+    def arguments(parser: argparse.ArgumentParser) -> None:
+        from ..fmu_log_option import fmu_log_option
 
-    fmu_log_option(parser)
-    parser.set_defaults(func=run)
-    return parser
+        _arguments(parser)
+        fmu_log_option(parser)
+
+    subparsers.add_parser("stability", arguments, run, description=_DESCRIPTION,
+                          help="linear stability analysis of the PD baseline, checked against the co-simulation")
 
 
 def _checked(args: argparse.Namespace) -> None:

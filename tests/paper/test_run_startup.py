@@ -73,16 +73,18 @@ def test_the_shipped_mission_served_from_the_cache_is_the_validated_one(tmp_path
 
 
 _COLLECTOR = """
-import gc, json, sys
+import atexit, gc, json, sys
 from quadrotor_paper.cli import main
 numpy_before_main = "numpy" in sys.modules  # the registrations load none: its import falls in main's start-up
 out = sys.argv[1]
 called = main(["run", "circles", "--no-plots", "--quiet", "--out", out + "/called"])  # a caller's main([...])
 after_call = [gc.isenabled(), gc.get_freeze_count()]
+report = {"called": called, "after_call": after_call, "numpy_before_main": numpy_before_main}
+# what the command's process is left with, told by Python's exit handlers, which the command's own end runs
+atexit.register(lambda: print(json.dumps({**report, "after_command": [gc.isenabled(), gc.get_freeze_count()]})))
 sys.argv = ["fnn-cosim", "run", "circles", "--no-plots", "--quiet", "--out", out + "/command"]
-command = main()  # the entry point's call
-print(json.dumps({"codes": [called, command], "after_call": after_call, "numpy_before_main": numpy_before_main,
-                  "after_command": [gc.isenabled(), gc.get_freeze_count()]}))
+main()  # the entry point's call: ends the process with the command's status
+print("main() returned")
 """
 
 
@@ -92,13 +94,81 @@ def test_the_command_collects_cycles_again_once_started(tmp_path):
     (gc.freeze); a caller's main([...]) leaves the collector as it is. Both
     write the same results. Importing the command line (the application's
     registrations with it) loads no numpy: its import is part of the start-up
-    the collector is off for."""
+    the collector is off for. The command's main() ends the process with
+    the command's status, its output flushed and Python's exit handlers run
+    (cli._end)."""
     proc = subprocess.run([sys.executable, "-c", _COLLECTOR, str(tmp_path)], capture_output=True, text=True,
                           cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    report = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert report["codes"] == [0, 0] and report["numpy_before_main"] is False
+    assert "main() returned" not in proc.stdout
+    *printed, told = proc.stdout.splitlines()
+    assert printed[-1] == f"results: {tmp_path / 'command'}"  # the command's output, then the exit handler's
+    report = json.loads(told)
+    assert report["called"] == 0 and report["numpy_before_main"] is False
     assert report["after_call"] == [True, 0]
     enabled, frozen = report["after_command"]
     assert enabled and frozen > 0
     assert (tmp_path / "called" / "results.csv").read_bytes() == (tmp_path / "command" / "results.csv").read_bytes()
+
+
+_FAILING = """
+import atexit, sys
+from quadrotor_paper.cli import main
+atexit.register(lambda: print("exit handler ran"))
+sys.stdout.write("buffered, ")  # a pipe: held in the buffer until flushed
+sys.argv = ["fnn-cosim", "run", "circles", "--no-plots", "--quiet", "--set", "wind.speed=-1",
+            "--out", sys.argv[1]]
+main()
+"""
+
+
+def test_the_command_ends_with_its_status_its_output_and_its_exit_handlers(tmp_path):
+    """A refused input ends the command's process with status 2, its one
+    line on stderr, what was written to stdout before flushed and the exit
+    handlers run, as Python's own exit does."""
+    proc = subprocess.run([sys.executable, "-c", _FAILING, str(tmp_path / "out")], capture_output=True,
+                          text=True, cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stdout == "buffered, exit handler ran\n"
+    assert proc.stderr.startswith("fnn-cosim: error: ") and "wind.speed" in proc.stderr
+    assert proc.stderr.count("\n") == 1
+
+
+def test_a_command_makes_only_its_own_parser():
+    """fnn-cosim's parser names every command (usage, --help, the refusal of
+    an unknown one) but makes a command's parser only when it is the one
+    given (cli._Commands)."""
+    import argparse
+
+    from quadrotor_paper.cli import _parser
+
+    parser = _parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    names = set(sub.choices)
+    assert {"run", "table2", "stability", "calibrate", "linearize"} <= names
+    args = parser.parse_args(["run", "circles", "--no-plots", "--seed", "3"])
+    assert (args.scenario, args.no_plots, args.seed, args.func.__name__) == ("circles", True, 3, "_cmd_run")
+    assert {name for name, made in sub.choices.items() if made is not None} == {"run"}
+    listing = parser.format_help()
+    assert all(name in listing for name in names)
+
+
+_ARGPARSE_END = """
+import sys
+from quadrotor_paper.cli import main
+sys.argv = ["fnn-cosim", *sys.argv[1:]]
+main()
+print("main() returned")
+"""
+
+
+def test_the_command_ends_as_argparse_ends_it():
+    """--help and arguments argparse refuses end the command's process the
+    same way, with argparse's status and text."""
+    helped = subprocess.run([sys.executable, "-c", _ARGPARSE_END, "--help"], capture_output=True, text=True)
+    assert helped.returncode == 0 and helped.stdout.startswith("usage: fnn-cosim") and "returned" not in helped.stdout
+    refused = subprocess.run([sys.executable, "-c", _ARGPARSE_END, "run", "circles", "--record-every", "0"],
+                             capture_output=True, text=True)
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert refused.stderr.startswith("fnn-cosim: error: run: argument --record-every: ") and \
+        refused.stderr.count("\n") == 1
