@@ -360,7 +360,7 @@ def _linearize_sampled(path, comp: FmuComponent, start, inputs, parameters, fmu_
 
     def evaluate(v):
         comp.restore_state(base_state)
-        comp.set_reals(dict(zip(z_names, v[:nz])) | dict(zip(in_names, v[nz:])))
+        comp.set_reals(dict(zip(z_names, v[:nz])) | dict(zip(in_names, v[nz:])), restore=base_state)
         y = np.fromiter(comp.get_reals(out_names).values(), float, len(out_names))
         comp.do_step(t, period)
         return np.concatenate([np.fromiter(comp.get_reals(z_names).values(), float, nz), y])

@@ -57,11 +57,11 @@ LONGEST_FIRST = (
     "tests/paper/test_stability_linear.py::test_paper_gains_are_stable_with_margins_at_every_operating_point",
     "tests/paper/test_ssp_importers.py::test_fmpy_flies_the_circles_archive_within_3_percent_of_our_master",
     "tests/paper/test_stability_along_flight.py::test_the_study_runs_every_case_through_the_study_runner_in_case_order",
-    "tests/fmus/test_fmi3.py::test_source_fmu_compiles_with_fmpy_build",
     "tests/engine/test_engine_calibration.py::test_the_command_writes_its_four_files",
     "tests/paper/test_bad_inputs.py::test_a_local_study_leaves_no_dask_scratch_space",
     "tests/test_imports.py::test_importing_every_engine_module_loads_no_application_package",
     "tests/engine/test_engine_study.py::test_a_local_dask_cluster_gives_the_rows_of_this_process",
+    "tests/fmus/test_fmi3.py::test_source_fmu_compiles_with_fmpy_build",
 )
 
 

@@ -72,8 +72,11 @@ DELTA = {"u": 0.05, "phi": 0.02}
 MODE_SIZE = 1e-4
 # s of one worker per frozen point, its perturbation checks and its share of the flight included:
 # the whole study (972 points, 1 s checks) took about 3 min on 2 workers of an idle 2-core
-# machine (docs/stability.md, "What the command costs"); the estimate printed before the study
-SECONDS_PER_POINT = 0.37
+# machine at 0.37 s (docs/stability.md, "What the command costs"); the controller's map then set
+# its values in one call each, which took a point's CPU from 0.638 to 0.401 s (circles, every
+# variant and law, every 5 s, one process, the same loaded machine): 0.37 x 0.401/0.638. The
+# estimate printed before the study.
+SECONDS_PER_POINT = 0.23
 
 
 @dataclass(frozen=True)

@@ -284,3 +284,30 @@ def test_the_linearizer_extracts_within_the_same_limits_as_the_master(tmp_path):
     message = str(info.value)
     assert "\n" not in message and "Bomb.fmu" in message, message
     assert "resources/zeros.bin" in message and f"at most {MAX_RATIO} (a zip bomb?)" in message, message
+
+
+def test_values_set_at_once_and_refused_are_named_one_by_one_from_the_state_set_back():
+    """``set_reals(..., restore=state)`` sets every value in one call (the
+    linearizer's differences); a refusal sets the state back and names the
+    refused value with the FMU's reason, as one by one does, and the
+    instance goes on from that state."""
+    from fmu_models.export.build import cached_fmu
+    from fmu_models.models.quadrotor import QUADROTOR
+
+    with FmuComponent("plant", cached_fmu(QUADROTOR, 2)) as fmu:
+        fmu.start(0.0)
+        before = fmu.get_reals(["Omega_1", "Omega_2"])
+        state = fmu.serialize_state()
+        fmu.set_reals({"Omega_1": 600.0, "Omega_2": 610.0}, restore=state)
+        assert fmu.get_reals(["Omega_1", "Omega_2"]) == {"Omega_1": 600.0, "Omega_2": 610.0}
+        fmu.restore_state(state)
+        errors = []
+        for restore in (None, state):
+            with pytest.raises(FmuCallError) as info:
+                fmu.set_reals({"Omega_2": 500.0, "Omega_1": float("nan"), "wind_x": 1.0}, restore=restore)
+            errors.append((str(info.value), info.value.variable))
+            assert fmu.get_reals(["Omega_1", "Omega_2"]) == {**before, "Omega_2": 500.0}  # set up to the refusal
+            fmu.restore_state(state)
+        assert errors[0] == errors[1] and errors[0][1] == "Omega_1"
+        assert "Omega_1 = nan refused: not a finite number" in errors[0][0] and errors[0][0].count("refused") == 1
+        fmu.do_step(0.0, 0.01)

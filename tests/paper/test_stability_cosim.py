@@ -44,6 +44,13 @@ def fmu(quadrotor_fmu2):
     return quadrotor_fmu2
 
 
+@pytest.fixture(scope="module")
+def pd_ramp(op, fmu):
+    """The paper's PD co-simulated behind a 2.5 m/s ramp for 15 s: (lag, run), read by its own test and
+    compared with the feed-forward's."""
+    return ramp_lag(op, 2.5, duration=15.0, fmu=fmu)
+
+
 @pytest.mark.parametrize("kind, axis, size", [
     ("position", "x", 0.02), ("position", "y", 0.02), ("position", "z", 0.1),
     ("velocity", "x", 0.05), ("velocity", "y", 0.05), ("velocity", "z", 0.05)])
@@ -100,12 +107,12 @@ def test_just_past_the_boundary_the_co_simulation_grows_at_the_dominant_poles_ra
     assert g.nonlinear_status == "ok"  # still small after 8 s: no saturation yet
 
 
-def test_pd_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fmu):
+def test_pd_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(pd_ramp):
     """The co-simulated lag behind a 2.5 m/s ramp equals e* of the forward
     flight trim (the nonlinear drag included) and is about V/kp = 1 m."""
     from quadrotor_paper.stability import forward_flight
 
-    lag, run = ramp_lag(op, 2.5, duration=15.0, fmu=fmu)
+    lag, run = pd_ramp
     assert run.status == "ok"
     assert lag == pytest.approx(forward_flight(2.5).position_error[0], abs=1e-4)
     assert lag == pytest.approx(2.5 / 2.5, abs=0.06)
@@ -316,7 +323,7 @@ def test_along_flight_flag_writes_the_learning_laws_sections(tmp_path, capsys, m
     assert "along the flight" in captured.err and "2/2" in captured.err  # the progress bar, both runs done
 
 
-def test_feed_forward_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fmu):
+def test_feed_forward_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fmu, pd_ramp):
     """With the velocity feed-forward the co-simulated lag behind the 2.5 m/s
     ramp is e* of the forward-flight trim with the same gain (the drag's
     share, 0.056 m), a twentieth of the paper's PD's 1.056 m."""
@@ -326,7 +333,7 @@ def test_feed_forward_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fm
     assert run.status == "ok"
     trim = forward_flight(2.5, position=PositionParams(feedforward=1.0)).position_error[0]
     assert lag == pytest.approx(trim, abs=1e-4)
-    assert lag < 0.06 * ramp_lag(op, 2.5, duration=15.0, fmu=fmu)[0]
+    assert lag < 0.06 * pd_ramp[0]
 
 
 def test_operating_point_figures_drawn_aside_are_the_same_files(report, tmp_path):
