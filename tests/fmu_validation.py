@@ -17,6 +17,16 @@ names, and the parse of a name depends on the name and the grammar alone.
 So each distinct name is parsed once per process and fmpy is handed the
 result (the same tree, or the same exception raised again): a fresh suite
 validated about a hundred distinct FMUs, each parsing all its names.
+
+Most names need no parser at all: fmpy keeps no tree, only whether the
+parse raised, and a name of the grammar's plain form (identifiers with
+array indices, joined by dots, or ``der(...)`` of one) is legal by reading
+the grammar. Such a name is accepted by a regular expression of that form
+(``_PLAIN``), in microseconds where Earley took milliseconds (the 7 FMUs
+of a ``circles_estimated`` archive validated in one process: 0.1 s of CPU
+against 4.0-4.4); any other name goes to the parser, so a problem is
+still worded by fmpy. The shortcut holds only for the grammar it was read
+from (its digest): an fmpy with another grammar parses every name again.
 """
 from __future__ import annotations
 
@@ -24,6 +34,7 @@ import functools
 import hashlib
 import json
 import os
+import re
 import tempfile
 from pathlib import Path
 from unittest import mock
@@ -39,18 +50,36 @@ __all__ = ["validate_fmu"]
 _LARK = lark.Lark  # the class itself: fmpy's name for it is patched below
 
 
+# fmpy 0.3's grammar of structured names (fmpy.validation._validate_variable_names), by its digest, and the
+# plain names it derives: bname as nondigit (nondigit | digit)*, arrayindices as [n(,n)*], identifier as
+# bname arrayindices? joined by "." (no quoted names), name as identifier or der(identifier(,n)?)
+_GRAMMAR = "4a50025cb4d0af0f"
+_IDENTIFIER = r"[A-Za-z_][A-Za-z0-9_]*(?:\[[0-9]+(?:,[0-9]+)*\])?(?:\.[A-Za-z_][A-Za-z0-9_]*(?:\[[0-9]+(?:,[0-9]+)*\])?)*"
+_PLAIN = re.compile(rf"{_IDENTIFIER}|der\({_IDENTIFIER}(?:,[0-9]+)?\)", re.ASCII)
+
+
 class _NameParser:
     """fmpy's parser of variable names with each name's outcome kept: the
     tree it returned, or the exception it raised (raised again, so fmpy
-    words the problem as before)."""
+    words the problem as before); a plain name of fmpy's grammar accepted
+    unparsed (module docstring)."""
 
     def __init__(self, *args, **kwargs):
-        self._lark = _LARK(*args, **kwargs)
+        self._grammar = (args, kwargs)
         self._outcomes: dict[str, tuple[bool, object]] = {}
+        grammar = args[0] if args and isinstance(args[0], str) else ""
+        self.plain = hashlib.sha256(grammar.encode()).hexdigest()[:16] == _GRAMMAR and kwargs == {"start": "name"}
+
+    @functools.cached_property
+    def _lark(self):  # built when a name needs it (0.3 s of CPU): a plain name does not
+        args, kwargs = self._grammar
+        return _LARK(*args, **kwargs)
 
     def parse(self, text: str, *args, **kwargs):
         if args or kwargs:  # not how fmpy calls it: no memory
             return self._lark.parse(text, *args, **kwargs)
+        if self.plain and _PLAIN.fullmatch(text):
+            return None  # legal: fmpy only asks whether the parse raises
         outcome = self._outcomes.get(text)
         if outcome is None:
             try:

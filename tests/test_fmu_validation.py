@@ -46,3 +46,31 @@ def test_an_illegal_name_is_reported_as_fmpy_reports_it_every_time_it_is_met(tmp
         problems = validate_fmu(str(fmu))
         assert _as_reported(problems) == _as_reported(fmpy_validate_fmu(str(fmu)))
         assert len(problems) == 1 and '"1v_wind_x"' in problems[0] and "not a legal variable name" in problems[0]
+
+
+def test_a_plain_name_accepted_unparsed_is_one_fmpys_parser_accepts():
+    """The shortcut of tests/fmu_validation.py: the grammar it was read from is
+    the installed fmpy's (else every name is parsed, and this test says the
+    shortcut is off), and every name it accepts unparsed, ours and the
+    grammar's corners, fmpy's parser accepts; names outside it still go to
+    the parser (a quoted name, a space, an index that is no number)."""
+    import inspect
+
+    import fmpy.validation
+    import lark
+
+    from fmu_models.models.estimator import ESTIMATOR
+    from tests import fmu_validation
+
+    source = inspect.getsource(fmpy.validation._validate_variable_names)
+    grammar = source.split('grammar = r"""', 1)[1].split('"""', 1)[0]
+    parser = fmu_validation._NameParser(grammar, start="name")
+    assert parser.plain
+    earley = lark.Lark(grammar, start="name")
+    ours = [v.name for v in ESTIMATOR.variables] + [v.name for v in WIND_GUST.variables]
+    corners = ["x", "_", "a1_B", "a.b", "a[1]", "a[1,22].b_c[3]", "a.b.c", "der(x)", "der(a.b[2],2)", "der", "dera"]
+    for name in ours + corners:
+        assert fmu_validation._PLAIN.fullmatch(name), name
+        earley.parse(name)  # raises if not legal
+    for name in ("'q x'", "a b", "a[i]", "a[]", "1a", "der(x", "a..b", "a.", "x\n"):
+        assert not fmu_validation._PLAIN.fullmatch(name), name

@@ -17,10 +17,13 @@ its ``out`` (the outputs). The calibrator then makes no FMU call:
   estimated initial states are CasADi's forward mode through the same
   graph, all directions at once: the derivatives of the discrete
   trajectory itself (no Magnus step, no differences: exact to round-off);
-* the two segment functions are generated as C and compiled once per
+* the segment functions are generated as C and compiled once per
   machine (:func:`cosim.kernel.compiled_library`: the cache keyed by the
-  source, so by the model, the rows a segment has, the directions); the
-  segments run side by side in ``workers`` threads (CasADi's ``map``).
+  source, so by the model, the RK4 steps a row, the directions): the
+  simulation in one library, both Jacobians the solver asks for (``n``
+  RK4 steps a row, and the coarse one step) in another, where the forward
+  derivative of ``step`` they share is compiled once; the segments run
+  side by side in ``workers`` threads.
   Without a C compiler, CasADi's virtual machine runs the same functions.
 
 The FMU's binary is generated from the same ``step`` and ``out``, so a
@@ -179,49 +182,90 @@ class SymbolicModel:
     # ---- the functions ----------------------------------------------------------------------------
 
     def _function(self, kind: str, n: int, nd: int):
-        key = (kind, n, nd)
-        if key not in self._functions:
-            self._functions[key] = self._build(kind, n, nd)
-        return self._functions[key]
-
-    def _build(self, kind: str, n: int, nd: int):
         """``kind``: ``"start"`` (a segment's initial state from its
         parameters, and its sensitivities: CasADi's virtual machine, it is
-        small), ``"simulate"`` or ``"sensitivities"`` of :data:`CHUNK` rows
-        (compiled)."""
+        small), ``"simulate"`` of :data:`CHUNK` rows of ``n`` RK4 steps,
+        ``"sensitivities"`` of :data:`CHUNK` rows of ``n`` RK4 steps and
+        ``"coarse"`` of one (compiled)."""
+        key = (kind, n, nd)
+        if key not in self._functions:
+            if kind == "start":
+                self._functions[key] = self._start(nd)
+            elif kind == "simulate":
+                self._functions[key] = self._compile([self._simulate(n)])[0]
+            else:
+                # both Jacobians the solver asks for in one library: they call the same forward derivative
+                # of the model's step, the bulk of the C, which is then generated and compiled once (a
+                # library each compiled it twice: the plant's four fitted names 4.4 CPU-s against 2.5, its
+                # six 6.5 against 3.8; the coarse one's own code is small, so a fit without coarse
+                # iterations pays little for it); the coarse one is the exact one where a row is one RK4
+                # step already
+                kinds = {"sensitivities": n, "coarse": 1} if n > 1 else {"sensitivities": 1, "coarse": 1}
+                fns = {}
+                for name, steps in kinds.items():
+                    fns.setdefault(steps, self._sensitivities(steps, nd, name))
+                compiled = dict(zip(fns, self._compile(list(fns.values()))))
+                for name, steps in kinds.items():
+                    self._functions[(name, n, nd)] = compiled[steps]
+        return self._functions[key]
+
+    def _start(self, nd: int):
         import casadi as ca
 
-        from ..kernel import compiled_library
+        f = self.definition.functions
+        p0, P0d = ca.MX.sym("p0", len(self.p_names)), ca.MX.sym("P0d", len(self.p_names), nd)
+        x0 = f["init"](p0)
+        return _Interpreted(ca.Function("start", [p0, P0d], [
+            x0, f["init"].forward(nd)(p0, x0, P0d) if nd else ca.MX(len(self.x_names), 0)]))
+
+    def _row(self, n: int):
+        """One row: ``n`` RK4 steps from its state and the outputs at its start (``core_do_step``)."""
+        import casadi as ca
 
         f = self.definition.functions
-        nx, nu, npar = len(self.x_names), len(self.u_names), len(self.p_names)
-        p0 = ca.MX.sym("p0", npar)
-        if kind == "start":
-            P0d = ca.MX.sym("P0d", npar, nd)
-            x0 = f["init"](p0)
-            fn = ca.Function("start", [p0, P0d], [x0, f["init"].forward(nd)(p0, x0, P0d) if nd else ca.MX(nx, 0)])
-            return _Interpreted(fn)
-        x, t, dt = ca.MX.sym("x", nx), ca.MX.sym("t"), ca.MX.sym("dt")
-        u, p = ca.MX.sym("u", nu), ca.MX.sym("p", npar)
+        x, t, dt = ca.MX.sym("x", len(self.x_names)), ca.MX.sym("t"), ca.MX.sym("dt")
+        u, p = ca.MX.sym("u", len(self.u_names)), ca.MX.sym("p", len(self.p_names))
         h = dt / n
         xk = x
         for k in range(n):  # core_do_step: n equal RK4 steps, the time from a step counter
             xk = f["step"](t + k * h, xk, u, p, h)
-        row = ca.Function("row", [x, t, u, p, dt], [xk, f["out"](t, x, u, p)])
+        return ca.Function("row", [x, t, u, p, dt], [xk, f["out"](t, x, u, p)])
+
+    def _simulate(self, n: int):
+        import casadi as ca
+
+        x, p0 = ca.MX.sym("x", len(self.x_names)), ca.MX.sym("p0", len(self.p_names))
+        T, U, DT = ca.MX.sym("T", 1, CHUNK), ca.MX.sym("U", len(self.u_names), CHUNK), ca.MX.sym("DT", 1, CHUNK)
+        X, Y = self._row(n).mapaccum("rows", CHUNK)(x, T, U, ca.repmat(p0, 1, CHUNK), DT)
+        return ca.Function("calibration_simulate", [x, p0, T, U, DT], [X, Y])
+
+    def _sensitivities(self, n: int, nd: int, name: str):
+        import casadi as ca
+
+        nx, nu, npar = len(self.x_names), len(self.u_names), len(self.p_names)
+        x, t, dt = ca.MX.sym("x", nx), ca.MX.sym("t"), ca.MX.sym("dt")
+        u, p, p0 = ca.MX.sym("u", nu), ca.MX.sym("p", npar), ca.MX.sym("p0", npar)
         T, U, DT = ca.MX.sym("T", 1, CHUNK), ca.MX.sym("U", nu, CHUNK), ca.MX.sym("DT", 1, CHUNK)
-        if kind == "simulate":
-            X, Y = row.mapaccum("rows", CHUNK)(x, T, U, ca.repmat(p0, 1, CHUNK), DT)
-            fn = ca.Function("calibration_simulate", [x, p0, T, U, DT], [X, Y])
-        else:
-            S, Pd, Ud = ca.MX.sym("S", nx, nd), ca.MX.sym("Pd", npar, nd), ca.MX.sym("Ud", nu, nd)
-            xn, y = row(x, t, u, p, dt)
-            dxn, dy = row.forward(nd)(x, t, u, p, dt, xn, y, S, ca.MX(1, nd), Ud, Pd, ca.MX(1, nd))
-            rows = ca.Function("row_sensitivities", [x, S, t, u, p, dt, Pd, Ud], [xn, dxn, y, dy])
-            X, dX, Y, dY = rows.mapaccum("rows", CHUNK, [0, 1], [0, 1])(
-                x, S, T, U, ca.repmat(p0, 1, CHUNK), DT, ca.repmat(Pd, 1, CHUNK), ca.repmat(Ud, 1, CHUNK))
-            fn = ca.Function("calibration_sensitivities", [x, S, p0, Pd, Ud, T, U, DT], [X, dX, Y, dY])
-        cg = ca.CodeGenerator(f"{fn.name()}.c")
-        cg.add(fn)
+        S, Pd, Ud = ca.MX.sym("S", nx, nd), ca.MX.sym("Pd", npar, nd), ca.MX.sym("Ud", nu, nd)
+        row = self._row(n)
+        xn, y = row(x, t, u, p, dt)
+        dxn, dy = row.forward(nd)(x, t, u, p, dt, xn, y, S, ca.MX(1, nd), Ud, Pd, ca.MX(1, nd))
+        rows = ca.Function(f"row_{name}", [x, S, t, u, p, dt, Pd, Ud], [xn, dxn, y, dy])
+        X, dX, Y, dY = rows.mapaccum("rows", CHUNK, [0, 1], [0, 1])(
+            x, S, T, U, ca.repmat(p0, 1, CHUNK), DT, ca.repmat(Pd, 1, CHUNK), ca.repmat(Ud, 1, CHUNK))
+        return ca.Function(f"calibration_{name}", [x, S, p0, Pd, Ud, T, U, DT], [X, dX, Y, dY])
+
+    def _compile(self, fns: list) -> list:
+        """``fns`` generated as C into one library, compiled once per machine
+        (:func:`cosim.kernel.compiled_library`), each a callable; without a C
+        compiler, run by CasADi's virtual machine."""
+        import casadi as ca
+
+        from ..kernel import compiled_library
+
+        cg = ca.CodeGenerator(f"{fns[0].name()}.c")
+        for fn in fns:
+            cg.add(fn)
         started = time.perf_counter()
         try:
             library = compiled_library(cg.dump().encode(), f"calibration_{self.definition.identifier}", CFLAGS)
@@ -230,8 +274,8 @@ class SymbolicModel:
         self.compile_seconds += time.perf_counter() - started
         if library is None:
             self.source = "CasADi's virtual machine"
-            return _Interpreted(fn)
-        return _Compiled(library, fn)
+            return [_Interpreted(fn) for fn in fns]
+        return [_Compiled(library, fn) for fn in fns]
 
     def _run(self, fn, arguments: list) -> list:
         """``fn`` on each segment's arguments, ``workers`` segments at a time
@@ -298,7 +342,7 @@ class SymbolicModel:
         Ud[self.u_fit, m.n_params + np.arange(self.u_fit.size)] = 1.0
         Pd[self.p_setter[est], nt + np.arange(est.size)] = 1.0
         Pd, Ud = np.ascontiguousarray(Pd.T), np.ascontiguousarray(Ud.T)  # column-major
-        start, chunk = self._function("start", n, nd), self._function("sensitivities", 1 if coarse else n, nd)
+        start, chunk = self._function("start", n, nd), self._function("coarse" if coarse else "sensitivities", n, nd)
 
         def one(a):
             params, T, U, DT = a
