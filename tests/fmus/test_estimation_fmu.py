@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from tests.fmu_validation import validate_fmu
 
-from fmu_models.export.build import cached_fmu
+from tests.catalog_fmus import catalog_fmu
 from fmu_models.models.estimator import ESTIMATOR, ESTIMATOR_GM, ESTIMATOR_MAG, ESTIMATED_STATES
 from fmu_models.models.imu import IMU
 from fmu_models.models.sensors import GNSS_6
@@ -34,7 +34,7 @@ def _outputs(model, rows, names):
 
 @pytest.mark.parametrize("model", [IMU, GNSS_6, ESTIMATOR, ESTIMATOR_MAG, ESTIMATOR_GM], ids=lambda m: m.identifier)
 def test_builds_and_validates(model):
-    assert validate_fmu(str(cached_fmu(model, 2))) == []
+    assert validate_fmu(str(catalog_fmu(model, 2))) == []
 
 
 def test_imu_white_noise_has_the_density_over_root_dt():

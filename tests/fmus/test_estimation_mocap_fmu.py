@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from tests.fmu_validation import validate_fmu
 
-from fmu_models.export.build import cached_fmu
+from tests.catalog_fmus import catalog_fmu
 from fmu_models.models.estimator import ANGLES, ESTIMATOR_MOCAP
 from fmu_models.models.sensors import MOCAP_9
 
@@ -22,7 +22,7 @@ G = 9.81
 
 @pytest.mark.parametrize("model", [MOCAP_9, ESTIMATOR_MOCAP], ids=lambda m: m.identifier)
 def test_builds_and_validates(model):
-    assert validate_fmu(str(cached_fmu(model, 2))) == []
+    assert validate_fmu(str(catalog_fmu(model, 2))) == []
 
 
 def test_the_motion_capture_angles_have_their_noise_every_frame():

@@ -14,7 +14,7 @@ from lxml import etree
 import fnn_controller as fc
 from cosim.fmu_component import FmuComponent
 from fmu_models.catalog import MODELS
-from fmu_models.export.build import cached_fmu
+from tests.catalog_fmus import catalog_fmu
 from fnn_controller.controller_fmu import controller_model
 
 MODELS_AND_CONTROLLERS = [*MODELS.values(), *(controller_model(v) for v in fc.variant_names())]
@@ -25,7 +25,7 @@ WHERE = {2: "VendorAnnotations/Tool[@name='fnn-cosim.sampled-data']/SampledData"
 @pytest.mark.parametrize("version", [2, 3])
 @pytest.mark.parametrize("model", MODELS_AND_CONTROLLERS, ids=lambda m: m.identifier)
 def test_a_sampled_data_fmu_declares_its_period_parameter_and_a_continuous_one_nothing(model, version):
-    path = cached_fmu(model, version)
+    path = catalog_fmu(model, version)
     with zipfile.ZipFile(path) as archive:
         root = etree.fromstring(archive.read("modelDescription.xml"))
     declared = [e.get("periodParameter") for e in root.findall(WHERE[version])]

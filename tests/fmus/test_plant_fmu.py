@@ -12,6 +12,7 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2CoSimulation
 from tests.fmu_validation import validate_fmu
+from tests.catalog_fmus import catalog_fmu
 
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel
@@ -467,7 +468,7 @@ def unzipped_fmu2(tmp_path_factory):
     def get(identifier):
         if identifier not in directories:
             target = tmp_path_factory.mktemp(identifier)
-            directories[identifier] = extract(cached_fmu(MODELS[identifier], 2), unzipdir=target)
+            directories[identifier] = extract(catalog_fmu(MODELS[identifier], 2), unzipdir=target)
         return directories[identifier]
 
     return get
