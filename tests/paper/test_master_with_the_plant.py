@@ -23,6 +23,7 @@ from cosim.assembly import build_master
 from fmu_models.export.build import cached_fmu
 from fmu_models.catalog import MODELS
 from fmu_models.models.quadrotor import hover_rotor_speed
+from tests.catalog_fmus import catalog_fmu
 
 WIND_TO_PLANT = "WindGust.v_wind_{x,y,z} -> Quadrotor.wind_{x,y,z}"
 ROTORS_TO_PLANT = "standin.Omega_{1,2,3,4} -> Quadrotor.Omega_{1,2,3,4}"
@@ -59,7 +60,7 @@ class Failing(ConstantRotors):
 
 @pytest.fixture(scope="module")
 def fmu_paths():
-    return {name: cached_fmu(model, 2) for name, model in MODELS.items()}
+    return {name: catalog_fmu(model, 2) for name, model in MODELS.items()}
 
 
 @pytest.fixture
