@@ -11,6 +11,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
+from tests.catalog_fmus import catalog_fmu
 from tests.fmu_validation import validate_fmu
 
 from cosim.fmu_component import fmi2_callbacks
@@ -30,7 +31,7 @@ class Sensor:
     """One initialized instance of a sensor FMU through fmpy."""
 
     def __init__(self, model=MEASUREMENT_12, version=2, parameters=None, initialize=True):
-        path = cached_fmu(model, version)
+        path = catalog_fmu(model, version)
         self.md = read_model_description(str(path))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.messages = []
