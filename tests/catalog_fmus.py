@@ -11,16 +11,28 @@ through the registry): the same file, found without generating anything once
 the session's build (tests/conftest.py) or any earlier process recorded it.
 A model changed in a test (another start value, another law) is not the
 registered one and is found by ``cached_fmu``, as before.
+
+The tests' own fmpy harnesses extract an FMU for each instance they make
+(:func:`extracted`): into this process's one temporary folder, which
+tests/conftest.py removes when the session ends, where fmpy's ``extract``
+alone leaves each folder in the system's temporary folder for good (a
+suite left about 160 of them, some 120 MB, at every run).
 """
 from __future__ import annotations
 
+import shutil
+import tempfile
 from pathlib import Path
+
+import fmpy
 
 import quadrotor_paper  # noqa: F401  (registers the shipped models)
 from cosim import registry
 from fmu_models.export.build import cached_fmu
 
-__all__ = ["catalog_fmu"]
+__all__ = ["catalog_fmu", "extracted", "remove_extracted"]
+
+_FOLDER: list[Path] = []  # this process's temporary folder, made on first use
 
 
 def catalog_fmu(model, version: int = 2) -> Path:
@@ -30,3 +42,17 @@ def catalog_fmu(model, version: int = 2) -> Path:
     if registered is not None and registered.definition is not None and registered.definition() is model:
         return registered.build(version)
     return cached_fmu(model, version)
+
+
+def extracted(path) -> str:
+    """fmpy's ``extract`` of the FMU ``path`` into a new folder of this
+    process's temporary folder (removed by :func:`remove_extracted`)."""
+    if not _FOLDER:
+        _FOLDER.append(Path(tempfile.mkdtemp(prefix="fnn-cosim-tests-")))
+    return fmpy.extract(str(path), unzipdir=tempfile.mkdtemp(dir=_FOLDER[0]))
+
+
+def remove_extracted() -> None:
+    """Remove every folder :func:`extracted` made in this process (at the session's end)."""
+    while _FOLDER:
+        shutil.rmtree(_FOLDER.pop(), ignore_errors=True)

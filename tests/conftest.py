@@ -25,6 +25,17 @@ def pytest_sessionstart(session):
         registry.build_fmu_models(sorted(FMI_VERSIONS))
 
 
+def pytest_sessionfinish(session):
+    """The folders the tests' fmpy harnesses extracted FMUs to, removed
+    (tests/catalog_fmus.py: fmpy's ``extract`` alone leaves them in the
+    system's temporary folder); in each process that made some."""
+    import sys
+
+    made = sys.modules.get("tests.catalog_fmus")
+    if made is not None:
+        made.remove_extracted()
+
+
 @pytest.fixture(scope="session")
 def quadrotor_fmu2():
     """Path of the FMI 2.0 (ME + CS) quadrotor FMU."""

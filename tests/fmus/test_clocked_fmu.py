@@ -12,9 +12,10 @@ import ctypes
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
+from tests.catalog_fmus import extracted
 from tests.fmu_validation import validate_fmu
 
 from fmu_models.export.build import cached_fmu
@@ -43,7 +44,7 @@ class Log:
 
 def _open(path, cls, **instantiate):
     md = read_model_description(str(path))
-    fmu = cls(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
+    fmu = cls(guid=md.guid, unzipDirectory=extracted(path), modelIdentifier=md.coSimulation.modelIdentifier,
               instanceName="controller")
     fmu.log = Log()
     fmu.instantiate(logMessage=fmu.log, **instantiate)
@@ -64,7 +65,7 @@ def _fmi2_reference(path) -> np.ndarray:
     from fmpy.fmi2 import FMU2Slave
 
     md = read_model_description(str(path))
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extracted(path), modelIdentifier=md.coSimulation.modelIdentifier)
     fmu.instantiate()
     inputs = [v.valueReference for v in md.modelVariables if v.causality == "input"]
     watched = [v.valueReference for v in md.modelVariables if v.causality in ("output", "local")

@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
+from tests.catalog_fmus import extracted
 from tests.fmu_validation import validate_fmu
 
 import fnn_controller as fc
@@ -41,7 +42,7 @@ class Controller:
         self.md = read_model_description(str(path))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.log = Log()
-        common = dict(guid=self.md.guid, unzipDirectory=extract(str(path)),
+        common = dict(guid=self.md.guid, unzipDirectory=extracted(path),
                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="controller")
         if version == 2:
             self.fmu = FMU2Slave(**common)

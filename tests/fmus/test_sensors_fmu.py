@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
-from tests.catalog_fmus import catalog_fmu
+from tests.catalog_fmus import catalog_fmu, extracted
 from tests.fmu_validation import validate_fmu
 
 from cosim.fmu_component import fmi2_callbacks
@@ -37,7 +37,7 @@ class Sensor:
         self.messages = []
         self.inputs = [v.name for v in model.inputs]
         self.outputs = [v.name for v in model.outputs]
-        common = dict(guid=self.md.guid, unzipDirectory=extract(str(path)),
+        common = dict(guid=self.md.guid, unzipDirectory=extracted(path),
                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="sensor")
         if version == 2:
             self.fmu = FMU2Slave(**common)

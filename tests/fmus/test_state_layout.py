@@ -10,12 +10,13 @@ from __future__ import annotations
 import struct
 
 import numpy as np
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.codegen import value_references
 from fmu_models.models.magnetometer import MAGNETOMETER
+from tests.catalog_fmus import extracted
 from tests.fmus.test_build_cache import _toy
 
 FIXED = 168  # StateHeader (8 + 40 + 64) + 4 int32 + 5 eight-byte counters
@@ -28,7 +29,7 @@ def _state_after_steps(model, steps: int, h: float) -> tuple[bytes, list[float],
     read through fmi2GetReal at that point, and its GUID."""
     path = cached_fmu(model, 2)
     description = read_model_description(str(path))
-    fmu = FMU2Slave(guid=description.guid, unzipDirectory=extract(str(path)),
+    fmu = FMU2Slave(guid=description.guid, unzipDirectory=extracted(path),
                     modelIdentifier=description.coSimulation.modelIdentifier, instanceName="layout")
     fmu.instantiate()
     try:
