@@ -177,10 +177,22 @@ def test_outside_refuse_refuses_a_run_that_leaves_the_table_before_it_starts(tmp
         assert master.run(3.0).status == "ok"
 
 
-def test_the_table_fmu_refuses_a_step_beyond_its_rows_itself(tmp_path):
+def _fmpy_extracts_into(tmp_path, monkeypatch):
+    """fmpy's ``simulate_fmu`` extracts into a new folder of the system's
+    temporary folder and removes it only when the simulation returns: one
+    that raises (what these tests ask for) leaves it behind; here it is left
+    in the test's own folder."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+
+def test_the_table_fmu_refuses_a_step_beyond_its_rows_itself(tmp_path, monkeypatch):
     """Another importer, which our check before the run does not guard: the
     FMU refuses the step that leaves its table (outside = "refuse")."""
     from fmpy import simulate_fmu
+
+    _fmpy_extracts_into(tmp_path, monkeypatch)
 
     from cosim.table import fmu_entry
 
@@ -237,7 +249,7 @@ def test_a_parquet_table_is_bounded_by_its_footer_before_it_is_read(tmp_path, mo
         load_table(tmp_path / "t.parquet")
 
 
-def test_the_table_fmu_refuses_a_tampered_resource(tmp_path):
+def test_the_table_fmu_refuses_a_tampered_resource(tmp_path, monkeypatch):
     """The table inside an FMU is data too: a file whose size does not match
     its header, or with a time that goes back, is refused at instantiation."""
     import zipfile
@@ -246,6 +258,8 @@ def test_the_table_fmu_refuses_a_tampered_resource(tmp_path):
 
     from cosim.table import fmu_entry
     from fmu_models.models.signal_table import RESOURCE
+
+    _fmpy_extracts_into(tmp_path, monkeypatch)
 
     path = fmu_entry("table", {"file": str(_write(tmp_path))}, builder=table_fmu())["path"]
     with zipfile.ZipFile(path) as z:
