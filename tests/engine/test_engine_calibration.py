@@ -115,7 +115,7 @@ def test_a_fit_that_does_not_converge_keeps_its_report_and_exits_1(tmp_path, cap
     settings.write_text("max_iterations = 1\n")
     out = tmp_path / "out"
     code = _cli("calibrate", RESULTS / "VanDerPol_out.csv", "--fmu", REFERENCE / "fmi2" / "VanDerPol.fmu",
-                "--fit", "mu", "--guess", "mu=1.5", "--settings", settings, "--out", out, "--quiet")
+                "--fit", "mu", "--guess", "mu=1.5", "--settings", settings, "--out", out, "--quiet", "--no-plots")
     assert code == 1
     assert "NOT CONVERGED" in (out / "report.md").read_text()
     assert json.loads((out / "calibration.json").read_text())["converged"] is False
