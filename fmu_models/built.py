@@ -7,8 +7,9 @@ CasADi imported). A run of already-built FMUs needs none of that.
 :func:`built_fmu` keeps, beside the cache, an index from a *recipe* to the
 FMU ``cached_fmu`` returned for it: the model's identifier, the FMI version,
 the start values it is built with where they are not its own (an SSP
-archive's self-contained FMUs, :mod:`cosim.ssp_export`), the installed CasADi and fmpy (the generated C, the FMI headers: where each
-is installed, its ``__init__.py``'s size and modification time) and the bytes
+archive's self-contained FMUs, :mod:`cosim.ssp_export`), the installed
+CasADi and fmpy (the generated C, the FMI headers: where each is installed,
+its ``__init__.py``'s size and modification time) and the bytes
 of every source file that can change the model or its FMU (the packages
 ``fmu_models`` and ``fnn_controller``, where every model and controller
 variant of the project is defined, and any ``extra`` file, such as a module
@@ -85,7 +86,7 @@ def built_fmu(identifier: str, fmi_version: int, load: Callable[[], object], ext
     that define the model. ``values``: the start values ``load()`` builds
     the model with (``FmuModel.with_defaults``: an SSP archive's
     self-contained FMUs), part of the recipe; a value ``load()`` refuses is
-    refused on the first call only, as no FMU is recorded for it."""
+    refused at every call (no FMU is recorded for it)."""
     entry = cache_root() / "index" / _recipe(identifier, fmi_version, extra, values)
     try:
         known = Path(entry.read_text())
