@@ -6,8 +6,10 @@ CasADi functions and generates their C (tens of milliseconds a model, and
 CasADi imported). A run of already-built FMUs needs none of that.
 :func:`built_fmu` keeps, beside the cache, an index from a *recipe* to the
 FMU ``cached_fmu`` returned for it: the model's identifier, the FMI version,
-the installed CasADi and fmpy (the generated C, the FMI headers: where each
-is installed, its ``__init__.py``'s size and modification time) and the bytes
+the start values it is built with where they are not its own (an SSP
+archive's self-contained FMUs, :mod:`cosim.ssp_export`), the installed
+CasADi and fmpy (the generated C, the FMI headers: where each is installed,
+its ``__init__.py``'s size and modification time) and the bytes
 of every source file that can change the model or its FMU (the packages
 ``fmu_models`` and ``fnn_controller``, where every model and controller
 variant of the project is defined, and any ``extra`` file, such as a module
@@ -23,7 +25,7 @@ import tempfile
 from functools import lru_cache
 from importlib.machinery import PathFinder
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Mapping
 
 from .cache import cache_root
 
@@ -65,20 +67,27 @@ def _sources_digest() -> bytes:
     return digest.digest()
 
 
-def _recipe(identifier: str, fmi_version: int, extra: Iterable[Path]) -> str:
+def _recipe(identifier: str, fmi_version: int, extra: Iterable[Path],
+            values: Mapping[str, float] | None = None) -> str:
     digest = hashlib.sha256(_sources_digest())
     digest.update(f"{identifier} fmi{fmi_version}".encode())
     _digest_files(digest, sorted({Path(p).resolve() for p in extra}))
+    if values is not None:  # repr: a float's exact digits; sorted: the table, not the mapping, orders them
+        digest.update(f"\0values {sorted((k, float(v)) for k, v in values.items())!r}".encode())
     return digest.hexdigest()[:32]
 
 
-def built_fmu(identifier: str, fmi_version: int, load: Callable[[], object], extra: Iterable[Path] = ()) -> Path:
+def built_fmu(identifier: str, fmi_version: int, load: Callable[[], object], extra: Iterable[Path] = (),
+              values: Mapping[str, float] | None = None) -> Path:
     """The FMU of the model ``load()`` returns (``identifier``, FMI
     ``fmi_version``): the one the index holds for its recipe if that file
     still exists, else ``cached_fmu(load(), fmi_version)``, then recorded.
     ``extra``: source files beyond ``fmu_models`` and ``fnn_controller``
-    that define the model."""
-    entry = cache_root() / "index" / _recipe(identifier, fmi_version, extra)
+    that define the model. ``values``: the start values ``load()`` builds
+    the model with (``FmuModel.with_defaults``: an SSP archive's
+    self-contained FMUs), part of the recipe; a value ``load()`` refuses is
+    refused at every call (no FMU is recorded for it)."""
+    entry = cache_root() / "index" / _recipe(identifier, fmi_version, extra, values)
     try:
         known = Path(entry.read_text())
         if known.is_file():

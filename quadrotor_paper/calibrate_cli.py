@@ -55,6 +55,7 @@ def _arguments(c: argparse.ArgumentParser, named_values, overrides) -> None:
     c.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
     c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
+    c.add_argument("--no-plots", action="store_true", help="no figures (report.md without them)")
     c.set_defaults(named_values=named_values, overrides=overrides)
 
 
@@ -104,7 +105,7 @@ def run(args) -> int:
     with progress_bar("calibrate", settings.max_iterations, enabled=not args.quiet, unit="Jacobian") as update_bar:
         cal = calibrate(args.log, fmu, settings, column_map, instance=instance, extra_columns=extra, fixed=fixed,
                         progress=update_bar)
-    written = write_outputs(cal, out, args.log, fmu, instance)
+    written = write_outputs(cal, out, args.log, fmu, instance, plots=not args.no_plots)
     for name, value in cal.estimates().items():
         j = cal.problem.fit.index(name)
         if value is None:

@@ -16,7 +16,8 @@
   ``[fmus.<instance>.parameters]`` (paste it into a scenario, or give each
   as ``--set fmus.<instance>.parameters.<name>=<value>``).
 * ``report.md``: the estimates with their intervals beside the defaults,
-  the residuals, the prediction of the held-out part, with figures.
+  the residuals, the prediction of the held-out part, with figures (unless
+  asked for none: drawing them is most of a small fit's time, docs/calibration.md).
 """
 from __future__ import annotations
 
@@ -193,23 +194,28 @@ def _report(cal, doc: dict, figures: list[str]) -> str:
         lines += ["* " + ", ".join(f"{k}: {v:+.3f}" for k, v in d.items()) for d in und]
     if p.fixed:
         lines += ["", "Fixed: " + ", ".join(f"{k} = {v:g}" for k, v in p.fixed.items()) + "."]
-    lines += ["", "![estimates](estimates.png)", "", "## Residuals", "",
+    if "estimates.png" in figures:
+        lines += ["", "![estimates](estimates.png)"]
+    lines += ["", "## Residuals", "",
               "| output | RMS | mean | max | lag-1 autocorrelation | noise level used |", "|---|---|---|---|---|---|"]
     for o, r in doc["residuals"].items():
         lines.append(f"| {o} | {_fmt(r['rms'])} | {_fmt(r['mean'])} | {_fmt(r['max_abs'])} | "
                      f"{r['lag1_autocorrelation']:.3f} | {_fmt(r['sigma'])} |")
-    lines += ["", "![residuals](residuals.png)"]
+    if "residuals.png" in figures:
+        lines += ["", "![residuals](residuals.png)"]
     if doc["prediction"]:
         pr = doc["prediction"]
         lines += ["", "## Prediction of the held-out part", "",
                   f"From {pr['start']:g} s to {pr['stop']:g} s, not fitted, simulated with the estimates from its "
-                  "logged start. RMS error: " + ", ".join(f"{o} {_fmt(v)}" for o, v in pr["rms"].items()) + ".",
-                  "", "![prediction](prediction.png)"]
+                  "logged start. RMS error: " + ", ".join(f"{o} {_fmt(v)}" for o, v in pr["rms"].items()) + "."]
+        if "prediction.png" in figures:
+            lines += ["", "![prediction](prediction.png)"]
     return "\n".join(lines) + "\n"
 
 
-def write_outputs(cal, out: Path, log_path, fmu_path, instance: str | None = None) -> list[Path]:
-    """The four files (and the figures) into ``out``; returns their paths."""
+def write_outputs(cal, out: Path, log_path, fmu_path, instance: str | None = None, plots: bool = True
+                  ) -> list[Path]:
+    """The four files (and, with ``plots``, the figures) into ``out``; returns their paths."""
     out = Path(out)
     doc = calibration_document(cal, str(log_path), str(fmu_path))
     instance = instance or cal.instance or Path(fmu_path).stem
@@ -217,7 +223,7 @@ def write_outputs(cal, out: Path, log_path, fmu_path, instance: str | None = Non
                write_parameter_set(_values(cal), out / "parameters.ssv", f"calibrated {instance}")]
     (out / "calibration.toml").write_text(_toml(cal, instance))
     written.append(out / "calibration.toml")
-    figures = _figures(cal, out)
+    figures = _figures(cal, out) if plots else []
     (out / "report.md").write_text(_report(cal, doc, figures))
     written.append(out / "report.md")
     return written + [out / n for n in figures]

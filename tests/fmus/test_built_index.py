@@ -51,3 +51,18 @@ def test_a_changed_source_or_a_removed_fmu_builds_again(builder, tmp_path):
     second.unlink()  # the cache cleaned by hand: the index entry is stale, not trusted
     third = built_fmu("Toy", 2, lambda: "Toy", [law])
     assert third.is_file() and len(builder) == 3
+
+
+def test_an_fmu_built_with_start_values_is_found_by_them(builder):
+    # an SSP archive's self-contained FMUs (quadrotor_paper.models: build_with): the values are part of the
+    # recipe, in any order, and other values (or none) are another FMU
+    loads = []
+
+    def load():
+        loads.append(1)
+        return "Toy"
+
+    first = built_fmu("Toy", 2, load, values={"a": 1.0, "b": 2.0})
+    assert built_fmu("Toy", 2, load, values={"b": 2.0, "a": 1.0}) == first and len(loads) == 1
+    assert built_fmu("Toy", 2, load, values={"a": 1.0, "b": 2.5}) != first
+    assert built_fmu("Toy", 2, load) != first and len(loads) == 3 and len(builder) == 3

@@ -18,8 +18,11 @@ def flight_log(tmp_path_factory):
 
 
 def _calibrate(tmp_path, log, *args):
+    # no figures: drawing the plant's 16 outputs took more CPU than the fit (their drawing is the command's
+    # test's, tests/engine/test_engine_calibration.py)
     out = tmp_path / "out"
-    code = main(["calibrate", str(log), *map(str, args), "--segment", "2", "--out", str(out), "--quiet"])
+    code = main(["calibrate", str(log), *map(str, args), "--segment", "2", "--out", str(out), "--quiet",
+                 "--no-plots"])
     return code, out
 
 
@@ -38,6 +41,7 @@ def test_the_hidden_parameters_and_the_wind_recovered_to_1e_6_from_guesses_far_o
     assert p["wind_y"]["value"] == pytest.approx(wind, rel=1e-6)
     assert "b = " in (out / "calibration.toml").read_text()
     assert 'name="Ix"' in (out / "parameters.ssv").read_text()
+    assert not list(out.glob("*.png")) and "](" not in (out / "report.md").read_text()  # --no-plots
 
 
 def test_the_casadi_way_and_the_fmu_way_give_the_same_estimates(flight_log):

@@ -34,7 +34,7 @@ def _rows(model, n, x_fix=lambda k: 0.0, every=10):
 
 
 def _run(model, inputs, **parameters):
-    """The model's outputs, row per step, from its CasADi step function (the FMU's)."""
+    """The model's outputs, row per step, from its FMU (the C of its CasADi step function)."""
     return outputs(model, inputs, {"z_0": -10.0, **WHITE, **parameters})
 
 

@@ -20,7 +20,7 @@ OUTPUTS = [v.name for v in ESTIMATOR_MAG.outputs]
 
 
 def _run(inputs, **parameters):
-    """EstimatorMag's outputs, row per step, from its CasADi step function (the FMU's law)."""
+    """EstimatorMag's outputs, row per step, from its FMU (the C of its CasADi step function)."""
     return run_estimator(inputs, ESTIMATOR_MAG, **parameters)
 
 

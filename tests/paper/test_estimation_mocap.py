@@ -23,8 +23,8 @@ SIGMA = {"sigma_phi_m": 7.1e-4, "sigma_theta_m": 7.1e-4, "sigma_psi_m": 5.0e-4,
 
 
 def _run(inputs, **parameters):
-    """EstimatorMocap's outputs, row per step, from its CasADi step function
-    (the FMU's law), with the lab's motion-capture noise, at hover 10 m up."""
+    """EstimatorMocap's outputs, row per step, from its FMU (the C of its
+    CasADi step function), with the lab's motion-capture noise, at hover 10 m up."""
     return outputs(ESTIMATOR_MOCAP, inputs, {"z_0": -10.0, **SIGMA, **parameters})
 
 
