@@ -69,10 +69,23 @@ def _bode_data(systems: list, dt: float) -> list:
                    outputs=L.output_labels) for L in systems]
 
 
+DPI = 110  # of the PNG files
+
+
 def _save(fig, out: Path, name: str, figures: dict) -> None:
-    """Write ``fig`` to ``out/name.png``, close it and record it in ``figures``."""
+    """Write ``fig`` to ``out/name.png``, close it and record it in ``figures``.
+
+    Laid out once (``tight_layout`` at the file's dpi) and drawn once, as
+    ``quadrotor_paper.plots`` saves a run's figures: ``bbox_inches="tight"``
+    and python-control's tight layout engine drew every figure two to three
+    times (a layout pass, a pass without output for the tight box, the
+    output), about 45 % of the figures' CPU (docs/stability.md, "What the
+    command costs")."""
     path = out / f"{name}.png"
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig.set_dpi(DPI)  # the layout's text extents are then the file's: one renderer for both
+    fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: no engine (not even tight_layout's placeholder) to run again
+    fig.savefig(path, dpi=DPI)
     plt.close(fig)
     figures[name] = path
 
@@ -162,7 +175,6 @@ def _figure_steps(study):
         ax.set_xlabel("t (s)")
         ax.grid(True, alpha=0.3)
     axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
     return fig
 
 
@@ -180,7 +192,6 @@ def _figure_gains(study):
         ax.grid(True, alpha=0.3)
     np.atleast_1d(axes)[0].legend(fontsize=8)
     np.atleast_1d(axes)[-1].set_xlabel("t (s)")
-    fig.tight_layout()
     return fig
 
 
@@ -233,7 +244,6 @@ def _figure_along_flight(study):
         row[-1].set_xlabel("t (s)")
     handles = {h.get_label(): h for ax in axes.flat for h in ax.get_lines() if not h.get_label().startswith("_")}
     axes[0, 0].legend(handles.values(), handles.keys(), fontsize=8)
-    fig.tight_layout()
     return fig
 
 
@@ -261,7 +271,6 @@ def _figure_perturbation(study):
     handles = {h.get_label(): h for h in axes[0, 0].get_lines() + axes[0, 2].get_lines()
                if not h.get_label().startswith("_")}
     axes[0, 0].legend(handles.values(), handles.keys(), fontsize=7, ncol=2)
-    fig.tight_layout()
     return fig
 
 
