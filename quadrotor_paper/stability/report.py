@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..tables import PAPER_TABLE2  # noqa: E402
-from .analysis import TIME_BASES, frequency_response  # noqa: E402
+from .analysis import TIME_BASES, frequency_response, response_at  # noqa: E402
 from .loops import AXES  # noqa: E402
 
 __all__ = ["write_report", "make_figures", "point_figures", "point_figures_aside"]
@@ -109,10 +109,23 @@ def _figure_bode_inner(a, dt: float):
     return fig
 
 
+class _EvaluatedAtOnce(ct.StateSpace):
+    """A loop that python-control evaluates at all its points at once:
+    ``nyquist_plot`` asks ``horner`` for its contour (about 1000 points a
+    loop), which python-control solves one point at a time in Python;
+    :func:`~quadrotor_paper.stability.analysis.response_at` gives the same
+    numbers to the bit in one batched solve (the same figure, byte for
+    byte), and hands the cases it does not take back to python-control."""
+
+    def horner(self, x, warn_infinite=True):
+        G = response_at(self, x)
+        return super().horner(x, warn_infinite) if G is None else G
+
+
 def _figure_nyquist_outer(a, loops: list):
     """Nyquist plot of the three outer PD loops of one operating point, near -1."""
     fig = plt.figure(figsize=(6.5, 6))
-    ct.nyquist_plot(loops, label=[f"outer {ax}" for ax in AXES], max_curve_magnitude=4,
+    ct.nyquist_plot([_EvaluatedAtOnce(L) for L in loops], label=[f"outer {ax}" for ax in AXES], max_curve_magnitude=4,
                     title=f"Nyquist, outer loops, {a.op.name} (discrete)", title_frame="figure")
     ax_ = plt.gca()
     ax_.set_xlim(-2.0, 1.0)
