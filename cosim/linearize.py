@@ -457,10 +457,14 @@ def save_linearization(lin: Linearization, out_dir: str | Path, bode: Sequence[t
 
         for i, o in bode:
             siso = sys_[outs.index(o), ins.index(i)]
-            plt.figure(figsize=(7, 6))
-            control.bode_plot(siso, dB=True, title=f"{i} -> {o} ({lin.units.get(i, '')} -> {lin.units.get(o, '')})")
+            fig = plt.figure(figsize=(7, 6), dpi=90)  # the file's dpi: the layout's text extents are the file's
+            # the title over the figure's middle: over the axes python-control centres it by a layout pass more
+            control.bode_plot(siso, dB=True, title=f"{i} -> {o} ({lin.units.get(i, '')} -> {lin.units.get(o, '')})",
+                              title_frame="figure")
             path = out_dir / f"{stem}_bode_{i}_{o}.png".replace("(", "_").replace(")", "_")
-            plt.savefig(path, dpi=90)
+            fig.tight_layout()  # laid out once, then drawn once: python-control's layout engine would lay it
+            fig.set_layout_engine(None)  # out again in a draw of its own before the file's (docs/stability.md)
+            fig.savefig(path, dpi=90)
             plt.close("all")
             written.append(path)
     return written

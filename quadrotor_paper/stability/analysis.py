@@ -32,7 +32,7 @@ __all__ = [
     "PoleReport", "LoopMargins", "GainSweep", "RampError", "CircleError",
     "closed_loop_poles", "loop_margins", "affine_closed_loop", "gain_sweep", "critical_gain_factor",
     "ramp_error", "circle_error", "analyze", "OperatingPointAnalysis", "TIME_BASES",
-    "FeedForwardCase", "feedforward_comparison", "frequency_response",
+    "FeedForwardCase", "feedforward_comparison", "frequency_response", "response_at",
 ]
 
 
@@ -127,12 +127,24 @@ def frequency_response(sys: ct.StateSpace, omega) -> np.ndarray:
     """
     omega = np.asarray(omega, float)
     x = np.exp(1j * omega * sys.dt) if sys.isdtime(strict=True) else 1j * omega
-    if not isinstance(sys, ct.StateSpace) or sys.nstates < 2:  # python-control's own cases
-        return sys(x, squeeze=False)
+    G = response_at(sys, x)
+    return sys(x, squeeze=False) if G is None else G
+
+
+def response_at(sys, x) -> np.ndarray | None:
+    """``C (x I - A)^-1 B + D`` at the complex points ``x`` (1-D), shape
+    (outputs, inputs, points), as one batched ``numpy.linalg.solve``: what
+    python-control's ``StateSpace.horner`` (without slycot) computes one
+    point at a time, to the bit (:func:`frequency_response`). None where
+    python-control's own evaluation is wanted: not a state-space system,
+    fewer than two states, ``x`` not 1-D, or ``x I - A`` singular at a point."""
+    x = np.atleast_1d(x).astype(complex, copy=False)
+    if not isinstance(sys, ct.StateSpace) or sys.nstates < 2 or x.ndim != 1:  # python-control's own cases
+        return None
     try:
         X = np.linalg.solve(x[:, None, None] * np.eye(sys.nstates) - sys.A, sys.B)
     except np.linalg.LinAlgError:
-        return sys(x, squeeze=False)
+        return None
     return np.moveaxis(sys.C @ X + sys.D, 0, -1)
 
 

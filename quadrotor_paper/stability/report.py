@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..tables import PAPER_TABLE2  # noqa: E402
-from .analysis import TIME_BASES, frequency_response  # noqa: E402
+from .analysis import TIME_BASES, frequency_response, response_at  # noqa: E402
 from .loops import AXES  # noqa: E402
 
 __all__ = ["write_report", "make_figures", "point_figures", "point_figures_aside"]
@@ -69,10 +69,23 @@ def _bode_data(systems: list, dt: float) -> list:
                    outputs=L.output_labels) for L in systems]
 
 
+DPI = 110  # of the PNG files
+
+
 def _save(fig, out: Path, name: str, figures: dict) -> None:
-    """Write ``fig`` to ``out/name.png``, close it and record it in ``figures``."""
+    """Write ``fig`` to ``out/name.png``, close it and record it in ``figures``.
+
+    Laid out once (``tight_layout`` at the file's dpi) and drawn once, as
+    ``quadrotor_paper.plots`` saves a run's figures: ``bbox_inches="tight"``
+    and python-control's tight layout engine drew every figure two to three
+    times (a layout pass, a pass without output for the tight box, the
+    output), about 45 % of the figures' CPU (docs/stability.md, "What the
+    command costs")."""
     path = out / f"{name}.png"
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig.set_dpi(DPI)  # the layout's text extents are then the file's: one renderer for both
+    fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: no engine (not even tight_layout's placeholder) to run again
+    fig.savefig(path, dpi=DPI)
     plt.close(fig)
     figures[name] = path
 
@@ -96,10 +109,23 @@ def _figure_bode_inner(a, dt: float):
     return fig
 
 
+class _EvaluatedAtOnce(ct.StateSpace):
+    """A loop that python-control evaluates at all its points at once:
+    ``nyquist_plot`` asks ``horner`` for its contour (about 1000 points a
+    loop), which python-control solves one point at a time in Python;
+    :func:`~quadrotor_paper.stability.analysis.response_at` gives the same
+    numbers to the bit in one batched solve (the same figure, byte for
+    byte), and hands the cases it does not take back to python-control."""
+
+    def horner(self, x, warn_infinite=True):
+        G = response_at(self, x)
+        return super().horner(x, warn_infinite) if G is None else G
+
+
 def _figure_nyquist_outer(a, loops: list):
     """Nyquist plot of the three outer PD loops of one operating point, near -1."""
     fig = plt.figure(figsize=(6.5, 6))
-    ct.nyquist_plot(loops, label=[f"outer {ax}" for ax in AXES], max_curve_magnitude=4,
+    ct.nyquist_plot([_EvaluatedAtOnce(L) for L in loops], label=[f"outer {ax}" for ax in AXES], max_curve_magnitude=4,
                     title=f"Nyquist, outer loops, {a.op.name} (discrete)", title_frame="figure")
     ax_ = plt.gca()
     ax_.set_xlim(-2.0, 1.0)
@@ -162,7 +188,6 @@ def _figure_steps(study):
         ax.set_xlabel("t (s)")
         ax.grid(True, alpha=0.3)
     axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
     return fig
 
 
@@ -180,7 +205,6 @@ def _figure_gains(study):
         ax.grid(True, alpha=0.3)
     np.atleast_1d(axes)[0].legend(fontsize=8)
     np.atleast_1d(axes)[-1].set_xlabel("t (s)")
-    fig.tight_layout()
     return fig
 
 
@@ -233,7 +257,6 @@ def _figure_along_flight(study):
         row[-1].set_xlabel("t (s)")
     handles = {h.get_label(): h for ax in axes.flat for h in ax.get_lines() if not h.get_label().startswith("_")}
     axes[0, 0].legend(handles.values(), handles.keys(), fontsize=8)
-    fig.tight_layout()
     return fig
 
 
@@ -261,7 +284,6 @@ def _figure_perturbation(study):
     handles = {h.get_label(): h for h in axes[0, 0].get_lines() + axes[0, 2].get_lines()
                if not h.get_label().startswith("_")}
     axes[0, 0].legend(handles.values(), handles.keys(), fontsize=7, ncol=2)
-    fig.tight_layout()
     return fig
 
 

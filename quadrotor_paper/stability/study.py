@@ -187,10 +187,13 @@ def _linear(settings: StabilitySettings, analysed=None) -> StabilityStudy:
               gain_sweep(ops[0], sweep_kp, sweep_kd, dt, 1), gain_sweep(ops[-1], sweep_kp, sweep_kd, dt)]
     bases = {"continuous": (None, 0), "discrete": (dt, 0), "discrete+1": (dt, 1)}
     critical = {op.name: {k: critical_gain_factor(op, s, d) for k, (s, d) in bases.items()} for op in ops}
-    study = StabilityStudy(dt, position, ops, analyses, sweeps, critical,
-                           ramp_error(ops[0], ops[1], speed, dt), circle_error(ops[0], dt=dt))
-    study.feedforward_cases = feedforward_comparison(ops, dt, speed, settings.feedforward_gains, analyses)
-    return study
+    cases = feedforward_comparison(ops, dt, speed, settings.feedforward_gains, analyses)
+    # the analysed gain's ramp and circle error are its feed-forward case's (the same calls on the same
+    # points), computed there once: otherwise the same two linear simulations again
+    same = next((c for c in cases if c.feedforward == position.feedforward), None)
+    ramp = same.ramp if same is not None else ramp_error(ops[0], ops[1], speed, dt)
+    circle = same.circle if same is not None else circle_error(ops[0], dt=dt)
+    return StabilityStudy(dt, position, ops, analyses, sweeps, critical, ramp, circle, feedforward_cases=cases)
 
 
 def _cosim_checks(study: StabilityStudy, settings: StabilitySettings) -> None:
