@@ -32,13 +32,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
-import control
 import numpy as np
 
 from .errors import FmuCallError, FmuLoadError
 from .fmu_component import FmuComponent
+
+if TYPE_CHECKING:
+    import control
 
 __all__ = ["Linearization", "LinearizationError", "linearize_fmu", "save_linearization", "operating_point_of_run",
            "METHODS"]
@@ -254,6 +256,10 @@ def _units(names, variables) -> dict[str, str]:
 
 
 def _system(A, B, C, D, states, ins, outs, dt=0) -> control.StateSpace:
+    # python-control imported here, when a system is made: with the SciPy and matplotlib it imports about
+    # 3 s of CPU, which a command refusing its input (or a process importing this module) need not pay
+    import control
+
     return control.ss(A, B, C, D, dt, states=list(states), inputs=list(ins), outputs=list(outs))
 
 
@@ -450,6 +456,7 @@ def save_linearization(lin: Linearization, out_dir: str | Path, bode: Sequence[t
     }
     written[1].write_text(json.dumps(document, indent=1) + "\n")
     if bode:
+        import control
         import matplotlib
 
         matplotlib.use("Agg")

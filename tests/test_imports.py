@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.source_trees import tree
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("fmu_models", "fnn_controller", "cosim", "quadrotor_paper")
 
@@ -75,7 +77,7 @@ def import_graph() -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {}
     for module, path in modules.items():
         visitor = _Imports(module, path.name == "__init__.py")
-        visitor.visit(ast.parse(path.read_text(), str(path)))
+        visitor.visit(tree(path))  # parsed once per process (tests/source_trees.py)
         edges = set()
         for base, name in visitor.found:
             submodule = f"{base}.{name}" if name else None

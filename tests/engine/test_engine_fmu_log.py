@@ -26,6 +26,7 @@ import pytest
 from cosim.errors import FmuCallError, FmuLoadError, ScenarioError
 from cosim.fmu_component import FmuComponent
 from cosim.fmu_log import fmu_log
+from tests.source_trees import nodes
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -220,7 +221,7 @@ _FORBIDDEN = ("fmpy.fmi2", "fmpy.fmi3", "fmpy.fmi1")  # fmi1 holds FMICallExcept
 
 def _imports(path: Path):
     """(module, name) of every import in ``path`` (name None for ``import module``)."""
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    for node in nodes(path):  # parsed once per process (tests/source_trees.py)
         if isinstance(node, ast.Import):
             for alias in node.names:
                 yield alias.name, None
@@ -255,8 +256,7 @@ def test_the_tool_runs_no_fmu_through_fmpys_own_simulation():
     offenders = []
     for folder in ("cosim", "quadrotor_paper", "fmu_models", "fnn_controller"):
         for path in (REPO / folder).rglob("*.py"):
-            tree = ast.parse(path.read_text(), str(path))
-            for node in ast.walk(tree):
+            for node in nodes(path):
                 used = (node.attr if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
                         and node.value.id == "fmpy" else None)
                 if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("fmpy"):

@@ -10,7 +10,7 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
-from cosim.fmu_component import fmi2_callbacks
+from cosim.fmu_component import _fmpy_class, fmi2_callbacks
 from fmu_models.models.quadrotor import STATE_NAMES
 
 
@@ -55,7 +55,14 @@ class LogCollector:
 
 
 class Fmi2Instance:
-    """One instantiated, initialized FMI 2.0 instance (CS by default)."""
+    """One instantiated, initialized FMI 2.0 instance (CS by default).
+
+    Made of fmpy's ``FMU2Slave`` (``FMU2Model``) as the tool makes its
+    instances (:func:`cosim.fmu_component._fmpy_class`): the same class
+    with each FMI function's C signature worked out once per process, not
+    by ``inspect`` for every instance (about 2 ms of the 3 ms an instance
+    took; the test of every parameter of every model makes some 1200), the
+    signatures fmpy's own constructor gives (tests/engine/test_fmpy_classes.py)."""
 
     def __init__(self, fmu_path, parameters=None, model_exchange=False, unzip_dir=None, initialize=True):
         self.md = model_description(fmu_path)
@@ -64,7 +71,7 @@ class Fmi2Instance:
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.log = LogCollector()  # messages of this instance only
         self.messages = self.log.messages
-        cls = FMU2Model if model_exchange else FMU2Slave
+        cls = _fmpy_class(FMU2Model if model_exchange else FMU2Slave)
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip_dir,
                        modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="test")
         self.fmu.instantiate(callbacks=self.log.callbacks)

@@ -157,7 +157,11 @@ def test_a_running_scheduler_and_two_workers_by_address(in_process, study, tmp_p
     from dask.distributed import Client
 
     info = tmp_path / "scheduler.json"
-    env = dict(os.environ)
+    # what the processes do beside the study, off: each worker's statistical profiler (a thread that
+    # samples its stack every 10 ms) and every process's system monitor (every 0.5 s); they serve
+    # the dashboard, which none of them has
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
+           "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL": "1h"}
     logs = open(tmp_path / "dask.log", "w")
     procs = [subprocess.Popen(_dask("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                     "--scheduler-file", str(info)), stdout=logs, stderr=logs, env=env, cwd=tmp_path)]
