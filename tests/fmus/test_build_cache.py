@@ -156,28 +156,3 @@ def test_the_library_is_the_one_a_single_compiler_call_makes(shared_cache, tmp_p
     subprocess.run([build._compiler(), *build.CFLAGS, f"-I{sources}", *sorted(map(str, sources.glob("*.c"))),
                     "-o", str(single), "-lm"], check=True)
     assert (tmp_path / "unzipped" / library).read_bytes() == single.read_bytes()
-
-
-def test_a_free_compiler_slot_goes_to_the_largest_compile_waiting():
-    import threading
-    import time
-
-    slots, order = build._CompilerSlots(1), []
-    waiting = threading.Barrier(4)
-
-    def compile_(cost):
-        waiting.wait()
-        time.sleep(0.05 * cost)  # arrive in the order 1, 2, 3 (smallest first), all while the slot is taken
-        with slots.held(cost):
-            order.append(cost)
-
-    with slots.held(0):  # the slot taken until the three are waiting for it
-        threads = [threading.Thread(target=compile_, args=(cost,)) for cost in (1, 2, 3)]
-        for thread in threads:
-            thread.start()
-        waiting.wait()
-        while len(slots._waiting) < 3:
-            time.sleep(0.01)
-    for thread in threads:
-        thread.join()
-    assert order == [3, 2, 1]
