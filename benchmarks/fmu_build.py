@@ -123,7 +123,8 @@ def main() -> None:
 
     calls = _Calls()
     build.subprocess = type("Shim", (), {"run": staticmethod(calls.run), "PIPE": subprocess.PIPE,
-                                         "STDOUT": subprocess.STDOUT})
+                                         "STDOUT": subprocess.STDOUT,
+                                         "CompletedProcess": subprocess.CompletedProcess})
     build._stage = calls.timed("staging (CasADi C, sources, modelDescription)", calls.stage(build._stage))
     build._zip = calls.timed("zipping", build._zip)
     codegen._generated = calls.timed("  of which CasADi code generation", codegen._generated)

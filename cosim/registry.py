@@ -220,16 +220,17 @@ def build_fmu_models(fmi_versions: Sequence[int]) -> list[tuple[str, int, Path]]
     after the previous version's (the second links the objects the first
     compiled).
 
-    One thread per core: while one thread's Python generates a model's C,
-    the others' compilers run (a builder runs one compiler per core in all),
-    so a first build takes about the compilers' time over the cores, not the
-    sum of every FMU's. ``fnn-cosim build-fmu`` and the test session's first
-    build (tests/conftest.py) use it."""
-    import os
+    One thread per FMU, so every build is queued at once: a builder that
+    stages one model at a time and runs the largest compile waiting first
+    (:mod:`fmu_models.export.build`) keeps every core compiling from its
+    first model staged to the end, where a thread per core staged a model
+    and then waited for its own compiles (the largest, staged late,
+    compiled alone at the end). ``fnn-cosim build-fmu`` and the test
+    session's first build (tests/conftest.py) use it."""
     from concurrent.futures import ThreadPoolExecutor
 
     builds = [(name, model, version) for version in fmi_versions for name, model in fmu_models().items()]
-    with ThreadPoolExecutor(max(1, os.cpu_count() or 1)) as pool:
+    with ThreadPoolExecutor(max(1, len(builds))) as pool:
         paths = list(pool.map(lambda b: b[1].build(b[2]), builds))
     return [(name, version, path) for (name, _, version), path in zip(builds, paths)]
 

@@ -18,7 +18,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["summarize", "interval95", "metric_value", "kept_t975", "STATUSES", "MAX_ERRORS"]
+__all__ = ["summarize", "interval95", "metric_value", "t975", "kept_t975", "STATUSES", "MAX_ERRORS"]
 
 STATUSES = ("ok", "diverged", "failed")
 MAX_ERRORS = 5  # messages kept per cell: the first ones in plan order
@@ -47,6 +47,9 @@ def _t975(dof: int) -> float:
 
             keep(path, {str(k): v for k, v in sorted({**kept_t975(), **_T975}.items())})
     return _T975[dof]
+
+
+t975 = _t975  # the same, for the other modules that need the quantile (cosim.calibration.statistics)
 
 
 def _quantiles_file():

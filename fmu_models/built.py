@@ -94,9 +94,11 @@ def built_fmu(identifier: str, fmi_version: int, load: Callable[[], object], ext
             return known
     except OSError:
         pass  # not yet recorded, or the cache moved: build (or find) it as cached_fmu does
-    from .export.build import cached_fmu
+    from .export.build import cached_fmu, staging
 
-    path = cached_fmu(load(), fmi_version)
+    with staging():  # building the model's CasADi functions is staging too: one builder thread at a time
+        model = load()
+    path = cached_fmu(model, fmi_version)
     entry.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=entry.parent, suffix=".part")  # parallel runs never read half an entry
     with os.fdopen(fd, "w") as f:

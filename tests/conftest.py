@@ -42,37 +42,51 @@ def quadrotor_fmu2():
     return cached_fmu(QUADROTOR, 2)
 
 
-# The longest tests (measured with ``--durations``; longest first), run
-# first: pytest-xdist hands each process a contiguous share of the
-# collection and the first to run out steals from the end of the other's,
-# so a long test left at the end keeps one process busy while the other
-# waits. A test using a module-scoped fixture moves with its whole module,
-# so that fixture is still made once. A name no longer collected is ignored.
+# The longest tests (wall time in a fresh ``make test``, parametrized ones
+# summed; longest first), run first: pytest-xdist hands each process a
+# contiguous share of the collection and the first to run out steals from
+# the end of the other's, so a long test left at the end keeps one process
+# busy while the other waits. A test using a module-scoped fixture moves with
+# its whole module, so that fixture is still made once. A name no longer
+# collected is ignored. Measured at 0adb59c (the tests of 1.3 s and more).
 LONGEST_FIRST = (
     "tests/paper/test_stability_cosim.py::test_command_writes_the_report_and_figures",
-    "tests/paper/test_fuzz.py::test_fuzz_scenario_files",
-    "tests/paper/test_fuzz.py::test_fuzz_archives",
-    "tests/paper/test_ssp_importers.py::test_every_input_is_connected_and_every_fmu_starts_from_the_bound_values",
-    "tests/paper/test_stability_cosim.py::test_operating_point_figures_drawn_aside_are_the_same_files",
-    "tests/paper/test_fuzz.py::test_fuzz_learned_files",
-    "tests/paper/test_fuzz.py::test_fuzz_study_files",
-    "tests/paper/test_fuzz.py::test_fuzz_special_files",
     "tests/paper/test_estimation_gating.py::test_fmpy_simulate_ssp_flies_circles_estimated_without_chasing_its_first_fix",
-    "tests/fmus/test_estimation_fmu.py::test_builds_and_validates",
-    "tests/fmus/test_sensors_ssp.py::test_circles_sensors_flies_in_libcosim_as_in_our_master_noise_and_seed_included",
-    "tests/paper/test_estimation.py::test_the_estimated_missions_as_fmus_fly_in_libcosim_as_in_our_master",
-    "tests/paper/test_cli.py::test_build_fmu_writes_the_plant_wind_references_and_every_controller",
-    "tests/paper/test_calibrate_plant.py::test_a_parameter_the_flight_does_not_excite_is_not_identifiable",
-    "tests/paper/test_stability_linear.py::test_feed_forward_leaves_poles_and_margins_and_removes_the_v_over_kp_ramp_lag",
+    "tests/paper/test_calibrate_plant.py::test_the_hidden_parameters_and_the_wind_recovered_to_1e_6_from_guesses_far_off",
     "tests/paper/test_sweep.py::test_a_running_scheduler_and_two_workers_by_address",
-    "tests/paper/test_stability_linear.py::test_paper_gains_are_stable_with_margins_at_every_operating_point",
+    "tests/paper/test_ssp_importers.py::test_every_input_is_connected_and_every_fmu_starts_from_the_bound_values",
+    "tests/engine/test_engine_calibration.py::test_van_der_pol_mu_from_noisy_data_of_our_own_inside_its_interval",
     "tests/paper/test_ssp_importers.py::test_fmpy_flies_the_circles_archive_within_3_percent_of_our_master",
+    "tests/paper/test_calibrate_plant.py::test_the_casadi_way_and_the_fmu_way_give_the_same_estimates",
+    "tests/paper/test_fuzz.py::test_fuzz_scenario_files",
+    "tests/paper/test_stability_cosim.py::test_operating_point_figures_drawn_aside_are_the_same_files",
+    "tests/paper/test_estimation.py::test_the_estimated_missions_as_fmus_fly_in_libcosim_as_in_our_master",
+    "tests/paper/test_fuzz.py::test_fuzz_archives",
     "tests/paper/test_stability_along_flight.py::test_the_study_runs_every_case_through_the_study_runner_in_case_order",
-    "tests/engine/test_engine_calibration.py::test_the_command_writes_its_four_files",
-    "tests/paper/test_bad_inputs.py::test_a_local_study_leaves_no_dask_scratch_space",
     "tests/test_imports.py::test_importing_every_engine_module_loads_no_application_package",
     "tests/engine/test_engine_study.py::test_a_local_dask_cluster_gives_the_rows_of_this_process",
+    "tests/engine/test_engine_fmu_log.py::test_the_tool_runs_no_fmu_through_fmpys_own_simulation",
+    "tests/paper/test_calibrate_plant.py::test_the_calibrated_parameter_set_flies_in_a_run_and_in_an_exported_archive",
+    "tests/paper/test_calibrate_plant.py::test_a_parameter_the_flight_does_not_excite_is_not_identifiable",
+    "tests/paper/test_fuzz.py::test_fuzz_learned_files",
+    "tests/fmus/test_sensors_ssp.py::test_circles_sensors_flies_in_libcosim_as_in_our_master_noise_and_seed_included",
+    "tests/fmus/test_build_cache.py::test_the_library_is_the_one_a_single_compiler_call_makes",
+    "tests/paper/test_stability_linear.py::test_feed_forward_leaves_poles_and_margins_and_removes_the_v_over_kp_ramp_lag",
     "tests/fmus/test_fmi3.py::test_source_fmu_compiles_with_fmpy_build",
+    "tests/paper/test_sweep.py::test_every_run_is_a_row_with_the_metrics_of_a_single_run",
+    "tests/paper/test_long_missions.py::test_a_runs_peak_memory_is_flat_in_its_duration",
+    "tests/paper/test_ssp_libcosim.py::test_the_whole_mission_as_fmus_flies_in_libcosim_as_in_our_master",
+    "tests/engine/test_engine_fmu_log.py::test_only_the_fmu_component_and_the_file_guard_import_fmpys_fmi_layers_or_extract",
+    "tests/test_fmu_validation.py::test_a_plain_name_accepted_unparsed_is_one_fmpys_parser_accepts",
+    "tests/paper/test_estimation_gating.py::test_a_fix_that_jumps_is_refused_counted_and_leaves_the_estimate_as_without_it",
+    "tests/paper/test_calibrate_plant.py::test_an_instance_of_a_scenario_driven_by_the_log",
+    "tests/fmus/test_sensors_ssp.py::test_the_archive_flies_as_the_toml_scenario_in_the_feedthrough_ordering",
+    "tests/fmus/test_plant_fmu.py::test_source_fmu_compiles_on_its_own_with_fmpy_build",
+    "tests/test_imports.py::test_the_graph_sees_imports_inside_functions_and_relative_ones",
+    "tests/paper/test_linearize_cli.py::test_linearize_the_plant_at_hover_writes_the_casadi_jacobian",
+    "tests/paper/test_plant_model_exchange.py::test_circles_with_the_plant_as_model_exchange_lands_on_the_co_simulation_run",
+    "tests/paper/test_fuzz.py::test_fuzz_study_files",
+    "tests/paper/test_estimation_gating.py::test_measurements_a_step_late_with_their_stamps_give_the_on_time_estimate",
 )
 
 
@@ -95,8 +109,11 @@ def pytest_collection_modifyitems(session, config, items):
             modules.setdefault(item.path, i)
         else:
             first.setdefault(i, []).append(item)
+    by_path: dict = {}
+    for item in items:
+        by_path.setdefault(item.path, []).append(item)
     for path, i in modules.items():  # the whole module where the test is, in its order
-        first.setdefault(i, []).extend(it for it in items if it.path == path)
+        first.setdefault(i, []).extend(by_path[path])
     moved = [it for i in sorted(first) for it in first[i]]
     seen = set()
     moved = [it for it in moved if not (id(it) in seen or seen.add(id(it)))]

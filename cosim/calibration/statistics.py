@@ -25,7 +25,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import stdtrit  # scipy.stats' t.ppf is this function; scipy.stats costs 0.3-0.6 s to import
+
+from ..summary import t975
 
 __all__ = ["Statistics", "statistics", "residual_statistics", "NULL_COMPONENT"]
 
@@ -86,7 +87,7 @@ def statistics(names, theta: np.ndarray, J: np.ndarray, residuals: np.ndarray, s
     cov_s = (Vk / wk) @ Vk.T if keep.any() else np.zeros((p, p))
     cov = s2 * cov_s * np.outer(scale, scale)
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
-    t = stdtrit(dof, 0.975)  # Student's t quantile, as scipy.stats.t.ppf(0.975, dof) gives it, bit for bit
+    t = t975(dof)  # scipy.stats.t.ppf(0.975, dof) bit for bit, without importing scipy.stats (~1.5 CPU-s a process)
     ci = np.column_stack([theta - t * std, theta + t * std])
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)

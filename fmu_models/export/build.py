@@ -9,6 +9,8 @@ platform, compiled here with the system C compiler, under
 from __future__ import annotations
 
 import hashlib
+import heapq
+import itertools
 import os
 import re
 import shutil
@@ -18,10 +20,10 @@ import threading
 import uuid
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import ExitStack
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import fmpy
 
@@ -121,20 +123,77 @@ def _object_digest(c_file: Path, compiler: list[str]) -> str:
     return digest.hexdigest()[:16]
 
 
-# One compiler per core in the whole process, however many builds run at once
-# (``fnn-cosim build-fmu`` builds every FMU on a thread of its own): a thread
-# waiting for a slot holds none, so builds never wait on each other.
-_COMPILER_SLOTS = threading.BoundedSemaphore(max(1, os.cpu_count() or 1))
+class _CompilerSlots:
+    """One compiler per core in the whole process, however many builds run at
+    once (:func:`cosim.registry.build_fmu_models` builds every FMU on a
+    thread of its own): a thread waiting for a slot holds none, so builds
+    never wait on each other. A slot that frees goes to the largest compile
+    waiting (its C file's size estimates its time), not to the first come:
+    longest first, so a first build does not start the estimators' generated
+    C, a quarter of all its compiling each, last while the other core idles."""
+
+    def __init__(self, slots: int) -> None:
+        self._free = slots
+        self._changed = threading.Condition()
+        self._waiting: list[tuple[int, int]] = []  # heap of (-cost, arrival)
+        self._arrivals = itertools.count()
+
+    @contextmanager
+    def held(self, cost: int) -> Iterator[None]:
+        ticket = (-cost, next(self._arrivals))
+        with self._changed:
+            heapq.heappush(self._waiting, ticket)
+            while not (self._free and self._waiting[0] == ticket):
+                self._changed.wait()
+            heapq.heappop(self._waiting)
+            self._free -= 1
+            self._changed.notify_all()  # the next largest may take another free slot
+        try:
+            yield
+        finally:
+            with self._changed:
+                self._free += 1
+                self._changed.notify_all()
+
+
+_COMPILER_SLOTS = _CompilerSlots(max(1, os.cpu_count() or 1))
+
+# Staging (a model's CasADi functions built, their C generated, the sources
+# written) is Python, one thread at a time under the GIL anyway: builds on
+# several threads stage one after the other, in the order they came, so each
+# one's compiles are queued as soon as it is staged, instead of every
+# thread's staging advancing slowly at once while the compilers wait for C.
+_STAGING = threading.RLock()
+
+
+def staging():
+    """Hold the process's staging turn (:data:`_STAGING`), e.g. while loading a model to build."""
+    return _STAGING
 
 
 def _compile_one(cmd: list[str]) -> subprocess.CompletedProcess:
-    with _COMPILER_SLOTS:
-        return subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    """Compile the object ``cmd`` names last (``-o <object>``) unless a
+    builder made it before, holding that object's lock alone: written
+    beside its name and renamed, so no builder ever sees half of one. A
+    builder waiting for another's object holds no other lock, nor a
+    compiler slot, so the builds of one process or several never wait for
+    each other's compiles beyond that object's."""
+    obj = Path(cmd[-1])
+    with _exclusive(obj.parent):
+        if obj.exists():  # compiled by the builder that held the lock before us
+            return subprocess.CompletedProcess(cmd, 0, "")
+        part = obj.with_name(f"{obj.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.o.part")
+        with _COMPILER_SLOTS.held(Path(cmd[cmd.index("-c") + 1]).stat().st_size):
+            result = subprocess.run([*cmd[:-1], str(part)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        if result.returncode == 0:
+            os.replace(part, obj)
+        return result
 
 
 def _run_compilers(commands: list[tuple[list[str], str]]) -> None:
-    """Run the compiler commands concurrently, at most one per core across
-    every build of this process; raise naming the first that failed with its output."""
+    """Run the compiler commands (each ends ``-o <object>``, :func:`_compile_one`)
+    concurrently, at most one per core across every build of this process,
+    the largest first; raise naming the first that failed with its output."""
     if not commands:
         return
     with ThreadPoolExecutor(len(commands)) as pool:
@@ -163,28 +222,15 @@ def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
     compiled only if no build made it before: the generated C of the
     largest model takes most of the time of a first build. One builder at a
     time compiles a missing object (a lock in its folder: the other threads
-    and processes wait, then link what it compiled), and each object is
-    written beside its name and renamed, so no builder ever sees half of one."""
+    and processes wait, then link what it compiled, :func:`_compile_one`)."""
     sources = root / "sources"
     cc = _compiler()
     compile_flags = [cc, *(f for f in CFLAGS if f != "-shared")]
     objects = {c_file: cache_root() / "objects" / _object_digest(c_file, compile_flags) / f"{c_file.stem}.o"
                for c_file in sorted(sources.glob("*.c"))}
-    missing = sorted((obj, c_file) for c_file, obj in objects.items() if not obj.exists())
-    with ExitStack() as locks:
-        for obj, _ in missing:  # always in the same order: two builders never wait on each other
-            locks.enter_context(_exclusive(obj.parent))
-        commands, renames = [], []
-        for obj, c_file in missing:
-            if obj.exists():  # compiled by the builder that held the lock before us
-                continue
-            part = obj.with_name(f"{obj.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.o.part")
-            renames.append((part, obj))
-            commands.append(([*compile_flags, f"-I{sources}", "-c", str(c_file), "-o", str(part)],
-                             f"{c_file.name} of {model.identifier} (FMI {fmi_version})"))
-        _run_compilers(commands)
-        for part, obj in renames:
-            os.replace(part, obj)
+    _run_compilers([([*compile_flags, f"-I{sources}", "-c", str(c_file), "-o", str(obj)],
+                     f"{c_file.name} of {model.identifier} (FMI {fmi_version})")
+                    for c_file, obj in objects.items() if not obj.exists()])
     binary_dir = root / "binaries" / FMI_VERSIONS[fmi_version].binary_dir
     binary_dir.mkdir(parents=True, exist_ok=True)
     out = binary_dir / f"{model.identifier}{fmpy.sharedLibraryExtension}"
@@ -234,12 +280,13 @@ def cached_fmu(model: FmuModel, fmi_version: int = 2) -> Path:
     if known is not None and known[0] is model and known[1].exists():
         return known[1]
     with tempfile.TemporaryDirectory() as tmp:
-        root = _stage(model, fmi_version, Path(tmp))
-        digest = hashlib.sha256(" ".join(CFLAGS).encode())
-        for path in sorted(root.rglob("*")):
-            if path.is_file():
-                digest.update(path.relative_to(root).as_posix().encode())
-                digest.update(path.read_bytes())
+        with _STAGING:
+            root = _stage(model, fmi_version, Path(tmp))
+            digest = hashlib.sha256(" ".join(CFLAGS).encode())
+            for path in sorted(root.rglob("*")):
+                if path.is_file():
+                    digest.update(path.relative_to(root).as_posix().encode())
+                    digest.update(path.read_bytes())
         target = cache_root() / digest.hexdigest()[:16] / f"fmi{fmi_version}" / f"{model.identifier}.fmu"
         if not target.exists():  # the tree just hashed is the one compiled: sources generated once
             _compile(model, fmi_version, root)
