@@ -279,6 +279,20 @@ class FmuModel:
             ),
         }
 
+    @cached_property
+    def inlined_step(self) -> ca.Function:
+        """``dstep`` of a sampled-data model as one SX function, every law the
+        step calls inlined (:func:`fmu_models.export.staged.inlined`): the same
+        values, and the exact structure its modelDescription's dependencies
+        are read from."""
+        s = self.symbols
+        if self.sampled is None or self.functions["dstep"].class_name() == "SXFunction":
+            return self.functions["dstep"]
+        named = {v.name: vec[i] for vec, group in ((s["u"], self.inputs), (s["p"], self.parameters),
+                                                   (s["z"], self.discrete_states)) for i, v in enumerate(group)}
+        with staged.inlined():
+            return self._sampled_functions(named)["dstep"]
+
     def _sampled_functions(self, named: dict[str, ca.SX]) -> dict[str, ca.Function]:
         """``dinit`` and ``dstep`` of a sampled-data model."""
         s = self.symbols

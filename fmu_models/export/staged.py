@@ -26,9 +26,29 @@ from contextlib import contextmanager
 
 from ..lazy_casadi import ca
 
-__all__ = ["call", "function", "recording", "value", "without_null_checks"]
+__all__ = ["call", "function", "inlining", "inlined", "recording", "value", "without_null_checks"]
 
 _RECORDING: list | None = None  # the calls recorded while a step is built, else None
+_INLINED = False  # True while a step is built whole, its laws inlined (:func:`inlined`)
+
+
+@contextmanager
+def inlined():
+    """Build a step whole, every law inlined where it is used: the expression
+    graph the step had before it was cut into pieces, for what reads its
+    structure (the modelDescription's dependencies: a law called on dense
+    arguments would make every entry it touches depend on every input)."""
+    global _INLINED
+    outer, _INLINED = _INLINED, True
+    try:
+        yield
+    finally:
+        _INLINED = outer
+
+
+def inlining() -> bool:
+    """True while a step is built whole (:func:`inlined`): a law is to be written inline, not called."""
+    return _INLINED
 
 
 @contextmanager

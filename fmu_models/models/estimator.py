@@ -523,6 +523,8 @@ def _called(law, name: str, args: tuple, v=None, covariance: int | None = None, 
     copy, and the law's lower triangle, which only repeats the upper, is
     never computed. The numbers are those of the law inlined, bit for bit:
     the same operations in the same order."""
+    if staged.inlining():  # the step's structure read (fmu_models.export.staged.inlined): the law inline
+        return tuple(law(*args, **({} if v is None else {"v": v}), **options))
     args = [ca.densify(ca.SX(a)) for a in args]
     n = None
     if covariance is not None:
@@ -615,6 +617,8 @@ def _cut(xs, P, *values):
     is cut into pieces (:func:`fmu_models.export.staged.value`): the gate's
     decisions (a chi-square quantile: 40 Newton steps) and what they select
     are read by the pieces after the cut, not computed again in each."""
+    if staged.inlining():
+        return (xs, P, *values)
     xs, packed, *values = staged.value([xs, _packed(P), *values])
     return (xs, _unpacked(packed, P.shape[0]), *values)
 
