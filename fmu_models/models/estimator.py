@@ -509,11 +509,12 @@ def _unpacked(packed, n: int):
 
 def _called(law, name: str, args: tuple, v=None, covariance: int | None = None, **options):
     """``law(*args, v, **options)`` as one CasADi function the step calls
-    (an SX call node, ``never_inline``) rather than its expression graph
+    (:func:`fmu_models.export.staged.call`) rather than its expression graph
     inlined at every use: the generated C holds the law's code once, a
-    function ``model_dstep`` calls at each use, where the inlined step was
-    one straight-line function of 30 000-40 000 lines that gcc compiled in
-    8-14 CPU-s (docs/estimation.md, "The generated C"). The law is built
+    function the step calls at each use, where the inlined step was one
+    straight-line function of 30 000-40 000 lines that gcc compiled in
+    8-14 CPU-s (docs/estimation.md, "The generated C"); inline while the
+    step's structure is read (:func:`fmu_models.export.staged.inlined`). The law is built
     once per shape of its arguments and ``options``, on symbols; ``v`` (the
     model's variables by name) becomes the inputs it reads. ``covariance``:
     the position of the covariance among the arguments and among the
