@@ -2,10 +2,11 @@
 EstimatorGM), and the compiler's CPU for its generated C.
 
 For each model: its FMU (FMI 2.0) as built from this tree (``cached_fmu``,
-the shared cache), instantiated with fmpy and stepped ``--steps`` times on a
-straight line with noisy IMU samples and a fresh fix every tenth step; the
-time of ``fmi2DoStep`` alone per step, best of ``--repeats`` runs (fmpy's
-call costs about a microsecond of it). Then the model's ``model_generated.c``
+the shared cache), instantiated as a run does (``cosim.fmu_component``) and
+stepped ``--steps`` times on a straight line with noisy IMU samples and a
+fresh fix every tenth step; the time of ``do_step`` (``fmi2DoStep``) alone per
+step, best of ``--repeats`` runs (the Python call is about a microsecond of it).
+Then the model's ``model_generated.c``
 compiled alone with the build's flags, its compiler CPU (``wait4``).
 ``--against TREE`` runs the same in another checkout (``PYTHONPATH=TREE``)
 and prints both side by side, measured in the same minutes: the machine may
@@ -44,17 +45,12 @@ def _compile_seconds(model) -> float:
 
 
 def _step_seconds(model, steps: int, repeats: int) -> float:
-    """Best time of one ``fmi2DoStep`` over ``repeats`` runs of ``steps`` steps."""
+    """Best time of one step (``FmuComponent.do_step``: fmi2DoStep) over ``repeats`` runs of ``steps`` steps."""
     import numpy as np
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave
 
+    from cosim.fmu_component import FmuComponent
     from fmu_models.export.build import cached_fmu
 
-    path = cached_fmu(model, 2)
-    folder = extract(str(path))
-    description = read_model_description(folder)
-    refs = {v.name: v.valueReference for v in description.modelVariables}
     names = [v.name for v in model.inputs]
     dt = model.variable("dt").start
     rng = np.random.default_rng(1)
@@ -63,34 +59,23 @@ def _step_seconds(model, steps: int, repeats: int) -> float:
     column = {n: k for k, n in enumerate(names)}
     inputs[:, column["x_m"]] = 1.0 * t + rng.normal(0, 0.02, steps)
     inputs[:, column["u_m"]] = 1.0 + rng.normal(0, 0.05, steps)
-    for k, axis in enumerate("xyz"):
+    for axis in "xyz":
         inputs[:, column[f"gyro_{axis}"]] = rng.normal(0, 0.01, steps)
         inputs[:, column[f"acc_{axis}"]] += rng.normal(0, 0.05, steps)
     inputs[:, column["fresh"]] = np.arange(steps) % 10 == 0
     inputs[:, column["t_imu"]] = inputs[:, column["t_fix"]] = t
-    vrs = [refs[n] for n in names]
     best = float("inf")
-    try:
+    with FmuComponent("ekf", cached_fmu(model, 2)) as fmu:
+        fmu.instantiate()
         for _ in range(repeats):
-            fmu = FMU2Slave(guid=description.guid, unzipDirectory=folder,
-                            modelIdentifier=description.coSimulation.modelIdentifier, instanceName="ekf")
-            fmu.instantiate()
-            fmu.setupExperiment(startTime=0.0)
-            fmu.enterInitializationMode()
-            fmu.exitInitializationMode()
+            fmu.start(0.0)
             spent = 0.0
             for n in range(steps):
-                fmu.setReal(vrs, list(inputs[n]))
+                fmu.set_inputs(dict(zip(names, inputs[n])), n * dt)
                 start = time.perf_counter()
-                fmu.doStep(currentCommunicationPoint=n * dt, communicationStepSize=dt)
+                fmu.do_step(n * dt, dt)
                 spent += time.perf_counter() - start
-            fmu.terminate()
-            fmu.freeInstance()
             best = min(best, spent / steps)
-    finally:
-        import shutil
-
-        shutil.rmtree(folder, ignore_errors=True)
     return best
 
 
