@@ -20,6 +20,7 @@ from pathlib import Path
 
 from fmu_models.lazy_casadi import ca
 
+from . import staged
 from .model import FmuModel
 
 __all__ = ["generate_sources", "GENERIC_C_DIR", "GENERIC_C_FILES", "value_references"]
@@ -145,6 +146,8 @@ def _generated(functions) -> tuple[dict[str, bytes], dict[str, int]]:
     with tempfile.TemporaryDirectory() as folder:
         generator.generate(folder + "/")
         generated = {name: (Path(folder) / name).read_bytes() for name in ("model_generated.c", "model_generated.h")}
+    if any(f.class_name() == "MXFunction" for f in functions.values()):  # a step in pieces (export/staged.py)
+        generated["model_generated.c"] = staged.without_null_checks(generated["model_generated.c"])
     work = {
         key: max(int(getattr(f, key)()) for f in functions.values())
         for key in ("sz_arg", "sz_res", "sz_iw", "sz_w")

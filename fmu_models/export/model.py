@@ -40,6 +40,7 @@ from functools import cached_property
 from typing import Callable, Mapping
 
 from ..lazy_casadi import ca
+from . import staged
 from .variables import SEED_MAX, Variable, parameter
 
 __all__ = ["FmuModel", "INTERNAL_STEP"]
@@ -278,12 +279,27 @@ class FmuModel:
             ),
         }
 
+    @cached_property
+    def inlined_step(self) -> ca.Function:
+        """``dstep`` of a sampled-data model as one SX function, every law the
+        step calls inlined (:func:`fmu_models.export.staged.inlined`): the same
+        values, and the exact structure its modelDescription's dependencies
+        are read from."""
+        s = self.symbols
+        if self.sampled is None or self.functions["dstep"].class_name() == "SXFunction":
+            return self.functions["dstep"]
+        named = {v.name: vec[i] for vec, group in ((s["u"], self.inputs), (s["p"], self.parameters),
+                                                   (s["z"], self.discrete_states)) for i, v in enumerate(group)}
+        with staged.inlined():
+            return self._sampled_functions(named)["dstep"]
+
     def _sampled_functions(self, named: dict[str, ca.SX]) -> dict[str, ca.Function]:
         """``dinit`` and ``dstep`` of a sampled-data model."""
         s = self.symbols
         t, u, p, z, r, rs = s["t"], s["u"], s["p"], s["z"], s["r"], s["rs"]
         stochastic = self.sampled.n_random_step > 0
-        outputs, z_next = self.sampled.update(t, named, rs) if stochastic else self.sampled.update(t, named)
+        with staged.recording() as calls:  # the laws the step calls as functions (fmu_models.export.staged)
+            outputs, z_next = self.sampled.update(t, named, rs) if stochastic else self.sampled.update(t, named)
         params = {v.name: named[v.name] for v in self.parameters}
         z0 = self.sampled.initial(params, r)
         missing = ({v.name for v in self.outputs} - set(outputs)) | ({v.name for v in self.discrete_states} - set(z_next))
@@ -295,10 +311,10 @@ class FmuModel:
         y = ca.densify(ca.vertcat(*[outputs[v.name] for v in self.outputs]))
         z_plus = ca.densify(ca.vertcat(*[z_next[v.name] for v in self.discrete_states]))
         z_init = ca.densify(ca.vertcat(*[z0[v.name] for v in self.discrete_states]))
+        # rs only where the model asks for it: the others' generated code stays as it was
+        inputs, names = ([t, u, p, z, rs], ["t", "u", "p", "z", "rs"]) if stochastic else ([t, u, p, z], ["t", "u", "p", "z"])
         return {
             "dinit": ca.Function("model_dinit", [p, r], [z_init], ["p", "r"], ["z0"]),
-            # rs only where the model asks for it: the others' generated code stays as it was
-            "dstep": (ca.Function("model_dstep", [t, u, p, z, rs], [y, z_plus], ["t", "u", "p", "z", "rs"],
-                                  ["y", "z_next"]) if stochastic else
-                      ca.Function("model_dstep", [t, u, p, z], [y, z_plus], ["t", "u", "p", "z"], ["y", "z_next"])),
+            "dstep": (staged.function("model_dstep", inputs, [y, z_plus], names, ["y", "z_next"], calls) if calls else
+                      ca.Function("model_dstep", inputs, [y, z_plus], names, ["y", "z_next"])),
         }

@@ -80,7 +80,8 @@ def dependency_kinds(model: FmuModel) -> dict[str, list[tuple[str, str]]]:
     t, x, u, p, z = s["t"], s["x"], s["u"], s["p"], s["z"]
     if model.sampled is not None:
         rs = s["rs"]
-        unknowns = (f["dstep"](t, u, p, z, rs) if model.sampled.n_random_step else f["dstep"](t, u, p, z))[0]
+        step = model.inlined_step  # its laws inlined: the exact structure (fmu_models.export.staged)
+        unknowns = (step(t, u, p, z, rs) if model.sampled.n_random_step else step(t, u, p, z))[0]
         variable_part = ca.vertcat(t, u, z, rs)
     else:
         unknowns = ca.vertcat(f["ode"](t, x, u, p), f["out"](t, x, u, p))

@@ -51,6 +51,7 @@ from functools import partial
 
 from fmu_models.lazy_casadi import ca
 
+from ..export import staged
 from ..export.model import FmuModel, Sampled
 from ..export.variables import discrete, input_, output, parameter
 from .estimator_outputs import (ATTITUDE_FIX_COUNTS, ATTITUDE_FIX_MODEL, COUNTS, COVARIANCE_BLOCKS, MAGNETOMETER_COUNTS,
@@ -162,11 +163,19 @@ def drag_measurement(xs, v):
 def scalar_update(xs, P, h, H, measured, variance):
     """One scalar EKF correction, eqs. E11-E12: innovation ``nu = y - h``,
     ``s = H P H^T + r``, gain ``K = P H^T / s``; returns the corrected state,
-    covariance and the NIS term ``nu^2 / s``."""
+    covariance and the NIS term ``nu^2 / s``. ``P H^T`` and ``s`` where ``H``
+    is (sparse, each channel its own), the rest one function every channel
+    calls (:func:`_corrected`, :func:`_called`)."""
     PH = P @ H.T
     s = (H @ PH)[0, 0] + variance
+    return _called(_corrected, "ekf_correct", (xs, P, PH, s, measured - h), covariance=1)
+
+
+def _corrected(xs, P, PH, s, nu):
+    """The scalar correction of :func:`scalar_update` from ``PH = P H^T``,
+    ``s`` and the innovation ``nu`` (E11-E12): ``K = PH / s``, the state
+    ``xs + K nu``, the covariance ``P - K PH^T`` made symmetric, the NIS term."""
     K = PH / s
-    nu = measured - h
     P_next = P - K @ PH.T
     return xs + K * nu, (P_next + P_next.T) / 2, nu * nu / s
 
@@ -452,13 +461,13 @@ def _attitude_fix(xs, P, v, gyro, tau, new_fix, level):
     corrected = _sequential(xs, P, measure, measured, variances)
     nis = corrected[2]
     refused = ca.logic_and(new_fix, nis > chi2_quantile_odd(3, level))
-    xs, P = _gated(ca.logic_and(new_fix, ca.logic_not(refused)), corrected[:2], (xs, P))
+    xs, P, refused = _gated(ca.logic_and(new_fix, ca.logic_not(refused)), corrected[:2], (xs, P), refused)
     run = ca.if_else(new_fix, ca.if_else(refused, v["refusal_run_attitude"] + 1, 0.0), v["refusal_run_attitude"])
     reset = run >= v["reset_after_attitude"]
     # the attitude starts again from the frame brought forward over tau, at its noise, uncorrelated with the rest
     restart = ca.vertcat(xs[0:6], measured + tau * euler_rate_matrix(xs[6], xs[7]) @ (gyro - xs[9:12]), xs[9:])
     xs = ca.if_else(reset, restart, xs)
-    P = ca.if_else(reset, _reset(P, range(6, 9), variances), P)
+    xs, P = _cut(xs, ca.if_else(reset, _reset(P, range(6, 9), variances), P))
     return (xs, P), refused, reset, ca.if_else(reset, 0.0, run), nis
 
 
@@ -468,7 +477,90 @@ def magnetometer_measurement(xs, v):
     return body_field(xs[6:9], ca.vertcat(v["field_north"], v["field_east"], v["field_down"]))
 
 
+class _Recorded(dict):
+    """The variables a law reads by name, each a fresh symbol at its first read, in the order read."""
+
+    def __missing__(self, name):
+        self[name] = ca.SX.sym(name)
+        return self[name]
+
+
+_CALLED: dict[tuple, tuple] = {}  # (law, shapes, options) -> (its Function, the names it reads from v)
+
+
+def _triangle(n: int) -> list[tuple[int, int]]:
+    """The entries ``(i, j)``, ``i <= j``, of an n x n matrix's upper triangle, column by column."""
+    return [(i, j) for j in range(n) for i in range(j + 1)]
+
+
+def _packed(P):
+    """A symmetric matrix as the column of its upper triangle (:func:`_triangle`)."""
+    return ca.vertcat(*(P[i, j] for i, j in _triangle(P.shape[0])))
+
+
+def _unpacked(packed, n: int):
+    """The symmetric n x n matrix of :func:`_packed`: ``(i, j)`` and ``(j, i)`` one expression."""
+    P = ca.SX(n, n)
+    for k, (i, j) in enumerate(_triangle(n)):
+        P[i, j] = packed[k]
+        P[j, i] = packed[k]
+    return P
+
+
+def _called(law, name: str, args: tuple, v=None, covariance: int | None = None, **options):
+    """``law(*args, v, **options)`` as one CasADi function the step calls
+    (:func:`fmu_models.export.staged.call`) rather than its expression graph
+    inlined at every use: the generated C holds the law's code once, a
+    function the step calls at each use, where the inlined step was one
+    straight-line function of 30 000-40 000 lines that gcc compiled in
+    8-14 CPU-s (docs/estimation.md, "The generated C"); inline while the
+    step's structure is read (:func:`fmu_models.export.staged.inlined`). The law is built
+    once per shape of its arguments and ``options``, on symbols; ``v`` (the
+    model's variables by name) becomes the inputs it reads. ``covariance``:
+    the position of the covariance among the arguments and among the
+    results; it crosses the call as its upper triangle (:func:`_packed`:
+    every covariance here is symmetric bit for bit, each entry made
+    ``(A_ij + A_ji) / 2`` and IEEE addition commutes), half the values to
+    copy, and the law's lower triangle, which only repeats the upper, is
+    never computed. The numbers are those of the law inlined, bit for bit:
+    the same operations in the same order."""
+    if staged.inlining():  # the step's structure read (fmu_models.export.staged.inlined): the law inline
+        return tuple(law(*args, **({} if v is None else {"v": v}), **options))
+    args = [ca.densify(ca.SX(a)) for a in args]
+    n = None
+    if covariance is not None:
+        n = args[covariance].shape[0]
+        args[covariance] = _packed(args[covariance])
+    key = (law, tuple(a.shape for a in args), covariance, tuple(sorted(options.items())))
+    if key not in _CALLED:
+        symbols = [ca.SX.sym(f"a{k}", *a.shape) for k, a in enumerate(args)]
+        inputs = list(symbols)
+        if covariance is not None:
+            inputs[covariance] = _unpacked(symbols[covariance], n)
+        read = _Recorded()
+        results = list(law(*inputs, **({} if v is None else {"v": read}), **options))
+        if covariance is not None:
+            results[covariance] = _packed(results[covariance])
+        _CALLED[key] = (ca.Function(name, symbols + list(read.values()), results, {"never_inline": True}),
+                        tuple(read))
+    function, names = _CALLED[key]
+    results = staged.call(function, [*args, *(v[name] for name in names)])
+    if covariance is not None:
+        results[covariance] = _unpacked(results[covariance], n)
+    return tuple(results)
+
+
 def _predict(xs, P, gyro, acc, v, h, second_order: bool = False, rate_noise=None):
+    """The state and covariance ``h`` seconds later (:func:`_predicted`),
+    one function called by the filter's prediction and its output predictor
+    (:func:`_called`); ``rate_noise``, when given, an argument of it."""
+    if rate_noise is None:
+        return _called(_predicted, "ekf_predict", (xs, P, gyro, acc, h), v, covariance=1, second_order=second_order)
+    return _called(_predicted, "ekf_predict", (xs, P, gyro, acc, h, rate_noise), v, covariance=1,
+                   second_order=second_order)
+
+
+def _predicted(xs, P, gyro, acc, h, rate_noise=None, v=None, second_order: bool = False):
     """The state and covariance ``h`` seconds later with the IMU's averages
     held (E7-E8, E13): explicit Euler over h (the position with its
     ``h^2/2 dv/dt``), the covariance by F and G linearized at the estimate,
@@ -515,9 +607,21 @@ def _reset(P, states, variances):
     return ca.diag(keep) @ P @ ca.diag(keep) + ca.diag(fresh)
 
 
-def _gated(accept, corrected, before):
-    """The corrected state and covariance when the gate accepts, else the prior (E19)."""
-    return tuple(ca.if_else(accept, c, b) for c, b in zip(corrected, before))
+def _gated(accept, corrected, before, *carried):
+    """The corrected state and covariance when the gate accepts, else the prior (E19),
+    computed once with ``carried`` (:func:`_cut`)."""
+    return _cut(*(ca.if_else(accept, c, b) for c, b in zip(corrected, before)), *carried)
+
+
+def _cut(xs, P, *values):
+    """The state, the covariance and ``values`` computed once, where the step
+    is cut into pieces (:func:`fmu_models.export.staged.value`): the gate's
+    decisions (a chi-square quantile: 40 Newton steps) and what they select
+    are read by the pieces after the cut, not computed again in each."""
+    if staged.inlining():
+        return (xs, P, *values)
+    xs, packed, *values = staged.value([xs, _packed(P), *values])
+    return (xs, _unpacked(packed, P.shape[0]), *values)
 
 
 def _update(t, v, magnetometer: bool = False, fix_bias: bool = False, attitude_fix: bool = False):
@@ -533,7 +637,8 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False, attitude_f
     t_imu = ca.if_else(v["t_imu"] < 0, t, v["t_imu"])  # no stamp: the sample is current
     new_imu = ca.logic_or(ca.logic_not(started), t_imu > v["t_posterior"] + v["dt"] / 2)
     h = ca.if_else(ca.logic_and(started, new_imu), t_imu - v["t_posterior"], 0.0)
-    xs, P = _predict(xs, P, gyro, acc, v, h, second_order=attitude_fix)
+    # (with the motion capture's attitude the rate's noise factor 1, an argument: the output predictor's function)
+    xs, P = _predict(xs, P, gyro, acc, v, h, second_order=attitude_fix, rate_noise=1.0 if attitude_fix else None)
     t_filter = ca.if_else(new_imu, t_imu, v["t_posterior"])
 
     # E9: the drag model's measurement, once per IMU sample, gated (E19-E21): after reset_after refusals
@@ -542,7 +647,7 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False, attitude_f
     corrected = _sequential(xs, P, lambda s: drag_measurement(s, v), acc[0:2], [r_acc, r_acc])
     nis_acc = corrected[2]
     refused_acc = ca.logic_and(new_imu, nis_acc > chi2_quantile_even(2, level))
-    xs, P = _gated(ca.logic_and(new_imu, ca.logic_not(refused_acc)), corrected[:2], (xs, P))
+    xs, P, refused_acc = _gated(ca.logic_and(new_imu, ca.logic_not(refused_acc)), corrected[:2], (xs, P), refused_acc)
     run_acc = ca.if_else(new_imu, ca.if_else(refused_acc, v["refusal_run_acc"] + 1, 0.0), v["refusal_run_acc"])
     reset_acc = run_acc >= v["reset_after_drag"]
     # the wind starts again from its initial uncertainty, and the measurement that found the step is fused
@@ -569,8 +674,8 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False, attitude_f
         nis_mag = corrected[2]
         refused_mag = ca.logic_and(new_mag, nis_mag > chi2_quantile_odd(3, level))
         accepted_mag = ca.logic_and(new_mag, ca.logic_not(refused_mag))
-        xs, P = _gated(accepted_mag, corrected[:2], (xs, P))
         heading_set = ca.if_else(ca.logic_and(first, accepted_mag), 1.0, v["heading_set"])
+        xs, P, refused_mag, heading_set = _gated(accepted_mag, corrected[:2], (xs, P), refused_mag, heading_set)
 
     # E10: the fix, when fresh and newer than the last one seen, fused at its own time t_fix: compared
     # with the state retrodicted over tau = t_filter - t_fix through the process model (E20), gated
@@ -590,7 +695,8 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False, attitude_f
     nis_fix = corrected[2]
     refused_fix = ca.logic_and(new_fix, nis_fix > chi2_quantile_even(6, level))
     used = ca.logic_and(new_fix, ca.logic_not(refused_fix))
-    xs, P = _gated(used, corrected[:2], (xs, P))
+    xs, P, refused_fix = _gated(used, corrected[:2], (xs, P), refused_fix)
+    used = ca.logic_and(new_fix, ca.logic_not(refused_fix))
     run_fix = ca.if_else(new_fix, ca.if_else(refused_fix, v["refusal_run_fix"] + 1, 0.0), v["refusal_run_fix"])
     reset_fix = run_fix >= v["reset_after_fix"]
     # position and velocity start again from the fix (brought forward over tau), at its noise (E21)
@@ -608,7 +714,7 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False, attitude_f
             P_restart[_N + k, k] = -gm2[k]
     else:
         P_restart = _reset(P, range(6), variances)
-    P = ca.if_else(reset_fix, P_restart, P)
+    xs, P = _cut(xs, ca.if_else(reset_fix, P_restart, P))
     run_fix = ca.if_else(reset_fix, 0.0, run_fix)
 
     # E29: the motion capture's attitude (the rigid body's Euler angles), taken with the fix (the same frame: its
