@@ -27,7 +27,7 @@ MAX_ERRORS = 5  # messages kept per cell: the first ones in plan order
 _T975: dict[int, float] = {}  # t(0.975, dof) by dof, in this process
 
 
-def _t975(dof: int) -> float:
+def t975(dof: int) -> float:
     """``scipy.stats.t.ppf(0.975, dof)``, bit for bit: the function it calls
     (``scipy.special.stdtrit``), without importing ``scipy.stats`` (about
     0.7 s at the end of every study). A value computed once is kept in the
@@ -47,9 +47,6 @@ def _t975(dof: int) -> float:
 
             keep(path, {str(k): v for k, v in sorted({**kept_t975(), **_T975}.items())})
     return _T975[dof]
-
-
-t975 = _t975  # the same, for the other modules that need the quantile (cosim.calibration.statistics)
 
 
 def _quantiles_file():
@@ -76,7 +73,7 @@ def _quantiles_file():
 
 
 def kept_t975() -> dict[int, float]:
-    """The t quantiles kept for the installed SciPy (:func:`_t975`), by
+    """The t quantiles kept for the installed SciPy (:func:`t975`), by
     degrees of freedom; none when nothing is kept (or cannot be read)."""
     path = _quantiles_file()
     if path is None:
@@ -98,7 +95,7 @@ def interval95(values: Sequence[float]) -> tuple[float, float] | None:
     x = np.asarray(values, dtype=float)
     if x.size < 2:
         return None
-    mean, half = float(x.mean()), _t975(x.size - 1) * float(x.std(ddof=1)) / math.sqrt(x.size)
+    mean, half = float(x.mean()), t975(x.size - 1) * float(x.std(ddof=1)) / math.sqrt(x.size)
     return mean - half, mean + half
 
 

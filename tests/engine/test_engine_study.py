@@ -205,7 +205,7 @@ def test_the_t_quantiles_are_scipys_to_the_bit_and_kept_so_a_later_summary_impor
         from pathlib import Path
         from cosim import cache, summary
         cache.register_cache(lambda: Path({str(tmp_path)!r}))
-        print(repr([summary._t975(d) for d in (1, 2, 9, 19)]), "scipy.special" in sys.modules)
+        print(repr([summary.t975(d) for d in (1, 2, 9, 19)]), "scipy.special" in sys.modules)
     """)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
     first, second = (subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
