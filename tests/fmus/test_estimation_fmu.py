@@ -16,7 +16,7 @@ from fmu_models.models.estimator import ESTIMATOR, ESTIMATOR_GM, ESTIMATOR_MAG, 
 from fmu_models.models.imu import IMU
 from fmu_models.models.sensors import GNSS_6
 
-from test_sensors_fmu import DT, Sensor
+from tests.fmus.sensor_harness import DT, Sensor
 
 G = 9.81
 IMU_IN = [v.name for v in IMU.inputs]  # u v w phi theta psi p q r

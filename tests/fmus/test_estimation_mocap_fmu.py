@@ -15,7 +15,7 @@ from tests.catalog_fmus import catalog_fmu
 from fmu_models.models.estimator import ANGLES, ESTIMATOR_MOCAP
 from fmu_models.models.sensors import MOCAP_9
 
-from test_sensors_fmu import DT, Sensor
+from tests.fmus.sensor_harness import DT, Sensor
 
 G = 9.81
 

@@ -11,7 +11,7 @@ from tests.fmu_validation import validate_fmu
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.sensors import GNSS_6_GM
 
-from test_sensors_fmu import DT, Sensor
+from tests.fmus.sensor_harness import DT, Sensor
 
 OUT = [f"{a}_m" for a in "xyzuvw"]
 

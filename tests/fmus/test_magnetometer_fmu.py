@@ -12,7 +12,7 @@ from fmu_models.export.build import cached_fmu
 from fmu_models.models.magnetometer import MAGNETOMETER, MAGNETOMETER_DEFAULTS
 from fmu_models.models.quadrotor import rotation_matrix
 
-from test_sensors_fmu import DT, Sensor
+from tests.fmus.sensor_harness import DT, Sensor
 
 FIELD = np.array([MAGNETOMETER_DEFAULTS[f"field_{d}"] for d in ("north", "east", "down")])
 OUT = ["mag_x", "mag_y", "mag_z"]

@@ -9,12 +9,10 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Slave
-from fmpy.fmi3 import FMU3Slave
-from tests.catalog_fmus import catalog_fmu, extracted
+from tests.catalog_fmus import catalog_fmu
+from tests.fmus.sensor_harness import DT, Sensor
 from tests.fmu_validation import validate_fmu
 
-from cosim.fmu_component import fmi2_callbacks
 from fmu_models.catalog import model as catalog_model
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import STATE_NAMES
@@ -22,74 +20,8 @@ from fmu_models.models.quadrotor import QUADROTOR
 from fmu_models.models.sensors import (COMMAND_LINK_4, DELAY_MAX, MEASUREMENT_12, VELOCITY_LINK_3, hold_steps,
                                        sensors_model)
 
-DT = 0.01
 IN12 = list(STATE_NAMES)
 OUT12 = [n + "_m" for n in IN12]
-
-
-class Sensor:
-    """One initialized instance of a sensor FMU through fmpy."""
-
-    def __init__(self, model=MEASUREMENT_12, version=2, parameters=None, initialize=True):
-        path = catalog_fmu(model, version)
-        self.md = read_model_description(str(path))
-        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.messages = []
-        self.inputs = [v.name for v in model.inputs]
-        self.outputs = [v.name for v in model.outputs]
-        common = dict(guid=self.md.guid, unzipDirectory=extracted(path),
-                      modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="sensor")
-        if version == 2:
-            self.fmu = FMU2Slave(**common)
-            self._callbacks = fmi2_callbacks(self._receive)
-            self.fmu.instantiate(callbacks=self._callbacks)
-            self.set, self.get = self.fmu.setReal, self.fmu.getReal
-        else:
-            self.fmu = FMU3Slave(**common)
-            self.fmu.instantiate(logMessage=lambda env, status, cat, msg: self.messages.append(msg.decode()))
-            self.set, self.get = self.fmu.setFloat64, self.fmu.getFloat64
-        self.version = version
-        self.n = 0
-        if initialize:
-            self.initialize(parameters or {})
-
-    def _receive(self, status, message):
-        self.messages.append(message.decode())
-
-    def initialize(self, parameters):
-        for name, value in parameters.items():
-            self.set([self.vr[name]], [float(value)])
-        if self.version == 2:
-            self.fmu.setupExperiment(startTime=0.0)
-            self.fmu.enterInitializationMode()
-        else:
-            self.fmu.enterInitializationMode(startTime=0.0)
-        self.fmu.exitInitializationMode()
-
-    def sample(self, u, read_before=True) -> np.ndarray:
-        """Set the inputs of t_n, (read the outputs,) step, read the held outputs."""
-        self.set([self.vr[n] for n in self.inputs], [float(x) for x in u])
-        before = np.array(self.get([self.vr[n] for n in self.outputs])) if read_before else None
-        self.fmu.doStep(self.n * DT, DT)
-        self.n += 1
-        after = np.array(self.get([self.vr[n] for n in self.outputs]))
-        if before is not None:
-            np.testing.assert_array_equal(before, after)  # sample and hold, same draws
-        return after
-
-    def run(self, inputs, read_before=True) -> np.ndarray:
-        if read_before:
-            return np.array([self.sample(u, read_before) for u in inputs])
-        # sample's calls, the references looked up once and the rows converted once: a third less CPU over
-        # the statistics' 20000 steps
-        ins, outs = [self.vr[n] for n in self.inputs], [self.vr[n] for n in self.outputs]
-        rows = []
-        for u in np.asarray(inputs, dtype=float).tolist():
-            self.set(ins, u)
-            self.fmu.doStep(self.n * DT, DT)
-            self.n += 1
-            rows.append(self.get(outs))
-        return np.array(rows)
 
 
 def _inputs(n, seed=1, k=12):

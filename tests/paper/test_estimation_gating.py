@@ -16,14 +16,12 @@ from pydantic import Field, create_model
 
 from cosim import registry
 from cosim.component import PythonComponent, ports
-from cosim.fmu_component import FmuComponent
 from cosim.scenario import load_scenario, parse_scenario
 from cosim.assembly import build_master
 from cosim.schema import Number, Table
 from fmu_models.models.estimator import ESTIMATOR, chi2_quantile_even
-from tests.catalog_fmus import catalog_fmu
+from tests.fmus.sensor_harness import DT, Sensor  # DT: the step of the data rows and of the FMU alike
 
-DT = 0.01
 G = 9.81
 FIX_SIGMA = {**{f"sigma_{a}_m": 0.02 for a in "xyz"}, **{f"sigma_{a}_m": 0.05 for a in "uvw"}}  # RTK GNSS
 V0 = np.array([2.0, 1.0, 0.0])
@@ -50,22 +48,12 @@ def _line(n, imu_lag=0, fix_lag=0):
 
 def outputs(model, inputs, parameters: dict) -> np.ndarray:
     """A sampled model's outputs, row per step of ``DT``, from its FMU as a
-    run finds it, with ``parameters`` over its defaults. The FMU's step is
-    the C generated from the model's CasADi ``dstep``, the same bits as
-    CasADi's evaluation of it (tests/fmus/test_estimation_fmu.py), at a
-    sixth of the CPU: CasADi's virtual machine took 0.35 ms a step of the
-    EKF, called step by step from Python."""
-    with FmuComponent(model.identifier, catalog_fmu(model, 2)) as fmu:
-        fmu.instantiate()
-        fmu.start(0.0, parameters)
-        get, set_ = fmu.real_calls()
-        ins, outs = ([fmu.variables[v.name].valueReference for v in vs] for vs in (model.inputs, model.outputs))
-        rows = []
-        for n, u in enumerate(np.asarray(inputs, dtype=float).tolist()):
-            set_(ins, u)
-            fmu.do_step(n * DT, DT)
-            rows.append(get(outs))
-    return np.array(rows)
+    run finds it (tests/fmus/sensor_harness.py), with ``parameters`` over its
+    defaults. The FMU's step is the C generated from the model's CasADi
+    ``dstep``, the same bits as CasADi's evaluation of it
+    (tests/fmus/test_estimation_fmu.py), at a sixth of the CPU: CasADi's
+    virtual machine took 0.35 ms a step of the EKF, called step by step from Python."""
+    return Sensor(model, parameters=parameters).run(inputs, read_before=False)
 
 
 def _run(inputs, model=ESTIMATOR, **parameters):
