@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-import control as ct
 import numpy as np
 import pytest
 
@@ -66,6 +65,8 @@ def test_small_steps_from_hover_match_the_linear_model(op, fmu, kind, axis, size
 def test_the_master_adds_no_delay_the_delayed_model_fits_worse(op, fmu):
     """The ZOH loop without delay matches the co-simulation 10x better than
     the same loop with one step of delay on the rotor commands."""
+    import control as ct
+
     step = (0.02, 0.0, 0.0)
     nl = position_step(op, step, 3.0, fmu=fmu)
     errors = {}
