@@ -61,6 +61,22 @@ def _static(D, inputs, outputs, name, dt):
                  inputs=list(inputs), outputs=list(outputs), name=name, dt=dt)
 
 
+# Interconnections by content: the blocks' matrices, time base and signal names, and what is broken, in and out.
+# ``control.interconnect`` linearizes the joined blocks column by column in Python (10-50 ms a loop), and the
+# same loop is asked for by several LoopModels of the same point and gains (an analysis, the ramp and circle
+# errors, the critical gain factors, the feed-forward comparison): the same blocks give the same system, to
+# the bit, so it is made once per process. Never changed by a caller (they negate or copy it).
+_INTERCONNECTED: dict[tuple, object] = {}
+_KEEP = 256  # systems kept, the oldest dropped first (about 10 kB each)
+
+
+def _content(block) -> tuple:
+    """What an interconnection of ``block`` depends on: its matrices (bytes and shapes), time base and names."""
+    matrices = (block.A, block.B, block.C, block.D)
+    return (block.name, block.dt, tuple(block.input_labels), tuple(block.output_labels), tuple(block.state_labels),
+            tuple((M.shape, M.dtype.str) for M in matrices), tuple(np.ascontiguousarray(M).tobytes() for M in matrices))
+
+
 def _built_once(method):
     """Cache an interconnection on its model, per argument: the report asks
     for the same loop up to three times (margins, Bode, Nyquist, pole-zero
@@ -192,10 +208,17 @@ class LoopModel:
         conns += [[f"hold.{c}", f"velocity.{c}"] for c in _CMDS]
         conns += [[f"plant.{r}", f"hold.{r}"] for r in _ROTORS]
         conns = [c for c in conns if c[0] not in broken]
-        return ct.interconnect(
-            blocks, connections=conns, inplist=list(inputs), outlist=list(outputs),
-            inputs=[s.split(".")[1] for s in inputs], outputs=[s.split(".")[1] for s in outputs],
-            check_unused=False, name=name)
+        key = (name, tuple(broken), tuple(inputs), tuple(outputs), tuple(_content(b) for b in blocks))
+        found = _INTERCONNECTED.get(key)
+        if found is None:
+            found = ct.interconnect(
+                blocks, connections=conns, inplist=list(inputs), outlist=list(outputs),
+                inputs=[s.split(".")[1] for s in inputs], outputs=[s.split(".")[1] for s in outputs],
+                check_unused=False, name=name)
+            if len(_INTERCONNECTED) >= _KEEP:
+                _INTERCONNECTED.pop(next(iter(_INTERCONNECTED)))  # the oldest
+            _INTERCONNECTED[key] = found
+        return found
 
     @_built_once
     def closed_loop(self) -> ct.StateSpace:
