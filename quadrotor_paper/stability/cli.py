@@ -42,8 +42,8 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                              f"(default {ALONG_EVERY:g}; 0 skips it)")
     parser.add_argument("--figures", nargs="*", default=None, metavar="NAME",
                         help="write only these figures (their names as the report lists them, without .png, e.g. "
-                             "gain_sweep bode_outer_hover); --figures alone writes none: the numbers in a third of "
-                             "the time (default: every figure)")
+                             "gain_sweep bode_outer_hover); --figures alone writes none: the numbers alone, in about "
+                             "half the CPU (default: every figure)")
     parser.add_argument("--workers", type=worker_count, default=None,
                         help="processes: Dask workers for the runs, and with 2 or more the operating points' "
                              "figures drawn in a second process while the study goes on (default: one per core; "
