@@ -6,7 +6,9 @@ untimed run, which also warms the file cache):
 * ``fnn-cosim stability --out <tmp>``: the command as users run it (on a
   2-core machine ``--workers`` defaults to 2: the operating points' figures
   are drawn in a second process while the study goes on);
-* ``fnn-cosim stability --workers 1 --out <tmp>``: everything in one process.
+* ``fnn-cosim stability --workers 1 --out <tmp>``: everything in one process;
+* ``fnn-cosim stability --figures --out <tmp>``: the report without its
+  figures (the PD's numbers alone).
 
 and prints, for each, the median wall time and the median CPU time of the
 process and its children (user + sys; the steadier figure on a shared
@@ -37,6 +39,7 @@ def main(argv=None) -> int:
         commands = {
             "fnn-cosim stability": cli("stability", "--out", str(Path(tmp) / "default")),
             "fnn-cosim stability --workers 1": cli("stability", "--workers", "1", "--out", str(Path(tmp) / "one")),
+            "fnn-cosim stability --figures": cli("stability", "--figures", "--out", str(Path(tmp) / "none")),
         }
         timed(next(iter(commands.values())))  # builds the FMUs if needed, warms the caches
         load = os.getloadavg()[0]

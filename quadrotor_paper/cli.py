@@ -16,7 +16,7 @@ Subcommands::
                  [--method auto|derivatives|differences] [--interface auto|me|cs] [--bode IN:OUT ...] [--out DIR]
     fnn-cosim linearize INSTANCE --scenario SCENARIO --time T [--set KEY=VALUE ...] [--bode IN:OUT ...] [--out DIR]
     fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim] [--along-flight [--along-every S]]
-                 [--workers N]
+                 [--figures [NAME ...]] [--workers N]
 
 SCENARIO is a TOML file or the name of a shipped scenario (``circles``, ``circles_sensors``,
 ``figure8``); STUDY a study file (``docs/studies.md``) or the name of a

@@ -177,3 +177,48 @@ def test_importing_every_engine_module_loads_no_application_package():
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "[]"
 
+
+
+class _ImportsWhenLoaded(_Imports):
+    """The imports that run when the module is imported: not those in its functions."""
+
+    def visit_FunctionDef(self, node: ast.FunctionDef) -> None:
+        return None
+
+    visit_AsyncFunctionDef = visit_FunctionDef
+
+
+def test_collecting_the_suite_imports_no_python_control():
+    """python-control (with scipy.signal and matplotlib.pyplot, which it imports: 2-3 s of CPU) is
+    imported where a linear system is made, as cosim.linearize does: no test module, nor what it
+    imports when loaded (the project's modules, the tests' helpers, ``quadrotor_paper.stability``'s
+    lazy names resolved to their modules), imports it, so collecting the suite does not, and a worker
+    that runs no stability test never does. Read from the sources (imports by a computed name other
+    than the stability package's are not seen)."""
+    from quadrotor_paper.stability import _MODULE_OF as lazy
+
+    modules = _modules()
+    for path in sorted((ROOT / "tests").rglob("*.py")):
+        parts = path.relative_to(ROOT).with_suffix("").parts
+        modules[".".join(parts)] = path
+        modules.setdefault(parts[-1], path)  # pytest's rootdir-relative imports: ``from toy_models import ...``
+    tests = [m for m, p in modules.items() if m.startswith("tests.") and p.name.startswith(("test_", "conftest"))]
+    loaded, third_party, todo = set(), {}, list(tests)
+    while todo:
+        module = todo.pop()
+        if module in loaded:
+            continue
+        loaded.add(module)
+        visitor = _ImportsWhenLoaded(module, modules[module].name == "__init__.py")
+        visitor.visit(tree(modules[module]))
+        for base, name in visitor.found:
+            if base == "quadrotor_paper.stability" and name in lazy:
+                base, name = f"quadrotor_paper.stability.{lazy[name]}", None
+            target = f"{base}.{name}" if name and f"{base}.{name}" in modules else _known(base, modules)
+            if target is None:
+                third_party.setdefault(base.split(".")[0], module)
+            else:
+                parts = target.split(".")
+                todo += [".".join(parts[:i]) for i in range(1, len(parts) + 1) if ".".join(parts[:i]) in modules]
+    assert "quadrotor_paper.stability.loops" in loaded and "tests.paper.test_stability_linear" in loaded
+    assert "control" not in third_party, f"{third_party['control']} imports python-control when loaded"

@@ -20,9 +20,12 @@ Modules, one job each:
   eqs. 53, 66, 70, on recorded runs: :mod:`quadrotor_paper.learning_claims`), the
   report, the command.
 
-The names below load their module (and python-control, scipy) on first use,
-so that ``fnn-cosim`` can add the ``stability`` subcommand without paying
-for them in every other command.
+The names below load their module on first use, so that ``fnn-cosim`` can
+add the ``stability`` subcommand without paying for them in every other
+command. python-control (with the scipy.signal and matplotlib.pyplot it
+imports, 2-3 s of CPU) is imported by the functions that make a linear
+system, not with the modules (as ``cosim.linearize``): importing them, e.g.
+a test worker collecting the suite, does not load it (tests/test_imports.py).
 """
 from importlib import import_module
 

@@ -21,7 +21,6 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import lru_cache
 
-import control as ct
 import numpy as np
 
 from .linearize import linearize_plant
@@ -138,6 +137,7 @@ def response_at(sys, x) -> np.ndarray | None:
     point at a time, to the bit (:func:`frequency_response`). None where
     python-control's own evaluation is wanted: not a state-space system,
     fewer than two states, ``x`` not 1-D, or ``x I - A`` singular at a point."""
+    import control as ct
     x = np.atleast_1d(x).astype(complex, copy=False)
     if not isinstance(sys, ct.StateSpace) or sys.nstates < 2 or x.ndim != 1:  # python-control's own cases
         return None
@@ -194,6 +194,7 @@ def loop_margins(L: ct.StateSpace, name: str = "", n_freq: int = 1000) -> LoopMa
     (continuous) or to just below the Nyquist frequency pi/dt (discrete),
     plus, in discrete time, the phase crossover at the Nyquist frequency
     itself (z = -1), which ``stability_margins`` does not report."""
+    import control as ct
     omega = _frequencies(L, n_freq)
     # stability_margins fits its own interpolating spline to the data (smooth=True)
     F = ct.frd(frequency_response(L, omega), omega, dt=L.dt)
@@ -344,6 +345,7 @@ class RampError:
 
 
 def _ramp_lag(model: LoopModel, speed: float, duration: float, axis: int = 0) -> float:
+    import control as ct
     sys = model.closed_loop()
     h = model.dt or 0.01
     t = np.arange(int(round(duration / h)) + 1) * h
@@ -390,6 +392,7 @@ def circle_error(op: OperatingPoint, radius: float = 10.0, speed: float = 2.5, d
     """Error of the linear loop at ``op`` on a circle: for each horizontal
     axis, ``|1 - T_p(jw) - jw T_v(jw)| R`` with T_p, T_v the closed-loop
     transfers from the position and velocity references to the position."""
+    import control as ct
     sys = LoopModel(op, dt).closed_loop()
     w = speed / radius
     amps = []

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
-import control as ct
 import numpy as np
 
 from cosim.linearize import Linearization, linearize_fmu
@@ -110,6 +109,7 @@ def inert_states(A: np.ndarray, atol: float = 1e-9) -> tuple[int, ...]:
 def join_loop(plant: Linearization, controller: Linearization) -> FmuLoop:
     """The plant's continuous linearization held (ZOH) over the controller's
     period and joined to the controller's one-period map by signal name."""
+    import control as ct
     dt = controller.system.dt
     if not dt or plant.system.dt:
         raise ValueError(f"join_loop: expected a continuous plant (dt = {plant.system.dt}) and a sampled "

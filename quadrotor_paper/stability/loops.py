@@ -33,7 +33,6 @@ from __future__ import annotations
 
 from functools import cached_property, wraps
 
-import control as ct
 import numpy as np
 
 from .linearize import (INPUT_NAMES, ControllerLinearization, PlantLinearization, linearize_controller,
@@ -56,9 +55,26 @@ _PD_STATES = STATE_NAMES[0:6]  # x y z u v w
 
 
 def _static(D, inputs, outputs, name, dt):
+    import control as ct
     D = np.atleast_2d(np.asarray(D, float))
     return ct.ss(np.zeros((0, 0)), np.zeros((0, D.shape[1])), np.zeros((D.shape[0], 0)), D,
                  inputs=list(inputs), outputs=list(outputs), name=name, dt=dt)
+
+
+# Interconnections by content: the blocks' matrices, time base and signal names, and what is broken, in and out.
+# ``control.interconnect`` linearizes the joined blocks column by column in Python (10-50 ms a loop), and the
+# same loop is asked for by several LoopModels of the same point and gains (an analysis, the ramp and circle
+# errors, the critical gain factors, the feed-forward comparison): the same blocks give the same system, to
+# the bit, so it is made once per process. Never changed by a caller (they negate or copy it).
+_INTERCONNECTED: dict[tuple, object] = {}
+_KEEP = 256  # systems kept, the oldest dropped first (about 10 kB each)
+
+
+def _content(block) -> tuple:
+    """What an interconnection of ``block`` depends on: its matrices (bytes and shapes), time base and names."""
+    matrices = (block.A, block.B, block.C, block.D)
+    return (block.name, block.dt, tuple(block.input_labels), tuple(block.output_labels), tuple(block.state_labels),
+            tuple((M.shape, M.dtype.str) for M in matrices), tuple(np.ascontiguousarray(M).tobytes() for M in matrices))
 
 
 def _built_once(method):
@@ -130,6 +146,7 @@ class LoopModel:
     @cached_property
     def continuous_plant(self) -> ct.StateSpace:
         """The plant linearization, continuous time; outputs = states."""
+        import control as ct
         return ct.ss(self.lin.A, self.lin.B, np.eye(len(STATE_NAMES)), 0.0,
                      inputs=list(_ROTORS + _WIND), outputs=list(STATE_NAMES),
                      states=list(STATE_NAMES), name="plant")
@@ -137,6 +154,7 @@ class LoopModel:
     @cached_property
     def plant(self) -> ct.StateSpace:
         """The plant in the loop's time base (ZOH-sampled when ``dt`` is set)."""
+        import control as ct
         if self.dt is None:
             return self.continuous_plant
         sampled = ct.c2d(self.continuous_plant, self.dt, method="zoh")
@@ -160,6 +178,7 @@ class LoopModel:
     @cached_property
     def hold(self) -> ct.StateSpace:
         """Rotor-command path: identity, or ``delay_steps`` unit delays."""
+        import control as ct
         n = self.delay_steps
         if n == 0:
             return _static(np.eye(4), _CMDS, _ROTORS, "hold", self.dt)
@@ -177,6 +196,7 @@ class LoopModel:
     def _connect(self, blocks, broken=(), inputs=(), outputs=(), name="loop"):
         """Interconnect ``blocks`` with every standard connection except the
         destinations in ``broken``; ``inputs``/``outputs`` are ``block.signal``."""
+        import control as ct
         names = {b.name for b in blocks}
         conns = []
         if {"plant", "velocity"} <= names:
@@ -188,10 +208,17 @@ class LoopModel:
         conns += [[f"hold.{c}", f"velocity.{c}"] for c in _CMDS]
         conns += [[f"plant.{r}", f"hold.{r}"] for r in _ROTORS]
         conns = [c for c in conns if c[0] not in broken]
-        return ct.interconnect(
-            blocks, connections=conns, inplist=list(inputs), outlist=list(outputs),
-            inputs=[s.split(".")[1] for s in inputs], outputs=[s.split(".")[1] for s in outputs],
-            check_unused=False, name=name)
+        key = (name, tuple(broken), tuple(inputs), tuple(outputs), tuple(_content(b) for b in blocks))
+        found = _INTERCONNECTED.get(key)
+        if found is None:
+            found = ct.interconnect(
+                blocks, connections=conns, inplist=list(inputs), outlist=list(outputs),
+                inputs=[s.split(".")[1] for s in inputs], outputs=[s.split(".")[1] for s in outputs],
+                check_unused=False, name=name)
+            if len(_INTERCONNECTED) >= _KEEP:
+                _INTERCONNECTED.pop(next(iter(_INTERCONNECTED)))  # the oldest
+            _INTERCONNECTED[key] = found
+        return found
 
     @_built_once
     def closed_loop(self) -> ct.StateSpace:
@@ -200,6 +227,7 @@ class LoopModel:
         Inputs ``x_ref y_ref z_ref vx_ref vy_ref vz_ref wind_x wind_y wind_z``;
         outputs the 12 states, ``tau_c_x..z`` (= v*) and ``Omega_1..4``.
         """
+        import control as ct
         blocks = [self.plant, self.velocity_controller, self.hold, self.position_controller]
         ins = [f"pd.{s}" for s in _P_REF + _P_REF_DOT] + [f"plant.{w}" for w in _WIND]
         outs = [f"plant.{s}" for s in STATE_NAMES] + [f"pd.{t}" for t in _TAU_C] + [f"hold.{r}" for r in _ROTORS]
@@ -209,6 +237,7 @@ class LoopModel:
     def inner_loop(self) -> ct.StateSpace:
         """Plant + velocity controller: inputs ``v_ref_x..z wind_x..z``;
         outputs the 12 states and ``Omega_1..4``."""
+        import control as ct
         blocks = [self.plant, self.velocity_controller, self.hold]
         ins = [f"velocity.{v}" for v in _V_REF] + [f"plant.{w}" for w in _WIND]
         outs = [f"plant.{s}" for s in STATE_NAMES] + [f"hold.{r}" for r in _ROTORS]
@@ -219,6 +248,7 @@ class LoopModel:
         """Loop transfer of the PD loop of ``axis`` broken at the PD output
         (the desired velocity v*_axis), the other two axes and the inner
         loop closed: ``L = -tau_c_axis / v_ref_axis`` (SISO)."""
+        import control as ct
         a = _axis(axis)
         blocks = [self.plant, self.velocity_controller, self.hold, self.position_controller]
         L = self._connect(blocks, broken=[f"velocity.{_V_REF[a]}"], inputs=[f"velocity.{_V_REF[a]}"],
@@ -229,6 +259,7 @@ class LoopModel:
     def velocity_loop(self, axis: str) -> ct.StateSpace:
         """Inner loop alone (outer loop open), broken at the measured velocity
         of ``axis`` where the velocity controller reads it: ``L = -v_a / v_a,in``."""
+        import control as ct
         a = _axis(axis)
         v = STATE_NAMES[3 + a]
         blocks = [self.plant, self.velocity_controller, self.hold]
@@ -240,6 +271,7 @@ class LoopModel:
     def rotor_loop(self, rotor: int) -> ct.StateSpace:
         """Inner loop alone (outer loop open), broken at the command of rotor
         ``rotor`` (1..4) at the plant input, the other rotors closed."""
+        import control as ct
         if rotor not in (1, 2, 3, 4):
             raise ValueError(f"rotor = {rotor!r}: expected 1, 2, 3 or 4")
         r = _ROTORS[rotor - 1]

@@ -22,7 +22,7 @@ from ..tables import PAPER_TABLE2  # noqa: E402
 from .analysis import TIME_BASES, frequency_response, response_at  # noqa: E402
 from .loops import AXES  # noqa: E402
 
-__all__ = ["write_report", "make_figures", "point_figures", "point_figures_aside"]
+__all__ = ["write_report", "make_figures", "point_figures", "point_figures_aside", "FIGURES"]
 
 _BASE_TEXT = {"continuous": "continuous", "discrete": "discrete h (co-sim)", "discrete+1": "discrete h + 1-step delay"}
 
@@ -288,6 +288,11 @@ def _figure_perturbation(study):
 
 
 _POINT_FIGURES = ("bode_outer", "bode_inner", "nyquist_outer", "pzmap")  # per operating point, in this order
+_POINTS = ("hover", "forward", "forward_wind")  # default_operating_points' names
+_STUDY_FIGURES = ("gain_sweep", "steps_linear_vs_nonlinear", "gains_across_the_boundary", "finite_time",
+                  "along_flight", "perturbation_check")  # each drawn when the study ran its part
+# every figure the report can write (its file is NAME.png), in the report's order
+FIGURES = tuple(f"{kind}_{point}" for point in _POINTS for kind in _POINT_FIGURES) + _STUDY_FIGURES
 
 
 def point_figures(analyses, out_dir: Path, names=None) -> dict[str, Path]:
@@ -313,7 +318,7 @@ def point_figures(analyses, out_dir: Path, names=None) -> dict[str, Path]:
 POINT_FIGURES_HERE = 2  # of the operating points' figures, drawn by the command itself (see point_figures_aside)
 
 
-def point_figures_aside(analyses, out_dir: Path, here: int = POINT_FIGURES_HERE):
+def point_figures_aside(analyses, out_dir: Path, here: int = POINT_FIGURES_HERE, names=None):
     """Start :func:`point_figures` in a second process (forked: it inherits
     the analyses, nothing is pickled) and return a function that draws the
     last ``here`` of them in this process, waits for the second and returns
@@ -324,17 +329,20 @@ def point_figures_aside(analyses, out_dir: Path, here: int = POINT_FIGURES_HERE)
     processes: the second has the 12 figures (about 1 s of CPU each), the
     command the rest of the study and 3 figures, about 2 s less, hence 2
     of the 12 drawn here. Where a process cannot be forked, they are all
-    drawn here and now."""
+    drawn here and now. ``names``: only these (default: every one)."""
     import multiprocessing
     import sys
 
     out = Path(out_dir)
     if "fork" not in multiprocessing.get_all_start_methods():
-        figures = point_figures(analyses, out)
+        figures = point_figures(analyses, out, names)
         return lambda: figures
-    names = {f"{kind}_{a.op.name}": out / f"{kind}_{a.op.name}.png" for a in analyses for kind in _POINT_FIGURES}
-    split = max(len(names) - here, 0)
-    there, mine = list(names)[:split], list(names)[split:]
+    paths = {f"{kind}_{a.op.name}": out / f"{kind}_{a.op.name}.png" for a in analyses for kind in _POINT_FIGURES
+             if names is None or f"{kind}_{a.op.name}" in names}
+    if not paths:
+        return lambda: {}  # none asked for: no second process
+    split = max(len(paths) - here, 0)
+    there, mine = list(paths)[:split], list(paths)[split:]
     sys.stdout.flush()  # the child would write what is still buffered a second time
     sys.stderr.flush()
     child = multiprocessing.get_context("fork").Process(target=point_figures, args=(analyses, out, there),
@@ -347,13 +355,14 @@ def point_figures_aside(analyses, out_dir: Path, here: int = POINT_FIGURES_HERE)
         if child.exitcode != 0:
             raise RuntimeError(f"drawing the operating points' figures failed (exit code {child.exitcode}; "
                                f"its traceback is above)")
-        return names
+        return paths
 
     return drawn
 
 
-def make_figures(study, out_dir: Path, drawn=None) -> dict[str, Path]:
-    """Write every figure into ``out_dir``; returns name -> path.
+def make_figures(study, out_dir: Path, drawn=None, names=None) -> dict[str, Path]:
+    """Write every figure (``names``: only these, default every one) into
+    ``out_dir``; returns name -> path.
 
     Per operating point the outer-loop Bode, inner-loop Bode, Nyquist and
     pole-zero plots (:func:`point_figures`; ``drawn``: a function returning
@@ -363,17 +372,16 @@ def make_figures(study, out_dir: Path, drawn=None) -> dict[str, Path]:
     finite-time runs.
     """
     out = Path(out_dir)
-    figures = {} if drawn is not None else point_figures(study.analyses, out)
-    _save(_figure_gain_sweep(study), out, "gain_sweep", figures)
-    if study.step_checks:
-        _save(_figure_steps(study), out, "steps_linear_vs_nonlinear", figures)
-    if study.gain_checks:
-        _save(_figure_gains(study), out, "gains_across_the_boundary", figures)
-    if study.runs:
-        _save(_figure_finite_time(study), out, "finite_time", figures)
-    if any(f.points for f in study.along_flight):
-        _save(_figure_along_flight(study), out, "along_flight", figures)
-        _save(_figure_perturbation(study), out, "perturbation_check", figures)
+    figures = {} if drawn is not None else point_figures(study.analyses, out, names)
+    along = any(f.points for f in study.along_flight)
+    for name, ran, draw in (("gain_sweep", True, _figure_gain_sweep),
+                            ("steps_linear_vs_nonlinear", study.step_checks, _figure_steps),
+                            ("gains_across_the_boundary", study.gain_checks, _figure_gains),
+                            ("finite_time", study.runs, _figure_finite_time),
+                            ("along_flight", along, _figure_along_flight),
+                            ("perturbation_check", along, _figure_perturbation)):
+        if ran and (names is None or name in names):
+            _save(draw(study), out, name, figures)
     return figures if drawn is None else {**drawn(), **figures}
 
 
@@ -628,7 +636,9 @@ def _section_not_run(study) -> list[str]:
 
 
 def _section_figures(figures: dict[str, Path]) -> list[str]:
-    """The list of figure files; the gain sweep and the steps shown inline."""
+    """The list of figure files; the gain sweep and the steps shown inline (nothing without figures)."""
+    if not figures:
+        return []
     return (["## Figures", ""]
             + [f"* `{p.name}`" + (f"\n\n  ![{name}]({p.name})" if name in ("gain_sweep", "steps_linear_vs_nonlinear",
                                                                          "along_flight")
@@ -647,13 +657,14 @@ def _markdown(study, figures: dict[str, Path]) -> str:
     return "\n".join(md + _section_figures(figures))
 
 
-def write_report(study, out_dir: str | Path, drawn=None) -> Path:
+def write_report(study, out_dir: str | Path, drawn=None, figures=None) -> Path:
     """Write the figures and ``stability.md`` into ``out_dir`` (created);
     sets ``study.figures`` and ``study.report_path``; returns the path.
-    ``drawn``: what returns the operating points' figures once the others are drawn (:func:`make_figures`)."""
+    ``drawn``: what returns the operating points' figures once the others are drawn (:func:`make_figures`);
+    ``figures``: only these figures (names of :data:`FIGURES`; default every one)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    study.figures = make_figures(study, out, drawn)
+    study.figures = make_figures(study, out, drawn, figures)
     if study.along_flight:
         from .along_flight import write_points
 

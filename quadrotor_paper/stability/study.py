@@ -237,9 +237,11 @@ def _along_flight(study: StabilityStudy, kp: float | None, kd: float | None, eve
 
 def run_stability_analysis(out_dir: str | Path = "results/stability",
                            settings: StabilitySettings = StabilitySettings(), *, workers: int = 1,
-                           show_progress: bool = False) -> StabilityStudy:
+                           show_progress: bool = False, figures=None) -> StabilityStudy:
     """:func:`stability_study` (same arguments), then write
-    ``out_dir/stability.md`` and the PNG figures; returns the study with
+    ``out_dir/stability.md`` and the PNG figures (``figures``: only these
+    names of :data:`~quadrotor_paper.stability.report.FIGURES`, default every
+    one; the report lists those written); returns the study with
     ``report_path`` and ``figures`` set. With ``workers`` > 1 the operating
     points' figures are drawn in a second process while the study goes on
     (:func:`~quadrotor_paper.stability.report.point_figures_aside`); the
@@ -247,7 +249,8 @@ def run_stability_analysis(out_dir: str | Path = "results/stability",
     from .report import point_figures_aside, write_report
 
     aside = []
-    analysed = (lambda analyses: aside.append(point_figures_aside(analyses, out_dir))) if workers > 1 else None
+    analysed = (lambda analyses: aside.append(point_figures_aside(analyses, out_dir, names=figures))
+                if workers > 1 else None)
     study = stability_study(settings, workers=workers, show_progress=show_progress, analysed=analysed)
-    write_report(study, out_dir, aside[0] if aside else None)
+    write_report(study, out_dir, aside[0] if aside else None, figures)
     return study

@@ -24,7 +24,6 @@ import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-import control as ct
 import numpy as np
 
 from fmu_models.models.quadrotor import QUADROTOR
@@ -173,6 +172,7 @@ def velocity_step(op: OperatingPoint, step=(0.1, 0.0, 0.0), duration: float = 3.
 
 
 def _linear(sys: ct.StateSpace, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+    import control as ct
     return ct.forced_response(sys, t, u).outputs[:12].T
 
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-import control as ct
 import numpy as np
 import pytest
 
@@ -66,6 +65,8 @@ def test_small_steps_from_hover_match_the_linear_model(op, fmu, kind, axis, size
 def test_the_master_adds_no_delay_the_delayed_model_fits_worse(op, fmu):
     """The ZOH loop without delay matches the co-simulation 10x better than
     the same loop with one step of delay on the rotor commands."""
+    import control as ct
+
     step = (0.02, 0.0, 0.0)
     nl = position_step(op, step, 3.0, fmu=fmu)
     errors = {}
@@ -252,13 +253,20 @@ def test_smc_step_run_converges_and_alpha_adapts(fmu):
 
 # ---- the report and the command ---------------------------------------------------------
 
+# the figures the command's tests read (--figures): hover's four, drawn in its second process, then one of
+# each other kind and point, drawn by the command itself; the six others are about 4 s of CPU more
+FIGURES = ("bode_outer_hover", "bode_inner_hover", "nyquist_outer_hover", "pzmap_hover", "pzmap_forward",
+           "nyquist_outer_forward_wind", "gain_sweep")
+
+
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
-    """``fnn-cosim stability --no-cosim --workers 2`` run once (its report and figures are about 10 s of
-    CPU): its folder, what it printed, and the study it wrote (kept as ``run_stability_analysis`` returned
-    it), for the command's test and for the test of the figures it drew in its second process. Its gain
-    sweep on every fifth gain of the grid, ends included (26 x 20 closed loops, not 126 x 96: 1.6 s of
-    CPU less); the tests read the report's sections and files, test_stability_linear the sweep itself."""
+    """``fnn-cosim stability --no-cosim --workers 2 --figures ...`` run once (its report and the figures
+    the tests read, :data:`FIGURES`, about 7 s of CPU): its folder, what it printed, and the study it wrote
+    (kept as ``run_stability_analysis`` returned it), for the command's test and for the test of the
+    figures it drew in its second process. Its gain sweep on every fifth gain of the grid, ends included
+    (26 x 20 closed loops, not 126 x 96: 1.6 s of CPU less); the tests read the report's sections and
+    files, test_stability_linear the sweep itself."""
     import contextlib
     import io
 
@@ -277,7 +285,7 @@ def report(tmp_path_factory):
         patch.setattr(study_module, "run_stability_analysis", kept)
         patch.setattr(study_module, "SWEEP_KP", study_module.SWEEP_KP[::5])  # StabilitySettings' defaults
         patch.setattr(study_module, "SWEEP_KD", study_module.SWEEP_KD[::5])
-        assert main(["stability", "--out", str(out), "--no-cosim", "--workers", "2"]) == 0
+        assert main(["stability", "--out", str(out), "--no-cosim", "--workers", "2", "--figures", *FIGURES]) == 0
     assert studies[0].sweeps[0].measure.shape == (20, 26)  # the coarser grid reached the study
     return out, printed.getvalue(), studies[0]
 
@@ -291,11 +299,24 @@ def test_command_writes_the_report_and_figures(report):
     for name in ("gain_sweep", "bode_outer_hover", "nyquist_outer_forward_wind", "pzmap_forward"):
         png = tmp_path / f"{name}.png"
         assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the figures asked for, those alone, listed in the report's order
+    assert sorted(p.stem for p in tmp_path.glob("*.png")) == sorted(FIGURES)
+    listed = [line[3:-5] for line in text.split("## Figures", 1)[1].splitlines() if line.startswith("* `")]
+    assert listed == list(FIGURES)
     # the default is the PD baseline: the learning laws' sections only with --along-flight, and a line saying so
     assert "## The learning loop along the flight" not in text and "## The learning laws' finite-time" not in text
     assert "`fnn-cosim stability --along-flight` adds them" in text
     assert not (tmp_path / "along_flight.csv").exists() and not (tmp_path / "along_flight.png").exists()
     assert "hover: stable" in out and "report:" in out and "fnn-cosim stability --along-flight" in out
+
+
+def test_a_figure_the_report_does_not_have_is_refused_in_one_line(tmp_path, capsys):
+    from quadrotor_paper.cli import main
+
+    assert main(["stability", "--out", str(tmp_path), "--no-cosim", "--figures", "gain_sweep", "bode_hover"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("fnn-cosim: error: --figures bode_hover: no such figure (the report's are bode_outer_hover, ")
+    assert len(err.splitlines()) == 1 and not any(tmp_path.iterdir())
 
 
 @pytest.mark.slow  # the whole report with its learning-law parts: ~20 s even on the smallest study
@@ -349,7 +370,8 @@ def test_operating_point_figures_drawn_aside_are_the_same_files(report, tmp_path
 
     folder, _, study = report
     names = ["bode_outer_hover", "bode_inner_hover", "nyquist_outer_hover", "pzmap_hover"]
-    assert [a.op.name for a in study.analyses][0] == "hover" and len(study.analyses) * 4 - POINT_FIGURES_HERE >= 4
+    points = [name for name in FIGURES if name != "gain_sweep"]  # the operating points' figures asked for
+    assert [a.op.name for a in study.analyses][0] == "hover" and len(points) - POINT_FIGURES_HERE >= 4
     assert list(study.figures)[:4] == names and all(study.figures[n] == folder / f"{n}.png" for n in names)
     here = point_figures([a for a in study.analyses if a.op.name == "hover"], tmp_path / "here")
     assert list(here) == names

@@ -8,7 +8,6 @@ import warnings
 from dataclasses import astuple
 
 import casadi as ca
-import control as ct
 import numpy as np
 import pytest
 
@@ -34,9 +33,11 @@ def ops():
 
 @pytest.fixture(scope="module")
 def analyses(ops):
-    """:func:`analyze` of every operating point in continuous time and in the sampled loop (about 0.35 s of
-    CPU each): the stability test reads both, the feed-forward test hands them on as the study does."""
-    return {name: analyze(op, H, time_bases=("continuous", "discrete")) for name, op in ops.items()}
+    """:func:`analyze` of every operating point in continuous time and in the sampled loop, the outer loops'
+    margins (every loop's would be about 0.3 s of CPU more a point): the stability test reads the poles of
+    both and the outer loops' margins, the feed-forward test hands them on as the study does (it takes the
+    outer loops' margins; test_the_study_takes_every_loop_in_the_sampled_loop... the inner ones)."""
+    return {name: analyze(op, H, time_bases=("continuous", "discrete"), every_loop=()) for name, op in ops.items()}
 
 
 # ---- operating points ----------------------------------------------------------------
@@ -211,6 +212,8 @@ def test_loop_model_refuses_a_delay_in_continuous_time_and_bad_arguments(ops):
 
 
 def test_one_step_delay_block_delays_by_one_sample(ops):
+    import control as ct
+
     hold = LoopModel(ops["hover"], dt=H, delay_steps=2).hold
     resp = ct.forced_response(hold, np.arange(5) * H, np.vstack([[1, 0, 0, 0, 0]] * 4))
     np.testing.assert_array_equal(resp.outputs[0], [0, 0, 1, 0, 0])
@@ -219,6 +222,8 @@ def test_one_step_delay_block_delays_by_one_sample(ops):
 def test_closing_the_broken_outer_loop_gives_the_closed_loop_poles(ops):
     """feedback(L, 1) of the x loop (other loops closed inside L) has the
     poles of the whole closed loop, up to the modes L cannot see."""
+    import control as ct
+
     model = LoopModel(ops["forward_wind"], dt=H)
     closed = np.sort_complex(model.closed_loop().poles())
     via_l = ct.feedback(model.outer_loop("x"), 1).poles()
@@ -263,6 +268,8 @@ def test_critical_gain_factor_equals_the_outer_loop_gain_margin(ops):
 
 
 def test_margins_on_the_frequency_response_match_the_polynomial_route(ops):
+    import control as ct
+
     L = LoopModel(ops["hover"]).outer_loop("x")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -275,6 +282,8 @@ def test_margins_on_the_frequency_response_match_the_polynomial_route(ops):
 
 def test_batched_frequency_response_is_python_controls_to_the_bit(ops):
     """One batched solve gives what ``StateSpace.__call__`` gives one frequency at a time."""
+    import control as ct
+
     from quadrotor_paper.stability.analysis import frequency_response
 
     w = np.logspace(-3, 2.4, 200)
@@ -320,6 +329,8 @@ def test_the_study_takes_every_loop_in_the_sampled_loop_and_the_outer_loops_else
 def test_margins_known_answers_for_the_ideal_outer_loop():
     """Perfect velocity loop: L = kp/s has PM 90 deg, no phase crossover; its
     ZOH version L = kp h/(z - 1) crosses -180 deg at z = -1 with GM 2/(kp h)."""
+    import control as ct
+
     kp = 2.5
     m = loop_margins(ct.tf([kp], [1, 0]))
     assert m.phase_margin == pytest.approx(90.0, abs=1e-3) and math.isinf(m.gain_margin)
@@ -362,6 +373,8 @@ def test_discrete_gain_margin_at_the_nyquist_frequency_is_confirmed_by_the_poles
     """The rotor loops of the sampled inner loop cross -180 deg at z = -1
     (python-control alone reports no crossover there): scaling the loop by
     0.98 GM keeps every pole in the closed unit disc, by 1.02 GM does not."""
+    import control as ct
+
     L = LoopModel(ops["hover"], dt=H).rotor_loop(1)
     m = loop_margins(L)
     assert m.w_phase_crossover == pytest.approx(math.pi / H)
