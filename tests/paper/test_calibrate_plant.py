@@ -175,3 +175,36 @@ def test_the_calibration_files_schemas_are_printed_and_agree_with_the_readers(tm
         else:
             with pytest.raises(ScenarioError):
                 reader(path)
+
+
+
+def test_the_steps_derivative_one_direction_a_call_is_all_directions_at_once_bit_for_bit(flight_log, tmp_path,
+                                                                                          monkeypatch):
+    # cosim.calibration.symbolic takes the model's step and outputs one direction a call (the C it compiles
+    # no longer grows with the directions): each direction the same operations as CasADi's forward(nd) of
+    # all of them, the same Jacobians to the bit (CasADi's virtual machine here, on 0.1 s of the log)
+    import numpy as np
+
+    import cosim.calibration.symbolic as symbolic
+    from cosim.calibration import CalibrationSettings, calibrate
+    from fmu_models.built import built_fmu
+    from fmu_models.catalog import model
+
+    monkeypatch.setenv("COSIM_CACHE", str(tmp_path / "empty-cache"))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    asked = []
+    sensitivities = symbolic.SymbolicModel.sensitivities
+    monkeypatch.setattr(symbolic.SymbolicModel, "sensitivities",
+                        lambda self, *args, **kw: asked.append((self, args)) or sensitivities(self, *args, **kw))
+    fixed = {k: v for k, v in HIDDEN.items() if k not in ("b", "Ix")}
+    calibrate(flight_log, built_fmu("Quadrotor", 2, lambda: model("Quadrotor")), CalibrationSettings(
+        fit=["b", "Ix", "wind_x"], guess={"b": 6e-6, "Ix": 0.03}, fix=fixed, segment=0.05, holdout=0.0, stop=0.1,
+        jacobian="casadi", max_iterations=1))
+    first, (theta, segments, x0, estimated) = asked[0]
+    at_once = symbolic.SymbolicModel(first.model, first.definition)
+    at_once._one_direction = lambda name: first.definition.functions[name]  # CasADi's forward(nd)
+    for coarse in (False, True):
+        for a, b in zip(first.sensitivities(theta, segments, x0, estimated, coarse=coarse),
+                        at_once.sensitivities(theta, segments, x0, estimated, coarse=coarse)):
+            assert np.any(a[0]) and np.array_equal(a[0], b[0])
+            assert a[1] is b[1] is None or np.array_equal(a[1], b[1])
