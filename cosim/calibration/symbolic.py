@@ -218,11 +218,35 @@ class SymbolicModel:
         return _Interpreted(ca.Function("start", [p0, P0d], [
             x0, f["init"].forward(nd)(p0, x0, P0d) if nd else ca.MX(len(self.x_names), 0)]))
 
+    def _one_direction(self, name: str):
+        """The model's ``step`` or ``out`` whose forward derivative takes one
+        direction a call (CasADi's ``max_num_dir``): a Jacobian's ``nd``
+        directions are ``nd`` calls of one derivative function, where
+        ``forward(nd)`` generated one function of all of them, about ``nd``
+        times the C (the plant's RK4 step: 2400 lines for one direction, 9000
+        for six), compiled again for every count of directions a fit has (the
+        fitted names and estimated states). Each direction is the same
+        operations either way, so the Jacobians are the same bit for bit; the
+        step's own values are computed again in each call instead of once,
+        which makes an exact Jacobian about 1.6x the time (docs/calibration.md:
+        the decision and the figures). The function's own code is unchanged
+        (made again from its expression graph)."""
+        import casadi as ca
+
+        key = ("one direction", name)
+        if key not in self._functions:
+            fn = self.definition.functions[name]
+            if fn.is_a("SXFunction"):
+                ins = fn.sx_in()
+                fn = ca.Function(fn.name(), ins, fn.call(ins), fn.name_in(), fn.name_out(), {"max_num_dir": 1})
+            self._functions[key] = fn
+        return self._functions[key]
+
     def _row(self, n: int):
         """One row: ``n`` RK4 steps from its state and the outputs at its start (``core_do_step``)."""
         import casadi as ca
 
-        f = self.definition.functions
+        f = {name: self._one_direction(name) for name in ("step", "out")}
         x, t, dt = ca.MX.sym("x", len(self.x_names)), ca.MX.sym("t"), ca.MX.sym("dt")
         u, p = ca.MX.sym("u", len(self.u_names)), ca.MX.sym("p", len(self.p_names))
         h = dt / n

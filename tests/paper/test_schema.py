@@ -22,11 +22,20 @@ STUDIES = sorted((Path(__file__).parents[2] / "quadrotor_paper" / "studies").glo
 
 
 def _schema(kind: str, capsys) -> jsonschema.Draft202012Validator:
-    assert main(["schema", kind]) == 0
-    schema = json.loads(capsys.readouterr().out)
-    jsonschema.Draft202012Validator.check_schema(schema)
-    assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
-    return jsonschema.Draft202012Validator(schema)
+    """The validator of what ``fnn-cosim schema KIND`` prints, the print checked
+    as a JSON Schema once per module: the five unknown-key cases read the same
+    printed scenario schema (generating it and checking it against the
+    meta-schema took 0.1-0.15 CPU-s each time)."""
+    if kind not in _PRINTED:
+        assert main(["schema", kind]) == 0
+        schema = json.loads(capsys.readouterr().out)
+        jsonschema.Draft202012Validator.check_schema(schema)
+        assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
+        _PRINTED[kind] = jsonschema.Draft202012Validator(schema)
+    return _PRINTED[kind]
+
+
+_PRINTED: dict[str, jsonschema.Draft202012Validator] = {}
 
 
 def test_every_shipped_scenario_satisfies_the_printed_schema(capsys):
