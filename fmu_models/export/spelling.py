@@ -43,7 +43,7 @@ _READ = re.compile(rb"=arg\[(\d+)\]\? arg\[\1\]\[(\d+)\] : 0;")
 _WRITE = re.compile(rb"^(\s*)if \(res\[(\d+)\]!=0\) (res\[\2\]\[\d+\]=)", re.M)
 _NULL_PASSED = re.compile(rb"(arg|res)1\[\d+\]=0;")
 _SELECT = re.compile(rb"\(([A-Za-z_]\w*)\?([A-Za-z_]\w*):0\)")
-_FIRST_FUNCTION = re.compile(rb"^static int casadi_f\d+\(", re.M)
+_FIRST_FUNCTION = re.compile(rb"^(/\*[^\n]*\*/\n)?static int casadi_f\d+\(", re.M)  # with its comment line
 
 
 def without_null_checks(c: bytes, entries: bool = False) -> bytes:
@@ -67,7 +67,7 @@ def without_null_checks(c: bytes, entries: bool = False) -> bytes:
 
 def branch_free(c: bytes) -> bytes:
     """``c`` with every ``(c?x:0)`` of two variables spelled ``if_else_zero(c,x)``
-    (:data:`IF_ELSE_ZERO`, defined before the first function that uses it)."""
+    (:data:`IF_ELSE_ZERO`, defined before the first function and its comment)."""
     c, n = _SELECT.subn(rb"if_else_zero(\1,\2)", c)
     if n == 0:
         return c
