@@ -20,7 +20,7 @@ from pathlib import Path
 
 from fmu_models.lazy_casadi import ca
 
-from . import staged
+from . import spelling
 from .model import FmuModel
 
 __all__ = ["generate_sources", "GENERIC_C_DIR", "GENERIC_C_FILES", "value_references"]
@@ -130,44 +130,52 @@ const ModelDescriptor fmu_model = {{
 """
 
 
-# functions object -> (it, its generated files, work sizes): the second FMI version of a model, and a
-# model with other start values (the same functions), reuse the C generated for the first (the EKFs':
-# ~2 s of CPU each time). The functions are held, so their id is never reused.
-_GENERATED: dict[int, tuple[object, dict[str, bytes], dict[str, int]]] = {}
+# functions object -> (it, its generated files, the GUID's digest so far (of its C), work sizes): the second FMI
+# version of a model, and a model with other start values (the same functions), reuse the C generated for
+# the first (the EKFs': ~2 s of CPU each time). The functions are held, so their id is never reused.
+_GENERATED: dict[int, tuple[object, dict[str, bytes], "hashlib._Hash", dict[str, int]]] = {}
 
 
-def _generated(functions) -> tuple[dict[str, bytes], dict[str, int]]:
+def _generated(functions) -> tuple[dict[str, bytes], "hashlib._Hash", dict[str, int]]:
+    """The generated files, spelled for the compiler (:func:`spelling.spelled`), and
+    the digest of the C the GUID is made from: CasADi's with the null checks of the
+    functions a staged step calls left out (:func:`spelling.without_null_checks`),
+    the C the FMUs compiled before the spelling, which changes no value any function
+    computes; so every GUID, and every modelDescription, stayed as it was."""
     known = _GENERATED.get(id(functions))
     if known is not None and known[0] is functions:
-        return known[1], known[2]
+        return known[1:]
     generator = ca.CodeGenerator("model_generated.c", {"with_header": True, "with_export": False})
     for function in functions.values():
         generator.add(function)
     with tempfile.TemporaryDirectory() as folder:
         generator.generate(folder + "/")
         generated = {name: (Path(folder) / name).read_bytes() for name in ("model_generated.c", "model_generated.h")}
-    if any(f.class_name() == "MXFunction" for f in functions.values()):  # a step in pieces (export/staged.py)
-        generated["model_generated.c"] = staged.without_null_checks(generated["model_generated.c"])
+    c = generated["model_generated.c"]
+    staged = any(f.class_name() == "MXFunction" for f in functions.values())  # else every function is an entry
+    identity = hashlib.sha256(spelling.without_null_checks(c) if staged else c)  # copied for each GUID
+    generated["model_generated.c"] = spelling.spelled(c)
     work = {
         key: max(int(getattr(f, key)()) for f in functions.values())
         for key in ("sz_arg", "sz_res", "sz_iw", "sz_w")
     }
-    _GENERATED[id(functions)] = (functions, generated, work)
-    return generated, work
+    _GENERATED[id(functions)] = (functions, generated, identity, work)
+    return generated, identity, work
 
 
 def generate_sources(model: FmuModel, directory: Path) -> str:
     """Write ``model_generated.c/.h`` and ``model_start.c`` into ``directory``.
 
-    Returns the GUID, a digest of the generated code and the variable table,
-    so the same model always gets the same GUID and any change gets a new one.
+    Returns the GUID, a digest of the generated code (as CasADi wrote it:
+    :func:`_generated`) and the variable table, so the same model always gets
+    the same GUID and any change of its functions or table a new one.
     """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    generated, work = _generated(model.functions)
+    generated, identity, work = _generated(model.functions)
     for name, text in generated.items():
         (directory / name).write_bytes(text)
-    digest = hashlib.sha256(generated["model_generated.c"])
+    digest = identity.copy()
     digest.update(repr([(v.name, v.causality, v.unit, v.start, v.min, v.max)
                         for v in model.all_variables] + ["table"] * model.table).encode())
     h = digest.hexdigest()

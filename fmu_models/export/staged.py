@@ -15,18 +15,17 @@ SX function computing the next call's arguments from the step's inputs and the
 results so far (its own straight-line piece of the step), the call, ..., and a
 last piece computing the outputs. The generated C is each law once plus the
 pieces, none with a call inside, and the pieces pass their values through the
-work vector. Every operation is the one the inlined step performs, on the same
-operands: the numbers are the same, bit for bit (docs/estimation.md, "The
-generated C").
+work vector (so their null checks are left out: :mod:`fmu_models.export.spelling`).
+Every operation is the one the inlined step performs, on the same operands:
+the numbers are the same, bit for bit (docs/estimation.md, "The generated C").
 """
 from __future__ import annotations
 
-import re
 from contextlib import contextmanager
 
 from ..lazy_casadi import ca
 
-__all__ = ["call", "function", "inlining", "inlined", "recording", "value", "without_null_checks"]
+__all__ = ["call", "function", "inlining", "inlined", "recording", "value"]
 
 _RECORDING: list | None = None  # the calls recorded while a step is built, else None
 _INLINED = False  # True while a step is built whole, its laws inlined (:func:`inlined`)
@@ -104,34 +103,3 @@ def function(name: str, inputs: list, outputs: list, input_names: list[str], out
         known_mx += values if f is None else f.call(values)
     last = ca.Function(f"{name}_out", known_sx, outputs)
     return ca.Function(name, mx, last.call(known_mx), input_names, output_names)
-
-
-_ENTRY = re.compile(rb"return (casadi_f\d+)\(arg, res, iw, w, mem\);")
-_BODY = re.compile(rb"^static int (casadi_f\d+)\(const casadi_real\*\* arg.*?^}$", re.M | re.S)
-_READ = re.compile(rb"=arg\[(\d+)\]\? arg\[\1\]\[(\d+)\] : 0;")
-_WRITE = re.compile(rb"^(\s*)if \(res\[(\d+)\]!=0\) (res\[\2\]\[\d+\]=)", re.M)
-_NULL_PASSED = re.compile(rb"(arg|res)1\[\d+\]=0;")
-
-
-def without_null_checks(c: bytes) -> bytes:
-    """The generated C of a step made by :func:`function` with the SX
-    pieces' and laws' element-wise null checks left out: CasADi's C reads
-    each input element as ``arg[i] ? arg[i][k] : 0`` and writes each output
-    behind ``if (res[i] != 0)``, a branch per element, and gcc's time over
-    the pieces went mostly into these branches (the four EKFs: 50 CPU-s
-    with them, about half the inlined step's without). Only functions the
-    MX step calls are changed, never an entry point the FMU's C layer calls,
-    and only when the step passes no null pointer to any of them (CasADi's
-    MX code would write ``arg1[k]=0;`` or ``res1[k]=0;`` for an argument or
-    result it leaves out): there every pointer is a slice of the work
-    vector, so the checks never fail and the code computes what it did."""
-    if _NULL_PASSED.search(c):
-        return c
-    entries = set(_ENTRY.findall(c))
-
-    def plain(body: re.Match) -> bytes:
-        if body.group(1) in entries:
-            return body.group(0)
-        return _WRITE.sub(rb"\1\3", _READ.sub(rb"=arg[\1][\2];", body.group(0)))
-
-    return _BODY.sub(plain, c)

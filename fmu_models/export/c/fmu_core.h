@@ -40,7 +40,9 @@
 #include "numpy_random.h"
 #include "signal_table.h"
 
-/* A CasADi-generated function (CodeGenerator, casadi_real = double, casadi_int = long long). */
+/* A CasADi-generated function (CodeGenerator, casadi_real = double, casadi_int = long long). The core
+ * passes an array of the instance's for every argument and result, never NULL: the generated C reads
+ * and writes them without CasADi's null checks (fmu_models/export/spelling.py). */
 typedef int (*ModelFunction)(const double **arg, double **res, long long *iw, double *w, int mem);
 
 /* Everything model-specific the core reads, generated from the model's variable table by
