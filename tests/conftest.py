@@ -25,6 +25,84 @@ def pytest_sessionstart(session):
         registry.build_fmu_models(sorted(FMI_VERSIONS))
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection(session):
+    """In a worker of several (pytest-xdist), this worker's share of the
+    test modules rewritten and written to their ``__pycache__`` before it
+    collects (:func:`_rewrite_share`)."""
+    import os
+    import sys
+
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if worker.startswith("gw") and count > 1 and not sys.dont_write_bytecode:
+        _rewrite_share(session, int(worker[2:]) % count, count)
+
+
+def _share(files, index: int, count: int) -> list:
+    """Worker ``index``'s share of ``files`` (paths), dealt out by size,
+    largest first, to the worker with the fewest bytes so far; in path
+    order (the order of collection)."""
+    shares: list[list] = [[] for _ in range(count)]
+    sizes = [0] * count
+    for size, f in sorted(((f.stat().st_size, f) for f in files), reverse=True):
+        least = sizes.index(min(sizes))
+        shares[least].append(f)
+        sizes[least] += size
+    return sorted(shares[index])
+
+
+def _rewrite_share(session, index: int, count: int) -> None:
+    """Every worker collects every test module, and pytest rewrites a test
+    module's asserts at its import unless its rewritten bytecode is cached
+    (``__pycache__/*-pytest-*.pyc``, keyed by the source's hash). In a fresh
+    clone the workers would each rewrite all of them side by side (~4.5
+    CPU-s each: parsing, the rewrite, compiling ~1 MB of tests), so each
+    first writes its share (:func:`_share`), and then finds the other's
+    written as it collects: a file not written yet is rewritten at its
+    import as before. Pytest's own functions do the rewrite, so the
+    bytecode is the one its import would write; without them (another
+    pytest), nothing is done here. docs/fmi-export.md, "The test modules'
+    assertion rewriting"."""
+    config = session.config
+    if config.getoption("assertmode", "rewrite") != "rewrite":
+        return
+    try:
+        import importlib.util
+        from fnmatch import fnmatch
+
+        from _pytest.assertion.rewrite import (PYC_TAIL, _rewrite_test, _write_pyc, assertstate_key,
+                                               get_cache_dir, try_makedirs)
+
+        patterns = [p for p in config.getini("python_files") if "/" not in p] + ["conftest.py"]
+        files = set()
+        for arg in config.args:
+            path = config.invocation_params.dir / arg.split("::")[0]
+            found = path.rglob("*.py") if path.is_dir() else [path]
+            files.update(f.resolve() for f in found
+                         if "__pycache__" not in f.parts and any(fnmatch(f.name, p) for p in patterns))
+        state = config.stash[assertstate_key]
+        for fn in _share(files, index, count):
+            cache_dir = get_cache_dir(fn)
+            pyc = cache_dir / (fn.name[:-3] + PYC_TAIL)
+            try:
+                with open(pyc, "rb") as fp:
+                    head = fp.read(16)
+                if head[:4] == importlib.util.MAGIC_NUMBER and \
+                        head[8:16] == importlib.util.source_hash(fn.read_bytes())[:8]:
+                    continue  # written already (a warm tree, or the other worker)
+            except OSError:
+                pass
+            try:
+                if try_makedirs(cache_dir):
+                    source_hash, co = _rewrite_test(fn, config)
+                    _write_pyc(state, co, source_hash, pyc)
+            except (OSError, SyntaxError, ValueError):  # its import says why, as before
+                continue
+    except (ImportError, AttributeError, KeyError, OSError):  # another pytest
+        return
+
+
 def pytest_sessionfinish(session):
     """The folders the tests' fmpy harnesses extracted FMUs to, removed
     (tests/catalog_fmus.py: fmpy's ``extract`` alone leaves them in the
