@@ -256,6 +256,10 @@ def forward_flight(speed: float = 2.5, wind_speed: float = 0.0,
 
 def default_operating_points(speed: float = 2.5, wind_speed: float = 3.0, **kwargs) -> list[OperatingPoint]:
     """Hover; forward flight at ``speed``; the same in a steady ``wind_speed``
-    wind along the paper's gust direction (defaults: 2.5 m/s, 3 m/s)."""
-    return [hover(**kwargs), forward_flight(speed, **kwargs), forward_flight(speed, wind_speed, **kwargs)]
+    wind along the paper's gust direction (defaults: 2.5 m/s, 3 m/s). The
+    third is ``forward_wind`` also at ``wind_speed`` 0 (``--wind 0``): named
+    by its place, not its wind, so its figures and rows never take the
+    second's names."""
+    return [hover(**kwargs), forward_flight(speed, **kwargs),
+            forward_flight(speed, wind_speed, name="forward_wind", **kwargs)]
 

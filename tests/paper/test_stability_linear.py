@@ -19,7 +19,7 @@ from quadrotor_paper.stability import (LoopModel, critical_gain_factor, forward_
                              ramp_error, trim_plant)
 from quadrotor_paper.stability.analysis import affine_closed_loop, analyze, closed_loop_poles
 from quadrotor_paper.stability.linearize import INPUT_NAMES
-from quadrotor_paper.stability.operating_points import STATE_NAMES
+from quadrotor_paper.stability.operating_points import STATE_NAMES, default_operating_points
 
 H = 0.01
 NO_DRAG = {"k_drag_lin": 0.0, "k_drag_quad": 0.0}
@@ -64,6 +64,14 @@ def test_hover_trim_is_the_hover_rotor_speed_and_level(ops):
     np.testing.assert_allclose(op.omega, hover_rotor_speed(), rtol=1e-12)
     np.testing.assert_allclose(op.x[6:12], 0.0, atol=1e-12)
     np.testing.assert_allclose(op.v_ref, 0.0, atol=1e-12)
+
+
+def test_the_default_points_keep_their_names_in_no_wind():
+    """``--wind 0``: the third point is still ``forward_wind`` (its figures and
+    rows were written over the second's when both were named ``forward``)."""
+    points = default_operating_points(wind_speed=0.0)
+    assert [p.name for p in points] == ["hover", "forward", "forward_wind"]
+    assert not points[2].wind.any() and "no wind" in points[2].description
 
 
 def test_without_drag_forward_flight_needs_no_velocity_error_and_lags_v_over_kp():
