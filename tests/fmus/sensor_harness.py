@@ -4,10 +4,9 @@ files after it; the estimators' outputs of tests/paper/test_estimation_gating.py
 from __future__ import annotations
 
 import numpy as np
-from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
-from tests.catalog_fmus import catalog_fmu, extracted
+from tests.catalog_fmus import catalog_fmu, loaded
 
 from cosim.fmu_component import fmi2_callbacks
 from fmu_models.models.sensors import MEASUREMENT_12
@@ -21,13 +20,12 @@ class Sensor:
     """One initialized instance of a sensor FMU through fmpy."""
 
     def __init__(self, model=MEASUREMENT_12, version=2, parameters=None, initialize=True):
-        path = catalog_fmu(model, version)
-        self.md = read_model_description(str(path))
+        self.md, folder = loaded(catalog_fmu(model, version))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.messages = []
         self.inputs = [v.name for v in model.inputs]
         self.outputs = [v.name for v in model.outputs]
-        common = dict(guid=self.md.guid, unzipDirectory=extracted(path),
+        common = dict(guid=self.md.guid, unzipDirectory=folder,
                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="sensor")
         if version == 2:
             self.fmu = FMU2Slave(**common)

@@ -10,7 +10,7 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
-from tests.catalog_fmus import extracted
+from tests.catalog_fmus import loaded
 from tests.fmu_validation import validate_fmu
 
 import fnn_controller as fc
@@ -39,10 +39,10 @@ class Controller:
 
     def __init__(self, variant: str, version: int, parameters=None):
         path = cached_fmu(controller_model(variant), version)
-        self.md = read_model_description(str(path))
+        self.md, folder = loaded(path)  # one reading and one folder for the process's instances
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.log = Log()
-        common = dict(guid=self.md.guid, unzipDirectory=extracted(path),
+        common = dict(guid=self.md.guid, unzipDirectory=folder,
                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="controller")
         if version == 2:
             self.fmu = FMU2Slave(**common)
