@@ -12,7 +12,7 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2CoSimulation
 from tests.fmu_validation import validate_fmu
-from tests.catalog_fmus import catalog_fmu, extracted
+from tests.catalog_fmus import catalog_fmu, extracted, simulated
 
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel
@@ -57,7 +57,7 @@ def test_fmu_validates_with_no_problems(quadrotor_fmu2):
 
 
 def test_hover_at_analytic_rotor_speed_holds_position_for_10_s(quadrotor_fmu2):
-    result = simulate_fmu(str(quadrotor_fmu2), stop_time=10.0, output_interval=0.01,
+    result = simulated(quadrotor_fmu2, stop_time=10.0, output_interval=0.01,
                           start_values={"z_0": -15.0, **ROTORS_AT_HOVER})
     assert result["time"][-1] == pytest.approx(10.0)
     drift = np.sqrt(result["x"] ** 2 + result["y"] ** 2 + (result["z"] + 15.0) ** 2)
@@ -764,7 +764,7 @@ def test_the_thrust_and_torques_lag_behind_the_commands(instance):
 def test_hover_with_the_motor_lag_holds_position_exactly(quadrotor_fmu2):
     """The rotor speeds start at the commanded hover speed: their lag is then
     exactly zero and the vehicle hovers as without it."""
-    result = simulate_fmu(str(quadrotor_fmu2), stop_time=10.0, output_interval=0.01,
+    result = simulated(quadrotor_fmu2, stop_time=10.0, output_interval=0.01,
                           start_values={"z_0": -15.0, "tau_m": TAU_M, **ROTORS_AT_HOVER})
     drift = np.sqrt(result["x"] ** 2 + result["y"] ** 2 + (result["z"] + 15.0) ** 2)
     assert drift.max() < 1e-9
