@@ -76,9 +76,10 @@ def ssd_schema_errors(ssd: str | Path | bytes) -> list[str]:
     """
     global _SCHEMA
     if _SCHEMA is None:
-        import pyssp_standard
+        from importlib.util import find_spec
 
-        folder = Path(pyssp_standard.__file__).parent / "resources"
+        # the package's folder, found without importing it (its import is pint's and xmlschema's, over 1 s of CPU)
+        folder = Path(find_spec("pyssp_standard").submodule_search_locations[0]) / "resources"
         imports = "".join(
             f'<xs:import namespace="{NS[p]}" schemaLocation="{(folder / f).as_uri()}"/>'
             for p, f in (("ssd", "SystemStructureDescription.xsd"), ("ssv", "SystemStructureParameterValues.xsd")))

@@ -20,10 +20,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import read_model_description, simulate_fmu
+from fmpy import read_model_description
 
 from cosim.recorder import read_results
 from quadrotor_paper.cli import main
+from tests.catalog_fmus import simulated
 from tests.strict_json import read_summary
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
@@ -122,7 +123,7 @@ def test_model_exchange_with_cvode_lands_on_fmpys_cvode_run(tmp_path, version, m
     step, stop = experiment(version, model)
     ours = fly(tmp_path, version, model, step, stop, interface="ModelExchange",
                solver={"relative_tolerance": CVODE_TOLERANCE})
-    theirs = simulate_fmu(str(fmu(version, model)), fmi_type="ModelExchange", solver="CVode",
+    theirs = simulated(fmu(version, model), fmi_type="ModelExchange", solver="CVode",
                           relative_tolerance=CVODE_TOLERANCE, output_interval=step, stop_time=stop,
                           record_events=False)
     np.testing.assert_allclose(ours["time"], theirs["time"], rtol=0, atol=1e-12)
@@ -139,7 +140,7 @@ def test_roberts_is_solved_as_a_stiff_ode(tmp_path):
     fixed communication step cannot sample, so 40 s at 0.1 s are flown."""
     ours = fly(tmp_path, 3, "Roberts", 0.1, 40.0, interface="ModelExchange",
                solver={"relative_tolerance": CVODE_TOLERANCE})
-    theirs = simulate_fmu(str(fmu(3, "Roberts")), fmi_type="ModelExchange", solver="CVode", start_time=0.0,
+    theirs = simulated(fmu(3, "Roberts"), fmi_type="ModelExchange", solver="CVode", start_time=0.0,
                           relative_tolerance=CVODE_TOLERANCE, output_interval=0.1, stop_time=40.0, record_events=False)
     assert worst(ours, theirs, ["y1", "y2", "y3"]) <= 1e-6
     np.testing.assert_allclose(ours["y1"] + ours["y2"] + ours["y3"], 1.0, rtol=0, atol=1e-12)
@@ -230,7 +231,7 @@ def test_stairs_counter_steps_at_fmpys_times(tmp_path, version, solver):
     step, stop = experiment(version, "Stair")
     ours = fly(tmp_path, version, "Stair", step, stop, interface="ModelExchange",
                solver={"method": solver.lower(), "step": EULER_STEP["Stair"]} if solver == "Euler" else {})
-    theirs = simulate_fmu(str(fmu(version, "Stair")), fmi_type="ModelExchange", solver=solver, output_interval=step,
+    theirs = simulated(fmu(version, "Stair"), fmi_type="ModelExchange", solver=solver, output_interval=step,
                           stop_time=stop, record_events=False)
     np.testing.assert_allclose(ours["time"], theirs["time"], rtol=0, atol=1e-12)
     np.testing.assert_array_equal(ours["counter"], theirs["counter"])
@@ -242,7 +243,7 @@ def test_state_space_arrays_in_model_exchange_land_on_fmpys_cvode_run(tmp_path):
     step, stop = experiment(3, "StateSpace")
     ours = fly(tmp_path, 3, "StateSpace", step, stop, interface="ModelExchange",
                solver={"relative_tolerance": CVODE_TOLERANCE})
-    theirs = simulate_fmu(str(fmu(3, "StateSpace")), fmi_type="ModelExchange", solver="CVode",
+    theirs = simulated(fmu(3, "StateSpace"), fmi_type="ModelExchange", solver="CVode",
                           relative_tolerance=CVODE_TOLERANCE, output_interval=step, stop_time=stop, record_events=False)
     names = outputs(3, "StateSpace")
     assert names == ["y[1]", "y[2]", "y[3]"]

@@ -15,9 +15,10 @@ import pytest
 from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
-from tests.catalog_fmus import extracted
+from tests.catalog_fmus import loaded
 from tests.fmu_validation import validate_fmu
 
+from cosim.fmu_component import _fmpy_class
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model_description import CLOCK_NAME, clock_reference
 from fnn_controller.controller_fmu import controller_model
@@ -43,9 +44,10 @@ class Log:
 
 
 def _open(path, cls, **instantiate):
-    md = read_model_description(str(path))
-    fmu = cls(guid=md.guid, unzipDirectory=extracted(path), modelIdentifier=md.coSimulation.modelIdentifier,
-              instanceName="controller")
+    # one reading and one folder for the process's instances, fmpy's class as a run makes its instances
+    md, folder = loaded(path)
+    fmu = _fmpy_class(cls)(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                           instanceName="controller")
     fmu.log = Log()
     fmu.instantiate(logMessage=fmu.log, **instantiate)
     fmu.vr = {v.name: v.valueReference for v in md.modelVariables}
@@ -64,8 +66,9 @@ def _fmi2_reference(path) -> np.ndarray:
     """The FMI 2.0 controller stepped at dt: set u(t_k), get, doStep."""
     from fmpy.fmi2 import FMU2Slave
 
-    md = read_model_description(str(path))
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extracted(path), modelIdentifier=md.coSimulation.modelIdentifier)
+    md, folder = loaded(path)
+    fmu = _fmpy_class(FMU2Slave)(guid=md.guid, unzipDirectory=folder,
+                                 modelIdentifier=md.coSimulation.modelIdentifier)
     fmu.instantiate()
     inputs = [v.valueReference for v in md.modelVariables if v.causality == "input"]
     watched = [v.valueReference for v in md.modelVariables if v.causality in ("output", "local")

@@ -10,11 +10,11 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
-from tests.catalog_fmus import extracted
+from tests.catalog_fmus import loaded
 from tests.fmu_validation import validate_fmu
 
 import fnn_controller as fc
-from cosim.fmu_component import fmi2_callbacks
+from cosim.fmu_component import _fmpy_class, fmi2_callbacks
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import STATE_NAMES
 from fnn_controller.step import OUTPUTS
@@ -39,18 +39,18 @@ class Controller:
 
     def __init__(self, variant: str, version: int, parameters=None):
         path = cached_fmu(controller_model(variant), version)
-        self.md = read_model_description(str(path))
+        self.md, folder = loaded(path)  # one reading and one folder for the process's instances
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.log = Log()
-        common = dict(guid=self.md.guid, unzipDirectory=extracted(path),
+        common = dict(guid=self.md.guid, unzipDirectory=folder,
                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="controller")
         if version == 2:
-            self.fmu = FMU2Slave(**common)
+            self.fmu = _fmpy_class(FMU2Slave)(**common)  # signatures once per process, as a run
             self._callbacks = fmi2_callbacks(self.log.receive)
             self.fmu.instantiate(callbacks=self._callbacks)
             self.set, self.get = self.fmu.setReal, self.fmu.getReal
         else:
-            self.fmu = FMU3Slave(**common)
+            self.fmu = _fmpy_class(FMU3Slave)(**common)
             self.fmu.instantiate(logMessage=lambda env, status, cat, msg: self.log.receive(status, msg))
             self.set, self.get = self.fmu.setFloat64, self.fmu.getFloat64
         self.version = version

@@ -21,6 +21,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
 
 from fmu_models.export.build import cached_fmu
+from tests.catalog_fmus import simulated
 from tests.fmu_validation import validate_fmu
 from fmu_models.export.codegen import value_references
 from fmu_models.export.model_description import SOURCE_FILES_FMI3
@@ -200,9 +201,9 @@ def _signal(n: int) -> np.ndarray:
 def test_simulate_fmu_runs_cs_and_me(fmu3):
     common = dict(stop_time=1.0, output_interval=H, input=_signal(100), start_values={"z_0": -15.0},
                   output=STATES + OUTPUTS)
-    cs = fmpy.simulate_fmu(str(fmu3), fmi_type="CoSimulation", **common)
-    cs_events = fmpy.simulate_fmu(str(fmu3), fmi_type="CoSimulation", use_event_mode=True, **common)
-    me = fmpy.simulate_fmu(str(fmu3), fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-9,
+    cs = simulated(fmu3, fmi_type="CoSimulation", **common)
+    cs_events = simulated(fmu3, fmi_type="CoSimulation", use_event_mode=True, **common)
+    me = simulated(fmu3, fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-9,
                            record_events=False, **common)
     assert len(cs) == len(me) == 101
     assert abs(cs["z"][-1] - cs["z"][0]) > 1e-3  # it moved
@@ -217,7 +218,7 @@ def test_simulate_fmu_runs_cs_and_me(fmu3):
 
 def test_hover_keeps_position_cs(fmu3):
     hover = hover_rotor_speed()
-    result = fmpy.simulate_fmu(str(fmu3), fmi_type="CoSimulation", stop_time=10.0, output_interval=H,
+    result = simulated(fmu3, fmi_type="CoSimulation", stop_time=10.0, output_interval=H,
                                start_values={"z_0": -15.0, **{k: hover for k in ROTORS}},
                                output=["x", "y", "z"])
     assert len(result) == 1001
@@ -500,6 +501,8 @@ def test_source_fmu_compiles_with_fmpy_build(fmu3, tmp_path):
     language C99) and puts the library under binaries/<platform tuple>."""
     from fmpy.build import build_platform_binary
 
+    from tests.fmus.test_plant_fmu import CXX_UNCHECKED
+
     unzipdir = tmp_path / "fmu"
     with zipfile.ZipFile(fmu3) as zf:
         zf.extractall(unzipdir)
@@ -507,13 +510,16 @@ def test_source_fmu_compiles_with_fmpy_build(fmu3, tmp_path):
     (tmp_path / "build").mkdir()
     # Debug (no optimization): the build description's file list and language are the question, not the
     # binary's speed; Release doubles the compiler's time (about 1 s of CPU). Without -ffast-math either way
-    # the rebuilt FMU computes the same doubles as ours (-O1), hence the 1e-12 below.
-    build_platform_binary(unzipdir, build_dir=tmp_path / "build", configuration="Debug")
+    # the rebuilt FMU computes the same doubles as ours (-O1), hence the 1e-12 below. fmpy's CMakeLists
+    # enables C++ as well (project() without LANGUAGES), whose compiler CMake checks by compiling and
+    # linking test programs (about 0.3 s of CPU); no source is C++: that compiler is taken as it is.
+    build_platform_binary(unzipdir, build_dir=tmp_path / "build", configuration="Debug",
+                          cmake_options=dict(CXX_UNCHECKED))
     assert (unzipdir / "binaries" / fmpy.platform_tuple / "Quadrotor.so").is_file()
 
     common = dict(fmi_type="CoSimulation", stop_time=0.5, output_interval=H, input=_signal(50),
                   start_values={"z_0": -15.0}, output=STATES)
     rebuilt = fmpy.simulate_fmu(str(unzipdir), **common)
-    shipped = fmpy.simulate_fmu(str(fmu3), **common)
+    shipped = simulated(fmu3, **common)
     for name in STATES:
         np.testing.assert_allclose(rebuilt[name], shipped[name], rtol=0, atol=1e-12, err_msg=name)

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import math
 
-import fmpy
 import numpy as np
 import pytest
 from fmpy import read_model_description
+from tests.catalog_fmus import simulated
 from tests.fmu_validation import validate_fmu
 
 from cosim.errors import FmuCallError
@@ -77,7 +77,7 @@ def test_fmu_outputs_equal_the_python_path_over_the_mission(case, version):
     """Co-simulation over the whole mission at 0.01 s: every communication
     point equals the Python evaluation of the same CasADi definition."""
     model, params, duration = case
-    r = fmpy.simulate_fmu(str(cached_fmu(model, version)), stop_time=duration, output_interval=0.01,
+    r = simulated(cached_fmu(model, version), stop_time=duration, output_interval=0.01,
                           start_values=params, validate=False, output=list(OUTPUT_NAMES))
     assert len(r) == round(duration / 0.01) + 1
     fmu = np.column_stack([r[name] for name in OUTPUT_NAMES])
@@ -87,7 +87,7 @@ def test_fmu_outputs_equal_the_python_path_over_the_mission(case, version):
 @pytest.mark.parametrize("identifier", IDENTIFIERS)
 def test_model_exchange_gives_the_same_outputs(identifier):
     model = REFERENCE_MODELS[identifier]
-    r = fmpy.simulate_fmu(str(cached_fmu(model, 2)), stop_time=30.0, output_interval=0.25,
+    r = simulated(cached_fmu(model, 2), stop_time=30.0, output_interval=0.25,
                           fmi_type="ModelExchange", validate=False, output=list(OUTPUT_NAMES))
     np.testing.assert_allclose(np.column_stack([r[n] for n in OUTPUT_NAMES]), evaluate_outputs(model, r["time"], {}),
                                rtol=0, atol=1e-12)
@@ -139,7 +139,7 @@ def test_the_bounds_themselves_are_admitted_and_fly(model, name):
     variable = model.variable(name)
     for bound in (variable.min, variable.max):
         check_parameter(variable, bound)
-        r = fmpy.simulate_fmu(str(cached_fmu(model, 2)), stop_time=20.0, output_interval=0.1,
+        r = simulated(cached_fmu(model, 2), stop_time=20.0, output_interval=0.1,
                               start_values={name: bound}, validate=False, output=list(OUTPUT_NAMES))
         fmu = np.column_stack([r[n] for n in OUTPUT_NAMES])
         assert np.all(np.isfinite(fmu))

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import math
 
-import fmpy
 import numpy as np
 import pytest
+from tests.catalog_fmus import simulated
 from tests.fmu_validation import validate_fmu
 
 from fmu_models.export.build import cached_fmu
@@ -18,7 +18,7 @@ def wind_fmu():
 
 
 def _simulate(path, stop=50.0, **start_values):
-    return fmpy.simulate_fmu(str(path), stop_time=stop, output_interval=0.01, start_values=start_values,
+    return simulated(path, stop_time=stop, output_interval=0.01, start_values=start_values,
                              validate=False, output=["v_wind_x", "v_wind_y", "v_wind_z"])
 
 
@@ -62,7 +62,7 @@ def test_turbulence_rms_determinism_and_seed(wind_fmu):
 def test_zero_state_model_builds_and_runs_in_both_interfaces(wind_fmu):
     assert WIND_GUST.states == ()
     for kind in ("CoSimulation", "ModelExchange"):
-        r = fmpy.simulate_fmu(str(wind_fmu), stop_time=20.0, output_interval=0.5, fmi_type=kind, validate=False,
+        r = simulated(wind_fmu, stop_time=20.0, output_interval=0.5, fmi_type=kind, validate=False,
                               start_values={"v_w": 1.0})
         assert r["v_wind_x"][0] == pytest.approx(-1 / math.sqrt(2))
         assert r["v_wind_x"][-1] == pytest.approx(1 / math.sqrt(2))

@@ -30,10 +30,12 @@ def _col(rows, name):
 
 @pytest.mark.parametrize("k", [3, 5])
 def test_the_odd_gate_is_the_chi_square_quantile_of_its_level(k):
-    from scipy.stats import chi2
+    # scipy.stats' chi2.ppf(q, k) is 2 gammaincinv(k / 2, q), the same bits, here without importing
+    # scipy.stats (about 0.9 s of CPU more in a process that imports it for nothing else)
+    from scipy.special import gammaincinv
 
     for level in (0.5, 0.95, 0.9999, 1 - 1e-6):
-        assert float(chi2_quantile_odd(k, level)) == pytest.approx(chi2.ppf(level, k), rel=1e-9)
+        assert float(chi2_quantile_odd(k, level)) == pytest.approx(2 * gammaincinv(k / 2, level), rel=1e-9)
     with pytest.raises(ValueError, match="k = 4"):
         chi2_quantile_odd(4, 0.99)
 

@@ -61,8 +61,8 @@ def test_fmpy_flies_the_circles_archive_within_3_percent_of_our_master(tmp_path)
     sample sees the vehicle at the origin (0.0 m); the learning takes that in and
     the mission ends within 0.1 % of our RMSE (measured: 0.22782 m against
     0.22801 m). With the stock FMUs, the values in the bindings only, it
-    flies another mission (2.77 m; 6.17 m over the first 10 s, which the
-    test flies)."""
+    flies another mission (2.77 m; 11.40 m over the first 2 s, which the
+    test flies, 6.17 m over the first 10 s)."""
     from fmpy.ssp.simulation import simulate_ssp
 
     from quadrotor_paper.cli import main
@@ -90,7 +90,8 @@ def test_fmpy_flies_the_circles_archive_within_3_percent_of_our_master(tmp_path)
     final = np.array([theirs[p][4999] for p in POSITION])
     assert np.max(np.abs(final - [ours[p][-1] for p in POSITION])) < 0.1
     # what it flew with the stock FMUs, the values in the bindings only: another mission (2.77 m over the
-    # 50 s, docs/ssp.md); its first 10 s show it (6.17 m: the start far from the reference) at a fifth of the cost
-    stock = export_ssp(all_fmu(scenario), tmp_path / "stock.ssp",
-                       fmu_files={c: fmu_file(s) for c, s in all_fmu(scenario).fmus.items()})
-    assert rmse(simulate_ssp(str(stock), stop_time=10.0, step_size=0.01), POSITION, REFERENCE) > 10 * ours_rmse
+    # 50 s, docs/ssp.md); its first 2 s show it (11.40 m: the start far from the reference; 6.17 m over 10 s, for
+    # 0.4 s of CPU more of fmpy's loop)
+    portable = all_fmu(scenario)  # made once for the archive and its stock FMUs
+    stock = export_ssp(portable, tmp_path / "stock.ssp", fmu_files={c: fmu_file(s) for c, s in portable.fmus.items()})
+    assert rmse(simulate_ssp(str(stock), stop_time=2.0, step_size=0.01), POSITION, REFERENCE) > 10 * ours_rmse
