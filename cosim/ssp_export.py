@@ -178,38 +178,6 @@ def _cosim_annotation(scenario: Scenario) -> etree._Element:
     return root
 
 
-_UNIT_CONVERSION = "pyssp_standard.unit_conversion"
-
-
-def _pyssp_without_pint() -> None:
-    """Let pyssp-standard be imported without pint until pint is used.
-
-    pyssp-standard 0.9.1's ``ssv`` module, which its ``ssd`` and ``ssp``
-    modules import, imports ``unit_conversion`` at its top, and that imports
-    pint: about 0.6 s of CPU of every export (1.4 s for pyssp-standard in
-    all), for one function (``SSV.add_unit`` without a base unit) that the
-    export never calls, as it states every unit's base-unit exponents
-    (:func:`_write_ssd`). Until pyssp-standard is imported, its
-    ``unit_conversion`` module is a stand-in whose ``generate_base_unit``
-    imports the real module (and pint) when called and calls it: the same
-    archive, the same answer for a caller that does use it."""
-    import sys
-
-    if _UNIT_CONVERSION in sys.modules or "pyssp_standard.ssv" in sys.modules:
-        return
-    import importlib
-    import types
-
-    def generate_base_unit(input_string):
-        if sys.modules.get(_UNIT_CONVERSION) is stand_in:
-            del sys.modules[_UNIT_CONVERSION]
-        return importlib.import_module(_UNIT_CONVERSION).generate_base_unit(input_string)
-
-    stand_in = types.ModuleType(_UNIT_CONVERSION, "pint imported when generate_base_unit is first called")
-    stand_in.generate_base_unit = generate_base_unit
-    sys.modules[_UNIT_CONVERSION] = stand_in
-
-
 def _ssd_class():
     from pyssp_standard.ssd import SSD
 
@@ -360,7 +328,6 @@ def export_ssp(scenario: Scenario, out_path: str | Path, fmu_files: Mapping[str,
         raise ScenarioError(f"scenario {scenario.name!r}: an SSP archive holds FMUs only; remove the Python "
                             f"component(s) {names} (or make them FMUs) to export it")
     parts = _collect(scenario, {k: Path(v) for k, v in (fmu_files or {}).items()})
-    _pyssp_without_pint()
     from pyssp_standard.ssp import SSP
 
     out = Path(out_path)
