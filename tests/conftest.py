@@ -114,6 +114,21 @@ def pytest_sessionfinish(session):
         made.remove_extracted()
 
 
+@pytest.fixture(scope="module")
+def one_extraction():
+    """A module's masters load the libraries of the FMUs this tool built
+    from the one folder the cache extracted them to, as a study's masters do
+    (:func:`cosim.description_cache.shared_extraction`; they keep no
+    writable global state): a master built after the first in a process
+    extracted each of its FMUs again and removed it when closed (about 5 ms
+    an FMU). A module asks for it with
+    ``pytestmark = pytest.mark.usefixtures("one_extraction")``."""
+    from cosim.description_cache import shared_extraction
+
+    with shared_extraction():
+        yield
+
+
 @pytest.fixture(scope="session")
 def quadrotor_fmu2():
     """Path of the FMI 2.0 (ME + CS) quadrotor FMU."""

@@ -13,7 +13,6 @@ import copy
 import numpy as np
 import pytest
 
-from cosim.description_cache import shared_extraction
 from cosim.fmu_component import FmuComponent
 from cosim.scenario import load_scenario, parse_scenario
 from cosim.assembly import build_master
@@ -22,16 +21,8 @@ from quadrotor_paper.portable import all_fmu
 from quadrotor_paper.trajectories import ReferenceComponent, make_trajectory
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_extraction():
-    """The module's masters load the libraries of the FMUs this tool built
-    from the one folder the cache extracted them to, as a study's masters do
-    (:func:`cosim.description_cache.shared_extraction`; they keep no
-    writable global state): a master built after the first in a process
-    extracted each of its FMUs again and removed it when closed (about 5 ms
-    an FMU)."""
-    with shared_extraction():
-        yield
+# the module's masters share one extraction of each FMU (tests/conftest.py: one_extraction)
+pytestmark = pytest.mark.usefixtures("one_extraction")
 
 
 def python_reference(name: str, trajectory: str, **parameters) -> ReferenceComponent:

@@ -16,7 +16,6 @@ from pydantic import Field, create_model
 
 from cosim import registry
 from cosim.component import PythonComponent, ports
-from cosim.description_cache import shared_extraction
 from cosim.scenario import load_scenario, parse_scenario
 from cosim.assembly import build_master
 from cosim.schema import Number, Table
@@ -31,16 +30,8 @@ OUTPUTS = [v.name for v in ESTIMATOR.outputs]
 STATE = ["x", "y", "z", "u", "v", "w", "phi", "theta", "psi"]
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_extraction():
-    """The module's masters load the libraries of the FMUs this tool built
-    from the one folder the cache extracted them to, as a study's masters do
-    (:func:`cosim.description_cache.shared_extraction`; they keep no
-    writable global state): a master built after the first in a process
-    extracted each of its FMUs again and removed it when closed (about 5 ms
-    an FMU)."""
-    with shared_extraction():
-        yield
+# the module's masters share one extraction of each FMU (tests/conftest.py: one_extraction)
+pytestmark = pytest.mark.usefixtures("one_extraction")
 
 
 def _line(n, imu_lag=0, fix_lag=0):
