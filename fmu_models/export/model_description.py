@@ -159,8 +159,10 @@ class _Entry:
     bounds: tuple[tuple[str, float], ...] = ()
 
 
-def _model_variables(model: FmuModel) -> list[_Entry]:
-    """Every variable of ``model`` in value-reference order (time, x, der(x), y, u, p)."""
+@lru_cache(maxsize=None)
+def _model_variables(model: FmuModel) -> tuple[_Entry, ...]:
+    """Every variable of ``model`` in value-reference order (time, x, der(x), y, u, p); once per model
+    (an FMI 2.0 and an FMI 3.0 modelDescription read it twice each: an EKF's ~300 rows)."""
     refs = value_references(model)
     by_name = {v.name: v for v in model.all_variables}
     entries = []
@@ -187,7 +189,7 @@ def _model_variables(model: FmuModel) -> list[_Entry]:
                            if b not in (float("inf"), -float("inf")))
             entries.append(_Entry(name, vr, "parameter", "fixed", "exact", v.description, v.unit, v.start,
                                   bounds=bounds))
-    return entries
+    return tuple(entries)
 
 
 def _model_structure(model: FmuModel):
