@@ -2,7 +2,6 @@
 messages, value references by name, and stepping by a step counter."""
 from __future__ import annotations
 
-import ctypes
 import os
 import shutil
 from functools import lru_cache
@@ -11,8 +10,9 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
-from cosim.fmu_component import _fmpy_class, _load_functions, fmi2_callbacks
+from cosim.fmu_component import fmi2_callbacks
 from fmu_models.models.quadrotor import STATE_NAMES
+from tests.catalog_fmus import fmpy_class
 
 
 def logged(value: float) -> str:
@@ -62,41 +62,6 @@ class LogCollector:
         self.messages.append(message.decode())
 
 
-# (fmpy's class, a loaded library's handle) -> (the library, fmpy's table of its FMI functions for that
-# class), kept for the process. fmpy's freeInstance unloads the library (dlclose), each instance its
-# own load; the library is loaded once more when it is kept and never unloaded for that (``pin``), so
-# it stays loaded at that handle while the process lives, whoever else loads and unloads it: a later
-# instance's load of the same file returns the same handle, and the same function pointers with the
-# same signatures serve it. The FMUs keep no writable global state (tests/catalog_fmus.py), so an
-# instance of a library that stayed loaded starts as one of a library loaded afresh.
-_LOADED: dict[tuple[type, int], tuple[ctypes.CDLL, dict]] = {}
-
-
-@lru_cache(maxsize=None)
-def _harness_class(base: type) -> type:
-    """fmpy's ``base`` as the tool makes it (:func:`cosim.fmu_component._fmpy_class`), taking the
-    function table of a library it loaded before (see ``_LOADED``). Each instance had its library
-    mapped and relocated again (the last instance's freeInstance had unloaded it) and its table made
-    again, a ``dlsym`` and three attributes a function: 1200 instances of the plant made and freed in
-    one process took 1.0-1.1 s of CPU, now 0.25 s (the range test of every parameter makes some 1200)."""
-    if _fmpy_class(base) is base:  # fmpy without the _loadFunctions the tool reaches into: fmpy's own class
-        return base
-
-    def load(self) -> None:
-        key = (base, self.dll._handle)
-        kept = _LOADED.get(key)
-        if kept is None:
-            _load_functions(self)  # the tool's: fmpy's for the first instance of base, its signatures after
-            pin = ctypes.CDLL(self.dll._name)  # a load of the library that nothing unloads
-            assert pin._handle == self.dll._handle, self.dll._name
-            _LOADED[key] = (pin, dict(self._functions))
-        else:
-            self.dll = kept[0]
-            self._functions.update(kept[1])
-
-    return type(base.__name__, (base,), {"_loadFunctions": load, "__module__": __name__, "__doc__": base.__doc__})
-
-
 class Fmi2Instance:
     """One instantiated, initialized FMI 2.0 instance (CS by default).
 
@@ -106,7 +71,8 @@ class Fmi2Instance:
     by ``inspect`` for every instance (about 2 ms of the 3 ms an instance
     took; the test of every parameter of every model makes some 1200), the
     signatures fmpy's own constructor gives (tests/engine/test_fmpy_classes.py);
-    a library's table of functions made once per process (``_harness_class``)."""
+    a library kept loaded and its table of functions made once per process
+    (:func:`tests.catalog_fmus.fmpy_class`)."""
 
     def __init__(self, fmu_path, parameters=None, model_exchange=False, unzip_dir=None, initialize=True):
         self.md = model_description(fmu_path)
@@ -115,7 +81,7 @@ class Fmi2Instance:
         self.vr = _value_references(self.md)  # shared, as the description: read it, never change it
         self.log = LogCollector()  # messages of this instance only
         self.messages = self.log.messages
-        cls = _harness_class(FMU2Model if model_exchange else FMU2Slave)
+        cls = fmpy_class(FMU2Model if model_exchange else FMU2Slave)
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip_dir,
                        modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="test")
         self.fmu.instantiate(callbacks=self.log.callbacks)
