@@ -10,8 +10,9 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
-from cosim.fmu_component import _fmpy_class, fmi2_callbacks
+from cosim.fmu_component import fmi2_callbacks
 from fmu_models.models.quadrotor import STATE_NAMES
+from tests.catalog_fmus import fmpy_class
 
 
 def logged(value: float) -> str:
@@ -69,7 +70,9 @@ class Fmi2Instance:
     with each FMI function's C signature worked out once per process, not
     by ``inspect`` for every instance (about 2 ms of the 3 ms an instance
     took; the test of every parameter of every model makes some 1200), the
-    signatures fmpy's own constructor gives (tests/engine/test_fmpy_classes.py)."""
+    signatures fmpy's own constructor gives (tests/engine/test_fmpy_classes.py);
+    a library kept loaded and its table of functions made once per process
+    (:func:`tests.catalog_fmus.fmpy_class`)."""
 
     def __init__(self, fmu_path, parameters=None, model_exchange=False, unzip_dir=None, initialize=True):
         self.md = model_description(fmu_path)
@@ -78,7 +81,7 @@ class Fmi2Instance:
         self.vr = _value_references(self.md)  # shared, as the description: read it, never change it
         self.log = LogCollector()  # messages of this instance only
         self.messages = self.log.messages
-        cls = _fmpy_class(FMU2Model if model_exchange else FMU2Slave)
+        cls = fmpy_class(FMU2Model if model_exchange else FMU2Slave)
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip_dir,
                        modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="test")
         self.fmu.instantiate(callbacks=self.log.callbacks)
