@@ -8,9 +8,9 @@ from ctypes import c_double, c_uint
 import numpy as np
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
-from tests.catalog_fmus import catalog_fmu, loaded
+from tests.catalog_fmus import catalog_fmu, fmpy_class, loaded
 
-from cosim.fmu_component import _fmpy_class, fmi2_callbacks
+from cosim.fmu_component import fmi2_callbacks
 from fmu_models.models.sensors import MEASUREMENT_12
 
 __all__ = ["DT", "Sensor"]
@@ -34,12 +34,12 @@ class Sensor:
         common = dict(guid=self.md.guid, unzipDirectory=folder,
                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="sensor")
         if version == 2:
-            self.fmu = _fmpy_class(FMU2Slave)(**common)
+            self.fmu = fmpy_class(FMU2Slave)(**common)
             self._callbacks = fmi2_callbacks(self._receive)
             self.fmu.instantiate(callbacks=self._callbacks)
             self.set, self.get = self.fmu.setReal, self.fmu.getReal
         else:
-            self.fmu = _fmpy_class(FMU3Slave)(**common)
+            self.fmu = fmpy_class(FMU3Slave)(**common)
             self.fmu.instantiate(logMessage=lambda env, status, cat, msg: self.messages.append(msg.decode()))
             self.set, self.get = self.fmu.setFloat64, self.fmu.getFloat64
         self.version = version

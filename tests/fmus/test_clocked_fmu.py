@@ -15,10 +15,10 @@ import pytest
 from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3ScheduledExecution, FMU3Slave
-from tests.catalog_fmus import loaded
+from tests.catalog_fmus import fmpy_class, loaded
 from tests.fmu_validation import validate_fmu
 
-from cosim.fmu_component import _fmpy_class
+
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model_description import CLOCK_NAME, clock_reference
 from fnn_controller.controller_fmu import controller_model
@@ -46,7 +46,7 @@ class Log:
 def _open(path, cls, **instantiate):
     # one reading and one folder for the process's instances, fmpy's class as a run makes its instances
     md, folder = loaded(path)
-    fmu = _fmpy_class(cls)(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+    fmu = fmpy_class(cls)(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
                            instanceName="controller")
     fmu.log = Log()
     fmu.instantiate(logMessage=fmu.log, **instantiate)
@@ -67,7 +67,7 @@ def _fmi2_reference(path) -> np.ndarray:
     from fmpy.fmi2 import FMU2Slave
 
     md, folder = loaded(path)
-    fmu = _fmpy_class(FMU2Slave)(guid=md.guid, unzipDirectory=folder,
+    fmu = fmpy_class(FMU2Slave)(guid=md.guid, unzipDirectory=folder,
                                  modelIdentifier=md.coSimulation.modelIdentifier)
     fmu.instantiate()
     inputs = [v.valueReference for v in md.modelVariables if v.causality == "input"]

@@ -10,11 +10,11 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
-from tests.catalog_fmus import loaded
+from tests.catalog_fmus import fmpy_class, loaded
 from tests.fmu_validation import validate_fmu
 
 import fnn_controller as fc
-from cosim.fmu_component import _fmpy_class, fmi2_callbacks
+from cosim.fmu_component import fmi2_callbacks
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import STATE_NAMES
 from fnn_controller.step import OUTPUTS
@@ -45,12 +45,12 @@ class Controller:
         common = dict(guid=self.md.guid, unzipDirectory=folder,
                       modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="controller")
         if version == 2:
-            self.fmu = _fmpy_class(FMU2Slave)(**common)  # signatures once per process, as a run
+            self.fmu = fmpy_class(FMU2Slave)(**common)  # signatures once per process, as a run
             self._callbacks = fmi2_callbacks(self.log.receive)
             self.fmu.instantiate(callbacks=self._callbacks)
             self.set, self.get = self.fmu.setReal, self.fmu.getReal
         else:
-            self.fmu = _fmpy_class(FMU3Slave)(**common)
+            self.fmu = fmpy_class(FMU3Slave)(**common)
             self.fmu.instantiate(logMessage=lambda env, status, cat, msg: self.log.receive(status, msg))
             self.set, self.get = self.fmu.setFloat64, self.fmu.getFloat64
         self.version = version

@@ -253,18 +253,17 @@ def test_smc_step_run_converges_and_alpha_adapts(fmu):
 
 # ---- the report and the command ---------------------------------------------------------
 
-# the figures the command's tests read (--figures): hover's outer Bode, Nyquist and pole-zero map, one of
-# each plotting function, drawn in its second process, then one of each other kind and point, drawn by the
-# command itself; the seven others are about 5 s of CPU more (the inner loops' Bode plot, drawn by the same
-# bode_plot call as the outer loops', 1 s here and 1 s again in the test of the figures drawn aside)
-FIGURES = ("bode_outer_hover", "nyquist_outer_hover", "pzmap_hover", "pzmap_forward", "nyquist_outer_forward_wind",
-           "gain_sweep")
+# the figures the command's tests read (--figures): hover's four, drawn in its second process, one of each
+# figure function, then one of each other kind and point, drawn by the command itself; the six others are
+# about 4 s of CPU more
+FIGURES = ("bode_outer_hover", "bode_inner_hover", "nyquist_outer_hover", "pzmap_hover", "pzmap_forward",
+           "nyquist_outer_forward_wind", "gain_sweep")
 
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     """``fnn-cosim stability --no-cosim --workers 2 --figures ...`` run once (its report and the figures
-    the tests read, :data:`FIGURES`, about 6 s of CPU): its folder, what it printed, and the study it wrote
+    the tests read, :data:`FIGURES`, about 7 s of CPU): its folder, what it printed, and the study it wrote
     (kept as ``run_stability_analysis`` returned it), for the command's test and for the test of the
     figures it drew in its second process. Its gain sweep on every fifth gain of the grid, ends included
     (26 x 20 closed loops, not 126 x 96: 1.6 s of CPU less); the tests read the report's sections and
@@ -366,16 +365,16 @@ def test_feed_forward_ramp_lag_in_the_co_simulation_is_the_trimmed_e_star(op, fm
 
 def test_operating_point_figures_drawn_aside_are_the_same_files(report, tmp_path):
     """The forked process of ``run_stability_analysis(workers > 1)`` writes what one process writes: the
-    command's hover figures, the first drawn in its second process (a Bode plot, a Nyquist plot, a
-    pole-zero map: one of each plotting function), are the files drawn here from the command's own
-    analyses."""
+    command's hover figures, the first drawn in its second process (the outer and inner loops' Bode
+    plots, a Nyquist plot, a pole-zero map: one of each figure function), are the files drawn here from
+    the command's own analyses."""
     from quadrotor_paper.stability.report import POINT_FIGURES_HERE, point_figures
 
     folder, _, study = report
-    names = ["bode_outer_hover", "nyquist_outer_hover", "pzmap_hover"]
+    names = ["bode_outer_hover", "bode_inner_hover", "nyquist_outer_hover", "pzmap_hover"]
     points = [name for name in FIGURES if name != "gain_sweep"]  # the operating points' figures asked for
     assert [a.op.name for a in study.analyses][0] == "hover" and len(points) - POINT_FIGURES_HERE >= len(names)
-    assert list(study.figures)[:3] == names and all(study.figures[n] == folder / f"{n}.png" for n in names)
+    assert list(study.figures)[:4] == names and all(study.figures[n] == folder / f"{n}.png" for n in names)
     here = point_figures([a for a in study.analyses if a.op.name == "hover"], tmp_path / "here", names)
     assert list(here) == names
     for name, path in here.items():
