@@ -21,10 +21,10 @@ its ``out`` (the outputs). The calibrator then makes no FMU call:
   machine (:func:`cosim.kernel.compiled_library`: the cache keyed by the
   source, so by the model and the RK4 steps a row; a Jacobian's chunk takes
   one direction a call, :data:`DIRECTIONS`, so not by the directions): the
-  simulation in one library, both Jacobians the solver asks for (``n``
-  RK4 steps a row, and the coarse one step) in another, where the forward
-  derivative of ``step`` they share is compiled once; the segments run
-  side by side in ``workers`` threads.
+  simulation and both Jacobians the solver asks for (``n`` RK4 steps a
+  row, and the coarse one step) in one library, where the ``step`` and its
+  forward derivative they share are compiled once; the segments run side
+  by side in ``workers`` threads.
   Without a C compiler, CasADi's virtual machine runs the same functions.
 
 The FMU's binary is generated from the same ``step`` and ``out``, so a
@@ -201,22 +201,27 @@ class SymbolicModel:
         if key not in self._functions:
             if kind == "start":
                 self._functions[key] = self._start(nd)
-            elif kind == "simulate":
-                self._functions[key] = self._compile([self._simulate(n)])[0]
-            else:
-                # both Jacobians the solver asks for in one library: they call the same forward derivative
-                # of the model's step, the bulk of the C, which is then generated and compiled once (a
-                # library each compiled it twice: the plant's four fitted names 4.4 CPU-s against 2.5, its
-                # six 6.5 against 3.8; the coarse one's own code is small, so a fit without coarse
-                # iterations pays little for it); the coarse one is the exact one where a row is one RK4
-                # step already
+                return self._functions[key]
+            # the simulation and both Jacobians the solver asks for in one library: they call the same model
+            # step (and its forward derivative), the bulk of the C, which is then generated and compiled once
+            # (a library each compiled it twice: the plant's four fitted names 4.4 CPU-s against 2.5, its six
+            # 6.5 against 3.8; the simulation's own library about 0.4 s more; the coarse one's own code is
+            # small, so a fit without coarse iterations pays little for it); the coarse one is the exact one
+            # where a row is one RK4 step already
+            wanted = {}
+            if ("simulate", n, 0) not in self._functions:
+                wanted[("simulate", n, 0)] = self._simulate(n)
+            jd = nd if kind != "simulate" else (self.directions or 1)
+            if ("sensitivities", n, jd) not in self._functions:
                 kinds = {"sensitivities": n, "coarse": 1} if n > 1 else {"sensitivities": 1, "coarse": 1}
-                fns = {}
+                made = {}
                 for name, steps in kinds.items():
-                    fns.setdefault(steps, self._sensitivities(steps, nd, name))
-                compiled = dict(zip(fns, self._compile(list(fns.values()))))
-                for name, steps in kinds.items():
-                    self._functions[(name, n, nd)] = compiled[steps]
+                    made.setdefault(steps, self._sensitivities(steps, jd, name))
+                    wanted[(name, n, jd)] = made[steps]
+            fns = list({id(fn): fn for fn in wanted.values()}.values())
+            compiled = dict(zip(map(id, fns), self._compile(fns)))
+            for k, fn in wanted.items():
+                self._functions[k] = compiled[id(fn)]
         return self._functions[key]
 
     def _start(self, nd: int):
@@ -253,7 +258,13 @@ class SymbolicModel:
         return self._functions[key]
 
     def _row(self, n: int):
-        """One row: ``n`` RK4 steps from its state and the outputs at its start (``core_do_step``)."""
+        """One row: ``n`` RK4 steps from its state and the outputs at its start (``core_do_step``); one
+        function of each ``n``, which the simulation and the Jacobians of a library share."""
+        if ("row", n) not in self._functions:
+            self._functions[("row", n)] = self._make_row(n)
+        return self._functions[("row", n)]
+
+    def _make_row(self, n: int):
         import casadi as ca
 
         f = {name: self._one_direction(name) for name in ("step", "out")}

@@ -97,11 +97,9 @@ def test_a_parameter_the_flight_does_not_excite_is_not_identifiable(tmp_path, fl
 
 
 def test_an_instance_of_a_scenario_driven_by_the_log(tmp_path, flight_log, capsys):
-    # four fitted names, as the CasADi-and-FMU test's: the same compiled segment libraries (the
-    # directions' count is their key; a fresh clone compiles them once, 1.9 CPU-s with the simulation's
-    # library). The first test's six names compile their own (1.5 CPU-s; 4 before the step's derivative
-    # took one direction a call, docs/calibration.md): fitting six in the four-name tests too took 4.5
-    # CPU-s more on every run (the FMU way's directional derivatives above all)
+    # four fitted names, as the CasADi-and-FMU test's (every test's fits share one compiled library, whatever
+    # they fit: docs/calibration.md, one direction a compiled call): fitting six in the four-name tests too
+    # took 4.5 CPU-s more on every run (the FMU way's directional derivatives above all)
     fix = [a for k, v in HIDDEN.items() if k not in ("b", "Ix") for a in ("--fix", f"{k}={v}")]
     code, out = _calibrate(tmp_path, flight_log, "--scenario", "circles", "--fit", "b,Ix,wind_x,wind_y", *fix)
     assert code == 0, capsys.readouterr().err
