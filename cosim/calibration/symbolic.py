@@ -19,11 +19,12 @@ its ``out`` (the outputs). The calibrator then makes no FMU call:
   trajectory itself (no Magnus step, no differences: exact to round-off);
 * the segment functions are generated as C and compiled once per
   machine (:func:`cosim.kernel.compiled_library`: the cache keyed by the
-  source, so by the model, the RK4 steps a row, the directions): the
-  simulation in one library, both Jacobians the solver asks for (``n``
-  RK4 steps a row, and the coarse one step) in another, where the forward
-  derivative of ``step`` they share is compiled once; the segments run
-  side by side in ``workers`` threads.
+  source, so by the model and the RK4 steps a row; a Jacobian's chunk takes
+  one direction a call, :data:`DIRECTIONS`, so not by the directions): the
+  simulation and both Jacobians the solver asks for (``n`` RK4 steps a
+  row, and the coarse one step) in one library, where the ``step`` and its
+  forward derivative they share are compiled once; the segments run side
+  by side in ``workers`` threads.
   Without a C compiler, CasADi's virtual machine runs the same functions.
 
 The FMU's binary is generated from the same ``step`` and ``out``, so a
@@ -51,9 +52,15 @@ CFLAGS = ("-O1",)
 
 __all__ = ["SymbolicModel", "symbolic_model", "definition_of", "CHUNK"]
 
-# rows a compiled call integrates: the compiled code depends on the model, the RK4 steps a row and the
-# directions only (not on the log), and a segment is chained from whole chunks (the last padded)
+# rows a compiled call integrates: the compiled code depends on the model and the RK4 steps a row only
+# (not on the log, nor on the directions: DIRECTIONS), and a segment is chained from whole chunks (the last
+# padded)
 CHUNK = 50
+
+# directions of a Jacobian a compiled call takes (SymbolicModel.directions): one, so that the
+# sensitivities' library is the same for every count of directions, compiled once per machine and model
+# (one for four fitted names and another for six was about 1.5 CPU-s of compiler more; docs/calibration.md)
+DIRECTIONS = 1
 
 
 def definition_of(cs) -> object | None:
@@ -140,6 +147,9 @@ class SymbolicModel:
                          for o in p.outputs]
         self._functions: dict = {}
         self.compile_seconds = 0.0  # spent generating and compiling C in this process (0 when cached)
+        # directions a compiled Jacobian call takes (None: all of them): one, so that one library serves
+        # every count of directions (the fitted names and the estimated states; docs/calibration.md)
+        self.directions: int | None = DIRECTIONS
         self.source = "compiled"  # or "CasADi's virtual machine" without a C compiler
 
     # ---- the segments' arguments --------------------------------------------------------------
@@ -191,22 +201,27 @@ class SymbolicModel:
         if key not in self._functions:
             if kind == "start":
                 self._functions[key] = self._start(nd)
-            elif kind == "simulate":
-                self._functions[key] = self._compile([self._simulate(n)])[0]
-            else:
-                # both Jacobians the solver asks for in one library: they call the same forward derivative
-                # of the model's step, the bulk of the C, which is then generated and compiled once (a
-                # library each compiled it twice: the plant's four fitted names 4.4 CPU-s against 2.5, its
-                # six 6.5 against 3.8; the coarse one's own code is small, so a fit without coarse
-                # iterations pays little for it); the coarse one is the exact one where a row is one RK4
-                # step already
+                return self._functions[key]
+            # the simulation and both Jacobians the solver asks for in one library: they call the same model
+            # step (and its forward derivative), the bulk of the C, which is then generated and compiled once
+            # (a library each compiled it twice: the plant's four fitted names 4.4 CPU-s against 2.5, its six
+            # 6.5 against 3.8; the simulation's own library about 0.4 s more; the coarse one's own code is
+            # small, so a fit without coarse iterations pays little for it); the coarse one is the exact one
+            # where a row is one RK4 step already
+            wanted = {}
+            if ("simulate", n, 0) not in self._functions:
+                wanted[("simulate", n, 0)] = self._simulate(n)
+            jd = nd if kind != "simulate" else (self.directions or 1)
+            if ("sensitivities", n, jd) not in self._functions:
                 kinds = {"sensitivities": n, "coarse": 1} if n > 1 else {"sensitivities": 1, "coarse": 1}
-                fns = {}
+                made = {}
                 for name, steps in kinds.items():
-                    fns.setdefault(steps, self._sensitivities(steps, nd, name))
-                compiled = dict(zip(fns, self._compile(list(fns.values()))))
-                for name, steps in kinds.items():
-                    self._functions[(name, n, nd)] = compiled[steps]
+                    made.setdefault(steps, self._sensitivities(steps, jd, name))
+                    wanted[(name, n, jd)] = made[steps]
+            fns = list({id(fn): fn for fn in wanted.values()}.values())
+            compiled = dict(zip(map(id, fns), self._compile(fns)))
+            for k, fn in wanted.items():
+                self._functions[k] = compiled[id(fn)]
         return self._functions[key]
 
     def _start(self, nd: int):
@@ -243,7 +258,13 @@ class SymbolicModel:
         return self._functions[key]
 
     def _row(self, n: int):
-        """One row: ``n`` RK4 steps from its state and the outputs at its start (``core_do_step``)."""
+        """One row: ``n`` RK4 steps from its state and the outputs at its start (``core_do_step``); one
+        function of each ``n``, which the simulation and the Jacobians of a library share."""
+        if ("row", n) not in self._functions:
+            self._functions[("row", n)] = self._make_row(n)
+        return self._functions[("row", n)]
+
+    def _make_row(self, n: int):
         import casadi as ca
 
         f = {name: self._one_direction(name) for name in ("step", "out")}
@@ -366,19 +387,29 @@ class SymbolicModel:
         Ud[self.u_fit, m.n_params + np.arange(self.u_fit.size)] = 1.0
         Pd[self.p_setter[est], nt + np.arange(est.size)] = 1.0
         Pd, Ud = np.ascontiguousarray(Pd.T), np.ascontiguousarray(Ud.T)  # column-major
-        start, chunk = self._function("start", n, nd), self._function("coarse" if coarse else "sensitivities", n, nd)
+        # the compiled chunk takes DIRECTIONS of them a call (one library whatever the fitted names: below)
+        g = nd if self.directions is None else min(self.directions, nd)
+        groups = [slice(i, min(i + g, nd)) for i in range(0, nd, g)]
+        kind = "coarse" if coarse else "sensitivities"
+        start = self._function("start", n, nd)
+        chunks = [self._function(kind, n, sl.stop - sl.start) for sl in groups]
 
         def one(a):
             params, T, U, DT = a
-            x, S = start((params, Pd))
-            x, S = x.ravel(), S  # S: nd x nx (column-major nx x nd)
+            x, S = start((params, Pd))  # S: nd x nx (column-major nx x nd)
+            xs = [x.ravel()] * len(groups)  # each group's own (the same) trajectory
             Ss, dys = [S[None]], []
             with np.errstate(all="ignore"):
                 for c in range(0, T.size, CHUNK):
-                    X, dX, _, dY = chunk((x, S, params, Pd, Ud, T[c:c + CHUNK], U[c:c + CHUNK], DT[c:c + CHUNK]))
-                    Ss.append(dX.reshape(CHUNK, nd, -1))
-                    dys.append(dY.reshape(CHUNK, nd, -1))
-                    x, S = X[-1], Ss[-1][-1]
+                    dX, dY = np.empty((CHUNK, nd, S.shape[1])), []
+                    for k, (sl, chunk) in enumerate(zip(groups, chunks)):
+                        X, dXg, _, dYg = chunk((xs[k], Ss[-1][-1][sl], params, Pd[sl], Ud[sl], T[c:c + CHUNK],
+                                                U[c:c + CHUNK], DT[c:c + CHUNK]))
+                        dX[:, sl] = dXg.reshape(CHUNK, sl.stop - sl.start, -1)
+                        dY.append(dYg.reshape(CHUNK, sl.stop - sl.start, -1))
+                        xs[k] = X[-1]
+                    Ss.append(dX)
+                    dys.append(np.concatenate(dY, axis=1))
             return np.concatenate(Ss).transpose(0, 2, 1), np.concatenate(dys)  # rows x states x unknowns
 
         out = []

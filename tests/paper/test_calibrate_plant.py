@@ -97,11 +97,9 @@ def test_a_parameter_the_flight_does_not_excite_is_not_identifiable(tmp_path, fl
 
 
 def test_an_instance_of_a_scenario_driven_by_the_log(tmp_path, flight_log, capsys):
-    # four fitted names, as the CasADi-and-FMU test's: the same compiled segment libraries (the
-    # directions' count is their key; a fresh clone compiles them once, 1.9 CPU-s with the simulation's
-    # library). The first test's six names compile their own (1.5 CPU-s; 4 before the step's derivative
-    # took one direction a call, docs/calibration.md): fitting six in the four-name tests too took 4.5
-    # CPU-s more on every run (the FMU way's directional derivatives above all)
+    # four fitted names, as the CasADi-and-FMU test's (every test's fits share one compiled library, whatever
+    # they fit: docs/calibration.md, one direction a compiled call): fitting six in the four-name tests too
+    # took 4.5 CPU-s more on every run (the FMU way's directional derivatives above all)
     fix = [a for k, v in HIDDEN.items() if k not in ("b", "Ix") for a in ("--fix", f"{k}={v}")]
     code, out = _calibrate(tmp_path, flight_log, "--scenario", "circles", "--fit", "b,Ix,wind_x,wind_y", *fix)
     assert code == 0, capsys.readouterr().err
@@ -180,9 +178,10 @@ def test_the_calibration_files_schemas_are_printed_and_agree_with_the_readers(tm
 
 def test_the_steps_derivative_one_direction_a_call_is_all_directions_at_once_bit_for_bit(flight_log, tmp_path,
                                                                                           monkeypatch):
-    # cosim.calibration.symbolic takes the model's step and outputs one direction a call (the C it compiles
-    # no longer grows with the directions): each direction the same operations as CasADi's forward(nd) of
-    # all of them, the same Jacobians to the bit (CasADi's virtual machine here, on 0.1 s of the log)
+    # cosim.calibration.symbolic takes the model's step and outputs one direction a call, and its compiled
+    # chunk one direction a call (the C it compiles is the same whatever the directions): each direction the
+    # same operations as CasADi's forward(nd) of all of them in one chunk, the same Jacobians to the bit
+    # (CasADi's virtual machine here, on 0.1 s of the log)
     import numpy as np
 
     import cosim.calibration.symbolic as symbolic
@@ -203,6 +202,8 @@ def test_the_steps_derivative_one_direction_a_call_is_all_directions_at_once_bit
     first, (theta, segments, x0, estimated) = asked[0]
     at_once = symbolic.SymbolicModel(first.model, first.definition)
     at_once._one_direction = lambda name: first.definition.functions[name]  # CasADi's forward(nd)
+    at_once.directions = None  # every direction in one call of the chunk (first: one a call)
+    assert first.directions == 1
     for coarse in (False, True):
         for a, b in zip(first.sensitivities(theta, segments, x0, estimated, coarse=coarse),
                         at_once.sensitivities(theta, segments, x0, estimated, coarse=coarse)):
