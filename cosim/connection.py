@@ -32,7 +32,7 @@ from . import units
 from .component import Port, element_of, element_ports
 from .errors import ConnectionCheckError, shown_text
 from .limits import MAX_GROUP
-from .names import split_endpoint, split_top, top_groups
+from .names import nearest, split_endpoint, split_top, top_groups
 
 __all__ = ["Connection", "parse_connection", "parse_connections", "check_connections", "Endpoint", "TABLE_KEYS",
            "unit_conversion"]
@@ -218,8 +218,10 @@ def check_connections(connections: Iterable[Connection], components: Mapping[str
                 elif _find(getattr(comp, "inputs" if group == "outputs" else "outputs"), end.variable):
                     reason = f"is an {'input' if group == 'outputs' else 'output'}, not an {group[:-1]}"
                 else:
-                    known = ", ".join(p.name for p in getattr(comp, group)) or "none"
-                    reason = f"does not exist (its {group} are: {known})"
+                    names = [p.name for p in getattr(comp, group)]
+                    close = nearest(end.variable, names)
+                    reason = (f"does not exist (nearest: {', '.join(close)})" if close else
+                              f"does not exist (its {group} are: {', '.join(names) or 'none'})")
                 raise ConnectionCheckError(f"connection {c}: {role} {end} {reason}")
             ports.append(port)
         out_port, in_port = ports
