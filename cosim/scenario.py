@@ -107,7 +107,8 @@ class Scenario:
         set_(self, "sections", _frozen(state["sections"]))
         set_(self, "connections", tuple(c if isinstance(c, str) else MappingProxyType(dict(c))
                                         for c in state["connections"]))
-        set_(self, "record", tuple(state["record"]))
+        # None: no record.signals, every output is recorded (cosim.plan.every_output)
+        set_(self, "record", None if state["record"] is None else tuple(state["record"]))
         # no bound on the rows here: a run streams them (cosim.recorder); only a run asked to keep every row
         # in memory (Master.run(keep=None)) is bounded, when it starts
         set_(self, "envelope", MappingProxyType({k: tuple(v) for k, v in state["envelope"].items()}))
