@@ -33,7 +33,7 @@ from . import units
 from .component import Port, element_of, element_ports
 from .errors import ConnectionCheckError, shown_text
 from .limits import MAX_GROUP
-from .names import nearest, split_endpoint, split_top, top_groups
+from .names import nearest_told, split_endpoint, split_top, top_groups
 
 _log = logging.getLogger(__name__)
 
@@ -228,8 +228,8 @@ def check_connections(connections: Iterable[Connection], components: Mapping[str
                     reason = f"is an {'input' if group == 'outputs' else 'output'}, not an {group[:-1]}"
                 else:
                     names = [p.name for p in getattr(comp, group)]
-                    close = nearest(end.variable, names)
-                    reason = (f"does not exist (nearest: {', '.join(close)})" if close else
+                    close = nearest_told(end.variable, names)
+                    reason = (f"does not exist{close}" if close else
                               f"does not exist (its {group} are: {', '.join(names) or 'none'})")
                 raise ConnectionCheckError(f"connection {c}: {role} {end} {reason}")
             ports.append(port)
