@@ -251,8 +251,8 @@ def _connection(where: str, element: etree._Element, components: Mapping[str, di
             raise ScenarioError(f"{where}: no {side}Connector")
         if conn not in components[comp]["connectors"]:
             raise ScenarioError(f"{where}: {side}Connector {conn!r} is no connector of {comp!r}")
-        ends.append(f"{comp}.{conn}")
-    text = f"{ends[0]} -> {ends[1]}"
+        ends.append((comp, conn))
+    text = " -> ".join(f"{comp}.{conn}" for comp, conn in ends)
     suppress = element.get("suppressUnitConversion", "false")
     if suppress not in ("true", "false", "1", "0"):
         raise ScenarioError(f"{where}: suppressUnitConversion = {suppress!r}: expected true or false")
@@ -273,7 +273,7 @@ def _connection(where: str, element: etree._Element, components: Mapping[str, di
     if transformation is None:
         return text
     # the connectors' units convert first, then the transformation: target = f (u_f source + u_o) + o
-    (start, start_connector), (end, end_connector) = (e.split(".", 1) for e in ends)
+    (start, start_connector), (end, end_connector) = ends  # as given: names may hold dots
     source_unit = components[start].get("units", {}).get(start_connector)
     target_unit = components[end].get("units", {}).get(end_connector)
     unit_factor, unit_offset = 1.0, 0.0
