@@ -33,7 +33,7 @@ from . import units
 from .component import Port, element_of, element_ports
 from .errors import ConnectionCheckError, shown_text
 from .limits import MAX_GROUP
-from .names import nearest_told, split_endpoint, split_top, top_groups
+from .names import arrows_of, nearest_told, split_endpoint, split_top, top_groups
 
 _log = logging.getLogger(__name__)
 
@@ -98,9 +98,10 @@ def parse_connection(text: str, instances: Iterable[str] = ()) -> list[Connectio
     endpoint splits at the longest of ``instances`` it starts with (instance
     names may hold dots), else at its first dot outside brackets and quotes
     (:func:`cosim.names.split_endpoint`)."""
-    if not isinstance(text, str) or text.count("->") != 1:
+    arrows = arrows_of(text) if isinstance(text, str) else []
+    if len(arrows) != 1:
         raise ConnectionCheckError(f"connection {shown_text(repr(text))} must be a string 'A.out -> B.in'")
-    left, right = text.split("->")
+    left, right = text[:arrows[0]], text[arrows[0] + 2:]
     sources, destinations = _expand(left, text), _expand(right, text)
     if len(sources) == 1 and len(destinations) > 1:  # fan-out: one output feeds every destination
         sources = sources * len(destinations)

@@ -28,7 +28,7 @@ from typing import Iterable, Mapping
 
 from .errors import ConnectionCheckError, shown_text
 
-__all__ = ["split_endpoint", "split_top", "find_top", "top_groups", "is_name", "array_element", "resolve",
+__all__ = ["arrows_of", "split_endpoint", "split_top", "find_top", "top_groups", "is_name", "array_element", "resolve",
            "nearest", "nearest_told", "base_variable", "split_variable"]
 
 # FMI 2.0 section 2.2.9: B-name := nondigit {digit|nondigit} | Q-name; arrayIndices := unsignedInteger {"," ...}
@@ -69,6 +69,11 @@ def find_top(text: str, sep: str) -> int:
     """The index of the first ``sep`` (one character) in ``text`` outside
     quotes, brackets and parentheses; -1 if there is none."""
     return next((i for i, ch, depth in _scan(text) if ch == sep and depth == 0), -1)
+
+
+def arrows_of(text: str) -> list[int]:
+    """Where ``->`` stands in ``text`` outside quoted names (``'a->b'`` is a name)."""
+    return [i for i, ch, _ in _scan(text) if ch == "-" and text.startswith("->", i)]
 
 
 def split_top(text: str, sep: str) -> list[str]:

@@ -165,3 +165,31 @@ def test_set_keys_and_named_values_take_the_name_as_the_fmu_writes_it():
     assert dotted_key('envelope."Q.phi"') == ["envelope", "Q.phi"]  # any other key: TOML's dotted keys
     assert _overrides(["fmus.V.start.'a=b'=2.5"]) == {"fmus.V.start.'a=b'": 2.5}
     assert _named_values(["x[1]=2", "'a=b'=3"], "--input") == {"x[1]": 2.0, "'a=b'": 3.0}
+
+
+def test_structured_names_survive_a_group_and_an_endpoint():
+    """Any structured name (FMI 2.0 section 2.2.9), quoted parts with commas,
+    dots, brackets and escaped quotes included, is one item of a brace group
+    and the variable of an endpoint."""
+    from hypothesis import given, settings, strategies as st
+
+    from cosim.connection import parse_connection
+
+    b_name = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,4}", fullmatch=True) | \
+        st.text(st.sampled_from("ab ,.[]{}()='->"), min_size=1, max_size=6).map(
+            lambda t: "'" + t.replace("'", "\\'") + "'")
+    part = st.tuples(b_name, st.lists(st.integers(1, 12), max_size=2)).map(
+        lambda p: p[0] + (f"[{','.join(map(str, p[1]))}]" if p[1] else ""))
+    name = st.lists(part, min_size=1, max_size=3).map(".".join)
+    name = name | name.map(lambda n: f"der({n})")
+
+    @settings(max_examples=60, deadline=None, database=None, derandomize=True)
+    @given(st.lists(name, min_size=1, max_size=3))
+    def check(names):
+        assert all(is_name(n) for n in names)
+        inputs = ",".join(f"u{i}" for i in range(len(names)))
+        connections = parse_connection("A.{" + ",".join(names) + "} -> B.{" + inputs + "}")
+        assert [c.source.variable for c in connections] == names
+        assert all(c.source.component == "A" for c in connections)
+
+    check()
