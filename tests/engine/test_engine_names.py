@@ -175,7 +175,7 @@ def test_structured_names_survive_a_group_and_an_endpoint():
 
     from cosim.connection import parse_connection
 
-    b_name = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,4}", fullmatch=True) | \
+    b_name = st.tuples(st.sampled_from("ax_"), st.text(st.sampled_from("b1_"), max_size=3)).map("".join) | \
         st.text(st.sampled_from("ab ,.[]{}()='->"), min_size=1, max_size=6).map(
             lambda t: "'" + t.replace("'", "\\'") + "'")
     part = st.tuples(b_name, st.lists(st.integers(1, 12), max_size=2)).map(
@@ -183,7 +183,7 @@ def test_structured_names_survive_a_group_and_an_endpoint():
     name = st.lists(part, min_size=1, max_size=3).map(".".join)
     name = name | name.map(lambda n: f"der({n})")
 
-    @settings(max_examples=60, deadline=None, database=None, derandomize=True)
+    @settings(max_examples=20, deadline=None, database=None, derandomize=True)
     @given(st.lists(name, min_size=1, max_size=3))
     def check(names):
         assert all(is_name(n) for n in names)
