@@ -25,7 +25,6 @@ unchecked (:func:`parse_connections`; ``docs/cosim.md``, "Units").
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, replace
 from typing import Any, Iterable, Mapping
 
@@ -34,8 +33,6 @@ from .component import Port, element_of, element_ports
 from .errors import ConnectionCheckError, shown_text
 from .limits import MAX_GROUP
 from .names import arrows_of, nearest_told, split_endpoint, split_top, top_groups
-
-_log = logging.getLogger(__name__)
 
 __all__ = ["Connection", "parse_connection", "parse_connections", "check_connections", "Endpoint", "TABLE_KEYS",
            "unit_conversion"]
@@ -191,7 +188,9 @@ def unit_conversion(c: Connection, out_port: Port, in_port: Port) -> tuple[float
             f"({c.destination} = factor * {c.source} + offset), or mark it "
             f"{{ connect = \"{c}\", units = \"unchecked\" }}") from None
     if source is not None and destination is not None and not source.same_quantity(destination):
-        _log.info("connection %s: %s and %s are one unit but for the radian, which %s leaves out "
+        import logging  # here only: a run whose units agree loads no logging (tests/paper/test_run_startup.py)
+
+        logging.getLogger(__name__).info("connection %s: %s and %s are one unit but for the radian, which %s leaves out "
                   "(docs/fmi-support.md, \"Angles\"); connected with factor %.17g", c,
                   units.describe(out_port.unit, source), units.describe(in_port.unit, destination),
                   out_port.unit if source.exponents[-1] == 0 else in_port.unit, factor)
