@@ -74,7 +74,9 @@ def run(args) -> int:
     settings = read_settings(args.settings) if args.settings else CalibrationSettings()
     update = {}
     if args.fit is not None:
-        names = [n.strip() for n in args.fit.split(",") if n.strip()]
+        from cosim.names import split_top
+
+        names = [n.strip() for n in split_top(args.fit, ",") if n.strip()]  # x[1,2], 'a,b': one name each
         if not names:
             raise ScenarioError(f"--fit {args.fit!r}: expected comma-separated names, e.g. --fit m,Ix")
         update["fit"] = names

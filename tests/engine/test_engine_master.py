@@ -187,6 +187,13 @@ def test_bad_record_signals_are_refused(lag, record, message):
         Master([lag], [Constant("src")], [], H, record=record)
 
 
+def test_record_none_records_every_output_of_every_component(lag):
+    """What a scenario without record.signals records: the FMUs' outputs,
+    then the Python components' (docs/cosim.md, "Recording")."""
+    master = Master([lag], [Constant("src")], ["src.out -> lag.u"], H, record=None)
+    assert list(master.record_columns) == ["time"] + [f"lag.{p.name}" for p in lag.outputs] + ["src.out"]
+
+
 def test_record_signal_without_a_variable_is_refused_as_malformed(lag):
     with pytest.raises(ConnectionCheckError) as info:
         Master([lag], [Constant("src")], ["src.out -> lag.u"], H, record=["lag"])
