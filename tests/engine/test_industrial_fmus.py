@@ -11,9 +11,10 @@ import pytest
 from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Model
 from fmpy.validation import validate_fmu
+from scipy.integrate import solve_ivp
 
 from tests.catalog_fmus import extracted, simulated
-from tests.industrial_fmus import (DC_MOTOR, algebraic_loop_specs, bouncing_mass_spec, build, dc_motor_reference,
+from tests.industrial_fmus import (DC_MOTOR, algebraic_loop_specs, bouncing_mass_spec, build, dc_motor_exact,
                                    dc_motor_rhs, dc_motor_specs)
 
 TAU = 0.02  # N.m, the constant driving torque of the mechanical part alone
@@ -139,12 +140,24 @@ def test_the_algebraic_loop_pair_feeds_through(fmus):
         assert list(result["y"]) == [k * 2.0 + offset] * 2
 
 
-def test_the_monolithic_reference_reaches_the_motor_s_steady_state():
-    """At rest after the start-up: k i = b w + tau_load and R i = V0 - k w, so
-    w = (k V0 - R tau_load) / (k^2 + b R)."""
+def test_the_monolithic_right_hand_side_and_its_exact_solution():
+    """solve_ivp of the right-hand side across the step agrees with the exact solution, which comes
+    to rest where k i = b w + tau_load and R i = V0 - k w: w = (k V0 - R tau_load) / (k^2 + b R)."""
     p = DC_MOTOR
-    x = dc_motor_reference(np.array([0.0, p["t_step"], 1.0]))
-    assert (x[:2] == 0).all()
+    f = dc_motor_rhs()
+    times = np.array([0.0, 0.005, p["t_step"], 0.02, 0.03])
+    exact = dc_motor_exact(times)
+    assert (exact[:3] == 0).all()  # at rest until the step
+    jacobian = np.array([[-p["R"] / p["L"], 0, -p["k"] / p["L"]], [0, 0, 1], [p["k"] / p["J"], 0, -p["b"] / p["J"]]])
+    after = solve_ivp(f, (p["t_step"], times[-1]), np.zeros(3), method="BDF", t_eval=times[2:], rtol=1e-10,
+                      atol=1e-12, jac=jacobian, args=(p["V0"],))
+    np.testing.assert_allclose(after.y.T, exact[2:], rtol=1e-7, atol=1e-9)
     w = (p["k"] * p["V0"] - p["R"] * p["tau_load"]) / (p["k"] ** 2 + p["b"] * p["R"])
-    np.testing.assert_allclose(x[2, [0, 2]], [(p["V0"] - p["k"] * w) / p["R"], w], rtol=1e-8)
-    np.testing.assert_allclose(dc_motor_rhs()(1.0, x[2]), [0, w, 0], atol=1e-5)
+    rest = dc_motor_exact([2.0])[0]
+    # i = (V0 - k w)/R cancels some 2.5 digits (12 - 11.95)
+    np.testing.assert_allclose(rest[[0, 2]], [(p["V0"] - p["k"] * w) / p["R"], w], rtol=1e-10)
+    np.testing.assert_allclose(f(2.0, rest), [0, w, 0], atol=1e-6)  # di/dt against V0/L = 2.4e4 A/s
+    smooth = dc_motor_exact([0.0, 0.01], source="smooth")
+    smooth_ivp = solve_ivp(dc_motor_rhs("smooth"), (0.0, 0.01), np.zeros(3), method="BDF", rtol=1e-10, atol=1e-12,
+                           jac=jacobian).y[:, -1]
+    np.testing.assert_allclose(smooth[1], smooth_ivp, rtol=1e-7, atol=1e-9)
