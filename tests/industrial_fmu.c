@@ -252,7 +252,7 @@ static fmi2Status check_vrs(Instance *c, const char *fn, const fmi2ValueReferenc
 }
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
-    ALLOW("fmi2GetReal", ANY & ~M(FAILED));
+    ALLOW("fmi2GetReal", ANY & ~M(INSTANTIATED));
     if (check_vrs(C, "fmi2GetReal", vr, nvr) != fmi2OK) return fmi2Error;
     refresh(C);
     for (size_t i = 0; i < nvr; i++) value[i] = C->r[vr[i]];
@@ -268,10 +268,10 @@ static int settable(Instance *c, int vr) {
     case INITIALIZATION:
         return variability != V_CONSTANT && (causality == C_INPUT || initial == I_EXACT);
     case EVENT:
+    case STEP_COMPLETE:
         return causality == C_INPUT || (causality == C_PARAMETER && variability == V_TUNABLE);
     case CONTINUOUS:
-    case STEP_COMPLETE:
-        return causality == C_INPUT && (c->mode == STEP_COMPLETE || variability == V_CONTINUOUS);
+        return causality == C_INPUT && variability == V_CONTINUOUS;
     default:
         return 0;
     }

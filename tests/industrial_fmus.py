@@ -240,6 +240,7 @@ def model_description(spec: ModelSpec, guid: str) -> str:
             exponents = " ".join(f'{k}="{_number(e) if e != int(e) else int(e)}"' for k, e in units[unit].items())
             lines.append(f'    <Unit name={quoteattr(unit)}><BaseUnit {exponents}/></Unit>')
         lines.append("  </UnitDefinitions>")
+    lines.append('  <LogCategories><Category name="logStatusError" description="errors"/></LogCategories>')
     if spec.default_experiment is not None:
         attributes = " ".join(f'{k}="{_number(x)}"' for k, x in spec.default_experiment.items())
         lines.append(f"  <DefaultExperiment {attributes}/>")
@@ -359,11 +360,18 @@ def _c_string(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+_GENERIC_OBJECTS: dict[str, Path] = {}  # the hash of the generic layer -> its object, for this process
+
+
 def _generic_object(folder: Path, generic: str) -> Path:
-    """The generic layer compiled once per folder (by the hash of its text and the flags): each model
-    then compiles only its small model.c and links (about 0.1 s of gcc instead of 0.5)."""
+    """The generic layer compiled once per process (by the hash of its text and the flags, into the
+    first folder asked for): each model then compiles only its small model.c and links."""
     digest = hashlib.sha256(repr((generic, CFLAGS)).encode()).hexdigest()[:12]
+    known = _GENERIC_OBJECTS.get(digest)
+    if known is not None and known.exists():
+        return known
     target = folder / f"industrial_fmu-{digest}.o"
+    _GENERIC_OBJECTS[digest] = target
     if not target.exists():
         with tempfile.TemporaryDirectory(dir=folder) as work:
             source = Path(work) / "industrial_fmu.c"

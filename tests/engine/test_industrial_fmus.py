@@ -14,20 +14,19 @@ from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
 from tests.catalog_fmus import extracted, simulated
-from tests.industrial_fmus import (DC_MOTOR, algebraic_loop_specs, bouncing_mass_spec, build, dc_motor_exact,
+from tests.industrial_fmus import (DC_MOTOR, algebraic_loop_specs, bouncing_mass_spec, dc_motor_exact,
                                    dc_motor_rhs, dc_motor_specs)
 
 TAU = 0.02  # N.m, the constant driving torque of the mechanical part alone
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    """Every ready-made FMU, built once (the DC motor's mechanical part also with Co-Simulation)."""
-    folder = tmp_path_factory.mktemp("industrial_fmus")
+def fmus(industrial_fmus):
+    """Every ready-made FMU (the DC motor's mechanical part also with Co-Simulation)."""
     specs = {**dc_motor_specs(), "BouncingMass": bouncing_mass_spec(), **algebraic_loop_specs()}
-    built = {name: build(folder, spec) for name, spec in specs.items()}
+    built = {name: industrial_fmus(spec) for name, spec in specs.items()}
     cs = dc_motor_specs(interfaces=("ModelExchange", "CoSimulation"))["DCMotor_Mechanical"]
-    built["DCMotor_Mechanical+CS"] = build(folder, cs)
+    built["DCMotor_Mechanical+CS"] = industrial_fmus(cs)
     return built
 
 
