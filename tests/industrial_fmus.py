@@ -71,6 +71,7 @@ SI_UNITS: dict[str, dict[str, float]] = {
     "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
     "rad": {"rad": 1},
     "rad/s": {"rad": 1, "s": -1},
+    "rad/s2": {"rad": 1, "s": -2},
     "1": {},
 }
 
@@ -514,14 +515,14 @@ def dc_motor_specs(source: str = "step", interfaces=("ModelExchange",), fixed_st
         Var("x[1]", "local", start=0.0, unit="rad", description="shaft angle"),
         Var("x[2]", "local", start=0.0, unit="rad/s", description="shaft speed"),
         Var("der(x[1])", "local", unit="rad/s", derivative="x[1]", dependencies=("x[2]",)),
-        Var("der(x[2])", "local", derivative="x[2]", dependencies=("flange.tau", "x[2]")),
+        Var("der(x[2])", "local", unit="rad/s2", derivative="x[2]", dependencies=("flange.tau", "x[2]")),
         Var("w", "output", unit="rad/s", description="shaft speed", dependencies=("x[2]",)),
         Var("phi", "output", unit="rad", description="shaft angle", dependencies=("x[1]",)),
     ), equations="""    der_x_1 = x_2;
     der_x_2 = (flange_tau - b * x_2 - tau_load) / J;
     w = x_2;
     phi = x_1;""",
-        units={"rad/s": {"s": -1}},  # the radian left out, as many tools write it
+        units={"rad/s": {"s": -1}, "rad/s2": {"s": -2}},  # the radian left out, as many tools write it
         description="the motor's rotor and load", **common)
     return {s.model_identifier: s for s in (source_spec, electrical, mechanical)}
 
