@@ -27,12 +27,14 @@ TAU = 0.02  # N.m, the constant driving torque of the mechanical part alone
 
 @pytest.fixture(scope="module")
 def fmus(industrial_fmus):
-    """Every ready-made FMU (the DC motor's mechanical part also with Co-Simulation)."""
+    """Every ready-made FMU (the DC motor's mechanical part also with Co-Simulation, by Euler and by
+    RK4; its source also smooth)."""
     specs = {**dc_motor_specs(), "BouncingMass": bouncing_mass_spec(), **algebraic_loop_specs()}
     built = {name: industrial_fmus(spec) for name, spec in specs.items()}
     cs = dc_motor_specs(interfaces=("ModelExchange", "CoSimulation"))["DCMotor_Mechanical"]
     built["DCMotor_Mechanical+CS"] = industrial_fmus(cs)
     built["DCMotor_Mechanical+RK4"] = industrial_fmus(replace(cs, cs_solver="rk4", fixed_step=0.01))
+    built["DCMotor_Source(smooth)"] = industrial_fmus(dc_motor_specs(source="smooth")["DCMotor_Source"])
     return built
 
 
