@@ -22,7 +22,7 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import least_squares
 
-from ..errors import CosimError, FmuCallError
+from ..errors import CosimError, FmuCallError, FmuError, SimulationTerminated
 from .model import LogModel, REL_STEP
 from .segments import Segment
 from .sensitivity import segment_sensitivities
@@ -39,15 +39,27 @@ DENSE_LIMIT = 20_000_000  # entries: a Jacobian with estimated initial states up
 _MODEL: LogModel | None = None  # a worker's model: inherited from the parent at fork (its own FMU instances)
 
 
+def _simulated(model: LogModel, theta, s: Segment, x0):
+    """The segment's trajectory, or why the FMU cannot make it at ``theta``
+    (an :class:`~cosim.errors.FmuError`: a refused step, a Model Exchange
+    solver's failure, the FMU asking to terminate; or a trajectory that is
+    not finite), for :meth:`_Problem.simulate` to reject."""
+    try:
+        tr = model.simulate(theta, s, x0)
+    except (FmuCallError, SimulationTerminated) as exc:
+        return exc
+    finite = np.isfinite(tr.states).all(axis=1)
+    finite[:len(tr.outputs)] &= np.isfinite(tr.outputs).all(axis=1)
+    if not finite.all():
+        t = float(model.times[s.first + int(np.argmin(finite))])
+        return FmuCallError(model.cs.name, model.cs.path, f"at t = {t:.4f} s: the trajectory is not finite (NaN or "
+                                                          f"infinite outputs or states)")
+    return tr
+
+
 def _simulate_part(job):
     theta, part = job
-    out = []
-    for s, x0 in part:
-        try:
-            out.append(_MODEL.simulate(theta, s, x0))
-        except FmuCallError as exc:
-            out.append(exc)
-    return out
+    return [_simulated(_MODEL, theta, s, x0) for s, x0 in part]
 
 
 def _sensitivities_part(job):
@@ -158,19 +170,15 @@ class _Problem:
             elif self.workers is not None:
                 done = self.workers.simulate(theta, self.segments, list(x0))
             else:
-                done = []
-                for i, s in enumerate(self.segments):
-                    try:
-                        done.append(self.model.simulate(theta, s, x0[i]))
-                    except FmuCallError as exc:
-                        done.append(exc)
+                done = [_simulated(self.model, theta, s, x0[i]) for i, s in enumerate(self.segments)]
             trajs = []
             for s, tr in zip(self.segments, done):
-                if isinstance(tr, FmuCallError):
+                if isinstance(tr, FmuError):
                     if not self.evaluations:  # the first guess: nothing to fall back on
                         raise FmuCallError(tr.instance, tr.path, f"the first guess fails: {tr.reason}") from None
-                    # a trial point the FMU refuses: infinite residuals, which the solver rejects
-                    # (its trust region shrinks), as a step into a region the model cannot fly
+                    # a trial point the FMU cannot simulate (refused, its solver failed, not finite): infinite
+                    # residuals, which the solver rejects (its trust region shrinks), as a step into a region the
+                    # model cannot fly; the one place every way (serial, workers, CasADi) meets it
                     tr = self._failed(s)
                 trajs.append(tr)
             self.cache[key] = trajs

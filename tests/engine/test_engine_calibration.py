@@ -255,3 +255,65 @@ def test_a_ulog_is_read_through_pyulog_its_topic_the_instants_another_interpolat
     cal = calibrate(path, REFERENCE / "fmi2" / "Dahlquist.fmu", CalibrationSettings(fit=["k"], guess={"k": 2.0}),
                     cmap)
     assert abs(cal.fit.theta[0] - 1.0) < 1e-6
+
+
+# ---- Model Exchange-only FMUs: the master's solver makes the trajectories (docs/calibration.md) ----------------
+
+def _without(version: int, elements: tuple[str, ...], path: Path) -> Path:
+    """The Reference VanDerPol with the interface ``elements`` taken out of its
+    modelDescription.xml (the binary unchanged): an FMU as a modelling tool
+    exports it, Model Exchange first."""
+    import zipfile
+
+    from lxml import etree
+
+    with zipfile.ZipFile(REFERENCE / f"fmi{version}" / "VanDerPol.fmu") as zin, \
+            zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                root = etree.fromstring(data)
+                for name in elements:
+                    root.remove(root.find(name))
+                data = etree.tostring(root, xml_declaration=True, encoding="UTF-8")
+            zout.writestr(item, data)
+    return path
+
+
+ME_MU = 0.7  # the log's mu, the FMU's default 1
+
+
+@pytest.fixture(scope="module", params=[2, 3])
+def me_only_log(request, tmp_path_factory):
+    """``(version, the ME-only VanDerPol, a noisy log of it)``: 10 s at 0.1 s
+    from fmpy's own Model Exchange run (CVode at 1e-10) at ``mu = 0.7``,
+    Gaussian noise 0.01 on both outputs (seeded)."""
+    from fmpy import simulate_fmu
+
+    folder = tmp_path_factory.mktemp(f"me{request.param}")
+    fmu = _without(request.param, ("CoSimulation",), folder / "VanDerPol.fmu")
+    r = simulate_fmu(str(fmu), fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-10, stop_time=10.0,
+                     output_interval=0.1, start_values={"mu": ME_MU})
+    rng = np.random.default_rng(7)
+    noisy = [r[n] + 0.01 * rng.standard_normal(r.size) for n in ("x0", "x1")]
+    log = folder / "log.csv"
+    np.savetxt(log, np.column_stack([r["time"], *noisy]), delimiter=",", header="time,x0,x1", comments="")
+    return request.param, fmu, log
+
+
+def test_a_model_exchange_only_fmu_is_calibrated_through_the_masters_solver(me_only_log, tmp_path, capsys):
+    version, fmu, log = me_only_log
+    settings = tmp_path / "settings.toml"
+    # the logged states are noisy: every segment's start estimated; a log of 0.1 s rows: Jacobians at every row
+    # (their Magnus step over 4 rows, the default's first iterations, converges in 26 simulations against 16)
+    settings.write_text("initial_states = 'estimated'\njacobian_stride = 1\n")
+    out = tmp_path / "out"
+    assert _cli("calibrate", log, "--fmu", fmu, "--fit", "mu", "--guess", "mu=1.05", "--segment", "5", "--settings",
+                settings, "--out", out, "--quiet", "--no-plots") == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    assert doc["interface"] == "ModelExchange" and doc["solver"]["relative_tolerance"] == 1e-8
+    assert doc["jacobian"] == "forward sensitivities (directional derivatives)"
+    mu = doc["parameters"]["mu"]
+    assert abs(mu["value"] - ME_MU) < 0.01 * ME_MU
+    assert mu["ci95"][0] < ME_MU < mu["ci95"][1]
+    assert doc["residuals"]["x0"]["sigma"] == pytest.approx(0.01, rel=0.2)  # the noise put in, estimated
