@@ -101,8 +101,10 @@ def run(args) -> int:
     if args.scenario is not None:
         from cosim.calibration.scenario_instance import scenario_instance
 
-        instance, fmu, fixed, extra = scenario_instance(args.scenario, args.instance, settings.fit,
-                                                        _overrides(args.set))
+        instance, fmu, fixed, extra, interface = scenario_instance(args.scenario, args.instance, settings.fit,
+                                                                   _overrides(args.set))
+        if settings.interface == "auto":  # the interface the scenario flies it in
+            settings = settings.model_copy(update={"interface": interface})
     else:
         if args.set or args.instance:
             raise ScenarioError("--set and --instance go with --scenario")

@@ -23,6 +23,7 @@ def test_van_der_pol_mu_from_its_published_output_from_a_guess_50_percent_off(ve
     settings = CalibrationSettings(fit=["mu"], guess={"mu": 1.5}, segment=5.0, **({"stop": 10.0} if version == 3 else {}))
     cal = calibrate(RESULTS / "VanDerPol_out.csv", REFERENCE / f"fmi{version}" / "VanDerPol.fmu", settings)
     assert cal.converged
+    assert cal.problem.fmu.interface == "CoSimulation"  # "auto": an FMU with both keeps Co-Simulation
     assert cal.fit.method.startswith("forward sensitivities")  # VanDerPol provides directional derivatives
     assert abs(cal.fit.theta[0] - 1.0) < 1e-6
     assert cal.stats.identifiable[0]
@@ -317,6 +318,16 @@ def test_a_model_exchange_only_fmu_is_calibrated_through_the_masters_solver(me_o
     assert abs(mu["value"] - ME_MU) < 0.01 * ME_MU
     assert mu["ci95"][0] < ME_MU < mu["ci95"][1]
     assert doc["residuals"]["x0"]["sigma"] == pytest.approx(0.01, rel=0.2)  # the noise put in, estimated
+
+
+def test_an_fmu_with_both_interfaces_is_calibrated_in_model_exchange_when_asked():
+    # the published output is the FMU's Co-Simulation (forward Euler at 0.01 s); the master's solver with
+    # Euler at the same step reproduces it, so the fit meets it as closely (3 s of it: one segment)
+    settings = CalibrationSettings(fit=["mu"], guess={"mu": 1.5}, stop=3.0, interface="ModelExchange",
+                                   solver={"method": "euler", "step": 0.01})
+    cal = calibrate(RESULTS / "VanDerPol_out.csv", REFERENCE / "fmi2" / "VanDerPol.fmu", settings)
+    assert cal.problem.fmu.interface == "ModelExchange" and cal.converged
+    assert abs(cal.fit.theta[0] - 1.0) < 1e-6
 
 
 @pytest.mark.parametrize("removed, args, says", [
