@@ -314,11 +314,11 @@ def _ordered(members: Sequence, connections: Sequence) -> list:
             return
         if state.get(key) == 1:
             cycle = path[path.index(key):]
-            links = [into[k.split(" -> ")[1]] for k in cycle]
+            links = [into[k.split(" -> ")[1]] for k in cycle][::-1]  # in the direction the values flow
+            first = len(links) - 1  # the link the search met first leads
             steps = []
-            for link in reversed(links):
+            for link in links[first:] + links[:first]:
                 steps += [str(link.source), str(link.destination)]
-            steps.append(steps[0])
             raise ConnectionCheckError(
                 f"algebraic loop between Model Exchange FMUs: {' -> '.join(steps)}; each output needs the input "
                 f"before it at the same instant (direct feedthrough): break it with a state, or set "
