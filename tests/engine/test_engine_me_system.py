@@ -1,0 +1,63 @@
+"""Model Exchange FMUs solved together (cosim/me_system.py, me_system.c):
+connected Model Exchange FMUs are one system, their connections evaluated
+inside the right-hand side, both loops give the same rows bit for bit, an
+algebraic loop between them is refused by name (exit 2)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim import kernel
+from cosim.fmu_component import FmuComponent
+from cosim.master import Master
+from cosim.model_exchange import SolverSettings
+from quadrotor_paper.cli import main
+
+REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
+pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
+THROUGH = "Float64_continuous_input", "Float64_continuous_output"
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_connected_model_exchange_fmus_are_one_system_run_alike_by_both_loops(monkeypatch, version):
+    """VanDerPol feeding Feedthrough, both Model Exchange: one system of two
+    (the connection set inside its right-hand side, not by the master), the
+    compiled loop calls it in C, and its rows are the Python loop's to the
+    bit; Feedthrough's output is the oscillator's state at every row."""
+    def build() -> Master:
+        fmus = [FmuComponent("V", REFERENCE / f"fmi{version}" / "VanDerPol.fmu", interface="ModelExchange",
+                             solver=SolverSettings(relative_tolerance=1e-8)),
+                FmuComponent("F", REFERENCE / f"fmi{version}" / "Feedthrough.fmu", interface="ModelExchange")]
+        return Master(fmus, [], [f"V.x0 -> F.{THROUGH[0]}"], 0.1, ["V.x0", f"F.{THROUGH[1]}"])
+
+    runs = []
+    for compiled in (True, False):
+        monkeypatch.setenv("COSIM_PYTHON_LOOP", "" if compiled else "1")
+        kernel.load.cache_clear()
+        with build() as master:
+            assert [[m.name for m in s.members] for s in master.me_systems] == [["V", "F"]]
+            assert master.plan.fmus[1].inputs == () and not master.plan.python_calls
+            runs.append(master.run(2.0))
+    kernel.load.cache_clear()
+    fast, slow = runs
+    assert not fast.python_loop and slow.python_loop
+    np.testing.assert_array_equal(fast.data, slow.data)
+    np.testing.assert_array_equal(fast[f"F.{THROUGH[1]}"], fast["V.x0"])
+    assert np.ptp(fast["V.x0"]) > 1  # the oscillator ran
+
+
+def test_an_algebraic_loop_between_model_exchange_fmus_is_refused_by_its_path(tmp_path, capsys):
+    path = json.dumps(str(REFERENCE / "fmi2" / "Feedthrough.fmu"))
+    scenario = tmp_path / "loop.toml"
+    scenario.write_text(f'connections = ["a.{THROUGH[1]} -> b.{THROUGH[0]}", "b.{THROUGH[1]} -> a.{THROUGH[0]}"]\n'
+                        f'[simulation]\nduration = 1.0\nstep = 0.1\n'
+                        f'[fmus.a]\npath = {path}\ninterface = "ModelExchange"\n'
+                        f'[fmus.b]\npath = {path}\ninterface = "ModelExchange"\n')
+    assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert (f"algebraic loop between Model Exchange FMUs: a.{THROUGH[1]} -> b.{THROUGH[0]} -> b.{THROUGH[1]} -> "
+            f"a.{THROUGH[0]};") in err
