@@ -61,3 +61,22 @@ def test_an_algebraic_loop_between_model_exchange_fmus_is_refused_by_its_path(tm
     assert len(err.splitlines()) == 1
     assert (f"algebraic loop between Model Exchange FMUs: a.{THROUGH[1]} -> b.{THROUGH[0]} -> b.{THROUGH[1]} -> "
             f"a.{THROUGH[0]};") in err
+
+
+def test_a_member_s_state_events_stop_the_shared_integration():
+    """BouncingBall feeding Feedthrough, one system: the ball's bounces (its
+    event indicator, among the system's roots) stop the shared integration
+    and its event iteration runs there; the ball's height is that of the ball
+    integrated alone, to the bit, and Feedthrough passes it on at every row."""
+    def fly(fmus, connections) -> np.ndarray:
+        with Master(fmus, [], connections, 0.05, ["B.h"] + ([f"F.{THROUGH[1]}"] if connections else [])) as master:
+            return master.run(3.0).data
+
+    ball = lambda: FmuComponent("B", REFERENCE / "fmi2" / "BouncingBall.fmu", interface="ModelExchange",  # noqa: E731
+                                solver=SolverSettings(relative_tolerance=1e-8))
+    together = fly([ball(), FmuComponent("F", REFERENCE / "fmi2" / "Feedthrough.fmu", interface="ModelExchange")],
+                   [f"B.h -> F.{THROUGH[0]}"])
+    alone = fly([ball()], [])
+    np.testing.assert_array_equal(together[:, :2], alone)
+    np.testing.assert_array_equal(together[:, 2], together[:, 1])
+    assert np.sum(np.diff(np.sign(np.diff(alone[:, 1]))) > 0) >= 2  # it bounced (the height turned upwards)
