@@ -25,6 +25,7 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "me_system_abi.h"
@@ -41,6 +42,7 @@ typedef void (*SUNErrHandlerFn)(int, const char *, const char *, const char *, i
 
 typedef int (*ctx_create_t)(int, void **);
 typedef int (*ctx_free_t)(void **);
+typedef int (*ctx_clear_t)(void *);
 typedef int (*ctx_push_t)(void *, SUNErrHandlerFn, void *);
 typedef N_Vector (*nv_new_t)(int64_t, void *);
 typedef void (*nv_destroy_t)(N_Vector);
@@ -244,6 +246,8 @@ static int solver_start(MeSystem *s, double t) {
     double *y, *abstol;
     if (!s->cvode) {
         if (((ctx_create_t)f->SUNContext_Create)(0, &s->context)) { fail(s, ME_SOLVER, -1, -1, t); return -1; }
+        /* CVODE's errors reach this system's message only (the default handler prints them to stderr) */
+        ((ctx_clear_t)f->SUNContext_ClearErrHandlers)(s->context);
         ((ctx_push_t)f->SUNContext_PushErrHandler)(s->context, error_handler, s);
         s->y = ((nv_new_t)f->N_VNew_Serial)(n, s->context);
         s->abstol = ((nv_new_t)f->N_VNew_Serial)(n, s->context);
@@ -452,7 +456,8 @@ int me_free(MeSystem *s) {
 }
 
 int me_flag_name(MeSystem *s, int64_t flag) {
-    const char *name = ((cv_flagname_t)s->sundials->CVodeGetReturnFlagName)((long)flag);
+    char *name = ((cv_flagname_t)s->sundials->CVodeGetReturnFlagName)((long)flag);  /* malloc'd by SUNDIALS */
     snprintf(s->flag_name, sizeof s->flag_name, "%s", name ? name : "?");
+    free(name);
     return 0;
 }

@@ -120,7 +120,7 @@ _CONNECTION_FIELDS = (
     ("discrete", _i64, "a discrete input: set in Event Mode only"),
 )
 
-_SUNDIALS = ("SUNContext_Create", "SUNContext_Free", "SUNContext_PushErrHandler", "N_VNew_Serial", "N_VDestroy",
+_SUNDIALS = ("SUNContext_Create", "SUNContext_Free", "SUNContext_ClearErrHandlers", "SUNContext_PushErrHandler", "N_VNew_Serial", "N_VDestroy",
              "N_VGetArrayPointer", "SUNDenseMatrix", "SUNMatDestroy", "SUNLinSol_Dense", "SUNLinSolFree",
              "CVodeCreate", "CVodeInit", "CVodeReInit", "CVodeSVtolerances", "CVodeRootInit", "CVodeSetLinearSolver",
              "CVodeSetMaxStep", "CVodeSetMaxNumSteps", "CVodeSetNoInactiveRootWarn", "CVodeSetUserData",
@@ -476,8 +476,7 @@ class ModelExchangeSystem:
 
     def refresh(self) -> None:
         """The connections evaluated if an input changed (before a typed get)."""
-        system = self._c[0].contents
-        if system.dirty:
+        if self._c is not None and self._c[0].contents.dirty:
             library().me_member_get(self.members[0]._me_member, None, 0, None)
 
     def restart(self) -> None:

@@ -80,3 +80,14 @@ def test_a_member_s_state_events_stop_the_shared_integration():
     np.testing.assert_array_equal(together[:, :2], alone)
     np.testing.assert_array_equal(together[:, 2], together[:, 1])
     assert np.sum(np.diff(np.sign(np.diff(alone[:, 1]))) > 0) >= 2  # it bounced (the height turned upwards)
+
+
+def test_the_solver_s_failure_is_told_in_one_line_with_cvode_s_own_words():
+    """Dahlquist with k = NaN: CVODE cannot converge; the run fails naming the
+    FMU, the time, CVODE's flag and its message (no print of SUNDIALS's own)."""
+    fmu = FmuComponent("D", REFERENCE / "fmi2" / "Dahlquist.fmu", interface="ModelExchange")
+    with Master([fmu], [], [], 0.1, ["D.x"], fmu_parameters={"D": {"k": float("nan")}}) as master:
+        result = master.run(1.0, raise_on_error=False)
+    assert result.status == "failed" and len(result.error.splitlines()) == 1
+    assert result.error.startswith("D (") and "Model Exchange integration (cvode)" in result.error
+    assert "CVODE failed (CV_CONV_FAILURE, flag -4): " in result.error and "corrector convergence" in result.error
