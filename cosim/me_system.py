@@ -347,13 +347,11 @@ class ModelExchangeSystem:
         self.internal = frozenset(str(c.destination) for c in self.connections)
         self._ready: set[str] = set()
         self._c = None  # the MeSystem and the arrays it points into
+        self.settings = self._settings()
         for m in self.members:
             m.system = self
 
-    # ---- settings ------------------------------------------------------------------------------------
-
-    @property
-    def settings(self) -> SolverSettings:
+    def _settings(self) -> SolverSettings:
         """One solver for all members: their method (the same for all), the
         tightest relative tolerance, the smallest step and event limit given."""
         given = [m.solver for m in self.members]
@@ -458,15 +456,23 @@ class ModelExchangeSystem:
         if function(system, *args):
             raise self.failure()
 
+    def _started(self) -> None:
+        if self._c is None:
+            waiting = ", ".join(m.name for m in self.members if m.name not in self._ready)
+            raise RuntimeError(f"the Model Exchange system of {', '.join(m.name for m in self.members)} has not "
+                               f"started: {waiting} still to leave Initialization Mode")
+
     def step(self, member, t: float, h: float) -> None:
         """``member``'s share of the step from ``t`` to ``t + h``: the first
         member advances the whole system (C: ``me_member_step``)."""
+        self._started()
         if library().me_member_step(member._me_member, t, h, 1) > 1:
             raise self.failure()
 
     def set_inputs(self, member, t: float) -> None:
         """``member``'s bound inputs from outside the system (:attr:`u`), held
         over the step (C: ``me_member_set``)."""
+        self._started()
         if library().me_member_set(member._me_member, member._in_vr, member._c_in, member._u_ptr) > 1:
             raise self.failure()
 

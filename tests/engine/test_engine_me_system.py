@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cosim import kernel
+from cosim.errors import ConnectionCheckError
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.model_exchange import SolverSettings
@@ -91,3 +92,16 @@ def test_the_solver_s_failure_is_told_in_one_line_with_cvode_s_own_words():
     assert result.status == "failed" and len(result.error.splitlines()) == 1
     assert result.error.startswith("D (") and "Model Exchange integration (cvode)" in result.error
     assert "CVODE failed (CV_CONV_FAILURE, flag -4): " in result.error and "corrector convergence" in result.error
+
+
+def test_members_of_one_system_take_one_solver_method_or_are_coupled_loosely():
+    def build(coupling: str) -> Master:
+        fmus = [FmuComponent("V", REFERENCE / "fmi2" / "VanDerPol.fmu", interface="ModelExchange"),
+                FmuComponent("F", REFERENCE / "fmi2" / "Feedthrough.fmu", interface="ModelExchange",
+                             solver=SolverSettings("euler"))]
+        return Master(fmus, [], [f"V.x0 -> F.{THROUGH[0]}"], 0.1, coupling=coupling)
+
+    with pytest.raises(ConnectionCheckError, match=r"one solver method \(V: cvode, F: euler\)"):
+        build("tight")
+    with build("loose") as master:
+        assert [len(s.members) for s in master.me_systems] == [1, 1]
