@@ -280,7 +280,9 @@ static int solver_start(MeSystem *s, double t) {
             fail(s, ME_SOLVER, -1, flag, t);
             return -1;
         }
-    } else if ((flag = ((cv_reinit_t)f->CVodeReInit)(s->cvode, t, s->y))) {
+    } else if ((flag = ((cv_reinit_t)f->CVodeReInit)(s->cvode, t, s->y))
+               /* CVODE keeps a copy of the absolute tolerances: the nominals may have changed at the event */
+               || (flag = ((cv_svtol_t)f->CVodeSVtolerances)(s->cvode, s->relative_tolerance, s->abstol))) {
         fail(s, ME_SOLVER, -1, flag, t);
         return -1;
     }
