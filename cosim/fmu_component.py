@@ -1,6 +1,6 @@
 """An FMU as a component of the master: a thin, fast wrapper over fmpy's
 instances, Co-Simulation (``FMU2Slave``, ``FMU3Slave``) or Model Exchange
-(``FMU2Model``, ``FMU3Model``, integrated by :mod:`cosim.model_exchange`).
+(``FMU2Model``, ``FMU3Model``, integrated by :mod:`cosim.me_system`).
 
 fmpy's classes do the loading, instantiation and status checking (every
 failed call raises fmpy's ``FMICallException`` in one place). This module
@@ -317,8 +317,8 @@ class FmuComponent:
         (:func:`stream_seed`; 0: the run's seed itself).
     interface : ``"CoSimulation"`` or ``"ModelExchange"``; by default
         Co-Simulation where the FMU has it, else Model Exchange. A Model
-        Exchange instance is integrated between communication points by the
-        master's solver (:mod:`cosim.model_exchange`); a clocked FMI 3.0 FMU
+        Exchange instance is integrated by the master's solver, with the Model
+        Exchange FMUs connected to it (:mod:`cosim.me_system`); a clocked FMI 3.0 FMU
         without continuous states in Model Exchange has its ticks as time
         events and nothing to integrate (docs/cosim.md, "Clocked FMUs").
     solver : :class:`~cosim.model_exchange.SolverSettings` of a Model

@@ -74,7 +74,8 @@ INTERFACES = ("CoSimulation", "ModelExchange")
 
 class Solver(Table):
     """``[fmus.<Name>.solver]``: how the master integrates a Model Exchange
-    FMU between communication points (:mod:`cosim.model_exchange`)."""
+    FMU (:mod:`cosim.me_system`; the FMUs of one system take one solver: the
+    same method, the tightest tolerance, the smallest step and event limit)."""
 
     method: one_of(METHODS) = Field("cvode", description="'cvode' (variable step BDF with root finding, "
                                                                     "SUNDIALS) or 'euler' (fixed step)")
