@@ -4,15 +4,15 @@ Two cases, each flown with the same FMUs in Co-Simulation and in Model
 Exchange (``cosim.me_system``: one CVODE over the stacked states of the
 connected Model Exchange FMUs, its calls in C):
 
-1. the DC motor as three FMUs (``tests/industrial_fmus.py``: a voltage
+1. the DC motor as three FMUs (``tests/dc_motor_fmus.py``: a voltage
    source with a step, the motor's electrical part, its mechanical part),
-   0.5 s at a 1 ms step: Co-Simulation (each FMU's own fixed-step solver,
-   the compiled loop), Model Exchange tightly coupled (the default), Model
-   Exchange loosely coupled (each FMU alone, its inputs held over a step), and
-   fmpy's ``simulate_fmu`` of one FMU (the mechanical part in Model Exchange,
-   its input held: fmpy cannot couple Model Exchange FMUs); the speed's largest
-   difference from the monolithic solution (scipy's ``solve_ivp`` over the
-   stacked states, rtol 1e-10) is printed beside each;
+   0.5 s at a 1 ms step: Co-Simulation (each FMU's own RK4 inside), Model
+   Exchange tightly coupled (the default), Model Exchange loosely coupled
+   (each FMU alone, its inputs held over a step), all in the compiled loop,
+   and fmpy's ``simulate_fmu`` of one FMU (the mechanical part in Model
+   Exchange, its input held: fmpy cannot couple Model Exchange FMUs); the
+   speed's largest difference from the monolithic solution (scipy's
+   ``solve_ivp`` over the stacked states, rtol 1e-10) is printed beside each;
 2. our plant on the 50 s circles mission (PD+LM-FNN, 3 m/s gust, 5000 steps
    of 10 ms): Co-Simulation (RK4 in the FMU) and Model Exchange at each
    --tolerances value, with the position RMSE against the Co-Simulation run.
@@ -27,6 +27,7 @@ never asserted.
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import resource
 import subprocess
@@ -83,33 +84,35 @@ HEADER = (f"{'':<44} {'loop (s)':>9} {'x CS':>6} {'wall (s)':>9} {'x CS':>6} {'C
 
 
 def dc_motor(repeats: int, folder: Path) -> None:
-    """Case 1 (needs tests/industrial_fmus.py, the DC motor's three FMUs)."""
-    try:
-        from tests import industrial_fmus as industrial
-    except ImportError:
-        print("DC motor: tests/industrial_fmus.py is not in this tree; skipped")
-        return
+    """Case 1: the DC motor's three FMUs (tests/dc_motor_fmus.py)."""
+    sys.path.insert(0, str(ROOT))
     from fmpy import simulate_fmu
-    from scipy.integrate import solve_ivp
+
+    from tests.dc_motor_fmus import CONNECTIONS, dc_motor_fmus
+    from tests.engine.test_engine_me_system import _monolithic
 
     duration, step = 0.5, 1e-3
-    fmus = industrial.dc_motor_fmus(folder)
-    t = np.linspace(0.0, duration, int(round(duration / step)) + 1)
-    exact = solve_ivp(industrial.dc_motor_rhs(), (0.0, duration), industrial.dc_motor_x0(), rtol=1e-10, atol=1e-12,
-                      t_eval=t, method="LSODA")
-    speed = exact.y[industrial.DC_MOTOR_SPEED_INDEX]
-    print(f"DC motor as three FMUs (source, electrical, mechanical), {duration} s at a {step * 1e3:g} ms step")
+    fmus = dc_motor_fmus()
+    times = np.linspace(0.0, duration, int(round(duration / step)) + 1)
+    speed = _monolithic(times)[1]
+    print(f"DC motor as three FMUs (source, electrical, mechanical), {duration} s at a {step * 1e3:g} ms step, "
+          f"median of {repeats}; error: the speed's largest difference from the monolithic solution")
     print(HEADER)
     base = None
-    for name, settings in (("Co-Simulation (each FMU's own solver)", {"interface": "CoSimulation"}),
-                           ("Model Exchange, tight (one CVODE, rtol 1e-8)",
-                            {"interface": "ModelExchange", "coupling": "tight"}),
-                           ("Model Exchange, loose (each FMU alone)",
-                            {"interface": "ModelExchange", "coupling": "loose"})):
-        path = folder / f"dc_{settings['interface']}_{settings.get('coupling', '')}.toml"
-        path.write_text(industrial.dc_motor_scenario(fmus, duration, step, **settings))
+    for name, interface, coupling in (("Co-Simulation (RK4 at 10 us in each FMU)", "CoSimulation", "tight"),
+                                      ("Model Exchange, tight (one CVODE, rtol 1e-8)", "ModelExchange", "tight"),
+                                      ("Model Exchange, loose (each FMU alone)", "ModelExchange", "loose")):
+        lines = [f"connections = {json.dumps(list(CONNECTIONS))}", "[simulation]", f"duration = {duration}",
+                 f"step = {step}", f'coupling = "{coupling}"']
+        for fmu, path in fmus.items():
+            lines += [f"[fmus.{fmu}]", f"path = {json.dumps(str(path))}", f'interface = "{interface}"']
+            if interface == "ModelExchange":
+                lines.append("solver = { relative_tolerance = 1e-8 }")
+        lines += ["[record]", 'signals = ["mechanical.w"]']
+        path = folder / f"dc_{interface}_{coupling}.toml"
+        path.write_text("\n".join(lines) + "\n")
         scenario = load_scenario(str(path))
-        loop_s, rows = loop(scenario, repeats, [industrial.DC_MOTOR_SPEED])
+        loop_s, rows = loop(scenario, repeats, ["mechanical.w"])
         process_s = process([str(path)], repeats)
         base = base or (loop_s, process_s)
         row(name, loop_s, process_s, base, f"{np.max(np.abs(rows[:, 0] - speed)):.2e} rad/s")
@@ -119,7 +122,7 @@ def dc_motor(repeats: int, folder: Path) -> None:
         simulate_fmu(str(fmus["mechanical"]), fmi_type="ModelExchange", stop_time=duration, output_interval=step,
                      relative_tolerance=1e-8)
         times.append(time.perf_counter() - start)
-    print(f"{'fmpy simulate_fmu, the mechanical part alone (ME)':<44} {statistics.median(times):9.3f} "
+    print(f"{'fmpy simulate_fmu, the mechanical part alone':<44} {statistics.median(times):9.3f} "
           f"{statistics.median(times) / base[0]:6.1f}")
 
 
