@@ -149,7 +149,8 @@ class Plan:
     ``python_calls``: FMU name -> why the compiled loop drives it through its Python
     calls (set, get and step: :meth:`~cosim.fmu_component.FmuComponent.kernel_entry`),
     each with its reason (:meth:`~cosim.fmu_component.FmuComponent.python_loop_reason`:
-    Model Exchange, a clock, signals of other types than Float64 scalars);
+    a clock, signals of other types than Float64 scalars; a Model Exchange FMU is called
+    through its system's C calls, :mod:`cosim.me_system`);
     the others it calls in C. ``conversion_of``:
     destination -> ``(factor, offset)`` of every converted connection;
     ``derived``: ``(slot, source slot, factor, offset)``, the converted
