@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cosim import kernel
+from cosim.connection import Connection, Endpoint
 from cosim.errors import ConnectionCheckError
 from cosim.fmu_component import FmuComponent
 from cosim.master import Master
@@ -28,12 +29,14 @@ def test_connected_model_exchange_fmus_are_one_system_run_alike_by_both_loops(mo
     """VanDerPol feeding Feedthrough, both Model Exchange: one system of two
     (the connection set inside its right-hand side, not by the master), the
     compiled loop calls it in C, and its rows are the Python loop's to the
-    bit; Feedthrough's output is the oscillator's state at every row."""
+    bit; Feedthrough's output is the oscillator's state at every row, through
+    the connection's conversion (factor 2, offset 1: a unit conversion)."""
     def build() -> Master:
         fmus = [FmuComponent("V", REFERENCE / f"fmi{version}" / "VanDerPol.fmu", interface="ModelExchange",
                              solver=SolverSettings(relative_tolerance=1e-8)),
                 FmuComponent("F", REFERENCE / f"fmi{version}" / "Feedthrough.fmu", interface="ModelExchange")]
-        return Master(fmus, [], [f"V.x0 -> F.{THROUGH[0]}"], 0.1, ["V.x0", f"F.{THROUGH[1]}"])
+        converted = Connection(Endpoint("V", "x0"), Endpoint("F", THROUGH[0]), conversion=(2.0, 1.0))
+        return Master(fmus, [], [converted], 0.1, ["V.x0", f"F.{THROUGH[1]}"])
 
     runs = []
     for compiled in (True, False):
@@ -47,7 +50,7 @@ def test_connected_model_exchange_fmus_are_one_system_run_alike_by_both_loops(mo
     fast, slow = runs
     assert not fast.python_loop and slow.python_loop
     np.testing.assert_array_equal(fast.data, slow.data)
-    np.testing.assert_array_equal(fast[f"F.{THROUGH[1]}"], fast["V.x0"])
+    np.testing.assert_array_equal(fast[f"F.{THROUGH[1]}"], 2.0 * fast["V.x0"] + 1.0)
     assert np.ptp(fast["V.x0"]) > 1  # the oscillator ran
 
 
