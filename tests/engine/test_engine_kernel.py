@@ -213,15 +213,21 @@ def test_an_fmu_local_outside_its_envelope_stops_both_loops_at_the_same_point(mo
     np.testing.assert_array_equal(fast.data, slow.data)
 
 
-def test_the_c_header_lays_the_structures_out_as_ctypes_does(tmp_path):
-    """The header kernel.c is compiled with, generated from the ctypes
-    structures: every field at the same offset, every structure of the same size."""
-    structures = (kernel.KernelFmu, kernel.KernelRun, kernel.KernelStop)
-    (tmp_path / "kernel_abi.h").write_text(kernel.header())
+@pytest.mark.parametrize("library", ["kernel", "me_system"])
+def test_the_c_header_lays_the_structures_out_as_ctypes_does(tmp_path, library):
+    """The header kernel.c (and me_system.c) is compiled with, generated from
+    the ctypes structures: every field at the same offset, every structure of
+    the same size."""
+    from cosim import me_system
+
+    module, structures = {"kernel": (kernel, (kernel.KernelFmu, kernel.KernelRun, kernel.KernelStop)),
+                          "me_system": (me_system, (me_system.MeMember, me_system.MeConnection,
+                                                    me_system.MeSundials, me_system.MeSystem))}[library]
+    (tmp_path / "abi.h").write_text(module.header())
     prints = [f'printf("{s.__name__} %zu\\n", sizeof({s.__name__}));' for s in structures]
     prints += [f'printf("{s.__name__}.{name} %zu\\n", offsetof({s.__name__}, {name}));'
                for s in structures for name, _ in s._fields_]
-    (tmp_path / "layout.c").write_text("#include <stddef.h>\n#include <stdio.h>\n#include \"kernel_abi.h\"\n"
+    (tmp_path / "layout.c").write_text("#include <stddef.h>\n#include <stdio.h>\n#include \"abi.h\"\n"
                                        "int main(void) {\n" + "\n".join(prints) + "\nreturn 0;\n}\n")
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     subprocess.run([cc, "-std=c99", f"-I{tmp_path}", "-o", str(tmp_path / "layout"), str(tmp_path / "layout.c")],
