@@ -1112,13 +1112,16 @@ class FmuComponent:
             except FMICallException as exc:
                 raise self._call_failure(Call.SET, exc, t) from None
 
-    def integration_failure(self, exc: Exception, t: float) -> Exception:
+    def integration_failure(self, exc: "Exception | int", t: float) -> Exception:
         """The error of this member's Model Exchange system at ``t``
         (:meth:`cosim.me_system.ModelExchangeSystem.failure`): the FMU asking
         to end the run, or an :class:`~cosim.errors.FmuCallError` naming the
-        time, the FMU and the reason (an FMI status, the solver's failure)."""
+        time, the FMU and the reason (an FMI status, given as the number, or
+        the solver's failure, an :class:`~cosim.model_exchange.IntegrationError`)."""
         from .model_exchange import IntegrationError
 
+        if isinstance(exc, int):
+            exc = FMICallException(function="a Model Exchange call", status=exc)
         method = self.system.settings.method if self.system is not None else self.solver.method
         if isinstance(exc, IntegrationError):
             if exc.terminate:

@@ -371,8 +371,6 @@ class ModelExchangeSystem:
         (its solver of the last run freed, no member calls into it)."""
         self._ready.discard(member.name)
         self.close()
-        for m in self.members:
-            m._me_member = None
 
     def initialized(self, member, t0: float) -> None:
         """``member`` left Initialization Mode (it is in Event Mode); when
@@ -447,6 +445,8 @@ class ModelExchangeSystem:
             if self._c[0].contents.sundials:
                 library().me_free(self._c[0])
             self._c = None
+            for m in self.members:  # their MeMember is gone with it
+                m._me_member = None
 
     # ---- calls in a run ----------------------------------------------------------------------------------
 
@@ -516,10 +516,7 @@ class ModelExchangeSystem:
         kind, code, t = MeError(system.error_kind), int(system.error_code), float(system.error_time)
         member = self.members[system.error_member] if 0 <= system.error_member < len(self.members) else None
         if kind == MeError.FMI:
-            from fmpy.fmi1 import FMICallException
-
-            return (member or self.members[0]).integration_failure(
-                FMICallException(function="a Model Exchange call", status=code), t)
+            return (member or self.members[0]).integration_failure(code, t)
         if kind == MeError.SOLVER:
             library().me_flag_name(self._c[0], code)
             said = system.message.decode("utf-8", "replace")
