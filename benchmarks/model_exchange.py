@@ -4,7 +4,7 @@ Two cases, each flown with the same FMUs in Co-Simulation and in Model
 Exchange (``cosim.me_system``: one CVODE over the stacked states of the
 connected Model Exchange FMUs, its calls in C):
 
-1. the DC motor as three FMUs (``tests/dc_motor_fmus.py``: a voltage
+1. the DC motor as three FMUs (``tests/industrial_fmus.py``: a voltage
    source with a step, the motor's electrical part, its mechanical part),
    0.5 s at a 1 ms step: Co-Simulation (each FMU's own RK4 inside), Model
    Exchange tightly coupled (the default), Model Exchange loosely coupled
@@ -84,43 +84,44 @@ HEADER = (f"{'':<44} {'loop (s)':>9} {'x CS':>6} {'wall (s)':>9} {'x CS':>6} {'C
 
 
 def dc_motor(repeats: int, folder: Path) -> None:
-    """Case 1: the DC motor's three FMUs (tests/dc_motor_fmus.py)."""
+    """Case 1: the DC motor's three FMUs (tests/industrial_fmus.py)."""
     sys.path.insert(0, str(ROOT))
     from fmpy import simulate_fmu
 
-    from tests.dc_motor_fmus import CONNECTIONS, dc_motor_fmus
-    from tests.engine.test_engine_me_system import _monolithic
+    from tests.industrial_fmus import DC_MOTOR_CONNECTIONS, build, dc_motor_reference, dc_motor_specs
 
     duration, step = 0.5, 1e-3
-    fmus = dc_motor_fmus()
+    fmus = {n: build(folder, s) for n, s in dc_motor_specs(interfaces=("ModelExchange", "CoSimulation")).items()}
     times = np.linspace(0.0, duration, int(round(duration / step)) + 1)
-    speed = _monolithic(times)[1]
+    speed = dc_motor_reference(times)[:, 2]
+    connections = [f'{{ connect = "{a}.{x} -> {b}.{y}", units = "unchecked" }}' if y == "w" else f'"{a}.{x} -> {b}.{y}"'
+                   for (a, x), (b, y) in DC_MOTOR_CONNECTIONS]  # the mechanical part's rad/s has no radian
     print(f"DC motor as three FMUs (source, electrical, mechanical), {duration} s at a {step * 1e3:g} ms step, "
           f"median of {repeats}; error: the speed's largest difference from the monolithic solution")
     print(HEADER)
     base = None
-    for name, interface, coupling in (("Co-Simulation (RK4 at 10 us in each FMU)", "CoSimulation", "tight"),
+    for name, interface, coupling in (("Co-Simulation (Euler at 0.1 ms in each FMU)", "CoSimulation", "tight"),
                                       ("Model Exchange, tight (one CVODE, rtol 1e-8)", "ModelExchange", "tight"),
                                       ("Model Exchange, loose (each FMU alone)", "ModelExchange", "loose")):
-        lines = [f"connections = {json.dumps(list(CONNECTIONS))}", "[simulation]", f"duration = {duration}",
+        lines = [f"connections = [{', '.join(connections)}]", "[simulation]", f"duration = {duration}",
                  f"step = {step}", f'coupling = "{coupling}"']
         for fmu, path in fmus.items():
             lines += [f"[fmus.{fmu}]", f"path = {json.dumps(str(path))}", f'interface = "{interface}"']
             if interface == "ModelExchange":
                 lines.append("solver = { relative_tolerance = 1e-8 }")
-        lines += ["[record]", 'signals = ["mechanical.w"]']
+        lines += ["[record]", 'signals = ["DCMotor_Mechanical.w"]']
         path = folder / f"dc_{interface}_{coupling}.toml"
         path.write_text("\n".join(lines) + "\n")
         scenario = load_scenario(str(path))
-        loop_s, rows = loop(scenario, repeats, ["mechanical.w"])
+        loop_s, rows = loop(scenario, repeats, ["DCMotor_Mechanical.w"])
         process_s = process([str(path)], repeats)
         base = base or (loop_s, process_s)
         row(name, loop_s, process_s, base, f"{np.max(np.abs(rows[:, 0] - speed)):.2e} rad/s")
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
-        simulate_fmu(str(fmus["mechanical"]), fmi_type="ModelExchange", stop_time=duration, output_interval=step,
-                     relative_tolerance=1e-8)
+        simulate_fmu(str(fmus["DCMotor_Mechanical"]), fmi_type="ModelExchange", stop_time=duration,
+                     output_interval=step, relative_tolerance=1e-8)
         times.append(time.perf_counter() - start)
     print(f"{'fmpy simulate_fmu, the mechanical part alone':<44} {statistics.median(times):9.3f} "
           f"{statistics.median(times) / base[0]:6.1f}")

@@ -17,7 +17,8 @@ from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.model_exchange import SolverSettings
 from quadrotor_paper.cli import main
-from tests.dc_motor_fmus import CONNECTIONS, PARAMETERS, dc_motor_fmus, dc_motor_rhs, dc_motor_x0
+from cosim.kernel import _cache
+from tests.industrial_fmus import DC_MOTOR, DC_MOTOR_CONNECTIONS, build, dc_motor_reference, dc_motor_specs
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
 pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
@@ -111,38 +112,40 @@ def test_members_of_one_system_take_one_solver_method_or_are_coupled_loosely():
         assert [len(s.members) for s in master.me_systems] == [1, 1]
 
 
-def _monolithic(times: np.ndarray) -> np.ndarray:
-    """``[i, w, phi]`` of the DC motor at ``times``: scipy's ``solve_ivp``
-    over the three models' stacked states, in two pieces split at the
-    source's step (rtol 1e-10)."""
-    from scipy.integrate import solve_ivp
-
-    f, step, end = dc_motor_rhs(), PARAMETERS["t_step"], float(times[-1])
-    before = solve_ivp(f, (0.0, step), dc_motor_x0(), rtol=1e-10, atol=1e-12, method="LSODA", dense_output=True)
-    after = solve_ivp(f, (step, end), before.y[:, -1], rtol=1e-10, atol=1e-12, method="LSODA", dense_output=True)
-    return np.where(times <= step, before.sol(np.minimum(times, step)), after.sol(np.maximum(times, step)))
+def _dc_motor() -> tuple[dict[str, Path], list[Connection]]:
+    """The DC motor's three FMUs (tests/industrial_fmus.py; Model Exchange and Co-Simulation), built
+    once per machine beside the engine's compiled C, and their connections (the speed's unit
+    unchecked: the mechanical part writes rad/s without the radian, as many tools do)."""
+    folder = _cache() / "industrial_fmus"
+    folder.mkdir(parents=True, exist_ok=True)
+    fmus = {n: build(folder, s) for n, s in dc_motor_specs(interfaces=("ModelExchange", "CoSimulation")).items()}
+    return fmus, [Connection(Endpoint(a, x), Endpoint(b, y), unchecked=y == "w") for (a, x), (b, y) in DC_MOTOR_CONNECTIONS]
 
 
-@pytest.mark.parametrize("step", [1e-3, 3e-3])
-def test_the_dc_motor_as_three_coupled_model_exchange_fmus_is_the_monolithic_solution(step):
+def test_the_dc_motor_as_three_coupled_model_exchange_fmus_is_the_monolithic_solution():
     """A voltage source, the motor's electrical part and its mechanical part,
     three Model Exchange FMUs in a feedback loop through their states: one
-    system lands within 1e-6 of the monolithic solution (the speed, about
-    200 rad/s, and the torque); each FMU alone with its inputs held over a
-    step (coupling = "loose") and their Co-Simulation are visibly off. At
-    the 3 ms step the source's time event (10 ms) falls inside a step: it
-    stops the shared integration there, the states right after it are right."""
+    system lands within 1e-6 of the monolithic solution (scipy's solve_ivp
+    over the stacked states, rtol 1e-10: the speed, about 200 rad/s, and the
+    current); each FMU alone with its inputs held over a step (coupling =
+    "loose") and their Co-Simulation are visibly off. At a 3 ms step the
+    source's time event (10 ms) falls inside a step: it stops the shared
+    integration there, and the states right after it are right."""
+    paths, connections = _dc_motor()
+    step = 3e-3
+
     def fly(interface: str, coupling: str = "tight"):
         solver = SolverSettings(relative_tolerance=1e-10) if interface == "ModelExchange" else None
-        fmus = [FmuComponent(n, p, interface=interface, solver=solver) for n, p in dc_motor_fmus().items()]
-        with Master(fmus, [], list(CONNECTIONS), step, ["mechanical.w", "electrical.tau"], coupling=coupling) as m:
-            return m.run(0.06)
+        fmus = [FmuComponent(n, p, interface=interface, solver=solver) for n, p in paths.items()]
+        with Master(fmus, [], connections, step, ["DCMotor_Mechanical.w", "DCMotor_Electrical.i"],
+                    coupling=coupling) as master:
+            return master.run(0.06)
 
     tight = fly("ModelExchange")
-    exact = _monolithic(tight.time)
-    assert np.max(np.abs(tight["mechanical.w"] - exact[1])) < 1e-6
-    assert np.max(np.abs(tight["electrical.tau"] - PARAMETERS["k"] * exact[0])) < 1e-6
-    after = np.searchsorted(tight.time, PARAMETERS["t_step"], side="right")  # the first row after the step
-    assert abs(tight["mechanical.w"][after] - exact[1][after]) < 1e-7 and exact[1][after] > 1.0
+    exact = dc_motor_reference(tight.time)  # [i, phi, w]
+    assert np.max(np.abs(tight["DCMotor_Mechanical.w"] - exact[:, 2])) < 1e-6
+    assert np.max(np.abs(tight["DCMotor_Electrical.i"] - exact[:, 0])) < 1e-6
+    after = np.searchsorted(tight.time, DC_MOTOR["t_step"], side="right")  # the first row after the step
+    assert abs(tight["DCMotor_Mechanical.w"][after] - exact[after, 2]) < 1e-7 and exact[after, 2] > 1.0
     for loose in (fly("ModelExchange", "loose"), fly("CoSimulation")):
-        assert np.max(np.abs(loose["mechanical.w"] - exact[1])) > 0.05
+        assert np.max(np.abs(loose["DCMotor_Mechanical.w"] - exact[:, 2])) > 0.05
