@@ -353,7 +353,9 @@ int me_advance(MeSystem *s, double t, double t_end) {
                      : (s->next_event_time > t ? s->next_event_time : t);
             time_event = 1;
         }
-        if (s->euler) {  /* whole steps of the given size, cut at events */
+        if (target - t <= close) {  /* a time event now (announced at an event at t): nothing to integrate */
+            reached = target;
+        } else if (s->euler) {  /* whole steps of the given size, cut at events */
             const int whole = target - (t + substep) > -close;
             const double dt = whole ? substep : target - t;
             reached = target - (t + substep) > close ? t + substep : target;
