@@ -65,6 +65,9 @@ typedef int (*cv_t)(void *, double, N_Vector, double *, int);
 typedef int (*cv_rootinfo_t)(void *, int *);
 typedef void (*cv_free_t)(void **);
 typedef char *(*cv_flagname_t)(long);
+typedef int (*CVLsJacFn)(double, N_Vector, N_Vector, void *, void *, N_Vector, N_Vector, N_Vector);
+typedef int (*cv_setjac_t)(void *, CVLsJacFn);
+typedef double *(*mat_column_t)(void *, int64_t);
 
 /* ---- FMI calls, by version (the standards' signatures) -------------------- */
 typedef int (*set_time2_t)(void *, double);
@@ -80,6 +83,9 @@ typedef int (*completed3_t)(void *, _Bool, _Bool *, _Bool *);
 typedef struct { int needed, terminate, nominals_changed, values_changed, next_defined; double next_time; } EventInfo2;
 typedef int (*newdiscrete2_t)(void *, EventInfo2 *);
 typedef int (*update3_t)(void *, _Bool *, _Bool *, _Bool *, _Bool *, _Bool *, double *);
+typedef int (*directional2_t)(void *, const uint32_t *, size_t, const uint32_t *, size_t, const double *, double *);
+typedef int (*directional3_t)(void *, const uint32_t *, size_t, const uint32_t *, size_t, const double *, size_t,
+                              double *, size_t);
 
 #define MAX_EVENT_ITERATIONS 1000
 
@@ -240,6 +246,76 @@ int me_event(MeSystem *s, double t) {
 
 /* ---- integration --------------------------------------------------------- */
 
+/* ---- the Jacobian from the members' directional derivatives --------------- */
+
+/* d(unknowns)/d(known) of member m: its derivatives, then its outputs that
+ * feed other members (FMI 2.0 section 2.1.9, FMI 3.0 section 2.2.10). */
+static int column(MeSystem *s, MeMember *m, int64_t i, uint32_t known, double *out, double t) {
+    const double seed = 1.0;
+    const size_t n = (size_t)m->n_unknowns;
+    if (!n) return 0;
+    CHECK(m->version == 2 ? ((directional2_t)m->directional)(m->component, m->unknown_vr, n, &known, 1, &seed, out)
+                          : ((directional3_t)m->directional)(m->component, m->unknown_vr, n, &known, 1, &seed, 1,
+                                                              out, n), i, t);
+    return 0;
+}
+
+/* CVODE's dense Jacobian d(der)/dx of the stacked states, by the chain rule
+ * through the connections: d(der_m)/dx = its own block + sum over its inputs
+ * from members of d(der_m)/du * du/dx, where du/dx of a connection is its
+ * factor times d(y_source)/dx, itself the source's own block plus, for an
+ * output with direct feedthrough, d(y)/du' * du'/dx of the inputs before it
+ * (the connections' dependency order). */
+static int jacobian(double t, N_Vector y, N_Vector fy, void *matrix, void *data, N_Vector t1, N_Vector t2,
+                    N_Vector t3) {
+    MeSystem *s = data;
+    MeSundials *f = s->sundials;
+    const int64_t nx = s->nx;
+    double *x = ((nv_data_t)f->N_VGetArrayPointer)(y);
+    (void)fy; (void)t1; (void)t2; (void)t3;
+    if (!nx) return 0;
+    if (set_time(s, t) || set_states(s, x, t) || connect(s, t)) return -1;
+    double *dense = s->jac_dense, *du = s->jac_du;  /* nx * nx column-major; n_connections * nx */
+    memset(dense, 0, (size_t)(nx * nx) * sizeof(double));
+    memset(du, 0, (size_t)(s->n_connections * nx) * sizeof(double));
+    for (int64_t i = 0; i < s->n_members; i++) {  /* each member's columns: its states, its inputs from members */
+        MeMember *m = &s->members[i];
+        for (int64_t j = 0; j < m->nx + m->n_linked; j++) {
+            double *col = m->jac_columns + j * m->n_unknowns;
+            if (column(s, m, i, j < m->nx ? m->state_vr[j] : m->linked_vr[j - m->nx], col, t)) return -1;
+            if (j < m->nx)
+                for (int64_t r = 0; r < m->nx; r++) dense[(m->x_offset + j) * nx + m->x_offset + r] = col[r];
+        }
+    }
+    for (int64_t k = 0; k < s->n_connections; k++) {  /* du/dx of every connection, in dependency order */
+        const MeConnection *c = &s->connections[k];
+        if (c->discrete) continue;
+        MeMember *a = &s->members[c->source];
+        const double factor = c->converted ? c->factor : 1.0;
+        double *row = du + k * nx;
+        const int64_t out = a->nx + c->source_slot;  /* the source output's place in a column */
+        for (int64_t j = 0; j < a->nx; j++) row[a->x_offset + j] = factor * a->jac_columns[j * a->n_unknowns + out];
+        for (int64_t q = 0; q < a->n_linked; q++) {
+            const double g = factor * a->jac_columns[(a->nx + q) * a->n_unknowns + out];
+            if (g != 0.0)
+                for (int64_t j = 0; j < nx; j++) row[j] += g * du[a->linked_connection[q] * nx + j];
+        }
+    }
+    for (int64_t i = 0; i < s->n_members; i++) {  /* the chain rule into each member's derivatives */
+        MeMember *m = &s->members[i];
+        for (int64_t q = 0; q < m->n_linked; q++) {
+            const double *col = m->jac_columns + (m->nx + q) * m->n_unknowns;
+            const double *row = du + m->linked_connection[q] * nx;
+            for (int64_t j = 0; j < nx; j++)
+                if (row[j] != 0.0)
+                    for (int64_t r = 0; r < m->nx; r++) dense[j * nx + m->x_offset + r] += col[r] * row[j];
+        }
+    }
+    for (int64_t j = 0; j < nx; j++)
+        memcpy(((mat_column_t)f->SUNDenseMatrix_Column)(matrix, j), dense + j * nx, (size_t)nx * sizeof(double));
+    return 0;
+}
+
 static int solver_start(MeSystem *s, double t) {
     MeSundials *f = s->sundials;
     const int64_t n = s->nx ? s->nx : 1;
@@ -275,6 +351,7 @@ static int solver_start(MeSystem *s, double t) {
         s->linear_solver = ((ls_dense_t)f->SUNLinSol_Dense)(s->y, s->matrix, s->context);
         if ((flag = ((cv_setls_t)f->CVodeSetLinearSolver)(s->cvode, s->linear_solver, s->matrix))
             || (s->max_step > 0 && (flag = ((cv_setreal_t)f->CVodeSetMaxStep)(s->cvode, s->max_step)))
+            || (s->directional && (flag = ((cv_setjac_t)f->CVodeSetJacFn)(s->cvode, jacobian)))
             || (flag = ((cv_setlong_t)f->CVodeSetMaxNumSteps)(s->cvode, 100000))
             || (flag = ((cv_setnone_t)f->CVodeSetNoInactiveRootWarn)(s->cvode))) {
             fail(s, ME_SOLVER, -1, flag, t);

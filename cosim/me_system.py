@@ -107,6 +107,14 @@ _MEMBER_FIELDS = (
     ("u_set", _f64p, "its inputs from outside the system as last set"),
     ("u_known", _i64, "u_set holds values (else the next set is a change)"),
     ("discrete_in", _i64p, "per input from outside: 1 if discrete (set in Event Mode)"),
+    ("directional", _ptr, "fmi2GetDirectionalDerivative / fmi3GetDirectionalDerivative (jacobian = directional)"),
+    ("state_vr", ctypes.POINTER(_u32), "its states' value references"),
+    ("unknown_vr", ctypes.POINTER(_u32), "its derivatives', then its outputs' that feed other members"),
+    ("n_unknowns", _i64, ""),
+    ("n_linked", _i64, "its continuous inputs fed by other members"),
+    ("linked_vr", ctypes.POINTER(_u32), "their value references"),
+    ("linked_connection", _i64p, "the connection feeding each"),
+    ("jac_columns", _f64p, "d(unknowns)/d(state j, then linked input q), column by column"),
 )
 
 _CONNECTION_FIELDS = (
@@ -118,13 +126,15 @@ _CONNECTION_FIELDS = (
     ("offset", _f64, ""),
     ("converted", _i64, "the connection carries a unit conversion"),
     ("discrete", _i64, "a discrete input: set in Event Mode only"),
+    ("source_slot", _i64, "the source output's place among its member's unknowns after the derivatives"),
 )
 
 _SUNDIALS = ("SUNContext_Create", "SUNContext_Free", "SUNContext_ClearErrHandlers", "SUNContext_PushErrHandler", "N_VNew_Serial", "N_VDestroy",
              "N_VGetArrayPointer", "SUNDenseMatrix", "SUNMatDestroy", "SUNLinSol_Dense", "SUNLinSolFree",
              "CVodeCreate", "CVodeInit", "CVodeReInit", "CVodeSVtolerances", "CVodeRootInit", "CVodeSetLinearSolver",
              "CVodeSetMaxStep", "CVodeSetMaxNumSteps", "CVodeSetNoInactiveRootWarn", "CVodeSetUserData",
-             "CVodeSetStopTime", "CVode", "CVodeGetRootInfo", "CVodeFree", "CVodeGetReturnFlagName")
+             "CVodeSetStopTime", "CVode", "CVodeGetRootInfo", "CVodeFree", "CVodeGetReturnFlagName",
+             "CVodeSetJacFn", "SUNDenseMatrix_Column")
 _SUNDIALS_FIELDS = tuple((name, _ptr, "") for name in _SUNDIALS)
 
 
@@ -183,6 +193,9 @@ _SYSTEM_FIELDS = (
     ("error_time", _f64, ""),
     ("message", ctypes.c_char * 512, "CVODE's error message"),
     ("flag_name", ctypes.c_char * 64, "me_flag_name's answer"),
+    ("directional", _i64, "CVODE's Jacobian from the members' directional derivatives"),
+    ("jac_dense", _f64p, "nx * nx, column-major"),
+    ("jac_du", _f64p, "n_connections * nx: d(input)/d(states) of each connection"),
 )
 
 
@@ -348,6 +361,14 @@ class ModelExchangeSystem:
         self._ready: set[str] = set()
         self._c = None  # the MeSystem and the arrays it points into
         self.settings = self._settings()
+        if self.settings.jacobian == "directional":
+            lacking = [m.name for m in self.members if (m.model_description.numberOfContinuousStates
+                       or any(c.destination.component == m.name for c in self.connections))
+                       and not m.provides_directional_derivatives]
+            if lacking:
+                raise ConnectionCheckError(f"jacobian = \"directional\": {', '.join(lacking)} provide(s) no "
+                                           f"directional derivatives (providesDirectionalDerivative); use the "
+                                           f"default, \"difference\"")
         for m in self.members:
             m.system = self
 
@@ -356,6 +377,11 @@ class ModelExchangeSystem:
         tightest relative tolerance, the smallest step and event limit given."""
         given = [m.solver for m in self.members]
         methods = {s.method for s in given}
+        jacobians = {s.jacobian for s in given}
+        if len(jacobians) > 1:
+            told = ", ".join(f"{m.name}: {s.jacobian}" for m, s in zip(self.members, given))
+            raise ConnectionCheckError(f"Model Exchange FMUs solved together take one Jacobian ({told}): give "
+                                       f"them the same, or set coupling = \"loose\" in [simulation]")
         if len(methods) > 1:
             told = ", ".join(f"{m.name}: {s.method}" for m, s in zip(self.members, given))
             raise ConnectionCheckError(f"Model Exchange FMUs solved together take one solver method ({told}): give "
@@ -405,7 +431,10 @@ class ModelExchangeSystem:
                                 dtype=np.int64)
             entry.u_set, entry.discrete_in = u_set.ctypes.data_as(_f64p), discrete.ctypes.data_as(_i64p)
             kept += [u_set, discrete]
+            if settings.jacobian == "directional":
+                kept += self._jacobian_tables(i, fmu, entry)
         index = {f.name: i for i, f in enumerate(self.members)}
+        sources = {c: self._sources(self.members[index[c.source.component]]) for c in self.connections}
         links = (MeConnection * max(len(self.connections), 1))()
         for c, link in zip(self.connections, links):
             src, dst = self.members[index[c.source.component]], self.members[index[c.destination.component]]
@@ -415,6 +444,7 @@ class ModelExchangeSystem:
             link.destination_vr, link.discrete = variable.valueReference, variable.variability != "continuous"
             if c.conversion is not None:
                 link.converted, (link.factor, link.offset) = 1, c.conversion
+            link.source_slot = sources[c].index(c.source.variable)
         buffers = [np.zeros(max(n, 1)) for n in (nx, nx, nz, nz)]
         roots = np.zeros(max(nz, 1), dtype=np.int32)
         kept += buffers + [roots, members, links]
@@ -429,6 +459,10 @@ class ModelExchangeSystem:
         system.nx, system.nz = nx, nz
         system.x, system.dx, system.z, system.z_before = (b.ctypes.data_as(_f64p) for b in buffers)
         system.root_info = roots.ctypes.data_as(_i32p)
+        if settings.jacobian == "directional" and settings.method == "cvode":
+            dense, du = np.zeros(max(nx * nx, 1)), np.zeros(max(len(self.connections) * nx, 1))
+            system.directional, system.jac_dense, system.jac_du = 1, dense.ctypes.data_as(_f64p), du.ctypes.data_as(_f64p)
+            kept += [dense, du]
         system.t, system.restart, system.event_mode = t0, 1, 1
         pointer = ctypes.pointer(system)
         address = ctypes.addressof(system)
@@ -438,6 +472,36 @@ class ModelExchangeSystem:
         self._member_address = {f.name: ctypes.addressof(members[i]) for i, f in enumerate(self.members)}
         for fmu in self.members:
             fmu._me_member = ctypes.c_void_p(self._member_address[fmu.name])
+
+    def _sources(self, fmu) -> list[str]:
+        """``fmu``'s outputs that feed other members through continuous connections, in order."""
+        return list(dict.fromkeys(c.source.variable for c in self.connections
+                                  if c.source.component == fmu.name and not self._discrete(c)))
+
+    def _discrete(self, c) -> bool:
+        return next(m for m in self.members if m.name == c.destination.component).variables[
+            c.destination.variable].variability != "continuous"
+
+    def _jacobian_tables(self, i: int, fmu, entry) -> list:
+        """The value references and the work array of member ``i``'s directional derivatives."""
+        md = fmu.model_description
+        vrs = lambda names: np.array([fmu.variables[n].valueReference for n in names] or [0], dtype=np.uint32)  # noqa: E731
+        linked = [(k, c) for k, c in enumerate(self.connections)
+                  if c.destination.component == fmu.name and not self._discrete(c)]
+        unknowns = [d.variable.name for d in md.derivatives] + self._sources(fmu)
+        state_vr, unknown_vr = vrs(fmu.state_names), vrs(unknowns)
+        linked_vr = vrs([c.destination.variable for _, c in linked])
+        linked_connection = np.array([k for k, _ in linked] or [0], dtype=np.int64)
+        columns = np.zeros(max(len(unknowns) * (entry.nx + len(linked)), 1))
+        if entry.nx or linked:
+            entry.directional = ctypes.cast(getattr(fmu._slave.dll, f"fmi{fmu.fmi_version}GetDirectionalDerivative"),
+                                            ctypes.c_void_p).value
+        u32p = ctypes.POINTER(_u32)
+        entry.state_vr, entry.unknown_vr = state_vr.ctypes.data_as(u32p), unknown_vr.ctypes.data_as(u32p)
+        entry.n_unknowns, entry.n_linked = len(unknowns), len(linked)
+        entry.linked_vr, entry.linked_connection = linked_vr.ctypes.data_as(u32p), linked_connection.ctypes.data_as(_i64p)
+        entry.jac_columns = columns.ctypes.data_as(_f64p)
+        return [state_vr, unknown_vr, linked_vr, linked_connection, columns]
 
     def close(self) -> None:
         """Free the solver (a member closes, or a new run builds it again)."""

@@ -14,9 +14,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-__all__ = ["SolverSettings", "IntegrationError", "METHODS"]
+__all__ = ["SolverSettings", "IntegrationError", "METHODS", "JACOBIANS"]
 
 METHODS = ("cvode", "euler")
+JACOBIANS = ("difference", "directional")  # CVODE's: difference quotients, or the FMUs' directional derivatives
 DEFAULT_TOLERANCE = 1e-5  # fmpy's, for an FMU whose default experiment gives none
 
 
@@ -40,12 +41,17 @@ class SolverSettings:
     or CVODE's largest step (default: unbounded but for the stop at every
     communication point). ``max_events``: events allowed in one
     communication step before the model is taken to chatter.
+    ``jacobian``: CVODE's Newton matrix by its own difference quotients
+    (``"difference"``, the default) or from the FMUs' directional
+    derivatives through the connections (``"directional"``; every member
+    with states or inputs from other members must provide them).
     """
 
     method: str = "cvode"
     relative_tolerance: float | None = None
     step: float | None = None
     max_events: int = 1000
+    jacobian: str = "difference"
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -54,6 +60,8 @@ class SolverSettings:
             raise ValueError(f"relative_tolerance = {self.relative_tolerance!r}: expected a number in (0, 1)")
         if self.step is not None and not (math.isfinite(self.step) and self.step > 0):
             raise ValueError(f"step = {self.step!r} s: expected a positive number")
+        if self.jacobian not in JACOBIANS:
+            raise ValueError(f"jacobian {self.jacobian!r}: expected one of {', '.join(JACOBIANS)}")
         if self.max_events < 1:
             raise ValueError(f"max_events = {self.max_events!r}: expected a positive integer")
 

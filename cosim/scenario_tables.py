@@ -21,7 +21,7 @@ from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag,
 
 from . import registry
 from .errors import ScenarioError
-from .model_exchange import METHODS
+from .model_exchange import JACOBIANS, METHODS
 from .plan import ORDERINGS  # the master's (docs/cosim.md)
 from .limits import MAX_STEPS
 from .limits import SEED_LIMIT
@@ -86,6 +86,9 @@ class Solver(Table):
                                              "the communication step), or CVODE's largest step")
     max_events: Count = Field(1000, description="events allowed in one communication step before the model is taken "
                                                 "to chatter")
+    jacobian: one_of(JACOBIANS) = Field("difference", description="CVODE's Newton matrix: 'difference' (its own "
+                                                                  "difference quotients) or 'directional' (the FMUs' "
+                                                                  "directional derivatives through the connections)")
 
 
 class ConnectionTable(Table):
