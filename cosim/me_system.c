@@ -266,14 +266,8 @@ static int column(MeSystem *s, MeMember *m, int64_t i, uint32_t known, double *o
  * factor times d(y_source)/dx, itself the source's own block plus, for an
  * output with direct feedthrough, d(y)/du' * du'/dx of the inputs before it
  * (the connections' dependency order). */
-static int jacobian(double t, N_Vector y, N_Vector fy, void *matrix, void *data, N_Vector t1, N_Vector t2,
-                    N_Vector t3) {
-    MeSystem *s = data;
-    MeSundials *f = s->sundials;
+static int dense_jacobian(MeSystem *s, double t, const double *x) {
     const int64_t nx = s->nx;
-    double *x = ((nv_data_t)f->N_VGetArrayPointer)(y);
-    (void)fy; (void)t1; (void)t2; (void)t3;
-    if (!nx) return 0;
     if (set_time(s, t) || set_states(s, x, t) || connect(s, t)) return -1;
     double *dense = s->jac_dense, *du = s->jac_du;  /* nx * nx column-major; n_connections * nx */
     memset(dense, 0, (size_t)(nx * nx) * sizeof(double));
@@ -311,8 +305,28 @@ static int jacobian(double t, N_Vector y, N_Vector fy, void *matrix, void *data,
                     for (int64_t r = 0; r < m->nx; r++) dense[j * nx + m->x_offset + r] += col[r] * row[j];
         }
     }
-    for (int64_t j = 0; j < nx; j++)
-        memcpy(((mat_column_t)f->SUNDenseMatrix_Column)(matrix, j), dense + j * nx, (size_t)nx * sizeof(double));
+    return 0;
+}
+
+static int jacobian(double t, N_Vector y, N_Vector fy, void *matrix, void *data, N_Vector t1, N_Vector t2,
+                    N_Vector t3) {
+    MeSystem *s = data;
+    MeSundials *f = s->sundials;
+    (void)fy; (void)t1; (void)t2; (void)t3;
+    if (!s->nx) return 0;
+    if (dense_jacobian(s, t, ((nv_data_t)f->N_VGetArrayPointer)(y))) return -1;
+    for (int64_t j = 0; j < s->nx; j++)
+        memcpy(((mat_column_t)f->SUNDenseMatrix_Column)(matrix, j), s->jac_dense + j * s->nx,
+               (size_t)s->nx * sizeof(double));
+    return 0;
+}
+
+/* The Jacobian at the members' states now, into out (nx * nx, column-major): what CVODE is given. */
+int me_jacobian(MeSystem *s, double t, double *out) {
+    s->error_kind = 0;
+    if (!s->directional || !s->nx) return 0;
+    if (stacked(s, 0, s->x, t) || dense_jacobian(s, t, s->x)) return -1;
+    memcpy(out, s->jac_dense, (size_t)(s->nx * s->nx) * sizeof(double));
     return 0;
 }
 

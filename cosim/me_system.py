@@ -212,6 +212,7 @@ _ENTRY_POINTS = (("me_advance", (("s", _SYS), ("t", _f64), ("t_end", _f64))),
                  ("me_finish_event", (("s", _SYS), ("t", _f64))),
                  ("me_free", (("s", _SYS),)),
                  ("me_flag_name", (("s", _SYS), ("flag", _i64))),
+                 ("me_jacobian", (("s", _SYS), ("t", _f64), ("out", _f64p))),
                  ("me_member_set", (("member", _ptr), ("vr", ctypes.POINTER(_u32)), ("n", ctypes.c_size_t),
                                     ("u", _f64p))),
                  ("me_member_get", (("member", _ptr), ("vr", ctypes.POINTER(_u32)), ("n", ctypes.c_size_t),
@@ -572,6 +573,15 @@ class ModelExchangeSystem:
             return
         self._c[1][-2][self.members.index(member)].u_known = 0  # kept: ..., roots, members, links
         self.event(t)
+
+    def jacobian(self, t: float) -> np.ndarray:
+        """The Jacobian d(der)/dx of the stacked states at the members' states
+        now, as CVODE is given it (``jacobian = "directional"``)."""
+        self._started()
+        nx = int(self._c[0].contents.nx)
+        out = np.zeros((nx, nx), order="F")
+        self._call(library().me_jacobian, t, out.ctypes.data_as(_f64p))
+        return out
 
     def failure(self) -> Exception:
         """The error of the last failed call, raised for the member at fault

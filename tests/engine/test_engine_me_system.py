@@ -168,9 +168,11 @@ def test_cvode_s_jacobian_from_the_members_directional_derivatives_through_the_c
     """jacobian = "directional": CVODE's Newton matrix from the electrical
     and mechanical parts' directional derivatives, by the chain rule through
     the connections (the torque into the mechanical part, the speed back):
-    the run lands within 1e-6 of the monolithic solution, and is another run
-    than the one with CVODE's difference quotients. A member without
-    directional derivatives is refused in one line."""
+    the Jacobian CVODE is given is the stacked model's (the couplings -k/L
+    and k/J come through the connections), the run lands within 1e-6 of the
+    monolithic solution, and is another run than the one with CVODE's
+    difference quotients. A member without directional derivatives is
+    refused in one line."""
     def fly(paths, connections, jacobian: str):
         fmus = [FmuComponent(n, p, interface="ModelExchange",
                              solver=SolverSettings(relative_tolerance=1e-10, jacobian=jacobian))
@@ -180,6 +182,13 @@ def test_cvode_s_jacobian_from_the_members_directional_derivatives_through_the_c
 
     paths, connections = _dc_motor(directional=True)
     directional, difference = fly(paths, connections, "directional"), fly(paths, connections, "difference")
+    fmus = [FmuComponent(n, p, interface="ModelExchange", solver=SolverSettings(jacobian="directional"))
+            for n, p in paths.items()]
+    with Master(fmus, [], connections, 3e-3) as master:  # the Jacobian after the step, against the stacked one
+        master.run(0.012)
+        system, p = master.me_systems[0], DC_MOTOR  # stacked states: [i], [phi, w]
+        np.testing.assert_allclose(system.jacobian(0.012), [[-p["R"] / p["L"], 0, -p["k"] / p["L"]], [0, 0, 1],
+                                                           [p["k"] / p["J"], 0, -p["b"] / p["J"]]], rtol=1e-14)
     exact = dc_motor_reference(directional.time)
     assert np.max(np.abs(directional["DCMotor_Mechanical.w"] - exact[:, 2])) < 1e-6
     assert not np.array_equal(directional.data, difference.data)
