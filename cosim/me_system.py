@@ -335,8 +335,8 @@ def _ordered(members: Sequence, connections: Sequence) -> list:
                 steps += [str(link.source), str(link.destination)]
             raise ConnectionCheckError(
                 f"algebraic loop between Model Exchange FMUs: {' -> '.join(steps)}; each output needs the input "
-                f"before it at the same instant (direct feedthrough): break it with a state, or set "
-                f"coupling = \"loose\" in [simulation]")
+                f"before it at the same instant (direct feedthrough): break it with a state, or delay it a step "
+                f"(coupling = \"loose\" and ordering = \"exchange\" in [simulation])")
         state[key] = 1
         for d in needs(c):
             visit(d, path + [key])
@@ -408,7 +408,7 @@ class ModelExchangeSystem:
             return
         self._build(t0)
         self._call(library().me_finish_event, t0)
-        self._c[0].events = 0
+        self._c[0].contents.events = 0
 
     def _build(self, t0: float) -> None:
         self.close()
