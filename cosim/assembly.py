@@ -250,7 +250,7 @@ def build_master(scenario: Scenario, fmu_files: Mapping[str, Path] | None = None
             fmu.instantiate()
             _check_sample_period(fmu, fmu.base_parameters, scenario.step, fmu.name)  # the kind set its parameters
         return Master(fmus, python, scenario.connections, scenario.step, scenario.record, scenario.envelope,
-                      fmu_values(scenario), ordering=scenario.ordering)
+                      fmu_values(scenario), ordering=scenario.ordering, coupling=scenario.coupling)
     except BaseException:
         for fmu in fmus:
             fmu.close()

@@ -98,7 +98,7 @@ def structure_key(scenario: Scenario) -> str:
             for name, spec in scenario.fmus.items()}
     return json.dumps({"fmus": fmus, "components": scenario.components, "connections": scenario.connections,
                        "record": scenario.record, "envelope": scenario.envelope, "step": scenario.step,
-                       "ordering": scenario.ordering, "source": str(scenario.source)},
+                       "ordering": scenario.ordering, "coupling": scenario.coupling, "source": str(scenario.source)},
                       sort_keys=True, default=repr)
 
 

@@ -1,6 +1,6 @@
 """An FMU as a component of the master: a thin, fast wrapper over fmpy's
 instances, Co-Simulation (``FMU2Slave``, ``FMU3Slave``) or Model Exchange
-(``FMU2Model``, ``FMU3Model``, integrated by :mod:`cosim.model_exchange`).
+(``FMU2Model``, ``FMU3Model``, integrated by :mod:`cosim.me_system`).
 
 fmpy's classes do the loading, instantiation and status checking (every
 failed call raises fmpy's ``FMICallException`` in one place). This module
@@ -317,8 +317,8 @@ class FmuComponent:
         (:func:`stream_seed`; 0: the run's seed itself).
     interface : ``"CoSimulation"`` or ``"ModelExchange"``; by default
         Co-Simulation where the FMU has it, else Model Exchange. A Model
-        Exchange instance is integrated between communication points by the
-        master's solver (:mod:`cosim.model_exchange`); a clocked FMI 3.0 FMU
+        Exchange instance is integrated by the master's solver, with the Model
+        Exchange FMUs connected to it (:mod:`cosim.me_system`); a clocked FMI 3.0 FMU
         without continuous states in Model Exchange has its ticks as time
         events and nothing to integrate (docs/cosim.md, "Clocked FMUs").
     solver : :class:`~cosim.model_exchange.SolverSettings` of a Model
@@ -373,7 +373,8 @@ class FmuComponent:
         self.sample_period = self._declared_period()
         self.clock = self._input_clock()
         self.model_exchange = interface == "ModelExchange" and self.clock is None  # integrated by the master
-        self._integrator = None
+        self.system = None  # Model Exchange: the cosim.me_system.ModelExchangeSystem integrating it
+        self._me_member = None  # its MeMember in that system's C structure
         self._tick_pending = False  # clocked: in Event Mode at a tick whose clock is not yet activated
         if seed_parameter is not None and getattr(self.variables.get(seed_parameter), "causality", None) != "parameter":
             raise FmuLoadError(name, self.path, "no parameter of the FMU", setting=("seed_parameter", seed_parameter))
@@ -426,8 +427,6 @@ class FmuComponent:
         an array's, is a reason."""
         if self.clock is not None:
             return "a clocked FMU: its ticks are Event Mode calls"
-        if self.model_exchange:
-            return f"Model Exchange: integrated by the master's solver ({self.solver.method})"
         types, arrays = {}, []
         for name in signals:
             var = self._element(name)[0]
@@ -714,7 +713,8 @@ class FmuComponent:
             else:
                 self._abandoned.append((self._slave, getattr(self, "_callbacks", None)))  # its callbacks stay valid
             self._slave = None
-            self._integrator = None
+            if self.system is not None:
+                self.system.close()
         if self._owns_unzipdir and self._unzipdir is not None:
             shutil.rmtree(self._unzipdir, ignore_errors=True)
             self._unzipdir = None
@@ -768,7 +768,8 @@ class FmuComponent:
         self.instantiate()
         s = self._slave
         self.messages.clear()
-        self._integrator = None  # a Model Exchange instance gets its solver when it leaves Initialization Mode
+        if self.system is not None:  # a Model Exchange system waits for every member to leave Initialization Mode
+            self.system.entering(self)
         self._tick_pending = False  # a clocked FMU ticks from Event Mode on, after initialization
         parameters = dict(parameters or {})
         for key, value in parameters.items():
@@ -812,15 +813,13 @@ class FmuComponent:
                              exc) from None
         self._initializing = False
         if self.model_exchange:
-            from .model_exchange import Integrator
+            if self.system is None:  # not given one by a master: a system of one
+                from .me_system import ModelExchangeSystem
 
-            md = self.model_description
-            self._integrator = Integrator(s, self.fmi_version, md.numberOfContinuousStates,
-                                          md.numberOfEventIndicators, bool(self.kind.needsCompletedIntegratorStep),
-                                          self.solver)
-            self._integrate(lambda: self._integrator.start(t0), t0)
+                ModelExchangeSystem([self])
+            self.system.initialized(self, t0)
             self._t = t0
-            self._u_set = None  # inputs set at t0 count as changed: the solver starts there anyway
+            self._u_set = None
         self._tick_pending = self.clock is not None
         self.read_outputs(t0)
 
@@ -1024,6 +1023,12 @@ class FmuComponent:
         version, component, calls = self.fmi_version, api._component.value, (api._set, api._get, api._step)
         if python:
             version, component, calls = 2, None, self._python_calls(time)  # the callbacks take FMI 2.0's shape
+        elif self.system is not None:  # Model Exchange: its system's calls (FMI 2.0's shape), cosim/me_system.c
+            from .me_system import library
+
+            lib = library()
+            version, component, calls = 2, self._me_member.value, (lib.me_member_set, lib.me_member_get,
+                                                                    lib.me_member_step)
         entry = KernelFmu(version, component, *map(address, calls), vrs(self._in_vr), self._n_in,
                           self._kernel_in_idx.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), self._u_ptr,
                           vrs(self._out_vr), self._n_out, self._y_ptr, int(direct))
@@ -1067,6 +1072,8 @@ class FmuComponent:
         if self._kernel_exception is not None:
             exc, self._kernel_exception = self._kernel_exception, None
             return exc
+        if self.system is not None:  # its system says why (the failure may be another member's)
+            return self.system.failure()
         call = Call(call)
         if call == Call.STEP and self._asked_to_terminate(status):
             return self._terminated(t, h)
@@ -1093,49 +1100,35 @@ class FmuComponent:
             values = dict(zip(self.input_names, self.u.tolist()))
             if names:
                 values.update(zip(names, self._objects[sources]))
-            if values and (self._integrator is None or values != self._u_set):  # Model Exchange: when they change
+            if values and (self.system is None or values != self._u_set):  # Model Exchange: when they change
                 self._set_values(values, t)
                 self._u_set = values
             return
-        if self._n_in and self._integrator is not None:
-            return self._write_inputs_me(t)
+        if self._n_in and self.system is not None:
+            return self.system.set_inputs(self, t)
         if self._n_in:
             try:
                 self._api.set(self._in_vr, self._c_in, self._u_ptr)
             except FMICallException as exc:
                 raise self._call_failure(Call.SET, exc, t) from None
 
-    def _write_inputs_me(self, t: float) -> None:
-        """Model Exchange: the inputs of ``t_n``, held over the step. Unchanged
-        inputs are not set again (the solver goes on); a changed continuous
-        input is set in Continuous-Time Mode and restarts the solver; a
-        changed discrete input is set in Event Mode, followed by the event
-        iteration (an input event, as fmpy's ``simulateME`` handles one)."""
-        u = self.u[:self._n_in]
-        before = self._u_set
-        if before is not None and np.array_equal(u, before):
-            return
-        changed = self.input_names if before is None else [n for n, c in zip(self.input_names, u != before) if c]
-        try:
-            self._set_in_mode(lambda: self._api.set(self._in_vr, self._c_in, self._u_ptr), changed, t)
-        except FMICallException as exc:
-            raise self._call_failure(Call.SET, exc, t) from None
-        self._u_set = u.copy()
-
-    def _integrate(self, work, t: float) -> None:
-        """Run ``work`` (a call into the Model Exchange integrator); its failure
-        becomes an :class:`~cosim.errors.FmuCallError` naming the time and the FMU."""
+    def integration_failure(self, exc: "Exception | int", t: float) -> Exception:
+        """The error of this member's Model Exchange system at ``t``
+        (:meth:`cosim.me_system.ModelExchangeSystem.failure`): the FMU asking
+        to end the run, or an :class:`~cosim.errors.FmuCallError` naming the
+        time, the FMU and the reason (an FMI status, given as the number, or
+        the solver's failure, an :class:`~cosim.model_exchange.IntegrationError`)."""
         from .model_exchange import IntegrationError
 
-        try:
-            work()
-        except IntegrationError as exc:
+        if isinstance(exc, int):
+            exc = FMICallException(function="a Model Exchange call", status=exc)
+        method = self.system.settings.method if self.system is not None else self.solver.method
+        if isinstance(exc, IntegrationError):
             if exc.terminate:
-                raise SimulationTerminated(self.name, self.path, t, f"asked to terminate the simulation at t = "
-                                           f"{exc.time!r} s; the run ends at t = {t!r} s") from None
-            raise self._fail(f"Model Exchange integration ({self.solver.method})", exc, exc.time) from None
-        except FMICallException as exc:
-            raise self._fail(f"Model Exchange integration ({self.solver.method}) from t = {t!r} s", exc, t) from None
+                return SimulationTerminated(self.name, self.path, exc.time, f"asked to terminate the simulation at "
+                                            f"t = {exc.time!r} s; the run ends at t = {exc.time!r} s")
+            return self._fail(f"Model Exchange integration ({method})", exc, exc.time)
+        return self._fail(f"Model Exchange integration ({method}) at t = {t!r} s", exc, t)
 
     def serialize_state(self) -> bytes:
         """The FMU's state, serialized (FMI getFMUState + serializeFMUState)."""
@@ -1170,8 +1163,8 @@ class FmuComponent:
             raise self._fail("restoring a serialized FMU state", exc) from None
         if self.clock is not None:  # a state this component saved: at a tick, in Event Mode
             self._tick_pending = True
-        if self._integrator is not None:  # new states: an event there gives the next time event; the solver restarts
-            self._integrate(lambda: self._integrator.handle_event(self._t), self._t)
+        if self.system is not None:  # new states: an event there gives the next time event; the solver restarts
+            self.system.state_changed(self, self._t)
             self._u_set = None
 
     def set_inputs(self, values: Mapping[str, float], t: float) -> None:
@@ -1207,13 +1200,13 @@ class FmuComponent:
         input in Event Mode, followed by the event iteration (an input
         event), and a continuous one in Continuous-Time Mode, restarting
         its solver (FMI 2.0 §3.2.3, FMI 3.0 §3.2.1); any other instance at once."""
-        if self._integrator is None:
+        if self.system is None or self.system._c is None or self._initializing:
             return setter()
         if any(self._element(n)[0].variability != "continuous" for n in names):
-            self._integrate(lambda: self._integrator.handle_event(t, setter), t)
+            self.system.event(t, setter)
         else:
             setter()
-            self._integrator.restart()
+            self.system.restart()
         self._u_set = None
 
     def real_calls(self):
@@ -1363,12 +1356,17 @@ class FmuComponent:
         return self._vector(self._slave.getContinuousStates, "getting the continuous states")
 
     def set_continuous_states(self, x: np.ndarray) -> None:
+        """Set the continuous states (Continuous-Time Mode: FMI 2.0 §3.2.1, FMI
+        3.0 §3.2.1); the master's solver, if it integrates this instance,
+        restarts from them at the next step (the states changed outside it)."""
         x = np.ascontiguousarray(x, dtype=float)
         if x.size:
             try:
                 self._slave.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), x.size)
             except FMICallException as exc:
                 raise self._fail("setting the continuous states", exc) from None
+            if self._integrator is not None:
+                self._integrator.restart()
 
     def derivatives(self) -> np.ndarray:
         """The state derivatives at the states and inputs set."""
@@ -1403,8 +1401,8 @@ class FmuComponent:
         tick at ``t`` first, and must meet its next tick at ``t + h``."""
         if self.clock is not None:
             return self._clocked_step(t, h)
-        if self._integrator is not None:
-            self._integrate(lambda: self._integrator.advance(t, t + h), t)
+        if self.system is not None:
+            self.system.step(self, t, h)
             self._t = t + h
             return
         try:
@@ -1468,6 +1466,8 @@ class FmuComponent:
         master's object slots."""
         if self._typed:
             names, target = self._object_reads
+            if self.system is not None and not self._initializing:
+                self.system.refresh()
             try:
                 values = self._get_typed(self.output_names + names)
             except FMICallException as exc:
@@ -1478,6 +1478,8 @@ class FmuComponent:
             if names:
                 target[:] = [int(v) if isinstance(v, int) else v for v in values[n:]]
             return
+        if self._n_out and self._me_member is not None and not self._initializing:  # Model Exchange, running
+            return self.system.get_outputs(self, t)
         if self._n_out:
             try:
                 self._api.get(self._out_vr, self._c_out, self._y_ptr)

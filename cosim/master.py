@@ -171,12 +171,17 @@ class Master:
         feedthrough evaluated at ``t_n``) or ``"exchange"`` (every block sees
         the others' values of the previous step, as Jacobi masters do);
         :data:`cosim.plan.ORDERINGS`, docs/cosim.md.
+    coupling : ``"tight"`` (default: connected Model Exchange FMUs are
+        integrated as one system, their connections evaluated inside its
+        right-hand side) or ``"loose"`` (each alone, its inputs held over a
+        step); :mod:`cosim.me_system`, docs/cosim.md "Model Exchange".
     """
 
     def __init__(self, fmus: Sequence[FmuComponent], components: Sequence[PythonComponent],
                  connections: Sequence[str | Connection], step: float, record: Sequence[str] | None = (),
                  bounds: Mapping[str, tuple[float, float]] | None = None,
-                 fmu_parameters: Mapping[str, Mapping[str, float]] | None = None, ordering: str = "feedthrough"):
+                 fmu_parameters: Mapping[str, Mapping[str, float]] | None = None, ordering: str = "feedthrough",
+                 coupling: str = "tight"):
         if not step > 0:
             raise ValueError(f"step = {step!r} s must be positive")
         if ordering not in ORDERINGS:
@@ -197,6 +202,12 @@ class Master:
         conns = [c for c in connections if isinstance(c, Connection)]
         conns += parse_connections([c for c in connections if not isinstance(c, Connection)], self.components)
         self.connections = check_connections(conns, self.components)
+        self.coupling = coupling
+        self.me_systems = []  # the Model Exchange FMUs, each in the system that integrates it (cosim.me_system)
+        if any(f.model_exchange for f in self.fmus):
+            from .me_system import systems
+
+            self.me_systems = systems(self.fmus, self.connections, coupling)
         self.bounds = dict(bounds or {})
         self._plan(every_output(self.fmus + self.python) if record is None else list(record))
 
@@ -205,7 +216,9 @@ class Master:
     def _plan(self, record: list[str]) -> None:
         """Plan the run (:func:`cosim.plan.make_plan`) and bind it: the signal
         array, each FMU's inputs and reads (straight into its slots), the guard."""
-        self.plan = plan = make_plan(self.fmus, self.python, self.connections, self.ordering, record, self.bounds)
+        internal = frozenset().union(*(s.internal for s in self.me_systems))
+        self.plan = plan = make_plan(self.fmus, self.python, self.connections, self.ordering, record, self.bounds,
+                                     internal)
         self.slots, self.source_of = plan.slots, plan.source_of
         self.signals = np.zeros(len(plan.slots))
         for slot, value in plan.start_values:

@@ -150,7 +150,8 @@ class Plan:
     ``python_calls``: FMU name -> why the compiled loop drives it through its Python
     calls (set, get and step: :meth:`~cosim.fmu_component.FmuComponent.kernel_entry`),
     each with its reason (:meth:`~cosim.fmu_component.FmuComponent.python_loop_reason`:
-    Model Exchange, a clock, signals of other types than Float64 scalars);
+    a clock, signals of other types than Float64 scalars; a Model Exchange FMU is called
+    through its system's C calls, :mod:`cosim.me_system`);
     the others it calls in C. ``conversion_of``:
     destination -> ``(factor, offset)`` of every converted connection;
     ``derived``: ``(slot, source slot, factor, offset)``, the converted
@@ -333,13 +334,17 @@ def _indices(values) -> np.ndarray:
 
 
 def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection], ordering: str,
-              record: Sequence[str], bounds: Mapping[str, tuple[float, float]]) -> Plan:
+              record: Sequence[str], bounds: Mapping[str, tuple[float, float]],
+              internal: frozenset[str] = frozenset()) -> Plan:
     """The :class:`Plan` of a run of ``fmus`` and ``python`` components joined
     by ``connections`` (already checked: arrays as their elements) in the
     ``ordering`` (one of :data:`ORDERINGS`, checked by the master), recording
     ``record`` and guarding ``bounds`` (signal -> (low, high); a whole array
     stands for its elements); one-line
-    :class:`~cosim.errors.ConnectionCheckError` for what cannot run."""
+    :class:`~cosim.errors.ConnectionCheckError` for what cannot run.
+    ``internal``: the inputs (``fmu.input``) a Model Exchange system sets
+    itself, inside its right-hand side (:mod:`cosim.me_system`): no FMU block
+    sets them, though they order the blocks and are set at initialization."""
     components = {c.name: c for c in list(fmus) + list(python)}
     record = scalar_signals(components, record)
     bounds = {e: b for s, b in bounds.items() for e in scalar_signals(components, [s])}
@@ -430,7 +435,7 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
     fmu_blocks = []
     for i, fmu in enumerate(fmus):
         inputs, sources, obj_inputs, obj_sources = split(
-            [c for c in connections if c.destination.component == fmu.name])
+            [c for c in connections if c.destination.component == fmu.name and str(c.destination) not in internal])
         fmu_blocks.append(FmuBlock(i, fmu.name, inputs, sources, reads[fmu.name], blocks[fmu.name],
                                    fmu.name in direct, obj_inputs, obj_sources, object_reads[fmu.name],
                                    object_blocks[fmu.name], converted([f"{fmu.name}.{n}" for n in inputs])))

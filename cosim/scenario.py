@@ -83,7 +83,7 @@ class Scenario:
     """
 
     __slots__ = ("__weakref__", "_document", "source", "name", "description", "duration", "step", "seed", "start_time", "ordering",
-                 "fmus", "components", "connections", "record", "block_rows", "envelope", "sections")
+                 "coupling", "fmus", "components", "connections", "record", "block_rows", "envelope", "sections")
 
     def __init__(self, raw: Mapping[str, Any], source: Path | None = None, name: str | None = None):
         document = json.loads(json.dumps(raw))  # the one copy (a TOML document is JSON data)
@@ -101,7 +101,8 @@ class Scenario:
         set_ = object.__setattr__
         set_(self, "_document", json.dumps(document))
         set_(self, "source", source)
-        for key in ("name", "description", "duration", "step", "seed", "start_time", "ordering", "block_rows"):
+        for key in ("name", "description", "duration", "step", "seed", "start_time", "ordering", "coupling",
+                    "block_rows"):
             set_(self, key, state[key])
         set_(self, "fmus", _frozen(state["fmus"]))
         set_(self, "components", _frozen(state["components"]))

@@ -21,7 +21,7 @@ from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag,
 
 from . import registry
 from .errors import ScenarioError
-from .model_exchange import METHODS
+from .model_exchange import JACOBIANS, METHODS
 from .plan import ORDERINGS  # the master's (docs/cosim.md)
 from .limits import MAX_STEPS
 from .limits import SEED_LIMIT
@@ -36,7 +36,7 @@ __all__ = ["Simulation", "Solver", "FmuSpec", "Record", "ConnectionTable", "Fact
 # ---- the generic tables -----------------------------------------------------------------------
 
 class Simulation(Table):
-    """``[simulation]``: the run's time grid, seed and ordering."""
+    """``[simulation]``: the run's time grid, seed, ordering and Model Exchange coupling."""
 
     duration: Positive = Field(50.0, description="length of the run [s], a whole number of steps")
     step: Positive = Field(0.01, description="communication step [s]")
@@ -45,6 +45,10 @@ class Simulation(Table):
     start_time: Number = Field(0.0, description="time of the first communication point [s]")
     ordering: one_of(ORDERINGS) = Field("feedthrough", description="how a step orders the blocks "
                                                                    "(docs/cosim.md)")
+    coupling: one_of(("tight", "loose")) = Field(
+        "tight", description="Model Exchange FMUs connected to each other: 'tight', one solver over all their states "
+                             "(the connections inside its right-hand side); 'loose', each alone with its inputs held "
+                             "over a step (docs/cosim.md, \"Model Exchange\")")
 
     @model_validator(mode="after")
     def _whole_steps(self):
@@ -70,7 +74,8 @@ INTERFACES = ("CoSimulation", "ModelExchange")
 
 class Solver(Table):
     """``[fmus.<Name>.solver]``: how the master integrates a Model Exchange
-    FMU between communication points (:mod:`cosim.model_exchange`)."""
+    FMU (:mod:`cosim.me_system`; the FMUs of one system take one solver: the
+    same method, the tightest tolerance, the smallest step and event limit)."""
 
     method: one_of(METHODS) = Field("cvode", description="'cvode' (variable step BDF with root finding, "
                                                                     "SUNDIALS) or 'euler' (fixed step)")
@@ -81,6 +86,9 @@ class Solver(Table):
                                              "the communication step), or CVODE's largest step")
     max_events: Count = Field(1000, description="events allowed in one communication step before the model is taken "
                                                 "to chatter")
+    jacobian: one_of(JACOBIANS) = Field("difference", description="CVODE's Newton matrix: 'difference' (its own "
+                                                                  "difference quotients) or 'directional' (the FMUs' "
+                                                                  "directional derivatives through the connections)")
 
 
 class ConnectionTable(Table):
@@ -407,7 +415,7 @@ def derived_state(document: dict[str, Any], source: Path | None, name: str | Non
                                                                                           "scenario")),
                              "description": model.description}
     sim = model.simulation
-    for key in ("duration", "step", "seed", "start_time", "ordering"):
+    for key in ("duration", "step", "seed", "start_time", "ordering", "coupling"):
         state[key] = getattr(sim, key)
     fmus: dict[str, dict[str, Any]] = {}
     for instance, spec in model.fmus.items():

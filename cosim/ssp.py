@@ -107,6 +107,7 @@ class _System:
     seed: int | None = None
     block_rows: int | None = None
     ordering: str | None = None
+    coupling: str | None = None
     seed_parameters: dict[str, str] = field(default_factory=dict)  # component -> parameter
     seed_streams: dict[str, int] = field(default_factory=dict)  # component -> its stream, where not 0
     fmu_settings: dict[str, dict[str, Any]] = field(default_factory=dict)  # component -> interface, solver, start
@@ -343,6 +344,7 @@ def _read_ssd(ssd_path: Path) -> _System:
         if scenario.get("blockRows") is not None:
             out.block_rows = _integer(where, scenario.get("blockRows"), "blockRows")
         out.ordering = scenario.get("ordering")
+        out.coupling = scenario.get("coupling")
         for item in scenario:
             tag = etree.QName(item).localname if isinstance(item.tag, str) else None
             if tag == "Record":
@@ -509,7 +511,8 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
             "connections": system.connections,
             "simulation": {"duration": length, "step": system.step if system.step is not None else step,
                            "seed": system.seed if system.seed is not None else 0, "start_time": start,
-                           **({"ordering": system.ordering} if system.ordering else {})},
+                           **({"ordering": system.ordering} if system.ordering else {}),
+                           **({"coupling": system.coupling} if system.coupling else {})},
             "fmus": {c: {"path": str(entry["path"]),
                          # a seed parameter is set by the master to the run's seed: not a fixed value
                          "parameters": {k: v for k, v in entry["parameters"].items()

@@ -158,6 +158,8 @@ def _cosim_annotation(scenario: Scenario) -> etree._Element:
                          blockRows=str(scenario.block_rows))
     if getattr(scenario, "ordering", None) is not None:
         root.set("ordering", scenario.ordering)
+    if getattr(scenario, "coupling", "tight") != "tight":  # the default left out: archives as before
+        root.set("coupling", scenario.coupling)
     for name, spec in scenario.fmus.items():
         if spec.get("seed_parameter") is not None:
             element = etree.SubElement(root, q("SeedParameter"), component=name, parameter=spec["seed_parameter"])

@@ -302,14 +302,15 @@ def test_a_model_exchange_run_resumes_from_its_snapshot(version):
 
 def test_an_archive_keeps_how_the_master_runs_an_fmu(tmp_path):
     """An exported archive carries each FMU's interface, solver and start
-    values (SSP 1.0 has no place for them: this engine's annotation), and
+    values, and the Model Exchange coupling (SSP 1.0 has no place for them:
+    this engine's annotation), and
     the archive read back flies the same run."""
     from cosim.scenario import parse_scenario
     from cosim.assembly import build_master
     from cosim.ssp import load_ssp
     from cosim.ssp_export import export_ssp
 
-    raw = {"simulation": {"duration": 2.0, "step": 0.01},
+    raw = {"simulation": {"duration": 2.0, "step": 0.01, "coupling": "loose"},
            "fmus": {"Ball": {"path": str(fmu(3, "BouncingBall")), "interface": "ModelExchange",
                              "solver": {"method": "euler", "step": 0.001}, "start": {"h": 2.0}}},
            "record": {"signals": ["Ball.h", "Ball.v"]}}
@@ -318,6 +319,7 @@ def test_an_archive_keeps_how_the_master_runs_an_fmu(tmp_path):
     spec = loaded.fmus["Ball"]
     assert (spec["interface"], dict(spec["solver"]), dict(spec["start"])) == (
         "ModelExchange", {"method": "euler", "step": 0.001}, {"h": 2.0})
+    assert loaded.coupling == "loose"
     runs = []
     for each in (scenario, loaded):
         with build_master(each) as master:

@@ -18,7 +18,7 @@ NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scip
                  # nor what only another path uses: TOML parsed (the document kept), an archive opened, a log shown
                  "tomllib", "zipfile", "logging", "cosim.fmu_log",
                  # the cases (a study's), a Model Exchange solver (the shipped FMUs are Co-Simulation), a results reader
-                 "quadrotor_paper.options", "cosim.model_exchange", "csv")
+                 "quadrotor_paper.options", "cosim.model_exchange", "cosim.me_system", "csv")
 
 _RUN = """
 import json, sys

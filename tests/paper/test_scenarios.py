@@ -43,7 +43,7 @@ def test_paper_values_in_the_shipped_missions():
 
 @pytest.mark.parametrize("overrides, message", [
     ({"simulation.durration": 5.0},
-     "simulation.durration: unknown key; known keys: duration, ordering, seed, start_time, step"),
+     "simulation.durration: unknown key; known keys: coupling, duration, ordering, seed, start_time, step"),
     ({"simulation.duration": "long"}, "simulation.duration = 'long': expected a number"),
     ({"simulation.duration": -5.0}, "simulation.duration = -5.0: must be positive"),
     ({"simulation.step": 0.0}, "simulation.step = 0.0: must be positive"),

@@ -54,7 +54,7 @@ def test_every_shipped_study_satisfies_the_printed_schema(capsys):
 
 
 @pytest.mark.parametrize("edit, key", [
-    (lambda doc: doc["simulation"].update(stepp=0.01), "simulation.stepp: unknown key; known keys: duration, "),
+    (lambda doc: doc["simulation"].update(stepp=0.01), "simulation.stepp: unknown key; known keys: coupling, duration, "),
     (lambda doc: doc["controller"]["position"].update(kq=1.0), "controller.position.kq: unknown key; known keys: kp"),
     (lambda doc: doc["wind"].update(gusty=True), "wind.gusty: unknown key"),
     (lambda doc: doc["fmus"]["Quadrotor"].update(versio=2), "fmus.Quadrotor.versio: unknown key"),
