@@ -88,12 +88,12 @@ def dc_motor(repeats: int, folder: Path) -> None:
     sys.path.insert(0, str(ROOT))
     from fmpy import simulate_fmu
 
-    from tests.industrial_fmus import DC_MOTOR_CONNECTIONS, build, dc_motor_reference, dc_motor_specs
+    from tests.industrial_fmus import DC_MOTOR_CONNECTIONS, build, dc_motor_exact, dc_motor_specs
 
     duration, step = 0.5, 1e-3
     fmus = {n: build(folder, s) for n, s in dc_motor_specs(interfaces=("ModelExchange", "CoSimulation")).items()}
     times = np.linspace(0.0, duration, int(round(duration / step)) + 1)
-    speed = dc_motor_reference(times)[:, 2]
+    speed = dc_motor_exact(times)[:, 2]
     connections = [f'{{ connect = "{a}.{x} -> {b}.{y}", units = "unchecked" }}' if y == "w" else f'"{a}.{x} -> {b}.{y}"'
                    for (a, x), (b, y) in DC_MOTOR_CONNECTIONS]  # the mechanical part's rad/s has no radian
     print(f"DC motor as three FMUs (source, electrical, mechanical), {duration} s at a {step * 1e3:g} ms step, "

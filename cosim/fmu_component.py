@@ -1365,8 +1365,8 @@ class FmuComponent:
                 self._slave.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), x.size)
             except FMICallException as exc:
                 raise self._fail("setting the continuous states", exc) from None
-            if self._integrator is not None:
-                self._integrator.restart()
+            if self.system is not None and self.system._c is not None:
+                self.system.restart()
 
     def derivatives(self) -> np.ndarray:
         """The state derivatives at the states and inputs set."""

@@ -19,7 +19,7 @@ from cosim.master import Master
 from cosim.model_exchange import SolverSettings
 from quadrotor_paper.cli import main
 from cosim.kernel import _cache
-from tests.industrial_fmus import DC_MOTOR, DC_MOTOR_CONNECTIONS, build, dc_motor_reference, dc_motor_specs
+from tests.industrial_fmus import DC_MOTOR, DC_MOTOR_CONNECTIONS, build, dc_motor_exact, dc_motor_specs
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
 pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
@@ -155,7 +155,7 @@ def test_the_dc_motor_as_three_coupled_model_exchange_fmus_is_the_monolithic_sol
             return master.run(0.06)
 
     tight = fly("ModelExchange")
-    exact = dc_motor_reference(tight.time)  # [i, phi, w]
+    exact = dc_motor_exact(tight.time)  # [i, phi, w]
     assert np.max(np.abs(tight["DCMotor_Mechanical.w"] - exact[:, 2])) < 1e-6
     assert np.max(np.abs(tight["DCMotor_Electrical.i"] - exact[:, 0])) < 1e-6
     after = np.searchsorted(tight.time, DC_MOTOR["t_step"], side="right")  # the first row after the step
@@ -189,7 +189,7 @@ def test_cvode_s_jacobian_from_the_members_directional_derivatives_through_the_c
         system, p = master.me_systems[0], DC_MOTOR  # stacked states: [i], [phi, w]
         np.testing.assert_allclose(system.jacobian(0.012), [[-p["R"] / p["L"], 0, -p["k"] / p["L"]], [0, 0, 1],
                                                            [p["k"] / p["J"], 0, -p["b"] / p["J"]]], rtol=1e-14)
-    exact = dc_motor_reference(directional.time)
+    exact = dc_motor_exact(directional.time)
     assert np.max(np.abs(directional["DCMotor_Mechanical.w"] - exact[:, 2])) < 1e-6
     assert not np.array_equal(directional.data, difference.data)
     with pytest.raises(ConnectionCheckError, match=r'jacobian = "directional": DCMotor_Mechanical provide\(s\) no '):
