@@ -526,3 +526,24 @@ def test_a_wrong_connection_table_given_to_the_master_is_refused(table):
     with pytest.raises(ConnectionCheckError, match=re.escape("expected 'connect' and either a conversion (factor, "
                                                              "offset) or units = 'unchecked'")):
         parse_connections([table])
+
+
+def test_the_dc_motors_speed_without_its_radian_connects_checked(tmp_path, caplog):
+    """The issue's angle case on FMUs a modelling tool writes (tests/industrial_fmus.py, their
+    modelDescriptions only): the mechanical part's rad/s leaves the radian out, the electrical
+    part's keeps it; the checked connection passes the value as it is, noted at info level."""
+    import logging
+
+    from tests.industrial_fmus import dc_motor_specs, model_description
+
+    comps = {}
+    for name in ("DCMotor_Mechanical", "DCMotor_Electrical"):
+        xml = tmp_path / f"{name}.xml"
+        xml.write_text(model_description(dc_motor_specs()[name], "{0}"))
+        ports_ = fmu_ports(read_model_description(str(xml)))
+        comps[name] = _stand_in(inputs=ports_["input"], outputs=ports_["output"])
+    with caplog.at_level(logging.INFO, logger="cosim.connection"):
+        (c,) = check_connections(parse_connections(["DCMotor_Mechanical.w -> DCMotor_Electrical.w"]), comps)
+    assert c.conversion is None and not c.unchecked
+    assert "connection DCMotor_Mechanical.w -> DCMotor_Electrical.w: rad/s (SI s-1) and rad/s (SI s-1.rad)" \
+        in caplog.text
