@@ -72,12 +72,13 @@ _SCHEMA = None
 
 
 def ssd_schema_errors(ssd: str | Path | bytes) -> list[str]:
-    """The SSP 1.0 schema's complaints about an SSD (empty: valid), one line each.
+    """The SSP 1.0 schema's complaints about an SSD, or a ``.ssv`` or ``.ssm`` file (empty: valid), one line each.
 
     The XSDs are the normative SSP 1.0 schemas that ``pyssp-standard`` ships
     (``pyssp_standard/resources``); inline ``ssv:ParameterSet`` elements are
-    validated too (the SSD schema admits them as lax wildcard content, checked
-    against the SSV schema it is given here).
+    and ``ssm:ParameterMapping`` elements are validated too (the SSD schema
+    admits them as lax wildcard content, checked against the SSV and SSM
+    schemas it is given here).
     """
     global _SCHEMA
     if _SCHEMA is None:
@@ -87,7 +88,8 @@ def ssd_schema_errors(ssd: str | Path | bytes) -> list[str]:
         folder = Path(find_spec("pyssp_standard").submodule_search_locations[0]) / "resources"
         imports = "".join(
             f'<xs:import namespace="{NS[p]}" schemaLocation="{(folder / f).as_uri()}"/>'
-            for p, f in (("ssd", "SystemStructureDescription.xsd"), ("ssv", "SystemStructureParameterValues.xsd")))
+            for p, f in (("ssd", "SystemStructureDescription.xsd"), ("ssv", "SystemStructureParameterValues.xsd"),
+                         ("ssm", "SystemStructureParameterMapping.xsd")))
         driver = f'<xs:schema xmlns:xs="http://www.w3.org/2001/XMLSchema">{imports}</xs:schema>'
         _SCHEMA = etree.XMLSchema(etree.fromstring(driver.encode(), base_url=folder.as_uri() + "/"))
     document = _xml(ssd)
