@@ -202,24 +202,34 @@ def _transformation(where: str, parent: etree._Element, allowed: tuple[str, ...]
     return transformation
 
 
+def _content(where: str, element: etree._Element, folder: Path, mime: str, wrapper: str | None,
+             tag: tuple[str, str]) -> tuple[etree._Element, str]:
+    """The document an ``ssd:ParameterBinding`` (a parameter set) or an ``ssd:ParameterMapping`` (a
+    mapping) holds, and where it is: of the MIME ``type`` SSP 1.0 defines for it, either its ``source``,
+    a file in the archive (``sourceBase = "SSD"``), or inline, the first element inside ``wrapper``
+    (inside ``element`` itself without one)."""
+    if element.get("type", mime) != mime:
+        raise ScenarioError(f"{where}: type {element.get('type')!r} is not supported ({mime} only)")
+    source = element.get("source")
+    if source is not None:
+        if element.get("sourceBase", "SSD") != "SSD":
+            raise ScenarioError(f"{where}: sourceBase {element.get('sourceBase')!r} is not supported (SSD only)")
+        return _document(where, source, folder, tag), f"{where} ({source})"
+    inline = element.find(wrapper, NS) if wrapper else element
+    node = next((n for n in inline if isinstance(n.tag, str)), None) if inline is not None else None
+    if node is None or (wrapper is None and node.tag != qualified(*tag)):
+        raise ScenarioError(f"{where}: neither a source nor an inline {wrapper or ':'.join(tag)}")
+    return node, f"{where}/{wrapper or ':'.join(tag)}"
+
+
 def _mapped(where: str, element: etree._Element, values: Mapping[str, float], folder: Path) -> dict[str, float]:
     """A parameter set's values renamed by an ``ssd:ParameterMapping`` (SSP 1.0
     SystemStructureParameterMapping: inline ``ssm:ParameterMapping``, or a ``.ssm`` source): each
     ``ssm:MappingEntry source target`` gives the set's ``source`` to the variable ``target``, through its
     ``ssc:LinearTransformation`` if it has one; names no entry maps keep their own (the standard's name
     resolution). An entry whose source the set does not hold maps nothing (a note at info level)."""
-    if element.get("type", "application/x-ssp-parameter-mapping") != "application/x-ssp-parameter-mapping":
-        raise ScenarioError(f"{where}: type {element.get('type')!r} is not supported "
-                            f"(application/x-ssp-parameter-mapping only)")
-    source = element.get("source")
-    if source is not None:
-        if element.get("sourceBase", "SSD") != "SSD":
-            raise ScenarioError(f"{where}: sourceBase {element.get('sourceBase')!r} is not supported (SSD only)")
-        mapping, at = _document(where, source, folder, ("ssm", "ParameterMapping")), f"{where} ({source})"
-    else:
-        mapping, at = element.find("ssm:ParameterMapping", NS), f"{where}/ssm:ParameterMapping"
-        if mapping is None:
-            raise ScenarioError(f"{where}: neither a source nor an inline ssm:ParameterMapping")
+    mapping, at = _content(where, element, folder, "application/x-ssp-parameter-mapping", None,
+                           ("ssm", "ParameterMapping"))
     out, renamed = dict(values), {}
     for k, entry in enumerate(mapping.findall("ssm:MappingEntry", NS), 1):
         entry_at = f"{at}/ssm:MappingEntry[{k}]"
@@ -253,20 +263,9 @@ def _bindings(where: str, element: etree._Element, folder: Path) -> dict[str, fl
         if not isinstance(binding.tag, str):
             continue
         at = f"{where}/ssd:ParameterBindings/ssd:ParameterBinding[{j}]"
-        if binding.get("type", "application/x-ssp-parameter-set") != "application/x-ssp-parameter-set":
-            raise ScenarioError(f"{at}: type {binding.get('type')!r} is not supported "
-                                f"(application/x-ssp-parameter-set only)")
-        source = binding.get("source")
-        if source is not None:
-            if binding.get("sourceBase", "SSD") != "SSD":
-                raise ScenarioError(f"{at}: sourceBase {binding.get('sourceBase')!r} is not supported (SSD only)")
-            more = _parameter_set(f"{at} ({source})", _document(at, source, folder, ("ssv", "ParameterSet")))
-        else:
-            inline = binding.find("ssd:ParameterValues", NS)
-            node = next((n for n in inline if isinstance(n.tag, str)), None) if inline is not None else None
-            if node is None:
-                raise ScenarioError(f"{at}: neither a source nor inline ssd:ParameterValues")
-            more = _parameter_set(f"{at}/ssd:ParameterValues", node)
+        node, node_at = _content(at, binding, folder, "application/x-ssp-parameter-set", "ssd:ParameterValues",
+                                 ("ssv", "ParameterSet"))
+        more = _parameter_set(node_at, node)
         prefix = binding.get("prefix", "")
         more = {prefix + name: value for name, value in more.items()}
         mapping = binding.find("ssd:ParameterMapping", NS)
