@@ -120,6 +120,7 @@ class _System:
     record: list[str] = field(default_factory=list)
     envelope: dict[str, list[float]] = field(default_factory=dict)
     sections: dict[str, Any] = field(default_factory=dict)  # an application's own tables, by name
+    ssd_units: dict[str, Any] = field(default_factory=dict)  # the SSD's ssd:Units, by name
 
 
 def qualified(prefix: str, tag: str) -> str:
@@ -202,6 +203,19 @@ def _transformation(where: str, parent: etree._Element, allowed: tuple[str, ...]
     return transformation
 
 
+@dataclass(frozen=True)
+class _Value:
+    """A bound value on its way to its FMU: converted from the unit its set states into its variable's
+    unit, unless its mapping entry suppresses that, then through the entry's transformation (SSP 1.0
+    SystemStructureParameterMapping: "the linear transformation is performed in addition to any unit
+    conversions"; :func:`_final_values`)."""
+
+    value: float
+    unit: str | None
+    transformation: tuple[float, float] | None
+    where: str
+
+
 def _content(where: str, element: etree._Element, folder: Path, mime: str, wrapper: str | None,
              tag: tuple[str, str]) -> tuple[etree._Element, str]:
     """The document an ``ssd:ParameterBinding`` (a parameter set) or an ``ssd:ParameterMapping`` (a
@@ -222,12 +236,13 @@ def _content(where: str, element: etree._Element, folder: Path, mime: str, wrapp
     return node, f"{where}/{wrapper or ':'.join(tag)}"
 
 
-def _mapped(where: str, element: etree._Element, values: Mapping[str, float], folder: Path) -> dict[str, float]:
+def _mapped(where: str, element: etree._Element, values: Mapping[str, _Value], folder: Path) -> dict[str, _Value]:
     """A parameter set's values renamed by an ``ssd:ParameterMapping`` (SSP 1.0
     SystemStructureParameterMapping: inline ``ssm:ParameterMapping``, or a ``.ssm`` source): each
     ``ssm:MappingEntry source target`` gives the set's ``source`` to the variable ``target``, through its
     ``ssc:LinearTransformation`` if it has one; names no entry maps keep their own (the standard's name
-    resolution). An entry whose source the set does not hold maps nothing (a note at info level)."""
+    resolution). An entry whose source the set does not hold maps nothing (a note at info level);
+    ``suppressUnitConversion = "true"`` takes the value as it is, in the variable's unit."""
     mapping, at = _content(where, element, folder, "application/x-ssp-parameter-mapping", None,
                            ("ssm", "ParameterMapping"))
     out, renamed = dict(values), {}
@@ -241,23 +256,26 @@ def _mapped(where: str, element: etree._Element, values: Mapping[str, float], fo
         if name not in values:
             log.info("%s: source %r is no parameter of the set: maps nothing", entry_at, name)
             continue
-        factor, offset = transformation or (1.0, 0.0)
+        suppress = entry.get("suppressUnitConversion", "false")
+        if suppress not in ("true", "false", "1", "0"):
+            raise ScenarioError(f"{entry_at}: suppressUnitConversion = {suppress!r}: expected true or false")
         out.pop(name, None)
-        put_once(renamed, target, factor * values[name] + offset if transformation else values[name],
-                 f"{entry_at}: target")
+        value = values[name]
+        put_once(renamed, target, _Value(value.value, None if suppress in ("true", "1") else value.unit,
+                                         transformation, entry_at), f"{entry_at}: target")
     for target, value in renamed.items():
         put_once(out, target, value, f"{at}: parameter")
     return out
 
 
-def _bindings(where: str, element: etree._Element, folder: Path) -> dict[str, float]:
+def _bindings(where: str, element: etree._Element, folder: Path) -> dict[str, _Value]:
     """The values an element's ``ssd:ParameterBindings`` give, by the names they bind (a component's
     variables; a system's hierarchical names, ``Element.variable``): each binding's parameter set
     (inline ``ssd:ParameterValues`` or a ``.ssv`` source), its ``prefix`` prepended to every name
     (SSP 1.0: "prior to processing the normal name resolution or name mapping rules"), then its
     ``ssd:ParameterMapping``. A name two bindings of one element give is refused (the standard lets
     the later one win; here that is a value lost without a word)."""
-    values: dict[str, float] = {}
+    values: dict[str, _Value] = {}
     bindings = element.find("ssd:ParameterBindings", NS)
     for j, binding in enumerate(bindings if bindings is not None else [], 1):
         if not isinstance(binding.tag, str):
@@ -265,9 +283,10 @@ def _bindings(where: str, element: etree._Element, folder: Path) -> dict[str, fl
         at = f"{where}/ssd:ParameterBindings/ssd:ParameterBinding[{j}]"
         node, node_at = _content(at, binding, folder, "application/x-ssp-parameter-set", "ssd:ParameterValues",
                                  ("ssv", "ParameterSet"))
-        more = _parameter_set(node_at, node)
+        stated: dict[str, str] = {}
         prefix = binding.get("prefix", "")
-        more = {prefix + name: value for name, value in more.items()}
+        more = {prefix + name: _Value(value, stated.get(name), None, node_at)
+                for name, value in _parameter_set(node_at, node, stated).items()}
         mapping = binding.find("ssd:ParameterMapping", NS)
         if mapping is not None:
             more = _mapped(f"{at}/ssd:ParameterMapping", mapping, more, folder)
@@ -550,7 +569,7 @@ def _read_ssd(ssd_path: Path) -> _System:
                         raise ScenarioError(f"{at_fixed}: baseStepSize = {fixed.get('baseStepSize')!r} is not "
                                             f"positive")
     out = _System(root.get("name") or system.get("name") or ssd_path.parent.name, root.get("description", ""),
-                  start, stop, step, components, connections)
+                  start, stop, step, components, connections, ssd_units=flat.ssd_units)
     recorded: set[str] = set()
     for scenario in _annotations(system, COSIM_ANNOTATION):
         where = f"ssd:System: ssc:Annotation {COSIM_ANNOTATION}"
@@ -715,6 +734,10 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
             system = _read_ssd(ssd_path)
         except ScenarioError as exc:
             raise ScenarioError(f"{label}: {exc}") from None
+        try:
+            _final_values(system)
+        except ScenarioError as exc:
+            raise ScenarioError(f"{label}: {exc}") from None
         start = system.start if system.start is not None else 0.0
         given = apply_overrides({}, overrides or {}).get("simulation", {})
         given = given if isinstance(given, Mapping) else {}
@@ -765,6 +788,40 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
     if temporary is not None:
         weakref.finalize(scenario, _remove_extraction, str(temporary), forget)
     return scenario
+
+
+def _final_values(system: _System) -> None:
+    """Every bound value as the number its FMU gets (:class:`_Value`): a unit the parameter set states
+    converted into the unit the FMU's variable declares (by ``ssd:Units``, the FMU's
+    ``UnitDefinitions``, else by name: :mod:`cosim.units`), then the mapping's transformation. A value
+    without a unit, or for a variable without one, is taken as it is."""
+    from .fmu_description import fmu_ports
+    from .fmu_component import read_description
+
+    for name, entry in system.components.items():
+        ports = None
+        final = {}
+        for key, bound in entry["parameters"].items():
+            value = bound.value
+            if bound.unit is not None:
+                if ports is None:
+                    try:
+                        groups = fmu_ports(read_description(name, entry["path"])[0])
+                    except FmuError:
+                        groups = {}  # a broken FMU is told where it is built, naming its [fmus] entry
+                    ports = {p.name: p for kind in ("parameter", "input") for p in groups.get(kind, ())}
+                port = ports.get(key)
+                if port is not None and port.unit and port.unit != bound.unit:
+                    try:
+                        factor, offset = units.conversion(units.unit_of(bound.unit, system.ssd_units) or bound.unit,
+                                                          port.unit_definition or port.unit)
+                    except CosimError as exc:
+                        raise ScenarioError(f"{bound.where}: parameter {key!r}: {exc}") from None
+                    value = factor * value + offset
+            if bound.transformation is not None:
+                value = bound.transformation[0] * value + bound.transformation[1]
+            final[key] = value
+        entry["parameters"] = final
 
 
 def _step(system: _System, step: float | None, given: Mapping[str, Any],

@@ -392,6 +392,31 @@ BAD_SSDS = [
 ]
 
 
+def test_a_value_in_another_unit_is_converted_into_its_variables(archive, tmp_path):
+    """A parameter set's ``ssv:Real unit`` is converted into the unit the FMU's variable declares (SSP 1.0
+    SystemStructureParameterValues), unless a mapping entry suppresses it; not one quantity: one line."""
+    def edit(root):
+        for component, name, value, unit in (("A", "y_0", "1500.0", "mm"), ("B", "tau", "250", "ms"),
+                                             ("C", "y_0", "-1000.0", "mm")):
+            _value(root, component, name).attrib.update({"value": value, "unit": unit})
+        mapping = _add(_component(root, "C").find(".//ssd:ParameterBinding", NS), "ssd", "ParameterMapping")
+        entry = etree.SubElement(etree.SubElement(mapping, f"{{{NS['ssm']}}}ParameterMapping", version="1.0"),
+                                 f"{{{NS['ssm']}}}MappingEntry", source="y_0", target="y_0",
+                                 suppressUnitConversion="true")
+        _add(entry, "ssc", "LinearTransformation", factor="0.001")
+    folder = _edited(archive, tmp_path, edit)
+    assert ssd_schema_errors(folder / SSD_NAME) == []
+    loaded = load_ssp(folder)
+    assert loaded.fmus["A"]["parameters"]["y_0"] == pytest.approx(1.5, rel=1e-15)
+    assert loaded.fmus["B"]["parameters"]["tau"] == pytest.approx(0.25, rel=1e-15)
+    assert loaded.fmus["C"]["parameters"]["y_0"] == -1000.0 * 0.001  # suppressed: the transformation alone
+    folder = _edited(archive, tmp_path, lambda root: _value(root, "A", "y_0").set("unit", "s"))
+    with pytest.raises(ScenarioError, match=re.escape(
+            "ssd:Component[@name='A']/ssd:ParameterBindings/ssd:ParameterBinding[1]/ssd:ParameterValues: parameter "
+            "'y_0': units s and m are not one quantity")):
+        load_ssp(folder)
+
+
 @pytest.mark.parametrize("edit, message", BAD_SSDS, ids=[m.split(":")[0][:40] for _, m in BAD_SSDS])
 def test_a_bad_ssd_is_refused_naming_the_element(archive, tmp_path, edit, message):
     folder = _edited(archive, tmp_path, edit)
