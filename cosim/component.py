@@ -119,14 +119,12 @@ def element_ports(ports_: tuple[Port, ...]) -> tuple[Port, ...]:
 
 def element_of(name: str) -> tuple[str, tuple[int, ...] | None]:
     """``"y[2]"`` -> ``("y", (2,))``, ``"A[1,2]"`` -> ``("A", (1, 2))``; a name
-    without an index -> ``(name, None)``; a malformed index -> ``(name, None)``."""
-    if not name.endswith("]") or "[" not in name:
-        return name, None
-    base, _, index = name[:-1].rpartition("[")
-    try:
-        return base, tuple(int(i) for i in index.split(","))
-    except ValueError:
-        return name, None
+    without an index -> ``(name, None)`` (:func:`cosim.names.array_element`;
+    whether ``y[2]`` is a variable of its own is :func:`cosim.names.resolve`'s
+    to say)."""
+    from .names import array_element
+
+    return array_element(name) or (name, None)
 
 
 def typed_value(type_: str, value, what: str):

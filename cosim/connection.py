@@ -25,7 +25,6 @@ unchecked (:func:`parse_connections`; ``docs/cosim.md``, "Units").
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, replace
 from typing import Any, Iterable, Mapping
 
@@ -33,12 +32,10 @@ from . import units
 from .component import Port, element_of, element_ports
 from .errors import ConnectionCheckError, shown_text
 from .limits import MAX_GROUP
+from .names import nearest, split_endpoint, split_top, top_groups
 
 __all__ = ["Connection", "parse_connection", "parse_connections", "check_connections", "Endpoint", "TABLE_KEYS",
            "unit_conversion"]
-
-_BRACES = re.compile(r"\{([^{}]*)\}")
-
 
 @dataclass(frozen=True)
 class Endpoint:
@@ -65,33 +62,39 @@ class Connection:
         return f"{self.source} -> {self.destination}"
 
 
-def _endpoint(text: str, whole: str) -> Endpoint:
-    component, dot, variable = text.strip().partition(".")
-    if not dot or not component or not variable:
+def _endpoint(text: str, whole: str, instances: Iterable[str]) -> Endpoint:
+    split = split_endpoint(text.strip(), instances)
+    if split is None:
         raise ConnectionCheckError(f"connection {shown_text(repr(whole))}: {shown_text(repr(text.strip()))} is not "
                                    f"of the form Component.variable")
-    return Endpoint(component, variable)
+    return Endpoint(*split)
 
 
 def _expand(side: str, whole: str) -> list[str]:
     """The endpoints a side's brace group stands for, in time linear in the
     side's length (the text around the group is joined to each item, not
-    searched again per item), at most :data:`~cosim.limits.MAX_GROUP` of them."""
-    groups = _BRACES.findall(side)
+    searched again per item), at most :data:`~cosim.limits.MAX_GROUP` of them.
+    A group's items split at commas outside brackets and quotes
+    (``A.{x[1,2],'a,b'}`` is two names; :mod:`cosim.names`)."""
+    groups = top_groups(side)
     if not groups:
         return [side]
     if len(groups) > 1:
         raise ConnectionCheckError(f"connection {shown_text(repr(whole))}: at most one {{a,b,...}} group per side")
-    if groups[0].count(",") >= MAX_GROUP:
-        raise ConnectionCheckError(f"connection {shown_text(repr(whole))}: a group of {groups[0].count(',') + 1} "
+    start, end = groups[0]
+    items = split_top(side[start + 1:end], ",")
+    if len(items) > MAX_GROUP:
+        raise ConnectionCheckError(f"connection {shown_text(repr(whole))}: a group of {len(items)} "
                                    f"names; at most {MAX_GROUP}")
-    group = _BRACES.search(side)
-    before, after = side[:group.start()], side[group.end():]
-    return [before + item.strip() + after for item in group[1].split(",")]  # no escapes in names
+    before, after = side[:start], side[end + 1:]
+    return [before + item.strip() + after for item in items]
 
 
-def parse_connection(text: str) -> list[Connection]:
-    """Parse one connection string (with optional brace expansion)."""
+def parse_connection(text: str, instances: Iterable[str] = ()) -> list[Connection]:
+    """Parse one connection string (with optional brace expansion). An
+    endpoint splits at the longest of ``instances`` it starts with (instance
+    names may hold dots), else at its first dot outside brackets and quotes
+    (:func:`cosim.names.split_endpoint`)."""
     if not isinstance(text, str) or text.count("->") != 1:
         raise ConnectionCheckError(f"connection {shown_text(repr(text))} must be a string 'A.out -> B.in'")
     left, right = text.split("->")
@@ -102,14 +105,16 @@ def parse_connection(text: str) -> list[Connection]:
         raise ConnectionCheckError(
             f"connection {shown_text(repr(text))}: {len(sources)} sources but {len(destinations)} destinations (a group "
             f"pairs with a group of the same size; one source may feed a group)")
-    return [Connection(_endpoint(s, text), _endpoint(d, text)) for s, d in zip(sources, destinations)]
+    instances = tuple(instances)
+    return [Connection(_endpoint(s, text, instances), _endpoint(d, text, instances))
+            for s, d in zip(sources, destinations)]
 
 
 # the keys of a connection written as a table (validated by the scenario's schema, cosim.scenario.ConnectionTable)
 TABLE_KEYS = ("connect", "factor", "offset", "units")
 
 
-def _from_table(entry: Mapping[str, Any]) -> list[Connection]:
+def _from_table(entry: Mapping[str, Any], instances: Iterable[str]) -> list[Connection]:
     """A connection table: ``connect`` (the string), and either a conversion
     (``factor``, ``offset``: destination = factor * source + offset) or
     ``units = "unchecked"``."""
@@ -120,15 +125,17 @@ def _from_table(entry: Mapping[str, Any]) -> list[Connection]:
                                    f"(factor, offset) or units = 'unchecked'")
     conversion = (float(entry.get("factor", 1.0)), float(entry.get("offset", 0.0))) if converts else None
     unchecked = "units" in entry
-    return [replace(c, conversion=conversion, unchecked=unchecked) for c in parse_connection(entry["connect"])]
+    return [replace(c, conversion=conversion, unchecked=unchecked) for c in parse_connection(entry["connect"], instances)]
 
 
-def parse_connections(texts: Iterable[str | Mapping[str, Any]]) -> list[Connection]:
+def parse_connections(texts: Iterable[str | Mapping[str, Any]], instances: Iterable[str] = ()) -> list[Connection]:
     """Parse connection strings, and tables (:data:`TABLE_KEYS`) that add a
-    conversion or the unchecked marker to the connections of their ``connect``."""
+    conversion or the unchecked marker to the connections of their ``connect``;
+    ``instances``: the scenario's instance names (:func:`parse_connection`)."""
     out: list[Connection] = []
+    instances = tuple(instances)
     for text in texts:
-        out.extend(_from_table(text) if isinstance(text, Mapping) else parse_connection(text))
+        out.extend(_from_table(text, instances) if isinstance(text, Mapping) else parse_connection(text, instances))
     return out
 
 
@@ -211,8 +218,10 @@ def check_connections(connections: Iterable[Connection], components: Mapping[str
                 elif _find(getattr(comp, "inputs" if group == "outputs" else "outputs"), end.variable):
                     reason = f"is an {'input' if group == 'outputs' else 'output'}, not an {group[:-1]}"
                 else:
-                    known = ", ".join(p.name for p in getattr(comp, group)) or "none"
-                    reason = f"does not exist (its {group} are: {known})"
+                    names = [p.name for p in getattr(comp, group)]
+                    close = nearest(end.variable, names)
+                    reason = (f"does not exist (nearest: {', '.join(close)})" if close else
+                              f"does not exist (its {group} are: {', '.join(names) or 'none'})")
                 raise ConnectionCheckError(f"connection {c}: {role} {end} {reason}")
             ports.append(port)
         out_port, in_port = ports

@@ -430,7 +430,7 @@ class FmuComponent:
             return f"Model Exchange: integrated by the master's solver ({self.solver.method})"
         types, arrays = {}, []
         for name in signals:
-            var = self.variables[element_of(name)[0]]
+            var = self._element(name)[0]
             port_type = TYPE_OF.get(var.type, var.type)
             if port_type != "Float64":
                 types.setdefault(port_type, name)
@@ -1209,7 +1209,7 @@ class FmuComponent:
         its solver (FMI 2.0 §3.2.3, FMI 3.0 §3.2.1); any other instance at once."""
         if self._integrator is None:
             return setter()
-        if any(self.variables[element_of(n)[0]].variability != "continuous" for n in names):
+        if any(self._element(n)[0].variability != "continuous" for n in names):
             self._integrate(lambda: self._integrator.handle_event(t, setter), t)
         else:
             setter()

@@ -193,7 +193,7 @@ class Master:
             if key not in self.components or key not in {f.name for f in self.fmus}:
                 raise ConnectionCheckError(f"parameters given for unknown FMU {key!r}")
         conns = [c for c in connections if isinstance(c, Connection)]
-        conns += parse_connections([c for c in connections if not isinstance(c, Connection)])
+        conns += parse_connections([c for c in connections if not isinstance(c, Connection)], self.components)
         self.connections = check_connections(conns, self.components)
         self.bounds = dict(bounds or {})
         self._plan(list(record))

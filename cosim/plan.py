@@ -48,7 +48,8 @@ from typing import Any, Mapping, Sequence, Union
 
 import numpy as np
 
-from .component import FLOAT_HELD, Port, element_of, element_ports
+from .component import FLOAT_HELD, Port, element_ports
+from .names import base_variable, resolve, split_endpoint
 from .connection import Connection
 from .errors import ConnectionCheckError
 
@@ -219,7 +220,7 @@ def signal_port(components: Mapping[str, Any], signal: str) -> Port:
     signal, or an input, recorded as the value its source gives it; a whole
     array or an element ``variable[i]``) names; a one-line
     :class:`ConnectionCheckError` otherwise."""
-    comp_name, _, var = signal.partition(".")
+    comp_name, var = split_endpoint(signal, components) or (signal.partition(".")[0], "")
     comp = components.get(comp_name)
     if comp is None:
         raise ConnectionCheckError(
@@ -228,21 +229,14 @@ def signal_port(components: Mapping[str, Any], signal: str) -> Port:
     if not var:
         raise ConnectionCheckError(f"signal {signal!r}: expected 'component.variable'")
     internals = _internals(comp)
-    for port in comp.outputs + internals + comp.inputs:
-        if port.name == var:
-            return port
-    base, index = element_of(var)
-    if index is not None:
-        for port in comp.outputs + internals + comp.inputs:
-            if port.name == base and port.shape:
-                for element in element_ports((port,)):
-                    if element.name == var:
-                        return element
-                raise ConnectionCheckError(f"signal {signal!r}: index {list(index)} outside {base}'s shape "
-                                           f"{port.shape} (indices count from 1)")
-    known = ", ".join(p.name for p in comp.outputs + comp.inputs + internals)
+    ports_ = {p.name: p for p in comp.inputs + internals + comp.outputs}  # an output wins a name it shares
+    shapes = {p.name: ports_[p.name].shape for p in comp.outputs + comp.inputs + internals}  # as listed
     kinds = "output, input or internal signal" if internals else "output or input"
-    raise ConnectionCheckError(f"signal {signal!r}: {comp_name} has no {kinds} {var!r}; it has: {known}")
+    base, index = resolve(var, shapes, f"signal {signal!r}", comp_name, kinds)
+    if index is None:
+        return ports_[base]
+    name = f"{base}[{','.join(map(str, index))}]"
+    return next(e for e in element_ports((ports_[base],)) if e.name == name)
 
 
 def scalar_signals(components: Mapping[str, Any], signals) -> list[str]:
@@ -252,7 +246,7 @@ def scalar_signals(components: Mapping[str, Any], signals) -> list[str]:
     for s in signals:
         port = signal_port(components, s)
         if port.shape:
-            comp = s.partition(".")[0]
+            comp = split_endpoint(s, components)[0]
             out.extend(f"{comp}.{e.name}" for e in element_ports((port,)))
         else:
             out.append(s)
@@ -271,8 +265,8 @@ def _direct_fmus(fmus: Sequence, connections: Sequence[Connection], used: set[st
     direct = set()
     for fmu in fmus:
         connected = {c.destination.variable for c in connections if c.destination.component == fmu.name}
-        connected = {element_of(v)[0] for v in connected}  # an array's element: the array's dependencies
-        if any(fmu.feedthrough.get(element_of(p.name)[0], frozenset()) & connected
+        connected = {base_variable(v, fmu.variables) for v in connected}  # an array's element: the array's
+        if any(fmu.feedthrough.get(base_variable(p.name, fmu.variables), frozenset()) & connected
                for p in _elements(fmu, "outputs") if f"{fmu.name}.{p.name}" in used):
             direct.add(fmu.name)
     return direct
@@ -295,9 +289,11 @@ def _order(blocks: Sequence[str], components: Mapping[str, Any], connections: Se
         if src not in deps or dst not in deps or ordering != "feedthrough":
             continue
         feeds = getattr(components[dst], "feedthrough", None)  # FMUs only: a Python block reads every input
-        if feeds is not None and not any(element_of(c.destination.variable)[0] in d for d in feeds.values()):
+        if feeds is not None and not any(base_variable(c.destination.variable, components[dst].variables) in d
+                                         for d in feeds.values()):
             continue
-        if src not in direct or components[src].feedthrough.get(element_of(c.source.variable)[0]):
+        if src not in direct or components[src].feedthrough.get(base_variable(c.source.variable,
+                                                                              components[src].variables)):
             deps[dst].add(src)
     order: list[str] = []
     state: dict[str, int] = {}
@@ -344,7 +340,7 @@ def make_plan(fmus: Sequence, python: Sequence, connections: Sequence[Connection
     source_of = {str(c.destination): str(c.source) for c in connections}
     for s in record + list(bounds):
         signal_port(components, s)
-        comp, _, var = source_of.get(s, s).partition(".")
+        comp, var = split_endpoint(source_of.get(s, s), components)
         sources = _elements(components[comp], "outputs") + element_ports(_internals(components[comp]))
         if var not in {p.name for p in sources}:
             raise ConnectionCheckError(f"signal {s!r} is an input that nothing feeds; record its source")

@@ -119,7 +119,7 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
         for key, value in params.items():
             part.parameters.append((key, _TYPES[fmu.variables[key].type], value))
         parts.append(part)
-    check_connections(parse_connections(scenario.connections), components)
+    check_connections(parse_connections(scenario.connections, components), components)
     for where, signals in (("record.signals", scenario.record), ("envelope", list(scenario.envelope))):
         for signal in signals:
             comp, _, var = signal.partition(".")
@@ -263,7 +263,7 @@ def _write_ssd(scenario: Scenario, parts: list[_Part], path: Path) -> None:
             component.parameter_bindings = [ParameterBinding(ssv=SSVElem(name=part.name, parameters=values))]
         system.elements.append(component)
     conversions = {}  # stated conversions (factor, offset) and unchecked connections (None)
-    for c in parse_connections(scenario.connections):
+    for c in parse_connections(scenario.connections, list(scenario.fmus) + list(scenario.components)):
         system.connections.append(Connection(start_element=c.source.component, start_connector=c.source.variable,
                                              end_element=c.destination.component,
                                              end_connector=c.destination.variable))

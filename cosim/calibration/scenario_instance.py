@@ -47,7 +47,7 @@ def scenario_instance(scenario_name: str | Path, instance: str | None, fit, over
         comp = fmus[instance]
         path, parameters = Path(comp.path), dict(comp.base_parameters)
     columns = {}
-    for c in parse_connections(scenario.connections):
+    for c in parse_connections(scenario.connections, list(scenario.fmus) + list(scenario.components)):
         if c.destination.component == instance:
             columns[c.destination.variable] = f"{c.source.component}.{c.source.variable}"
     return instance, path, parameters, columns

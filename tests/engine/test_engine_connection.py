@@ -151,3 +151,18 @@ def test_connection_objects_are_checked_like_strings(components):
     conn = Connection(Endpoint("src", "v"), Endpoint("fmu", "u"))
     with pytest.raises(ConnectionCheckError, match="unit mismatch"):
         check_connections([conn], components)
+
+
+def test_endpoints_split_at_the_longest_known_instance_name():
+    # an SSP archive's nested systems are flattened to dotted instance names (SuT.edrive_mass)
+    (c,) = parse_connection("SuT.edrive_mass.x -> SuT.y", instances=("SuT", "SuT.edrive_mass"))
+    assert c.source == Endpoint("SuT.edrive_mass", "x") and c.destination == Endpoint("SuT", "y")
+    (c,) = parse_connections(["A.x[1] -> B.der(x[2])"], instances=())
+    assert c.source == Endpoint("A", "x[1]") and c.destination == Endpoint("B", "der(x[2])")
+
+
+def test_groups_split_outside_brackets_and_quotes():
+    assert parse_connection("A.{x[1,2],'a,b', 'c.d'.e} -> B.{p,q,r}") == [
+        C("A.x[1,2]", "B.p"), C("A.'a,b'", "B.q"), C("A.'c.d'.e", "B.r")]
+    # a dot inside a quoted name is no endpoint separator
+    assert parse_connection("'q.r'.x -> B.u")[0].source == Endpoint("'q.r'", "x")
