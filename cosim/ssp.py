@@ -38,6 +38,7 @@ from .errors import CosimError, FmuError, ScenarioError, one_line, show_folder_a
 from .files import (SSD_NAME, extract_zip, given_twice, json_document, put_once, read_entry, regular_file, safe_name,
                     zip_members)
 from .limits import MAX_DOCUMENT_BYTES, MAX_NESTING
+from .names import split_endpoint
 from .scenario import Scenario, apply_overrides, parse_scenario
 from .assembly import fmu_component
 from .ssv import number as _number, parameter_set as _parameter_set
@@ -452,11 +453,11 @@ class _Flattening:
         below = {name[len(".".join(path)) + 1 if path else 0:]: name for name in self.components
                  if not path or name.startswith(".".join(path) + ".")}
         for name, value in values.items():
-            relative = max((r for r in below if name.startswith(r + ".")), key=len, default=None)
-            if relative is None:
+            relative, variable = split_endpoint(name, below) or (None, None)
+            if relative not in below:
                 raise ScenarioError(f"{at}: parameter {name!r}: names no element of the system (expected "
                                     f"Element.variable; elements below it: {', '.join(below)})")
-            self.components[below[relative]]["parameters"][name[len(relative) + 1:]] = value
+            self.components[below[relative]]["parameters"][variable] = value
 
     def connections(self) -> list[str | dict[str, Any]]:
         """Every chain from a component's connector to a component's connector, one connection each."""

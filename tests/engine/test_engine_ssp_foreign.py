@@ -195,7 +195,6 @@ def test_the_nested_archive_is_flattened(foreign, caplog):
                for n in notes), notes
 
 
-@pytest.mark.skip(reason="dotted instance names in endpoints: branch names, merged next")
 def test_the_nested_archive_flies_as_the_flat_scenario(foreign, tmp_path):
     flat_file = tmp_path / "flat.toml"
     flat_file.write_text(FLAT.format(ref=REFERENCE / "fmi2"))
@@ -271,3 +270,14 @@ def test_the_command_line_refuses_a_signal_dictionary_with_exit_2(tmp_path, caps
     assert err.endswith("/ssd:SystemStructureDescription/ssd:System[@name='Root']/ssd:SignalDictionaries: signal "
                         "dictionaries are not supported"), err
     assert not (tmp_path / "out").exists()
+
+
+def test_the_command_line_flies_it_at_the_users_step(foreign, tmp_path, capsys):
+    """``fnn-cosim run bench.ssp --set simulation.step=...``: the user's step is taken before any other."""
+    from quadrotor_paper.cli import main
+
+    code = main(["run", str(foreign), "--out", str(tmp_path / "out"), "--quiet", "--no-plots",
+                 "--set", "simulation.step=0.02"])
+    assert code == 0, capsys.readouterr().err
+    rows = np.loadtxt(tmp_path / "out" / "results.csv", delimiter=",", skiprows=1, ndmin=2)
+    assert len(rows) == 51 and rows[1, 0] == 0.02
