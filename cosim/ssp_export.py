@@ -36,6 +36,7 @@ from lxml import etree
 from . import registry, units
 from .connection import check_connections, parse_connections
 from .errors import FmuError, ScenarioError, one_line
+from .names import split_endpoint
 from .scenario import Scenario
 from .assembly import check_fmu_file, fmu_component, fmu_error_in_scenario, fmu_file
 from .ssp import COSIM_ANNOTATION, COSIM_NAMESPACE, FMU_TYPE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, qualified
@@ -122,7 +123,7 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     check_connections(parse_connections(scenario.connections, components), components)
     for where, signals in (("record.signals", scenario.record), ("envelope", list(scenario.envelope))):
         for signal in signals:
-            comp, _, var = signal.partition(".")
+            comp, var = split_endpoint(signal, components) or (signal, "")
             fmu = components.get(comp)
             if fmu is None or var not in {p.name for p in fmu.inputs + fmu.outputs}:
                 raise ScenarioError(f"{where}: {signal!r} is no input or output of an FMU of the scenario "
