@@ -296,3 +296,28 @@ def test_exported_again_it_reads_back_the_same(foreign, tmp_path):
     assert ({str(c): c.conversion for c in parse_connections(again.connections)}
             == {str(c): c.conversion for c in parse_connections(nested.connections)})
     assert (again.step, again.duration, again.record) == (nested.step, nested.duration, nested.record)
+
+
+ONE = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" version="1.0"
+    name="one">
+  <ssd:System name="Root">
+    <ssd:Elements><ssd:Component name="{fmu}" source="resources/{fmu}.fmu"/></ssd:Elements>
+  </ssd:System>
+  <ssd:DefaultExperiment stopTime="{stop}"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+@pytest.mark.parametrize("fmu, stop, step, origin", [
+    ("Feedthrough", "2.0", 0.002, "from the span / 1000 (no step in the archive nor in its FMUs; span 2 s)"),
+    # Dahlquist asks 0.1 s: 0.25 s is no whole number of them, so the grid is 0.25 / 3
+    ("Dahlquist", "0.25", 0.25 / 3, "from the smallest FMU DefaultExperiment stepSize (Dahlquist: 0.1 s), 3 steps "
+                                    "over the span of 0.25 s"),
+])
+def test_without_a_step_the_default_is_said(tmp_path, caplog, fmu, stop, step, origin):
+    path = _archive(tmp_path / "one.ssp", ONE.format(fmu=fmu, stop=stop))
+    with caplog.at_level(logging.INFO, logger="cosim.ssp"):
+        scenario = load_ssp(path)
+    assert scenario.step == step
+    assert any(origin in r.getMessage() for r in caplog.records), [r.getMessage() for r in caplog.records]
