@@ -1363,12 +1363,17 @@ class FmuComponent:
         return self._vector(self._slave.getContinuousStates, "getting the continuous states")
 
     def set_continuous_states(self, x: np.ndarray) -> None:
+        """Set the continuous states (Continuous-Time Mode: FMI 2.0 §3.2.1, FMI
+        3.0 §3.2.1); the master's solver, if it integrates this instance,
+        restarts from them at the next step (the states changed outside it)."""
         x = np.ascontiguousarray(x, dtype=float)
         if x.size:
             try:
                 self._slave.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), x.size)
             except FMICallException as exc:
                 raise self._fail("setting the continuous states", exc) from None
+            if self._integrator is not None:
+                self._integrator.restart()
 
     def derivatives(self) -> np.ndarray:
         """The state derivatives at the states and inputs set."""

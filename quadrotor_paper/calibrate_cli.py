@@ -52,6 +52,9 @@ def _arguments(c: argparse.ArgumentParser, named_values, overrides) -> None:
                    "value of the scenario (repeatable)")
     c.add_argument("--workers", type=worker_count, default=None, metavar="N",
                    help="processes that share the segments (default: the settings', 1)")
+    c.add_argument("--interface", default=None, metavar="auto|CoSimulation|ModelExchange",
+                   help="the FMU's interface that makes the trajectories (default: the settings', 'auto': "
+                        "Co-Simulation where the FMU has it, else Model Exchange)")
     c.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
     c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -88,6 +91,8 @@ def run(args) -> int:
         update["segment"] = args.segment
     if args.workers is not None:
         update["workers"] = args.workers
+    if args.interface is not None:
+        update["interface"] = args.interface
     if update:
         settings = validate(CalibrationSettings, settings.model_dump(exclude_none=True) | update)
     column_map = read_column_map(args.columns) if args.columns else None
@@ -96,8 +101,10 @@ def run(args) -> int:
     if args.scenario is not None:
         from cosim.calibration.scenario_instance import scenario_instance
 
-        instance, fmu, fixed, extra = scenario_instance(args.scenario, args.instance, settings.fit,
-                                                        _overrides(args.set))
+        instance, fmu, fixed, extra, interface = scenario_instance(args.scenario, args.instance, settings.fit,
+                                                                   _overrides(args.set))
+        if settings.interface == "auto":  # the interface the scenario flies it in
+            settings = settings.model_copy(update={"interface": interface})
     else:
         if args.set or args.instance:
             raise ScenarioError("--set and --instance go with --scenario")

@@ -135,6 +135,16 @@ def quadrotor_fmu2():
     return cached_fmu(QUADROTOR, 2)
 
 
+@pytest.fixture(scope="session")
+def industrial_fmus(tmp_path_factory):
+    """``industrial_fmus(spec) -> Path``: tests/industrial_fmus.py's ``build`` into one folder of the
+    test process, so each FMU (and the generic C layer) is compiled once a process."""
+    from tests.industrial_fmus import build
+
+    folder = tmp_path_factory.mktemp("industrial_fmus")
+    return lambda spec: build(folder, spec)
+
+
 # The longest tests (wall time in a fresh ``make test``, parametrized ones
 # summed; longest first), run first: pytest-xdist hands each process a
 # contiguous share of the collection and the first to run out steals from

@@ -8,7 +8,7 @@ each:
 * :mod:`~cosim.calibration.log`: the log read and checked (CSV, Parquet, ULog);
 * :mod:`~cosim.calibration.problem`: the FMU's variables bound to the log's columns;
 * :mod:`~cosim.calibration.segments`: multiple shooting's segments and the held-out part;
-* :mod:`~cosim.calibration.model`: the trajectories (Co-Simulation) and the right-hand side's Jacobians (Model Exchange);
+* :mod:`~cosim.calibration.model`: the trajectories (Co-Simulation, or Model Exchange through the master's solver) and the right-hand side's Jacobians (Model Exchange);
 * :mod:`~cosim.calibration.sensitivity`: the forward sensitivities along a segment;
 * :mod:`~cosim.calibration.symbolic`: segments and exact sensitivities from the model's own CasADi definition (FMUs of ours);
 * :mod:`~cosim.calibration.solve`: the weighted least squares (scipy's ``least_squares``);
@@ -83,7 +83,7 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
     if fixed:
         settings = settings.model_copy(update={"fix": {**{k: v for k, v in fixed.items() if k not in settings.fit},
                                                        **settings.fix}})
-    cs = FmuComponent(instance or "calibrated", fmu, interface="CoSimulation")
+    cs = _component(fmu, settings, instance)
     try:
         states = _states(cs)
         problem = bind_problem(cs, log, settings, column_map, instance, extra_columns, states)
@@ -112,7 +112,7 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
                     if logged[j]:
                         x0[i, j] = problem.output_values[seg.first, problem.state_columns[s]]
             result = solve(model, segments, estimated, x0, dict(settings.noise), method, settings.max_iterations,
-                           settings.tolerance, progress, settings.workers, settings.jacobian_stride, symbolic)
+                           _tolerance(cs, settings), progress, settings.workers, settings.jacobian_stride, symbolic)
             weighted = np.concatenate([(r / result.sigma).ravel() for r in result.residuals])
             stats = statistics(problem.fit, result.theta, result.jacobian, weighted, result.jacobian_state_blocks,
                                int(estimated.sum()) * len(segments), settings.identifiability)
@@ -125,11 +125,45 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
     return Calibration(problem, settings, segments, held_out, result, stats, residuals, prediction, instance)
 
 
+def _component(fmu: str | Path, settings: CalibrationSettings, instance: str | None) -> FmuComponent:
+    """The instance that makes the trajectories, in the interface the
+    settings ask (``"auto"``: Co-Simulation where the FMU has it, else Model
+    Exchange: the FMU component's own default); a Model Exchange one
+    integrated by the master's solver (``settings.solver``, CVODE at
+    :data:`~cosim.calibration.columns.TOLERANCE` unless given). An interface
+    the FMU lacks is its :class:`~cosim.errors.FmuLoadError`, in one line."""
+    from ..model_exchange import SolverSettings
+    from .columns import TOLERANCE
+
+    given = settings.solver.model_dump() if settings.solver is not None else {}
+    solver = SolverSettings(**(given | {"relative_tolerance": given.get("relative_tolerance") or TOLERANCE}))
+    interface = None if settings.interface == "auto" else settings.interface
+    comp = FmuComponent(instance or "calibrated", fmu, interface=interface, solver=solver)
+    if settings.solver is not None and comp.interface != "ModelExchange":
+        comp.close()
+        raise ScenarioError(f"solver: {Path(fmu).name} runs in Co-Simulation here (its own integrator); a solver is "
+                            f"for interface = 'ModelExchange'")
+    return comp
+
+
+def _tolerance(cs: FmuComponent, settings: CalibrationSettings) -> float:
+    """The solver's ``ftol``, ``xtol``, ``gtol``: the settings', and in Model
+    Exchange with CVODE no finer than its relative tolerance: the residuals
+    are computed no finer (the cost jitters between neighbouring points,
+    measured 1e-5 relative at 1e-8 on VanDerPol), and iterations below it
+    chase the integration's error."""
+    if cs.interface == "ModelExchange" and cs.solver.method == "cvode":
+        return max(settings.tolerance, cs.solver.relative_tolerance)
+    return settings.tolerance
+
+
 def _symbolic(cs: FmuComponent, model, workers: int):
     """The problem's :class:`~cosim.calibration.symbolic.SymbolicModel` when
-    the FMU is one of ours, else why not (a string)."""
+    the FMU is one of ours run in Co-Simulation, else why not (a string)."""
     from .symbolic import definition_of, symbolic_model
 
+    if cs.interface != "CoSimulation":  # the CasADi way is the Co-Simulation's RK4 steps, not a Model Exchange solver
+        return "run in Model Exchange here (the CasADi way reproduces its Co-Simulation)"
     definition = definition_of(cs)
     if definition is None:
         return "not a model whose CasADi definition is registered (or built with other values)"

@@ -17,13 +17,16 @@ from pydantic import BeforeValidator, Field, WithJsonSchema
 
 from ..errors import ScenarioError
 from ..files import read_toml
+from ..scenario_tables import Solver
 from ..schema import NonNegative, Number, Positive, Count, Table, json_schema, one_of, validate
 
 __all__ = ["Column", "ColumnMap", "CalibrationSettings", "read_column_map", "read_settings", "INITIAL_STATES",
-           "JACOBIANS", "calibration_schema"]
+           "JACOBIANS", "INTERFACES", "TOLERANCE", "calibration_schema"]
 
 INITIAL_STATES = ("recorded", "estimated")
 JACOBIANS = ("auto", "casadi", "derivatives", "differences")
+INTERFACES = ("auto", "CoSimulation", "ModelExchange")
+TOLERANCE = 1e-8  # CVODE's relative tolerance for a Model Exchange FMU's trajectories (docs/calibration.md)
 
 
 class Column(Table):
@@ -91,6 +94,14 @@ class CalibrationSettings(Table):
                                                    "predicted (default: the last segment when there are several)")
     start: Number = Field(None, description="the log's part used starts here, s")
     stop: Number = Field(None, description="and ends here, s")
+    interface: one_of(INTERFACES) = Field(
+        "auto", description="the FMU's interface that makes the trajectories: 'CoSimulation' (its own integrator), "
+                            "'ModelExchange' (the master's solver, 'solver'), or 'auto': Co-Simulation where the "
+                            "FMU has it, else Model Exchange")
+    solver: Solver = Field(None, description=f"Model Exchange: how the master integrates it (default: CVODE at a "
+                                             f"relative tolerance of {TOLERANCE:g}, not the FMU's default "
+                                             f"experiment's: the trajectories must be accurate well below the "
+                                             f"noise)")
     jacobian: one_of(JACOBIANS) = Field("auto", description="'casadi' (the model's own CasADi definition, when the "
                                                             "FMU is one of ours), 'derivatives' (forward "
                                                             "sensitivities from the FMU's directional derivatives), "

@@ -1,15 +1,22 @@
-"""The FMU driven by the log: trajectories of segments (Co-Simulation) and
-the Jacobians of its right-hand side along them (Model Exchange).
+"""The FMU driven by the log: trajectories of segments (Co-Simulation, or
+Model Exchange through the master's solver) and the Jacobians of its
+right-hand side along them (Model Exchange).
 
-* **Trajectory** of a segment: the Co-Simulation instance is started at the
-  segment's first instant with the fixed and fitted parameters and the
-  segment's initial state (each state's start value, or the parameter that
-  sets it: ``<state>_0`` or the settings' ``initial_parameters``), then
-  stepped from row to row with the log's inputs held over each step
-  (zero-order hold, as the master's communication does), reading the
-  compared outputs and the states at every row. The FMU's own integrator
-  makes the trajectory: a model fitted to a log it produced itself meets it
-  to round-off.
+* **Trajectory** of a segment: the instance is started at the segment's
+  first instant with the fixed and fitted parameters, then stepped from row
+  to row with the log's inputs held over each step (zero-order hold, as the
+  master's communication does), reading the compared outputs and the states
+  at every row. Its initial state: in Co-Simulation, each state's start
+  value, or the parameter that sets it (``<state>_0`` or the settings'
+  ``initial_parameters``), set before initialization; in Model Exchange,
+  the continuous states set by ``fmiXSetContinuousStates`` in
+  Continuous-Time Mode after initialization (FMI 2.0 section 3.2.1, FMI 3.0
+  section 3.2.1: the importer owns the states there; the solver restarts),
+  whatever the start values' rules. In Co-Simulation the FMU's own
+  integrator makes the trajectory (a model fitted to a log it produced
+  itself meets it to round-off); in Model Exchange the master's
+  (:mod:`cosim.model_exchange`, through the FMU component's ``do_step``),
+  at the settings' tolerance.
 * **Right-hand side Jacobians** at each row, on Model Exchange instances of
   the same FMU set to the row's states and inputs: ``A = d der(x)/dx``,
   ``C = dy/dx`` and the columns of fitted inputs from the FMU's directional
@@ -130,12 +137,14 @@ class _Fast:
 
 
 class LogModel:
-    """The problem's FMU: one Co-Simulation instance for trajectories, Model
-    Exchange instances for Jacobians (when the FMU has that interface)."""
+    """The problem's FMU: one instance for trajectories (Co-Simulation or
+    Model Exchange: the problem's), Model Exchange instances for Jacobians
+    (when the FMU has that interface)."""
 
     def __init__(self, problem: Problem, initial_parameters: Mapping[str, str] | None = None):
         self.problem = p = problem
-        self.cs: FmuComponent = p.fmu
+        self.cs: FmuComponent = p.fmu  # the trajectories' instance, in either interface
+        self.model_exchange = self.cs.interface == "ModelExchange"
         self.drive = p.inputs + p.fit_inputs  # inputs set each step: the log's, then the fitted constants
         self.states = list(p.states)
         self.read = list(dict.fromkeys(p.outputs + self.states))
@@ -143,7 +152,8 @@ class LogModel:
         self._out_idx = np.array([self.read.index(o) for o in p.outputs], dtype=int)
         self._x_idx = np.array([self.read.index(s) for s in self.states], dtype=int)
         self.n_params = len(p.fit) - len(p.fit_inputs)
-        self.setters = self._initial_setters(dict(initial_parameters or {}))
+        # Model Exchange sets the states themselves (simulate): no start value needed
+        self.setters = {} if self.model_exchange else self._initial_setters(dict(initial_parameters or {}))
         self.times = p.log.times
         self._me: FmuComponent | None = None
         self._pairs: list[tuple[FmuComponent, FmuComponent, float]] = []
@@ -182,9 +192,14 @@ class LogModel:
         return values
 
     def initial_guess(self) -> np.ndarray:
-        """Each state's start: its setter's start value (the FMU's default)."""
+        """Each state's start: its setter's start value (the FMU's default);
+        in Model Exchange, the states the FMU's initialization gives at the
+        first guess."""
         from .problem import _float
 
+        if self.model_exchange:
+            self.cs.start(float(self.times[0]), self.parameters(np.asarray(self.problem.guess, dtype=float)))
+            return self.cs.continuous_states()
         return np.array([_float(self.cs.variables[self.setters[s]].start, 0.0) for s in self.states])
 
     # ---- trajectories -----------------------------------------------------------------------------
@@ -194,7 +209,8 @@ class LogModel:
         p, cs, t = self.problem, self.cs, self.times
         n_rows = seg.last - seg.first
         steps = n_rows if seg.last < t.size else n_rows - 1
-        parameters = self.parameters(theta) | {self.setters[s]: float(v) for s, v in zip(self.states, x0)}
+        parameters = self.parameters(theta) | {self.setters[s]: float(v) for s, v in zip(self.states, x0)
+                                               if s in self.setters}
         fitted_u = theta[self.n_params:]
         n_in = len(p.inputs)
         cs.u[n_in:n_in + fitted_u.size] = fitted_u
@@ -203,6 +219,8 @@ class LogModel:
         if self.drive:
             cs.set_inputs(dict(zip(self.drive, cs.u[:len(self.drive)])), float(t[seg.first]))
         cs.exit_initialization(float(t[seg.first]))
+        if self.model_exchange:
+            cs.set_continuous_states(x0)
         outputs = np.empty((n_rows, len(p.outputs)))
         states = np.empty((steps + 1, len(self.states)))
         y = cs.y
@@ -220,6 +238,19 @@ class LogModel:
             if i < steps:
                 cs.do_step(float(t[k]), float(t[k + 1] - t[k]))
         return Trajectory(states, outputs)
+
+    @property
+    def difference_step(self) -> float:
+        """The relative step of differences of whole simulations
+        (:mod:`cosim.calibration.solve`): ``eps^(1/3)`` where a trajectory is
+        a deterministic function to round-off (Co-Simulation, Euler), the
+        integration's relative tolerance to the 1/3 in Model Exchange with
+        CVODE (2e-3 at 1e-8: central differences' error balances the
+        truncation ``h^2`` against the solver's error over ``h``; the
+        round-off step meets only that error)."""
+        if self.model_exchange and self.cs.solver.method == "cvode":
+            return max(REL_STEP, self.cs.solver.relative_tolerance ** (1.0 / 3.0))
+        return REL_STEP
 
     # ---- Jacobians of the right-hand side -------------------------------------------------------
 

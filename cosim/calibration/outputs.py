@@ -51,7 +51,8 @@ def calibration_document(cal, log_path: str, fmu_path: str) -> dict:
         }
     corr = [[_num(v) for v in row] for row in st.correlation]
     doc = {
-        "log": str(log_path), "fmu": str(fmu_path), "instance": cal.instance,
+        "log": str(log_path), "fmu": str(fmu_path), "instance": cal.instance, "interface": p.fmu.interface,
+        "solver": _solver(p.fmu),
         "parameters": params,
         "correlation": {"names": list(p.fit), "matrix": corr},
         "identifiability": {"relative_singular_values": [float(s) for s in st.singular_values],
@@ -71,6 +72,15 @@ def calibration_document(cal, log_path: str, fmu_path: str) -> dict:
         doc["prediction"] = {"start": float(pr["times"][0]), "stop": float(pr["times"][-1]),
                              "rms": {o: float(r) for o, r in zip(p.outputs, pr["rms"])}}
     return doc
+
+
+def _solver(fmu) -> dict | None:
+    """A Model Exchange FMU's solver as the trajectories took it (``None`` in Co-Simulation: its own)."""
+    if fmu.interface != "ModelExchange":
+        return None
+    from dataclasses import asdict
+
+    return asdict(fmu.solver)
 
 
 def _values(cal) -> dict[str, tuple[float, str]]:

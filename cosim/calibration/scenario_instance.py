@@ -24,9 +24,10 @@ __all__ = ["scenario_instance"]
 
 
 def scenario_instance(scenario_name: str | Path, instance: str | None, fit, overrides: Mapping[str, Any] | None = None):
-    """``(instance, fmu_path, parameters, input_columns)`` of the scenario's
-    FMU instance ``instance`` (default: the one FMU that has every name of
-    ``fit``)."""
+    """``(instance, fmu_path, parameters, input_columns, interface)`` of the
+    scenario's FMU instance ``instance`` (default: the one FMU that has every
+    name of ``fit``); ``interface``: the one the scenario runs it in
+    (``"CoSimulation"`` or ``"ModelExchange"``)."""
     from ..connection import parse_connections
     from ..scenario import load_scenario
     from ..assembly import build_master
@@ -45,9 +46,9 @@ def scenario_instance(scenario_name: str | Path, instance: str | None, fit, over
             raise ScenarioError(f"--instance {instance}: no FMU instance of that name in {scenario.name} "
                                 f"(its FMUs: {', '.join(fmus)})")
         comp = fmus[instance]
-        path, parameters = Path(comp.path), dict(comp.base_parameters)
+        path, parameters, interface = Path(comp.path), dict(comp.base_parameters), comp.interface
     columns = {}
     for c in parse_connections(scenario.connections, list(scenario.fmus) + list(scenario.components)):
         if c.destination.component == instance:
             columns[c.destination.variable] = f"{c.source.component}.{c.source.variable}"
-    return instance, path, parameters, columns
+    return instance, path, parameters, columns, interface

@@ -22,7 +22,7 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import least_squares
 
-from ..errors import CosimError, FmuCallError
+from ..errors import CosimError, FmuCallError, FmuError, SimulationTerminated
 from .model import LogModel, REL_STEP
 from .segments import Segment
 from .sensitivity import segment_sensitivities
@@ -39,15 +39,27 @@ DENSE_LIMIT = 20_000_000  # entries: a Jacobian with estimated initial states up
 _MODEL: LogModel | None = None  # a worker's model: inherited from the parent at fork (its own FMU instances)
 
 
+def _simulated(model: LogModel, theta, s: Segment, x0):
+    """The segment's trajectory, or why the FMU cannot make it at ``theta``
+    (an :class:`~cosim.errors.FmuError`: a refused step, a Model Exchange
+    solver's failure, the FMU asking to terminate; or a trajectory that is
+    not finite), for :meth:`_Problem.simulate` to reject."""
+    try:
+        tr = model.simulate(theta, s, x0)
+    except (FmuCallError, SimulationTerminated) as exc:
+        return exc
+    finite = np.isfinite(tr.states).all(axis=1)
+    finite[:len(tr.outputs)] &= np.isfinite(tr.outputs).all(axis=1)
+    if not finite.all():
+        t = float(model.times[s.first + int(np.argmin(finite))])
+        return FmuCallError(model.cs.name, model.cs.path, f"at t = {t:.4f} s: the trajectory is not finite (NaN or "
+                                                          f"infinite outputs or states)")
+    return tr
+
+
 def _simulate_part(job):
     theta, part = job
-    out = []
-    for s, x0 in part:
-        try:
-            out.append(_MODEL.simulate(theta, s, x0))
-        except FmuCallError as exc:
-            out.append(exc)
-    return out
+    return [_simulated(_MODEL, theta, s, x0) for s, x0 in part]
 
 
 def _sensitivities_part(job):
@@ -158,19 +170,15 @@ class _Problem:
             elif self.workers is not None:
                 done = self.workers.simulate(theta, self.segments, list(x0))
             else:
-                done = []
-                for i, s in enumerate(self.segments):
-                    try:
-                        done.append(self.model.simulate(theta, s, x0[i]))
-                    except FmuCallError as exc:
-                        done.append(exc)
+                done = [_simulated(self.model, theta, s, x0[i]) for i, s in enumerate(self.segments)]
             trajs = []
             for s, tr in zip(self.segments, done):
-                if isinstance(tr, FmuCallError):
+                if isinstance(tr, FmuError):
                     if not self.evaluations:  # the first guess: nothing to fall back on
                         raise FmuCallError(tr.instance, tr.path, f"the first guess fails: {tr.reason}") from None
-                    # a trial point the FMU refuses: infinite residuals, which the solver rejects
-                    # (its trust region shrinks), as a step into a region the model cannot fly
+                    # a trial point the FMU cannot simulate (refused, its solver failed, not finite): infinite
+                    # residuals, which the solver rejects (its trust region shrinks), as a step into a region the
+                    # model cannot fly; the one place every way (serial, workers, CasADi) meets it
                     tr = self._failed(s)
                 trajs.append(tr)
             self.cache[key] = trajs
@@ -254,6 +262,9 @@ class _Problem:
         if p.defaults:
             for j, name in enumerate(p.fit):
                 scales[j] = max(scales[j], abs(p.defaults[name]))
+        rel_step = self.model.difference_step
+        if rel_step != REL_STEP and self.ne:  # a solver's error: a state near 0 moved by its scale's step
+            scales[self.nt:] = np.maximum(scales[self.nt:], np.tile(self.scale_x[self.estimated], len(self.segments)))
         groups = [[j] for j in range(self.nt)]
         groups += [[self.nt + i * self.ne + e for i in range(len(self.segments))] for e in range(self.ne)]
         J = np.zeros((r0.size, z.size))
@@ -262,7 +273,7 @@ class _Problem:
         for group in groups:
             cols = {}
             for factor in (1.0, 2.0):
-                h = factor * REL_STEP * scales[group]
+                h = factor * rel_step * scales[group]
                 zp, zm = z.copy(), z.copy()
                 zp[group] += h
                 zm[group] -= h
@@ -277,11 +288,19 @@ class _Problem:
                 c2 = cols[2.0][0][rows] / cols[2.0][1][which]
                 J[rows, j] = c1
                 err = max(err, float(np.max(np.abs(c1 - c2), initial=0.0)))
+            if group[0] >= self.nt and self.continuity:
+                self._continuity_columns(J, group, *cols[1.0])
         self.error_estimate = err
         return sparse.csr_matrix(J) if self.ne and not self.dense else J
 
+    def _continuity_base(self) -> int:
+        return sum((s.last - s.first) for s in self.segments) * len(self.model.problem.outputs)
+
     def _rows_of(self, j):
-        """The residual rows column ``j`` of z touches (all of them for a fitted name)."""
+        """The residual rows column ``j`` of z touches through a simulation:
+        all of them for a fitted name; for a segment's estimated state, the
+        segment's outputs and the continuity at its end (the continuity at
+        its start holds the state itself: :meth:`_continuity_columns`)."""
         if j < self.nt:
             return slice(None)
         i = (j - self.nt) // self.ne
@@ -289,12 +308,29 @@ class _Problem:
         seg = self.segments[i]
         start = sum((s.last - s.first) * ny for s in self.segments[:i])
         rows = np.arange(start, start + (seg.last - seg.first) * ny)
-        base = sum((s.last - s.first) * ny for s in self.segments)
-        extra = []
+        if i in self.continuity:
+            base = self._continuity_base() + self.continuity.index(i) * self.ne
+            rows = np.concatenate([rows, np.arange(base, base + self.ne)])
+        return rows
+
+    def _continuity_columns(self, J, group, diff, dz) -> None:
+        """The continuity rows of one estimated state's columns (``group``:
+        that state in every segment, moved at once by ``dz``, the residuals
+        moving by ``diff``). The continuity ``W (x_end(k) - x_start(k + 1)) /
+        scale`` moved both ``x_start(k + 1)``, exactly (``-W / scale`` on the
+        state's own row), and ``x_end(k)`` through segment ``k``'s simulation:
+        the first is taken out of the difference, and is segment ``k + 1``'s
+        column there."""
+        e = group[0] - self.nt
+        weight = CONTINUITY_WEIGHT / self.scale_x[self.estimated][e]
+        base = self._continuity_base()
         for c, k in enumerate(self.continuity):
-            if k == i or k + 1 == i:
-                extra += list(range(base + c * self.ne, base + (c + 1) * self.ne))
-        return np.concatenate([rows, np.array(extra, dtype=int)])
+            block = np.arange(base + c * self.ne, base + (c + 1) * self.ne)
+            moved = diff[block].copy()
+            moved[e] += weight * dz[k + 1]
+            J[block, group[k]] = moved / dz[k]
+            J[block, group[k + 1]] = 0.0
+            J[block[e], group[k + 1]] = -weight
 
     def bounds(self):
         p = self.model.problem

@@ -23,6 +23,7 @@ def test_van_der_pol_mu_from_its_published_output_from_a_guess_50_percent_off(ve
     settings = CalibrationSettings(fit=["mu"], guess={"mu": 1.5}, segment=5.0, **({"stop": 10.0} if version == 3 else {}))
     cal = calibrate(RESULTS / "VanDerPol_out.csv", REFERENCE / f"fmi{version}" / "VanDerPol.fmu", settings)
     assert cal.converged
+    assert cal.problem.fmu.interface == "CoSimulation"  # "auto": an FMU with both keeps Co-Simulation
     assert cal.fit.method.startswith("forward sensitivities")  # VanDerPol provides directional derivatives
     assert abs(cal.fit.theta[0] - 1.0) < 1e-6
     assert cal.stats.identifiable[0]
@@ -255,3 +256,157 @@ def test_a_ulog_is_read_through_pyulog_its_topic_the_instants_another_interpolat
     cal = calibrate(path, REFERENCE / "fmi2" / "Dahlquist.fmu", CalibrationSettings(fit=["k"], guess={"k": 2.0}),
                     cmap)
     assert abs(cal.fit.theta[0] - 1.0) < 1e-6
+
+
+# ---- Model Exchange-only FMUs: the master's solver makes the trajectories (docs/calibration.md) ----------------
+
+def _without(version: int, elements: tuple[str, ...], path: Path) -> Path:
+    """The Reference VanDerPol with the interface ``elements`` taken out of its
+    modelDescription.xml (the binary unchanged): an FMU as a modelling tool
+    exports it, Model Exchange first."""
+    import zipfile
+
+    from lxml import etree
+
+    with zipfile.ZipFile(REFERENCE / f"fmi{version}" / "VanDerPol.fmu") as zin, \
+            zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                root = etree.fromstring(data)
+                for name in elements:
+                    root.remove(root.find(name))
+                data = etree.tostring(root, xml_declaration=True, encoding="UTF-8")
+            zout.writestr(item, data)
+    return path
+
+
+ME_MU = 0.7  # the log's mu, the FMU's default 1
+
+
+@pytest.fixture(scope="module", params=[2, 3])
+def me_only_log(request, tmp_path_factory):
+    """``(version, the ME-only VanDerPol, a noisy log of it)``: 10 s at 0.1 s
+    from fmpy's own Model Exchange run (CVode at 1e-10) at ``mu = 0.7``,
+    Gaussian noise 0.01 on both outputs (seeded)."""
+    from fmpy import simulate_fmu
+
+    folder = tmp_path_factory.mktemp(f"me{request.param}")
+    fmu = _without(request.param, ("CoSimulation",), folder / "VanDerPol.fmu")
+    r = simulate_fmu(str(fmu), fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-10, stop_time=10.0,
+                     output_interval=0.1, start_values={"mu": ME_MU})
+    rng = np.random.default_rng(7)
+    noisy = [r[n] + 0.01 * rng.standard_normal(r.size) for n in ("x0", "x1")]
+    log = folder / "log.csv"
+    np.savetxt(log, np.column_stack([r["time"], *noisy]), delimiter=",", header="time,x0,x1", comments="")
+    return request.param, fmu, log
+
+
+def test_a_model_exchange_only_fmu_is_calibrated_through_the_masters_solver(me_only_log, tmp_path, capsys):
+    version, fmu, log = me_only_log
+    settings = tmp_path / "settings.toml"
+    # the logged states are noisy: every segment's start estimated; a log of 0.1 s rows: Jacobians at every row
+    # (their Magnus step over 4 rows, the default's first iterations, converges in 26 simulations against 16)
+    settings.write_text("initial_states = 'estimated'\njacobian_stride = 1\n")
+    out = tmp_path / "out"
+    assert _cli("calibrate", log, "--fmu", fmu, "--fit", "mu", "--guess", "mu=1.05", "--segment", "5", "--settings",
+                settings, "--out", out, "--quiet", "--no-plots") == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    assert doc["interface"] == "ModelExchange" and doc["solver"]["relative_tolerance"] == 1e-8
+    assert doc["jacobian"] == "forward sensitivities (directional derivatives)"
+    mu = doc["parameters"]["mu"]
+    assert abs(mu["value"] - ME_MU) < 0.01 * ME_MU
+    assert mu["ci95"][0] < ME_MU < mu["ci95"][1]
+    assert doc["residuals"]["x0"]["sigma"] == pytest.approx(0.01, rel=0.2)  # the noise put in, estimated
+
+
+def test_an_fmu_with_both_interfaces_is_calibrated_in_model_exchange_when_asked():
+    # the published output is the FMU's Co-Simulation (forward Euler at 0.01 s); the master's solver with
+    # Euler at the same step reproduces it, so the fit meets it as closely (3 s of it: one segment)
+    settings = CalibrationSettings(fit=["mu"], guess={"mu": 1.5}, stop=3.0, interface="ModelExchange",
+                                   solver={"method": "euler", "step": 0.01})
+    cal = calibrate(RESULTS / "VanDerPol_out.csv", REFERENCE / "fmi2" / "VanDerPol.fmu", settings)
+    assert cal.problem.fmu.interface == "ModelExchange" and cal.converged
+    assert abs(cal.fit.theta[0] - 1.0) < 1e-6
+
+
+@pytest.mark.parametrize("removed, args, says", [
+    (("CoSimulation",), ["--interface", "CoSimulation"],
+     "interface = 'CoSimulation': the FMU has no Co-Simulation interface (it has Model Exchange only)"),
+    ((), ["--interface", "ME"], "interface = 'ME': expected one of auto, CoSimulation, ModelExchange"),
+    (("CoSimulation", "ModelExchange"), [], "the FMU has neither Co-Simulation nor Model Exchange"),
+    ((), ["--settings", "solver.relative_tolerance = 1e-9"], "solver: VanDerPol.fmu runs in Co-Simulation here"),
+    (("CoSimulation",), ["--settings", "solver.relative_tolerance = 2"], "solver.relative_tolerance = 2: must be below 1"),
+])
+def test_an_interface_the_fmu_lacks_or_a_bad_choice_is_one_line_exit_2(tmp_path, capsys, removed, args, says):
+    fmu = _without(2, removed, tmp_path / "VanDerPol.fmu")
+    args = list(args)
+    if "--settings" in args:
+        settings = tmp_path / "settings.toml"
+        settings.write_text(args[-1] + "\n")
+        args[-1] = settings
+    assert says in _refused(capsys, "calibrate", RESULTS / "VanDerPol_out.csv", "--fmu", fmu, "--fit", "mu", *args,
+                            "--out", tmp_path / "o", "--quiet")
+
+
+@pytest.mark.parametrize("me_only_log", [2], indirect=True)
+@pytest.mark.parametrize("failure", ["solver", "not finite"])
+def test_a_trial_point_the_solver_cannot_simulate_is_rejected_not_a_crash(me_only_log, monkeypatch, failure):
+    # the fit's first step from mu = 1.05 overshoots to 0.62; say the model cannot be simulated below 0.65: CVODE
+    # fails there (the component's FmuCallError, as a Model Exchange integration failure is), or the FMU returns
+    # NaN; the solver rejects those trial points (its trust region shrinks) and reaches the estimate
+    from cosim.calibration.model import LogModel
+    from cosim.errors import FmuCallError
+
+    _, fmu, log = me_only_log
+    simulate, tried = LogModel.simulate, []
+
+    def failing(self, theta, seg, x0):
+        tr = simulate(self, theta, seg, x0)
+        if theta[0] < 0.65:
+            tried.append(float(theta[0]))
+            if failure == "solver":
+                raise FmuCallError("calibrated", fmu, "Model Exchange integration (cvode) failed (CVode error)")
+            tr.outputs[-1] = np.nan
+        return tr
+
+    monkeypatch.setattr(LogModel, "simulate", failing)
+    settings = CalibrationSettings(fit=["mu"], guess={"mu": 1.05}, initial_states="estimated", segment=5.0,
+                                   jacobian_stride=1, noise={"x0": 0.01, "x1": 0.01})
+    cal = calibrate(log, fmu, settings)
+    assert tried and cal.converged
+    assert abs(cal.fit.theta[0] - ME_MU) < 0.01 * ME_MU
+    # a first guess there: nothing to fall back on, the FMU's error in one line (not scipy's ValueError)
+    with pytest.raises(FmuCallError, match="the first guess fails: " + ("Model Exchange integration" if
+                       failure == "solver" else r"at t = 4\.9000 s: the trajectory is not finite")):
+        calibrate(log, fmu, settings.model_copy(update={"guess": {"mu": 0.5}}))
+
+
+@pytest.mark.parametrize("me_only_log", [2], indirect=True)
+def test_differences_give_the_continuity_rows_of_each_segments_own_start(me_only_log):
+    # the differences move one estimated state in every segment at once (a segment's outputs depend on its own
+    # start only); a continuity residual W (x_end(k) - x_start(k + 1)) / scale depends on two of them: each
+    # column gets its own part (x_start's exactly), as the forward sensitivities give it
+    from cosim.calibration import read_log
+    from cosim.calibration.model import LogModel
+    from cosim.calibration.problem import bind_problem
+    from cosim.calibration.segments import split
+    from cosim.calibration.solve import _Problem
+    from cosim.fmu_component import FmuComponent
+
+    _, fmu, log = me_only_log
+    settings = CalibrationSettings(fit=["mu"], initial_states="estimated", stop=3.0)
+    comp = FmuComponent("calibrated", fmu)
+    model = LogModel(bind_problem(comp, read_log(log).window(None, 3.0), settings, states=comp.state_names))
+    try:
+        segments, _ = split(model.times, 1.5, 0)
+        x0 = np.array([[2.0, 0.0], [0.9, -1.6]])
+        estimated, sigma, z = np.ones(2, bool), np.array([0.01, 0.01]), np.array([0.7, 2.0, 0.0, 0.9, -1.6])
+        J = {how: _Problem(model, segments, estimated, x0, sigma, how, None).jacobian(z)
+             for how in ("differences", "derivatives")}
+    finally:
+        model.close()
+        comp.close()
+    rows = slice(-2, None)  # the continuity between the two segments
+    assert J["differences"][rows, 3:] == pytest.approx(-1e3 / np.array([2.0, 1.6]) * np.eye(2))
+    np.testing.assert_allclose(J["differences"][rows, :3], J["derivatives"][rows, :3], rtol=2e-2, atol=1.0)

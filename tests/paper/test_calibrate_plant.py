@@ -148,6 +148,8 @@ def test_a_parameter_set_that_is_not_one_is_refused_in_one_line(tmp_path, capsys
 
 @pytest.mark.parametrize("kind, good, bad", [
     ("settings", "fit = ['b']\njacobian = 'casadi'\nsegment = 2.0\n", "fit = ['b']\njacobian = 'magic'\n"),
+    ("settings", "fit = ['b']\ninterface = 'ModelExchange'\n[solver]\nrelative_tolerance = 1e-9\n",
+     "fit = ['b']\n[solver]\nrelative_tolerance = 2\n"),
     ("column-map", "time = 'timestamp'\n[columns]\nx = 'pos_n'\nOmega_1 = { column = 'rpm1', unit = 'rpm' }\n",
      "[columns]\nx = 3\n"),
 ])
