@@ -15,6 +15,7 @@ from typing import Any, Mapping
 from . import registry
 from .errors import CosimError, FmuError, ScenarioError
 from .fmu_description import start_value_rule
+from .names import nearest_told
 from .scenario import Scenario
 from .time_grid import runs_at
 
@@ -55,7 +56,9 @@ def check_fmu_file(scenario: Scenario, fmu) -> None:
     for key, value in spec["parameters"].items():
         var = fmu.variables.get(key)
         if var is None or var.causality not in ("parameter", "input"):
-            raise ScenarioError(f"fmus.{fmu.name}.parameters.{key}: the FMU file {fmu.path} has no parameter {key!r}")
+            raise ScenarioError(f"fmus.{fmu.name}.parameters.{key}: the FMU file {fmu.path} has no parameter {key!r}"
+                                + nearest_told(key, [n for n, v in fmu.variables.items()
+                                                 if v.causality in ("parameter", "input")]))
         low = float(var.min) if var.min is not None else -math.inf
         high = float(var.max) if var.max is not None else math.inf
         if not low <= float(value) <= high:
@@ -66,7 +69,8 @@ def check_fmu_file(scenario: Scenario, fmu) -> None:
         why = "is a parameter: give it in 'parameters'" if getattr(var, "causality", None) == "parameter" else \
             start_value_rule(var)
         if why:
-            raise ScenarioError(f"fmus.{fmu.name}.start.{key} = {value!r}: {key!r} {why} (the FMU file {fmu.path})")
+            raise ScenarioError(f"fmus.{fmu.name}.start.{key} = {value!r}: {key!r} {why} (the FMU file {fmu.path})"
+                                + (nearest_told(key, fmu.variables) if var is None else ""))
     if fmu.model_exchange:
         try:
             fmu.solver.substeps(scenario.step)

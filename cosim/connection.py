@@ -25,6 +25,7 @@ unchecked (:func:`parse_connections`; ``docs/cosim.md``, "Units").
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, replace
 from typing import Any, Iterable, Mapping
 
@@ -32,7 +33,9 @@ from . import units
 from .component import Port, element_of, element_ports
 from .errors import ConnectionCheckError, shown_text
 from .limits import MAX_GROUP
-from .names import nearest, split_endpoint, split_top, top_groups
+from .names import nearest_told, split_endpoint, split_top, top_groups
+
+_log = logging.getLogger(__name__)
 
 __all__ = ["Connection", "parse_connection", "parse_connections", "check_connections", "Endpoint", "TABLE_KEYS",
            "unit_conversion"]
@@ -178,13 +181,19 @@ def unit_conversion(c: Connection, out_port: Port, in_port: Port) -> tuple[float
     destination = units.unit_of(in_port.unit, in_port.unit_definition)
     try:
         factor, offset = units.conversion(source or out_port.unit, destination or in_port.unit)
-    except ConnectionCheckError:
+    except ConnectionCheckError as exc:
+        why = str(exc).partition("not one quantity")[2]  # e.g. why Hz and rad/s are not (cosim.units.radian_dropped)
         raise ConnectionCheckError(
             f"connection {c}: unit mismatch, {c.source} is in {units.describe(out_port.unit, source)} but "
-            f"{c.destination} is in {units.describe(in_port.unit, destination)}, not one quantity; "
+            f"{c.destination} is in {units.describe(in_port.unit, destination)}, not one quantity{why}; "
             f"state the conversion, {{ connect = \"{c}\", factor = ..., offset = ... }} "
             f"({c.destination} = factor * {c.source} + offset), or mark it "
             f"{{ connect = \"{c}\", units = \"unchecked\" }}") from None
+    if source is not None and destination is not None and not source.same_quantity(destination):
+        _log.info("connection %s: %s and %s are one unit but for the radian, which %s leaves out "
+                  "(docs/fmi-support.md, \"Angles\"); connected with factor %.17g", c,
+                  units.describe(out_port.unit, source), units.describe(in_port.unit, destination),
+                  out_port.unit if source.exponents[-1] == 0 else in_port.unit, factor)
     return None if (factor, offset) == (1.0, 0.0) else (factor, offset)
 
 
@@ -219,8 +228,8 @@ def check_connections(connections: Iterable[Connection], components: Mapping[str
                     reason = f"is an {'input' if group == 'outputs' else 'output'}, not an {group[:-1]}"
                 else:
                     names = [p.name for p in getattr(comp, group)]
-                    close = nearest(end.variable, names)
-                    reason = (f"does not exist (nearest: {', '.join(close)})" if close else
+                    close = nearest_told(end.variable, names)
+                    reason = (f"does not exist{close}" if close else
                               f"does not exist (its {group} are: {', '.join(names) or 'none'})")
                 raise ConnectionCheckError(f"connection {c}: {role} {end} {reason}")
             ports.append(port)

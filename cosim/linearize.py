@@ -38,6 +38,7 @@ import numpy as np
 
 from .errors import FmuCallError, FmuLoadError
 from .fmu_component import FmuComponent
+from .names import nearest_told
 
 if TYPE_CHECKING:
     import control
@@ -97,7 +98,7 @@ def _check_values(what: str, values: Mapping[str, float], variables: Mapping, al
     for name, value in values.items():
         var = variables.get(name)
         if var is None:
-            raise LinearizationError(f"{what} {name!r}: the FMU has no such variable")
+            raise LinearizationError(f"{what} {name!r}: the FMU has no such variable{nearest_told(name, variables)}")
         if var.causality not in allowed:
             raise LinearizationError(f"{what} {name!r}: it is a {var.causality}, not a {' or '.join(allowed)}")
         if not np.isfinite(float(value)):
@@ -107,7 +108,7 @@ def _check_values(what: str, values: Mapping[str, float], variables: Mapping, al
 def _check_states(start: Mapping[str, float], variables: Mapping, states: Sequence[str], kind: str) -> None:
     for name, value in start.items():
         if name not in variables:
-            raise LinearizationError(f"start value {name!r}: the FMU has no such variable")
+            raise LinearizationError(f"start value {name!r}: the FMU has no such variable{nearest_told(name, variables)}")
         if name not in states:
             raise LinearizationError(f"start value {name!r}: not a {kind} state of the FMU "
                                      f"(its {kind} states: {', '.join(states) or 'none'})")

@@ -49,7 +49,7 @@ from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallEr
 from .time_grid import communication_point, seed_error, whole_steps
 from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
-from .plan import ORDERINGS, FmuBlock, PythonBlock, make_plan
+from .plan import ORDERINGS, FmuBlock, PythonBlock, every_output, make_plan
 from .recorder import Recorder
 
 __all__ = ["Master", "RunResult", "Snapshot", "ORDERINGS"]
@@ -159,7 +159,8 @@ class Master:
     components : Python components (:class:`~cosim.component.PythonComponent`).
     connections : connection strings or :class:`~cosim.connection.Connection`.
     step : communication step h (s).
-    record : signals (``component.variable``) to record, after ``time``.
+    record : signals (``component.variable``) to record, after ``time``;
+        ``None``: every output of every component (:func:`cosim.plan.every_output`).
     bounds : ``signal -> (low, high)``, the envelope (inclusive); every
         signal the master holds (the FMU outputs in use, every Python output,
         the internal signals recorded) is also checked to be finite.
@@ -172,7 +173,7 @@ class Master:
     """
 
     def __init__(self, fmus: Sequence[FmuComponent], components: Sequence[PythonComponent],
-                 connections: Sequence[str | Connection], step: float, record: Sequence[str] = (),
+                 connections: Sequence[str | Connection], step: float, record: Sequence[str] | None = (),
                  bounds: Mapping[str, tuple[float, float]] | None = None,
                  fmu_parameters: Mapping[str, Mapping[str, float]] | None = None, ordering: str = "feedthrough"):
         if not step > 0:
@@ -196,7 +197,7 @@ class Master:
         conns += parse_connections([c for c in connections if not isinstance(c, Connection)], self.components)
         self.connections = check_connections(conns, self.components)
         self.bounds = dict(bounds or {})
-        self._plan(list(record))
+        self._plan(every_output(self.fmus + self.python) if record is None else list(record))
 
     # ---- planning -----------------------------------------------------------
 

@@ -29,7 +29,7 @@ from typing import Iterable, Mapping
 from .errors import ConnectionCheckError, shown_text
 
 __all__ = ["split_endpoint", "split_top", "find_top", "top_groups", "is_name", "array_element", "resolve",
-           "nearest", "base_variable"]
+           "nearest", "nearest_told", "base_variable", "split_variable"]
 
 # FMI 2.0 section 2.2.9: B-name := nondigit {digit|nondigit} | Q-name; arrayIndices := unsignedInteger {"," ...}
 _B_NAME = r"(?:[A-Za-z_][A-Za-z0-9_]*|'(?:[^'\\]|\\.)+')"
@@ -140,6 +140,13 @@ def nearest(reference: str, names: Iterable[str], n: int = 5) -> list[str]:
                         if m not in elements])[:n]
 
 
+def nearest_told(reference: str, names: Iterable[str]) -> str:
+    """``"; nearest: a, b"``, the names most like ``reference``, for the end
+    of a refusal (empty when none is near)."""
+    close = nearest(reference, names)
+    return f"; nearest: {_shown_names(close)}" if close else ""
+
+
 def _shown_names(names: list[str], limit: int = 10) -> str:
     shown = ", ".join(shown_text(n, 60) for n in names[:limit])
     return shown + (f", ... ({len(names)} in all)" if len(names) > limit else "")
@@ -176,3 +183,14 @@ def base_variable(name: str, known: Iterable[str] | Mapping[str, object]) -> str
         return name
     element = array_element(name)
     return element[0] if element is not None else name
+
+
+def split_variable(text: str, variables: Iterable[str] | Mapping[str, object]) -> tuple[str, str] | None:
+    """``(prefix, variable)`` of ``"prefix.variable"`` where ``variable`` is
+    one of ``variables`` (its names may hold dots, ``a.b[2]``; the shortest
+    prefix wins: a results column ``SuT.mass.x`` of the variable ``x`` of
+    ``SuT.mass`` when ``mass.x`` is no variable); ``None`` if none is."""
+    for i, ch in enumerate(text):
+        if ch == "." and i and text[i + 1:] in variables:
+            return text[:i], text[i + 1:]
+    return None

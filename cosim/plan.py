@@ -253,6 +253,14 @@ def scalar_signals(components: Mapping[str, Any], signals) -> list[str]:
     return out
 
 
+def every_output(components: Sequence) -> list[str]:
+    """What a scenario without ``record.signals`` records: every output of
+    every component (FMUs and Python components alike; not inputs nor
+    internal signals), in the components' order, each in its ports' order
+    (docs/cosim.md, "Recording")."""
+    return [f"{c.name}.{p.name}" for c in components for p in c.outputs]
+
+
 def _elements(comp, group: str) -> tuple[Port, ...]:
     return element_ports(tuple(getattr(comp, group, ())))
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import re
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
@@ -107,7 +108,8 @@ class Scenario:
         set_(self, "sections", _frozen(state["sections"]))
         set_(self, "connections", tuple(c if isinstance(c, str) else MappingProxyType(dict(c))
                                         for c in state["connections"]))
-        set_(self, "record", tuple(state["record"]))
+        # None: no record.signals, every output is recorded (cosim.plan.every_output)
+        set_(self, "record", None if state["record"] is None else tuple(state["record"]))
         # no bound on the rows here: a run streams them (cosim.recorder); only a run asked to keep every row
         # in memory (Master.run(keep=None)) is bounded, when it starts
         set_(self, "envelope", MappingProxyType({k: tuple(v) for k, v in state["envelope"].items()}))
@@ -128,12 +130,23 @@ class Scenario:
         return f"Scenario({self.name!r}, source={str(self.source) if self.source else None!r})"
 
 
+# an FMU instance's parameter or start value, the rest being one variable name as FMI writes it
+# (FMI 2.0 section 2.2.9: a.b[2,3], der(x), 'x y'), unquoted: cosim.names
+_VARIABLE_KEY = re.compile(r"(fmus)\.([A-Za-z_][A-Za-z0-9_-]*)\.(parameters|start)\.([^\"\s].*)")
+
+
 def dotted_key(dotted: str, where: str | None = None) -> list[str]:
     """The parts of a dotted key as TOML writes one: ``simulation.duration``,
     ``envelope."Quadrotor.phi"`` (a part holding a dot is quoted); at most
     :data:`~cosim.limits.MAX_NESTING` of them. ``where`` names the key in a
-    refusal (default: ``key '...'``)."""
+    refusal (default: ``key '...'``). After ``fmus.<instance>.parameters.``
+    (or ``.start.``) the rest is one variable name as the FMU writes it,
+    dots, brackets and quotes included (``fmus.V.start.a.b[2,3]``,
+    ``fmus.V.parameters.'x y'``); a TOML-quoted one is read as TOML reads it."""
     where = where or f"key {shown_text(dotted)!r}"
+    variable = _VARIABLE_KEY.fullmatch(dotted.strip())
+    if variable:  # fmus.V.parameters.<an FMI name, dots, brackets and quotes as the FMU writes it>
+        return list(variable.groups())
     if '"' not in dotted and "'" not in dotted:
         parts = dotted.split(".")
         if all(parts):

@@ -211,7 +211,8 @@ def check_fmu_parameters(where_: str, fmu: Mapping[str, Any], params: Mapping[st
 class Record(Table):
     """``[record]``: what the results hold."""
 
-    signals: Names = Field(default_factory=list, description="recorded signals, 'Component.variable', each once")
+    signals: Names | None = Field(None, description="recorded signals, 'Component.variable', each once; "
+                                                  "without it, every output of every component")
     block_rows: Count = Field(100, description="rows per block flushed to the results file")
 
 
@@ -446,6 +447,6 @@ def derived_state(document: dict[str, Any], source: Path | None, name: str | Non
             sections[key] = section.apply(key, value, fmus)
     state.update(fmus=fmus, components=components, sections=sections,
                  connections=[c if isinstance(c, str) else c.model_dump(exclude_none=True) for c in model.connections],
-                 record=list(model.record.signals), block_rows=model.record.block_rows,
+                 record=None if model.record.signals is None else list(model.record.signals), block_rows=model.record.block_rows,
                  envelope={k: list(v) for k, v in model.envelope.items()})
     return state

@@ -35,6 +35,7 @@ from lxml import etree
 
 from . import registry, units
 from .connection import check_connections, parse_connections
+from .names import split_endpoint
 from .errors import FmuError, ScenarioError, one_line
 from .names import split_endpoint
 from .scenario import Scenario
@@ -121,7 +122,7 @@ def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
             part.parameters.append((key, _TYPES[fmu.variables[key].type], value))
         parts.append(part)
     check_connections(parse_connections(scenario.connections, components), components)
-    for where, signals in (("record.signals", scenario.record), ("envelope", list(scenario.envelope))):
+    for where, signals in (("record.signals", scenario.record or ()), ("envelope", list(scenario.envelope))):
         for signal in signals:
             comp, var = split_endpoint(signal, components) or (signal, "")
             fmu = components.get(comp)
@@ -169,7 +170,7 @@ def _cosim_annotation(scenario: Scenario) -> etree._Element:
             settings["interface"] = spec["interface"]
         if settings:
             etree.SubElement(root, q("Fmu"), component=name, **settings)
-    for signal in scenario.record:
+    for signal in scenario.record or ():  # none: every output (as an SSP archive without them is read)
         etree.SubElement(root, q("Record"), signal=signal)
     for signal, (low, high) in scenario.envelope.items():
         etree.SubElement(root, q("Envelope"), signal=signal, low=_num(low), high=_num(high))

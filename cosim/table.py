@@ -110,11 +110,13 @@ class TableSpec(Table):
     fmi_version: one_of((2, 3), type_=int) = Field(2, description="FMI version of the table FMU")
 
 
-_UNIT = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]\s*$")
+# the unit follows the name after a space: "x[1]" is an FMI name (an array element, FMI 2.0 section 2.2.9)
+_UNIT = re.compile(r"^(?P<name>.*?)\s+\[(?P<unit>[^\[\]]*)\]\s*$")
 
 
 def split_unit(header: str) -> tuple[str, str | None]:
-    """``"x [m]"`` -> ``("x", "m")``; a name without brackets has no unit."""
+    """``"x [m]"`` -> ``("x", "m")``, ``"x[1] [m]"`` -> ``("x[1]", "m")``; a
+    name without a bracketed unit after a space (``x``, ``x[1]``) has none."""
     match = _UNIT.match(header.strip())
     if match is None:
         return header.strip(), None

@@ -210,6 +210,53 @@ def describe(name: str, unit: Unit | None) -> str:
     return name if unit.si == name else f"{name} (SI {unit.si})"
 
 
+# pint's names of the units that count cycles (a cycle is 2 pi rad): Hz, rpm, rps, turn, cycle
+_CYCLE_UNITS = ("hertz", "revolution", "turn", "cycle")
+
+
+def _cycles(name: str) -> bool:
+    """Whether the unit ``name`` counts cycles (pint's reading of it has a
+    hertz, revolution, turn or cycle in it)."""
+    if _base_units_only(name) is not None:
+        return False
+    quantity = _pint_quantity(name)
+    return quantity is not None and any(c in u for u in quantity.units._units for c in _CYCLE_UNITS)
+
+
+def radian_dropped(a: Unit, b: Unit) -> bool:
+    """Whether ``a`` and ``b`` are one quantity but for the radian, which one
+    of them leaves out (an FMU's ``<BaseUnit s="-1"/>`` for ``rad/s``, a
+    units library's ``1/s``; docs/fmi-support.md, "Angles"): then they
+    connect, by the units' own factors. A rad-less unit that counts cycles
+    (``Hz``: 2 pi rad a cycle) is no such unit: a refusal says why (one
+    whose name pint reads with its radian, ``rpm`` defined as ``1/min``, is
+    read by its name); :class:`~cosim.errors.ConnectionCheckError`."""
+    if a.exponents[:-1] != b.exponents[:-1] or (a.exponents[-1] == 0) == (b.exponents[-1] == 0):
+        return False
+    plain, angle = (a, b) if a.exponents[-1] == 0 else (b, a)
+    if _cycles(plain.name):
+        named = parse(plain.name)
+        if named is None or named.exponents != angle.exponents:
+            raise ConnectionCheckError(
+                f"units {describe(a.name, a)} and {describe(b.name, b)} are not one quantity: {plain.name} counts "
+                f"cycles, {angle.name} radians (2*pi rad a cycle)")
+    return True
+
+
+def _frequency_is_no_angular_rate(a: Unit, b: Unit) -> None:
+    """Two rad-less rates of one quantity where one counts cycles (``Hz``)
+    and the other's name reads as radians (an FMU's ``rad/s`` defined as
+    ``<BaseUnit s="-1"/>``): refused as :func:`radian_dropped` refuses
+    ``Hz`` against ``rad/s``. Only pure rates (s^k alone) are looked at: no
+    other unit loads pint for this."""
+    if a.exponents[-1] != 0 or any(e for b_, e in zip(BASE_UNITS, a.exponents) if b_ != "s"):
+        return
+    for plain, angle in ((a, b), (b, a)):
+        named = parse(angle.name)
+        if _cycles(plain.name) and named is not None and named.exponents[-1] != 0:
+            radian_dropped(plain, named)  # raises, naming the cycles
+
+
 def conversion(source: str | Unit, destination: str | Unit) -> tuple[float, float]:
     """``(factor, offset)`` turning a value in ``source`` into ``destination``:
     ``destination_value = factor * source_value + offset``, from both units'
@@ -222,7 +269,11 @@ def conversion(source: str | Unit, destination: str | Unit) -> tuple[float, floa
     dst_name = destination.name if isinstance(destination, Unit) else destination
     if src is None and dst is None and src_name == dst_name:
         return 1.0, 0.0  # one name, unknown to pint: nothing says the two differ
-    if src is None or dst is None or not src.same_quantity(dst):
+    if src is not None and dst is not None and src.same_quantity(dst) and src.name != dst.name:
+        _frequency_is_no_angular_rate(src, dst)
+    if src is not None and dst is not None and not src.same_quantity(dst) and radian_dropped(src, dst):
+        src, dst = (parse(u.name) if u.exponents[-1] == 0 and _cycles(u.name) else u for u in (src, dst))
+    if src is None or dst is None or not (src.same_quantity(dst) or radian_dropped(src, dst)):
         raise ConnectionCheckError(f"units {describe(src_name, src)} and {describe(dst_name, dst)} "
                                    f"are not one quantity")
     # v_dst = (f_src v + o_src - o_dst) / f_dst

@@ -57,9 +57,12 @@ def _overrides(pairs: Sequence[str]) -> dict[str, Any]:
     from cosim.files import toml_value
     from cosim.scenario import dotted_key
 
+    from cosim.names import find_top
+
     out = {}
-    for pair in pairs:
-        key, eq, value = pair.partition("=")
+    for pair in pairs:  # the first = outside a quoted FMI name ('a=b') ends the key
+        cut = find_top(pair, "=")
+        key, eq, value = (pair[:cut], "=", pair[cut + 1:]) if cut >= 0 else (pair, "", "")
         if not eq or not key.strip():
             raise ScenarioError(f"--set {shown_text(pair)!r}: expected KEY=VALUE, e.g. --set wind.speed=5")
         key = key.strip()
@@ -346,10 +349,12 @@ def _named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
     import math
 
     from cosim.errors import ScenarioError, shown_text
+    from cosim.names import find_top
 
     out = {}
-    for pair in pairs:
-        name, eq, text = pair.partition("=")
+    for pair in pairs:  # a variable name as FMI writes it: x[1], der(x), 'a=b' (cosim.names)
+        cut = find_top(pair, "=")
+        name, eq, text = (pair[:cut], "=", pair[cut + 1:]) if cut >= 0 else (pair, "", "")
         try:
             value = float(text)
         except ValueError:
@@ -391,8 +396,11 @@ def _cmd_linearize(args) -> int:
         path = fmu_file_or_model(args.fmu, args.fmi, "linearize")
         point = dict(parameters=_named_values(args.parameter, "--parameter"))
     pairs = []
+    from cosim.names import find_top
+
     for pair in args.bode:
-        i, colon, o = pair.partition(":")
+        cut = find_top(pair, ":")
+        i, colon, o = (pair[:cut], ":", pair[cut + 1:]) if cut >= 0 else (pair, "", "")
         if not colon or not i or not o:
             raise ScenarioError(f"--bode {pair!r}: expected INPUT:OUTPUT, e.g. --bode Omega_1:z")
         pairs.append((i, o))

@@ -53,14 +53,14 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
     (keeping ``keep`` rows: ``Master.run``) and a JSON-ready summary
     (:func:`run_summary`), its metrics taken over every row as they streamed.
     """
-    position, reference = metric_signals(scenario)
-    missing = [s for s in position + reference + estimation_signals(scenario) if s not in scenario.record]
-    if missing:  # the summary's RMSE reads them from the recorded rows
-        raise ScenarioError(f"metrics: {missing[0]!r} is not recorded; add it to record.signals")
+    if scenario.record is not None:  # refused before any FMU is loaded
+        _check_recorded(scenario, scenario.record)
     own = master is None
     master = master or build_master(scenario)
     metrics = RunMetrics(scenario)
     try:
+        if scenario.record is None:  # every output is recorded: the master knows which
+            _check_recorded(scenario, master.record_columns)
         csv = Path(out_dir) / "results.csv" if out_dir is not None else None
         result = master.run(scenario.duration, seed=scenario.seed if seed is None else seed, csv_path=csv,
                             t0=scenario.start_time, block_rows=scenario.block_rows, raise_on_error=False,
@@ -72,6 +72,15 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
         if own:
             master.close()
     return result, run_summary(scenario, result, metrics)
+
+
+def _check_recorded(scenario: Scenario, recorded) -> None:
+    """The summary's RMSE reads the metrics' signals from the recorded rows:
+    one missing is refused."""
+    position, reference = metric_signals(scenario)
+    missing = [s for s in position + reference + estimation_signals(scenario) if s not in recorded]
+    if missing:
+        raise ScenarioError(f"metrics: {missing[0]!r} is not recorded; add it to record.signals")
 
 
 def _streamed(scenario: Scenario, result) -> RunMetrics:
@@ -100,6 +109,7 @@ def run_summary(scenario: Scenario, result, metrics: RunMetrics | None = None) -
         "scenario": scenario.name, "status": result.status, "error": result.error, "seed": result.seed,
         "variant": controller_variant(scenario),
         "duration_s": scenario.duration, "step_s": scenario.step, "rows": int(result.rows),
+        "signals": len(result.columns) - 1,  # the recorded signals (time aside)
         "wall_time_s": result.wall_time,
         "real_time_factor": (span[1] - span[0]) / result.wall_time if result.rows > 1 else None,
     }

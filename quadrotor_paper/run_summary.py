@@ -32,7 +32,8 @@ def summary_lines(scenario, result, summary: Mapping[str, Any], figures: Sequenc
              + (f", ended early: {summary['terminated']}" if summary.get("terminated") else ""),
              f"- seed: {summary['seed']}, controller: {summary['variant']}",
              f"- simulated {simulated:.2f} s in {summary['wall_time_s']:.3f} s "
-             f"(real-time factor {summary['real_time_factor'] or 0:.0f})"]
+             f"(real-time factor {summary['real_time_factor'] or 0:.0f}); "
+             f"{summary['signals']} signal{'s' * (summary['signals'] != 1)} recorded"]
     if summary.get("max_error_m") is not None:
         lines.append(f"- Euclidean RMSE: {summary['rmse_m']:.4f} m (max {summary['max_error_m']:.3f} m)")
     if summary.get("nees_position") is not None:  # flown on an estimate (docs/estimation.md)

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import ConnectionCheckError, ScenarioError, shown_text
 from .. import units as _units
+from ..names import nearest_told, split_variable
 from .log import Log
 
 __all__ = ["Problem", "bind_problem"]
@@ -83,7 +84,8 @@ def _columns_of(log: Log, fmu, column_map, instance: str | None, extra: Mapping[
     if column_map is not None:
         for name, col in column_map.columns.items():
             if name not in fmu.variables:
-                raise ScenarioError(f"column map: {name!r} is not a variable of {fmu.path.name}")
+                raise ScenarioError(f"column map: {name!r} is not a variable of {fmu.path.name}"
+                                    + nearest_told(name, fmu.variables))
             if col.column not in log.columns:
                 raise ScenarioError(f"{where}: no column {col.column!r} (named by the column map for {name}); "
                                     f"its columns: {shown_text(', '.join(log.columns), 200)}")
@@ -94,17 +96,18 @@ def _columns_of(log: Log, fmu, column_map, instance: str | None, extra: Mapping[
     if instance is None:  # the prefix that names the most of the FMU's variables (the project's results)
         counts: dict[str, int] = {}
         for c in log.columns:
-            if "." in c and c.split(".", 1)[1] in fmu.variables:
-                counts[c.split(".", 1)[0]] = counts.get(c.split(".", 1)[0], 0) + 1
+            split = split_variable(c, fmu.variables)
+            if split is not None:
+                counts[split[0]] = counts.get(split[0], 0) + 1
         ranked = sorted(counts.items(), key=lambda kv: -kv[1])
         if ranked and (len(ranked) == 1 or ranked[0][1] > ranked[1][1]):
             instance = ranked[0][0]
     for column in log.columns:
         name = column
-        if name not in fmu.variables and "." in column:
-            prefix, rest = column.split(".", 1)
-            if rest in fmu.variables and prefix == instance:
-                name = rest
+        if name not in fmu.variables:
+            split = split_variable(column, fmu.variables)
+            if split is not None and split[0] == instance:
+                name = split[1]
         if name in fmu.variables and name not in found:
             found[name] = (column, None)
     return found

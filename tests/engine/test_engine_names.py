@@ -114,3 +114,38 @@ def test_the_fmus_own_name_wins_over_an_array_element():
         resolve("y[4]", {"y": (3,)}, "here", "A")
     with pytest.raises(ConnectionCheckError, match=r"here: A has no variable 'x'; nearest: x\[1\], x\[2\]"):
         resolve("x", {"x[1]": (), "x[2]": (), "mu": ()}, "here", "A")
+
+
+@needs_reference
+def test_a_scenario_without_record_signals_records_every_output(tmp_path, fmus, capsys):
+    """Without ``record.signals`` every output of every component is recorded,
+    in the components' order (fmpy's ``simulate_fmu`` records every output
+    too); ``signals = []`` records time only; the summary counts them."""
+    from fmpy import read_model_description
+
+    from tests.strict_json import read_summary
+
+    vdp, feed = fmus
+    outputs = [f"F.{v.name}" for v in read_model_description(str(feed)).modelVariables if v.causality == "output"]
+    for record, expected in (("", ["V.x[1]", "V.x[2]"] + outputs), ("[record]\nsignals = []\n", [])):
+        scenario = tmp_path / "s.toml"
+        scenario.write_text(f'[simulation]\nduration = 0.05\nstep = 0.01\n[fmus.V]\npath = {json.dumps(str(vdp))}\n'
+                            f'[fmus.F]\npath = {json.dumps(str(feed))}\n{record}')
+        out = tmp_path / f"out{len(expected)}"
+        assert main(["run", str(scenario), "--out", str(out), "--no-plots", "--quiet"]) == 0
+        header, rows = read_results(out / "results.csv")
+        assert list(header) == ["time"] + expected and len(rows) == 6
+        assert read_summary(out / "summary.json")["signals"] == len(expected)
+        assert f"{len(expected)} signals recorded" in capsys.readouterr().out
+
+
+def test_set_keys_and_named_values_take_the_name_as_the_fmu_writes_it():
+    from cosim.scenario import dotted_key
+    from quadrotor_paper.cli import _named_values, _overrides
+
+    assert dotted_key("fmus.V.parameters.a.b[2,3]") == ["fmus", "V", "parameters", "a.b[2,3]"]
+    assert dotted_key("fmus.V.start.'x y'") == ["fmus", "V", "start", "'x y'"]
+    assert dotted_key("fmus.V.start.der(a.b)") == ["fmus", "V", "start", "der(a.b)"]
+    assert dotted_key('envelope."Q.phi"') == ["envelope", "Q.phi"]  # any other key: TOML's dotted keys
+    assert _overrides(["fmus.V.start.'a=b'=2.5"]) == {"fmus.V.start.'a=b'": 2.5}
+    assert _named_values(["x[1]=2", "'a=b'=3"], "--input") == {"x[1]": 2.0, "'a=b'": 3.0}

@@ -56,15 +56,21 @@ def test_modelica_unit_syntax_is_read():
     assert parse("kg.m2/s2").exponents == parse("J").exponents
 
 
-def test_rad_is_a_base_unit_and_dimensionless_is_1():
-    """FMI keeps rad as a base unit: rad/s is not 1/s, rad is not 1; 1, dimensionless and '' are one unit."""
-    with pytest.raises(ConnectionCheckError, match=re.escape("units rad/s (SI s-1.rad) and 1/s (SI s-1) are not "
-                                                             "one quantity")):
-        conversion("rad/s", "1/s")
+def test_a_unit_that_leaves_out_the_radian_is_the_unit_with_it_but_cycles_are_not_radians():
+    """FMI keeps rad as a base unit, and many FMUs' definitions (and units
+    libraries) leave it out: rad/s and 1/s, rad and 1 connect by their own
+    factors; Hz counts cycles (2 pi rad each): refused saying so, and an
+    rpm defined without its radian is read by its name (2 pi / 60 rad/s)."""
+    assert conversion("rad/s", "1/s") == conversion("rad", "1") == (1.0, 0.0)
+    assert conversion("deg", "1") == conversion("deg", "rad")
+    dropped = Unit("radian / second", parse("1/s").exponents)  # <BaseUnit s="-1"/>, the issue's FMU input
+    assert conversion("rad/s", dropped) == (1.0, 0.0)
+    assert conversion(Unit("rpm", parse("1/s").exponents, 1 / 60), "rad/s") == conversion("rpm", "rad/s")
+    for a, b in (("Hz", "rad/s"), ("rad/s", "kHz")):
+        with pytest.raises(ConnectionCheckError, match=r"not one quantity: k?Hz counts cycles, rad/s radians \(2\*pi"):
+            conversion(a, b)
     with pytest.raises(ConnectionCheckError, match="not one quantity"):
-        conversion("rad", "1")
-    with pytest.raises(ConnectionCheckError, match="not one quantity"):
-        conversion("Hz", "rad/s")
+        conversion("m", "rad")
     assert conversion("1", "dimensionless") == conversion("", "1") == (1.0, 0.0)
     assert conversion("deg", "rad")[0] == pytest.approx(np.pi / 180, rel=1e-15)
     assert conversion("rpm", "rad/s")[0] == pytest.approx(2 * np.pi / 60, rel=1e-15)
@@ -187,6 +193,19 @@ def _stand_in(inputs=(), outputs=()):
 def _components():
     return {"src": _stand_in(outputs=ports(("v", "km/h"), ("x", "m"), ("w", "rad/s"))),
             "sink": _stand_in(inputs=ports(("v", "m/s"), ("t", "s"), ("w", "radian / second"), ("d", "1")))}
+
+
+def test_a_connection_that_drops_the_radian_is_told_at_info_level_and_hz_is_refused(caplog):
+    import logging
+
+    comps = {"src": _stand_in(outputs=ports(("w", "rad/s"), ("f", "Hz"))),
+             "sink": _stand_in(inputs=(Port("w", "radian / second", unit_definition=Unit("radian / second",
+                                                                                           parse("1/s").exponents)),))}
+    with caplog.at_level(logging.INFO, logger="cosim.connection"):
+        (w,) = check_connections(parse_connections(["src.w -> sink.w"]), comps)
+    assert w.conversion is None and "connection src.w -> sink.w:" in caplog.text and "radian" in caplog.text
+    with pytest.raises(ConnectionCheckError, match="connection src.f -> sink.w: unit mismatch.*Hz counts cycles"):
+        check_connections(parse_connections(["src.f -> sink.w"]), comps)
 
 
 def test_a_connection_between_units_of_one_quantity_converts():

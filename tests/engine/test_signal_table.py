@@ -88,6 +88,7 @@ def test_units_from_the_header_the_sidecar_and_the_map(tmp_path):
     assert split_unit("x [m]") == ("x", "m") and split_unit("Quadrotor.Omega_1 [rad/s]") == ("Quadrotor.Omega_1",
                                                                                                "rad/s")
     assert split_unit("x") == ("x", None)
+    assert split_unit("V.x[1]") == ("V.x[1]", None) and split_unit("V.x[1] [m]") == ("V.x[1]", "m")  # FMI names
     table = SignalTable("t", _write(tmp_path))
     assert [(p.name, p.unit) for p in table.outputs] == [("x", "m"), ("y", "km/h")]
     # this engine's results file: the units and types of its sidecar
