@@ -12,7 +12,10 @@ Open Simulation Platform's libcosim runs it (``docs/ssp.md``).
 * :func:`load_ssp` reads an archive back into a Scenario (FMUs by path),
   checked by :func:`~cosim.scenario.parse_scenario` like any TOML scenario;
   a bad archive is a one-line :class:`~cosim.errors.ScenarioError` naming the
-  element. The reader uses lxml directly, so that every refusal can name the
+  element by its path in the SSD. Archives from SSP editors too: nested
+  systems flattened (:class:`_Flattening`), ``implementation``, parameter
+  mappings, prefixes and system bindings, no step (``docs/ssp.md``,
+  "Archives from SSP editors"). The reader uses lxml directly, so that every refusal can name the
   element it comes from.
 * :func:`ssd_schema_errors` validates an SSD against the SSP 1.0 XML schemas
   shipped with ``pyssp-standard``.

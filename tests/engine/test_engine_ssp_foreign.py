@@ -77,6 +77,17 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
             <ssd:Connectors>
               <ssd:Connector name="x0" kind="output"><ssc:Real/></ssd:Connector>
             </ssd:Connectors>
+            <ssd:ParameterBindings>
+              <ssd:ParameterBinding>
+                <ssd:ParameterValues>
+                  <ssv:ParameterSet version="1.0" name="stiff">
+                    <ssv:Parameters>
+                      <ssv:Parameter name="mu"><ssv:Real value="3.0"/></ssv:Parameter>
+                    </ssv:Parameters>
+                  </ssv:ParameterSet>
+                </ssd:ParameterValues>
+              </ssd:ParameterBinding>
+            </ssd:ParameterBindings>
           </ssd:Component>
         </ssd:Elements>
         <ssd:Connections>
@@ -179,7 +190,8 @@ def test_the_nested_archive_is_flattened(foreign, caplog):
     assert fmus["Source"]["interface"] == "ModelExchange" and fmus["SuT.edrive_mass"]["interface"] == "CoSimulation"
     assert "interface" not in fmus["SuT.osc"] and "interface" not in fmus["Sink"]  # "any", absent: the master's
     assert fmus["Source"]["parameters"] == {"k": 2.0}  # decay = 4.0 through the .ssm, factor 0.5
-    assert fmus["SuT.osc"]["parameters"] == {"mu": 0.5}  # the sub-system's binding, prefix "osc."
+    # the sub-system's binding (prefix "osc.") wins over the component's own mu = 3.0: the higher level
+    assert fmus["SuT.osc"]["parameters"] == {"mu": 0.5}
     connections = {str(c): c for c in parse_connections(scenario.connections)}
     assert sorted(connections) == ["Source.x -> SuT.edrive_mass.Float64_continuous_input",
                                    "SuT.edrive_mass.Float64_continuous_output -> Sink.Float64_continuous_input"]
