@@ -334,7 +334,8 @@ def _value(root, component, parameter):
 BAD_SSDS = [
     (lambda r: _connection(r, 2).set("startElement", "Plant"),
      "ssd:Connections/ssd:Connection[2]: startElement 'Plant' is no element of its system; its elements are: A, B, C"),
-    (lambda r: _connection(r, 1).set("endConnector", "w"), "ssd:Connection[1]: endConnector 'w' is no connector of 'B'"),
+    (lambda r: _connection(r, 1).set("endConnector", "w"),
+     "ssd:Connection[1]: endConnector 'w' is no connector of 'B'"),
     (lambda r: _connection(r, 1).attrib.pop("startElement"),
      "ssd:Connection[1]: startConnector 'y' is no connector of the system"),
     (lambda r: _add(_connection(r, 2), "ssc", "BooleanMappingTransformation"),
@@ -360,7 +361,8 @@ BAD_SSDS = [
     (lambda r: _component(r, "B").set("type", "application/x-ssp-definition"),
      "ssd:Component[@name='B']: type 'application/x-ssp-definition' is not supported (application/x-fmu-sharedlibrary "
      "only)"),
-    (lambda r: _component(r, "B").set("name", "A"), "ssd:Component[@name='A']: an element of that name is already given"),
+    (lambda r: _component(r, "B").set("name", "A"),
+     "ssd:Component[@name='A']: an element of that name is already given"),
     (lambda r: _add(r.find("ssd:System/ssd:Elements", NS), "ssd", "SignalDictionaryReference", name="Bus"),
      "ssd:System[@name='toy_chain']/ssd:Elements/ssd:SignalDictionaryReference[@name='Bus']: signal dictionaries are "
      "not supported"),
@@ -379,8 +381,8 @@ BAD_SSDS = [
      "ssd:Component[@name='C']/ssd:ParameterBindings/ssd:ParameterBinding[1]: source 'resources/C.ssv': no such "
      "file in the archive"),
     (lambda r: _add(_component(r, "C").find(".//ssd:ParameterBinding", NS), "ssd", "ParameterMapping"),
-     "ssd:Component[@name='C']/ssd:ParameterBindings/ssd:ParameterBinding[1]/ssd:ParameterMapping: neither a source nor "
-     "an inline ssm:ParameterMapping"),
+     "ssd:Component[@name='C']/ssd:ParameterBindings/ssd:ParameterBinding[1]/ssd:ParameterMapping: neither a "
+     "source nor an inline ssm:ParameterMapping"),
     (lambda r: r.find("ssd:DefaultExperiment", NS).set("stopTime", "soon"),
      "/ssd:SystemStructureDescription/ssd:DefaultExperiment: stopTime = 'soon' is not a number"),
     (lambda r: r.find(f".//{{{OSP_NAMESPACE}}}FixedStepAlgorithm").set("baseStepSize", "0"),

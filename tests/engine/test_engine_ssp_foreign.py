@@ -24,7 +24,15 @@ from cosim.ssp import load_ssp, ssd_schema_errors
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
 pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
 
-SSD = """<?xml version="1.0" encoding="UTF-8"?>
+def _binding(name: str, parameter: str, value: float, attributes: str = "") -> str:
+    """An ``ssd:ParameterBindings`` of one inline parameter set holding one Real."""
+    return (f'<ssd:ParameterBindings><ssd:ParameterBinding{attributes}><ssd:ParameterValues>'
+            f'<ssv:ParameterSet version="1.0" name="{name}"><ssv:Parameters><ssv:Parameter name="{parameter}">'
+            f'<ssv:Real value="{value}"/></ssv:Parameter></ssv:Parameters></ssv:ParameterSet></ssd:ParameterValues>'
+            f'</ssd:ParameterBinding></ssd:ParameterBindings>')
+
+
+SSD = f"""<?xml version="1.0" encoding="UTF-8"?>
 <ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
     xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
     xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues"
@@ -54,17 +62,7 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
           <ssd:Connector name="x_in" kind="input"><ssc:Real/></ssd:Connector>
           <ssd:Connector name="y_out" kind="output"><ssc:Real/></ssd:Connector>
         </ssd:Connectors>
-        <ssd:ParameterBindings>
-          <ssd:ParameterBinding prefix="osc.">
-            <ssd:ParameterValues>
-              <ssv:ParameterSet version="1.0" name="oscillator">
-                <ssv:Parameters>
-                  <ssv:Parameter name="mu"><ssv:Real value="0.5"/></ssv:Parameter>
-                </ssv:Parameters>
-              </ssv:ParameterSet>
-            </ssd:ParameterValues>
-          </ssd:ParameterBinding>
-        </ssd:ParameterBindings>
+        {_binding("oscillator", "mu", 0.5, ' prefix="osc."')}
         <ssd:Elements>
           <ssd:Component name="edrive_mass" type="application/x-fmu-sharedlibrary"
               source="resources/Feedthrough.fmu" implementation="CoSimulation">
@@ -77,17 +75,7 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
             <ssd:Connectors>
               <ssd:Connector name="x0" kind="output"><ssc:Real/></ssd:Connector>
             </ssd:Connectors>
-            <ssd:ParameterBindings>
-              <ssd:ParameterBinding>
-                <ssd:ParameterValues>
-                  <ssv:ParameterSet version="1.0" name="stiff">
-                    <ssv:Parameters>
-                      <ssv:Parameter name="mu"><ssv:Real value="3.0"/></ssv:Parameter>
-                    </ssv:Parameters>
-                  </ssv:ParameterSet>
-                </ssd:ParameterValues>
-              </ssd:ParameterBinding>
-            </ssd:ParameterBindings>
+            {_binding("stiff", "mu", 3.0)}
           </ssd:Component>
         </ssd:Elements>
         <ssd:Connections>
@@ -233,7 +221,8 @@ SOURCE_BINDING = ("/ssd:SystemStructureDescription/ssd:System[@name='Root']/ssd:
 REFUSED = [
     # what is still refused: each one line naming the element by its path
     (lambda s: s.replace("        <ssd:Elements>\n          <ssd:Component name=\"edrive_mass\"",
-                         "        <ssd:Elements>\n          <ssd:SignalDictionaryReference name=\"bus\" dictionary=\"d\"/>"
+                         "        <ssd:Elements>\n          <ssd:SignalDictionaryReference name=\"bus\" "
+                         "dictionary=\"d\"/>"
                          "\n          <ssd:Component name=\"edrive_mass\"", 1), {},
      f"{SUT}/ssd:Elements/ssd:SignalDictionaryReference[@name='bus']: signal dictionaries are not supported"),
     (lambda s: s, {"resources/source.ssm": SSM.replace('<ssc:LinearTransformation factor="0.5"/>',
@@ -271,7 +260,8 @@ def test_the_command_line_refuses_a_signal_dictionary_with_exit_2(tmp_path, caps
     from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 
     ssd = SSD.replace("  </ssd:System>\n  <ssd:DefaultExperiment",
-                      "    <ssd:SignalDictionaries>\n      <ssd:SignalDictionary name=\"d\" source=\"resources/d.ssb\"/>"
+                      "    <ssd:SignalDictionaries>\n      <ssd:SignalDictionary name=\"d\" "
+                      "source=\"resources/d.ssb\"/>"
                       "\n    </ssd:SignalDictionaries>\n  </ssd:System>\n  <ssd:DefaultExperiment", 1)
     assert ssd_schema_errors(ssd.encode()) == []  # as an editor writes it
     path = _archive(tmp_path / "dictionary.ssp", ssd)
