@@ -350,6 +350,7 @@ def _ssd_units(root: etree._Element) -> dict[str, Any]:
     return out
 
 
+_DICTIONARY = object()  # marks a signal dictionary's entries among the systems' connectors (_Flattening.reference)
 # A connection's end: (False, instance, connector) for a component's connector, (True, system path below
 # the root, connector) for a system's own.
 _End = tuple[bool, Any, str]
@@ -376,13 +377,20 @@ class _Flattening:
         self.components: dict[str, dict[str, Any]] = {}
         self.systems: dict[tuple[str, ...], dict[str, str | None]] = {}  # path -> connector -> unit
         self.edges: dict[_End, list[tuple[_End, _Hop]]] = {}
+        self.dictionaries: dict[tuple[str, ...], set[str]] = {}  # system path -> its signal dictionaries
+        self.references: dict[tuple[str, ...], tuple[tuple, dict[str, str | None]]] = {}  # -> hub, connectors
 
     def system(self, element: etree._Element, at: str, path: tuple[str, ...]) -> None:
         if len(path) >= MAX_NESTING:
             raise ScenarioError(f"{at}: systems nested {len(path)} deep; at most {MAX_NESTING}")
         _note_annotations(element, at)
-        if element.find("ssd:SignalDictionaries", NS) is not None:
-            raise ScenarioError(f"{at}/ssd:SignalDictionaries: signal dictionaries are not supported")
+        self.dictionaries[path] = set()
+        for k, dictionary in enumerate(element.findall("ssd:SignalDictionaries/ssd:SignalDictionary", NS), 1):
+            if not dictionary.get("name"):
+                raise ScenarioError(f"{at}/ssd:SignalDictionaries/ssd:SignalDictionary[{k}]: no name attribute")
+            if dictionary.get("name") in self.dictionaries[path]:
+                raise given_twice(f"{at}/ssd:SignalDictionaries: ssd:SignalDictionary", dictionary.get("name"))
+            self.dictionaries[path].add(dictionary.get("name"))
         kinds, connector_units = _connectors(at, element)
         self.systems[path] = {name: connector_units.get(name) for name in kinds}
         children: dict[str, str] = {}
@@ -404,7 +412,8 @@ class _Flattening:
                 children[name] = "system"
                 self.system(child, child_at, (*path, name))
             elif child.tag == qualified("ssd", "SignalDictionaryReference"):
-                raise ScenarioError(f"{child_at}: signal dictionaries are not supported")
+                children[name] = "dictionary"
+                self.reference(child, child_at, (*path, name))
             else:
                 raise ScenarioError(f"{child_at}: not supported (ssd:Component and ssd:System are)")
         for i, connection in enumerate(element.findall("ssd:Connections/ssd:Connection", NS), 1):
@@ -428,6 +437,9 @@ class _Flattening:
             elif children.get(name) == "system":
                 inner = self.systems[(*path, name)]
                 end, known, unit = (True, (*path, name), connector), inner, inner.get(connector)
+            elif children.get(name) == "dictionary":  # the entry of that name, shared by every reference
+                hub, inner = self.references[(*path, name)]
+                end, known, unit = (True, hub, connector), inner, inner.get(connector)
             else:
                 raise ScenarioError(f"{where}: {side}Element {name!r} is no element of its system; its elements "
                                     f"are: {', '.join(children) or '(none)'}")
@@ -444,6 +456,22 @@ class _Flattening:
         _note_annotations(element, where)
         hop = _Hop(where, (end_units[0], end_units[1]), transformation, suppress in ("true", "1"))
         self.edges.setdefault(ends[0], []).append((ends[1], hop))
+
+    def reference(self, element: etree._Element, at: str, path: tuple[str, ...]) -> None:
+        """An ``ssd:SignalDictionaryReference``: its connectors are entries of the signal dictionary it
+        names, looked up in its system, then in each enclosing one (SSP 1.0, ``ssd:SignalDictionary``
+        ``name``). Every reference to one dictionary shares its entries: what is connected into an
+        entry reaches whatever is connected out of it, anywhere (the entries' types and units in the
+        dictionary itself are not read: the references' connectors state theirs)."""
+        dictionary = element.get("dictionary")
+        owner = next((path[:i] for i in range(len(path) - 1, -1, -1)
+                      if dictionary in self.dictionaries.get(path[:i], ())), None)
+        if owner is None:
+            raise ScenarioError(f"{at}: dictionary {dictionary!r}: no ssd:SignalDictionary of that name in its system "
+                                f"or an enclosing one")
+        kinds, connector_units = _connectors(at, element)
+        _note_annotations(element, at)
+        self.references[path] = ((_DICTIONARY, *owner, dictionary), {c: connector_units.get(c) for c in kinds})
 
     def bind(self, at: str, element: etree._Element, path: tuple[str, ...]) -> None:
         """A system's bindings, applied to the components below it: a name is ``Element.variable``
@@ -526,6 +554,8 @@ class _Flattening:
 def _shown(end: _End) -> str:
     if not end[0]:
         return f"{end[1]}.{end[2]}"
+    if end[1] and end[1][0] is _DICTIONARY:
+        return f"entry {end[2]!r} of the signal dictionary {end[1][-1]!r}"
     return f"connector {end[2]!r} of the {'system ' + repr('.'.join(end[1])) if end[1] else 'root system'}"
 
 

@@ -364,8 +364,8 @@ BAD_SSDS = [
     (lambda r: _component(r, "B").set("name", "A"),
      "ssd:Component[@name='A']: an element of that name is already given"),
     (lambda r: _add(r.find("ssd:System/ssd:Elements", NS), "ssd", "SignalDictionaryReference", name="Bus"),
-     "ssd:System[@name='toy_chain']/ssd:Elements/ssd:SignalDictionaryReference[@name='Bus']: signal dictionaries are "
-     "not supported"),
+     "ssd:System[@name='toy_chain']/ssd:Elements/ssd:SignalDictionaryReference[@name='Bus']: dictionary None: no "
+     "ssd:SignalDictionary of that name in its system or an enclosing one"),
     (lambda r: [_component(r, n).getparent().remove(_component(r, n)) for n in "ABC"] and
      _drop(r, "ssd:System/ssd:Connections"),
      "ssd:System[@name='toy_chain']: no ssd:Component (an FMU) in its ssd:Elements or below"),

@@ -224,7 +224,8 @@ REFUSED = [
                          "        <ssd:Elements>\n          <ssd:SignalDictionaryReference name=\"bus\" "
                          "dictionary=\"d\"/>"
                          "\n          <ssd:Component name=\"edrive_mass\"", 1), {},
-     f"{SUT}/ssd:Elements/ssd:SignalDictionaryReference[@name='bus']: signal dictionaries are not supported"),
+     f"{SUT}/ssd:Elements/ssd:SignalDictionaryReference[@name='bus']: dictionary 'd': no ssd:SignalDictionary of that "
+     f"name in its system or an enclosing one"),
     (lambda s: s, {"resources/source.ssm": SSM.replace('<ssc:LinearTransformation factor="0.5"/>',
                                                       '<ssc:BooleanMappingTransformation/>')},
      f"{SOURCE_BINDING}/ssd:ParameterMapping (resources/source.ssm)/ssm:MappingEntry[1]/"
@@ -256,22 +257,47 @@ def test_what_is_refused_is_one_line_naming_the_element(tmp_path, edit, extra, m
     assert message in text, text
 
 
-def test_the_command_line_refuses_a_signal_dictionary_with_exit_2(tmp_path, capsys):
+def test_the_command_line_refuses_a_reference_to_no_dictionary_with_exit_2(tmp_path, capsys):
     from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 
-    ssd = SSD.replace("  </ssd:System>\n  <ssd:DefaultExperiment",
-                      "    <ssd:SignalDictionaries>\n      <ssd:SignalDictionary name=\"d\" "
-                      "source=\"resources/d.ssb\"/>"
-                      "\n    </ssd:SignalDictionaries>\n  </ssd:System>\n  <ssd:DefaultExperiment", 1)
-    assert ssd_schema_errors(ssd.encode()) == []  # as an editor writes it
+    ssd = SSD.replace('    <ssd:Elements>\n', '    <ssd:Elements>\n      <ssd:SignalDictionaryReference name="bus" '
+                      'dictionary="nobus"/>\n', 1)
+    assert ssd_schema_errors(ssd.encode()) == []  # the schema does not know which dictionaries there are
     path = _archive(tmp_path / "dictionary.ssp", ssd)
     code = main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet", "--no-plots",
                  "--set", "simulation.step=0.001"])
     err = capsys.readouterr().err.strip()
     assert code == EXIT_BAD_INPUT and len(err.splitlines()) == 1, err
-    assert err.endswith("/ssd:SystemStructureDescription/ssd:System[@name='Root']/ssd:SignalDictionaries: signal "
-                        "dictionaries are not supported"), err
+    assert err.endswith("/ssd:SystemStructureDescription/ssd:System[@name='Root']/ssd:Elements/"
+                        "ssd:SignalDictionaryReference[@name='bus']: dictionary 'nobus': no ssd:SignalDictionary of "
+                        "that name in its system or an enclosing one"), err
     assert not (tmp_path / "out").exists()
+
+
+def _reference(name: str, kind: str) -> str:
+    return (f'<ssd:SignalDictionaryReference name="{name}" dictionary="bus"><ssd:Connectors><ssd:Connector name="x" '
+            f'kind="{kind}"><ssc:Real/></ssd:Connector></ssd:Connectors></ssd:SignalDictionaryReference>')
+
+
+def test_a_signal_dictionary_carries_a_signal_between_systems(foreign, tmp_path):
+    """Source.x into the root's dictionary entry ``x`` (through the transformation), read from it inside SuT:
+    the same direct connection as through SuT's connector."""
+    ssd = (SSD.replace('      <ssd:Component name="Sink"', f'      {_reference("busref", "input")}\n'
+                       f'      <ssd:Component name="Sink"', 1)
+           .replace('        <ssd:Elements>\n', f'        <ssd:Elements>\n          {_reference("busin", "output")}\n', 1)
+           .replace('endElement="SuT" endConnector="x_in"', 'endElement="busref" endConnector="x"', 1)
+           .replace('<ssd:Connection startConnector="x_in" endElement="edrive_mass"',
+                    '<ssd:Connection startElement="busin" startConnector="x" endElement="edrive_mass"', 1)
+           .replace('  </ssd:System>\n  <ssd:DefaultExperiment',
+                    '    <ssd:SignalDictionaries><ssd:SignalDictionary name="bus"><ssb:SignalDictionary '
+                    'xmlns:ssb="http://ssp-standard.org/SSP1/SystemStructureSignalDictionary" version="1.0">'
+                    '<ssb:DictionaryEntry name="x"><ssc:Real/></ssb:DictionaryEntry></ssb:SignalDictionary>'
+                    '</ssd:SignalDictionary></ssd:SignalDictionaries>\n  </ssd:System>\n  <ssd:DefaultExperiment', 1))
+    assert ssd.count('dictionary="bus"') == 2 and 'startElement="busin"' in ssd and 'endElement="busref"' in ssd
+    assert ssd_schema_errors(ssd.encode()) == []
+    bused = load_ssp(_archive(tmp_path / "bus.ssp", ssd))
+    assert ({str(c): c.conversion for c in parse_connections(bused.connections)}
+            == {str(c): c.conversion for c in parse_connections(load_ssp(foreign).connections)})
 
 
 def test_the_command_line_flies_it_at_the_users_step(foreign, tmp_path, capsys):
