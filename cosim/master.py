@@ -49,6 +49,7 @@ from .errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallEr
 from .time_grid import communication_point, seed_error, whole_steps
 from .fmu_component import FmuComponent, stream_seed
 from .guard import Guard
+from .names import split_endpoint
 from .plan import ORDERINGS, FmuBlock, PythonBlock, every_output, make_plan
 from .recorder import Recorder
 
@@ -224,7 +225,7 @@ class Master:
     def _split_parameters(self, parameters: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
         split: dict[str, dict[str, Any]] = {name: {} for name in self.components}
         for key, value in parameters.items():
-            comp, _, var = key.partition(".")
+            comp, var = split_endpoint(key, self.components) or (key, "")
             if comp not in self.components or not var:
                 raise ConnectionCheckError(
                     f"parameter {key!r}: expected 'component.name' with a component among "
@@ -373,7 +374,7 @@ class Master:
         moving = still(before)
         fed = {self.fmus[tr.index].name for tr in transfers}
         loop = [f"{src} -> {dst}" for dst, src in self.source_of.items()
-                if dst.partition(".")[0] in fed and (src in self.slots and moving[self.slots[src]])]
+                if split_endpoint(dst, self.components)[0] in fed and (src in self.slots and moving[self.slots[src]])]
         raise ConnectionCheckError(f"initialization at t0 = {t0!r} s: the FMUs' outputs did not settle after {passes} "
                                    f"passes through the connections (an algebraic loop at t0 through "
                                    f"{', '.join(loop) or 'the feedthrough FMUs'}): break it with a delay")

@@ -54,7 +54,8 @@ def run(tmp_path: Path, fmus, interface: str, *flags: str, record=("V.x[1]", "V.
             f'start = {{ "x[1]" = 1.5 }}\n'
             f'[fmus.F]\npath = {json.dumps(str(feed))}\n'
             f'[[connections]]\nconnect = "V.{{x[1], x[2]}} -> F.{{\'u, in\', a.b[2,3]}}"\nunits = "unchecked"\n'
-            f'[record]\nsignals = {json.dumps(list(record))}\n')
+            f'[record]\nsignals = {json.dumps(list(record))}\n'
+            f'[envelope]\n"V.x[2]" = [-10.0, 10.0]\n')
     scenario = tmp_path / f"{interface}{''.join(flags)}.toml"
     scenario.write_text(text)
     out = tmp_path / scenario.stem
@@ -104,6 +105,21 @@ def test_the_structured_name_grammar():
     assert split_endpoint("A.'b.c'.d") == ("A", "'b.c'.d")
     assert split_endpoint("S.sub.x[1]", ("S", "S.sub")) == ("S.sub", "x[1]")
     assert split_endpoint("nodot") is None
+
+
+def test_a_connection_to_no_variable_offers_the_nearest_names():
+    from types import SimpleNamespace
+
+    from cosim.component import Port
+    from cosim.connection import check_connections, parse_connections
+
+    comps = {"V": SimpleNamespace(inputs=(), outputs=(Port("x[1]"), Port("x[2]"), Port("'u, in'"))),
+             "F": SimpleNamespace(inputs=(Port("'u, in'"),), outputs=())}
+    (c,) = check_connections(parse_connections(["V.x[2] -> F.'u, in'"]), comps)
+    assert str(c) == "V.x[2] -> F.'u, in'"
+    with pytest.raises(ConnectionCheckError, match=r"^connection V.x -> F.'u, in': source V.x does not exist; "
+                                                   r"nearest: x\[1\], x\[2\]$"):
+        check_connections(parse_connections(["V.x -> F.'u, in'"]), comps)
 
 
 def test_the_fmus_own_name_wins_over_an_array_element():
