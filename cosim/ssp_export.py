@@ -37,6 +37,7 @@ from . import registry, units
 from .connection import check_connections, parse_connections
 from .names import split_endpoint
 from .errors import FmuError, ScenarioError, one_line
+from .names import split_endpoint
 from .scenario import Scenario
 from .assembly import check_fmu_file, fmu_component, fmu_error_in_scenario, fmu_file
 from .ssp import COSIM_ANNOTATION, COSIM_NAMESPACE, FMU_TYPE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, qualified

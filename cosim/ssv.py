@@ -47,8 +47,10 @@ def read_parameter_set(path: str | Path) -> dict[str, float]:
     return parameter_set(where, node)
 
 
-def parameter_set(where: str, node: etree._Element) -> dict[str, float]:
-    """The values of an ``ssv:ParameterSet`` (numbers only: the engine sets Float64 values)."""
+def parameter_set(where: str, node: etree._Element, units: dict[str, str] | None = None) -> dict[str, float]:
+    """The values of an ``ssv:ParameterSet`` (numbers only: the engine sets Float64 values); the
+    ``unit`` each ``ssv:Real`` states goes into ``units`` when given (an SSP importer converts the value
+    into its variable's unit: :mod:`cosim.ssp`)."""
     if node.tag != f"{{{NS['ssv']}}}ParameterSet":
         raise ScenarioError(f"{where}: expected an ssv:ParameterSet, found {etree.QName(node).localname}")
     values: dict[str, float] = {}
@@ -64,6 +66,8 @@ def parameter_set(where: str, node: etree._Element) -> dict[str, float]:
             raise given_twice(f"{where}: ssv:Parameter", name)
         if kind == "Real":
             values[name] = number(at, value.get("value"), "value")
+            if units is not None and value.get("unit"):
+                units[name] = value.get("unit")
         elif kind == "Integer":
             whole = number(at, value.get("value"), "value")
             if whole != int(whole):
@@ -76,5 +80,6 @@ def parameter_set(where: str, node: etree._Element) -> dict[str, float]:
             values[name] = 1 if text in ("true", "1") else 0
         else:
             raise ScenarioError(f"{at}: {kind or 'no value'}: only Real, Integer and Boolean values are supported")
-        # a unit on the value is not converted: the FMU takes the value in its variable's unit
+        # a unit on the value: converted by the SSP reader (units given); a scenario's parameter_set takes
+        # the value in its variable's unit
     return values

@@ -233,11 +233,12 @@ def test_overrides_and_fallbacks(archive, tmp_path):
     folder = _edited(archive, tmp_path, lambda root: [
         _drop(root, "ssd:DefaultExperiment/ssd:Annotations"),
         root.find("ssd:DefaultExperiment", NS).attrib.pop("stopTime")])
-    with pytest.raises(ScenarioError, match=r"SystemStructure.ssd: no step size: the ssd:DefaultExperiment has no "
-                                            r"OSP annotation \(osp:FixedStepAlgorithm baseStepSize\); give one"):
-        load_ssp(folder)
-    with pytest.raises(ScenarioError, match="no duration: the ssd:DefaultExperiment has no stopTime"):
+    with pytest.raises(ScenarioError, match=r"SystemStructure.ssd: no duration: the ssd:DefaultExperiment has no "
+                                            r"stopTime; give one \(duration=\.\.\. or --set simulation.duration"):
         load_ssp(folder, step=0.05)
+    # no step anywhere in the archive: the FMUs' DefaultExperiment stepSize, else the span / 1000
+    # (tests/engine/test_engine_ssp_foreign.py); the user's setting first
+    assert load_ssp(folder, duration=1.0, overrides={"simulation.step": 0.25}).step == 0.25
     loaded = load_ssp(folder, step=0.05, duration=1.0)
     assert (loaded.step, loaded.duration, loaded.start_time) == (0.05, 1.0, 0.5)
     # the archive's values win over the fallbacks
@@ -332,56 +333,90 @@ def _value(root, component, parameter):
 
 BAD_SSDS = [
     (lambda r: _connection(r, 2).set("startElement", "Plant"),
-     "ssd:Connection 2: startElement 'Plant' is no component; components are: A, B, C"),
-    (lambda r: _connection(r, 1).set("endConnector", "w"), "ssd:Connection 1: endConnector 'w' is no connector of 'B'"),
+     "ssd:Connections/ssd:Connection[2]: startElement 'Plant' is no element of its system; its elements are: A, B, C"),
+    (lambda r: _connection(r, 1).set("endConnector", "w"),
+     "ssd:Connection[1]: endConnector 'w' is no connector of 'B'"),
     (lambda r: _connection(r, 1).attrib.pop("startElement"),
-     "ssd:Connection 1: no startElement: connections to the system's own connectors are not supported"),
+     "ssd:Connection[1]: startConnector 'y' is no connector of the system"),
     (lambda r: _add(_connection(r, 2), "ssc", "BooleanMappingTransformation"),
-     "ssd:Connection 2: BooleanMappingTransformation: not supported (of the transformations, a connection may "
-     "carry one ssc:LinearTransformation)"),
+     "ssd:Connection[2]/ssc:BooleanMappingTransformation: not supported (of the transformations, one "
+     "ssc:LinearTransformation is)"),
     (lambda r: _add(_connection(r, 2), "ssc", "LinearTransformation", factor="x"),
-     "ssd:Connection 2: ssc:LinearTransformation: factor = 'x' is not a number"),
+     "ssd:Connection[2]/ssc:LinearTransformation: factor = 'x' is not a number"),
     (lambda r: _component(r, "B").set("source", "resources/Missing.fmu"),
-     "ssd:Component 'B': source 'resources/Missing.fmu': no such file in the archive"),
+     "ssd:Component[@name='B']: source 'resources/Missing.fmu': no such file in the archive"),
     (lambda r: _component(r, "B").set("source", "https://example.org/B.fmu"),
-     "ssd:Component 'B': source 'https://example.org/B.fmu': only files inside the archive"),
+     "ssd:Component[@name='B']: source 'https://example.org/B.fmu': only files inside the archive"),
     (lambda r: _component(r, "B").set("source", "../../B.fmu"),
-     "ssd:Component 'B': source '../../B.fmu': leaves the archive; only files inside it are supported"),
+     "ssd:Component[@name='B']: source '../../B.fmu': leaves the archive; only files inside it are supported"),
     (lambda r: _component(r, "B").set("source", "resources/../../x/B.fmu"),
-     "ssd:Component 'B': source 'resources/../../x/B.fmu': leaves the archive"),
+     "ssd:Component[@name='B']: source 'resources/../../x/B.fmu': leaves the archive"),
     (lambda r: _component(r, "B").set("source", "file:///tmp/B.fmu"),
-     "ssd:Component 'B': source 'file:///tmp/B.fmu': only files inside the archive (relative URIs) are supported"),
+     "ssd:Component[@name='B']: source 'file:///tmp/B.fmu': only files inside the archive (relative URIs) are "
+     "supported"),
     (lambda r: _component(r, "B").set("source", "/tmp/B.fmu"),
-     "ssd:Component 'B': source '/tmp/B.fmu': only files inside the archive (relative URIs) are supported"),
+     "ssd:Component[@name='B']: source '/tmp/B.fmu': only files inside the archive (relative URIs) are supported"),
     (lambda r: _component(r, "C").find(".//ssd:ParameterBinding", NS).set("source", "../C.ssv"),
-     "ssd:Component 'C': ssd:ParameterBinding 1: source '../C.ssv': leaves the archive"),
+     "ssd:Component[@name='C']/ssd:ParameterBindings/ssd:ParameterBinding[1]: source '../C.ssv': leaves the archive"),
     (lambda r: _component(r, "B").set("type", "application/x-ssp-definition"),
-     "ssd:Component 'B': type 'application/x-ssp-definition' is not supported (application/x-fmu-sharedlibrary "
+     "ssd:Component[@name='B']: type 'application/x-ssp-definition' is not supported (application/x-fmu-sharedlibrary "
      "only)"),
-    (lambda r: _component(r, "B").set("name", "A"), "ssd:Component 'A': a component of that name is already given"),
-    (lambda r: _add(r.find("ssd:System/ssd:Elements", NS), "ssd", "System", name="Sub"),
-     "ssd:Elements child 4: ssd:System 'Sub': only ssd:Component elements (FMUs) are supported"),
+    (lambda r: _component(r, "B").set("name", "A"),
+     "ssd:Component[@name='A']: an element of that name is already given"),
+    (lambda r: _add(r.find("ssd:System/ssd:Elements", NS), "ssd", "SignalDictionaryReference", name="Bus"),
+     "ssd:System[@name='toy_chain']/ssd:Elements/ssd:SignalDictionaryReference[@name='Bus']: dictionary None: no "
+     "ssd:SignalDictionary of that name in its system or an enclosing one"),
     (lambda r: [_component(r, n).getparent().remove(_component(r, n)) for n in "ABC"] and
      _drop(r, "ssd:System/ssd:Connections"),
-     "ssd:System 'toy_chain': no ssd:Component (an FMU) in its ssd:Elements"),
+     "ssd:System[@name='toy_chain']: no ssd:Component (an FMU) in its ssd:Elements or below"),
     (lambda r: _value(r, "A", "y_0").set("value", "abc"),
-     "ssd:Component 'A': ssd:ParameterBinding 1: ssv:Parameter 'y_0': value = 'abc' is not a number"),
+     "ssd:Component[@name='A']/ssd:ParameterBindings/ssd:ParameterBinding[1]/ssd:ParameterValues: "
+     "ssv:Parameter 'y_0': value = 'abc' is not a number"),
     (lambda r: _value(r, "A", "y_0").set("value", "inf"),
      "ssv:Parameter 'y_0': value = 'inf' is not a finite number"),
     (lambda r: setattr(_value(r, "A", "u"), "tag", f"{{{NS['ssv']}}}String"),
-     "ssd:ParameterBinding 1: ssv:Parameter 'u': String: only Real, Integer and Boolean values are supported"),
+     "ssd:ParameterBinding[1]/ssd:ParameterValues: ssv:Parameter 'u': String: only Real, Integer and Boolean "
+     "values are supported"),
     (lambda r: _component(r, "C").find(".//ssd:ParameterBinding", NS).set("source", "resources/C.ssv"),
-     "ssd:Component 'C': ssd:ParameterBinding 1: source 'resources/C.ssv': no such file in the archive"),
+     "ssd:Component[@name='C']/ssd:ParameterBindings/ssd:ParameterBinding[1]: source 'resources/C.ssv': no such "
+     "file in the archive"),
     (lambda r: _add(_component(r, "C").find(".//ssd:ParameterBinding", NS), "ssd", "ParameterMapping"),
-     "ssd:Component 'C': ssd:ParameterBinding 1: ssd:ParameterMapping is not supported"),
+     "ssd:Component[@name='C']/ssd:ParameterBindings/ssd:ParameterBinding[1]/ssd:ParameterMapping: neither a "
+     "source nor an inline ssm:ParameterMapping"),
     (lambda r: r.find("ssd:DefaultExperiment", NS).set("stopTime", "soon"),
-     "ssd:DefaultExperiment: stopTime = 'soon' is not a number"),
+     "/ssd:SystemStructureDescription/ssd:DefaultExperiment: stopTime = 'soon' is not a number"),
     (lambda r: r.find(f".//{{{OSP_NAMESPACE}}}FixedStepAlgorithm").set("baseStepSize", "0"),
-     "ssd:DefaultExperiment: osp:FixedStepAlgorithm: baseStepSize = '0' is not positive"),
+     "/ssd:SystemStructureDescription/ssd:DefaultExperiment: osp:FixedStepAlgorithm: baseStepSize = '0' is not "
+     "positive"),
     (lambda r: r.find("ssd:DefaultExperiment", NS).set("stopTime", "2.55"),
      "simulation.duration = 2.05: not a whole number of steps of 0.1 s"),
     (lambda r: _drop(r, "ssd:System"), "no ssd:System"),
 ]
+
+
+def test_a_value_in_another_unit_is_converted_into_its_variables(archive, tmp_path):
+    """A parameter set's ``ssv:Real unit`` is converted into the unit the FMU's variable declares (SSP 1.0
+    SystemStructureParameterValues), unless a mapping entry suppresses it; not one quantity: one line."""
+    def edit(root):
+        for component, name, value, unit in (("A", "y_0", "1500.0", "mm"), ("B", "tau", "250", "ms"),
+                                             ("C", "y_0", "-1000.0", "mm")):
+            _value(root, component, name).attrib.update({"value": value, "unit": unit})
+        mapping = _add(_component(root, "C").find(".//ssd:ParameterBinding", NS), "ssd", "ParameterMapping")
+        entry = etree.SubElement(etree.SubElement(mapping, f"{{{NS['ssm']}}}ParameterMapping", version="1.0"),
+                                 f"{{{NS['ssm']}}}MappingEntry", source="y_0", target="y_0",
+                                 suppressUnitConversion="true")
+        _add(entry, "ssc", "LinearTransformation", factor="0.001")
+    folder = _edited(archive, tmp_path, edit)
+    assert ssd_schema_errors(folder / SSD_NAME) == []
+    loaded = load_ssp(folder)
+    assert loaded.fmus["A"]["parameters"]["y_0"] == pytest.approx(1.5, rel=1e-15)
+    assert loaded.fmus["B"]["parameters"]["tau"] == pytest.approx(0.25, rel=1e-15)
+    assert loaded.fmus["C"]["parameters"]["y_0"] == -1000.0 * 0.001  # suppressed: the transformation alone
+    folder = _edited(archive, tmp_path, lambda root: _value(root, "A", "y_0").set("unit", "s"))
+    with pytest.raises(ScenarioError, match=re.escape(
+            "ssd:Component[@name='A']/ssd:ParameterBindings/ssd:ParameterBinding[1]/ssd:ParameterValues: parameter "
+            "'y_0': units s and m are not one quantity")):
+        load_ssp(folder)
 
 
 @pytest.mark.parametrize("edit, message", BAD_SSDS, ids=[m.split(":")[0][:40] for _, m in BAD_SSDS])

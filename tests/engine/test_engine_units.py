@@ -458,7 +458,7 @@ def test_a_transformation_applies_after_the_connectors_unit_conversion(converted
     assert dict(loaded.connections[0]) == {"connect": "A.y -> B.u", "factor": 1000.0 * 1000.0, "offset": 0.5}
     a_y.set("unit", "s")
     tree.write(str(folder / SSD_NAME))
-    with pytest.raises(ScenarioError, match=re.escape("ssd:Connection 1: units s and m are not one quantity")):
+    with pytest.raises(ScenarioError, match=re.escape("ssd:Connections/ssd:Connection[1]: units s and m are not one quantity")):
         load_ssp(folder)
 
 

@@ -533,14 +533,14 @@ def _archive_with(archive: Path, path: Path, edit) -> Path:
     # a second binding of z_0 (the last won: the vehicle started at z = -50)
     (lambda t: t.replace("</ssd:ParameterBinding>", "</ssd:ParameterBinding>" + t[
         t.index("<ssd:ParameterBinding>"):t.index("</ssd:ParameterBinding>") + 25].replace("-15.0", "-50.0"), 1),
-     "ssd:Component 'Quadrotor': parameter: 'z_0' is given twice; each at most once"),
+     "ssd:Component[@name='Quadrotor']: parameter: 'z_0' is given twice; each at most once"),
     (lambda t: t.replace('<cosim:Section name="wind">', '<cosim:Section name="wind">{"speed": 50.0}</cosim:Section>'
                          '<cosim:Section name="wind">', 1),
      "Section: 'wind' is given twice; each at most once"),
     (lambda t: t.replace('"speed": 3.0,', '"speed": 3.0, "speed": 50.0,', 1),
      "Section 'wind': key: 'speed' is given twice"),
     (lambda t: t.replace('<ssd:Connector name="x" kind="output">', '<ssd:Connector name="x" kind="input">', 1),
-     "ssd:Component 'Quadrotor': ssd:Connector 'x': kind = 'input', but its FMU's variable is an output"),
+     "ssd:Component[@name='Quadrotor']: ssd:Connector 'x': kind = 'input', but its FMU's variable is an output"),
 ])
 def test_an_archive_that_says_a_thing_twice_or_against_its_fmu_is_one_line(archive, sandbox, capsys, edit, message):
     path = _archive_with(archive, sandbox / "bad.ssp", edit)
