@@ -94,8 +94,7 @@ def dc_motor(repeats: int, folder: Path) -> None:
     fmus = {n: build(folder, s) for n, s in dc_motor_specs(interfaces=("ModelExchange", "CoSimulation")).items()}
     times = np.linspace(0.0, duration, int(round(duration / step)) + 1)
     speed = dc_motor_exact(times)[:, 2]
-    connections = [f'{{ connect = "{a}.{x} -> {b}.{y}", units = "unchecked" }}' if y == "w" else f'"{a}.{x} -> {b}.{y}"'
-                   for (a, x), (b, y) in DC_MOTOR_CONNECTIONS]  # the mechanical part's rad/s has no radian
+    connections = [f'"{a}.{x} -> {b}.{y}"' for (a, x), (b, y) in DC_MOTOR_CONNECTIONS]
     print(f"DC motor as three FMUs (source, electrical, mechanical), {duration} s at a {step * 1e3:g} ms step, "
           f"median of {repeats}; error: the speed's largest difference from the monolithic solution")
     print(HEADER)

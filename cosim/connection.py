@@ -188,12 +188,12 @@ def unit_conversion(c: Connection, out_port: Port, in_port: Port) -> tuple[float
             f"({c.destination} = factor * {c.source} + offset), or mark it "
             f"{{ connect = \"{c}\", units = \"unchecked\" }}") from None
     if source is not None and destination is not None and not source.same_quantity(destination):
-        import logging  # here only: a run whose units agree loads no logging (tests/paper/test_run_startup.py)
+        from .notes import note  # logging loaded only for a note (tests/paper/test_run_startup.py)
 
-        logging.getLogger(__name__).info("connection %s: %s and %s are one unit but for the radian, which %s leaves out "
-                  "(docs/fmi-support.md, \"Angles\"); connected with factor %.17g", c,
-                  units.describe(out_port.unit, source), units.describe(in_port.unit, destination),
-                  out_port.unit if source.exponents[-1] == 0 else in_port.unit, factor)
+        note(__name__, "connection %s: %s and %s are one unit but for the radian, which %s leaves out "
+             "(docs/fmi-support.md, \"Angles\"); connected with factor %.17g", c,
+             units.describe(out_port.unit, source), units.describe(in_port.unit, destination),
+             out_port.unit if source.exponents[-1] == 0 else in_port.unit, factor)
     return None if (factor, offset) == (1.0, 0.0) else (factor, offset)
 
 

@@ -22,7 +22,6 @@ Open Simulation Platform's libcosim runs it (``docs/ssp.md``).
 """
 from __future__ import annotations
 
-import logging
 import math
 import posixpath
 import shutil
@@ -42,6 +41,7 @@ from .files import (SSD_NAME, extract_zip, given_twice, json_document, put_once,
                     zip_members)
 from .limits import MAX_DOCUMENT_BYTES, MAX_NESTING
 from .names import split_endpoint
+from .notes import note
 from .scenario import Scenario, apply_overrides, parse_scenario
 from .assembly import fmu_component
 from .ssv import number as _number, parameter_set as _parameter_set
@@ -56,7 +56,6 @@ NS = {
     "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
     "ssm": "http://ssp-standard.org/SSP1/SystemStructureParameterMapping",
 }
-log = logging.getLogger(__name__)
 # libcosim (0.11, the one inside libcosimpy 0.0.6) reads the step size from
 #   ssd:DefaultExperiment/ssd:Annotations/ssc:Annotation[@type="com.opensimulationplatform"]
 #     /osp:Algorithm/osp:FixedStepAlgorithm/@baseStepSize   (seconds)
@@ -171,8 +170,8 @@ def _note_annotations(parent: etree._Element, where: str) -> None:
     their type (SystemStructureCommon, ``ssc:Annotation``), with a note at info level naming the type."""
     for i, annotation in enumerate(parent.findall("ssd:Annotations/ssc:Annotation", NS), 1):
         if annotation.get("type") not in _KNOWN_ANNOTATIONS:
-            log.info("%s/ssd:Annotations/ssc:Annotation[%d]: type %r is an annotation this reader does not know: "
-                     "ignored", where, i, annotation.get("type"))
+            note(__name__, "%s/ssd:Annotations/ssc:Annotation[%d]: type %r is an annotation this reader does not know: "
+                 "ignored", where, i, annotation.get("type"))
 
 
 def _document(where: str, source: str, folder: Path, tag: tuple[str, str]) -> etree._Element:
@@ -259,7 +258,7 @@ def _mapped(where: str, element: etree._Element, values: Mapping[str, _Value], f
         transformation = _transformation(entry_at, entry, (qualified("ssc", "Annotations"),
                                                            qualified("ssm", "Annotations")))
         if name not in values:
-            log.info("%s: source %r is no parameter of the set: maps nothing", entry_at, name)
+            note(__name__, "%s: source %r is no parameter of the set: maps nothing", entry_at, name)
             continue
         suppress = entry.get("suppressUnitConversion", "false")
         if suppress not in ("true", "false", "1", "0"):
@@ -500,8 +499,8 @@ class _Flattening:
                 out.extend(self._connection(start, end, hops) for end, hops in self._ends(start, memo, ()))
         for start in self.edges:
             if start[0] and start not in memo:
-                log.info("%s: starts at %s, which nothing connected drives: ignored",
-                         self.edges[start][0][1].where, _shown(start))
+                note(__name__, "%s: starts at %s, which nothing connected drives: ignored",
+                     self.edges[start][0][1].where, _shown(start))
         return out
 
     def _ends(self, node: _End, memo: dict, busy: tuple[_End, ...]) -> list[tuple[_End, tuple[_Hop, ...]]]:
@@ -515,7 +514,7 @@ class _Flattening:
                 raise ScenarioError(f"{hop.where}: a loop of connections through the systems' connectors")
             if nxt not in memo:
                 if nxt not in self.edges:
-                    log.info("%s: ends at %s, connected to nothing further: ignored", hop.where, _shown(nxt))
+                    note(__name__, "%s: ends at %s, connected to nothing further: ignored", hop.where, _shown(nxt))
                 memo[nxt] = self._ends(nxt, memo, (*busy, node))
             ends.extend((end, (hop, *hops)) for end, hops in memo[nxt])
         if len(ends) > len(self.components) * max(1, max((len(c["connectors"]) for c in self.components.values()),
@@ -783,7 +782,7 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
         length = system.stop - start if system.stop is not None else duration
         span = length if length is not None else given.get("duration")
         chosen, origin = _step(system, step, given, span if isinstance(span, (int, float)) else None)
-        log.info("%s: communication step %s s, from %s", label, chosen, origin)
+        note(__name__, "%s: communication step %s s, from %s", label, chosen, origin)
         record = system.record or [f"{c}.{n}" for c, entry in system.components.items()
                                    for n, kind in entry["connectors"].items() if kind == "output"]
         raw: dict[str, Any] = {

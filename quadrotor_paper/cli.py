@@ -121,6 +121,10 @@ def _cmd_run(args) -> int:
     from cosim.errors import CosimError, ScenarioError, one_line
     from cosim.files import is_ssp, not_others_results, output_file, output_folder, safe_name
 
+    if not args.quiet:  # what the engine decides for the user (a default step, a unit's radian): cosim.notes
+        from cosim.notes import show_on_stderr
+
+        show_on_stderr()
     overrides = _overrides(args.set)
     if args.seed is not None:
         overrides["simulation.seed"] = args.seed
@@ -548,7 +552,7 @@ def _parser() -> argparse.ArgumentParser:
     def common(sp, seeds=True):
         sp.add_argument("--out", help="output directory (default: under results/)")
         fmu_log_option(sp)
-        sp.add_argument("--quiet", action="store_true", help="no progress bar")
+        sp.add_argument("--quiet", action="store_true", help="no progress bar, no notes")
         if seeds:
             from fnn_controller.variants import variant_names
 

@@ -124,15 +124,15 @@ MECHANICAL_PARTIALS = """    if (unknown == VR_der_x_1 && known == VR_x_2) retur
 def _dc_motor(directional: bool = False) -> tuple[dict[str, Path], list[Connection]]:
     """The DC motor's three FMUs (tests/industrial_fmus.py; Model Exchange and Co-Simulation; with
     ``directional`` the mechanical part gives its directional derivatives too), built once per
-    machine beside the engine's compiled C, and their connections (the speed's unit unchecked: the
-    mechanical part writes rad/s without the radian, as many tools do)."""
+    machine beside the engine's compiled C, and their connections (the mechanical part writes rad/s
+    without the radian, as many tools do: one unit, docs/fmi-support.md "Angles")."""
     folder = _cache() / "industrial_fmus"
     folder.mkdir(parents=True, exist_ok=True)
     specs = dc_motor_specs(interfaces=("ModelExchange", "CoSimulation"))
     if directional:
         specs["DCMotor_Mechanical"] = dataclasses.replace(specs["DCMotor_Mechanical"], partials=MECHANICAL_PARTIALS)
     fmus = {n: build(folder, s) for n, s in specs.items()}
-    return fmus, [Connection(Endpoint(a, x), Endpoint(b, y), unchecked=y == "w") for (a, x), (b, y) in DC_MOTOR_CONNECTIONS]
+    return fmus, [Connection(Endpoint(a, x), Endpoint(b, y)) for (a, x), (b, y) in DC_MOTOR_CONNECTIONS]
 
 
 def test_the_dc_motor_as_three_coupled_model_exchange_fmus_is_the_monolithic_solution():
