@@ -6,22 +6,39 @@ connector with nothing beyond it), a unit taken as another (a rate without
 its radian) is said once, at info level, to the logger of the module that
 decided it (``cosim.ssp``, ``cosim.connection``): an application that
 configures logging sees it there. The command line shows the notes on
-stderr as ``note: ...`` lines (:func:`show_on_stderr`; ``--quiet`` hides
-them). ``logging`` is imported only when a note is made, so a run with
+stderr as ``note: ...`` lines once the run's inputs are taken
+(:func:`show_on_stderr`, :func:`release`; ``--quiet`` hides them): a
+refused input stays one line, its error's. ``logging`` is imported only when a note is made, so a run with
 nothing to note loads none (tests/paper/test_run_startup.py).
 """
 from __future__ import annotations
 
-__all__ = ["note", "show_on_stderr"]
+__all__ = ["note", "show_on_stderr", "release"]
 
 _ON_STDERR = False
 _HANDLER = None
+_HELD: list[str] | None = None  # notes made before release(): shown only if the run starts
 
 
-def show_on_stderr(on: bool = True) -> None:
-    """Notes made from now on also go to stderr (the command line's choice)."""
-    global _ON_STDERR
+def show_on_stderr(on: bool = True, hold: bool = True) -> None:
+    """Notes made from now on also go to stderr (the command line's
+    choice); with ``hold``, kept until :func:`release`, so an input refused
+    before the run stays one line on stderr, the error's."""
+    global _ON_STDERR, _HELD
     _ON_STDERR = on
+    _HELD = [] if on and hold else None
+
+
+def release() -> None:
+    """The notes held so far to stderr (the inputs were taken: the run
+    starts), and the next ones as they come."""
+    global _HELD
+    held, _HELD = _HELD, None
+    if held:
+        import sys
+
+        for line in held:
+            print(line, file=sys.stderr)
 
 
 def note(logger: str, message: str, *args) -> None:
@@ -29,7 +46,9 @@ def note(logger: str, message: str, *args) -> None:
     import logging
 
     log = logging.getLogger(logger)
-    if _ON_STDERR:
+    if _HELD is not None:
+        _HELD.append("note: " + message % args)
+    elif _ON_STDERR:
         _stderr_handler()
         if log.level == logging.NOTSET:  # this logger's notes only: the FMUs' log keeps its own level
             log.setLevel(logging.INFO)

@@ -782,7 +782,8 @@ def load_ssp(path: str | Path, *, step: float | None = None, duration: float | N
         length = system.stop - start if system.stop is not None else duration
         span = length if length is not None else given.get("duration")
         chosen, origin = _step(system, step, given, span if isinstance(span, (int, float)) else None)
-        note(__name__, "%s: communication step %s s, from %s", label, chosen, origin)
+        if chosen is not None and given.get("step") is None and system.step is None and step is None:
+            note(__name__, "%s: communication step %s s, from %s", label, chosen, origin)  # a default: said
         record = system.record or [f"{c}.{n}" for c, entry in system.components.items()
                                    for n, kind in entry["connectors"].items() if kind == "output"]
         raw: dict[str, Any] = {

@@ -146,6 +146,10 @@ def _cmd_run(args) -> int:
 
     with build_master(scenario) as master:  # every input refused before anything is written
         _started()
+        if not args.quiet:
+            from cosim.notes import release
+
+            release()  # the inputs are taken: the notes the engine made for them (cosim.notes)
         # every place a result goes is checked before the run: nothing computed is lost for want of it
         out = not_others_results(output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}"), "run")
         learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
