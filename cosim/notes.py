@@ -67,6 +67,6 @@ def _stderr_handler() -> None:
 
     handler = _Stderr()
     handler.setFormatter(logging.Formatter("note: %(message)s"))
-    handler.addFilter(lambda record: not record.name.startswith(FMU_LOGGER))
+    handler.addFilter(lambda record: _ON_STDERR and not record.name.startswith(FMU_LOGGER))  # the latest choice
     logging.getLogger("cosim").addHandler(handler)
     _HANDLER = handler

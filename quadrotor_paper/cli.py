@@ -121,10 +121,9 @@ def _cmd_run(args) -> int:
     from cosim.errors import CosimError, ScenarioError, one_line
     from cosim.files import is_ssp, not_others_results, output_file, output_folder, safe_name
 
-    if not args.quiet:  # what the engine decides for the user (a default step, a unit's radian): cosim.notes
-        from cosim.notes import show_on_stderr
+    from cosim.notes import show_on_stderr
 
-        show_on_stderr()
+    show_on_stderr(not args.quiet)  # what the engine decides for the user (a default step, a unit's radian)
     overrides = _overrides(args.set)
     if args.seed is not None:
         overrides["simulation.seed"] = args.seed

@@ -147,3 +147,18 @@ def test_a_nested_model_exchange_archive_as_exported_lands_on_the_monolithic_sol
     assert np.max(np.abs(result["SuT.edrive_mass.w"] - exact[:, 2])) < 1e-6
     assert np.max(np.abs(result["SuT.edrive_el.i"] - exact[:, 0])) < 1e-6
     assert np.max(exact[:, 2]) > 100  # the transient is there: the motor spins up to ~ 200 rad/s
+
+
+def test_the_command_line_says_what_it_decided_for_the_archive(archive, tmp_path, capsys):
+    """``fnn-cosim run`` of the archive: exit 0, and stderr says, once the
+    inputs are taken, the step it chose (no step anywhere: span / 1000) and
+    the speed's unit taken without its radian, naming the connection;
+    ``--quiet`` says nothing."""
+    from quadrotor_paper.cli import main
+
+    assert main(["run", str(archive), "--out", str(tmp_path / "a"), "--no-plots"]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if line.startswith("note: ")]
+    assert any("communication step" in n and "span / 1000" in n for n in notes), notes
+    assert any("SuT.edrive_mass.w -> SuT.edrive_el.w" in n and "radian" in n for n in notes), notes
+    assert main(["run", str(archive), "--out", str(tmp_path / "b"), "--no-plots", "--quiet"]) == 0
+    assert "note: " not in capsys.readouterr().err
