@@ -18,8 +18,7 @@ from cosim.fmu_component import FmuComponent
 from cosim.master import Master
 from cosim.model_exchange import SolverSettings
 from quadrotor_paper.cli import main
-from cosim.kernel import _cache
-from tests.industrial_fmus import DC_MOTOR, DC_MOTOR_CONNECTIONS, build, dc_motor_exact, dc_motor_specs
+from tests.industrial_fmus import DC_MOTOR, DC_MOTOR_CONNECTIONS, algebraic_loop_specs, dc_motor_exact, dc_motor_specs
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
 pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
@@ -121,21 +120,19 @@ MECHANICAL_PARTIALS = """    if (unknown == VR_der_x_1 && known == VR_x_2) retur
     if (unknown == VR_phi && known == VR_x_1) return 1;"""
 
 
-def _dc_motor(directional: bool = False) -> tuple[dict[str, Path], list[Connection]]:
+def _dc_motor(industrial_fmus, directional: bool = False) -> tuple[dict[str, Path], list[Connection]]:
     """The DC motor's three FMUs (tests/industrial_fmus.py; Model Exchange and Co-Simulation; with
-    ``directional`` the mechanical part gives its directional derivatives too), built once per
-    machine beside the engine's compiled C, and their connections (the mechanical part writes rad/s
-    without the radian, as many tools do: one unit, docs/fmi-support.md "Angles")."""
-    folder = _cache() / "industrial_fmus"
-    folder.mkdir(parents=True, exist_ok=True)
+    ``directional`` the mechanical part gives its directional derivatives too), built once per test
+    process (the ``industrial_fmus`` fixture), and their connections (the mechanical part writes
+    rad/s without the radian, as many tools do: one unit, docs/fmi-support.md "Angles")."""
     specs = dc_motor_specs(interfaces=("ModelExchange", "CoSimulation"))
     if directional:
         specs["DCMotor_Mechanical"] = dataclasses.replace(specs["DCMotor_Mechanical"], partials=MECHANICAL_PARTIALS)
-    fmus = {n: build(folder, s) for n, s in specs.items()}
+    fmus = {n: industrial_fmus(s) for n, s in specs.items()}
     return fmus, [Connection(Endpoint(a, x), Endpoint(b, y)) for (a, x), (b, y) in DC_MOTOR_CONNECTIONS]
 
 
-def test_the_dc_motor_as_three_coupled_model_exchange_fmus_is_the_monolithic_solution():
+def test_the_dc_motor_as_three_coupled_model_exchange_fmus_is_the_monolithic_solution(industrial_fmus):
     """A voltage source, the motor's electrical part and its mechanical part,
     three Model Exchange FMUs in a feedback loop through their states: one
     system lands within 1e-6 of the monolithic solution (scipy's solve_ivp
@@ -144,7 +141,7 @@ def test_the_dc_motor_as_three_coupled_model_exchange_fmus_is_the_monolithic_sol
     "loose") and their Co-Simulation are visibly off. At a 3 ms step the
     source's time event (10 ms) falls inside a step: it stops the shared
     integration there, and the states right after it are right."""
-    paths, connections = _dc_motor()
+    paths, connections = _dc_motor(industrial_fmus)
     step = 3e-3
 
     def fly(interface: str, coupling: str = "tight"):
@@ -164,7 +161,7 @@ def test_the_dc_motor_as_three_coupled_model_exchange_fmus_is_the_monolithic_sol
         assert np.max(np.abs(loose["DCMotor_Mechanical.w"] - exact[:, 2])) > 0.05
 
 
-def test_cvode_s_jacobian_from_the_members_directional_derivatives_through_the_connections():
+def test_cvode_s_jacobian_from_the_members_directional_derivatives_through_the_connections(industrial_fmus):
     """jacobian = "directional": CVODE's Newton matrix from the electrical
     and mechanical parts' directional derivatives, by the chain rule through
     the connections (the torque into the mechanical part, the speed back):
@@ -180,7 +177,7 @@ def test_cvode_s_jacobian_from_the_members_directional_derivatives_through_the_c
         with Master(fmus, [], connections, 3e-3, ["DCMotor_Mechanical.w"]) as master:
             return master.run(0.06)
 
-    paths, connections = _dc_motor(directional=True)
+    paths, connections = _dc_motor(industrial_fmus, directional=True)
     directional, difference = fly(paths, connections, "directional"), fly(paths, connections, "difference")
     fmus = [FmuComponent(n, p, interface="ModelExchange", solver=SolverSettings(jacobian="directional"))
             for n, p in paths.items()]
@@ -193,4 +190,22 @@ def test_cvode_s_jacobian_from_the_members_directional_derivatives_through_the_c
     assert np.max(np.abs(directional["DCMotor_Mechanical.w"] - exact[:, 2])) < 1e-6
     assert not np.array_equal(directional.data, difference.data)
     with pytest.raises(ConnectionCheckError, match=r'jacobian = "directional": DCMotor_Mechanical provide\(s\) no '):
-        fly(*_dc_motor(), "directional")
+        fly(*_dc_motor(industrial_fmus), "directional")
+
+
+def test_the_jacobian_s_chain_rule_passes_through_a_member_with_direct_feedthrough(industrial_fmus):
+    """A gain of 0.8 with direct feedthrough and no state (``GainA``: y = K[1,1] u) put between the
+    motor's torque and its mechanical part: one system of four members, and the Jacobian CVODE is
+    given carries the gain through the feedthrough, d(der w)/d(i) = 0.8 k / J, the rest the motor's."""
+    paths, _ = _dc_motor(industrial_fmus, directional=True)
+    paths["Gain"] = industrial_fmus(algebraic_loop_specs(a=0.8, c=0.0, interfaces=("ModelExchange",))["GainA"])
+    connections = ["DCMotor_Source.v -> DCMotor_Electrical.pin_p.v", "DCMotor_Electrical.flange.tau -> Gain.u",
+                   "Gain.y -> DCMotor_Mechanical.flange.tau", "DCMotor_Mechanical.w -> DCMotor_Electrical.w"]
+    fmus = [FmuComponent(n, p, interface="ModelExchange", solver=SolverSettings(jacobian="directional"))
+            for n, p in paths.items()]
+    with Master(fmus, [], connections, 3e-3) as master:
+        master.run(0.012)
+        system, p = master.me_systems[0], DC_MOTOR
+        assert len(system.members) == 4
+        np.testing.assert_allclose(system.jacobian(0.012), [[-p["R"] / p["L"], 0, -p["k"] / p["L"]], [0, 0, 1],
+                                                           [0.8 * p["k"] / p["J"], 0, -p["b"] / p["J"]]], rtol=1e-14)
