@@ -22,7 +22,6 @@ parentheses (:func:`split_endpoint`).
 """
 from __future__ import annotations
 
-import difflib
 import re
 from typing import Iterable, Mapping
 
@@ -141,6 +140,8 @@ def nearest(reference: str, names: Iterable[str], n: int = 5) -> list[str]:
     :func:`difflib.get_close_matches`."""
     names = list(names)
     elements = [m for m in names if m.startswith(reference + "[")]
+    import difflib  # only when a name matched nothing: a run's start-up loads none
+
     return (elements + [m for m in difflib.get_close_matches(reference, names, n=n, cutoff=0.5)
                         if m not in elements])[:n]
 
