@@ -80,7 +80,7 @@ from .controller_component import internal_ports
 from .controller_component import controller_variant
 
 __all__ = ["Recording", "AxisClaims", "recorded", "evaluate_claims", "default_runs",
-           "finite_time_report", "regressor_step_change", "CLAIM_MISSIONS", "CLAIM_VARIANTS"]
+           "regressor_step_change", "CLAIM_MISSIONS", "CLAIM_VARIANTS"]
 
 _AXES = ("x", "y", "z")
 # the learning variants the claims cover, by law: the type-1 FNN (eq. 25) and the interval type-2 FNN (IT-5)
@@ -354,10 +354,3 @@ def default_runs(variants=CLAIM_VARIANTS, kp: float | None = None, kd: float | N
     labels = {c.name: c.label for c in study.cases}
     rows = measure(study, workers=workers, metrics=recorded, metric_names=()).rows  # each case records its own signals
     return [replace(row["recorded"], name=labels[row["case"]]) for row in rows]
-
-
-def finite_time_report(runs: list[Recording] | None = None) -> list[AxisClaims]:
-    """:func:`evaluate_claims` for every axis of every run (default:
-    :func:`default_runs`)."""
-    runs = default_runs() if runs is None else runs
-    return [evaluate_claims(run, a) for run in runs for a in range(3)]
