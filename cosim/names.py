@@ -27,7 +27,7 @@ from typing import Iterable, Mapping
 
 from .errors import ConnectionCheckError, shown_text
 
-__all__ = ["arrows_of", "split_endpoint", "split_top", "find_top", "top_groups", "is_name", "array_element", "resolve",
+__all__ = ["arrows_of", "split_endpoint", "split_top", "find_top", "partition_top", "top_groups", "is_name", "array_element", "resolve",
            "nearest", "nearest_told", "base_variable", "split_variable"]
 
 # FMI 2.0 section 2.2.9: B-name := nondigit {digit|nondigit} | Q-name; arrayIndices := unsignedInteger {"," ...}
@@ -68,6 +68,14 @@ def find_top(text: str, sep: str) -> int:
     """The index of the first ``sep`` (one character) in ``text`` outside
     quotes, brackets and parentheses; -1 if there is none."""
     return next((i for i, ch, depth in _scan(text) if ch == sep and depth == 0), -1)
+
+
+def partition_top(text: str, sep: str) -> tuple[str, str, str]:
+    """``str.partition`` at the first ``sep`` outside quotes, brackets and
+    parentheses: ``"'a=b'=1"`` -> ``("'a=b'", "=", "1")``; ``(text, "", "")``
+    when there is none."""
+    cut = find_top(text, sep)
+    return (text[:cut], sep, text[cut + 1:]) if cut >= 0 else (text, "", "")
 
 
 def arrows_of(text: str) -> list[int]:

@@ -57,12 +57,11 @@ def _overrides(pairs: Sequence[str]) -> dict[str, Any]:
     from cosim.files import toml_value
     from cosim.scenario import dotted_key
 
-    from cosim.names import find_top
+    from cosim.names import partition_top
 
     out = {}
     for pair in pairs:  # the first = outside a quoted FMI name ('a=b') ends the key
-        cut = find_top(pair, "=")
-        key, eq, value = (pair[:cut], "=", pair[cut + 1:]) if cut >= 0 else (pair, "", "")
+        key, eq, value = partition_top(pair, "=")
         if not eq or not key.strip():
             raise ScenarioError(f"--set {shown_text(pair)!r}: expected KEY=VALUE, e.g. --set wind.speed=5")
         key = key.strip()
@@ -145,10 +144,9 @@ def _cmd_run(args) -> int:
 
     with build_master(scenario) as master:  # every input refused before anything is written
         _started()
-        if not args.quiet:
-            from cosim.notes import release
+        from cosim.notes import release
 
-            release()  # the inputs are taken: the notes the engine made for them (cosim.notes)
+        release()  # the inputs are taken: the notes the engine held for them (none with --quiet)
         # every place a result goes is checked before the run: nothing computed is lost for want of it
         out = not_others_results(output_folder(args.out or DEFAULT_OUT / f"run-{safe_name(scenario.name)}"), "run")
         learned_file = output_file(args.save_learned, "--save-learned") if args.save_learned else None
@@ -356,12 +354,11 @@ def _named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
     import math
 
     from cosim.errors import ScenarioError, shown_text
-    from cosim.names import find_top
+    from cosim.names import partition_top
 
     out = {}
     for pair in pairs:  # a variable name as FMI writes it: x[1], der(x), 'a=b' (cosim.names)
-        cut = find_top(pair, "=")
-        name, eq, text = (pair[:cut], "=", pair[cut + 1:]) if cut >= 0 else (pair, "", "")
+        name, eq, text = partition_top(pair, "=")
         try:
             value = float(text)
         except ValueError:
@@ -403,11 +400,10 @@ def _cmd_linearize(args) -> int:
         path = fmu_file_or_model(args.fmu, args.fmi, "linearize")
         point = dict(parameters=_named_values(args.parameter, "--parameter"))
     pairs = []
-    from cosim.names import find_top
+    from cosim.names import partition_top
 
     for pair in args.bode:
-        cut = find_top(pair, ":")
-        i, colon, o = (pair[:cut], ":", pair[cut + 1:]) if cut >= 0 else (pair, "", "")
+        i, colon, o = partition_top(pair, ":")
         if not colon or not i or not o:
             raise ScenarioError(f"--bode {pair!r}: expected INPUT:OUTPUT, e.g. --bode Omega_1:z")
         pairs.append((i, o))
