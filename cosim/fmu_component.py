@@ -1200,7 +1200,7 @@ class FmuComponent:
         input in Event Mode, followed by the event iteration (an input
         event), and a continuous one in Continuous-Time Mode, restarting
         its solver (FMI 2.0 §3.2.3, FMI 3.0 §3.2.1); any other instance at once."""
-        if self.system is None or self.system._c is None or self._initializing:
+        if self.system is None or not self.system.running or self._initializing:
             return setter()
         if any(self._element(n)[0].variability != "continuous" for n in names):
             self.system.event(t, setter)
@@ -1365,7 +1365,7 @@ class FmuComponent:
                 self._slave.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), x.size)
             except FMICallException as exc:
                 raise self._fail("setting the continuous states", exc) from None
-            if self.system is not None and self.system._c is not None:
+            if self.system is not None and self.system.running:
                 self.system.restart()
 
     def derivatives(self) -> np.ndarray:

@@ -57,11 +57,10 @@ import numpy as np
 
 from .errors import ConnectionCheckError, CosimError
 from .kernel import c_header, compiled_library
-from .model_exchange import IntegrationError, SolverSettings
+from .model_exchange import COUPLINGS, IntegrationError, SolverSettings
 
 __all__ = ["ModelExchangeSystem", "systems", "COUPLINGS", "library"]
 
-COUPLINGS = ("tight", "loose")
 _SOURCE = Path(__file__).with_name("me_system.c")
 _HEADER = "me_system_abi.h"
 
@@ -315,6 +314,7 @@ def _ordered(members: Sequence, connections: Sequence) -> list:
     the path named (``a.y -> b.u -> b.y -> a.u``)."""
     fmus = {f.name: f for f in members}
     into = {str(c.destination): c for c in connections}
+    by_key = {str(c): c for c in connections}
 
     def needs(c) -> list:
         depends = fmus[c.source.component].feedthrough.get(c.source.variable, frozenset())
@@ -328,7 +328,7 @@ def _ordered(members: Sequence, connections: Sequence) -> list:
             return
         if state.get(key) == 1:
             cycle = path[path.index(key):]
-            links = [into[k.split(" -> ")[1]] for k in cycle][::-1]  # in the direction the values flow
+            links = [by_key[k] for k in cycle][::-1]  # in the direction the values flow
             first = len(links) - 1  # the link the search met first leads
             steps = []
             for link in links[first:] + links[:first]:
@@ -361,6 +361,7 @@ class ModelExchangeSystem:
         self.internal = frozenset(str(c.destination) for c in self.connections)
         self._ready: set[str] = set()
         self._c = None  # the MeSystem and the arrays it points into
+        self._entries = None  # the members' MeMember structures (in self._c's arrays)
         self.settings = self._settings()
         if self.settings.jacobian == "directional":
             lacking = [m.name for m in self.members if (m.model_description.numberOfContinuousStates
@@ -469,7 +470,7 @@ class ModelExchangeSystem:
         address = ctypes.addressof(system)
         for entry in members:
             entry.system = address
-        self._c = (pointer, kept)
+        self._c, self._entries = (pointer, kept), members
         self._member_address = {f.name: ctypes.addressof(members[i]) for i, f in enumerate(self.members)}
         for fmu in self.members:
             fmu._me_member = ctypes.c_void_p(self._member_address[fmu.name])
@@ -509,7 +510,7 @@ class ModelExchangeSystem:
         if self._c is not None:
             if self._c[0].contents.sundials:
                 library().me_free(self._c[0])
-            self._c = None
+            self._c = self._entries = None
             for m in self.members:  # their MeMember is gone with it
                 m._me_member = None
 
@@ -521,8 +522,13 @@ class ModelExchangeSystem:
         if function(system, *args):
             raise self.failure()
 
+    @property
+    def running(self) -> bool:
+        """Built in C: every member has left Initialization Mode (:meth:`initialized`)."""
+        return self._c is not None
+
     def _started(self) -> None:
-        if self._c is None:
+        if not self.running:
             waiting = ", ".join(m.name for m in self.members if m.name not in self._ready)
             raise RuntimeError(f"the Model Exchange system of {', '.join(m.name for m in self.members)} has not "
                                f"started: {waiting} still to leave Initialization Mode")
@@ -547,7 +553,7 @@ class ModelExchangeSystem:
 
     def refresh(self) -> None:
         """The connections evaluated if an input changed (before a typed get)."""
-        if self._c is not None and self._c[0].contents.dirty:
+        if self.running and self._c[0].contents.dirty:
             library().me_member_get(self.members[0]._me_member, None, 0, None)
 
     def restart(self) -> None:
@@ -569,9 +575,9 @@ class ModelExchangeSystem:
         """``member``'s FMU state was set: an event at ``t`` gives the next
         time event and restarts the solver (once the system runs); its
         inputs count as unknown."""
-        if self._c is None or len(self._ready) < len(self.members):
+        if not self.running:
             return
-        self._c[1][-2][self.members.index(member)].u_known = 0  # kept: ..., roots, members, links
+        self._entries[self.members.index(member)].u_known = 0
         self.event(t)
 
     def jacobian(self, t: float) -> np.ndarray:

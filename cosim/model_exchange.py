@@ -14,10 +14,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-__all__ = ["SolverSettings", "IntegrationError", "METHODS", "JACOBIANS"]
+__all__ = ["SolverSettings", "IntegrationError", "METHODS", "JACOBIANS", "COUPLINGS"]
 
 METHODS = ("cvode", "euler")
 JACOBIANS = ("difference", "directional")  # CVODE's: difference quotients, or the FMUs' directional derivatives
+# connected Model Exchange FMUs: one solver over all their states, or each alone (cosim.me_system)
+COUPLINGS = ("tight", "loose")
 DEFAULT_TOLERANCE = 1e-5  # fmpy's, for an FMU whose default experiment gives none
 
 

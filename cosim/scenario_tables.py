@@ -21,7 +21,7 @@ from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag,
 
 from . import registry
 from .errors import ScenarioError
-from .model_exchange import JACOBIANS, METHODS
+from .model_exchange import COUPLINGS, JACOBIANS, METHODS
 from .plan import ORDERINGS  # the master's (docs/cosim.md)
 from .limits import MAX_STEPS
 from .limits import SEED_LIMIT
@@ -45,7 +45,7 @@ class Simulation(Table):
     start_time: Number = Field(0.0, description="time of the first communication point [s]")
     ordering: one_of(ORDERINGS) = Field("feedthrough", description="how a step orders the blocks "
                                                                    "(docs/cosim.md)")
-    coupling: one_of(("tight", "loose")) = Field(
+    coupling: one_of(COUPLINGS) = Field(
         "tight", description="Model Exchange FMUs connected to each other: 'tight', one solver over all their states "
                              "(the connections inside its right-hand side); 'loose', each alone with its inputs held "
                              "over a step (docs/cosim.md, \"Model Exchange\")")
