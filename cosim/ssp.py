@@ -207,6 +207,15 @@ def _transformation(where: str, parent: etree._Element, allowed: tuple[str, ...]
     return transformation
 
 
+def _suppressed(where: str, element: etree._Element) -> bool:
+    """An element's ``suppressUnitConversion`` (an ``xs:boolean``, false by default: a connection's or a
+    mapping entry's)."""
+    suppress = element.get("suppressUnitConversion", "false")
+    if suppress not in ("true", "false", "1", "0"):
+        raise ScenarioError(f"{where}: suppressUnitConversion = {suppress!r}: expected true or false")
+    return suppress in ("true", "1")
+
+
 @dataclass(frozen=True)
 class _Value:
     """A bound value on its way to its FMU: converted from the unit its set states into its variable's
@@ -260,12 +269,10 @@ def _mapped(where: str, element: etree._Element, values: Mapping[str, _Value], f
         if name not in values:
             note(__name__, "%s: source %r is no parameter of the set: maps nothing", entry_at, name)
             continue
-        suppress = entry.get("suppressUnitConversion", "false")
-        if suppress not in ("true", "false", "1", "0"):
-            raise ScenarioError(f"{entry_at}: suppressUnitConversion = {suppress!r}: expected true or false")
+        suppress = _suppressed(entry_at, entry)
         out.pop(name, None)
         value = values[name]
-        put_once(renamed, target, _Value(value.value, None if suppress in ("true", "1") else value.unit,
+        put_once(renamed, target, _Value(value.value, None if suppress else value.unit,
                                          transformation, entry_at), f"{entry_at}: target")
     for target, value in renamed.items():
         put_once(out, target, value, f"{at}: parameter")
@@ -448,13 +455,11 @@ class _Flattening:
                                     f"{repr(name) if name is not None else 'the system'}")
             ends.append(end)
             end_units.append(unit)
-        suppress = element.get("suppressUnitConversion", "false")
-        if suppress not in ("true", "false", "1", "0"):
-            raise ScenarioError(f"{where}: suppressUnitConversion = {suppress!r}: expected true or false")
+        suppress = _suppressed(where, element)
         transformation = _transformation(where, element, (qualified("ssd", "ConnectionGeometry"),
                                                           qualified("ssd", "Annotations")))
         _note_annotations(element, where)
-        hop = _Hop(where, (end_units[0], end_units[1]), transformation, suppress in ("true", "1"))
+        hop = _Hop(where, (end_units[0], end_units[1]), transformation, suppress)
         self.edges.setdefault(ends[0], []).append((ends[1], hop))
 
     def reference(self, element: etree._Element, at: str, path: tuple[str, ...]) -> None:

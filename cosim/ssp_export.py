@@ -35,7 +35,6 @@ from lxml import etree
 
 from . import registry, units
 from .connection import check_connections, parse_connections
-from .names import split_endpoint
 from .errors import FmuError, ScenarioError, one_line
 from .names import split_endpoint
 from .scenario import Scenario
