@@ -21,7 +21,7 @@ import pytest
 
 from cosim.assembly import build_master
 from cosim.ssp import load_ssp, ssd_schema_errors
-from tests.industrial_fmus import DC_MOTOR, dc_motor_specs
+from tests.industrial_fmus import DC_MOTOR, dc_motor_rhs, dc_motor_specs
 
 R = 1.5  # Ohm: the archive's parameter set, not the FMU's start value (1 Ohm)
 TOLERANCE = 1e-10  # the FMUs' DefaultExperiment tolerance, as an exporting tool writes it
@@ -108,16 +108,13 @@ def archive(tmp_path_factory, industrial_fmus):
 
 def _monolithic(times: np.ndarray) -> np.ndarray:
     """scipy's ``solve_ivp`` over the stacked states [i, phi, w] of the three
-    FMUs, the connections substituted by hand: the source's step at t_step
-    splits the integration (the right-hand side jumps there)."""
+    FMUs (``dc_motor_rhs``: their equations, the connections substituted by
+    hand): the source's step at t_step splits the integration (the
+    right-hand side jumps there)."""
     from scipy.integrate import solve_ivp
 
     p = {**DC_MOTOR, "R": R}
-
-    def f(t, x, v):
-        i, _, w = x
-        return [(v - p["R"] * i - p["k"] * w) / p["L"], w, (p["k"] * i - p["b"] * w - p["tau_load"]) / p["J"]]
-
+    f = dc_motor_rhs(R=R)  # f(t, x, v): the three FMUs' equations, the source's value v held over a piece
     jacobian = [[-p["R"] / p["L"], 0, -p["k"] / p["L"]], [0, 0, 1], [p["k"] / p["J"], 0, -p["b"] / p["J"]]]
     before, after = times[times < p["t_step"]], times[times >= p["t_step"]]
     x = np.zeros((len(times), 3))  # at rest until the step
