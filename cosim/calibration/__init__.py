@@ -13,13 +13,14 @@ each:
 * :mod:`~cosim.calibration.symbolic`: segments and exact sensitivities from the model's own CasADi definition (FMUs of ours);
 * :mod:`~cosim.calibration.solve`: the weighted least squares (scipy's ``least_squares``);
 * :mod:`~cosim.calibration.statistics`: standard errors, intervals, correlation, identifiability, residuals;
+* :mod:`~cosim.calibration.diagnostics`: the warnings (the model does not fit the log);
 * :mod:`~cosim.calibration.outputs`: ``calibration.json``, ``parameters.ssv``, the TOML override, ``report.md``.
 
 :func:`calibrate` runs them in order and returns a :class:`Calibration`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -28,13 +29,14 @@ import numpy as np
 from ..errors import ScenarioError
 from ..fmu_component import FmuComponent
 from .columns import CalibrationSettings, ColumnMap, read_column_map, read_settings
+from .diagnostics import Diagnostic
 from .log import Log, read_log
 from .problem import Problem, bind_problem
 from .segments import Segment, split
 from .statistics import Statistics, residual_statistics, statistics
 
 __all__ = ["Calibration", "calibrate", "CalibrationSettings", "ColumnMap", "read_column_map", "read_settings",
-           "read_log", "Log"]
+           "read_log", "Log", "Diagnostic"]
 
 
 @dataclass
@@ -51,6 +53,7 @@ class Calibration:
     residuals: dict
     prediction: dict | None  # {"times", "logged", "predicted", "rms"} of the held-out part
     instance: str | None = None
+    diagnostics: list[Diagnostic] = field(default_factory=list)  # the warnings (cosim.calibration.diagnostics)
 
     @property
     def converged(self) -> bool:
