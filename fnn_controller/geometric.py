@@ -29,7 +29,8 @@ Additions the paper leaves open (justified in ``docs/controller.md``):
   one controller step (``desired_rate="finite_difference"``), for which the
   previous R* is the controller's state;
 * rotor speeds from the inverse of the plant's rotor model
-  (``fmu_models.models.rotor.rotor_speeds_squared``), squared speeds clipped to
+  (``fmu_models.models.rotor.rotor_speeds_squared``, the vehicle's
+  ``arm_angle``: plus or X), squared speeds clipped to
   ``[0, Omega_max^2]``.
 
 The velocity-controller state ``vel_state`` (VEL_STATE_SIZE = 10) holds the
@@ -81,6 +82,7 @@ class VehicleParams:
     b: float = _plant_param("b")
     d: float = _plant_param("d")
     Omega_max: float = _plant_param("Omega_max")
+    arm_angle: float = _plant_param("arm_angle")  # the airframe: the mixer's rotor positions, as the plant's
 
     def __post_init__(self) -> None:
         check_ranges(self)
@@ -198,10 +200,11 @@ def thrust_and_torque(force, R, e_R, e_omega, omega_b, params: GeometricParams =
 def rotor_speeds(thrust, tau, vehicle: VehicleParams = VehicleParams()):
     """Rotor speeds (rad/s) by the inverse rotor model, saturated.
 
-    Squared speeds from ``fmu_models.models.rotor.rotor_speeds_squared`` (plus
-    configuration), each clipped to ``[0, Omega_max^2]`` before the root.
+    Squared speeds from ``fmu_models.models.rotor.rotor_speeds_squared`` (the
+    vehicle's airframe, ``arm_angle``: 0 plus, pi/4 X), each clipped to ``[0, Omega_max^2]`` before the root.
     """
-    squares = rotor_speeds_squared(thrust, tau[0], tau[1], tau[2], vehicle.b, vehicle.d, vehicle.l)
+    squares = rotor_speeds_squared(thrust, tau[0], tau[1], tau[2], vehicle.b, vehicle.d, vehicle.l,
+                                   vehicle.arm_angle)
     return ca.vertcat(*[ca.sqrt(ca.fmin(ca.fmax(s, 0.0), vehicle.Omega_max**2)) for s in squares])
 
 

@@ -39,6 +39,7 @@ UNITS: dict[str, dict[str, int]] = {
     "N.m.s2": {"kg": 1, "m": 2},
     "N.s/m": {"kg": 1, "s": -1},
     "N.s2/m2": {"kg": 1, "m": -1},
+    "N.s2/m": {"kg": 1},  # rotor drag and inflow: N per (rad/s) per (m/s), the radian left out as above
     "T": {"kg": 1, "s": -2, "A": -1},   # tesla: the magnetometer's field
 }
 

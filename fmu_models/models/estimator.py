@@ -58,8 +58,8 @@ from .estimator_outputs import (ATTITUDE_FIX_COUNTS, ATTITUDE_FIX_MODEL, COUNTS,
                                 MAGNETOMETER_MODEL, covariance_output)
 from .imu import AXES, IMU_DEFAULTS
 from .magnetometer import MAGNETOMETER_DEFAULTS, body_field, heading_from_field
-from .quadrotor import (DEFAULTS, aerodynamic_drag, body_angular_acceleration, euler_rate_matrix, rotation_matrix,
-                        rotor_clip)
+from .quadrotor import (DEFAULTS, QUADROTOR, aerodynamic_drag, body_angular_acceleration, euler_rate_matrix,
+                        rotation_matrix, rotor_clip)
 from .rotor import thrust_and_torques
 from .sensors import DT_DEFAULT
 
@@ -357,6 +357,11 @@ def _variables(magnetometer: bool, fix_bias: bool = False, attitude_fix: bool = 
             discrete("refusal_run_attitude", "1", "motion-capture attitudes refused in a row"),
             *(discrete(f"total_{c}", "1", f"{c.replace('_', ' of the ')} so far") for c in ATTITUDE_FIX_COUNTS),
         ]
+    # the airframe of the output predictor's rotor model (E26), last so that the variables above keep their references
+    arm = QUADROTOR.variable("arm_angle")
+    variables.append(parameter("arm_angle", arm.unit, "angle of rotor 1's arm from x_B the output predictor's rotor "
+                               "model assumes (the plant's: 0 plus, pi/4 X; E26)", arm.start, min=arm.min,
+                               max=arm.max))
     return tuple(variables)
 
 
@@ -742,7 +747,8 @@ def _update(t, v, magnetometer: bool = False, fix_bias: bool = False, attitude_f
     modelled = commands[0] >= 0
     for c in commands[1:]:
         modelled = ca.logic_and(modelled, c >= 0)
-    _, *torque = thrust_and_torques([rotor_clip(c, v["Omega_max"]) ** 2 for c in commands], v["b"], v["d"], v["l"])
+    _, *torque = thrust_and_torques([rotor_clip(c, v["Omega_max"]) ** 2 for c in commands], v["b"], v["d"], v["l"],
+                                   v["arm_angle"])
     alpha = body_angular_acceleration(rate_start, ca.vertcat(v["Ix"], v["Iy"], v["Iz"]), ca.vertcat(*torque))
     # the attitude predicted with the mean rate over the span; unconnected: the IMU's averages along their trend
     gyro_out = ca.if_else(modelled, rate_start + alpha * h_out / 2 + xs[9:12], gyro + trend[0:3])

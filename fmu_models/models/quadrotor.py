@@ -33,11 +33,11 @@ import math
 from fmu_models.lazy_casadi import ca
 
 from ..export.model import FmuModel
-from .rotor import thrust_and_torques
+from .rotor import rotor_positions, thrust_and_torques
 from ..export.variables import input_, output, parameter, state
 
 __all__ = ["QUADROTOR", "STATE_NAMES", "BODY_STATES", "ROTOR_STATE_NAMES", "rotation_matrix", "euler_rate_matrix",
-           "aerodynamic_drag", "body_angular_acceleration", "rotor_clip",
+           "aerodynamic_drag", "rotor_aerodynamics", "body_angular_acceleration", "rotor_clip",
            "hover_rotor_speed", "DEFAULTS"]
 
 # Keeps d|v_rel|/dv_rel finite at v_rel = 0 (the Jacobian at hover would be
@@ -137,6 +137,20 @@ _VARIABLES = (
                 f"initial speed of rotor {i} (clipped to [0, Omega_max]; used only when tau_m > 0); "
                 f"starts at hover, as the command Omega_{i}", _HOVER_SPEED, min=0.0)
       for i, v in enumerate(_ROTOR_STATES, start=1)),
+    # Airframe and rotor aerodynamics, after the motor's (the same rule: earlier parameters keep their
+    # value references); each 0 by default, which is the plant above bit for bit (docs/plant-model.md).
+    parameter("arm_angle", "rad",
+              "angle of rotor 1's arm from x_B towards y_B; rotor i at arm_angle + (i-1) pi/2: 0 = plus frame "
+              "(rotor 1 on +x_B), pi/4 = X frame", 0.0, min=-math.pi, max=math.pi),
+    parameter("k_rotor_drag", "N.s2/m",
+              "rotor drag (H-force) coefficient: in-plane force -k_rotor_drag Omega_i v_perp_i at each hub "
+              "(N per rad/s per m/s)", 0.0, min=0.0),
+    parameter("k_inflow", "N.s2/m",
+              "axial inflow coefficient: thrust of rotor i reduced by k_inflow Omega_i v_axial_i "
+              "(v_axial_i: the hub's airspeed up along -z_B)", 0.0, min=0.0),
+    parameter("k_translational_lift", "N.s2/m2",
+              "translational lift coefficient: thrust of rotor i raised by k_translational_lift |v_perp_i|^2",
+              0.0, min=0.0),
     *_ROTOR_STATES,
 )
 
@@ -170,6 +184,38 @@ def aerodynamic_drag(v_rel, k_drag_lin, k_drag_quad):
     return -(k_drag_lin + k_drag_quad * speed) * v_rel
 
 
+def rotor_aerodynamics(v_air, rates, speeds, l, arm_angle, k_rotor_drag, k_inflow, k_translational_lift):
+    """The rotors' aerodynamic wrench in body axes (docs/plant-model.md, "Rotor aerodynamics").
+
+    At hub i (position ``r_i``, :func:`~fmu_models.models.rotor.rotor_positions`) the air-relative velocity
+    is ``v_i = v_air + omega_B x r_i`` with ``v_air = R^T (v - v_wind)`` (m/s, body axes, z down); its
+    in-plane part ``v_perp_i = (v_ix, v_iy)`` and its axial part ``v_axial_i = -v_iz`` (positive when the
+    hub moves up along the thrust, into the air the rotor draws in: a climb). With the applied rotor
+    speeds ``Omega_i`` (rad/s):
+
+    * rotor drag (H-force; Martin & Salaun 2010, Mahony, Kumar & Corke 2012):
+      ``H_i = -k_rotor_drag Omega_i v_perp_i`` in the rotor plane;
+    * axial inflow (Bangura & Mahony, momentum theory; RotorPy's ``k_z``): thrust change
+      ``-k_inflow Omega_i v_axial_i``;
+    * translational lift (RotorPy's ``k_h``; Leishman): thrust change ``+k_translational_lift |v_perp_i|^2``.
+
+    Returns ``(lift, in_plane, moment)``: the thrust change summed over the rotors (N, along -z_B), the
+    in-plane force ``(sum H_ix, sum H_iy, 0)`` (N) and the moment ``sum r_i x F_i`` of the forces at the
+    hubs (N m). Every term is a product with its coefficient: at 0 it adds exact zeros.
+    """
+    lift, hx, hy = 0.0, 0.0, 0.0
+    mx, my, mz = 0.0, 0.0, 0.0
+    for (x, y), omega in zip(rotor_positions(l, arm_angle), speeds):
+        hub = v_air + ca.cross(rates, ca.vertcat(x, y, 0.0))
+        vx, vy, v_axial = hub[0], hub[1], -hub[2]
+        dT = -k_inflow * omega * v_axial + k_translational_lift * (vx**2 + vy**2)
+        fx, fy = -k_rotor_drag * omega * vx, -k_rotor_drag * omega * vy
+        lift, hx, hy = lift + dT, hx + fx, hy + fy
+        # r_i x (fx, fy, -dT) with r_i = (x, y, 0)
+        mx, my, mz = mx - y * dT, my + x * dT, mz + x * fy - y * fx
+    return lift, ca.vertcat(hx, hy, 0.0), (mx, my, mz)
+
+
 def body_angular_acceleration(rates, inertia, torque):
     """d omega_B / dt (rad/s^2), eq. (4): ``(-omega x (I omega) + tau) / I``
     with ``I`` the diagonal of the inertia (kg m^2) and ``tau`` the torques (N m)."""
@@ -194,17 +240,22 @@ def _equations(t, s):
     applied = [ca.if_else(instant, cmd, rotor_clip(s[name], s["Omega_max"]))
                for cmd, name in zip(commanded, ROTOR_STATE_NAMES)]
     omega_sq = [omega**2 for omega in applied]
-    thrust, tau_phi, tau_theta, tau_psi = thrust_and_torques(omega_sq, s["b"], s["d"], s["l"])
+    thrust, tau_phi, tau_theta, tau_psi = thrust_and_torques(omega_sq, s["b"], s["d"], s["l"], s["arm_angle"])
 
     R = rotation_matrix(s["phi"], s["theta"], s["psi"])
     velocity = ca.vertcat(s["u"], s["v"], s["w"])
     v_rel = velocity - ca.vertcat(s["wind_x"], s["wind_y"], s["wind_z"])
     drag = aerodynamic_drag(v_rel, s["k_drag_lin"], s["k_drag_quad"])
-    e3 = ca.DM([0, 0, 1])
-    # eqs. (9)-(11) with the drag force added to F
-    acceleration = (-R @ e3 * thrust + drag) / s["m"] + s["g"] * e3
-
     rates = ca.vertcat(s["p"], s["q"], s["r"])
+    # The rotors' aerodynamic wrench: added to the thrust and torques as exact zeros when its coefficients are 0.
+    lift, in_plane, moment = rotor_aerodynamics(R.T @ v_rel, rates, applied, s["l"], s["arm_angle"],
+                                                s["k_rotor_drag"], s["k_inflow"], s["k_translational_lift"])
+    thrust = thrust + lift
+    tau_phi, tau_theta, tau_psi = tau_phi + moment[0], tau_theta + moment[1], tau_psi + moment[2]
+    e3 = ca.DM([0, 0, 1])
+    # eqs. (9)-(11) with the drag force and the rotors' in-plane (H) force added to F
+    acceleration = (-R @ e3 * thrust + drag + R @ in_plane) / s["m"] + s["g"] * e3
+
     euler_rates = euler_rate_matrix(s["phi"], s["theta"]) @ rates  # eq. (2)
     inertia = ca.vertcat(s["Ix"], s["Iy"], s["Iz"])  # diagonal of I
     torque = ca.vertcat(tau_phi, tau_theta, tau_psi)
