@@ -27,7 +27,7 @@ def _vehicle(overrides=None) -> VehicleParams:
 
 # a plant unlike the controller's defaults in every field the nominal vehicle has
 OTHER_PLANT = {"m": 1.31, "g": 9.79, "Ix": 0.033, "Iy": 0.047, "Iz": 0.025, "l": 0.19, "b": 7.1e-6, "d": 1.9e-7,
-               "Omega_max": 950.0}
+               "Omega_max": 950.0, "arm_angle": 0.7853981633974483}
 
 
 def test_the_nominal_vehicle_is_the_plants():
@@ -38,6 +38,16 @@ def test_the_nominal_vehicle_is_the_plants():
     assert all(OTHER_PLANT[k] != DEFAULTS[k] for k in OTHER_PLANT)
     vehicle = _vehicle({f"fmus.Quadrotor.parameters.{k}": v for k, v in OTHER_PLANT.items()})
     assert dataclasses.asdict(vehicle) == OTHER_PLANT
+
+
+def test_a_parameter_set_that_makes_the_plant_an_x_makes_the_mixer_an_x(tmp_path):
+    """The plant's parameter_set (.ssv) reaches the controller's nominal vehicle:
+    an X plant gets an X mixer with no other setting."""
+    from cosim.calibration.outputs import write_parameter_set
+
+    ssv = write_parameter_set({"arm_angle": (0.7853981633974483, "rad"), "m": (1.2, "kg")}, tmp_path / "x.ssv", "X")
+    vehicle = _vehicle({"fmus.Quadrotor.parameter_set": str(ssv)})
+    assert (vehicle.arm_angle, vehicle.m, vehicle.b) == (0.7853981633974483, 1.2, DEFAULTS["b"])
 
 
 def test_a_heavier_plant_makes_a_heavier_nominal_model():
