@@ -2,7 +2,8 @@
 
 The circles mission (closed loop: controller, plant, a constant wind: the
 gust's reversals moved past the end) flown with the plant's parameters
-changed to ``hidden``, recording what a vehicle's log holds: the 12 rigid-body
+changed to ``hidden`` (:data:`HIDDEN`; :data:`HIDDEN_X_AERO`: an X frame with
+rotor aerodynamics, the controller's mixer an X too as it reads the plant's), recording what a vehicle's log holds: the 12 rigid-body
 states, the commanded rotor speeds and the measured ones. It is what
 ``fnn-cosim calibrate`` is tested and benchmarked on (docs/calibration.md):
 the parameters are hidden from the calibration, which must find them.
@@ -12,10 +13,17 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Mapping
 
-__all__ = ["HIDDEN", "LOGGED", "fly_synthetic_log"]
+import math
+
+__all__ = ["HIDDEN", "HIDDEN_X_AERO", "LOGGED", "fly_synthetic_log"]
 
 # the vehicle the log is flown with: Table 1's with five values changed (and a motor lag)
 HIDDEN = {"b": 7.0e-6, "Ix": 0.035, "Iy": 0.045, "k_drag_lin": 0.25, "tau_m": 0.03}
+# issue 42's "Done when": an X frame with the rotor aerodynamics, every parameter fitted there off its default.
+# The rotor coefficients are of RotorPy's hummingbird's order scaled to this vehicle's rotor speed (about 630
+# rad/s): the four rotors' H-force 4 k_rotor_drag Omega about 0.5 N per m/s, as large as the body drag.
+HIDDEN_X_AERO = {**HIDDEN, "arm_angle": math.pi / 4, "d": 1.9e-7, "Iz": 0.024, "k_drag_quad": 0.05,
+                 "k_rotor_drag": 2.0e-4, "k_inflow": 3.0e-4, "k_translational_lift": 0.01}
 _STATES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
 LOGGED = tuple(f"Quadrotor.{n}" for n in _STATES) + tuple(f"Quadrotor.Omega_{i}" for i in range(1, 5)) + \
     tuple(f"Quadrotor.Omega_r_{i}" for i in range(1, 5))
