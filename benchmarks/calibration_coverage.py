@@ -35,43 +35,23 @@ FIT_AERO = ("b", "d", "Ix", "Iy", "Iz", "tau_m", "k_rotor_drag", "k_inflow", "k_
 GUESS_AERO = {"b": 6.0e-6, "d": 1.6e-7, "Ix": 0.03, "Iy": 0.04, "Iz": 0.021, "tau_m": 0.02, "k_rotor_drag": 1.0e-4,
               "k_inflow": 1.0e-4, "k_translational_lift": 0.005, "k_drag_lin": 0.2, "k_drag_quad": 0.04,
               "wind_x": 0.0, "wind_y": 0.0, "wind_z": 0.0}
-STATES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
-
-
-def noisy_log(folder: Path, seed: int, duration: float, hidden=None) -> Path:
-    from quadrotor_paper.synthetic_log import fly_synthetic_log
-
-    record = tuple(f"Sensors.{s}_m" for s in STATES) + tuple(f"Quadrotor.Omega_{i}" for i in range(1, 5)) + \
-        tuple(f"Quadrotor.Omega_r_{i}" for i in range(1, 5))
-    return fly_synthetic_log(folder, duration, hidden=hidden, scenario="circles_sensors", record=record,
-                             extra={"simulation.seed": seed})
-
-
-def column_map():
-    from cosim.calibration import ColumnMap
-
-    columns = {s: f"Sensors.{s}_m" for s in STATES}
-    columns |= {f"Omega_{i}": f"Quadrotor.Omega_{i}" for i in range(1, 5)}
-    columns |= {f"Omega_r_{i}": f"Quadrotor.Omega_r_{i}" for i in range(1, 5)}
-    return ColumnMap.from_document({"columns": columns}, "coverage")
 
 
 def one(seed: int, duration: float, workers: int, aero: bool = False):
     from cosim.calibration import CalibrationSettings, calibrate
     from fmu_models.built import built_fmu
     from fmu_models.catalog import model
-    from quadrotor_paper.synthetic_log import HIDDEN, HIDDEN_X_AERO
+    from quadrotor_paper.synthetic_log import HIDDEN, HIDDEN_X_AERO, WIND, fly_sensed_log, sensed_column_map
 
     fit, guess, hidden = (FIT_AERO, GUESS_AERO, HIDDEN_X_AERO) if aero else (FIT, GUESS, HIDDEN)
     fmu = built_fmu("Quadrotor", 2, lambda: model("Quadrotor"))
     fixed = {k: v for k, v in hidden.items() if k not in fit} | {"z_0": -15.0}
-    wind = -3.0 / 2 ** 0.5
-    truth = {**hidden, "wind_x": wind, "wind_y": wind, "wind_z": 0.0}
+    truth = {**hidden, **WIND}
     with tempfile.TemporaryDirectory() as tmp:
-        log = noisy_log(Path(tmp), seed, duration, hidden)
+        log = fly_sensed_log(Path(tmp), seed, duration, hidden)
         cal = calibrate(log, fmu, CalibrationSettings(fit=list(fit), guess=guess, fix=fixed, segment=2.0,
                                                       holdout=0.0, initial_states="estimated", workers=workers),
-                        column_map())
+                        sensed_column_map())
     out = {}
     for j, n in enumerate(fit):
         lo, hi = cal.stats.ci95[j]

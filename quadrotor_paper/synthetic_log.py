@@ -15,7 +15,7 @@ from typing import Mapping
 
 import math
 
-__all__ = ["HIDDEN", "HIDDEN_X_AERO", "LOGGED", "fly_synthetic_log"]
+__all__ = ["HIDDEN", "HIDDEN_X_AERO", "WIND", "LOGGED", "SENSED", "fly_synthetic_log", "fly_sensed_log", "sensed_column_map"]
 
 # the vehicle the log is flown with: Table 1's with five values changed (and a motor lag)
 HIDDEN = {"b": 7.0e-6, "Ix": 0.035, "Iy": 0.045, "k_drag_lin": 0.25, "tau_m": 0.03}
@@ -25,6 +25,8 @@ HIDDEN = {"b": 7.0e-6, "Ix": 0.035, "Iy": 0.045, "k_drag_lin": 0.25, "tau_m": 0.
 HIDDEN_X_AERO = {**HIDDEN, "arm_angle": math.pi / 4, "d": 1.9e-7, "Iz": 0.024, "k_drag_quad": 0.05,
                  "k_rotor_drag": 2.0e-4, "k_inflow": 3.0e-4, "k_translational_lift": 0.01}
 _STATES = ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
+# the wind of every log: circles' gust, 3 m/s along [-1, -1, 0] (world, NED), held
+WIND = {"wind_x": -3.0 / 2 ** 0.5, "wind_y": -3.0 / 2 ** 0.5, "wind_z": 0.0}
 LOGGED = tuple(f"Quadrotor.{n}" for n in _STATES) + tuple(f"Quadrotor.Omega_{i}" for i in range(1, 5)) + \
     tuple(f"Quadrotor.Omega_r_{i}" for i in range(1, 5))
 
@@ -53,3 +55,25 @@ def fly_synthetic_log(out: str | Path, duration: float = 10.0, hidden: Mapping[s
     if result.status != "ok":
         raise RuntimeError(f"the synthetic flight {result.status}: {result.error}")
     return out / "results.csv"
+
+
+# A log as a vehicle's sensors give it: the measured states of circles_sensors' Measurement12 (motion-capture
+# position and attitude, velocity and gyro noise), the rotor commands the plant received and the rotor speeds.
+SENSED = tuple(f"Sensors.{s}_m" for s in _STATES) + LOGGED[12:]
+
+
+def fly_sensed_log(out: str | Path, seed: int, duration: float = 10.0,
+                   hidden: Mapping[str, float] | None = None) -> Path:
+    """:func:`fly_synthetic_log` in ``circles_sensors`` (its noise drawn from
+    ``seed``), recording :data:`SENSED`; read it with :func:`sensed_column_map`."""
+    return fly_synthetic_log(out, duration, hidden=hidden, scenario="circles_sensors", record=SENSED,
+                             extra={"simulation.seed": seed})
+
+
+def sensed_column_map():
+    """The column map of a :func:`fly_sensed_log` log: the plant's states from the sensors' columns."""
+    from cosim.calibration import ColumnMap
+
+    columns = {s: f"Sensors.{s}_m" for s in _STATES}
+    columns |= {c.split(".")[1]: c for c in LOGGED[12:]}
+    return ColumnMap.from_document({"columns": columns}, "sensed log")

@@ -192,3 +192,25 @@ def test_rotor_drag_adds_its_damping_to_the_linearized_velocity_rows(quadrotor_f
     assert A[i["v"], i["v"]] == pytest.approx(-4 * k * HOVER / m, rel=1e-12)
     assert A[i["w"], i["w"]] == pytest.approx(-4 * k_in * HOVER / m, rel=1e-12)
     assert abs(A[i["u"], i["v"]]) < 1e-15
+
+
+def test_the_stability_analysis_of_an_x_plant_flown_by_its_x_mixer_is_the_plus_ones(quadrotor_fmu2):
+    """The stability analysis reads the plant FMU: in forward flight in wind, an
+    X plant with the X mixer (the nominal vehicle's arm_angle) has the closed-loop
+    poles of the plus plant with the plus mixer (the mixer gives the same
+    wrench); the X plant with the plus mixer does not."""
+    from fnn_controller import GeometricParams, VehicleParams
+    from quadrotor_paper.stability.linearize import linearize_plant_fmu
+    from quadrotor_paper.stability.loops import LoopModel
+    from quadrotor_paper.stability.operating_points import forward_flight
+
+    def poles(plant, vehicle):
+        op = forward_flight(2.5, 3.0, plant_parameters=plant, geometric=GeometricParams(vehicle=vehicle))
+        A = LoopModel(op, plant=linearize_plant_fmu(quadrotor_fmu2, op)).closed_loop().A
+        return np.sort_complex(np.linalg.eigvals(A))
+
+    plus = poles({}, VehicleParams())
+    x = poles({"arm_angle": X}, VehicleParams(arm_angle=X))
+    assert x == pytest.approx(plus, rel=1e-7, abs=1e-9)
+    mismatched = poles({"arm_angle": X}, VehicleParams())
+    assert np.abs(mismatched - plus).max() > 1e-2
