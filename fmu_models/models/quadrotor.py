@@ -201,7 +201,8 @@ def rotor_aerodynamics(v_air, rates, speeds, l, arm_angle, k_rotor_drag, k_inflo
 
     Returns ``(lift, in_plane, moment)``: the thrust change summed over the rotors (N, along -z_B), the
     in-plane force ``(sum H_ix, sum H_iy, 0)`` (N) and the moment ``sum r_i x F_i`` of the forces at the
-    hubs (N m). Every term is a product with its coefficient: at 0 it adds exact zeros.
+    hubs (N m). The plant adds them with :func:`_added`, which leaves every value as it was to the last
+    bit when the three coefficients are 0.
     """
     lift, hx, hy = 0.0, 0.0, 0.0
     mx, my, mz = 0.0, 0.0, 0.0
@@ -214,6 +215,14 @@ def rotor_aerodynamics(v_air, rates, speeds, l, arm_angle, k_rotor_drag, k_inflo
         # r_i x (fx, fy, -dT) with r_i = (x, y, 0)
         mx, my, mz = mx - y * dT, my + x * dT, mz + x * fy - y * fx
     return lift, ca.vertcat(hx, hy, 0.0), (mx, my, mz)
+
+
+def _added(value, term, off):
+    """``value + term``, and ``value`` to the last bit where ``off``: ``value - (+0)``
+    is ``value`` for every double, -0 and inf included, where ``value + 0`` turns
+    -0 into +0; ``casadi.if_else`` gives an exact +0 even where ``term`` is NaN
+    (``0 * inf`` at an airspeed that overflows)."""
+    return value - ca.if_else(off, 0.0, -term)
 
 
 def body_angular_acceleration(rates, inertia, torque):
@@ -247,14 +256,15 @@ def _equations(t, s):
     v_rel = velocity - ca.vertcat(s["wind_x"], s["wind_y"], s["wind_z"])
     drag = aerodynamic_drag(v_rel, s["k_drag_lin"], s["k_drag_quad"])
     rates = ca.vertcat(s["p"], s["q"], s["r"])
-    # The rotors' aerodynamic wrench: added to the thrust and torques as exact zeros when its coefficients are 0.
+    # The rotors' aerodynamic wrench, added to the thrust, the torques and the force (nothing changes at 0).
     lift, in_plane, moment = rotor_aerodynamics(R.T @ v_rel, rates, applied, s["l"], s["arm_angle"],
                                                 s["k_rotor_drag"], s["k_inflow"], s["k_translational_lift"])
-    thrust = thrust + lift
-    tau_phi, tau_theta, tau_psi = tau_phi + moment[0], tau_theta + moment[1], tau_psi + moment[2]
+    off = ca.logic_and(ca.logic_and(s["k_rotor_drag"] == 0, s["k_inflow"] == 0), s["k_translational_lift"] == 0)
+    thrust = _added(thrust, lift, off)
+    tau_phi, tau_theta, tau_psi = (_added(tau, m, off) for tau, m in zip((tau_phi, tau_theta, tau_psi), moment))
     e3 = ca.DM([0, 0, 1])
     # eqs. (9)-(11) with the drag force and the rotors' in-plane (H) force added to F
-    acceleration = (-R @ e3 * thrust + drag + R @ in_plane) / s["m"] + s["g"] * e3
+    acceleration = (_added(-R @ e3 * thrust + drag, R @ in_plane, off)) / s["m"] + s["g"] * e3
 
     euler_rates = euler_rate_matrix(s["phi"], s["theta"]) @ rates  # eq. (2)
     inertia = ca.vertcat(s["Ix"], s["Iy"], s["Iz"])  # diagonal of I
