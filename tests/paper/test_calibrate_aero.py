@@ -43,6 +43,7 @@ def test_the_x_frame_rotor_coefficients_are_recovered_within_their_intervals(x_a
     assert max(abs(cal.residuals[v]["lag1_autocorrelation"]) for v in ("u", "v", "w")) < 0.3
 
 
+@pytest.mark.slow  # a second fit with estimated initial states: about 5 CPU-s
 def test_the_same_log_without_the_rotor_aerodynamics_leaves_correlated_residuals(x_aero_log):
     """The aerodynamics left out (k_* fixed at 0), the thrust coefficient and the
     wind fitted: the velocity residuals' lag-1 autocorrelation is far above the
