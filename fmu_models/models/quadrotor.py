@@ -25,6 +25,12 @@ others. See docs/plant-model.md, "Motor dynamics".
 Aerodynamic drag (not in the paper, which adds wind in Gazebo) acts on the
 air-relative velocity v_rel = v - v_wind through a linear (rotor drag) and a
 quadratic (body drag) term, see ``docs/plant-model.md``.
+
+Airframe and rotor aerodynamics (not in the paper; each 0 by default, the
+plant above bit for bit): ``arm_angle`` turns the rotors about z_B (0 plus,
+pi/4 X; :mod:`fmu_models.models.rotor`), and :func:`rotor_aerodynamics` adds
+the rotor drag (H-force), axial inflow and translational lift at each hub, from
+the hub's airspeed in body axes (docs/plant-model.md, "Rotor aerodynamics").
 """
 from __future__ import annotations
 
