@@ -21,8 +21,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from ..errors import ConnectionCheckError, ScenarioError, shown_text
-from ..names import nearest_told
+from ..errors import ConnectionCheckError, ScenarioError
 from .. import units as _units
 from .columns import POSITIONS, Column, ColumnMap
 from .diagnostics import Diagnostic
@@ -52,9 +51,7 @@ def body_matrix(body: str) -> np.ndarray:
 def _values(log: Log, col: Column, what: str) -> tuple[np.ndarray, str]:
     """The column ``col`` of ``log`` and its unit (declared, else the log's)."""
     if col.column not in log.columns:
-        raise ScenarioError(f"{log.where()}: no column {col.column!r} (named by the column map for {what})"
-                            + (nearest_told(col.column, log.columns)
-                               or f"; its columns: {shown_text(', '.join(log.columns), 200)}"))
+        raise log.no_column(col.column, what)
     return np.asarray(log.columns[col.column], dtype=float), col.unit or log.units.get(col.column, "")
 
 
@@ -103,7 +100,7 @@ def convert(log: Log, column_map: ColumnMap | None, parameter: Callable[[str], f
         name = f"{variable} ({label})"
         derived[name] = values
         units[name] = unit
-        columns[variable] = Column(column=name, unit=unit or None)
+        columns[variable] = _column(name, unit)
 
     if frames is not None:
         W, B = world_matrix(column_map.world), body_matrix(column_map.body)
@@ -114,18 +111,22 @@ def convert(log: Log, column_map: ColumnMap | None, parameter: Callable[[str], f
                 given = [v for v in vector if v in columns]
                 if not given:
                     continue
-                if len(given) < 3:
+                # a component of another (ENU: north is the log's y) needs that one; a sign needs only itself
+                needed = {vector[j] for i, v in enumerate(vector) if v in columns
+                          for j in np.flatnonzero(matrix[i])}
+                if not needed <= set(given):
                     raise ScenarioError(f"column map: [{', '.join(vector)}] is converted to {label} as a vector: "
                                         f"name every component in [columns] (missing: "
-                                        f"{', '.join(v for v in vector if v not in columns)})")
-                read = [_values(log, columns[v], v) for v in vector]
-                if len({u for _, u in read}) > 1:
+                                        f"{', '.join(v for v in vector if v in needed - set(given))})")
+                read = {v: _values(log, columns[v], v) for v in given}
+                if len({u for _, u in read.values()}) > 1:
                     raise ScenarioError(f"column map: [{', '.join(vector)}]: its columns' units differ "
-                                        f"({', '.join(repr(u) for _, u in read)}); one vector, one unit")
+                                        f"({', '.join(repr(u) for _, u in read.values())}); one vector, one unit")
                 # B is its own inverse: v_FRD = B v_log as v_log = B v_FRD
-                out = matrix @ np.vstack([v for v, _ in read])
-                for variable, values in zip(vector, out):
-                    put(variable, values, read[0][1], label)
+                for i, variable in enumerate(vector):
+                    if variable in read:
+                        values = sum(matrix[i, j] * read[vector[j]][0] for j in np.flatnonzero(matrix[i]))
+                        put(variable, values, read[variable][1], label)
         euler = frames.euler
         source = column_map.attitude
         if source is None and euler is not None and all(e in column_map.columns for e in euler) and \
@@ -150,13 +151,17 @@ def convert(log: Log, column_map: ColumnMap | None, parameter: Callable[[str], f
             if variable in column_map.columns:
                 raise ScenarioError(f"column map: {variable} is named in [columns] and in [rotors]; give it once")
             if label is None:
-                columns[variable] = Column(column=values, unit=unit or None)  # a speed: the column as it is
+                columns[variable] = _column(values, unit)  # a speed: the column as it is
             else:
                 put(variable, values, unit, label)
     kept = log.columns.adding(derived) if isinstance(log.columns, Columns) else {**log.columns, **derived}
     converted = replace(log, columns=kept, units={**log.units, **units})
     return converted, column_map.model_copy(update={"columns": columns, "frames": None, "attitude": None,
                                                     "rotors": None, "world": "NED", "body": "FRD"})
+
+
+def _column(name: str, unit: str | None) -> Column:
+    return Column(column=name, unit=unit) if unit else Column(column=name)
 
 
 def _rotation(log: Log, source: Mapping):

@@ -102,6 +102,14 @@ class Log:
     def where(self) -> str:
         return f"log {self.path.name}"
 
+    def no_column(self, name: str, what: str) -> ScenarioError:
+        """The one line for a column ``name`` the log lacks, named for ``what``."""
+        from ..names import nearest_told
+
+        return ScenarioError(f"{self.where()}: no column {name!r} (named by the column map for {what})"
+                             + (nearest_told(name, self.columns)
+                                or f"; its columns: {shown_text(', '.join(self.columns), 200)}"))
+
     def window(self, start: float | None, stop: float | None) -> "Log":
         """The rows with ``start <= t <= stop`` (within 1e-9 s)."""
         keep = np.ones(self.times.size, bool)
