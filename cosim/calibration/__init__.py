@@ -131,10 +131,9 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
     finally:
         cs.close()
     cal = Calibration(problem, settings, segments, held_out, result, stats, residuals, prediction, instance)
-    if stated is not None and stated.mirror_check:  # the map's mirrors refitted briefly from the estimates
-        brief = settings.model_copy(update={
-            "guess": dict(zip(problem.fit, map(float, result.theta))), "max_iterations": MIRROR_ITERATIONS,
-            "noise": dict(zip(problem.outputs, map(float, result.sigma)))})
+    if stated is not None and stated.mirror_check:  # the map's mirrors refitted briefly from the same guesses
+        brief = settings.model_copy(update={"max_iterations": MIRROR_ITERATIONS,
+                                            "noise": dict(zip(problem.outputs, map(float, result.sigma)))})
         cal.diagnostics += mirror_check(result.cost, stated, lambda m: calibrate(read, fmu, brief, m, instance,
                                                                                  extra_columns))
     return cal

@@ -34,7 +34,7 @@ _WORLD = {"NED": np.eye(3), "ENU": np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]]
 # FRD -> log body: v_log = B v_FRD (FLU: left = -right, up = -down)
 _BODY = {"FRD": np.eye(3), "FLU": np.diag([1.0, -1, -1])}
 MIRROR_FACTOR = 4.0  # a mirror whose cost is below 1/4 of the map's (half its RMS residual) fits "far better"
-MIRROR_ITERATIONS = 8  # the mirror's refit: simulations of the log, from the map's estimates
+MIRROR_ITERATIONS = 8  # the mirror's refit: Jacobians, from the fit's own first guesses
 
 
 def world_matrix(world: str) -> np.ndarray:
@@ -248,9 +248,11 @@ def mirrors(column_map: ColumnMap) -> list[tuple[str, str, ColumnMap]]:
 def mirror_check(cost: float, column_map: ColumnMap, refit: Callable[[ColumnMap], object]) -> list[Diagnostic]:
     """A ``"mirror-fits-better"`` diagnostic for each mirror of
     ``column_map`` (:func:`mirrors`) whose brief refit (``refit(map)``, a
-    :class:`~cosim.calibration.Calibration` from the map's estimates, with
-    its noise levels, :data:`MIRROR_ITERATIONS` simulations) ends at a cost
-    below ``cost / MIRROR_FACTOR``. A mirror the FMU cannot simulate says
+    :class:`~cosim.calibration.Calibration` from the fit's first guesses,
+    with its noise levels, at most :data:`MIRROR_ITERATIONS` Jacobians) ends
+    at a cost below ``cost / MIRROR_FACTOR``. Not from the estimates: a
+    wrong map drives them to a bound (a thrust or gain at 0), from where a
+    refit scaled by them cannot move. A mirror the FMU cannot simulate says
     nothing."""
     found = []
     for subject, what, mirrored in mirrors(column_map):
@@ -261,6 +263,6 @@ def mirror_check(cost: float, column_map: ColumnMap, refit: Callable[[ColumnMap]
         if other * MIRROR_FACTOR < cost:
             found.append(Diagnostic(
                 "mirror-fits-better", f"the column map's mirror, {what}, fits far better: cost {other:.4g} against "
-                f"{cost:.4g} (x{cost / max(other, 1e-300):.3g}) after a refit of {MIRROR_ITERATIONS} simulations "
-                f"from the estimates; check the map's {subject}", subject))
+                f"{cost:.4g} (x{cost / max(other, 1e-300):.3g}) after a refit of at most "
+                f"{MIRROR_ITERATIONS} Jacobians from the same first guesses; check the map's {subject}", subject))
     return found

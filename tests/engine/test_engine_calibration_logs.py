@@ -13,6 +13,7 @@ import pytest
 from cosim.calibration import ColumnMap, read_log
 from cosim.calibration.frames import convert
 from cosim.errors import ScenarioError
+from tests.engine.test_engine_calibration import _refused
 from tests.ulog_writer import write_ulog
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
@@ -20,20 +21,6 @@ DAHLQUIST = REFERENCE / "fmi2" / "Dahlquist.fmu"
 W = np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]])  # ENU <-> NED, its own inverse
 B = np.diag([1.0, -1, -1])  # FLU <-> FRD
 FRAMES = {"world": [["x", "y", "z"], ["u", "v", "w"]], "body": [["p", "q", "r"]], "euler": ["phi", "theta", "psi"]}
-
-
-def _cli(*args):
-    from quadrotor_paper.cli import main
-
-    return main(list(map(str, args)))
-
-
-def _refused(capsys, *args) -> str:
-    code = _cli(*args)
-    err = capsys.readouterr().err.strip()
-    assert code == 2, err
-    assert len(err.splitlines()) == 1, err
-    return err
 
 
 def _euler_matrix(phi, theta, psi):
@@ -271,3 +258,29 @@ def test_a_csv_log_reads_only_the_columns_used(tmp_path):
     log.check(["x"])
     assert set(log.columns._held) == {"x"}  # the column used, read in one pass
     assert np.isnan(log.columns["note"]).all()  # a text column: refused only if used
+
+
+# ---- the map's mirrors (a frame or rotor map that fits far worse than its mirror) -------------------------------
+
+@pytest.mark.parametrize("body, warned", [("FRD", False), ("FLU", True)])
+def test_a_body_frame_stated_wrong_fits_far_worse_than_its_mirror_and_says_so(tmp_path, body, warned):
+    from cosim.calibration import CalibrationSettings, calibrate
+    from tests.engine.toy_models import LAG_TAU, lag_fmu_path
+
+    # the toy lag dy/dt = (k u - y) / tau, its input u the y component of a body vector, logged in FRD
+    t = np.arange(0, 2.001, 0.02)
+    u = np.sin(3 * t) + 0.5
+    y = np.zeros_like(t)
+    for i in range(1, t.size):  # exact under the held input
+        y[i] = 2.0 * u[i - 1] + (y[i - 1] - 2.0 * u[i - 1]) * math.exp(-0.02 / LAG_TAU)
+    path = _csv(tmp_path / "lag.csv", t, {"uy": u, "y": y})
+    cmap = ColumnMap.from_document({"body": body, "frames": {"body": [["ux", "u", "uz"]]},
+                                    "columns": {"u": "uy", "y": "y"}}, "map")
+    settings = CalibrationSettings(fit=["k"], guess={"k": 1.0}, bounds={"k": [0.0, 10.0]}, jacobian="derivatives")
+    cal = calibrate(path, lag_fmu_path(2), settings, cmap)
+    found = [d for d in cal.diagnostics if d.kind == "mirror-fits-better"]
+    assert bool(found) == warned
+    if warned:  # stated FLU, the input's sign flipped: k >= 0 cannot follow; the mirror, FRD, meets the log
+        assert found[0].subject == "body" and "body = 'FRD'" in found[0].message
+    else:
+        assert abs(cal.fit.theta[0] - 2.0) < 1e-3
