@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterator, Mapping, Sequence
@@ -226,21 +227,41 @@ def _read_csv(path: Path, time_name: str):
         raise _missing_time(path, time_name, header)
     raw_of = dict(zip(header, raw))
 
+    rows: list[int] = []
+
     def read(names: list[str]) -> dict[str, np.ndarray]:
         import pyarrow as pa
         import pyarrow.csv as pcsv
 
+        # streamed in blocks, only these columns parsed as floats: the memory is the columns', not the file's
+        options = pcsv.ConvertOptions(include_columns=[raw_of[n] for n in names],
+                                      column_types={raw_of[n]: pa.float64() for n in names})
+        # the rows are known once the time is read: each column then filled in place, block by block
+        out = {n: np.empty(rows[0]) for n in names} if rows else {n: [] for n in names}
+        at = 0
         try:
-            table = pcsv.read_csv(path, convert_options=pcsv.ConvertOptions(
-                include_columns=[raw_of[n] for n in names], strings_can_be_null=True))
-        except (pa.ArrowInvalid, OSError) as exc:  # a row of other width, bytes that are no text
-            raise ScenarioError(f"log {path.name}: {shown_text(str(exc).splitlines()[0], 200)}") from None
-        return {n: _floats(table.column(raw_of[n])) for n in names}
+            for batch in pcsv.open_csv(path, read_options=pcsv.ReadOptions(block_size=1 << 20, use_threads=False),
+                                       convert_options=options):
+                for n in names:
+                    block = batch.column(raw_of[n]).to_numpy(zero_copy_only=False)
+                    if rows:
+                        out[n][at:at + block.size] = block
+                    else:
+                        out[n].append(block)
+                at += batch.num_rows
+        except (pa.ArrowInvalid, OSError, ValueError) as exc:  # a row of other width, a text value, not text
+            said = str(exc).splitlines()[0]
+            at = re.match(r"In CSV column #(\d+): Row #(\d+): (.*)", said)
+            if at is not None and int(at[1]) < len(header):  # pyarrow counts columns from 0, rows from the header
+                said = f"row {int(at[2]) - 1}, column {header[int(at[1])]}: {at[3]}"
+            raise ScenarioError(f"log {path.name}: {shown_text(said, 200)}") from None
+        return {n: v if rows else (np.concatenate(v) if v else np.zeros(0)) for n, v in out.items()}
 
     columns = Columns([h for h in header if h != time_name], read)
     times = read([time_name])[time_name]
     if times.size == 0:
         raise ScenarioError(f"log {path.name}: no rows after the header")
+    rows.append(times.size)
     units: dict[str, str] = {}
     sidecar = path.with_name(path.name + ".json")  # the project's results: columns, units (cosim.recorder)
     if sidecar.is_file():

@@ -257,7 +257,9 @@ def test_a_csv_log_reads_only_the_columns_used(tmp_path):
     assert list(log.columns) == ["x", "note"] and log.columns._held == {}  # the header alone so far
     log.check(["x"])
     assert set(log.columns._held) == {"x"}  # the column used, read in one pass
-    assert np.isnan(log.columns["note"]).all()  # a text column: refused only if used
+    with pytest.raises(ScenarioError) as info:  # a text column: refused when used, naming it
+        log.check(["note"])
+    assert str(info.value) == "log wide.csv: row 1, column note: CSV conversion error to double: invalid value 'text'"
 
 
 # ---- the map's mirrors (a frame or rotor map that fits far worse than its mirror) -------------------------------
