@@ -13,7 +13,7 @@ import pytest
 from cosim.calibration import ColumnMap, read_log
 from cosim.calibration.frames import convert
 from cosim.errors import ScenarioError
-from tests.engine.test_engine_calibration import _refused
+from tests.engine.test_engine_calibration import _cli, _refused
 from tests.ulog_writer import write_ulog
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
@@ -286,3 +286,53 @@ def test_a_body_frame_stated_wrong_fits_far_worse_than_its_mirror_and_says_so(tm
         assert found[0].subject == "body" and "body = 'FRD'" in found[0].message
     else:
         assert abs(cal.fit.theta[0] - 2.0) < 1e-3
+
+
+def test_the_mirrors_of_a_map_body_and_rotors_left_right():
+    from cosim.calibration.frames import mirrors
+
+    found = {subject: m for subject, _, m in mirrors(_rotor_map())}
+    assert list(found) == ["rotors"]  # no body vector or attitude converted: no body mirror
+    assert found["rotors"].rotors.positions == ["front-left", "rear-right", "front-right", "rear-left"]
+    both = ColumnMap.from_document({"frames": FRAMES, "attitude": {"quaternion": ["a", "b", "c", "d"]}}, "map")
+    assert [(s, m.body) for s, _, m in mirrors(both)] == [("body", "FLU")]
+
+
+@pytest.mark.slow
+def test_the_plant_in_an_x_frame_calibrated_from_a_px4_ulog_through_the_command(tmp_path, capsys):
+    # the project's X plant flown with hidden values, its log written as PX4 writes one (topics, quaternion,
+    # PX4's motor order, normalized thrust), calibrated by `fnn-cosim calibrate --columns px4`
+    pytest.importorskip("pyulog")
+    import json
+
+    from cosim.calibration import read_log as read
+    from quadrotor_paper.synthetic_log import HIDDEN, fly_synthetic_log
+    from fmu_models.catalog import model
+
+    if "arm_angle" not in {v.name for v in model("Quadrotor").variables}:
+        pytest.skip("the plant has no arm_angle yet (issue 42 item 1)")
+    hidden = {**HIDDEN, "arm_angle": math.pi / 4}
+    log = read(fly_synthetic_log(tmp_path / "fly", duration=3.0, hidden=hidden))
+    s = {n: np.asarray(log.columns[f"Quadrotor.{n}"]) for n in
+         ["x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r", "Omega_1", "Omega_2", "Omega_3",
+          "Omega_4"]}
+    t_us = np.round(log.times * 1e6).astype(np.int64)
+    q = _quaternion(_euler_matrix(s["phi"], s["theta"], s["psi"]))
+    omega_max = 900.0  # the plant's default
+    thrust = np.column_stack([(s[f"Omega_{i}"] / omega_max) ** 2 for i in (1, 3, 4, 2)])  # PX4's FR, RL, FL, RR
+    path = write_ulog(tmp_path / "flight.ulg", {
+        "vehicle_local_position": (t_us, {"x": s["x"], "y": s["y"], "z": s["z"], "vx": s["u"], "vy": s["v"],
+                                          "vz": s["w"]}),
+        "vehicle_attitude": (t_us, {"q": q}),
+        "vehicle_angular_velocity": (t_us, {"xyz": np.column_stack([s["p"], s["q"], s["r"]])}),
+        "actuator_motors": (t_us, {"control": thrust})})
+    fixed = [f"--fix={k}={v!r}" for k, v in hidden.items() if k not in ("b", "Ix")]
+    out = tmp_path / "cal"
+    code = _cli("calibrate", path, "--fmu", "Quadrotor", "--columns", "px4", "--fit", "b,Ix,wind_x,wind_y",
+                *fixed, "--guess", "b=5e-6", "--guess", "Ix=0.025", "--segment", "1", "--out",
+                out, "--quiet", "--no-plots")
+    assert code == 0, capsys.readouterr().err
+    doc = json.loads((out / "calibration.json").read_text())
+    assert doc["parameters"]["b"]["value"] == pytest.approx(HIDDEN["b"], rel=1e-6)
+    assert doc["parameters"]["Ix"]["value"] == pytest.approx(HIDDEN["Ix"], rel=1e-6)
+    assert doc["resampling"].startswith("onto the 301 samples of vehicle_local_position (100 Hz)")
