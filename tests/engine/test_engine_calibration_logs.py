@@ -311,7 +311,7 @@ def test_the_plant_in_an_x_frame_calibrated_from_a_px4_ulog_through_the_command(
 
     if "arm_angle" not in {v.name for v in model("Quadrotor").variables}:
         pytest.skip("the plant has no arm_angle yet (issue 42 item 1)")
-    hidden = {**HIDDEN, "arm_angle": math.pi / 4}
+    hidden = {**HIDDEN, "arm_angle": math.pi / 4, "tau_m": 0.0}  # rotor speeds as commanded: PX4 logs no rpm here
     log = read(fly_synthetic_log(tmp_path / "fly", duration=3.0, hidden=hidden))
     s = {n: np.asarray(log.columns[f"Quadrotor.{n}"]) for n in
          ["x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r", "Omega_1", "Omega_2", "Omega_3",
