@@ -254,6 +254,9 @@ def _read_csv(path: Path, time_name: str):
             at = re.match(r"In CSV column #(\d+): Row #(\d+): (.*)", said)
             if at is not None and int(at[1]) < len(header):  # pyarrow counts columns from 0, rows from the header
                 said = f"row {int(at[2]) - 1}, column {header[int(at[1])]}: {at[3]}"
+            width = re.match(r"CSV parse error: Row #(\d+): Expected (\d+) columns, got (\d+)", said)
+            if width is not None:
+                said = f"row {int(width[1]) - 1}: {width[3]} fields for {width[2]} columns"
             raise ScenarioError(f"log {path.name}: {shown_text(said, 200)}") from None
         return {n: v if rows else (np.concatenate(v) if v else np.zeros(0)) for n, v in out.items()}
 

@@ -336,3 +336,10 @@ def test_the_plant_in_an_x_frame_calibrated_from_a_px4_ulog_through_the_command(
     assert doc["parameters"]["b"]["value"] == pytest.approx(HIDDEN["b"], rel=1e-6)
     assert doc["parameters"]["Ix"]["value"] == pytest.approx(HIDDEN["Ix"], rel=1e-6)
     assert doc["resampling"].startswith("onto the 301 samples of vehicle_local_position (100 Hz)")
+
+
+def test_a_csv_row_of_another_width_is_one_line_naming_the_row(tmp_path):
+    path = tmp_path / "w.csv"
+    path.write_text("time,x\n0,1\n0.1,2,3\n")
+    with pytest.raises(ScenarioError, match=r"^log w.csv: row 2: 3 fields for 2 columns$"):
+        read_log(path)
