@@ -138,6 +138,11 @@ class Rotors(Table):
         if len(set(self.positions)) != n:
             raise refuse(f"positions = {self.positions}: a position given twice")
         if self.signal == "speed":
+            curve = [k for k in ("pwm_min", "pwm_max", "a", "thrust_model_factor", "omega_max")
+                     if getattr(self, k) is not None]
+            if curve:
+                raise refuse(f"{', '.join(curve)}: a curve for signal = 'throttle' or 'pwm'; these columns are "
+                             f"speeds (signal = 'speed')")
             return self
         if self.signal == "pwm" and (self.pwm_min is None or self.pwm_max is None or not self.pwm_min < self.pwm_max):
             raise refuse(f"signal = 'pwm' needs pwm_min < pwm_max (given: pwm_min = {self.pwm_min}, "
