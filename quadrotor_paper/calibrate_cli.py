@@ -16,6 +16,7 @@ from .workers_option import worker_count
 __all__ = ["add_parser", "run"]
 
 DEFAULT_OUT = "results/calibration"
+COLUMN_MAPS = Path(__file__).resolve().parent / "column_maps"  # the built-in maps: --columns px4, px4-pwm
 
 
 def add_parser(sub, named_values, overrides) -> None:
@@ -45,7 +46,9 @@ def _arguments(c: argparse.ArgumentParser, named_values, overrides) -> None:
                    "(repeatable)")
     c.add_argument("--guess", action="append", default=[], metavar="K=V", help="a first guess (repeatable; default "
                    "the FMU's start value)")
-    c.add_argument("--columns", default=None, metavar="MAP.toml", help="the column map: log columns as FMU variables")
+    c.add_argument("--columns", default=None, metavar="MAP.toml|px4|px4-pwm",
+                   help="the column map: log columns as FMU variables; 'px4' ('px4-pwm'): a PX4 ULog onto the plant, "
+                        "rotor speeds from actuator_motors (actuator_outputs' PWM)")
     c.add_argument("--settings", default=None, metavar="FILE.toml", help="calibration settings (docs/calibration.md)")
     c.add_argument("--segment", type=float, default=None, metavar="S", help="shooting segment length, s")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="with --scenario: override a "
@@ -60,6 +63,12 @@ def _arguments(c: argparse.ArgumentParser, named_values, overrides) -> None:
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.add_argument("--no-plots", action="store_true", help="no figures (report.md without them)")
     c.set_defaults(named_values=named_values, overrides=overrides)
+
+
+def _column_map_file(given: str) -> Path:
+    """A built-in map's file by its name (``px4``), else the file given."""
+    builtin = COLUMN_MAPS / f"{given}.toml"
+    return builtin if "/" not in given and not given.endswith(".toml") and builtin.is_file() else Path(given)
 
 
 def run(args) -> int:
@@ -97,7 +106,7 @@ def run(args) -> int:
         update["interface"] = args.interface
     if update:
         settings = validate(CalibrationSettings, settings.model_dump(exclude_none=True) | update)
-    column_map = read_column_map(args.columns) if args.columns else None
+    column_map = read_column_map(_column_map_file(args.columns)) if args.columns else None
     out = output_folder(args.out or DEFAULT_OUT)
     fixed, extra, instance = {}, {}, None
     if args.scenario is not None:

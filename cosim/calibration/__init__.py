@@ -6,6 +6,7 @@ each:
 
 * :mod:`~cosim.calibration.columns`: the column map and the settings (the files a user writes);
 * :mod:`~cosim.calibration.log`: the log read and checked (CSV, Parquet, ULog);
+* :mod:`~cosim.calibration.frames`: the log's frames, attitude and rotors as the FMU's; the map's mirrors checked;
 * :mod:`~cosim.calibration.problem`: the FMU's variables bound to the log's columns;
 * :mod:`~cosim.calibration.segments`: multiple shooting's segments and the held-out part;
 * :mod:`~cosim.calibration.model`: the trajectories (Co-Simulation, or Model Exchange through the master's solver) and the right-hand side's Jacobians (Model Exchange);
@@ -28,8 +29,10 @@ import numpy as np
 
 from ..errors import ScenarioError
 from ..fmu_component import FmuComponent
+from ..names import nearest_told
 from .columns import CalibrationSettings, ColumnMap, read_column_map, read_settings
 from .diagnostics import Diagnostic
+from .frames import MIRROR_ITERATIONS, convert, mirror_check
 from .log import Log, read_log
 from .problem import Problem, bind_problem
 from .segments import Segment, split
@@ -88,6 +91,8 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
                                                        **settings.fix}})
     cs = _component(fmu, settings, instance)
     try:
+        read, stated = log, column_map
+        log, column_map = convert(log, column_map, lambda name: _parameter(cs, settings, name))
         states = _states(cs)
         problem = bind_problem(cs, log, settings, column_map, instance, extra_columns, states)
         model = LogModel(problem, settings.initial_parameters)
@@ -125,7 +130,31 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
             model.close()
     finally:
         cs.close()
-    return Calibration(problem, settings, segments, held_out, result, stats, residuals, prediction, instance)
+    cal = Calibration(problem, settings, segments, held_out, result, stats, residuals, prediction, instance)
+    if stated is not None and stated.mirror_check:  # the map's mirrors refitted briefly from the same guesses
+        brief = settings.model_copy(update={"max_iterations": MIRROR_ITERATIONS,
+                                            "noise": dict(zip(problem.outputs, map(float, result.sigma)))})
+        cal.diagnostics += mirror_check(result.cost, stated, lambda m: calibrate(read, fmu, brief, m, instance,
+                                                                                 extra_columns))
+    return cal
+
+
+def _parameter(cs: FmuComponent, settings: CalibrationSettings, name: str) -> float:
+    """The value of the FMU parameter ``name`` a column map names (a rotor's
+    angle, a top speed): fixed, else its start value; not a fitted one."""
+    if name in settings.fit:
+        raise ScenarioError(f"column map: names {name}, which is fitted; the log's reading cannot depend on it "
+                            f"(fix it: --fix {name}=...)")
+    if name in settings.fix:
+        return float(settings.fix[name])
+    v = cs.variables.get(name)
+    if v is None or v.causality != "parameter":
+        raise ScenarioError(f"column map: {name!r} is not a parameter of {cs.path.name}"
+                            + nearest_told(name, cs.variables))
+    try:
+        return float(v.start)
+    except (TypeError, ValueError):
+        raise ScenarioError(f"column map: {name} of {cs.path.name} has no numeric start value; fix it") from None
 
 
 def _component(fmu: str | Path, settings: CalibrationSettings, instance: str | None) -> FmuComponent:

@@ -13,15 +13,22 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Mapping
 
-from pydantic import BeforeValidator, Field, WithJsonSchema
+from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
 
 from ..errors import ScenarioError
 from ..files import read_toml
 from ..scenario_tables import Solver
-from ..schema import NonNegative, Number, Positive, Count, Table, json_schema, one_of, validate
+from ..schema import NonNegative, Number, Positive, Count, Names, Table, json_schema, one_of, refuse, validate
 
-__all__ = ["Column", "ColumnMap", "CalibrationSettings", "read_column_map", "read_settings", "INITIAL_STATES",
-           "JACOBIANS", "INTERFACES", "TOLERANCE", "calibration_schema"]
+__all__ = ["Column", "ColumnMap", "Attitude", "Frames", "Rotors", "CalibrationSettings", "read_column_map",
+           "read_settings", "INITIAL_STATES", "JACOBIANS", "INTERFACES", "TOLERANCE", "WORLDS", "BODIES",
+           "POSITIONS", "calibration_schema"]
+
+WORLDS = ("NED", "ENU")  # the log's world frame: north-east-down (the plant's, paper eqs. 10-11) or east-north-up
+BODIES = ("FRD", "FLU")  # the log's body frame: forward-right-down (the plant's) or forward-left-up
+# a rotor's place on the airframe, seen from above, by its angle from the nose towards the right (deg)
+POSITIONS = {"front": 0, "front-right": 45, "right": 90, "rear-right": 135, "rear": 180, "rear-left": 225,
+             "left": 270, "front-left": 315}
 
 INITIAL_STATES = ("recorded", "estimated")
 JACOBIANS = ("auto", "casadi", "derivatives", "differences")
@@ -49,6 +56,104 @@ _AnyColumn = Annotated[Column, BeforeValidator(_column),
                                                  Column.model_json_schema()]})]
 
 
+def _exactly(n: int, what: str):
+    def check(value: Any) -> Any:
+        if not isinstance(value, list) or len(value) != n:
+            raise refuse(f"expected a list of {n} {what}", value=value)
+        return [_column(v) for v in value]
+    return BeforeValidator(check)
+
+
+def _triples(value: Any) -> Any:
+    if not isinstance(value, list) or not all(isinstance(v, list) and len(v) == 3 and all(isinstance(n, str) for n in v)
+                                              for v in value):
+        raise refuse("expected a list of [x, y, z] name triples", value=value)
+    return value
+
+
+class Attitude(Table):
+    """``[attitude]``: the log's attitude, the rotation from its body frame to
+    its world frame (the frames ``world`` and ``body`` state), as a quaternion
+    or as Z-Y-X Euler angles (roll, pitch, yaw) of its own frames."""
+
+    quaternion: Annotated[list[_AnyColumn], _exactly(4, "columns")] = Field(
+        None, description="the quaternion's four columns in the log's order (PX4: vehicle_attitude.q[0..3])")
+    scalar: one_of(("first", "last")) = Field("first", description="where the quaternion's scalar part is among "
+                                                                      "its columns: 'first' (w, x, y, z: PX4, "
+                                                                      "Hamilton) or 'last' (x, y, z, w: ROS)")
+    euler: Annotated[list[_AnyColumn], _exactly(3, "columns")] = Field(
+        None, description="the roll, pitch and yaw columns (Z-Y-X Euler angles in the log's frames)")
+
+    @model_validator(mode="after")
+    def _one(self) -> "Attitude":
+        if (self.quaternion is None) == (self.euler is None):
+            raise refuse("give either quaternion = [4 columns] or euler = [3 columns]")
+        return self
+
+
+class Frames(Table):
+    """``[frames]``: which FMU variables are vectors of which frame, for the
+    conversion from the log's frames (the engine knows no vehicle: the map
+    names them)."""
+
+    world: Annotated[list[list[str]], BeforeValidator(_triples)] = Field(
+        default_factory=list, description="world-frame vectors of the FMU, each [x, y, z] (e.g. position, velocity)")
+    body: Annotated[list[list[str]], BeforeValidator(_triples)] = Field(
+        default_factory=list, description="body-frame vectors of the FMU, each [x, y, z] (e.g. the body rates)")
+    euler: Annotated[Names, Field(min_length=3, max_length=3)] = Field(
+        None, description="the FMU's Z-Y-X Euler angles [roll, pitch, yaw] of its body (FRD) to world (NED) rotation")
+
+
+class Rotors(Table):
+    """``[rotors]``: the log's rotor columns by where each rotor sits, matched
+    to the FMU's rotor inputs at the same places; and, where the log holds
+    throttle or PWM commands instead of speeds, the curve to rotor speed."""
+
+    columns: list[_AnyColumn] = Field(..., description="the log's rotor columns, in the log's motor order")
+    positions: list[one_of(tuple(POSITIONS))] = Field(..., description="where each of them sits: "
+                                                                       + ", ".join(POSITIONS))
+    variables: Names = Field(..., description="the FMU's rotor-speed inputs, its rotor 1 first")
+    first_angle: Number | str = Field(..., description="the angle of the FMU's first rotor from the nose towards "
+                                                       "the right, rad, or the FMU parameter that holds it; rotor "
+                                                       "i at first_angle + (i - 1) 2 pi / n")
+    signal: one_of(("speed", "throttle", "pwm")) = Field(
+        "speed", description="what the columns hold: rotor speeds (their unit), a throttle u in [0, 1], or PWM "
+                             "(u = (pwm - pwm_min) / (pwm_max - pwm_min), clipped to [0, 1])")
+    pwm_min: Number = Field(None, description="PWM of zero throttle (signal = 'pwm'; PX4: PWM_MAIN_MIN)")
+    pwm_max: Number = Field(None, description="PWM of full throttle (signal = 'pwm'; PX4: PWM_MAIN_MAX)")
+    a: Number = Field(None, description="Omega = a u + c u^2, rad/s")
+    c: Number = Field(0.0, description="Omega = a u + c u^2, rad/s")
+    thrust_model_factor: Annotated[float, Field(strict=True, ge=0, le=1)] = Field(
+        None, description="PX4's THR_MDL_FAC f: thrust ~ (1 - f) u + f u^2, so Omega = omega_max sqrt((1 - f) u + "
+                          "f u^2)")
+    omega_max: Positive | str = Field(None, description="rotor speed at full throttle, rad/s, or the FMU parameter "
+                                                        "that holds it (with thrust_model_factor)")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Rotors":
+        n = len(self.variables)
+        if len(self.columns) != n or len(self.positions) != n:
+            raise refuse(f"columns ({len(self.columns)}), positions ({len(self.positions)}) and variables ({n}) "
+                         f"must be as many")
+        if len(set(self.positions)) != n:
+            raise refuse(f"positions = {self.positions}: a position given twice")
+        if self.signal == "speed":
+            curve = [k for k in ("pwm_min", "pwm_max", "a", "thrust_model_factor", "omega_max")
+                     if getattr(self, k) is not None]
+            if curve:
+                raise refuse(f"{', '.join(curve)}: a curve for signal = 'throttle' or 'pwm'; these columns are "
+                             f"speeds (signal = 'speed')")
+            return self
+        if self.signal == "pwm" and (self.pwm_min is None or self.pwm_max is None or not self.pwm_min < self.pwm_max):
+            raise refuse(f"signal = 'pwm' needs pwm_min < pwm_max (given: pwm_min = {self.pwm_min}, "
+                         f"pwm_max = {self.pwm_max})")
+        quadratic, px4 = self.a is not None, self.thrust_model_factor is not None or self.omega_max is not None
+        if quadratic == px4 or (px4 and (self.thrust_model_factor is None or self.omega_max is None)):
+            raise refuse(f"signal = {self.signal!r} needs one curve to rotor speed: a (and c), or "
+                         f"thrust_model_factor and omega_max")
+        return self
+
+
 class ColumnMap(Table):
     """A column-map file: the log's columns as the FMU's variables."""
 
@@ -56,9 +161,22 @@ class ColumnMap(Table):
     time_unit: str = Field("s", description="the time column's unit (e.g. 'us' for PX4's microseconds)")
     topic: str = Field(None, description="ULog only: the topic whose samples are the log's instants; the other "
                                          "topics' fields are interpolated linearly onto them")
+    hold: list[str] = Field(default_factory=list, description="ULog only: topics held between their samples "
+                                                                "(zero-order: commands); the others interpolated "
+                                                                "linearly")
     columns: dict[str, _AnyColumn] = Field(default_factory=dict,
                                        description="FMU variable -> its column: a name, or a table "
-                                                   "{column, unit}")
+                                                   "{column, unit}; a vector's components in the log's frame")
+    world: one_of(WORLDS) = Field("NED", description="the log's world frame: 'NED' (north, east, down: the "
+                                                     "plant's) or 'ENU' (east, north, up)")
+    body: one_of(BODIES) = Field("FRD", description="the log's body frame: 'FRD' (forward, right, down: the "
+                                                    "plant's) or 'FLU' (forward, left, up)")
+    frames: Frames = Field(None, description="the FMU's vectors and Euler angles converted from the log's frames")
+    attitude: Attitude = Field(None, description="the log's attitude (a quaternion or Euler angles), converted "
+                                                 "to the FMU's Euler angles (frames.euler)")
+    rotors: Rotors = Field(None, description="the log's rotors by position, onto the FMU's rotor inputs")
+    mirror_check: bool = Field(True, description="after the fit, refit briefly with the body frame and the rotors "
+                                                 "mirrored, and warn when a mirror fits far better")
 
     @classmethod
     def from_document(cls, data: Mapping[str, Any], where: str) -> "ColumnMap":

@@ -4,7 +4,9 @@ Readers (by the file's suffix): a CSV (the project's results, whose sidecar
 ``<file>.json`` gives the columns' units, or any CSV with a header), a
 Parquet file (pyarrow; a field's ``unit`` metadata is its unit) and a PX4
 ULog (``.ulg``, through the optional ``pyulog``: columns ``topic.field``,
-every topic interpolated onto the instants of the column map's ``topic``).
+the topics the column map names resampled onto one time base). A CSV's or
+Parquet file's columns are read when used, only those (pyarrow, columnar):
+a log's memory is that of the columns used, not the file's.
 
 Every column the calibration uses is checked, and the time: a NaN or an
 infinite value, a time that repeats or goes back, and a gap (a step more
@@ -15,33 +17,84 @@ file, the row (1 = the first data row) and the column
 from __future__ import annotations
 
 import csv
-import io
 import json
-from dataclasses import dataclass, field
+import re
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from ..errors import ConnectionCheckError, ScenarioError, shown_text
 from ..files import read_text, regular_file
-from ..limits import MAX_TABLE_BYTES
 from .. import units as _units
 
-__all__ = ["Log", "read_log", "GAP_FACTOR"]
+__all__ = ["Log", "Columns", "read_log", "GAP_FACTOR"]
 
 GAP_FACTOR = 1.5  # a step longer than this many median steps is a gap
 
 
+class Columns(Mapping[str, np.ndarray]):
+    """A log's columns by name, each read from the file when first used:
+    the memory a log takes is that of the columns a calibration uses, not
+    the file's (issue 42 item 5). ``load(names)`` reads several in one pass;
+    ``derived`` columns (frames converted, :mod:`~cosim.calibration.frames`)
+    are held as given."""
+
+    def __init__(self, names: Sequence[str], read: Callable[[list[str]], dict[str, np.ndarray]],
+                 derived: Mapping[str, np.ndarray] | None = None):
+        self._names = list(dict.fromkeys([*names, *(derived or {})]))
+        self._read = read
+        self._held: dict[str, np.ndarray] = dict(derived or {})
+
+    def load(self, names: Sequence[str]) -> None:
+        missing = [n for n in dict.fromkeys(names) if n not in self._held and n in self._names]
+        if missing:
+            self._held.update(self._read(missing))
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._held:
+            if name not in self._names:
+                raise KeyError(name)
+            self.load([name])
+        return self._held[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __contains__(self, name) -> bool:
+        return name in self._names
+
+    def rows(self, keep: np.ndarray) -> "Columns":
+        """The same columns, each at the rows ``keep`` (a mask) only."""
+        def read(names):
+            self.load(names)
+            return {n: self._held[n][keep] for n in names}
+        return Columns(self._names, read)
+
+    def adding(self, derived: Mapping[str, np.ndarray]) -> "Columns":
+        """These columns and ``derived`` (name -> values, one a row)."""
+        def read(names):
+            self.load(names)
+            return {n: self._held[n] for n in names}
+        return Columns(self._names, read, derived)
+
+
 @dataclass(frozen=True, eq=False)
 class Log:
-    """``times`` (s) and ``columns`` (name -> float array, one value a row)
-    with their ``units`` (name -> unit, ``""`` when the log says none)."""
+    """``times`` (s) and ``columns`` (name -> float array, one value a row,
+    read when used: :class:`Columns`) with their ``units`` (name -> unit,
+    ``""`` when the log says none); ``resampling``: how a log of several
+    rates was put on one time base (a ULog), for the report, else ``None``."""
 
     path: Path
     times: np.ndarray
-    columns: dict[str, np.ndarray]
+    columns: Mapping[str, np.ndarray]
     units: dict[str, str] = field(default_factory=dict)
+    resampling: str | None = None
 
     @property
     def step(self) -> float:
@@ -49,6 +102,14 @@ class Log:
 
     def where(self) -> str:
         return f"log {self.path.name}"
+
+    def no_column(self, name: str, what: str) -> ScenarioError:
+        """The one line for a column ``name`` the log lacks, named for ``what``."""
+        from ..names import nearest_told
+
+        return ScenarioError(f"{self.where()}: no column {name!r} (named by the column map for {what})"
+                             + (nearest_told(name, self.columns)
+                                or f"; its columns: {shown_text(', '.join(self.columns), 200)}"))
 
     def window(self, start: float | None, stop: float | None) -> "Log":
         """The rows with ``start <= t <= stop`` (within 1e-9 s)."""
@@ -59,7 +120,9 @@ class Log:
             keep &= self.times <= stop + 1e-9
         if keep.sum() < 2:
             raise ScenarioError(f"{self.where()}: fewer than 2 rows between start {start} and stop {stop}")
-        return Log(self.path, self.times[keep], {k: v[keep] for k, v in self.columns.items()}, self.units)
+        columns = self.columns.rows(keep) if isinstance(self.columns, Columns) else \
+            {k: v[keep] for k, v in self.columns.items()}
+        return replace(self, times=self.times[keep], columns=columns)
 
     def check(self, names: Sequence[str]) -> None:
         """Refuse the time or a column of ``names`` the calibration cannot use (module docstring)."""
@@ -82,6 +145,8 @@ class Log:
                 i = int(gaps[0]) + 1
                 raise ScenarioError(f"{where}: row {i + 1}, column time: a gap of {steps[i - 1]:g} s after "
                                     f"t = {float(t[i - 1])!r} (the log's step is {median:g} s)")
+        if isinstance(self.columns, Columns):
+            self.columns.load(names)  # one pass over the file for them all
         for name in names:
             values = self.columns[name]
             bad = np.flatnonzero(~np.isfinite(values))
@@ -93,15 +158,18 @@ class Log:
 def read_log(path: str | Path, column_map=None) -> Log:
     """The log at ``path`` with the time column of ``column_map``
     (:class:`~cosim.calibration.columns.ColumnMap`; default ``time`` in s),
-    its time converted to s. Values are not yet checked (:meth:`Log.check`)."""
+    its time converted to s. Only the header is read here; a column is read
+    when used (:class:`Columns`). Two columns of one name are refused in one
+    line. Values are not yet checked (:meth:`Log.check`)."""
     path = Path(path)
     regular_file(path, "log")
     suffix = path.suffix.lower()
     time_name = column_map.time if column_map is not None else "time"
+    resampling = None
     if suffix == ".parquet":
         times, columns, units = _read_parquet(path, time_name)
     elif suffix == ".ulg":
-        times, columns, units = _read_ulog(path, column_map)
+        times, columns, units, resampling = _read_ulog(path, column_map)
     else:
         times, columns, units = _read_csv(path, time_name)
     time_unit = column_map.time_unit if column_map is not None else (units.pop(time_name, "") or "s")
@@ -112,7 +180,7 @@ def read_log(path: str | Path, column_map=None) -> Log:
         except ConnectionCheckError as exc:
             raise ScenarioError(f"log {path.name}: time unit {time_unit!r}: {exc}") from None
         times = times * factor + offset
-    return Log(path, times, columns, units)
+    return Log(path, times, columns, units, resampling)
 
 
 def _missing_time(path: Path, time_name: str, names) -> ScenarioError:
@@ -120,28 +188,83 @@ def _missing_time(path: Path, time_name: str, names) -> ScenarioError:
                          f"{shown_text(', '.join(names), 200)} (name it with 'time' in --columns)")
 
 
+def _unique(path: Path, names: Sequence[str]) -> None:
+    from ..files import repeated
+
+    twice = repeated(list(names))
+    if twice is not None:  # which of the two would the calibration read? neither, silently
+        raise ScenarioError(f"log {path.name}: two columns named {twice!r}; each name at most once")
+
+
+def _floats(column) -> np.ndarray:
+    """A pyarrow column as floats: numbers as they are, a null as NaN, text
+    parsed where it is a number and NaN elsewhere (refused only if used)."""
+    import pyarrow as pa
+
+    if pa.types.is_integer(column.type) or pa.types.is_floating(column.type) or pa.types.is_boolean(column.type) \
+            or pa.types.is_null(column.type):
+        return column.to_numpy(zero_copy_only=False).astype(float)
+    out = np.full(len(column), np.nan)
+    for i, value in enumerate(column.to_pylist()):
+        try:
+            out[i] = float(value)
+        except (TypeError, ValueError):
+            pass
+    return out
+
+
 def _read_csv(path: Path, time_name: str):
-    text = read_text(path, "log", limit=MAX_TABLE_BYTES)
-    reader = csv.reader(io.StringIO(text, newline=""))
-    try:
-        header = [h.strip() for h in next(reader)]
-    except StopIteration:
-        raise ScenarioError(f"log {path.name}: empty") from None
+    """Its header now; its columns when used, by pyarrow's CSV reader with
+    only those columns kept (``include_columns``), the file read in blocks."""
+    with open(path, newline="", encoding="utf-8", errors="replace") as f:
+        try:
+            raw = next(csv.reader(f))
+        except StopIteration:
+            raise ScenarioError(f"log {path.name}: empty") from None
+    header = [h.strip() for h in raw]
+    _unique(path, header)
     if time_name not in header:
         raise _missing_time(path, time_name, header)
-    rows = [r for r in reader if r]
-    if not rows:
+    raw_of = dict(zip(header, raw))
+
+    rows: list[int] = []
+
+    def read(names: list[str]) -> dict[str, np.ndarray]:
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+
+        # streamed in blocks, only these columns parsed as floats: the memory is the columns', not the file's
+        options = pcsv.ConvertOptions(include_columns=[raw_of[n] for n in names],
+                                      column_types={raw_of[n]: pa.float64() for n in names})
+        # the rows are known once the time is read: each column then filled in place, block by block
+        out = {n: np.empty(rows[0]) for n in names} if rows else {n: [] for n in names}
+        at = 0
+        try:
+            for batch in pcsv.open_csv(path, read_options=pcsv.ReadOptions(block_size=1 << 20, use_threads=False),
+                                       convert_options=options):
+                for n in names:
+                    block = batch.column(raw_of[n]).to_numpy(zero_copy_only=False)
+                    if rows:
+                        out[n][at:at + block.size] = block
+                    else:
+                        out[n].append(block)
+                at += batch.num_rows
+        except (pa.ArrowInvalid, OSError, ValueError) as exc:  # a row of other width, a text value, not text
+            said = str(exc).splitlines()[0]
+            at = re.match(r"In CSV column #(\d+): Row #(\d+): (.*)", said)
+            if at is not None and int(at[1]) < len(header):  # pyarrow counts columns from 0, rows from the header
+                said = f"row {int(at[2]) - 1}, column {header[int(at[1])]}: {at[3]}"
+            width = re.match(r"CSV parse error: Row #(\d+): Expected (\d+) columns, got (\d+)", said)
+            if width is not None:
+                said = f"row {int(width[1]) - 1}: {width[3]} fields for {width[2]} columns"
+            raise ScenarioError(f"log {path.name}: {shown_text(said, 200)}") from None
+        return {n: v if rows else (np.concatenate(v) if v else np.zeros(0)) for n, v in out.items()}
+
+    columns = Columns([h for h in header if h != time_name], read)
+    times = read([time_name])[time_name]
+    if times.size == 0:
         raise ScenarioError(f"log {path.name}: no rows after the header")
-    data = np.full((len(rows), len(header)), np.nan)
-    for i, row in enumerate(rows, start=1):
-        if len(row) != len(header):
-            raise ScenarioError(f"log {path.name}: row {i}: {len(row)} fields for {len(header)} columns")
-        for j, text_value in enumerate(row):
-            text_value = text_value.strip()
-            try:
-                data[i - 1, j] = float(text_value) if text_value else np.nan
-            except ValueError:
-                data[i - 1, j] = np.nan  # a text column; refused only if the calibration uses it
+    rows.append(times.size)
     units: dict[str, str] = {}
     sidecar = path.with_name(path.name + ".json")  # the project's results: columns, units (cosim.recorder)
     if sidecar.is_file():
@@ -150,35 +273,58 @@ def _read_csv(path: Path, time_name: str):
             units = {c: u for c, u in zip(meta.get("columns", []), meta.get("units", [])) if isinstance(u, str)}
         except (ValueError, AttributeError, TypeError):
             units = {}
-    columns = {name: data[:, j] for j, name in enumerate(header) if name != time_name}
-    return data[:, header.index(time_name)], columns, units
-
-
-def _read_parquet(path: Path, time_name: str):
-    import pyarrow.parquet as pq
-
-    try:
-        table = pq.read_table(path)
-    except Exception as exc:  # pyarrow's errors are many types: the file is no Parquet we can read
-        raise ScenarioError(f"log {path.name}: not a Parquet file pyarrow reads ({shown_text(str(exc), 200)})") \
-            from None
-    names = table.column_names
-    if time_name not in names:
-        raise _missing_time(path, time_name, names)
-    units, columns = {}, {}
-    for f in table.schema:
-        unit = (f.metadata or {}).get(b"unit")
-        if unit:
-            units[f.name] = unit.decode()
-        try:
-            columns[f.name] = table.column(f.name).to_numpy(zero_copy_only=False).astype(float)
-        except (TypeError, ValueError, Exception):  # a text column: unusable, refused if used
-            columns[f.name] = np.full(table.num_rows, np.nan)
-    times = columns.pop(time_name)
     return times, columns, units
 
 
+def _read_parquet(path: Path, time_name: str):
+    """Its schema now; its columns when used (Parquet is columnar: a column
+    read is that column's pages only)."""
+    import pyarrow.parquet as pq
+
+    def failed(exc) -> ScenarioError:
+        return ScenarioError(f"log {path.name}: not a Parquet file pyarrow reads ({shown_text(str(exc), 200)})")
+
+    try:
+        schema = pq.read_schema(path)
+    except Exception as exc:  # pyarrow's errors are many types: the file is no Parquet we can read
+        raise failed(exc) from None
+    names = schema.names
+    _unique(path, names)
+    if time_name not in names:
+        raise _missing_time(path, time_name, names)
+    units = {}
+    for f in schema:
+        unit = (f.metadata or {}).get(b"unit")
+        if unit:
+            units[f.name] = unit.decode()
+
+    def read(wanted: list[str]) -> dict[str, np.ndarray]:
+        try:
+            table = pq.read_table(path, columns=wanted)
+        except Exception as exc:
+            raise failed(exc) from None
+        return {n: _floats(table.column(n)) for n in wanted}
+
+    times = read([time_name])[time_name]
+    return times, Columns([n for n in names if n != time_name], read), units
+
+
+def _ulog_topics(column_map) -> set[str]:
+    """The topics a column map's columns name (``topic.field``)."""
+    named = [c.column for c in column_map.columns.values()]
+    if column_map.attitude is not None:
+        named += [c.column for c in (column_map.attitude.quaternion or column_map.attitude.euler)]
+    if column_map.rotors is not None:
+        named += [c.column for c in column_map.rotors.columns]
+    return {n.split(".", 1)[0] for n in named if "." in n} | {column_map.topic}
+
+
 def _read_ulog(path: Path, column_map):
+    """The topics the column map names, each at its own rate, resampled onto
+    one time base (docs/calibration.md, "PX4 ULog"): the instants of the
+    map's ``topic`` within the span every used topic covers (no
+    extrapolation), the ``hold`` topics held from their last sample
+    (zero-order: commands), the others interpolated linearly."""
     try:
         from pyulog import ULog
     except ImportError:
@@ -187,24 +333,45 @@ def _read_ulog(path: Path, column_map):
     if column_map is None or not column_map.topic:
         raise ScenarioError(f"log {path.name}: a ULog needs a column map (--columns) naming its 'topic', whose "
                             f"samples are the log's instants")
-    try:
-        ulog = ULog(str(path))
-    except Exception as exc:  # pyulog raises many types on a file that is not a ULog
-        raise ScenarioError(f"log {path.name}: not a ULog pyulog reads ({shown_text(str(exc), 200)})") from None
+    wanted = _ulog_topics(column_map)
+
+    def parse(only):
+        try:
+            return ULog(str(path), only)  # only the topics used are parsed and kept
+        except Exception as exc:  # pyulog raises many types on a file that is not a ULog
+            raise ScenarioError(f"log {path.name}: not a ULog pyulog reads ({shown_text(str(exc), 200)})") from None
+
     topics = {}
-    for d in ulog.data_list:
-        topics.setdefault(d.name, d)  # the first instance of a topic (multi-instance topics: instance 0)
-    if column_map.topic not in topics:
-        raise ScenarioError(f"log {path.name}: no topic {column_map.topic!r}; its topics: "
-                            f"{shown_text(', '.join(sorted(topics)), 200)}")
-    base = topics[column_map.topic].data["timestamp"].astype(float)
+    for d in parse(sorted(wanted)).data_list:
+        if d.name in wanted:
+            topics.setdefault(d.name, d)  # the first instance of a topic (multi-instance topics: instance 0)
+    missing = sorted(wanted - set(topics))
+    if missing:
+        present = sorted({d.name for d in parse(None).data_list})
+        raise ScenarioError(f"log {path.name}: no topic {missing[0]!r} (named by the column map); its topics: "
+                            f"{shown_text(', '.join(present), 300)}")
+    stamps = {name: d.data["timestamp"].astype(float) for name, d in topics.items()}
+    lo, hi = max(t[0] for t in stamps.values()), min(t[-1] for t in stamps.values())
+    base = stamps[column_map.topic]
+    base = base[(base >= lo) & (base <= hi)]
+    if base.size < 2:
+        raise ScenarioError(f"log {path.name}: the topics {', '.join(sorted(topics))} overlap in fewer than 2 "
+                            f"samples of {column_map.topic!r}")
+    held = sorted(set(column_map.hold) & set(topics))
     columns = {}
     for name, d in topics.items():
-        t = d.data["timestamp"].astype(float)
+        t = stamps[name]
+        last = np.searchsorted(t, base, side="right") - 1  # the sample at or before each instant
         for fname, values in d.data.items():
             if fname == "timestamp":
                 continue
             v = np.asarray(values, dtype=float)
-            columns[f"{name}.{fname}"] = v if name == column_map.topic else np.interp(base, t, v)
+            columns[f"{name}.{fname}"] = v[last] if name in held else np.interp(base, t, v)
+    rate = (base.size - 1) / (base[-1] - base[0]) * 1e6 if column_map.time_unit == "us" else None
+    resampling = (f"onto the {base.size} samples of {column_map.topic}"
+                  + (f" ({rate:.4g} Hz)" if rate else "")
+                  + f" within the span all of {', '.join(sorted(topics))} cover; "
+                  + (f"{', '.join(held)} held (zero-order), " if held else "")
+                  + "the others interpolated linearly")
     # ULog's time is microseconds: the column map's time_unit says so ("us")
-    return base, columns, {}
+    return base, columns, {}, resampling

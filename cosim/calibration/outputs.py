@@ -51,7 +51,8 @@ def calibration_document(cal, log_path: str, fmu_path: str) -> dict:
         }
     corr = [[_num(v) for v in row] for row in st.correlation]
     doc = {
-        "log": str(log_path), "fmu": str(fmu_path), "instance": cal.instance, "interface": p.fmu.interface,
+        "log": str(log_path), "resampling": p.log.resampling,  # a ULog's topics put on one time base, else null
+        "fmu": str(fmu_path), "instance": cal.instance, "interface": p.fmu.interface,
         "solver": _solver(p.fmu),
         "parameters": params,
         "correlation": {"names": list(p.fit), "matrix": corr},

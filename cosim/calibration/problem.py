@@ -87,8 +87,7 @@ def _columns_of(log: Log, fmu, column_map, instance: str | None, extra: Mapping[
                 raise ScenarioError(f"column map: {name!r} is not a variable of {fmu.path.name}"
                                     + nearest_told(name, fmu.variables))
             if col.column not in log.columns:
-                raise ScenarioError(f"{where}: no column {col.column!r} (named by the column map for {name}); "
-                                    f"its columns: {shown_text(', '.join(log.columns), 200)}")
+                raise log.no_column(col.column, name)
             found[name] = (col.column, col.unit)
     for name, column in extra.items():  # e.g. a scenario's connections: input -> the source's column
         if name not in found and column in log.columns:
