@@ -3,12 +3,45 @@ not fit the log (docs/calibration.md, "Warnings").
 
 Each check gives a :class:`Diagnostic`; ``report.md`` opens with them, the
 command prints them on stderr, and ``--strict`` turns any into exit status 1.
+The checks, each with its fixed ``kind``:
+
+* ``residuals-not-white``: an output whose residuals fail the Ljung-Box
+  test (:func:`~cosim.calibration.statistics.whiteness`) at
+  ``whiteness_level`` divided by the number of outputs (Bonferroni). A model
+  that misses a term leaves its error in the residuals, slow and
+  correlated; so does a logger that resampled or filtered its noise (a
+  noise spectrum that is not white), and the message says both. The
+  intervals are then the robust (sandwich) ones.
+* ``held-out-error``: the held-out part's prediction RMS above
+  ``held_out_factor`` times the output's noise level (a correct model
+  predicts it to about the noise: RMS about ``sigma``).
+* ``jacobian-error``: the central differences' error estimate (``h``
+  against ``2 h``) above :data:`JACOBIAN_ERROR` of the Jacobian's largest
+  entry: a state event or a step-size change inside the difference step;
+  the standard errors, computed from that Jacobian, are then not to be
+  trusted.
+* ``at-bound``: an estimate at its bound (reported with its value, no
+  interval: :mod:`~cosim.calibration.statistics`).
+* ``unmatched-column``: a column meant for the FMU that fed nothing: a
+  column-map entry whose variable is neither an input, an output nor a
+  state; or, without a map, a column that carries the instance's prefix
+  (``<instance>.<name>``, the project's results), or no prefix at all and a
+  name close to an input, output or state (:func:`cosim.names.nearest`),
+  but names none. Other components' columns (``controller.u``) and
+  unrelated names are not the FMU's and are not reported.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Diagnostic"]
+import numpy as np
+
+from ..names import base_variable, nearest, split_variable
+
+__all__ = ["Diagnostic", "diagnose", "JACOBIAN_ERROR", "KINDS"]
+
+JACOBIAN_ERROR = 1e-2  # central differences agree with their 2h twin to ~h^2 (1e-10 relative); 1 % is a kink
+KINDS = ("residuals-not-white", "held-out-error", "jacobian-error", "at-bound", "unmatched-column")
 
 
 @dataclass(frozen=True)
@@ -21,3 +54,108 @@ class Diagnostic:
     kind: str
     message: str
     subject: str | None = None
+
+
+def diagnose(cal, column_map=None) -> list[Diagnostic]:
+    """The warnings of the calibration ``cal`` (module docstring), in the
+    order of :data:`KINDS`; ``column_map``: the one the log was read with."""
+    return (_whiteness(cal) + _held_out(cal) + _jacobian(cal) + _at_bound(cal)
+            + _unmatched(cal, column_map))
+
+
+def _whiteness(cal) -> list[Diagnostic]:
+    level = cal.settings.whiteness_level / max(len(cal.problem.outputs), 1)
+    out = []
+    for o, r in cal.residuals.items():
+        lb = r.get("ljung_box")
+        if lb is not None and lb["p_value"] < level:
+            out.append(Diagnostic("residuals-not-white",
+                                  f"residuals of {o} are not white: Ljung-Box Q = {lb['q']:.4g} over {lb['lags']} "
+                                  f"lags, p = {lb['p_value']:.3g} < {level:.3g} (lag-1 autocorrelation "
+                                  f"{r['lag1_autocorrelation']:.3f}): the model misses something the log holds, or "
+                                  f"the log's noise is not white (resampled or filtered by its logger); intervals "
+                                  f"from the robust (sandwich) covariance", o))
+    return out
+
+
+def _held_out(cal) -> list[Diagnostic]:
+    if cal.prediction is None:
+        return []
+    factor = cal.settings.held_out_factor
+    out = []
+    for o, rms, sigma in zip(cal.problem.outputs, cal.prediction["rms"], cal.fit.sigma):
+        if rms > factor * sigma:
+            out.append(Diagnostic("held-out-error",
+                                  f"the held-out prediction of {o} is off by RMS {rms:.4g}, {rms / sigma:.3g} times "
+                                  f"its noise level {sigma:.4g} (more than {factor:g}): the model does not predict "
+                                  f"what it was not fitted to", o))
+    return out
+
+
+def _jacobian(cal) -> list[Diagnostic]:
+    f = cal.fit
+    if not f.method.startswith("central differences") or not f.error_estimate:
+        return []
+    largest = float(np.max(np.abs(f.jacobian), initial=0.0))
+    if largest > 0 and f.error_estimate > JACOBIAN_ERROR * largest:
+        return [Diagnostic("jacobian-error",
+                           f"the Jacobian's error estimate {f.error_estimate:.3g} (steps h against 2h) is "
+                           f"{f.error_estimate / largest:.3g} of its largest entry {largest:.3g} (more than "
+                           f"{JACOBIAN_ERROR:g}): an event or a solver's step inside the difference step; standard "
+                           f"errors and intervals from it are not to be trusted")]
+    return []
+
+
+def _at_bound(cal) -> list[Diagnostic]:
+    st, p = cal.stats, cal.problem
+    if st.at_bound is None:
+        return []
+    out = []
+    for j, name in enumerate(p.fit):
+        if st.at_bound[j]:
+            v = float(cal.fit.theta[j])
+            which, b = ("lower", p.lower[j]) if abs(v - p.lower[j]) <= abs(v - p.upper[j]) else ("upper", p.upper[j])
+            out.append(Diagnostic("at-bound", f"{name} = {v:.6g} is at its {which} bound {b:g}: the best fit "
+                                              f"within the bounds, without an interval (widen the bound, or fix "
+                                              f"{name})", name))
+    return out
+
+
+def _unmatched(cal, column_map) -> list[Diagnostic]:
+    p = cal.problem
+    fmu = p.fmu
+    variables = fmu.variables
+    wanted = [v.name for v in fmu.inputs] + [v.name for v in fmu.outputs] + list(p.states)
+    used = set(wanted)
+    out = []
+    if column_map is not None:
+        for name, col in column_map.columns.items():
+            if base_variable(name, variables) not in used and name not in used:
+                v = variables[name]
+                out.append(Diagnostic("unmatched-column",
+                                      f"column {col.column} (mapped to {name}, a {v.causality}) feeds no input, "
+                                      f"output or state of {fmu.path.name}" + _near(name, wanted), col.column))
+        return out
+    matched = [c for c in p.log.columns if c in variables]
+    prefixes = {cal.instance} if cal.instance else set()
+    for c in p.log.columns:
+        split = split_variable(c, variables)
+        if split is not None and split[1] in p.inputs + p.outputs:
+            prefixes.add(split[0])
+    for c in p.log.columns:
+        if c in variables or c in matched:
+            continue
+        head, dot, rest = c.partition(".")
+        if dot and head in prefixes:
+            if split_variable(c, variables) is None and base_variable(rest, variables) not in variables:
+                out.append(Diagnostic("unmatched-column", f"column {c} names no variable of {fmu.path.name}"
+                                                          + (_near(rest, wanted) or " (not fitted)"), c))
+        elif not dot and nearest(c, wanted, 1) and base_variable(c, variables) not in variables:
+            out.append(Diagnostic("unmatched-column", f"column {c} names no variable of {fmu.path.name} and was not "
+                                                      f"fitted" + _near(c, wanted), c))
+    return out
+
+
+def _near(name: str, names) -> str:
+    close = nearest(name, names)
+    return f"; nearest: {', '.join(close)}" if close else ""
