@@ -187,3 +187,11 @@ def test_the_robust_standard_error_grows_by_the_ar1_factor():
                         segment_rows=[n // 2, n // 2])
         ratios.append(st.std_robust[0] / st.std[0])
     assert np.mean(ratios) == pytest.approx(np.sqrt((1 + rho) / (1 - rho)), rel=0.08)
+
+
+def test_a_noise_free_log_the_model_meets_to_round_off_does_not_warn():
+    # the published output is the FMU's own run: residuals of 1e-16, correlated round-off, no misfit
+    cal = calibrate(REFERENCE / "results" / "Dahlquist_out.csv", DAHLQUIST,
+                    CalibrationSettings(fit=["k"], guess={"k": 0.5}))
+    assert cal.residuals["x"]["rms"] < 1e-12 and cal.diagnostics == []
+    assert cal.stats.covariance == "classical"
