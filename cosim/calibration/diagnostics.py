@@ -27,7 +27,8 @@ The checks, each with its fixed ``kind``:
 * ``unmatched-column``: a column meant for the FMU that fed nothing: a
   column-map entry whose variable is neither an input, an output nor a
   state; or, without a map, a column that carries the instance's prefix
-  (``<instance>.<name>``, the project's results), or no prefix at all and a
+  (``<instance>.<name>``, the project's results: the instance given, or
+  the prefix that names the most of the FMU's variables), or no prefix at all and a
   name close to an input, output or state (:func:`cosim.names.nearest`),
   but names none. Other components' columns (``controller.u``) and
   unrelated names are not the FMU's and are not reported.
@@ -39,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..names import base_variable, nearest, split_variable
+from .problem import log_instance
 
 __all__ = ["Diagnostic", "diagnose", "JACOBIAN_ERROR", "KINDS"]
 
@@ -146,17 +148,12 @@ def _unmatched(cal, column_map) -> list[Diagnostic]:
                                       f"column {col.column} (mapped to {name}, a {v.causality}) feeds no input, "
                                       f"output or state of {fmu.path.name}" + _near(name, wanted), col.column))
         return out
-    matched = [c for c in p.log.columns if c in variables]
-    prefixes = {cal.instance} if cal.instance else set()
+    instance = cal.instance or log_instance(p.log, variables)
     for c in p.log.columns:
-        split = split_variable(c, variables)
-        if split is not None and split[1] in p.inputs + p.outputs:
-            prefixes.add(split[0])
-    for c in p.log.columns:
-        if c in variables or c in matched:
+        if c in variables:
             continue
         head, dot, rest = c.partition(".")
-        if dot and head in prefixes:
+        if dot and head == instance:
             if split_variable(c, variables) is None and base_variable(rest, variables) not in variables:
                 out.append(Diagnostic("unmatched-column", f"column {c} names no variable of {fmu.path.name}"
                                                           + (_near(rest, wanted) or " (not fitted)"), c))

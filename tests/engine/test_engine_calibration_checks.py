@@ -117,7 +117,10 @@ def test_a_misspelt_output_column_is_named_with_the_nearest_variables_other_comp
     from fmpy import simulate_fmu
 
     r = simulate_fmu(str(VAN_DER_POL), stop_time=2.0, output_interval=0.01)
-    columns = {"vdp.x0": r["x0"], "vdp.x_1": r["x1"], "controller.u": r["x1"], "battery": r["x1"]}
+    # controller.x1: another component's column named as one of the FMU's variables (a connection's source);
+    # vdp.mu: a parameter recorded, a variable of the FMU (vdp names the most of them: the instance)
+    columns = {"vdp.x0": r["x0"], "vdp.x_1": r["x1"], "vdp.mu": np.ones(r.size), "controller.x1": r["x1"],
+               "controller.u": r["x1"], "battery": r["x1"]}
     cal = calibrate(_log(tmp_path / "log.csv", r["time"], columns), VAN_DER_POL,
                     CalibrationSettings(fit=["mu"], guess={"mu": 1.2}))
     assert cal.problem.outputs == ["x0"]  # fitted on the other column
