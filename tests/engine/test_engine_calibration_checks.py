@@ -198,3 +198,15 @@ def test_a_noise_free_log_the_model_meets_to_round_off_does_not_warn():
                     CalibrationSettings(fit=["k"], guess={"k": 0.5}))
     assert cal.residuals["x"]["rms"] < 1e-12 and cal.diagnostics == []
     assert cal.stats.covariance == "classical"
+
+
+def test_a_column_map_entry_that_feeds_no_input_output_or_state_warns(tmp_path):
+    from cosim.calibration import read_column_map
+
+    src = np.loadtxt(REFERENCE / "results" / "Dahlquist_out.csv", delimiter=",", skiprows=1)
+    log = _log(tmp_path / "log.csv", src[:, 0], {"x": src[:, 1], "gain": np.ones(len(src))})
+    (tmp_path / "map.toml").write_text('[columns]\nx = "x"\nk = "gain"\n')  # k: a parameter, not an output
+    cal = calibrate(log, DAHLQUIST, CalibrationSettings(fit=["k"], guess={"k": 0.5}),
+                    read_column_map(tmp_path / "map.toml"))
+    (d,) = cal.diagnostics
+    assert d.kind == "unmatched-column" and d.subject == "gain" and "mapped to k, a parameter" in d.message
