@@ -101,7 +101,6 @@ def statistics(names, theta: np.ndarray, J: np.ndarray, residuals: np.ndarray, s
     free = ~bound
     st = _statistics([n for n, f in zip(names, free) if f], theta[free], J[:, free], residuals, state_blocks,
                      n_states_estimated + int(bound.sum()), tolerance, n_outputs, segment_rows)
-    nan = np.full(p, np.nan)
 
     def grown(a, fill, square=False):
         out = np.full((p, p) if square else (p,) + a.shape[1:], fill, dtype=a.dtype)
@@ -174,11 +173,6 @@ def _segment_rows(n_rows: int, state_blocks, segment_rows) -> list[tuple[int, in
         out.append((start, start + n, block))
         start += n
     return out
-
-
-def _lag1(c: np.ndarray) -> float:
-    d = float(c @ c)
-    return float(c[:-1] @ c[1:] / d) if d > 0 and c.size > 1 else 0.0
 
 
 def _long_run_variance(J: np.ndarray, residuals: np.ndarray, state_blocks, n_outputs: int, segment_rows):
