@@ -56,7 +56,7 @@ def main() -> None:
             cal = calibrate(path, FMU, CalibrationSettings(fit=["k"], guess={"k": 0.5}, initial_states="estimated"))
             st = cal.stats
             robust = st.covariance == "robust"
-            std_c, std_r = (st.std_robust[0], st.std[0]) if robust else (st.std[0], st.std_robust[0])
+            std_c, std_r = st.std_classical[0], st.std_robust[0]
             k = float(cal.fit.theta[0])
             half = (st.ci95[0, 1] - st.ci95[0, 0]) / 2 / st.std[0]  # t(0.975, dof)
             hit = {"classical": abs(k - 1.0) <= half * std_c, "robust": abs(k - 1.0) <= half * std_r}
@@ -64,7 +64,8 @@ def main() -> None:
                 covered[key] += hit[key]
             ratios.append(std_r / std_c)
             warned += robust
-            print(f"seed {seed:3d}: k = {k:.6f}  std classical {std_c:.3g} ({'covers' if hit['classical'] else 'misses'})"
+            print(f"seed {seed:3d}: k = {k:.6f}  std classical {std_c:.3g} "
+                  f"({'covers' if hit['classical'] else 'misses'})"
                   f"  robust {std_r:.3g} ({'covers' if hit['robust'] else 'misses'})"
                   f"  {'warned' if robust else 'white'}")
     n = args.seeds

@@ -96,11 +96,15 @@ def _whiteness(cal) -> list[Diagnostic]:
             continue
         if lb is not None and lb["p_value"] < level:            out.append(Diagnostic("residuals-not-white",
                                   f"residuals of {o} are not white: Ljung-Box Q = {lb['q']:.4g} over {lb['lags']} "
-                                  f"lags, p = {lb['p_value']:.3g} < {level:.3g} (lag-1 autocorrelation "
+                                  f"lags, {_p(lb['p_value'])} < {level:.3g} (lag-1 autocorrelation "
                                   f"{r['lag1_autocorrelation']:.3f}): the model misses something the log holds, or "
                                   f"the log's noise is not white (resampled or filtered by its logger); intervals "
                                   f"from the robust (sandwich) covariance", o))
     return out
+
+
+def _p(value: float) -> str:
+    return f"p = {value:.3g}" if value > 0 else "p < 1e-300"  # chdtrc underflows to 0 below ~1e-308
 
 
 def _held_out(cal) -> list[Diagnostic]:

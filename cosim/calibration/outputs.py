@@ -43,19 +43,17 @@ def _num(v) -> float | None:
 def calibration_document(cal, log_path: str, fmu_path: str) -> dict:
     p, f, st = cal.problem, cal.fit, cal.stats
     params = {}
-    robust = st.covariance == "robust"
     for j, name in enumerate(p.fit):
         bound = _bound_of(cal, j)
         ok = bool(st.identifiable[j]) and bound is None
-        classical, sandwich = (st.std_robust, st.std) if robust else (st.std, st.std_robust)
         params[name] = {
             "value": _num(f.theta[j]) if ok or bound is not None else None,
             "std": _num(st.std[j]) if ok else None,
             "ci95": [_num(st.ci95[j, 0]), _num(st.ci95[j, 1])] if ok else None,
             "identifiable": ok if bound is None else None,
             "at_bound": bound,
-            "std_classical": _num(classical[j]) if ok else None,
-            "std_robust": _num(sandwich[j]) if ok and sandwich is not None else None,
+            "std_classical": _num(st.std_classical[j]) if ok else None,
+            "std_robust": _num(st.std_robust[j]) if ok else None,
             "default": _num(p.defaults.get(name)),
             "unit": p.units.get(name, ""),
             "kind": "input (constant)" if name in p.fit_inputs else "parameter",

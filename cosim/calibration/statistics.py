@@ -51,11 +51,16 @@ class Statistics:
     ci95_robust: np.ndarray = None
     bandwidth: float = 0.0  # the sandwich's Bartlett bandwidth S, rows
     covariance: str = "classical"  # which one std and ci95 are: "classical" or "robust"
+    std_classical: np.ndarray = None  # s^2 F^-1's, whichever std is
+    ci95_classical: np.ndarray = None
+
+    def __post_init__(self):
+        if self.std_classical is None:
+            self.std_classical, self.ci95_classical = self.std, self.ci95
 
     def use_robust(self) -> None:
         """Report the sandwich's standard errors and intervals (residuals that are not white)."""
-        self.std, self.std_robust = self.std_robust, self.std
-        self.ci95, self.ci95_robust = self.ci95_robust, self.ci95
+        self.std, self.ci95 = self.std_robust, self.ci95_robust
         self.covariance = "robust"
 
 
