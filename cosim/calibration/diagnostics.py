@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..names import base_variable, nearest, split_variable
+from ..names import base_variable, nearest, nearest_told, split_variable
 from .problem import log_instance
 
 __all__ = ["Diagnostic", "diagnose", "log_noise", "JACOBIAN_ERROR", "NOISE_FREE", "KINDS"]
@@ -163,7 +163,7 @@ def _unmatched(cal, column_map) -> list[Diagnostic]:
                 v = variables[name]
                 out.append(Diagnostic("unmatched-column",
                                       f"column {col.column} (mapped to {name}, a {v.causality}) feeds no input, "
-                                      f"output or state of {fmu.path.name}" + _near(name, wanted), col.column))
+                                      f"output or state of {fmu.path.name}" + nearest_told(name, wanted), col.column))
         return out
     instance = cal.instance or log_instance(p.log, variables)
     for c in p.log.columns:
@@ -173,13 +173,8 @@ def _unmatched(cal, column_map) -> list[Diagnostic]:
         if dot and head == instance:
             if split_variable(c, variables) is None and base_variable(rest, variables) not in variables:
                 out.append(Diagnostic("unmatched-column", f"column {c} names no variable of {fmu.path.name}"
-                                                          + (_near(rest, wanted) or " (not fitted)"), c))
+                                                          + (nearest_told(rest, wanted) or " (not fitted)"), c))
         elif not dot and nearest(c, wanted, 1) and base_variable(c, variables) not in variables:
             out.append(Diagnostic("unmatched-column", f"column {c} names no variable of {fmu.path.name} and was not "
-                                                      f"fitted" + _near(c, wanted), c))
+                                                      f"fitted" + nearest_told(c, wanted), c))
     return out
-
-
-def _near(name: str, names) -> str:
-    close = nearest(name, names)
-    return f"; nearest: {', '.join(close)}" if close else ""
