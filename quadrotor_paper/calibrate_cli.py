@@ -2,12 +2,15 @@
 
 The command's arguments and its run; the calibration is the engine's
 (:mod:`cosim.calibration`). Exit status 0: converged; 1: the fit did not
-converge (its report is written with the last iterate, and says so); 2: bad
-input, nothing fitted.
+converge (its report is written with the last iterate, and says so), or,
+with ``--strict``, it warned (:mod:`cosim.calibration.diagnostics`; every
+file written first); 2: bad input, nothing fitted. The warnings are printed
+on stderr, ``warning: ...``, after the files are written.
 """
 from __future__ import annotations
 
 import argparse
+import sys
 from functools import partial
 from pathlib import Path
 
@@ -62,6 +65,9 @@ def _arguments(c: argparse.ArgumentParser, named_values, overrides) -> None:
     c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.add_argument("--no-plots", action="store_true", help="no figures (report.md without them)")
+    c.add_argument("--strict", action="store_true", help="exit status 1 when the calibration warns (residuals not "
+                   "white, held-out error, Jacobian error, an estimate at its bound, an unmatched column), after "
+                   "writing every file")
     c.set_defaults(named_values=named_values, overrides=overrides)
 
 
@@ -128,12 +134,19 @@ def run(args) -> int:
         j = cal.problem.fit.index(name)
         if value is None:
             print(f"{name}: not identifiable from this log")
+        elif cal.stats.at_bound is not None and cal.stats.at_bound[j]:
+            print(f"{name} = {value:.10g} (at bound: no interval)")
         else:
             lo, hi = cal.stats.ci95[j]
             print(f"{name} = {value:.10g} (95 % interval [{lo:.6g}, {hi:.6g}])")
     for path in written[:4]:
         print(path)
+    for d in cal.diagnostics:
+        print(f"warning: {d.kind}: {d.message}", file=sys.stderr)
     if not cal.converged:
         print(f"fnn-cosim: the fit did not converge ({cal.fit.message}); the report shows the last iterate")
+        return 1
+    if args.strict and cal.diagnostics:
+        print(f"fnn-cosim: --strict: {len(cal.diagnostics)} warning(s) (report.md lists them)", file=sys.stderr)
         return 1
     return 0

@@ -31,7 +31,7 @@ from ..errors import ScenarioError
 from ..fmu_component import FmuComponent
 from ..names import nearest_told
 from .columns import CalibrationSettings, ColumnMap, read_column_map, read_settings
-from .diagnostics import Diagnostic
+from .diagnostics import Diagnostic, diagnose
 from .frames import MIRROR_ITERATIONS, convert, mirror_check
 from .log import Log, read_log
 from .problem import Problem, bind_problem
@@ -63,7 +63,7 @@ class Calibration:
         return self.fit.converged
 
     def estimates(self) -> dict[str, float | None]:
-        """Fitted name -> value (``None`` where not identifiable)."""
+        """Fitted name -> value (``None`` where not identifiable; an estimate at its bound has its value)."""
         return {n: (float(v) if ok else None) for n, v, ok in
                 zip(self.problem.fit, self.fit.theta, self.stats.identifiable)}
 
@@ -123,14 +123,19 @@ def calibrate(log: Log | str | Path, fmu: str | Path, settings: CalibrationSetti
                            _tolerance(cs, settings), progress, settings.workers, settings.jacobian_stride, symbolic)
             weighted = np.concatenate([(r / result.sigma).ravel() for r in result.residuals])
             stats = statistics(problem.fit, result.theta, result.jacobian, weighted, result.jacobian_state_blocks,
-                               int(estimated.sum()) * len(segments), settings.identifiability)
-            residuals = residual_statistics(problem.outputs, np.concatenate(result.residuals), result.sigma)
+                               int(estimated.sum()) * len(segments), settings.identifiability, problem.lower,
+                               problem.upper, len(problem.outputs), [r.size for r in result.residuals])
+            residuals = residual_statistics(problem.outputs, np.concatenate(result.residuals), result.sigma,
+                                            [len(r) for r in result.residuals], settings.whiteness_lags)
             prediction = _predict(model, result, segments, held_out, logged, problem) if held_out is not None else None
         finally:
             model.close()
     finally:
         cs.close()
     cal = Calibration(problem, settings, segments, held_out, result, stats, residuals, prediction, instance)
+    cal.diagnostics.extend(diagnose(cal, column_map))
+    if any(d.kind == "residuals-not-white" for d in cal.diagnostics):  # correlated: the sandwich's intervals
+        stats.use_robust()
     if stated is not None and stated.mirror_check:  # the map's mirrors refitted briefly from the same guesses
         brief = settings.model_copy(update={"max_iterations": MIRROR_ITERATIONS,
                                             "noise": dict(zip(problem.outputs, map(float, result.sigma)))})

@@ -233,6 +233,13 @@ class CalibrationSettings(Table):
                                                         "is below this fraction of the largest is not determined "
                                                         "by the data")
     workers: Count = Field(1, description="processes that share the segments")
+    # the warnings' thresholds (cosim.calibration.diagnostics)
+    whiteness_lags: Count = Field(None, description="lags of the residuals' Ljung-Box test (default: min(20, "
+                                                    "rows / 5))")
+    whiteness_level: Positive = Field(0.01, description="residuals are not white below this p-value, divided by "
+                                                        "the number of outputs (Bonferroni)")
+    held_out_factor: Positive = Field(3.0, description="the held-out prediction's RMS error above this many noise "
+                                                       "levels is a warning")
 
 
 def _named(what: str, path, make):

@@ -1,12 +1,17 @@
 """A calibration's files: ``calibration.json``, ``parameters.ssv``,
 ``calibration.toml`` and ``report.md`` with its figures.
 
-* ``calibration.json``: ``{"parameters": {name: {"value", "std", "ci95":
-  [lo, hi], "identifiable", "default", "unit"}}, "correlation",
-  "identifiability", "residuals", "prediction", "fixed", "converged",
-  "message", ...}``; a parameter the data do not determine has ``value``,
-  ``std`` and ``ci95`` ``null`` (never a number) and the direction it
-  shares in ``identifiability.undetermined``.
+* ``calibration.json``: ``{"warnings": [{"kind", "subject", "message"}],
+  "parameters": {name: {"value", "std", "ci95": [lo, hi], "identifiable",
+  "at_bound", "std_classical", "std_robust", "default", "unit"}},
+  "covariance", "correlation", "identifiability", "residuals",
+  "prediction", "fixed", "converged", "message", ...}``; a parameter the
+  data do not determine has ``value``, ``std`` and ``ci95`` ``null`` (never
+  a number) and the direction it shares in ``identifiability.undetermined``;
+  one at its bound has its ``value``, ``at_bound`` the bound, ``std`` and
+  ``ci95`` ``null`` and ``identifiable`` ``null`` (not judged: the bound
+  holds it). ``std`` and ``ci95`` are the ``covariance`` named
+  (``"robust"`` when the residuals are not white, else ``"classical"``).
 * ``parameters.ssv``: an SSP 1.0 parameter set (``ssv:ParameterSet``,
   written with pyssp-standard as :mod:`cosim.ssp_export` writes SSDs, valid against
   the standard's schema): the fixed values and the identifiable estimates
@@ -15,7 +20,7 @@
 * ``calibration.toml``: the same values as a scenario's override,
   ``[fmus.<instance>.parameters]`` (paste it into a scenario, or give each
   as ``--set fmus.<instance>.parameters.<name>=<value>``).
-* ``report.md``: the estimates with their intervals beside the defaults,
+* ``report.md``: the warnings first ("No warnings." when none), the estimates with their intervals beside the defaults,
   the residuals, the prediction of the held-out part, with figures (unless
   asked for none: drawing them is most of a small fit's time, docs/calibration.md).
 """
@@ -39,22 +44,28 @@ def calibration_document(cal, log_path: str, fmu_path: str) -> dict:
     p, f, st = cal.problem, cal.fit, cal.stats
     params = {}
     for j, name in enumerate(p.fit):
-        ok = bool(st.identifiable[j])
+        bound = _bound_of(cal, j)
+        ok = bool(st.identifiable[j]) and bound is None
         params[name] = {
-            "value": _num(f.theta[j]) if ok else None,
+            "value": _num(f.theta[j]) if ok or bound is not None else None,
             "std": _num(st.std[j]) if ok else None,
             "ci95": [_num(st.ci95[j, 0]), _num(st.ci95[j, 1])] if ok else None,
-            "identifiable": ok,
+            "identifiable": ok if bound is None else None,
+            "at_bound": bound,
+            "std_classical": _num(st.std_classical[j]) if ok else None,
+            "std_robust": _num(st.std_robust[j]) if ok else None,
             "default": _num(p.defaults.get(name)),
             "unit": p.units.get(name, ""),
             "kind": "input (constant)" if name in p.fit_inputs else "parameter",
         }
     corr = [[_num(v) for v in row] for row in st.correlation]
     doc = {
+        "warnings": [{"kind": d.kind, "subject": d.subject, "message": d.message} for d in cal.diagnostics],
         "log": str(log_path), "resampling": p.log.resampling,  # a ULog's topics put on one time base, else null
         "fmu": str(fmu_path), "instance": cal.instance, "interface": p.fmu.interface,
         "solver": _solver(p.fmu),
         "parameters": params,
+        "covariance": st.covariance, "robust_bandwidth": st.bandwidth,
         "correlation": {"names": list(p.fit), "matrix": corr},
         "identifiability": {"relative_singular_values": [float(s) for s in st.singular_values],
                             "tolerance": cal.settings.identifiability, "undetermined": st.null_directions},
@@ -75,6 +86,15 @@ def calibration_document(cal, log_path: str, fmu_path: str) -> dict:
     return doc
 
 
+def _bound_of(cal, j: int) -> float | None:
+    """The bound the ``j``-th estimate sits at, or ``None``."""
+    at = cal.stats.at_bound
+    if at is None or not at[j]:
+        return None
+    v, lo, hi = cal.fit.theta[j], cal.problem.lower[j], cal.problem.upper[j]
+    return float(lo if abs(v - lo) <= abs(v - hi) else hi)
+
+
 def _solver(fmu) -> dict | None:
     """A Model Exchange FMU's solver as the trajectories took it (``None`` in Co-Simulation: its own)."""
     if fmu.interface != "ModelExchange":
@@ -89,7 +109,7 @@ def _values(cal) -> dict[str, tuple[float, str]]:
     p = cal.problem
     out = {k: (float(v), p.fmu.variables[k].unit or "") for k, v in p.fixed.items()}
     for j, name in enumerate(p.fit):
-        if cal.stats.identifiable[j] and name not in p.fit_inputs:
+        if cal.stats.identifiable[j] and name not in p.fit_inputs:  # an estimate at its bound included
             out[name] = (float(cal.fit.theta[j]), p.units.get(name, ""))
     return out
 
@@ -135,7 +155,10 @@ def _figures(cal, out: Path) -> list[str]:
     for j, n in enumerate(p.fit):
         d = p.defaults.get(n) or 1.0
         d = d if d != 0 else 1.0
-        if cal.stats.identifiable[j]:
+        if _bound_of(cal, j) is not None:
+            ax.plot([f.theta[j] / d], [j], "s", color="C1")
+            ax.text(f.theta[j] / d, j + 0.3, "at bound", va="center", ha="center", color="C1", fontsize=7)
+        elif cal.stats.identifiable[j]:
             lo, hi = cal.stats.ci95[j]
             ax.errorbar([f.theta[j] / d], [j], xerr=[[(f.theta[j] - lo) / abs(d)], [(hi - f.theta[j]) / abs(d)]],
                         fmt="o", color="C0")
@@ -184,7 +207,10 @@ def _fmt(v) -> str:
 
 def _report(cal, doc: dict, figures: list[str]) -> str:
     p = cal.problem
-    lines = ["# Calibration", "",
+    warnings = doc["warnings"]
+    lines = ["# Calibration", "", "## Warnings", ""]
+    lines += [f"* **{w['kind']}**: {w['message']}" for w in warnings] or ["No warnings."]
+    lines += ["",
              f"Log `{Path(doc['log']).name}`, FMU `{Path(doc['fmu']).name}`"
              + (f" (instance `{cal.instance}`)" if cal.instance else "") + ".", "",
              f"**{'Converged' if doc['converged'] else 'NOT CONVERGED: the last iterate is reported'}**: "
@@ -193,11 +219,19 @@ def _report(cal, doc: dict, figures: list[str]) -> str:
              f"inputs from the log: {', '.join(p.inputs) or 'none'}; outputs compared: {', '.join(p.outputs)}.", "",
              "## Estimates", "", "| name | estimate | std | 95 % interval | default | unit |", "|---|---|---|---|---|---|"]
     for name, e in doc["parameters"].items():
-        if e["identifiable"]:
+        if e["at_bound"] is not None:
+            lines.append(f"| {name} | {_fmt(e['value'])} (at bound) | — | — (at its bound {_fmt(e['at_bound'])}) | "
+                         f"{_fmt(e['default'])} | {e['unit']} |")
+        elif e["identifiable"]:
             ci = f"[{_fmt(e['ci95'][0])}, {_fmt(e['ci95'][1])}]"
             lines.append(f"| {name} | {_fmt(e['value'])} | {_fmt(e['std'])} | {ci} | {_fmt(e['default'])} | {e['unit']} |")
         else:
             lines.append(f"| {name} | not identifiable | — | — | {_fmt(e['default'])} | {e['unit']} |")
+    if doc["covariance"] == "robust":
+        lines += ["", f"Standard errors and intervals: robust (sandwich, Newey-West within segments, bandwidth "
+                      f"{doc['robust_bandwidth']:.3g} rows): the residuals are not white. Classical: "
+                      + ", ".join(f"{n} {_fmt(e['std_classical'])}" for n, e in doc["parameters"].items()
+                                  if e["std_classical"] is not None) + "."]
     und = doc["identifiability"]["undetermined"]
     if und:
         lines += ["", "Directions the log does not determine (components in relative changes; the parameters move "
@@ -208,10 +242,12 @@ def _report(cal, doc: dict, figures: list[str]) -> str:
     if "estimates.png" in figures:
         lines += ["", "![estimates](estimates.png)"]
     lines += ["", "## Residuals", "",
-              "| output | RMS | mean | max | lag-1 autocorrelation | noise level used |", "|---|---|---|---|---|---|"]
+              "| output | RMS | mean | max | lag-1 autocorrelation | Ljung-Box p (lags) | noise level used |",
+              "|---|---|---|---|---|---|---|"]
     for o, r in doc["residuals"].items():
+        lb = r["ljung_box"]
         lines.append(f"| {o} | {_fmt(r['rms'])} | {_fmt(r['mean'])} | {_fmt(r['max_abs'])} | "
-                     f"{r['lag1_autocorrelation']:.3f} | {_fmt(r['sigma'])} |")
+                     f"{r['lag1_autocorrelation']:.3f} | {lb['p_value']:.3g} ({lb['lags']}) | {_fmt(r['sigma'])} |")
     if "residuals.png" in figures:
         lines += ["", "![residuals](residuals.png)"]
     if doc["prediction"]:

@@ -30,7 +30,7 @@ from .. import units as _units
 from ..names import nearest_told, split_variable
 from .log import Log
 
-__all__ = ["Problem", "bind_problem"]
+__all__ = ["Problem", "bind_problem", "log_instance"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,15 +92,8 @@ def _columns_of(log: Log, fmu, column_map, instance: str | None, extra: Mapping[
     for name, column in extra.items():  # e.g. a scenario's connections: input -> the source's column
         if name not in found and column in log.columns:
             found[name] = (column, None)
-    if instance is None:  # the prefix that names the most of the FMU's variables (the project's results)
-        counts: dict[str, int] = {}
-        for c in log.columns:
-            split = split_variable(c, fmu.variables)
-            if split is not None:
-                counts[split[0]] = counts.get(split[0], 0) + 1
-        ranked = sorted(counts.items(), key=lambda kv: -kv[1])
-        if ranked and (len(ranked) == 1 or ranked[0][1] > ranked[1][1]):
-            instance = ranked[0][0]
+    if instance is None:
+        instance = log_instance(log, fmu.variables)
     for column in log.columns:
         name = column
         if name not in fmu.variables:
@@ -110,6 +103,21 @@ def _columns_of(log: Log, fmu, column_map, instance: str | None, extra: Mapping[
         if name in fmu.variables and name not in found:
             found[name] = (column, None)
     return found
+
+
+def log_instance(log: Log, variables) -> str | None:
+    """The prefix of the log's columns that names the most of the FMU's
+    ``variables`` (``<instance>.<variable>``, the project's results), or
+    ``None`` (none, or a tie)."""
+    counts: dict[str, int] = {}
+    for c in log.columns:
+        split = split_variable(c, variables)
+        if split is not None:
+            counts[split[0]] = counts.get(split[0], 0) + 1
+    ranked = sorted(counts.items(), key=lambda kv: -kv[1])
+    if ranked and (len(ranked) == 1 or ranked[0][1] > ranked[1][1]):
+        return ranked[0][0]
+    return None
 
 
 def bind_problem(fmu, log: Log, settings, column_map=None, instance: str | None = None,

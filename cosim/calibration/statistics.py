@@ -28,9 +28,12 @@ import numpy as np
 
 from ..summary import t975
 
-__all__ = ["Statistics", "statistics", "residual_statistics", "NULL_COMPONENT"]
+__all__ = ["Statistics", "statistics", "residual_statistics", "whiteness", "at_bounds", "NULL_COMPONENT", "AT_BOUND"]
 
 NULL_COMPONENT = 0.1  # a parameter with more than this in an undetermined direction is not identifiable
+AT_BOUND = 1e-6  # an estimate this close to its bound (relative) is at it: the solver's interior iterates (trf,
+# strictly feasible) approach an active bound geometrically and end 1e-8..1e-10 from it, measured
+MAX_RHO = 0.97  # Andrews' AR(1) plug-in is clipped here (his section 6): a residual of rho -> 1 has no bandwidth
 
 
 @dataclass
@@ -43,6 +46,22 @@ class Statistics:
     null_directions: list  # [{name: component}] of the undetermined directions
     dof: int
     residual_variance: float
+    at_bound: np.ndarray = None  # bool: the estimate sits at its bound (module docstring)
+    std_robust: np.ndarray = None  # the sandwich's standard errors (module docstring), nan where std is
+    ci95_robust: np.ndarray = None
+    bandwidth: float = 0.0  # the sandwich's Bartlett bandwidth S, rows
+    covariance: str = "classical"  # which one std and ci95 are: "classical" or "robust"
+    std_classical: np.ndarray = None  # s^2 F^-1's, whichever std is
+    ci95_classical: np.ndarray = None
+
+    def __post_init__(self):
+        if self.std_classical is None:
+            self.std_classical, self.ci95_classical = self.std, self.ci95
+
+    def use_robust(self) -> None:
+        """Report the sandwich's standard errors and intervals (residuals that are not white)."""
+        self.std, self.ci95 = self.std_robust, self.ci95_robust
+        self.covariance = "robust"
 
 
 def _fisher(J: np.ndarray, state_blocks) -> np.ndarray:
@@ -60,13 +79,57 @@ def _fisher(J: np.ndarray, state_blocks) -> np.ndarray:
     return F
 
 
+def at_bounds(theta: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Which estimates sit at a finite bound: within :data:`AT_BOUND` of it,
+    relative to the larger of the bound's and the interval's magnitudes
+    (a bound at 0: to the other bound, else 1)."""
+    out = np.zeros(theta.size, bool)
+    for j, (v, lo, hi) in enumerate(zip(theta, lower, upper)):
+        width = hi - lo if np.isfinite(hi - lo) else 0.0
+        for b in (lo, hi):
+            if np.isfinite(b):
+                ref = max(abs(b), abs(width) if width else 0.0) or 1.0
+                out[j] |= abs(v - b) <= AT_BOUND * ref
+    return out
+
+
 def statistics(names, theta: np.ndarray, J: np.ndarray, residuals: np.ndarray, state_blocks,
-               n_states_estimated: int, tolerance: float) -> Statistics:
+               n_states_estimated: int, tolerance: float, lower: np.ndarray | None = None,
+               upper: np.ndarray | None = None, n_outputs: int = 1, segment_rows=None) -> Statistics:
     """The estimates' statistics (module docstring). ``residuals``: the
-    weighted output residuals; ``J``: their Jacobian w.r.t. the fitted names."""
+    weighted output residuals, per segment its rows x ``n_outputs`` raveled
+    (``segment_rows``: each segment's number of residuals; default one);
+    ``J``: their Jacobian w.r.t. the fitted names; ``lower``, ``upper``: the
+    fitted names' bounds."""
+    p = len(names)
+    bound = at_bounds(theta, lower, upper) if lower is not None else np.zeros(p, bool)
+    free = ~bound
+    st = _statistics([n for n, f in zip(names, free) if f], theta[free], J[:, free], residuals, state_blocks,
+                     n_states_estimated + int(bound.sum()), tolerance, n_outputs, segment_rows)
+
+    def grown(a, fill, square=False):
+        out = np.full((p, p) if square else (p,) + a.shape[1:], fill, dtype=a.dtype)
+        if square:
+            out[np.ix_(free, free)] = a
+        else:
+            out[free] = a
+        return out
+
+    return Statistics(grown(st.std, np.nan), grown(st.ci95, np.nan), grown(st.correlation, np.nan, True),
+                      grown(st.identifiable, True), st.singular_values, st.null_directions, st.dof,
+                      st.residual_variance, bound, grown(st.std_robust, np.nan), grown(st.ci95_robust, np.nan),
+                      st.bandwidth) if bound.any() else st
+
+
+def _statistics(names, theta, J, residuals, state_blocks, n_states_estimated, tolerance, n_outputs,
+                segment_rows) -> Statistics:
     n, p = residuals.size, len(names)
     dof = max(n - p - n_states_estimated, 1)
     s2 = float(residuals @ residuals) / dof
+    if not p:
+        e = np.zeros(0)
+        return Statistics(e, np.zeros((0, 2)), np.zeros((0, 0)), np.zeros(0, bool), e, [], dof, s2,
+                          np.zeros(0, bool), e, np.zeros((0, 2)), 0.0)
     scale = np.where(np.abs(theta) > 0, np.abs(theta), 1.0)
     F = _fisher(J, state_blocks)
     Fs = F * np.outer(scale, scale)
@@ -91,17 +154,108 @@ def statistics(names, theta: np.ndarray, J: np.ndarray, residuals: np.ndarray, s
     ci = np.column_stack([theta - t * std, theta + t * std])
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
-    std[~identifiable] = np.nan
-    ci[~identifiable] = np.nan
+    # the sandwich: the bread is the classical covariance's (without s^2), the meat the scores' long-run variance
+    bread = cov_s * np.outer(scale, scale)
+    meat, bandwidth = _long_run_variance(J, residuals, state_blocks, n_outputs, segment_rows)
+    std_r = np.sqrt(np.clip(np.diag(bread @ meat @ bread), 0, None))
+    ci_r = np.column_stack([theta - t * std_r, theta + t * std_r])
+    for a in (std, ci, std_r, ci_r):
+        a[~identifiable] = np.nan
     corr[~identifiable, :] = np.nan
     corr[:, ~identifiable] = np.nan
-    return Statistics(std, ci, corr, identifiable, rel, directions, dof, s2)
+    return Statistics(std, ci, corr, identifiable, rel, directions, dof, s2, np.zeros(p, bool), std_r, ci_r,
+                      bandwidth)
 
 
-def residual_statistics(names, residuals: np.ndarray, sigma: np.ndarray) -> dict:
+def _segment_rows(n_rows: int, state_blocks, segment_rows) -> list[tuple[int, int, np.ndarray | None]]:
+    """``(start, stop, block)`` of each segment's rows of ``J`` (``segment_rows``:
+    each segment's residuals; none given: one segment)."""
+    if not segment_rows:
+        return [(0, n_rows, None)]
+    out, start = [], 0
+    blocks = list(state_blocks or []) + [None] * len(segment_rows)
+    for n, block in zip(segment_rows, blocks):
+        out.append((start, start + n, block))
+        start += n
+    return out
+
+
+def _long_run_variance(J: np.ndarray, residuals: np.ndarray, state_blocks, n_outputs: int, segment_rows):
+    """``J_p^T Omega J_p`` of the Newey-West estimator (module docstring)
+    and its bandwidth ``S``, rows."""
+    p = J.shape[1]
+    parts = []
+    for start, stop, block in _segment_rows(J.shape[0], state_blocks, segment_rows):
+        Jp = J[start:stop]
+        if block is not None and block.size:  # the initial states projected out: J_p^T J_p is the Schur complement
+            Jp = Jp - block @ (np.linalg.pinv(block) @ Jp)
+        e = residuals[start:stop]
+        rows = e.size // n_outputs
+        g = (Jp * e[:, None]).reshape(rows, n_outputs, p).sum(axis=1)
+        parts.append((g, e.reshape(rows, n_outputs)))
+    # Andrews' AR(1) plug-in over the outputs (their residuals weighted: equal variances), rho from all segments
+    rho = np.array([_pooled_lag1([ee[:, k] for _, ee in parts]) for k in range(n_outputs)])
+    rho = np.clip(rho, -MAX_RHO, MAX_RHO)
+    alpha = float(np.sum(4 * rho ** 2 / ((1 - rho) ** 6 * (1 + rho) ** 2)) / np.sum(1 / (1 - rho) ** 4))
+    n = sum(g.shape[0] for g, _ in parts)
+    S = 1.1447 * (alpha * n) ** (1 / 3)
+    meat = np.zeros((p, p))
+    for g, _ in parts:
+        meat += g.T @ g
+        for lag in range(1, min(int(np.ceil(S)), g.shape[0])):
+            w = 1.0 - lag / S
+            if w <= 0:
+                break
+            G = g[lag:].T @ g[:-lag]
+            meat += w * (G + G.T)
+    return meat, float(S)
+
+
+def _pooled_lag1(series: list[np.ndarray]) -> float:
+    """The lag-one autocorrelation of a residual split into segments: the
+    pairs within each segment, about the whole mean."""
+    return float(_autocorrelations(series, 1)[0][0])
+
+
+def _autocorrelations(series: list[np.ndarray], h: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(r_k, n_k)``, ``k = 1..h``: the autocorrelations of one residual
+    split into segments (about its whole mean, each lag's products summed
+    over the pairs within a segment only) and the number of those pairs."""
+    mean = np.mean(np.concatenate(series)) if series else 0.0
+    cs = [s - mean for s in series]
+    denom = sum(float(c @ c) for c in cs)
+    r, nk = np.zeros(h), np.zeros(h)
+    for k in range(1, h + 1):
+        nk[k - 1] = sum(max(c.size - k, 0) for c in cs)
+        if denom > 0:
+            r[k - 1] = sum(float(c[:-k] @ c[k:]) for c in cs if c.size > k) / denom
+    return r, nk
+
+
+def whiteness(series: list[np.ndarray], lags: int | None = None) -> dict:
+    """The Ljung-Box test of one output's residuals, split into segments
+    (module docstring): ``{"q", "lags", "p_value"}``. ``lags``: ``h``
+    (default ``min(20, n // 5)``, at least 1; Ljung & Box used 20 to 30 lags
+    for some hundred points). p-value by ``scipy.special.chdtrc`` (not
+    ``scipy.stats``: 1.5 CPU-s to import)."""
+    from scipy.special import chdtrc
+
+    n = sum(s.size for s in series)
+    h = lags if lags is not None else max(1, min(20, n // 5))
+    r, nk = _autocorrelations(series, h)
+    ok = nk > 0
+    q = float(n * (n + 2) * np.sum(r[ok] ** 2 / nk[ok]))
+    return {"q": q, "lags": int(h), "p_value": float(chdtrc(h, q))}
+
+
+def residual_statistics(names, residuals: np.ndarray, sigma: np.ndarray, segment_rows=None,
+                        lags: int | None = None) -> dict:
     """Per output: RMS, mean, standard deviation, largest magnitude, lag-one
     autocorrelation (near 0 for white noise; near 1 when the model misses
-    something slow), and the noise level used."""
+    something slow), the noise level used, and the Ljung-Box test
+    (:func:`whiteness`, ``{"q", "lags", "p_value"}``) over the segments'
+    rows (``segment_rows``: each segment's, default one segment)."""
+    bounds = np.cumsum([0] + list(segment_rows or [residuals.shape[0]]))
     out = {}
     for j, name in enumerate(names):
         r = residuals[:, j]
@@ -109,5 +263,6 @@ def residual_statistics(names, residuals: np.ndarray, sigma: np.ndarray) -> dict
         denom = float(c @ c)
         lag1 = float(c[:-1] @ c[1:] / denom) if denom > 0 and r.size > 1 else 0.0
         out[name] = {"rms": float(np.sqrt(np.mean(r ** 2))), "mean": float(r.mean()), "std": float(r.std()),
-                     "max_abs": float(np.max(np.abs(r))), "lag1_autocorrelation": lag1, "sigma": float(sigma[j])}
+                     "max_abs": float(np.max(np.abs(r))), "lag1_autocorrelation": lag1, "sigma": float(sigma[j]),
+                     "ljung_box": whiteness([r[a:b] for a, b in zip(bounds[:-1], bounds[1:])], lags)}
     return out

@@ -66,6 +66,7 @@ def test_van_der_pol_mu_from_noisy_data_of_our_own_inside_its_interval(tmp_path,
     assert 0 < cal.stats.std[0] < 0.05
     # the noise level estimated from the residuals is the one put in
     assert cal.residuals["x0"]["sigma"] == pytest.approx(0.01, rel=0.15)
+    assert cal.diagnostics == []  # the model's own log with white noise: nothing to warn of
 
 
 def test_a_parameter_without_effect_is_reported_not_identifiable_never_as_a_number(tmp_path):
@@ -296,6 +297,7 @@ def test_a_model_exchange_only_fmu_is_calibrated_through_the_masters_solver(me_o
     assert abs(mu["value"] - ME_MU) < 0.01 * ME_MU
     assert mu["ci95"][0] < ME_MU < mu["ci95"][1]
     assert doc["residuals"]["x0"]["sigma"] == pytest.approx(0.01, rel=0.2)  # the noise put in, estimated
+    assert doc["warnings"] == [] and doc["covariance"] == "classical"  # white noise on the model's own run
 
 
 def test_an_fmu_with_both_interfaces_is_calibrated_in_model_exchange_when_asked():
