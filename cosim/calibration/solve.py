@@ -16,13 +16,14 @@ statistics then use.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
 from scipy import sparse
 from scipy.optimize import least_squares
 
-from ..errors import CosimError, FmuCallError, FmuError, SimulationTerminated
+from ..errors import CosimError, FmuCallError, FmuError, ScenarioError, SimulationTerminated
 from .model import LogModel, REL_STEP
 from .segments import Segment
 from .sensitivity import segment_sensitivities
@@ -55,6 +56,18 @@ def _simulated(model: LogModel, theta, s: Segment, x0):
         return FmuCallError(model.cs.name, model.cs.path, f"at t = {t:.4f} s: the trajectory is not finite (NaN or "
                                                           f"infinite outputs or states)")
     return tr
+
+
+def _fmu_name(exc: FmuError) -> str:
+    return Path(exc.path).name if exc.path else exc.instance
+
+
+def _named(names, theta) -> str:
+    return ", ".join(f"{n} = {float(v):.6g}" for n, v in zip(names, theta))
+
+
+def _finite(J) -> bool:
+    return bool(np.isfinite(J.data if sparse.issparse(J) else J).all())
 
 
 def _simulate_part(job):
@@ -174,8 +187,10 @@ class _Problem:
             trajs = []
             for s, tr in zip(self.segments, done):
                 if isinstance(tr, FmuError):
-                    if not self.evaluations:  # the first guess: nothing to fall back on
-                        raise FmuCallError(tr.instance, tr.path, f"the first guess fails: {tr.reason}") from None
+                    if not self.evaluations:  # the first guess: nothing to fall back on; the user's input to change
+                        raise ScenarioError(f"the first guess {_named(self.model.problem.fit, theta)}: "
+                                            f"{_fmu_name(tr)} cannot simulate it: "
+                                            f"{tr.reason}") from None
                     # a trial point the FMU cannot simulate (refused, its solver failed, not finite): infinite
                     # residuals, which the solver rejects (its trust region shrinks), as a step into a region the
                     # model cannot fly; the one place every way (serial, workers, CasADi) meets it
@@ -205,9 +220,30 @@ class _Problem:
         return np.concatenate(parts)
 
     def jacobian(self, z):
+        """The residuals' Jacobian at an accepted point ``z``. The coarse one
+        (``stride > 1``: one RK4 step, or one Magnus step, over several
+        rows) can overflow where the trajectory itself does not (a stiff
+        trial point: measured on the plant with ``Ix`` at a tenth and ``b``
+        30 times the truth); the exact one is taken there. An exact Jacobian
+        that is not finite (the sensitivities of a finite trajectory
+        overflow along a segment) leaves the solver no direction: one line,
+        naming the point."""
         key = (z.tobytes(), self.stride)
         if self._last_jacobian[0] != key:
-            self._last_jacobian = (key, self._jacobian(z))
+            J = self._jacobian(z)
+            if not _finite(J) and self.stride > 1:
+                stride, self.stride = self.stride, 1
+                try:
+                    J = self._jacobian(z)
+                finally:
+                    self.stride = stride
+            if not _finite(J):
+                theta, _ = self.split(z)
+                raise FmuCallError(self.model.cs.name, self.model.cs.path,
+                                   f"at {_named(self.model.problem.fit, theta)}: the trajectory's sensitivities are "
+                                   f"not finite (they overflow along a segment); shorter segments (--segment) or "
+                                   f"bounds on the fitted names keep the solver away from there")
+            self._last_jacobian = (key, J)
         return self._last_jacobian[1]
 
     def _jacobian(self, z):
