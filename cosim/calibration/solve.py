@@ -226,8 +226,11 @@ class _Problem:
         trial point: measured on the plant with ``Ix`` at a tenth and ``b``
         30 times the truth); the exact one is taken there. An exact Jacobian
         that is not finite (the sensitivities of a finite trajectory
-        overflow along a segment) leaves the solver no direction: one line,
-        naming the point."""
+        overflow along a segment: measured on VanDerPol's forward Euler at
+        ``mu = 44``, whose continuous-time variational equation grows
+        where the discrete trajectory does not) is taken by central
+        differences of the trajectories; where those are not finite either,
+        the solver has no direction: one line, naming the point."""
         key = (z.tobytes(), self.stride)
         if self._last_jacobian[0] != key:
             J = self._jacobian(z)
@@ -237,12 +240,16 @@ class _Problem:
                     J = self._jacobian(z)
                 finally:
                     self.stride = stride
+            if not _finite(J) and self.method != "differences":
+                J = self._differences(z)  # the trajectories are finite there: their differences may be
             if not _finite(J):
                 theta, _ = self.split(z)
+                where = f"at {_named(self.model.problem.fit, theta)}: the residuals' Jacobian is not finite"
+                if self.evaluations <= 1:  # the first guess: the user's to change
+                    raise ScenarioError(f"the first guess: {where}")
                 raise FmuCallError(self.model.cs.name, self.model.cs.path,
-                                   f"at {_named(self.model.problem.fit, theta)}: the trajectory's sensitivities are "
-                                   f"not finite (they overflow along a segment); shorter segments (--segment) or "
-                                   f"bounds on the fitted names keep the solver away from there")
+                                   f"{where}; shorter segments (--segment) or bounds on the fitted names keep "
+                                   f"the solver away from there")
             self._last_jacobian = (key, J)
         return self._last_jacobian[1]
 

@@ -1,0 +1,41 @@
+"""The calibrator where trial points, first guesses and logs go wrong, and
+its defaults on noisy logs (issue 42, items 4 and 5; docs/calibration.md)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.calibration import CalibrationSettings, calibrate
+
+REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
+pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
+VAN_DER_POL = REFERENCE / "fmi2" / "VanDerPol.fmu"
+PUBLISHED = REFERENCE / "results" / "VanDerPol_out.csv"
+
+
+def test_a_trial_point_whose_simulation_is_not_finite_is_rejected_and_the_fit_converges(monkeypatch):
+    # VanDerPol's Co-Simulation is forward Euler at 0.01 s: above mu ~ 44 its trajectory overflows (mu x^2 h > 2);
+    # from mu = 40 on the published log (mu = 1) the solver's first trial points go there
+    from cosim.calibration import solve
+
+    rejected = []
+    failed = solve._Problem._failed
+    monkeypatch.setattr(solve._Problem, "_failed", lambda self, s: rejected.append(s) or failed(self, s))
+    cal = calibrate(PUBLISHED, VAN_DER_POL, CalibrationSettings(fit=["mu"], guess={"mu": 40.0}, segment=5.0,
+                                                                stop=10.0))
+    assert rejected  # the solver did step where the FMU cannot go
+    assert cal.converged and np.isfinite(cal.fit.cost) and np.isfinite(cal.fit.theta).all()
+    assert np.isfinite(cal.stats.std).all()
+
+
+def test_a_first_guess_whose_simulation_is_not_finite_is_one_line_naming_it_exit_2(tmp_path, capsys):
+    from quadrotor_paper.cli import main
+
+    code = main(["calibrate", str(PUBLISHED), "--fmu", str(VAN_DER_POL), "--fit", "mu", "--guess", "mu=-5",
+                 "--no-plots", "--quiet", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and "internal error" not in err
+    assert "the first guess mu = -5" in err and "VanDerPol.fmu" in err and "not finite" in err
