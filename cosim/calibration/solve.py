@@ -274,25 +274,33 @@ class _Problem:
         return self._assemble(blocks, ends)
 
     def _assemble(self, blocks, ends):
+        """The residuals' Jacobian from each segment's output sensitivities
+        (``blocks``) and end-state sensitivities (``ends``): dense without
+        estimated states; with them, block-sparse (a segment's rows touch the
+        fitted names and its own initial state; a continuity row also the
+        next segment's), built as CSR at once from the blocks' arrays, the
+        columns of each row in ascending order."""
         nt, ne, nseg = self.nt, self.ne, len(self.segments)
-        ncol = nt + ne * nseg
         if not ne:
             return np.concatenate([b.reshape(-1, nt) for b in blocks])
-        rows = []
+        theta_cols = np.arange(nt)
+        values, columns = [], []
         for i, b in enumerate(blocks):
             flat = b.reshape(-1, nt + ne)
-            m = sparse.lil_matrix((flat.shape[0], ncol))
-            m[:, :nt] = flat[:, :nt]
-            m[:, nt + i * ne:nt + (i + 1) * ne] = flat[:, nt:]
-            rows.append(m.tocsr())
+            values.append(flat)
+            columns.append(np.broadcast_to(np.concatenate([theta_cols, nt + i * ne + np.arange(ne)]), flat.shape))
+        weight = CONTINUITY_WEIGHT / self.scale_x[self.estimated]
         for i in self.continuity:
             dX = ends[i][self.estimated] / self.scale_x[self.estimated, None] * CONTINUITY_WEIGHT
-            m = sparse.lil_matrix((ne, ncol))
-            m[:, :nt] = dX[:, :nt]
-            m[:, nt + i * ne:nt + (i + 1) * ne] = dX[:, nt:]
-            m[:, nt + (i + 1) * ne:nt + (i + 2) * ne] = -np.diag(CONTINUITY_WEIGHT / self.scale_x[self.estimated])
-            rows.append(m.tocsr())
-        J = sparse.vstack(rows).tocsr()
+            values.append(np.column_stack([dX, -weight]))
+            cols = np.concatenate([theta_cols, nt + i * ne + np.arange(ne)])
+            columns.append(np.column_stack([np.broadcast_to(cols, dX.shape), nt + (i + 1) * ne + np.arange(ne)]))
+        widths = np.concatenate([np.full(v.shape[0], v.shape[1]) for v in values])
+        indptr = np.concatenate([[0], np.cumsum(widths)])
+        data = np.concatenate([v.ravel() for v in values])
+        indices = np.concatenate([c.ravel() for c in columns])
+        J = sparse.csr_matrix((data, indices, indptr), shape=(widths.size, nt + ne * nseg))
+        J.eliminate_zeros()  # as the block matrices built it (an exact 0 is no entry)
         return J.toarray() if self.dense else J
 
     def _differences(self, z):
@@ -441,6 +449,10 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
         lo, hi = prob.bounds()
         z = np.clip(z, lo, hi)
         scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
+        # an estimated state is scaled by its state's size over the log, not by its first guess: a state logged
+        # near 0 (an angle, a rate) would otherwise be scaled by its noise, a condition number of 1e4 or more
+        # that the sparse solver's iterations (lsmr) pay for at every step
+        scale[prob.nt:] = np.tile(prob.scale_x[estimated], len(segments))
 
         def jac(zz):
             report()

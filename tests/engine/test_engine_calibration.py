@@ -376,9 +376,10 @@ def test_a_trial_point_the_solver_cannot_simulate_is_rejected_not_a_crash(me_onl
     cal = calibrate(log, fmu, settings)
     assert tried and cal.converged
     assert abs(cal.fit.theta[0] - ME_MU) < 0.01 * ME_MU
-    # a first guess there: nothing to fall back on, the FMU's error in one line (not scipy's ValueError)
-    with pytest.raises(FmuCallError, match="the first guess fails: " + ("Model Exchange integration" if
-                       failure == "solver" else r"at t = 4\.9000 s: the trajectory is not finite")):
+    # a first guess there: nothing to fall back on, the FMU's error in one line naming the guess (not scipy's
+    # ValueError); bad input (exit 2): the guess is the user's to change (issue 42)
+    with pytest.raises(ScenarioError, match="the first guess mu = 0.5: VanDerPol.fmu cannot simulate it: " + (
+            "Model Exchange integration" if failure == "solver" else r"at t = 4\.9000 s: the trajectory is not finite")):
         calibrate(log, fmu, settings.model_copy(update={"guess": {"mu": 0.5}}))
 
 
