@@ -96,8 +96,9 @@ class CalibrationSettings(Table):
     stop: Number = Field(None, description="and ends here, s")
     interface: one_of(INTERFACES) = Field(
         "auto", description="the FMU's interface that makes the trajectories: 'CoSimulation' (its own integrator), "
-                            "'ModelExchange' (the master's solver, 'solver'), or 'auto': Co-Simulation where the "
-                            "FMU has it, else Model Exchange")
+                            "'ModelExchange' (the master's solver, 'solver'), or 'auto': Model Exchange where the "
+                            "FMU has it, except an FMU of ours (its CasADi definition registered: Co-Simulation, "
+                            "exact by construction), else Co-Simulation")
     solver: Solver = Field(None, description=f"Model Exchange: how the master integrates it (default: CVODE at a "
                                              f"relative tolerance of {TOLERANCE:g}, not the FMU's default "
                                              f"experiment's: the trajectories must be accurate well below the "

@@ -39,3 +39,19 @@ def test_a_first_guess_whose_simulation_is_not_finite_is_one_line_naming_it_exit
     assert code == 2
     assert len(err.splitlines()) == 1 and "internal error" not in err
     assert "the first guess mu = -5" in err and "VanDerPol.fmu" in err and "not finite" in err
+
+
+def test_auto_takes_model_exchange_for_a_foreign_fmu_with_both_and_co_simulation_for_ours():
+    # a foreign FMU's Co-Simulation is often a crude fixed step (VanDerPol's forward Euler: mu 4.5 % low on an
+    # accurate log); ours is its CasADi definition's RK4 steps, which the CasADi way reproduces exactly
+    from cosim.calibration import _component
+    from fmu_models.built import built_fmu
+    from fmu_models.catalog import model
+
+    for fmu, interface in ((VAN_DER_POL, "ModelExchange"),
+                           (built_fmu("Quadrotor", 2, lambda: model("Quadrotor")), "CoSimulation")):
+        comp = _component(fmu, CalibrationSettings(fit=["mu"]), None)
+        try:
+            assert comp.interface == interface
+        finally:
+            comp.close()
