@@ -24,16 +24,18 @@ def test_a_trial_point_whose_simulation_is_not_finite_is_rejected_and_the_fit_co
     failed = solve._Problem._failed
     monkeypatch.setattr(solve._Problem, "_failed", lambda self, s: rejected.append(s) or failed(self, s))
     cal = calibrate(PUBLISHED, VAN_DER_POL, CalibrationSettings(fit=["mu"], guess={"mu": 40.0}, segment=5.0,
-                                                                stop=10.0))
+                                                                interface="CoSimulation", stop=10.0))
     assert rejected  # the solver did step where the FMU cannot go
     assert cal.converged and np.isfinite(cal.fit.cost) and np.isfinite(cal.fit.theta).all()
     assert np.isfinite(cal.stats.std).all()
 
 
 def test_a_first_guess_whose_simulation_is_not_finite_is_one_line_naming_it_exit_2(tmp_path, capsys):
+    # the case: VanDerPol's Co-Simulation (forward Euler) overflows at t = 1.91 s from mu = -5
     from quadrotor_paper.cli import main
 
     code = main(["calibrate", str(PUBLISHED), "--fmu", str(VAN_DER_POL), "--fit", "mu", "--guess", "mu=-5",
+                 "--interface", "CoSimulation",
                  "--no-plots", "--quiet", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err.strip()
     assert code == 2
