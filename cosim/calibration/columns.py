@@ -81,8 +81,9 @@ class CalibrationSettings(Table):
                                                         "min/max)")
     segment: Positive = Field(None, description="length of one shooting segment, s (default: the whole log)")
     initial_states: one_of(INITIAL_STATES) = Field(
-        "recorded", description="'recorded': each segment starts from the logged states (states the log lacks "
-                                "are estimated); 'estimated': every segment's initial state is estimated")
+        "estimated", description="'estimated': every segment's initial state is estimated (unbiased when the "
+                                 "logged states are noisy); 'recorded': each segment starts from the logged states "
+                                 "(states the log lacks are estimated): exact logs only")
     initial_parameters: dict[str, str] = Field(
         default_factory=dict, description="state -> the parameter that sets its initial value, where the state's "
                                           "own start value cannot be set (default: '<state>_0')")
