@@ -85,22 +85,6 @@ def _bounds(out: Path, bounds: dict) -> Path:
     return path
 
 
-def noisy(log: Path, sigma: float, rng) -> Path:
-    """The log with Gaussian noise on every state (not on the commanded rotor speeds)."""
-    head = log.read_text().splitlines()[0]
-    names = head.split(",")
-    data = np.loadtxt(log, delimiter=",", skiprows=1)
-    for j, n in enumerate(names):
-        if n != "time" and not n.startswith("Quadrotor.Omega_"):
-            data[:, j] += sigma * rng.standard_normal(data.shape[0])
-    out = log.with_name("noisy.csv")
-    np.savetxt(out, data, delimiter=",", header=head, comments="", fmt="%.17g")
-    sidecar = log.with_name(log.name + ".json")
-    if sidecar.exists():
-        out.with_name(out.name + ".json").write_text(sidecar.read_text())
-    return out
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=40, help="runs of each problem (default 40)")
@@ -108,6 +92,7 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=4.0, help="the plant's log, s (default 4)")
     ap.add_argument("--verbose", action="store_true", help="print every run's status and stderr")
     args = ap.parse_args()
+    from calibration_speed import noisy  # this folder's
     from quadrotor_paper.synthetic_log import HIDDEN, fly_synthetic_log
 
     rng = np.random.default_rng(args.seed)
