@@ -59,3 +59,23 @@ def test_auto_takes_model_exchange_for_a_foreign_fmu_with_both_and_co_simulation
             assert comp.interface == interface
         finally:
             comp.close()
+
+
+def test_the_defaults_on_a_noisy_log_cover_the_truth(tmp_path):
+    # the defaults (issue 42): initial states estimated (the logged ones are noisy) and, VanDerPol having both
+    # interfaces, Model Exchange by CVODE; the log an accurate solution (fmpy's CVODE at 1e-10) with noise 0.01
+    from fmpy import simulate_fmu
+
+    assert CalibrationSettings().initial_states == "estimated" and CalibrationSettings().interface == "auto"
+    truth = 0.7
+    r = simulate_fmu(str(VAN_DER_POL), fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-10,
+                     stop_time=4.0, output_interval=0.05, start_values={"mu": truth})
+    noise = 0.01 * np.random.default_rng(1).standard_normal((r.size, 2))
+    path = tmp_path / "noisy.csv"
+    np.savetxt(path, np.column_stack([r["time"], r["x0"] + noise[:, 0], r["x1"] + noise[:, 1]]), delimiter=",",
+               header="time,x0,x1", comments="")
+    cal = calibrate(path, VAN_DER_POL, CalibrationSettings(fit=["mu"], guess={"mu": 1.0}, segment=2.0, holdout=0.0))
+    assert cal.problem.fmu.interface == "ModelExchange" and cal.converged
+    assert cal.fit.estimated.all()  # every state of every segment estimated
+    lo, hi = cal.stats.ci95[0]
+    assert lo < truth < hi and hi - lo < 0.1
