@@ -164,8 +164,10 @@ def _parameter(cs: FmuComponent, settings: CalibrationSettings, name: str) -> fl
 
 def _component(fmu: str | Path, settings: CalibrationSettings, instance: str | None) -> FmuComponent:
     """The instance that makes the trajectories, in the interface the
-    settings ask (``"auto"``: Co-Simulation where the FMU has it, else Model
-    Exchange: the FMU component's own default); a Model Exchange one
+    settings ask (``"auto"``: Model Exchange where the FMU has it, integrated
+    to the solver's tolerance, except an FMU of ours, whose Co-Simulation is
+    its CasADi definition's RK4 steps, exact and fast by :mod:`.symbolic`;
+    Co-Simulation for an FMU without Model Exchange); a Model Exchange one
     integrated by the master's solver (``settings.solver``, CVODE at
     :data:`~cosim.calibration.columns.TOLERANCE` unless given). An interface
     the FMU lacks is its :class:`~cosim.errors.FmuLoadError`, in one line."""
@@ -176,6 +178,12 @@ def _component(fmu: str | Path, settings: CalibrationSettings, instance: str | N
     solver = SolverSettings(**(given | {"relative_tolerance": given.get("relative_tolerance") or TOLERANCE}))
     interface = None if settings.interface == "auto" else settings.interface
     comp = FmuComponent(instance or "calibrated", fmu, interface=interface, solver=solver)
+    if interface is None and comp.interface == "CoSimulation" and comp.model_description.modelExchange is not None:
+        from .symbolic import definition_of
+
+        if definition_of(comp) is None:  # not ours: its Co-Simulation is often a crude fixed step (docs)
+            comp.close()
+            comp = FmuComponent(instance or "calibrated", fmu, interface="ModelExchange", solver=solver)
     if settings.solver is not None and comp.interface != "ModelExchange":
         comp.close()
         raise ScenarioError(f"solver: {Path(fmu).name} runs in Co-Simulation here (its own integrator); a solver is "

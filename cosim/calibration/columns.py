@@ -199,8 +199,9 @@ class CalibrationSettings(Table):
                                                         "min/max)")
     segment: Positive = Field(None, description="length of one shooting segment, s (default: the whole log)")
     initial_states: one_of(INITIAL_STATES) = Field(
-        "recorded", description="'recorded': each segment starts from the logged states (states the log lacks "
-                                "are estimated); 'estimated': every segment's initial state is estimated")
+        "estimated", description="'estimated': every segment's initial state is estimated (unbiased when the "
+                                 "logged states are noisy); 'recorded': each segment starts from the logged states "
+                                 "(states the log lacks are estimated): exact logs only")
     initial_parameters: dict[str, str] = Field(
         default_factory=dict, description="state -> the parameter that sets its initial value, where the state's "
                                           "own start value cannot be set (default: '<state>_0')")
@@ -214,8 +215,9 @@ class CalibrationSettings(Table):
     stop: Number = Field(None, description="and ends here, s")
     interface: one_of(INTERFACES) = Field(
         "auto", description="the FMU's interface that makes the trajectories: 'CoSimulation' (its own integrator), "
-                            "'ModelExchange' (the master's solver, 'solver'), or 'auto': Co-Simulation where the "
-                            "FMU has it, else Model Exchange")
+                            "'ModelExchange' (the master's solver, 'solver'), or 'auto': Model Exchange where the "
+                            "FMU has it, except an FMU of ours (its CasADi definition registered: Co-Simulation, "
+                            "exact by construction), else Co-Simulation")
     solver: Solver = Field(None, description=f"Model Exchange: how the master integrates it (default: CVODE at a "
                                              f"relative tolerance of {TOLERANCE:g}, not the FMU's default "
                                              f"experiment's: the trajectories must be accurate well below the "

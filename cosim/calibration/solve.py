@@ -16,13 +16,14 @@ statistics then use.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
 from scipy import sparse
 from scipy.optimize import least_squares
 
-from ..errors import CosimError, FmuCallError, FmuError, SimulationTerminated
+from ..errors import CosimError, FmuCallError, FmuError, ScenarioError, SimulationTerminated
 from .model import LogModel, REL_STEP
 from .segments import Segment
 from .sensitivity import segment_sensitivities
@@ -55,6 +56,18 @@ def _simulated(model: LogModel, theta, s: Segment, x0):
         return FmuCallError(model.cs.name, model.cs.path, f"at t = {t:.4f} s: the trajectory is not finite (NaN or "
                                                           f"infinite outputs or states)")
     return tr
+
+
+def _fmu_name(exc: FmuError) -> str:
+    return Path(exc.path).name if exc.path else exc.instance
+
+
+def _named(names, theta) -> str:
+    return ", ".join(f"{n} = {float(v):.6g}" for n, v in zip(names, theta))
+
+
+def _finite(J) -> bool:
+    return bool(np.isfinite(J.data if sparse.issparse(J) else J).all())
 
 
 def _simulate_part(job):
@@ -174,8 +187,10 @@ class _Problem:
             trajs = []
             for s, tr in zip(self.segments, done):
                 if isinstance(tr, FmuError):
-                    if not self.evaluations:  # the first guess: nothing to fall back on
-                        raise FmuCallError(tr.instance, tr.path, f"the first guess fails: {tr.reason}") from None
+                    if not self.evaluations:  # the first guess: nothing to fall back on; the user's input to change
+                        raise ScenarioError(f"the first guess {_named(self.model.problem.fit, theta)}: "
+                                            f"{_fmu_name(tr)} cannot simulate it: "
+                                            f"{tr.reason}") from None
                     # a trial point the FMU cannot simulate (refused, its solver failed, not finite): infinite
                     # residuals, which the solver rejects (its trust region shrinks), as a step into a region the
                     # model cannot fly; the one place every way (serial, workers, CasADi) meets it
@@ -205,9 +220,37 @@ class _Problem:
         return np.concatenate(parts)
 
     def jacobian(self, z):
+        """The residuals' Jacobian at an accepted point ``z``. The coarse one
+        (``stride > 1``: one RK4 step, or one Magnus step, over several
+        rows) can overflow where the trajectory itself does not (a stiff
+        trial point: measured on the plant with ``Ix`` at a tenth and ``b``
+        30 times the truth); the exact one is taken there. An exact Jacobian
+        that is not finite (the sensitivities of a finite trajectory
+        overflow along a segment: measured on VanDerPol's forward Euler at
+        ``mu = 44``, whose continuous-time variational equation grows
+        where the discrete trajectory does not) is taken by central
+        differences of the trajectories; where those are not finite either,
+        the solver has no direction: one line, naming the point."""
         key = (z.tobytes(), self.stride)
         if self._last_jacobian[0] != key:
-            self._last_jacobian = (key, self._jacobian(z))
+            J = self._jacobian(z)
+            if not _finite(J) and self.stride > 1:
+                stride, self.stride = self.stride, 1
+                try:
+                    J = self._jacobian(z)
+                finally:
+                    self.stride = stride
+            if not _finite(J) and self.method != "differences":
+                J = self._differences(z)  # the trajectories are finite there: their differences may be
+            if not _finite(J):
+                theta, _ = self.split(z)
+                where = f"at {_named(self.model.problem.fit, theta)}: the residuals' Jacobian is not finite"
+                if self.evaluations <= 1:  # the first guess: the user's to change
+                    raise ScenarioError(f"the first guess: {where}")
+                raise FmuCallError(self.model.cs.name, self.model.cs.path,
+                                   f"{where}; shorter segments (--segment) or bounds on the fitted names keep "
+                                   f"the solver away from there")
+            self._last_jacobian = (key, J)
         return self._last_jacobian[1]
 
     def _jacobian(self, z):
@@ -231,25 +274,33 @@ class _Problem:
         return self._assemble(blocks, ends)
 
     def _assemble(self, blocks, ends):
+        """The residuals' Jacobian from each segment's output sensitivities
+        (``blocks``) and end-state sensitivities (``ends``): dense without
+        estimated states; with them, block-sparse (a segment's rows touch the
+        fitted names and its own initial state; a continuity row also the
+        next segment's), built as CSR at once from the blocks' arrays, the
+        columns of each row in ascending order."""
         nt, ne, nseg = self.nt, self.ne, len(self.segments)
-        ncol = nt + ne * nseg
         if not ne:
             return np.concatenate([b.reshape(-1, nt) for b in blocks])
-        rows = []
+        theta_cols = np.arange(nt)
+        values, columns = [], []
         for i, b in enumerate(blocks):
             flat = b.reshape(-1, nt + ne)
-            m = sparse.lil_matrix((flat.shape[0], ncol))
-            m[:, :nt] = flat[:, :nt]
-            m[:, nt + i * ne:nt + (i + 1) * ne] = flat[:, nt:]
-            rows.append(m.tocsr())
+            values.append(flat)
+            columns.append(np.broadcast_to(np.concatenate([theta_cols, nt + i * ne + np.arange(ne)]), flat.shape))
+        weight = CONTINUITY_WEIGHT / self.scale_x[self.estimated]
         for i in self.continuity:
             dX = ends[i][self.estimated] / self.scale_x[self.estimated, None] * CONTINUITY_WEIGHT
-            m = sparse.lil_matrix((ne, ncol))
-            m[:, :nt] = dX[:, :nt]
-            m[:, nt + i * ne:nt + (i + 1) * ne] = dX[:, nt:]
-            m[:, nt + (i + 1) * ne:nt + (i + 2) * ne] = -np.diag(CONTINUITY_WEIGHT / self.scale_x[self.estimated])
-            rows.append(m.tocsr())
-        J = sparse.vstack(rows).tocsr()
+            values.append(np.column_stack([dX, -weight]))
+            cols = np.concatenate([theta_cols, nt + i * ne + np.arange(ne)])
+            columns.append(np.column_stack([np.broadcast_to(cols, dX.shape), nt + (i + 1) * ne + np.arange(ne)]))
+        widths = np.concatenate([np.full(v.shape[0], v.shape[1]) for v in values])
+        indptr = np.concatenate([[0], np.cumsum(widths)])
+        data = np.concatenate([v.ravel() for v in values])
+        indices = np.concatenate([c.ravel() for c in columns])
+        J = sparse.csr_matrix((data, indices, indptr), shape=(widths.size, nt + ne * nseg))
+        J.eliminate_zeros()  # as the block matrices built it (an exact 0 is no entry)
         return J.toarray() if self.dense else J
 
     def _differences(self, z):
@@ -398,6 +449,10 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
         lo, hi = prob.bounds()
         z = np.clip(z, lo, hi)
         scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
+        # an estimated state is scaled by its state's size over the log, not by its first guess: a state logged
+        # near 0 (an angle, a rate) would otherwise be scaled by its noise, a condition number of 1e4 or more
+        # that the sparse solver's iterations (lsmr) pay for at every step
+        scale[prob.nt:] = np.tile(prob.scale_x[estimated], len(segments))
 
         def jac(zz):
             report()

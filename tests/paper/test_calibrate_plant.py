@@ -20,9 +20,13 @@ def flight_log(tmp_path_factory):
 def _calibrate(tmp_path, log, *args):
     # no figures: drawing the plant's 16 outputs took more CPU than the fit (their drawing is the command's
     # test's, tests/engine/test_engine_calibration.py)
+    # the flight log is exact (the plant's own output, no noise): segments start from its states, as
+    # initial_states = "recorded" does (the default, "estimated", is for noisy logs: 6x this file's CPU)
     out = tmp_path / "out"
+    settings = tmp_path / "recorded.toml"
+    settings.write_text('initial_states = "recorded"\n')
     code = main(["calibrate", str(log), *map(str, args), "--segment", "2", "--out", str(out), "--quiet",
-                 "--no-plots"])
+                 "--no-plots", "--settings", str(settings)])
     return code, out
 
 
@@ -55,7 +59,7 @@ def test_the_casadi_way_and_the_fmu_way_give_the_same_estimates(flight_log):
     fixed = {k: v for k, v in HIDDEN.items() if k not in ("b", "Ix")}
     cals = {way: calibrate(flight_log, fmu, CalibrationSettings(
         fit=["b", "Ix", "wind_x", "wind_y"], guess={"b": 6e-6, "Ix": 0.03}, fix=fixed, segment=1.0, holdout=0.0,
-        stop=3.0, jacobian=way)) for way in ("casadi", "derivatives")}
+        stop=3.0, jacobian=way, initial_states="recorded")) for way in ("casadi", "derivatives")}
     assert cals["casadi"].fit.method.startswith("forward sensitivities (CasADi")
     assert cals["derivatives"].fit.method == "forward sensitivities (directional derivatives)"
     a, b = cals["casadi"].fit.theta, cals["derivatives"].fit.theta
@@ -76,7 +80,7 @@ def test_without_a_c_compiler_the_casadi_way_runs_in_casadis_virtual_machine(fli
     fixed = {k: v for k, v in HIDDEN.items() if k != "Ix"}
     cal = calibrate(flight_log, fmu, CalibrationSettings(fit=["Ix", "wind_x", "wind_y"], guess={"Ix": 0.03},
                                                          fix=fixed, segment=0.5, holdout=0.0, stop=1.0,
-                                                         jacobian_stride=1))
+                                                         jacobian_stride=1, initial_states="recorded"))
     assert cal.fit.method.endswith("run by CasADi's virtual machine")
     assert cal.fit.theta[0] == pytest.approx(HIDDEN["Ix"], rel=1e-9)
     assert not any((tmp_path / "empty-cache").glob("*.so"))
@@ -200,7 +204,7 @@ def test_the_steps_derivative_one_direction_a_call_is_all_directions_at_once_bit
     fixed = {k: v for k, v in HIDDEN.items() if k not in ("b", "Ix")}
     calibrate(flight_log, built_fmu("Quadrotor", 2, lambda: model("Quadrotor")), CalibrationSettings(
         fit=["b", "Ix", "wind_x"], guess={"b": 6e-6, "Ix": 0.03}, fix=fixed, segment=0.05, holdout=0.0, stop=0.1,
-        jacobian="casadi", max_iterations=1))
+        jacobian="casadi", max_iterations=1, initial_states="recorded"))
     first, (theta, segments, x0, estimated) = asked[0]
     at_once = symbolic.SymbolicModel(first.model, first.definition)
     at_once._one_direction = lambda name: first.definition.functions[name]  # CasADi's forward(nd)
