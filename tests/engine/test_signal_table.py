@@ -335,3 +335,46 @@ def test_a_scenario_key_of_the_table_is_checked_in_one_line(tmp_path):
     with pytest.raises(ScenarioError, match=r"components\.table\.outside = 'clamp'") as info:
         parse_scenario(raw)
     assert "\n" not in str(info.value)
+
+
+def test_only_the_columns_played_are_read(tmp_path):
+    """A wide file whose other columns are not numbers (or empty) plays the
+    column the scenario connects; recording every output (no
+    record.signals) plays, and so reads, every column: then the text is
+    refused, naming its line and column."""
+    (tmp_path / "wide.csv").write_text("time,x,note,y\n0,1,text,\n1,2,more,\n", encoding="utf-8")
+    raw = {"simulation": {"duration": 1.0, "step": 0.5},
+           "connections": ["table.x -> F.Float64_continuous_input"],
+           "fmus": {"F": {"path": str(fmu(2, "Feedthrough"))}},
+           "components": {"table": {"kind": "signal_table", "file": str(tmp_path / "wide.csv"), "form": "python"}},
+           "record": {"signals": ["F.Float64_continuous_output"]}}
+    with build_master(parse_scenario(raw)) as master:
+        assert [p.name for p in master.components["table"].outputs] == ["x"]
+        assert master.run(1.0)["F.Float64_continuous_output"].tolist() == [1.0, 1.0, 2.0]
+    with pytest.raises(ScenarioError, match=re.escape("wide.csv': no column 'z'; its columns are: x, note, y")):
+        load_table(tmp_path / "wide.csv", use=["x", "z"])
+    del raw["record"]
+    with pytest.raises(ScenarioError, match=re.escape("wide.csv': line 2, column note: value = 'text': expected a "
+                                                      "number (Float64)")):
+        build_master(parse_scenario(raw))
+
+
+@pytest.mark.parametrize("header", ["time,x,x", "time,x,x [m]"])
+def test_two_columns_of_one_name_are_one_line_naming_it_and_the_file(tmp_path, header):
+    (tmp_path / "t.csv").write_text(f"{header}\n0,1,2\n", encoding="utf-8")
+    with pytest.raises(ScenarioError) as info:
+        load_table(tmp_path / "t.csv", use=["x"])
+    assert str(info.value) == f"signal table {str(tmp_path / 't.csv')!r}: two columns named 'x'; each name at most once"
+
+
+def test_numbers_read_by_pyarrow_are_python_s_doubles(tmp_path):
+    """The fast reader (pyarrow's float parser) gives the double Python's
+    ``float`` gives, to the bit; a field it does not read (spaces inside,
+    ``1_0``) is read field by field as before."""
+    fields = ["0.1", "1e-320", "-0", "1.7976931348623157e308", "123456789012345678901234567890", "2.5e-3",
+              "0.30000000000000004", "4.9406564584124654e-324", " 7", "+3"]
+    (tmp_path / "n.csv").write_text("time,x\n" + "".join(f"{i},{f}\n" for i, f in enumerate(fields)))
+    got = load_table(tmp_path / "n.csv").columns["x"]
+    assert [v.hex() for v in got] == [float(f).hex() for f in fields]
+    (tmp_path / "u.csv").write_text("time,x\n0,1_0\n")
+    assert load_table(tmp_path / "u.csv").columns["x"].tolist() == [10.0]  # Python's float reads it
