@@ -583,8 +583,8 @@ class SignalTable(PythonComponent):
         return TableData(tuple(p.name for p in self.outputs), units, tuple(_base_unit(u) if u else None for u in units),
                          tuple(p.description for p in self.outputs),
                          tuple(how == "linear" for _, how, _, _ in self._columns), self.outside == "refuse",
-                         np.array(self.times, dtype=float),
-                         np.column_stack([data for data, _, _, _ in self._columns]).astype(float))
+                         self.times,  # float64 arrays as read: not copied again (a column may be millions of rows)
+                         np.column_stack([data for data, _, _, _ in self._columns]))
 
 
 def played(name: str, context) -> set[str] | None:
