@@ -26,11 +26,12 @@ import numpy as np
 from .errors import ScenarioError, shown_text
 from .files import repeated
 
-__all__ = ["BLOCK", "MAX_HEADER_BYTES", "FieldError", "csv_header", "unique_columns", "csv_batches", "csv_floats",
+__all__ = ["BLOCK", "MAX_HEADER_BYTES", "MAX_FOOTER_BYTES", "FieldError", "csv_header", "unique_columns", "csv_batches", "csv_floats",
            "parquet_schema", "parquet_read"]
 
 BLOCK = 1 << 20  # bytes of a CSV parsed at a time: a row longer than this is refused by pyarrow
 MAX_HEADER_BYTES = 1 << 20  # a CSV's header line, read before anything else
+MAX_FOOTER_BYTES = 64 << 20  # a Parquet file's footer (its schema and metadata), read before any column
 
 LineOf = Callable[[int], str]
 
@@ -139,6 +140,16 @@ def parquet_schema(path, where: str):
     """A Parquet file's schema and metadata, from its footer only: ``(schema, FileMetaData)``."""
     import pyarrow.parquet as pq
 
+    try:  # the footer's length: its last 8 bytes, the length and b"PAR1" (else pyarrow says what is wrong)
+        with open(path, "rb") as f:
+            size = f.seek(0, 2)
+            f.seek(max(size - 8, 0))
+            tail = f.read(8)
+    except OSError as exc:
+        raise ScenarioError(f"{where}: cannot be read ({exc.strerror or exc})") from None
+    if len(tail) == 8 and tail[4:] == b"PAR1" and int.from_bytes(tail[:4], "little") > MAX_FOOTER_BYTES:
+        raise ScenarioError(f"{where}: a footer of {int.from_bytes(tail[:4], 'little')} bytes; at most "
+                            f"{MAX_FOOTER_BYTES} are read")
     try:
         parquet = pq.ParquetFile(path)
         return parquet.schema_arrow, parquet.metadata

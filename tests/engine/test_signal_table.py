@@ -258,7 +258,7 @@ def test_parquet_tables_with_units_in_names_or_metadata(tmp_path):
 def test_a_parquet_table_is_bounded_by_its_footer_before_it_is_read(tmp_path, monkeypatch):
     """Rows, and the data of the columns used uncompressed (a zip bomb's
     kin: small compressed, large read), from the footer; a long column no
-    one uses counts for nothing."""
+    one uses counts for nothing; the footer's own length, before it is read."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -274,6 +274,11 @@ def test_a_parquet_table_is_bounded_by_its_footer_before_it_is_read(tmp_path, mo
     assert load_table(tmp_path / "t.parquet", use=["x"]).columns["x"].tolist() == [1.0] * 5
     with pytest.raises(ScenarioError, match=r"\d+ bytes of data uncompressed in the columns used; at most 1000 are"):
         load_table(tmp_path / "t.parquet", use=["s"])
+    import cosim.columns_io
+
+    monkeypatch.setattr(cosim.columns_io, "MAX_FOOTER_BYTES", 100)  # the schema itself, before pyarrow parses it
+    with pytest.raises(ScenarioError, match=r"t.parquet': a footer of \d+ bytes; at most 100 are read"):
+        load_table(tmp_path / "t.parquet", use=["x"])
 
 
 def test_the_table_fmu_refuses_a_tampered_resource(tmp_path, monkeypatch):
