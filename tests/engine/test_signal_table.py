@@ -199,7 +199,7 @@ def test_a_table_that_starts_after_the_run_exits_2_at_the_cli_unless_told_to_hol
     assert err.endswith("in.csv', whose rows run from t = 0.5 to 2 s (outside = 'refuse'; outside = 'hold' holds its "
                         "first and last rows there)")
     (tmp_path / "s.toml").write_text(toml + 'outside = "hold"\n', encoding="utf-8")
-    assert main(["run", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out")]) == 0
+    assert main(["run", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 0
 
 
 def _fmpy_extracts_into(tmp_path, monkeypatch):
