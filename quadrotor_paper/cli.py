@@ -677,7 +677,7 @@ def _parser() -> argparse.ArgumentParser:
     # the subcommand's own module: argparse only; python-control loads when it runs
     from .stability.cli import add_parser as add_stability_parser
 
-    add_stability_parser(sub)
+    add_stability_parser(sub, _overrides)
     from .calibrate_cli import add_parser as add_calibrate_parser  # its own module: argparse only
 
     add_calibrate_parser(sub, _named_values, _overrides)

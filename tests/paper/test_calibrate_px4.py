@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -64,3 +65,106 @@ def test_a_calibrated_parameter_set_reaches_the_plant_and_the_mixer_in_a_run(tmp
     assert held["plant"] == values  # every value of the set, to the bit
     assert held["vehicle"] == {"vehicle.arm_angle": values["arm_angle"], "vehicle.b": values["b"],
                                "vehicle.d": values["d"]}
+
+
+
+def test_the_stability_analysis_takes_the_twins_parameters_into_the_plant_and_the_mixer(tmp_path, monkeypatch):
+    """``fnn-cosim stability --set`` reads the plant's parameters as ``run`` does
+    (a calibration's parameter set, single values over it), less the initial
+    states; the operating points are trimmed on that plant, with the
+    controller's nominal vehicle (its mixer) the same plant's."""
+    from cosim.calibration.outputs import write_parameter_set
+    from quadrotor_paper.stability import study
+
+    ssv = write_parameter_set({"arm_angle": (PX4_ARM_ANGLE, "rad"), "k_rotor_drag": (2e-4, ""), "z_0": (-3.0, "m")},
+                              tmp_path / "parameters.ssv", "cal")
+    plant = study.plant_parameters({"fmus.Quadrotor.parameter_set": str(ssv), "fmus.Quadrotor.parameters.d": 2e-7})
+    assert plant == {"arm_angle": PX4_ARM_ANGLE, "k_rotor_drag": 2e-4, "d": 2e-7}
+    given = {}
+
+    def points(speed, wind_speed, **kw):  # what the analysis trims: recorded, then the study stops
+        given.update(kw)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(study, "default_operating_points", points)
+    with pytest.raises(KeyboardInterrupt):
+        study.stability_study(study.StabilitySettings(plant=plant, cosim=False))
+    assert given["plant_parameters"] == plant
+    assert (given["geometric"].vehicle.arm_angle, given["geometric"].vehicle.d) == (PX4_ARM_ANGLE, 2e-7)
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--set", "simulation.duration=3"], "--set simulation.duration: the stability analysis takes the plant's "
+                                         "parameters only"),
+    (["--set", "fmus.Quadrotor.parameters.arm_angel=0.7"], "arm_angel"),
+    (["--set", "fmus.Quadrotor.parameters.k_rotor_drag=-1"], "k_rotor_drag"),
+    (["--set", "fmus.Quadrotor.parameters.d=2e-7", "--along-flight"], "--along-flight analyses the shipped plant"),
+])
+def test_stability_refuses_a_key_other_than_the_plants_in_one_line(tmp_path, capsys, args, says):
+    assert main(["stability", "--no-cosim", *args, "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and len(err.splitlines()) == 1, err
+
+def _walkthrough_commands() -> list[list[str]]:
+    """The ``fnn-cosim`` commands of docs/calibration.md's walkthrough, as written there (continuations joined)."""
+    import re
+    import shlex
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "calibration.md").read_text()
+    section = doc[doc.index("## From a PX4 log to the paper's controllers"):]
+    section = section[:section.index("\n## ", 1)]
+    blocks = re.findall(r"```sh\n(.*?)```", section, flags=re.S)
+    return [shlex.split(command) for block in blocks for command in block.replace("\\\n", " ").splitlines()
+            if command.strip()]
+
+
+def _px4_ulog(path, results_csv):
+    """The flight as PX4 logs it: NED positions and velocities, the FRD-to-NED quaternion (scalar first), FRD
+    body rates, and each motor's normalized thrust (Omega / Omega_max)^2 in PX4's X order."""
+    from scipy.spatial.transform import Rotation
+
+    from cosim.calibration import read_log
+    from tests.ulog_writer import write_ulog
+
+    log = read_log(results_csv)
+    s = {n.split(".")[1]: np.asarray(log.columns[n]) for n in log.columns if n.startswith("Quadrotor.")}
+    t_us = np.round(log.times * 1e6).astype(np.int64)
+    q = Rotation.from_euler("ZYX", np.column_stack([s["psi"], s["theta"], s["phi"]])).as_quat(scalar_first=True)
+    # the plant at -pi/4: rotor 1 front-left, 2 front-right, 3 rear-right, 4 rear-left; PX4's FR, RL, FL, RR
+    thrust = np.column_stack([np.clip(s[f"Omega_{i}"] / 900.0, 0, 1) ** 2 for i in (2, 4, 1, 3)])
+    return write_ulog(path, {
+        "vehicle_local_position": (t_us, {"x": s["x"], "y": s["y"], "z": s["z"], "vx": s["u"], "vy": s["v"],
+                                          "vz": s["w"]}),
+        "vehicle_attitude": (t_us, {"q": q}),
+        "vehicle_angular_velocity": (t_us, {"xyz": np.column_stack([s["p"], s["q"], s["r"]])}),
+        "actuator_motors": (t_us, {"control": thrust})})
+
+
+@pytest.mark.slow
+def test_the_walkthrough_from_a_px4_log_to_the_paper_controllers(tmp_path, monkeypatch, capsys):
+    """docs/calibration.md's walkthrough, its commands as written there, on a
+    ULog of a synthetic PX4 X flight: the calibration recovers the hidden
+    plant, writes the files and figures the page names, and the paper's
+    controller flies the twin."""
+    pytest.importorskip("pyulog")
+    from quadrotor_paper.synthetic_log import HIDDEN_X_AERO, WIND, fly_synthetic_log
+
+    commands = _walkthrough_commands()
+    assert [c[:2] for c in commands] == [["fnn-cosim", "calibrate"], ["fnn-cosim", "run"]]
+    fixed = dict(a.split("=") for c in commands for k, a in zip(c, c[1:]) if k == "--fix")
+    hidden = {**HIDDEN_X_AERO, "arm_angle": float(fixed["arm_angle"])}  # the vehicle: PX4's X
+    flight = fly_synthetic_log(tmp_path / "flight", duration=6.0, hidden=hidden)
+    _px4_ulog(tmp_path / "flight.ulg", flight)
+    monkeypatch.chdir(tmp_path)
+    for command in commands:
+        assert main(command[1:]) == 0, capsys.readouterr().err
+    doc = json.loads((tmp_path / "cal" / "calibration.json").read_text())
+    truth = {**hidden, **WIND}
+    for name, p in doc["parameters"].items():
+        assert p["value"] == pytest.approx(truth[name], rel=1e-4, abs=1e-6), name
+    for name in ("calibration.json", "parameters.ssv", "calibration.toml", "report.md", "estimates.png",
+                 "residuals.png", "prediction.png"):
+        assert (tmp_path / "cal" / name).is_file(), name
+    summary = json.loads((tmp_path / "twin" / "summary.json").read_text())
+    assert summary["status"] == "ok" and summary["rmse_m"] < 1.0
+    assert {Path(f).name for f in summary["figures"]} >= {"trajectory.png", "error.png", "control_signals.png"}
