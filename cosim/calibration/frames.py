@@ -2,7 +2,9 @@
 
 The column map states the log's frames (``world = "NED" | "ENU"``, ``body =
 "FRD" | "FLU"``), its attitude (a quaternion, either scalar order, or Euler
-angles), its rotors by position and what they hold (speeds, throttle, PWM);
+angles), its rotors by position and turning sense (a rotor fed by a log
+rotor that turns the other way is refused: its yaw torque's sign would be
+reversed) and what they hold (speeds, throttle, PWM);
 ``[frames]`` names the FMU variables that are world vectors, body vectors
 and Z-Y-X Euler angles. :func:`convert` adds the converted columns to the
 log and points the map's columns at them, so the rest of the calibration
