@@ -231,13 +231,20 @@ def test_a_ulog_read_with_the_px4_map_topics_resampled_on_the_local_positions_in
     assert "actuator_motors held (zero-order)" in raw.resampling
 
 
-def test_a_ulog_without_a_topic_the_map_names_is_one_line_listing_those_present(tmp_path, capsys):
+@pytest.mark.parametrize("columns, skip, topics", [
+    ("px4", "vehicle_angular_velocity", "actuator_motors, battery_status, vehicle_attitude, vehicle_local_position"),
+    # the PWM map on a log without PWM outputs (actuator_motors only): the topic its rotor columns need
+    ("px4-pwm", "", "actuator_motors, battery_status, vehicle_angular_velocity, vehicle_attitude, "
+                    "vehicle_local_position"),
+])
+def test_a_ulog_without_a_topic_the_map_names_is_one_line_listing_those_present(tmp_path, capsys, columns, skip,
+                                                                                topics):
     pytest.importorskip("pyulog")
-    path = write_ulog(tmp_path / "flight.ulg", _px4_topics(skip="vehicle_angular_velocity"))
-    err = _refused(capsys, "calibrate", path, "--fmu", DAHLQUIST, "--fit", "k", "--columns", "px4", "--out",
+    path = write_ulog(tmp_path / "flight.ulg", _px4_topics(skip=skip))
+    err = _refused(capsys, "calibrate", path, "--fmu", DAHLQUIST, "--fit", "k", "--columns", columns, "--out",
                    tmp_path / "o", "--quiet")
-    assert err.endswith("log flight.ulg: no topic 'vehicle_angular_velocity' (named by the column map); its topics: "
-                        "actuator_motors, battery_status, vehicle_attitude, vehicle_local_position")
+    assert err.endswith(f"log flight.ulg: no topic '{skip or 'actuator_outputs'}' (named by the column map); its "
+                        f"topics: {topics}")
 
 
 # ---- bad logs and maps: one line, exit 2 ----------------------------------------------------------------------
