@@ -172,9 +172,12 @@ def plant_parameters(overrides: Mapping[str, Any]) -> dict[str, float]:
     ``fnn-cosim run`` reads them: ``fmus.Quadrotor.parameters.<name>`` and
     ``fmus.Quadrotor.parameter_set`` (an SSP parameter set, e.g. a calibration's
     ``parameters.ssv``) applied to the ``circles`` scenario (names and ranges
-    checked there, one line each), less that scenario's own values and the
-    initial states (``<state>_0``: the operating points set the states).
-    Any other key is refused in one line."""
+    checked there, one line each), less the values the plant has anyway (the
+    scenario's, the defaults) and the initial states (``<state>_0``: the
+    operating points set the states). Any other key is refused in one line,
+    and so is a motor lag: the loop model takes the rotors as instantaneous
+    (the plant's 12 rigid-body states; ``tau_m > 0`` would leave the rotor
+    commands acting through states it does not carry)."""
     from cosim.errors import ScenarioError
     from cosim.scenario import load_scenario
     from fmu_models.models.quadrotor import QUADROTOR
@@ -191,7 +194,13 @@ def plant_parameters(overrides: Mapping[str, Any]) -> dict[str, float]:
     own = load_scenario("circles").fmus[DEFAULT_PLANT]["parameters"]
     given = load_scenario("circles", dict(overrides)).fmus[DEFAULT_PLANT]["parameters"]
     initial = {f"{v.name}_0" for v in QUADROTOR.states}
-    return {k: float(v) for k, v in given.items() if k not in initial and (k not in own or own[k] != v)}
+    plant = {k: float(v) for k, v in given.items()
+             if k not in initial and float(v) != float(own.get(k, QUADROTOR.variable(k).start))}
+    if plant.get("tau_m", 0.0) != 0.0:
+        raise ScenarioError(f"--set: tau_m = {plant['tau_m']:g} s: the linear analysis takes the rotors as "
+                            f"instantaneous (tau_m = 0; docs/stability.md); add --set "
+                            f"{prefix}parameters.tau_m=0 to analyse this plant without its motor lag")
+    return plant
 
 
 def stability_study(settings: StabilitySettings = StabilitySettings(), *, workers: int = 1,

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.errors import ScenarioError
 from quadrotor_paper.cli import main
 
 # PX4's quadrotor X (airframe 4001: CA_ROTOR0..3 at (+,+), (-,-), (+,-), (-,+) in FRD, CA_ROTORi_KM > 0 for
@@ -76,21 +77,26 @@ def test_the_stability_analysis_takes_the_twins_parameters_into_the_plant_and_th
     from cosim.calibration.outputs import write_parameter_set
     from quadrotor_paper.stability import study
 
-    ssv = write_parameter_set({"arm_angle": (PX4_ARM_ANGLE, "rad"), "k_rotor_drag": (2e-4, ""), "z_0": (-3.0, "m")},
-                              tmp_path / "parameters.ssv", "cal")
-    plant = study.plant_parameters({"fmus.Quadrotor.parameter_set": str(ssv), "fmus.Quadrotor.parameters.d": 2e-7})
+    ssv = write_parameter_set({"arm_angle": (PX4_ARM_ANGLE, "rad"), "k_rotor_drag": (2e-4, ""), "z_0": (-3.0, "m"),
+                               "m": (1.07, "kg"), "tau_m": (0.03, "s")}, tmp_path / "parameters.ssv", "cal")
+    given = {"fmus.Quadrotor.parameter_set": str(ssv), "fmus.Quadrotor.parameters.d": 2e-7}
+    with pytest.raises(ScenarioError, match=r"^--set: tau_m = 0.03 s: the linear analysis takes the rotors as "
+                                            r"instantaneous .* fmus.Quadrotor.parameters.tau_m=0 to analyse"):
+        study.plant_parameters(given)
+    # the parameters win over the set, as in a run; the initial state and the default mass are the plant's anyway
+    plant = study.plant_parameters(given | {"fmus.Quadrotor.parameters.tau_m": 0.0})
     assert plant == {"arm_angle": PX4_ARM_ANGLE, "k_rotor_drag": 2e-4, "d": 2e-7}
-    given = {}
+    trimmed = {}
 
     def points(speed, wind_speed, **kw):  # what the analysis trims: recorded, then the study stops
-        given.update(kw)
+        trimmed.update(kw)
         raise KeyboardInterrupt
 
     monkeypatch.setattr(study, "default_operating_points", points)
     with pytest.raises(KeyboardInterrupt):
         study.stability_study(study.StabilitySettings(plant=plant, cosim=False))
-    assert given["plant_parameters"] == plant
-    assert (given["geometric"].vehicle.arm_angle, given["geometric"].vehicle.d) == (PX4_ARM_ANGLE, 2e-7)
+    assert trimmed["plant_parameters"] == plant
+    assert (trimmed["geometric"].vehicle.arm_angle, trimmed["geometric"].vehicle.d) == (PX4_ARM_ANGLE, 2e-7)
 
 
 @pytest.mark.parametrize("args, says", [
@@ -150,7 +156,7 @@ def test_the_walkthrough_from_a_px4_log_to_the_paper_controllers(tmp_path, monke
     from quadrotor_paper.synthetic_log import HIDDEN_X_AERO, WIND, fly_synthetic_log
 
     commands = _walkthrough_commands()
-    assert [c[:2] for c in commands] == [["fnn-cosim", "calibrate"], ["fnn-cosim", "run"]]
+    assert [c[:2] for c in commands] == [["fnn-cosim", "calibrate"], ["fnn-cosim", "run"], ["fnn-cosim", "stability"]]
     fixed = dict(a.split("=") for c in commands for k, a in zip(c, c[1:]) if k == "--fix")
     hidden = {**HIDDEN_X_AERO, "arm_angle": float(fixed["arm_angle"])}  # the vehicle: PX4's X
     flight = fly_synthetic_log(tmp_path / "flight", duration=6.0, hidden=hidden)
@@ -170,3 +176,5 @@ def test_the_walkthrough_from_a_px4_log_to_the_paper_controllers(tmp_path, monke
     summary = json.loads((tmp_path / "twin" / "summary.json").read_text())
     assert summary["status"] == "ok" and summary["rmse_m"] < 1.0
     assert {Path(f).name for f in summary["figures"]} >= {"trajectory.png", "error.png", "control_signals.png"}
+    report = (tmp_path / "twin-stability" / "stability.md").read_text()
+    assert f"`arm_angle = {fixed['arm_angle']}`" in report and "`k_rotor_drag = " in report
