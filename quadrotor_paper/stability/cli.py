@@ -156,11 +156,11 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     from ..fmu_log_option import apply_fmu_log, fmu_log_option
 
-    from ..cli import _overrides
+    from ..set_option import overrides
 
     parser = _arguments(argparse.ArgumentParser(prog="fnn-cosim stability", description=_DESCRIPTION))
     fmu_log_option(parser)
-    parser.set_defaults(overrides=_overrides)
+    parser.set_defaults(overrides=overrides)
     args = parser.parse_args(argv)
     apply_fmu_log(args.fmu_log)
     return run(args)
