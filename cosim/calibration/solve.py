@@ -25,7 +25,7 @@ import numpy as np
 from scipy import sparse
 
 from ..errors import CosimError, FmuCallError, FmuError, ScenarioError, SimulationTerminated
-from .marquardt import levenberg_marquardt
+from .marquardt import INITIAL_DAMPING, levenberg_marquardt
 from .model import LogModel, REL_STEP
 from .problem import _float
 from .segments import Segment
@@ -461,6 +461,7 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
             progress(min(done[0], total), total)
 
     result, prob = None, None
+    damping = INITIAL_DAMPING
     for n in range(passes):
         prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress, pool, symbolic)
         lo, hi = prob.bounds()
@@ -475,19 +476,22 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
             report()
             return prob.jacobian(zz)
 
-        def solve(max_nfev, tol):
+        def solve(max_nfev, tol):  # each run from the damping the last one ended with (near the optimum: small)
             return levenberg_marquardt(prob.residuals, jac, z, lo, hi, scale, prob.nt, prob.ne, ftol=tol, xtol=tol,
-                                       gtol=tol, max_nfev=max_nfev)
+                                       gtol=tol, max_nfev=max_nfev, damping=damping)
 
         used = 0
+        # the first of two passes gives the noise levels only (each output's RMS residual, wanted to a few
+        # digits): it ends where the coarse Jacobians do (at their tolerance: 1e-8), the second is the estimate
+        weights_only = n == 0 and passes == 2
         if stride > 1:  # the coarse Jacobians bring the iterate near the optimum, the exact ones finish
             prob.stride = stride
             result = solve(min(max_iterations, COARSE_EVALUATIONS), max(tolerance, COARSE_TOLERANCE))
-            z, used = result.x, result.nfev
+            z, used, damping = result.x, result.nfev, result.damping
         prob.stride = 1
-        if used < max_iterations:
-            result = solve(max_iterations - used, tolerance)
-        z = result.x
+        if used < max_iterations and not (weights_only and stride > 1):
+            result = solve(max_iterations - used, max(tolerance, COARSE_TOLERANCE) if weights_only else tolerance)
+        z, damping = result.x, result.damping
         if n == 0 and passes == 2:
             r = prob.residuals(z).copy()
             ny = len(p.outputs)
