@@ -191,8 +191,8 @@ class _Problem:
                                             f"{_fmu_name(tr)} cannot simulate it: "
                                             f"{tr.reason}") from None
                     # a trial point the FMU cannot simulate (refused, its solver failed, not finite): infinite
-                    # residuals, which the solver rejects (its trust region shrinks), as a step into a region the
-                    # model cannot fly; the one place every way (serial, workers, CasADi) meets it
+                    # residuals, which the solver rejects (its damping grows: a shorter step), as a step into a
+                    # region the model cannot fly; the one place every way (serial, workers, CasADi) meets it
                     tr = self._failed(s)
                 trajs.append(tr)
             self.cache[key] = trajs
