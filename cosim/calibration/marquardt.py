@@ -47,6 +47,7 @@ from scipy import sparse
 __all__ = ["Result", "levenberg_marquardt", "schur_step", "MESSAGES"]
 
 MESSAGES = {
+    -1: "No step: the damped normal equations are not positive definite at any damping.",
     0: "The maximum number of function evaluations is exceeded.",
     1: "`gtol` termination condition is satisfied.",
     2: "`ftol` termination condition is satisfied.",
@@ -187,8 +188,9 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], jac: Callable, 
             try:
                 step = schur_step(H, g, lam * damping, nt, ne, ~held)
             except np.linalg.LinAlgError:  # not positive definite to round-off: more damping makes it so
-                if lam > 1e30:
-                    raise
+                if lam > 1e30:  # none does (a Jacobian of overflowing entries): not converged, said so
+                    status, done = -1, True
+                    break
                 lam, nu = lam * nu, 2 * nu
                 continue
             z_new = np.clip(z + step, lower, upper)
