@@ -482,16 +482,17 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
 
         used = 0
         # the first of two passes gives the noise levels only (each output's RMS residual, wanted to a few
-        # digits): it ends at the coarse tolerance (1e-8), the second is the estimate. Its exact Jacobians still
-        # finish it: on a log the model meets exactly, the coarse ones converge linearly (20 simulations left
-        # the 6 s log's residuals 1e-6 of its spread, so a second pass), the exact ones reach round-off
+        # digits): it ends where the coarse Jacobians converge (1e-8), the second is the estimate. Where they do
+        # not, the exact ones finish it at 1e-8: on a log the model meets exactly through the generic way's
+        # Magnus step the coarse ones converged linearly (20 simulations left the 6 s log's residuals 1e-6 of
+        # its spread: a second pass), the exact ones reach round-off (the first weights stay)
         weights_only = n == 0 and passes == 2
         if stride > 1:  # the coarse Jacobians bring the iterate near the optimum, the exact ones finish
             prob.stride = stride
             result = solve(min(max_iterations, COARSE_EVALUATIONS), max(tolerance, COARSE_TOLERANCE))
             z, used, damping = result.x, result.nfev, result.damping
         prob.stride = 1
-        if used < max_iterations:
+        if used < max_iterations and not (weights_only and stride > 1 and result.status > 0):
             result = solve(max_iterations - used, max(tolerance, COARSE_TOLERANCE) if weights_only else tolerance)
         z, damping = result.x, result.damping
         if n == 0 and passes == 2:
