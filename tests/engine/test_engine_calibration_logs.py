@@ -348,10 +348,6 @@ def test_the_mirrors_of_a_map_body_and_rotors_left_right():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="the rotor speeds behind the motor lag (states the ULog lacks) start each segment "
-                          "estimated, unbounded: a trial point sets Omega_r_1_0 = -33.7 and the FMU refuses it, an "
-                          "error instead of a rejected trial (2026-11-29; with tau_m = 0 the same at -4e-71: "
-                          "cosim/calibration/solve.py bounds the estimated states at -inf, inf)", strict=False)
 def test_the_plant_in_an_x_frame_calibrated_from_a_px4_ulog_through_the_command(tmp_path, capsys):
     # the project's X plant flown with hidden values, its log written as PX4 writes one (topics, quaternion,
     # PX4's motor order, normalized thrust), calibrated by `fnn-cosim calibrate --columns px4`
