@@ -4,19 +4,24 @@ For each seed: the plant flown by the project in the circles mission with
 the sensors of ``circles_sensors`` (Measurement12: motion-capture position
 and attitude noise, gyro and velocity noise; the command link's delay) and a
 constant 3 m/s wind, hidden parameters (quadrotor_paper.synthetic_log.HIDDEN);
-the log holds the *measured* states, the rotor commands the plant received
-and the rotor speeds. ``b, Ix, k_drag_lin, tau_m`` and the wind are fitted
-(every segment's initial state estimated: the logged states are noisy).
-Printed per seed: each estimate's relative error and whether its 95 %
-interval covers the truth; at the end, per parameter, the share of seeds
-covered (about 95 % expected) and the largest relative error (target 1 %).
+the log (``fly_sensed_log``) is written as another vehicle's: ENU world, FLU
+body, the attitude a quaternion (scalar last), the rotor commands in PX4's
+motor order by position and the ESCs' noisy rotor speeds, read through the
+column map a user would write (``sensed_column_map``). ``b, Ix, k_drag_lin,
+tau_m`` and the wind are fitted (every segment's initial state estimated:
+the logged states are noisy). Printed per seed: each estimate's relative
+error and whether its 95 % interval covers the truth, the intervals used
+(classical, or robust after a warning) and the warnings; at the end, per
+parameter, the share of seeds covered (about 95 % expected) and the largest
+relative error.
 
 With ``--aero`` (issue 42's "Done when"): the plant an X frame with rotor
 drag, axial inflow and translational lift (HIDDEN_X_AERO), the controller's
 mixer an X as it reads the plant's arm_angle, the same sensors and wind, and
 FIT_AERO fitted: b, d, the three inertias, tau_m, the three rotor
 coefficients, both body drags and the three wind components (wind_z's truth
-is 0: its absolute error is printed).
+is 0: its absolute error is printed). ``--processes N``: N seeds fitted side
+by side (minutes a seed; docs/calibration.md).
 
     .venv/bin/python benchmarks/calibration_coverage.py [--aero] [--seeds 20] [--first 1] [--duration 20] [--processes 2]
 """
