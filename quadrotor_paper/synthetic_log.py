@@ -63,7 +63,8 @@ def fly_synthetic_log(out: str | Path, duration: float = 10.0, hidden: Mapping[s
 SENSED = tuple(f"Sensors.{s}_m" for s in _STATES) + LOGGED[12:]
 # The log's motors in its own order, by position: PX4's numbering of its quadrotor X (1 front-right, 2 rear-left,
 # 3 front-left, 4 rear-right) and of its quadrotor plus (1 right, 2 left, 3 front, 4 rear); the plant's rotor i
-# sits at arm_angle + (i - 1) pi/2 from the nose (docs/plant-model.md): an X at pi/4, a plus at 0.
+# sits at arm_angle + (i - 1) pi/2 from the nose (docs/plant-model.md): an X at pi/4, a plus at 0. Positions only:
+# each motor turns as the plant's rotor there does (the map states no spins).
 LOG_MOTORS = {"X": ("front-right", "rear-left", "front-left", "rear-right"), "plus": ("right", "left", "front", "rear")}
 ESC_NOISE = 3.0  # rad/s: the ESCs' rotor-speed telemetry, white, about 0.5 % of the hover speed (630 rad/s)
 # the ESC noise's own stream of the seed (the Measurement12 noise is the scenario's stream 1, the FNN's 0)
@@ -74,7 +75,7 @@ _ESC_STREAM = 2
 SENSED_MAP = """\
 world = "ENU"
 body = "FLU"
-mirror_check = false   # the mirrors are checked by the calibration tests of frames.py, not by every fit here
+mirror_check = false   # the mirrors' two refits would double every fit of the coverage study; frames.py's tests check them
 
 [columns]
 x = "pos_x"
