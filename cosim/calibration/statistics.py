@@ -28,11 +28,16 @@ import numpy as np
 
 from ..summary import t975
 
-__all__ = ["Statistics", "statistics", "residual_statistics", "whiteness", "at_bounds", "NULL_COMPONENT", "AT_BOUND"]
+__all__ = ["Statistics", "statistics", "residual_statistics", "whiteness", "at_bounds", "NULL_COMPONENT", "AT_BOUND",
+           "NEAR_BOUND_STD"]
 
 NULL_COMPONENT = 0.1  # a parameter with more than this in an undetermined direction is not identifiable
 AT_BOUND = 1e-6  # an estimate this close to its bound (relative) is at it: the solver's projection puts it on the
 # bound or, where the last steps approached it from inside, near it (measured 5.7e-12 from a bound at 0)
+# a bound at 0 with the other side open: an estimate nearer to it than this share of its standard error is at it
+# (its interval would cross the bound by two standard errors; the projected solver ends on an active bound or
+# within 1e-11 of it, far below 1e-3 of any standard error)
+NEAR_BOUND_STD = 1e-3
 MAX_RHO = 0.97  # Andrews' AR(1) plug-in is clipped here (his section 6): a residual of rho -> 1 has no bandwidth
 
 
@@ -79,17 +84,27 @@ def _fisher(J: np.ndarray, state_blocks) -> np.ndarray:
     return F
 
 
-def at_bounds(theta: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+def at_bounds(theta: np.ndarray, lower: np.ndarray, upper: np.ndarray, std: np.ndarray | None = None) -> np.ndarray:
     """Which estimates sit at a finite bound: within :data:`AT_BOUND` of it,
-    relative to the larger of the bound's and the interval's magnitudes
-    (a bound at 0: to the other bound, else 1)."""
+    relative to the larger of the bound's and the interval's magnitudes. A
+    bound at 0 with the other side open has no magnitude: there, within
+    :data:`NEAR_BOUND_STD` of the estimate's standard error ``std`` (the
+    classical one, every name free), else (no standard error) within
+    :data:`AT_BOUND` in the name's own unit. Not an absolute 1e-6: a yaw
+    coefficient ``d`` of 1.9e-7 N m s^2 with its bound at 0 would always be
+    "at" it."""
     out = np.zeros(theta.size, bool)
     for j, (v, lo, hi) in enumerate(zip(theta, lower, upper)):
         width = hi - lo if np.isfinite(hi - lo) else 0.0
         for b in (lo, hi):
             if np.isfinite(b):
-                ref = max(abs(b), abs(width) if width else 0.0) or 1.0
-                out[j] |= abs(v - b) <= AT_BOUND * ref
+                ref = max(abs(b), abs(width) if width else 0.0)
+                if ref:
+                    out[j] |= abs(v - b) <= AT_BOUND * ref
+                elif std is not None and np.isfinite(std[j]) and std[j] > 0:
+                    out[j] |= abs(v - b) <= NEAR_BOUND_STD * std[j]
+                else:
+                    out[j] |= abs(v - b) <= AT_BOUND
     return out
 
 
@@ -102,7 +117,11 @@ def statistics(names, theta: np.ndarray, J: np.ndarray, residuals: np.ndarray, s
     ``J``: their Jacobian w.r.t. the fitted names; ``lower``, ``upper``: the
     fitted names' bounds."""
     p = len(names)
-    bound = at_bounds(theta, lower, upper) if lower is not None else np.zeros(p, bool)
+    every = _statistics(names, theta, J, residuals, state_blocks, n_states_estimated, tolerance, n_outputs,
+                        segment_rows)
+    bound = at_bounds(theta, lower, upper, every.std_classical) if lower is not None else np.zeros(p, bool)
+    if not bound.any():
+        return every
     free = ~bound
     st = _statistics([n for n, f in zip(names, free) if f], theta[free], J[:, free], residuals, state_blocks,
                      n_states_estimated + int(bound.sum()), tolerance, n_outputs, segment_rows)
@@ -118,7 +137,7 @@ def statistics(names, theta: np.ndarray, J: np.ndarray, residuals: np.ndarray, s
     return Statistics(grown(st.std, np.nan), grown(st.ci95, np.nan), grown(st.correlation, np.nan, True),
                       grown(st.identifiable, True), st.singular_values, st.null_directions, st.dof,
                       st.residual_variance, bound, grown(st.std_robust, np.nan), grown(st.ci95_robust, np.nan),
-                      st.bandwidth) if bound.any() else st
+                      st.bandwidth)
 
 
 def _statistics(names, theta, J, residuals, state_blocks, n_states_estimated, tolerance, n_outputs,
