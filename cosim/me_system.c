@@ -21,6 +21,7 @@
  * Its structures and codes are declared once, in cosim/me_system.py, which
  * writes them as me_system_abi.h for this file.
  */
+#include <float.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -39,6 +40,7 @@ typedef void (*SUNErrHandlerFn)(int, const char *, const char *, const char *, i
 #define CV_BDF 2
 #define CV_NORMAL 1
 #define CV_ROOT_RETURN 2
+#define MIN_STEP_ULPS 100.0  /* CVODE's smallest step, in units of the time's last place (cvode_step) */
 
 typedef int (*ctx_create_t)(int, void **);
 typedef int (*ctx_free_t)(void **);
@@ -386,6 +388,15 @@ static int cvode_step(MeSystem *s, double t, double target, int *state_event, do
     MeSundials *f = s->sundials;
     if ((!s->cvode || s->restart) && solver_start(s, t)) return -1;
     ((cv_setreal_t)f->CVodeSetStopTime)(s->cvode, target);
+    /* The smallest step: 100 units in the last place of the time (a step below it is rounded by over 1 % when
+     * added to t; at t + h == t CVODE would go on for its 100000 steps without moving). A trajectory that needs
+     * one (a solution escaping to infinity, a singular right-hand side) fails here at once, deterministically,
+     * with CVODE's error-test or convergence failure at |h| = hmin. Never above a thousandth of the interval
+     * (a communication step itself that short), nor above the largest step. */
+    double hmin = MIN_STEP_ULPS * DBL_EPSILON * fmax(fabs(t), fabs(target));
+    hmin = fmin(hmin, 1e-3 * (target - t));
+    if (s->max_step > 0) hmin = fmin(hmin, s->max_step);
+    ((cv_setreal_t)f->CVodeSetMinStep)(s->cvode, hmin);
     double tret = t;
     s->message[0] = 0;
     const int flag = ((cv_t)f->CVode)(s->cvode, target, s->y, &tret, CV_NORMAL);

@@ -131,7 +131,7 @@ _CONNECTION_FIELDS = (
 _SUNDIALS = ("SUNContext_Create", "SUNContext_Free", "SUNContext_ClearErrHandlers", "SUNContext_PushErrHandler", "N_VNew_Serial", "N_VDestroy",
              "N_VGetArrayPointer", "SUNDenseMatrix", "SUNMatDestroy", "SUNLinSol_Dense", "SUNLinSolFree",
              "CVodeCreate", "CVodeInit", "CVodeReInit", "CVodeSVtolerances", "CVodeRootInit", "CVodeSetLinearSolver",
-             "CVodeSetMaxStep", "CVodeSetMaxNumSteps", "CVodeSetNoInactiveRootWarn", "CVodeSetUserData",
+             "CVodeSetMaxStep", "CVodeSetMinStep", "CVodeSetMaxNumSteps", "CVodeSetNoInactiveRootWarn", "CVodeSetUserData",
              "CVodeSetStopTime", "CVode", "CVodeGetRootInfo", "CVodeFree", "CVodeGetReturnFlagName",
              "CVodeSetJacFn", "SUNDenseMatrix_Column")
 _SUNDIALS_FIELDS = tuple((name, _ptr, "") for name in _SUNDIALS)
