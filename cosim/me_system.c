@@ -548,6 +548,22 @@ int me_member_step(void *member, double t, double h, int flag) {
     return me_advance(m->system, t, t + h) ? 3 : 0;
 }
 
+/* A lone member's trajectory over rows (a calibration's segment): at each row its inputs from outside set
+ * (u: a row of n_in each), its outputs read (y: a row of n_out each), then the step to the next row: the calls
+ * me_member_set, me_member_get and me_member_step make one by one, without leaving C. 0, or the failed call's
+ * status (3: the integration's) with its row in *row. */
+int me_member_rows(void *member, double *t, int64_t steps, uint32_t *in_vr, size_t n_in, double *u,
+                   uint32_t *out_vr, size_t n_out, double *y, int64_t *row) {
+    for (int64_t i = 0; i <= steps; i++) {
+        int status;
+        *row = i;
+        if (n_in && (status = me_member_set(member, in_vr, n_in, u + i * (int64_t)n_in)) > 1) return status;
+        if ((status = me_member_get(member, out_vr, n_out, y + i * (int64_t)n_out)) > 1) return status;
+        if (i < steps && me_member_step(member, t[i], t[i + 1] - t[i], 1)) return 3;
+    }
+    return 0;
+}
+
 /* Everything the solver holds freed (a new run builds it again). */
 int me_free(MeSystem *s) {
     MeSundials *f = s->sundials;

@@ -216,7 +216,10 @@ _ENTRY_POINTS = (("me_advance", (("s", _SYS), ("t", _f64), ("t_end", _f64))),
                                     ("u", _f64p))),
                  ("me_member_get", (("member", _ptr), ("vr", ctypes.POINTER(_u32)), ("n", ctypes.c_size_t),
                                     ("y", _f64p))),
-                 ("me_member_step", (("member", _ptr), ("t", _f64), ("h", _f64), ("flag", ctypes.c_int))))
+                 ("me_member_step", (("member", _ptr), ("t", _f64), ("h", _f64), ("flag", ctypes.c_int))),
+                 ("me_member_rows", (("member", _ptr), ("t", _f64p), ("steps", _i64), ("in_vr", ctypes.POINTER(_u32)),
+                                     ("n_in", ctypes.c_size_t), ("u", _f64p), ("out_vr", ctypes.POINTER(_u32)),
+                                     ("n_out", ctypes.c_size_t), ("y", _f64p), ("row", _i64p))))
 
 
 def header() -> str:
@@ -539,6 +542,25 @@ class ModelExchangeSystem:
         self._started()
         if library().me_member_step(member._me_member, t, h, 1) > 1:
             raise self.failure()
+
+    def rows(self, member, times: np.ndarray, u: np.ndarray, y: np.ndarray) -> None:
+        """``member`` (alone in its system, its inputs and outputs bound
+        untyped) over the rows ``times``: at row ``i`` its bound inputs set
+        to ``u[i]``, its bound outputs read into ``y[i]``, then the step to
+        row ``i + 1``; the calls :meth:`set_inputs`, :meth:`get_outputs` and
+        :meth:`step` make row by row, in C (``me_member_rows``: a
+        calibration's trajectories). ``times``, ``u``, ``y``: C-contiguous
+        float64, ``u`` rows x bound inputs, ``y`` rows x bound outputs."""
+        self._started()
+        row = _i64(0)
+        u32p = ctypes.POINTER(_u32)
+        status = library().me_member_rows(member._me_member, times.ctypes.data_as(_f64p), times.size - 1,
+                                           ctypes.cast(member._in_vr, u32p), member._n_in, u.ctypes.data_as(_f64p),
+                                           ctypes.cast(member._out_vr, u32p), member._n_out,
+                                           y.ctypes.data_as(_f64p), ctypes.byref(row))
+        if status > 1:
+            raise self.failure()
+        member._t = float(times[-1])
 
     def set_inputs(self, member, t: float) -> None:
         """``member``'s bound inputs from outside the system (:attr:`u`), held

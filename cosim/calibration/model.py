@@ -221,6 +221,13 @@ class LogModel:
         cs.exit_initialization(float(t[seg.first]))
         if self.model_exchange:
             cs.set_continuous_states(x0)
+            if cs.system is not None and not cs._typed:  # the same calls row by row, in C
+                u = np.empty((steps + 1, len(self.drive)))
+                u[:, :n_in] = p.input_values[seg.first:seg.first + steps + 1]
+                u[:, n_in:] = fitted_u
+                y = np.empty((steps + 1, len(self.read)))
+                cs.system.rows(cs, np.ascontiguousarray(t[seg.first:seg.first + steps + 1], dtype=float), u, y)
+                return Trajectory(y[:, self._x_idx], y[:n_rows, self._out_idx])
         outputs = np.empty((n_rows, len(p.outputs)))
         states = np.empty((steps + 1, len(self.states)))
         y = cs.y
