@@ -564,6 +564,42 @@ int me_member_rows(void *member, double *t, int64_t steps, uint32_t *in_vr, size
     return 0;
 }
 
+/* A lone member's right-hand side at n points (a calibration's rows), the member in Continuous-Time Mode: at
+ * point i its time t[i], its continuous states x[i] (nx each) and its inputs u[i] (n_in each, in_vr) set, then
+ * f[i] = [der(x); the outputs out_vr] (nx + n_out each) read; with dd (its fmiXGetDirectionalDerivative), also
+ * jac[i] = d f / d known_k for each of the n_known known_vr (one column of nx + n_out a known, unknown_vr the
+ * derivatives' and the outputs' references). The calls cosim/calibration/model.py's _Fast makes one by one, in
+ * its order. 0, or the failed call's status with its point in *row. */
+int me_member_evaluate_rows(void *member, int64_t n, double *t, double *x, uint32_t *in_vr, size_t n_in, double *u,
+                            uint32_t *out_vr, size_t n_out, double *f, void *dd, uint32_t *unknown_vr,
+                            uint32_t *known_vr, size_t n_known, double *jac, int64_t *row) {
+    MeMember *m = member;
+    const size_t nx = (size_t)m->nx, nf = nx + n_out;
+    const double seed = 1.0;
+    for (int64_t i = 0; i < n; i++) {
+        int status;
+        double *fi = f + i * (int64_t)nf;
+        *row = i;
+        if ((status = ((set_time2_t)m->set_time)(m->component, t[i])) > 1
+            || (status = ((cvector2_t)m->set_states)(m->component, x + i * (int64_t)nx, nx)) > 1
+            || (n_in && (status = set_real(m, in_vr, n_in, u + i * (int64_t)n_in)) > 1)
+            || (status = ((vector2_t)m->get_derivatives)(m->component, fi, nx)) > 1)
+            return status;
+        if (n_out && (status = m->version == 2 ? ((real2_t)m->get_real)(m->component, out_vr, n_out, fi + nx)
+                                               : ((real3_t)m->get_real)(m->component, out_vr, n_out, fi + nx,
+                                                                         n_out)) > 1)
+            return status;
+        for (size_t k = 0; dd && k < n_known; k++) {
+            double *column = jac + (i * (int64_t)n_known + (int64_t)k) * (int64_t)nf;
+            status = m->version == 2
+                ? ((directional2_t)dd)(m->component, unknown_vr, nf, known_vr + k, 1, &seed, column)
+                : ((directional3_t)dd)(m->component, unknown_vr, nf, known_vr + k, 1, &seed, 1, column, nf);
+            if (status > 1) return status;
+        }
+    }
+    return 0;
+}
+
 /* Everything the solver holds freed (a new run builds it again). */
 int me_free(MeSystem *s) {
     MeSundials *f = s->sundials;

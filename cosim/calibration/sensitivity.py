@@ -1,6 +1,6 @@
 """Forward sensitivities of a segment's outputs to the unknowns.
 
-With the Jacobians of the right-hand side at each row (:class:`~cosim.calibration.model.LogModel.jacobians`),
+With the Jacobians of the right-hand side at each row (:meth:`~cosim.calibration.model.LogModel.jacobians_at`),
 the sensitivity ``S = dx/d(theta, x0)`` of the states obeys the variational
 equation ``dS/dt = A(t) S + G(t)``, ``S(t_0) = [0, I]`` (the initial state's
 own columns, where it is estimated), carried along the log from row to
@@ -67,15 +67,9 @@ def segment_sensitivities(model, theta: np.ndarray, seg, traj, estimated: np.nda
     ny = len(p.outputs)
     at = np.unique(np.concatenate([np.arange(0, steps + 1, max(int(stride), 1)), [steps]]))
     m = at.size
-    A = np.empty((m, nx, nx))
-    G = np.empty((m, nx, nt))
-    C = np.empty((m, ny, nx))
-    D = np.empty((m, ny, nt))
-    empty = np.zeros(0)
-    for q, i in enumerate(at):
-        k = seg.first + int(i)
-        A[q], G[q], C[q], D[q] = model.jacobians(theta, float(t[k]), traj.states[i],
-                                                 p.input_values[k] if p.inputs else empty)
+    rows = seg.first + at
+    A, G, C, D = model.jacobians_at(theta, t[rows], traj.states[at],
+                                    p.input_values[rows] if p.inputs else np.zeros((m, 0)))
     h = np.diff(t[seg.first + at])[:, None, None]
     M = np.zeros((m - 1, nx + nt, nx + nt))
     M[:, :nx, :nx] = 0.5 * h * (A[:-1] + A[1:])
