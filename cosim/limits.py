@@ -8,7 +8,7 @@ from __future__ import annotations
 
 __all__ = ["MAX_DOCUMENT_BYTES", "MAX_ENTRY_BYTES", "MAX_ARCHIVE_BYTES", "MAX_RATIO", "MAX_STEPS",
            "MAX_RECORD_BYTES", "MAX_RUNS", "MAX_STATE", "SEED_LIMIT", "WORKER_TIMEOUT", "MAX_STRING_BYTES",
-           "MAX_TABLE_BYTES", "MAX_TABLE_ROWS", "MAX_TABLE_DATA", "MAX_NESTING", "MAX_GROUP"]
+           "MAX_TABLE_ROWS", "MAX_TABLE_DATA", "MAX_NESTING", "MAX_GROUP"]
 
 MAX_DOCUMENT_BYTES = 16 * 2 ** 20  # a scenario, study, learned-state file or SSD: far beyond any real one
 MAX_ENTRY_BYTES = 512 * 2 ** 20  # one file extracted from an archive (an FMU's binary, an FMU in an SSP archive)
@@ -22,8 +22,7 @@ MAX_STATE = 100_000  # values of a learned state
 SEED_LIMIT = 2 ** 53  # a seed parameter is a double: every whole number up to 2^53 is exact
 WORKER_TIMEOUT = 120.0  # s a study waits for a Dask cluster without a worker before it stops
 MAX_STRING_BYTES = 2 ** 20  # one recorded String or Binary value; those a result keeps count against MAX_RECORD_BYTES
-MAX_TABLE_BYTES = 256 * 2 ** 20  # a signal table file (cosim.table): read whole, so bounded
-MAX_TABLE_ROWS = 10 ** 7  # rows of a signal table
-MAX_TABLE_DATA = 2 ** 30  # a Parquet signal table's data uncompressed, as its footer states: compressed it may be 1000x smaller
+MAX_TABLE_ROWS = 10 ** 7  # rows of a signal table (its file is streamed: its size bounds no memory, its rows do)
+MAX_TABLE_DATA = 2 ** 30  # the data of a signal table's columns read (a Parquet file's uncompressed, as its footer states: compressed it may be 1000x smaller)
 MAX_NESTING = 32  # levels of a document (tables and arrays within each other) and parts of a dotted key (--set a.b.c): ours use 6; thousands exhaust the interpreter
 MAX_GROUP = 10_000  # names in one brace group of a connection ({x,y,z}): ours hold 12; each is a connection checked

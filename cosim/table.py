@@ -30,10 +30,16 @@ columns (docs/cosim.md, "The signal table"):
 * **the time column** (:func:`check_times`): finite, never decreasing (with
   ``duplicates = "refuse"`` increasing), and, with ``max_gap``, no two rows
   further apart than that; one line naming the row and the column otherwise;
-* **outside the recorded times** (``outside``): ``"hold"`` (default: before
-  the first row the first value holds, after the last row the last) or
-  ``"refuse"`` (a run that starts before the first row or ends after the
-  last is refused before its first step, naming both times);
+* **outside the recorded times** (``outside``): ``"refuse"`` (default: a
+  run that starts before the first row or ends after the last is refused
+  before its first step, in one line naming the table, its file, its first
+  and last times and the run's span) or ``"hold"`` (before the first row the
+  first value holds, after the last row the last: a table of constants may
+  be one row);
+* **the columns played**: those the scenario uses -- the sources of its
+  connections, its recorded and bounded signals (:func:`played`; every one
+  where it records every output) -- and only those are read: a column no
+  one uses may hold anything;
 * **form** (``form``): a table of Float64 scalar columns runs as an FMU
   (``fmu_models``' generic table FMU, registered with
   :func:`cosim.registry.register_table_fmu`: the same values, in the
@@ -41,38 +47,43 @@ columns (docs/cosim.md, "The signal table"):
   (``"auto"``, the default; ``"fmu"`` insists), else as this Python
   component (``"python"``).
 
-The file is data from anyone: read whole, it is bounded
-(:data:`~cosim.limits.MAX_TABLE_BYTES`, :data:`~cosim.limits.MAX_TABLE_ROWS`),
-every field checked against its column's type, in one line naming the file,
-the row and the column (``docs/security.md``).
+The file is data from anyone, and a log may be hours at hundreds of hertz
+with dozens of columns: it is read through :mod:`cosim.columns_io` (a CSV
+streamed, only the columns played converted; a Parquet file's chunks of
+those columns alone), so a table holds its time and the columns played as
+float64 arrays (or lists, for the types a double does not hold exactly),
+not the file. Bounded by rows (:data:`~cosim.limits.MAX_TABLE_ROWS`) and
+the data of the columns read (:data:`~cosim.limits.MAX_TABLE_DATA`), every
+field checked against its column's type, in one line naming the file, the
+row and the column (``docs/security.md``). Two columns of one name are
+refused in one line naming it and the file.
 """
 from __future__ import annotations
 
-import csv
-import io
 import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Collection, Mapping, Sequence
 
 import numpy as np
 from pydantic import Field
 
-from .component import FLOAT_HELD, TYPES, Port, PythonComponent, element_ports, typed_value
-from .errors import ScenarioError
-from .files import read_json, read_text, regular_file
-from .limits import MAX_TABLE_BYTES, MAX_TABLE_DATA, MAX_TABLE_ROWS
+from .columns_io import FieldError, csv_floats, csv_batches, csv_header, parquet_read, parquet_schema, unique_columns
+from .component import FLOAT_HELD, TYPES, Port, PythonComponent, element_of, element_ports, typed_value
+from .errors import ScenarioError, shown_text
+from .files import read_json, regular_file
+from .limits import MAX_TABLE_DATA, MAX_TABLE_ROWS
 from .schema import Positive, Table, one_of
 from .time_grid import TOLERANCE  # a time within it of a row's counts as the row's (math.isclose, as fmpy)
 
 __all__ = ["SignalTable", "RecordedTable", "TableData", "read_table", "load_table", "check_times", "split_unit",
            "table_component", "fmu_entry", "KIND", "INTERPOLATIONS", "OUTSIDE", "DUPLICATES", "FORMS",
-           "PARQUET_SUFFIXES"]
+           "PARQUET_SUFFIXES", "played"]
 
 KIND = "signal_table"
 INTERPOLATIONS = ("hold", "linear")
-OUTSIDE = ("hold", "refuse")
+OUTSIDE = ("refuse", "hold")  # the first the default: a run beyond the rows plays no made-up values
 DUPLICATES = ("step", "refuse")
 FORMS = ("auto", "fmu", "python")
 PARQUET_SUFFIXES = (".parquet", ".pq")
@@ -97,8 +108,9 @@ class TableSpec(Table):
                                                                       "'hold' (sample and hold) or 'linear'")
     columns: dict[str, ColumnSpec] = Field(default_factory=dict, description="type, unit, interpolation per "
                                                                              "column (default Float64)")
-    outside: one_of(OUTSIDE) = Field("hold", description="before the first row and after the last: 'hold' the "
-                                                         "first / last values, or 'refuse' a run that goes there")
+    outside: one_of(OUTSIDE) = Field(OUTSIDE[0], description="a run that starts before the first row or ends "
+                                                             "after the last: 'refuse' it (before it starts), or "
+                                                             "'hold' the first / last values there")
     max_gap: Positive = Field(None, description="the most two rows may lie apart [s]; a table with a wider gap "
                                                 "is refused (default: any)")
     duplicates: one_of(DUPLICATES) = Field("step", description="two rows at one time: 'step' (from then on the "
@@ -157,35 +169,6 @@ def check_times(times: np.ndarray, where: str, column: str = "time", max_gap: fl
                                 f"{_num(max_gap)} s")
 
 
-def _parse(text: str, where: str) -> tuple[list[str], list[list[str]]]:
-    """The header and rows of a CSV text, bounded and rectangular."""
-    reader = csv.reader(io.StringIO(text, newline=""))
-    try:
-        header = next(reader)
-    except StopIteration:
-        raise ScenarioError(f"{where}: empty (expected a header 'time,col1,...')") from None
-    except csv.Error as exc:
-        raise ScenarioError(f"{where}: line 1: {exc}") from None
-    header = [h.strip() for h in header]
-    if not header or split_unit(header[0])[0] != "time" or len(header) < 2:
-        raise ScenarioError(f"{where}: header {','.join(header)!r}: expected 'time,col1,...'")
-    rows = []
-    try:
-        for line, row in enumerate(reader, start=2):
-            if not row:
-                continue
-            if len(rows) >= MAX_TABLE_ROWS:
-                raise ScenarioError(f"{where}: more than {MAX_TABLE_ROWS} rows; at most {MAX_TABLE_ROWS} are read")
-            if len(row) != len(header):
-                raise ScenarioError(f"{where}: line {line}: {len(row)} fields for {len(header)} columns")
-            rows.append(row)
-    except csv.Error as exc:
-        raise ScenarioError(f"{where}: line {reader.line_num}: {exc}") from None
-    if not rows:
-        raise ScenarioError(f"{where}: no rows after the header")
-    return header, rows
-
-
 def _names(header: Sequence[str], where: str, told_units: Sequence[str | None] | None) -> tuple[list, list]:
     """Column names and units of a header (``x [m]``; the sidecar's units where it gives them)."""
     names, units = [], []
@@ -194,16 +177,29 @@ def _names(header: Sequence[str], where: str, told_units: Sequence[str | None] |
         told = told_units[k] if told_units is not None else None
         if unit is not None and told not in (None, unit):
             raise ScenarioError(f"{where}: column {name}: unit {unit!r} in the header but {told!r} in the sidecar")
+        if not name:
+            raise ScenarioError(f"{where}: header: column {k + 1} has no name")
         names.append(name)
         units.append(unit if unit is not None else told)
-    seen = set()
-    for name in names[1:]:
-        if not name or name in seen or name == "time":
-            raise ScenarioError(f"{where}: header: column name {name!r} is empty or repeated")
-        seen.add(name)
-    if units[0] not in (None, "s"):
-        raise ScenarioError(f"{where}: column time: unit {units[0]!r}; the time is in s")
+    unique_columns(names, where)  # "x" and "x [m]" are one name too
+    if "time" in names and units[names.index("time")] not in (None, "s"):
+        raise ScenarioError(f"{where}: column time: unit {units[names.index('time')]!r}; the time is in s")
     return names, units
+
+
+def _chosen(names: Sequence[str], types: Mapping[str, str], use: Collection[str] | None, where: str) -> list[str]:
+    """The data columns to read, in the file's order: those ``use`` names
+    (a column, or an array column's element ``u[1]``), every one if ``None``;
+    a declared or used name that is no column is refused in one line."""
+    data = [n for n in names if n != "time"]
+    wanted = set()
+    for name, used in [*((n, False) for n in types), *((n, True) for n in use or ())]:
+        base = name if name in data or not used else element_of(name)[0]
+        if base not in data:
+            raise ScenarioError(f"{where}: no column {name!r}; its columns are: {shown_text(', '.join(data), 300)}")
+        if used:
+            wanted.add(base)
+    return data if use is None else [n for n in data if n in wanted]
 
 
 def _sidecar(path: Path, header: Sequence[str]) -> tuple[list | None, list | None]:
@@ -221,47 +217,113 @@ def _sidecar(path: Path, header: Sequence[str]) -> tuple[list | None, list | Non
             [t if t in TYPES else "Float64" for t in types] if ok(types) else None)
 
 
-def _csv_columns(path: Path, where: str, types: dict[str, str]) -> tuple[np.ndarray, dict, dict, dict]:
-    header, rows = _parse(read_text(path, "signal table", limit=MAX_TABLE_BYTES), where)
+def _line(i: int) -> str:
+    return f"line {i + 2}"  # a CSV's line: the header is line 1
+
+
+class _Budget:
+    """What the columns read may still hold (:data:`~cosim.limits.MAX_TABLE_DATA` in all)."""
+
+    def __init__(self):
+        self.left = MAX_TABLE_DATA
+
+    def limits(self) -> dict:
+        return {"nulls": False, "max_rows": MAX_TABLE_ROWS, "max_bytes": self.left}
+
+    def took(self, columns: Mapping[str, Any]) -> None:
+        self.left -= sum(v.nbytes if isinstance(v, np.ndarray) else 8 * len(v) for v in columns.values())
+
+
+def _typed_columns(path: Path, where: str, kinds: Mapping[str, str], raw_of: Mapping[str, str], raw: Sequence[str],
+                   names: Sequence[str], budget: _Budget) -> dict[str, Any]:
+    """Columns read field by field as their types (:func:`typed_value`):
+    every type, an array column (several numbers in a field, the same
+    count in every row), the one-line refusal of a field that is none.
+    Streamed as strings; a batch's Python objects are the most held."""
+    import pyarrow as pa
+
+    parts_of: dict[str, list] = {n: [] for n in kinds}
+    sizes: dict[str, int] = {}
+    at = 0
+    for batch in csv_batches(path, where, {raw_of[n]: pa.string() for n in kinds}, raw, names, _line,
+                             **budget.limits()):
+        for name, type_ in kinds.items():
+            values = []
+            for k, field in enumerate(batch.column(raw_of[name]).to_pylist()):
+                here = f"{where}: {_line(at + k)}, column {name}"
+                # several numbers separated by spaces: an array column (a String keeps its spaces)
+                parts = [field] if type_ == "String" else field.split() or [field]
+                if type_ not in ("String", "Binary") and not all(p.strip() for p in parts):  # b"" is a Binary
+                    raise ScenarioError(f"{here}: empty field")
+                if sizes.setdefault(name, len(parts)) != len(parts):
+                    raise ScenarioError(f"{here}: {len(parts)} values; the rows before have {sizes[name]}")
+                try:
+                    parsed = [typed_value(type_, p.strip() if type_ != "String" else p, "value") for p in parts]
+                except ValueError as exc:
+                    raise ScenarioError(f"{here}: {exc}") from None
+                if type_ in ("Float64", "Float32") and not all(math.isfinite(v) for v in parsed):
+                    raise ScenarioError(f"{here}: {field!r}: expected finite numbers")
+                values.append(parsed if len(parts) > 1 else parsed[0])
+            # numbers a double holds exactly (Booleans as 0/1) as float arrays, a batch at a time
+            parts_of[name].append(np.array(values, dtype=float) if type_ in FLOAT_HELD else values)
+        at += batch.num_rows
+    out = {n: np.concatenate(p) if kinds[n] in FLOAT_HELD else [v for chunk in p for v in chunk]
+           for n, p in parts_of.items()}
+    budget.took(out)
+    return out
+
+
+def _csv_columns(path: Path, where: str, types: dict[str, str],
+                 use: Collection[str] | None) -> tuple[np.ndarray, dict, dict, dict]:
+    """A CSV table's time and the columns ``use`` names (:func:`_chosen`),
+    read by :mod:`cosim.columns_io`: the Float64 and Float32 scalar columns
+    by pyarrow's float parser (the value Python's ``float`` gives: both
+    round correctly), a column that is not one field by field
+    (:func:`_typed_columns`)."""
+    regular_file(path, "signal table")
+    raw = csv_header(path, where)
+    if not raw:
+        raise ScenarioError(f"{where}: empty (expected a header 'time,col1,...')")
+    header = [h.strip() for h in raw]
+    if split_unit(header[0])[0] != "time" or len(header) < 2:
+        raise ScenarioError(f"{where}: header {shown_text(repr(','.join(header)), 200)}: expected 'time,col1,...'")
     told_units, told_types = _sidecar(path, header)
     names, units = _names(header, where, told_units)
     defaults = dict(zip(names, told_types)) if told_types is not None else {}
-    unknown = sorted(set(types) - set(names[1:]))
-    if unknown:
-        raise ScenarioError(f"{where}: no column {unknown[0]!r}; its columns are: {', '.join(names[1:])}")
-    times = np.empty(len(rows))
-    for i, row in enumerate(rows):
-        try:
-            times[i] = float(row[0])
-        except ValueError:
-            raise ScenarioError(f"{where}: line {i + 2}, column time: {row[0]!r}: expected a number") from None
+    chosen = _chosen(names, types, use, where)
+    kinds = {n: types.get(n) or defaults.get(n) or "Float64" for n in chosen}
+    raw_of = dict(zip(names, raw))
+    budget = _Budget()
+    try:
+        times = csv_floats(path, where, {"time": raw[0]}, raw, names, _line, **budget.limits())["time"]
+    except FieldError:
+        times = _typed_columns(path, where, {"time": "Float64"}, raw_of, raw, names, budget)["time"]
+        if times.ndim > 1:
+            raise ScenarioError(f"{where}: column time: {times.shape[1]} values a row; one time a row") from None
+    budget.took({"time": times})
+    if times.size == 0:
+        raise ScenarioError(f"{where}: no rows after the header")
+    fast = [n for n in chosen if kinds[n] in ("Float64", "Float32")]
     columns: dict[str, Any] = {}
-    kinds: dict[str, str] = {}
-    for j, name in enumerate(names[1:], start=1):
-        type_ = types.get(name) or defaults.get(name) or "Float64"
-        kinds[name] = type_
-        fields = [row[j] for row in rows]
-        # several numbers separated by spaces: an array column (a String keeps its spaces)
-        split = type_ != "String" and any(len(f.split()) > 1 for f in fields)
-        values = []
-        size = None
-        for i, field in enumerate(fields):
-            parts = field.split() if split else [field]
-            if split and size is not None and len(parts) != size:
-                raise ScenarioError(f"{where}: line {i + 2}, column {name}: {len(parts)} values; the rows before "
-                                    f"have {size}")
-            size = len(parts)
-            if type_ not in ("String", "Binary") and not all(p.strip() for p in parts):  # b"" is a Binary
-                raise ScenarioError(f"{where}: line {i + 2}, column {name}: empty field")
-            try:
-                parsed = [typed_value(type_, p.strip() if type_ != "String" else p, "value") for p in parts]
-            except ValueError as exc:
-                raise ScenarioError(f"{where}: line {i + 2}, column {name}: {exc}") from None
-            if type_ in ("Float64", "Float32") and not all(math.isfinite(v) for v in parsed):
-                raise ScenarioError(f"{where}: line {i + 2}, column {name}: {field!r}: expected finite numbers")
-            values.append(parsed if split else parsed[0])
-        columns[name] = np.array(values, dtype=float) if type_ in FLOAT_HELD else values  # Booleans as 0/1
-    return times, columns, dict(zip(names[1:], units[1:])), kinds
+    while fast:
+        try:
+            columns = csv_floats(path, where, {n: raw_of[n] for n in fast}, raw, names, _line, times.size,
+                                 **budget.limits())
+        except FieldError as exc:  # not one number (an array, a typo): read field by field, its message
+            if exc.column not in fast:
+                raise
+            fast.remove(exc.column)
+            continue
+        # a NaN or an infinity: field by field too, for the message naming the field as written
+        fast = [n for n in fast if np.isfinite(columns[n]).all()]
+        columns = {n: columns[n] for n in fast}
+        break
+    budget.took(columns)
+    slow = {n: kinds[n] for n in chosen if n not in columns}
+    if slow:
+        columns.update(_typed_columns(path, where, slow, raw_of, raw, names, budget))
+    columns = {n: columns[n] for n in chosen}
+    return times, columns, {n: u for n, u in zip(names, units) if n in columns}, kinds
 
 
 _ARROW_TYPES = {"double": "Float64", "float": "Float32", "halffloat": "Float32", "int8": "Int8",
@@ -270,64 +332,61 @@ _ARROW_TYPES = {"double": "Float64", "float": "Float32", "halffloat": "Float32",
                 "large_string": "String", "binary": "Binary", "large_binary": "Binary"}
 
 
-def _parquet_columns(path: Path, where: str, types: dict[str, str]) -> tuple[np.ndarray, dict, dict, dict]:
-    """A Parquet table: bounded by its file size, its row count and its data
-    uncompressed (read from its footer before any column), each column's Arrow type its signal type
-    (a declared type must be the same), units from the names or the field
-    metadata ``unit``; rows counted from 1 (the Parquet file has no lines)."""
-    import pyarrow.parquet as pq
-
-    size = regular_file(path, "signal table").st_size
-    if size > MAX_TABLE_BYTES:
-        raise ScenarioError(f"{where}: {size} bytes; at most {MAX_TABLE_BYTES} are read")
-    try:
-        parquet = pq.ParquetFile(path)
-        meta = parquet.metadata
-        n_rows = meta.num_rows
-        if n_rows > MAX_TABLE_ROWS:
-            raise ScenarioError(f"{where}: more than {MAX_TABLE_ROWS} rows ({n_rows}); at most {MAX_TABLE_ROWS} "
-                                f"are read")
-        data = sum(meta.row_group(i).total_byte_size for i in range(meta.num_row_groups))
-        if data > MAX_TABLE_DATA:
-            raise ScenarioError(f"{where}: {data} bytes of data uncompressed; at most {MAX_TABLE_DATA} are read")
-        table = parquet.read()
-    except ScenarioError:
-        raise
-    except Exception as exc:  # pyarrow's errors: a corrupt or foreign file
-        raise ScenarioError(f"{where}: not a readable Parquet file ({str(exc).splitlines()[0] if str(exc) else exc})"
-                            ) from None
+def _parquet_columns(path: Path, where: str, types: dict[str, str],
+                     use: Collection[str] | None) -> tuple[np.ndarray, dict, dict, dict]:
+    """A Parquet table's time and the columns ``use`` names: bounded by its
+    row count and the used columns' data uncompressed (from its footer,
+    before any column is read), those columns' chunks alone read, each
+    column's Arrow type its signal type (a declared type must be the same),
+    units from the names or the field metadata ``unit``; rows counted from 1
+    (the Parquet file has no lines)."""
+    regular_file(path, "signal table")
+    schema, meta = parquet_schema(path, where)
+    n_rows = meta.num_rows
+    if n_rows > MAX_TABLE_ROWS:
+        raise ScenarioError(f"{where}: more than {MAX_TABLE_ROWS} rows ({n_rows}); at most {MAX_TABLE_ROWS} are read")
     if n_rows == 0:
         raise ScenarioError(f"{where}: no rows")
-    header = list(table.schema.names)
-    meta = [(f.metadata or {}).get(b"unit") for f in table.schema]
-    names, units = _names(header, where, [m.decode("utf-8", "replace") if m else None for m in meta])
+    header = list(schema.names)
+    meta_units = [(f.metadata or {}).get(b"unit") for f in schema]
+    names, units = _names(header, where, [m.decode("utf-8", "replace") if m else None for m in meta_units])
     if "time" not in names:
-        raise ScenarioError(f"{where}: no column 'time'; its columns are: {', '.join(names)}")
-    unknown = sorted(set(types) - set(names) - {"time"})
-    if unknown:
-        raise ScenarioError(f"{where}: no column {unknown[0]!r}; its columns are: "
-                            f"{', '.join(n for n in names if n != 'time')}")
-    columns: dict[str, Any] = {}
+        raise ScenarioError(f"{where}: no column 'time'; its columns are: {shown_text(', '.join(names), 300)}")
+    chosen = ["time", *_chosen(names, types, use, where)]
+    raw_of = dict(zip(names, header))
     kinds: dict[str, str] = {}
-    times = None
-    for name, field, array in zip(names, table.schema, table.columns):
-        type_ = _ARROW_TYPES.get(str(field.type))
+    for name in chosen:  # the types from the schema: a column the table cannot hold is refused before any is read
+        arrow = schema.field(raw_of[name]).type
+        type_ = _ARROW_TYPES.get(str(arrow))
         if type_ is None:
-            raise ScenarioError(f"{where}: column {name}: Arrow type {field.type}; a table holds numbers, "
+            raise ScenarioError(f"{where}: column {name}: Arrow type {arrow}; a table holds numbers, "
                                 f"Booleans, strings and bytes")
-        if array.null_count:
-            i = int(np.flatnonzero(np.asarray(array.is_null()))[0])
-            raise ScenarioError(f"{where}: row {i + 1}, column {name}: no value (null)")
-        if name == "time":
-            if type_ not in FLOAT_HELD:
-                raise ScenarioError(f"{where}: column time: {type_}; expected numbers")
-            times = np.asarray(array.to_numpy(zero_copy_only=False), dtype=float)
-            continue
+        if name == "time" and type_ not in FLOAT_HELD:
+            raise ScenarioError(f"{where}: column time: {type_}; expected numbers")
         declared = types.get(name)
         if declared is not None and declared != type_:
             raise ScenarioError(f"{where}: column {name}: {type_} in the file, declared {declared}")
         kinds[name] = type_
-        if type_ in FLOAT_HELD:
+    # the data read, from the footer: each column's pages uncompressed, at least a double a row (a page may
+    # encode many equal values in a few bytes, which a read spells out)
+    flat = meta.num_columns == len(names)  # one leaf a field: chunk j is field j (else every chunk counts)
+    read = [j for j in range(meta.num_columns) if not flat or names[j] in kinds]
+    data = sum(max(sum(meta.row_group(g).column(j).total_uncompressed_size for g in range(meta.num_row_groups)),
+                   8 * n_rows) for j in read)
+    if data > MAX_TABLE_DATA:
+        raise ScenarioError(f"{where}: {data} bytes of data uncompressed in the columns used; at most "
+                            f"{MAX_TABLE_DATA} are read")
+    table = parquet_read(path, where, [raw_of[n] for n in chosen])
+    columns: dict[str, Any] = {}
+    times = None
+    for name in chosen:
+        array, type_ = table.column(raw_of[name]), kinds[name]
+        if array.null_count:
+            i = int(np.flatnonzero(np.asarray(array.is_null()))[0])
+            raise ScenarioError(f"{where}: row {i + 1}, column {name}: no value (null)")
+        if name == "time":
+            times = np.asarray(array.to_numpy(zero_copy_only=False), dtype=float)
+        elif type_ in FLOAT_HELD:
             values = np.asarray(array.to_numpy(zero_copy_only=False), dtype=float)
             if type_ in ("Float64", "Float32") and not np.isfinite(values).all():
                 i = int(np.flatnonzero(~np.isfinite(values))[0])
@@ -335,7 +394,8 @@ def _parquet_columns(path: Path, where: str, types: dict[str, str]) -> tuple[np.
             columns[name] = values
         else:
             columns[name] = array.to_pylist()
-    return times, columns, {n: u for n, u in zip(names, units) if n != "time"}, kinds
+    del kinds["time"]
+    return times, columns, {n: u for n, u in zip(names, units) if n in columns}, kinds
 
 
 @dataclass(frozen=True)
@@ -352,18 +412,20 @@ class RecordedTable:
 
 
 def load_table(path: str | Path, types: Mapping[str, str] | None = None, max_gap: float | None = None,
-               steps: bool = True) -> RecordedTable:
-    """The CSV or Parquet table ``path`` (by its suffix), every field read as
-    its column's type (``types``, default Float64 or the results sidecar's),
-    the time column checked (:func:`check_times` with ``max_gap`` and
-    ``steps``). One-line :class:`ScenarioError` otherwise."""
+               steps: bool = True, use: Collection[str] | None = None) -> RecordedTable:
+    """The CSV or Parquet table ``path`` (by its suffix): its time and the
+    columns ``use`` names (a column, or an element ``u[1]`` of an array
+    column; ``None``: every column), no other column read; every field read
+    as its column's type (``types``, default Float64 or the results
+    sidecar's), the time column checked (:func:`check_times` with
+    ``max_gap`` and ``steps``). One-line :class:`ScenarioError` otherwise."""
     path = Path(path)
     where = f"signal table {str(path)!r}"
-    types = {k: v for k, v in (types or {}).items() if v}
+    types = dict(types or {})  # a column named with no type: checked to exist, its type the default
     parquet = path.suffix.lower() in PARQUET_SUFFIXES
-    times, columns, units, kinds = (_parquet_columns if parquet else _csv_columns)(path, where, types)
+    times, columns, units, kinds = (_parquet_columns if parquet else _csv_columns)(path, where, types, use)
     check_times(times, where, max_gap=max_gap, steps=steps, line_of=(lambda i: f"row {i + 1}") if parquet
-                else (lambda i: f"line {i + 2}"))
+                else _line)
     return RecordedTable(path, times, columns, units, kinds)
 
 
@@ -412,14 +474,15 @@ class SignalTable(PythonComponent):
     (any may be left out: Float64 or the results sidecar's type, the file's
     unit, the table's ``interpolation``); ``outside``: ``"hold"`` or
     ``"refuse"``; ``max_gap``: the widest gap between rows [s];
-    ``duplicates``: ``"step"`` or ``"refuse"`` (two rows at one time).
-    :meth:`values_at` gives every output's value at a time; :meth:`fmu_data`
-    what the table FMU is built from.
+    ``duplicates``: ``"step"`` or ``"refuse"`` (two rows at one time);
+    ``use``: the columns played (:func:`load_table`; ``None``: every one),
+    the only ones read. :meth:`values_at` gives every output's value at a
+    time; :meth:`fmu_data` what the table FMU is built from.
     """
 
     def __init__(self, name: str, file: str | Path, interpolation: str = "hold",
-                 columns: Mapping[str, Mapping[str, Any]] | None = None, outside: str = "hold",
-                 max_gap: float | None = None, duplicates: str = "step"):
+                 columns: Mapping[str, Mapping[str, Any]] | None = None, outside: str = OUTSIDE[0],
+                 max_gap: float | None = None, duplicates: str = "step", use: Collection[str] | None = None):
         super().__init__(name)
         self.path = Path(file)
         specs = {k: dict(v) for k, v in (columns or {}).items()}
@@ -429,11 +492,7 @@ class SignalTable(PythonComponent):
                 raise ScenarioError(f"{name}.{key} = {value!r}: expected one of {', '.join(allowed)}")
         self.outside = outside
         recorded = load_table(self.path, {k: v.get("type") for k, v in specs.items()}, max_gap,
-                              steps=duplicates == "step")
-        unknown = sorted(set(specs) - set(recorded.columns))
-        if unknown:
-            raise ScenarioError(f"signal table {str(self.path)!r}: no column {unknown[0]!r}; its columns are: "
-                                f"{', '.join(recorded.columns)}")
+                              steps=duplicates == "step", use=use)
         self.times = recorded.times
         ports, self._columns = [], []
         for column, data in recorded.columns.items():
@@ -463,14 +522,16 @@ class SignalTable(PythonComponent):
         return all(p.type == "Float64" and not p.shape for p in self.outputs)
 
     def check_span(self, t0: float, t_end: float) -> None:
-        """With ``outside = "refuse"``: a one-line :class:`ScenarioError` if
-        ``[t0, t_end]`` leaves the recorded times (within 1e-9 relative)."""
+        """With ``outside = "refuse"``: a one-line :class:`ScenarioError`,
+        naming the table, its file, its first and last times and the run's
+        span, if ``[t0, t_end]`` leaves the recorded times (within 1e-9 relative)."""
         first, last = float(self.times[0]), float(self.times[-1])
         early = t0 < first and not math.isclose(t0, first, rel_tol=TOLERANCE)
         late = t_end > last and not math.isclose(t_end, last, rel_tol=TOLERANCE)
         if self.outside == "refuse" and (early or late):
-            raise ScenarioError(f"{self.name}: the run from t = {t0!r} to {t_end!r} s leaves the table's times "
-                                f"[{first!r}, {last!r}] s (outside = 'refuse'; 'hold' holds the first and last rows)")
+            raise ScenarioError(f"{self.name}: the run from t = {_num(t0)} to {_num(t_end)} s leaves signal table "
+                                f"{str(self.path)!r}, whose rows run from t = {_num(first)} to {_num(last)} s "
+                                f"(outside = 'refuse'; outside = 'hold' holds its first and last rows there)")
 
     def start(self, t0: float, h: float, n_steps: int, seed: int) -> None:
         self.check_span(t0, t0 + n_steps * h)
@@ -522,8 +583,30 @@ class SignalTable(PythonComponent):
         return TableData(tuple(p.name for p in self.outputs), units, tuple(_base_unit(u) if u else None for u in units),
                          tuple(p.description for p in self.outputs),
                          tuple(how == "linear" for _, how, _, _ in self._columns), self.outside == "refuse",
-                         np.array(self.times, dtype=float),
-                         np.column_stack([data for data, _, _, _ in self._columns]).astype(float))
+                         self.times,  # float64 arrays as read: not copied again (a column may be millions of rows)
+                         np.column_stack([data for data, _, _, _ in self._columns]))
+
+
+def played(name: str, context) -> set[str] | None:
+    """The outputs of the table ``name`` its scenario uses: the sources of
+    its connections, its signals recorded or bounded (``[envelope]``);
+    ``None`` (every column) without a scenario or where it records every
+    output (no ``record.signals``)."""
+    scenario = getattr(context, "scenario", None)
+    if scenario is None or getattr(scenario, "record", None) is None:
+        return None
+    from .connection import parse_connections
+    from .names import split_endpoint
+
+    # the instances as the context holds them: iterating the scenario's [fmus] would count as reading each entry
+    instances = (*getattr(context, "fmus", {}), *scenario.components)
+    used = {c.source.variable for c in parse_connections(scenario.connections, instances)
+            if c.source.component == name}
+    for signal in (*scenario.record, *scenario.envelope):
+        split = split_endpoint(signal, instances)
+        if split is not None and split[0] == name:
+            used.add(split[1])
+    return used
 
 
 def _table(name: str, params: Mapping[str, Any], context) -> SignalTable:
@@ -533,7 +616,8 @@ def _table(name: str, params: Mapping[str, Any], context) -> SignalTable:
         path = Path(source).parent / path
     return SignalTable(name, path, params.get("interpolation", "hold"),
                        {k: dict(v) for k, v in (params.get("columns") or {}).items()},
-                       params.get("outside", "hold"), params.get("max_gap"), params.get("duplicates", "step"))
+                       params.get("outside", OUTSIDE[0]), params.get("max_gap"), params.get("duplicates", "step"),
+                       use=played(name, context))
 
 
 def _fmu_path(table: SignalTable, params: Mapping[str, Any], builder) -> Path | None:

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from .fmu_log_option import apply_fmu_log, fmu_log_option
+from .set_option import overrides as _overrides
 from .workers_option import TABLE_WORKERS, default_workers, worker_count
 
 __all__ = ["main"]
@@ -47,27 +48,6 @@ __all__ = ["main"]
 DEFAULT_OUT = Path("results")
 EXIT_RUN_FAILED = 1  # a run diverged or an FMU failed mid-run (partial results kept)
 EXIT_BAD_INPUT = 2  # a scenario, connection or FMU file is wrong: refused before anything ran
-
-
-def _overrides(pairs: Sequence[str]) -> dict[str, Any]:
-    """``--set KEY=VALUE`` pairs as dotted keys and values, each checked as a
-    document's key and value are (:func:`cosim.scenario.dotted_key`,
-    :func:`cosim.files.toml_value`): a bare word is text."""
-    from cosim.errors import ScenarioError, shown_text
-    from cosim.files import toml_value
-    from cosim.scenario import dotted_key
-
-    from cosim.names import partition_top
-
-    out = {}
-    for pair in pairs:  # the first = outside a quoted FMI name ('a=b') ends the key
-        key, eq, value = partition_top(pair, "=")
-        if not eq or not key.strip():
-            raise ScenarioError(f"--set {shown_text(pair)!r}: expected KEY=VALUE, e.g. --set wind.speed=5")
-        key = key.strip()
-        parts = dotted_key(key, f"--set {shown_text(key)!r}")
-        out[key] = toml_value(value.strip(), f"--set {shown_text(key)}", len(parts))
-    return out
 
 
 def _out_folder(given: str | None, default: Path) -> Path:
@@ -677,7 +657,7 @@ def _parser() -> argparse.ArgumentParser:
     # the subcommand's own module: argparse only; python-control loads when it runs
     from .stability.cli import add_parser as add_stability_parser
 
-    add_stability_parser(sub)
+    add_stability_parser(sub, _overrides)
     from .calibrate_cli import add_parser as add_calibrate_parser  # its own module: argparse only
 
     add_calibrate_parser(sub, _named_values, _overrides)

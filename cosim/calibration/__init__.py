@@ -12,7 +12,8 @@ each:
 * :mod:`~cosim.calibration.model`: the trajectories (Co-Simulation, or Model Exchange through the master's solver) and the right-hand side's Jacobians (Model Exchange);
 * :mod:`~cosim.calibration.sensitivity`: the forward sensitivities along a segment;
 * :mod:`~cosim.calibration.symbolic`: segments and exact sensitivities from the model's own CasADi definition (FMUs of ours);
-* :mod:`~cosim.calibration.solve`: the weighted least squares (scipy's ``least_squares``);
+* :mod:`~cosim.calibration.solve`: the weighted least-squares problem over the segments;
+* :mod:`~cosim.calibration.marquardt`: its solver, Levenberg-Marquardt with the segments' states eliminated (Schur complement);
 * :mod:`~cosim.calibration.statistics`: standard errors, intervals, correlation, identifiability, residuals;
 * :mod:`~cosim.calibration.diagnostics`: the warnings (the model does not fit the log);
 * :mod:`~cosim.calibration.outputs`: ``calibration.json``, ``parameters.ssv``, the TOML override, ``report.md``.

@@ -22,13 +22,14 @@ from ..schema import NonNegative, Number, Positive, Count, Names, Table, json_sc
 
 __all__ = ["Column", "ColumnMap", "Attitude", "Frames", "Rotors", "CalibrationSettings", "read_column_map",
            "read_settings", "INITIAL_STATES", "JACOBIANS", "INTERFACES", "TOLERANCE", "WORLDS", "BODIES",
-           "POSITIONS", "calibration_schema"]
+           "POSITIONS", "SPINS", "calibration_schema"]
 
 WORLDS = ("NED", "ENU")  # the log's world frame: north-east-down (the plant's, paper eqs. 10-11) or east-north-up
 BODIES = ("FRD", "FLU")  # the log's body frame: forward-right-down (the plant's) or forward-left-up
 # a rotor's place on the airframe, seen from above, by its angle from the nose towards the right (deg)
 POSITIONS = {"front": 0, "front-right": 45, "right": 90, "rear-right": 135, "rear": 180, "rear-left": 225,
              "left": 270, "front-left": 315}
+SPINS = ("cw", "ccw")  # a rotor's turning sense seen from above (looking down the thrust's opposite, along z_FRD)
 
 INITIAL_STATES = ("recorded", "estimated")
 JACOBIANS = ("auto", "casadi", "derivatives", "differences")
@@ -116,6 +117,13 @@ class Rotors(Table):
     first_angle: Number | str = Field(..., description="the angle of the FMU's first rotor from the nose towards "
                                                        "the right, rad, or the FMU parameter that holds it; rotor "
                                                        "i at first_angle + (i - 1) 2 pi / n")
+    spins: list[one_of(SPINS)] = Field(
+        None, description="each log rotor's turning sense seen from above, 'cw' or 'ccw', in the log's motor order "
+                          "(PX4's quadrotor X: ['ccw', 'ccw', 'cw', 'cw']); with variable_spins, a rotor fed by a log "
+                          "rotor of the other sense is refused (its yaw torque's sign would be reversed)")
+    variable_spins: list[one_of(SPINS)] = Field(
+        None, description="each FMU rotor's turning sense seen from above, its rotor 1 first (the quadrotor "
+                          "plant's: ['cw', 'ccw', 'cw', 'ccw'])")
     signal: one_of(("speed", "throttle", "pwm")) = Field(
         "speed", description="what the columns hold: rotor speeds (their unit), a throttle u in [0, 1], or PWM "
                              "(u = (pwm - pwm_min) / (pwm_max - pwm_min), clipped to [0, 1])")
@@ -137,6 +145,11 @@ class Rotors(Table):
                          f"must be as many")
         if len(set(self.positions)) != n:
             raise refuse(f"positions = {self.positions}: a position given twice")
+        if (self.spins is None) != (self.variable_spins is None):
+            raise refuse("spins (the log's rotors) and variable_spins (the FMU's) go together: give both or neither")
+        if self.spins is not None and not len(self.spins) == len(self.variable_spins) == n:
+            raise refuse(f"spins ({len(self.spins)}) and variable_spins ({len(self.variable_spins)}) must be as many "
+                         f"as the rotors ({n})")
         if self.signal == "speed":
             curve = [k for k in ("pwm_min", "pwm_max", "a", "thrust_model_factor", "omega_max")
                      if getattr(self, k) is not None]

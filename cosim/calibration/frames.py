@@ -2,7 +2,9 @@
 
 The column map states the log's frames (``world = "NED" | "ENU"``, ``body =
 "FRD" | "FLU"``), its attitude (a quaternion, either scalar order, or Euler
-angles), its rotors by position and what they hold (speeds, throttle, PWM);
+angles), its rotors by position and turning sense (a rotor fed by a log
+rotor that turns the other way is refused: its yaw torque's sign would be
+reversed) and what they hold (speeds, throttle, PWM);
 ``[frames]`` names the FMU variables that are world vectors, body vectors
 and Z-Y-X Euler angles. :func:`convert` adds the converted columns to the
 log and points the map's columns at them, so the rest of the calibration
@@ -27,7 +29,8 @@ from .columns import POSITIONS, Column, ColumnMap
 from .diagnostics import Diagnostic
 from .log import Columns, Log
 
-__all__ = ["convert", "world_matrix", "body_matrix", "mirror_check", "MIRROR_FACTOR", "MIRROR_ITERATIONS"]
+__all__ = ["convert", "world_matrix", "body_matrix", "matching_first_angles", "mirror_check", "MIRROR_FACTOR",
+           "MIRROR_ITERATIONS"]
 
 # log world -> NED: v_NED = W v_log (ENU: north = y, east = x, down = -z)
 _WORLD = {"NED": np.eye(3), "ENU": np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]])}
@@ -191,22 +194,70 @@ def _euler(rotation, W: np.ndarray, B: np.ndarray) -> np.ndarray:
     return np.vstack([np.unwrap(roll), pitch, np.unwrap(yaw)])
 
 
+def _nearest(rotors, angle: float) -> tuple[int, float]:
+    """The log rotor nearest to ``angle`` (deg from the nose towards the right): its index and its gap, deg."""
+    gaps = [abs((POSITIONS[p] - angle + 180.0) % 360.0 - 180.0) for p in rotors.positions]
+    k = int(np.argmin(gaps))
+    return k, gaps[k]
+
+
+def _places(rotors, first: float) -> list[tuple[float, int | None, bool]]:
+    """(angle, log rotor or None, same spin) of each FMU rotor with its rotor 1 at ``first`` (rad): the log
+    rotor within 22.5 deg (the positions' names are 45 deg apart), and whether it turns the FMU rotor's way
+    (true where the map states no spins)."""
+    n = len(rotors.variables)
+    out = []
+    for i in range(n):
+        angle = np.degrees(first + i * 2 * np.pi / n) % 360.0
+        k, gap = _nearest(rotors, angle)
+        if gap > 22.5:
+            out.append((angle, None, False))
+        else:
+            out.append((angle, k, rotors.spins is None or rotors.spins[k] == rotors.variable_spins[i]))
+    return out
+
+
+def matching_first_angles(rotors) -> list[float]:
+    """The first angles (rad, in (-pi, pi], smallest magnitude first) that put every FMU rotor on a log rotor
+    that turns its way: each log position tried for the FMU's rotor 1."""
+    found = set()
+    for p in rotors.positions:
+        deg = (POSITIONS[p] + 180.0) % 360.0 - 180.0
+        deg = 180.0 if deg == -180.0 else deg
+        places = _places(rotors, np.radians(deg))
+        if all(k is not None and same for _, k, same in places) and len({k for _, k, _ in places}) == len(places):
+            found.add(deg)
+    return [float(np.radians(d)) for d in sorted(found, key=lambda d: (abs(d), d))]
+
+
+def _advice(rotors) -> str:
+    """Where the map's first angle would match, for an error message."""
+    fits = matching_first_angles(rotors)
+    if not fits:
+        return "; no first angle puts every FMU rotor on a log rotor of its spin"
+    said = " or ".join(f"{a:.6g} rad ({np.degrees(a):g} deg)" for a in fits)
+    what = f"{rotors.first_angle} = " if isinstance(rotors.first_angle, str) else "first_angle = "
+    return f"; {what}{said} puts every FMU rotor on a log rotor of its spin"
+
+
 def _rotors(log: Log, rotors, parameter: Callable[[str], float]):
     """(FMU variable, column or values, unit, label or None) for each of the
-    FMU's rotors: the log's rotor at its position (module docstring)."""
+    FMU's rotors: the log's rotor at its position (module docstring), of its
+    spin where the map states the spins."""
     first = rotors.first_angle if not isinstance(rotors.first_angle, str) else parameter(rotors.first_angle)
-    n = len(rotors.variables)
     where = {name: POSITIONS[name] for name in rotors.positions}
-    by_place = dict(zip(rotors.positions, rotors.columns))
-    for i, variable in enumerate(rotors.variables):
-        angle = np.degrees(first + i * 2 * np.pi / n) % 360.0
-        gap = {name: abs((deg - angle + 180.0) % 360.0 - 180.0) for name, deg in where.items()}
-        name = min(gap, key=gap.get)
-        if gap[name] > 22.5:  # the positions' names are 45 degrees apart
+    for i, (variable, (angle, k, same)) in enumerate(zip(rotors.variables, _places(rotors, first))):
+        if k is None:
             raise ScenarioError(f"column map: rotors: the FMU's {variable} sits at {angle:g} deg from the nose "
                                 f"(first_angle = {rotors.first_angle!r}); no log rotor there (its: "
-                                f"{', '.join(f'{p} {d} deg' for p, d in where.items())})")
-        col = by_place[name]
+                                f"{', '.join(f'{p} {d} deg' for p, d in where.items())})" + _advice(rotors))
+        name = rotors.positions[k]
+        if not same:  # the yaw reaction's sign would be the other rotor's: a fit would bend d or Iz to match
+            raise ScenarioError(f"column map: rotors: the FMU's {variable} at {angle:g} deg turns "
+                                f"{rotors.variable_spins[i]}, the log's {name} rotor ({rotors.columns[k].column}) "
+                                f"{rotors.spins[k]}: its yaw torque would have the wrong sign (first_angle = "
+                                f"{rotors.first_angle!r} = {first:.6g} rad)" + _advice(rotors))
+        col = rotors.columns[k]
         if rotors.signal == "speed":
             if col.column not in log.columns:
                 _values(log, col, f"the {name} rotor")  # one line naming it
@@ -226,6 +277,7 @@ def _rotors(log: Log, rotors, parameter: Callable[[str], float]):
 
 _MIRRORED = {"front": "front", "rear": "rear", "right": "left", "left": "right", "front-right": "front-left",
              "front-left": "front-right", "rear-right": "rear-left", "rear-left": "rear-right"}
+_OTHER_SPIN = {"cw": "ccw", "ccw": "cw"}
 
 
 def mirrors(column_map: ColumnMap) -> list[tuple[str, str, ColumnMap]]:
@@ -239,9 +291,11 @@ def mirrors(column_map: ColumnMap) -> list[tuple[str, str, ColumnMap]]:
         out.append(("body", f"body = {other!r}", column_map.model_copy(update={"body": other})))
     if column_map.rotors is not None and any(_MIRRORED[p] != p for p in column_map.rotors.positions):
         mirrored = [_MIRRORED[p] for p in column_map.rotors.positions]
+        update = {"positions": mirrored}
+        if column_map.rotors.spins is not None:  # a mirror image turns each rotor the other way
+            update["spins"] = [_OTHER_SPIN[s] for s in column_map.rotors.spins]
         out.append(("rotors", f"the rotors mirrored left-right (positions = {mirrored})",
-                    column_map.model_copy(update={"rotors": column_map.rotors.model_copy(
-                        update={"positions": mirrored})})))
+                    column_map.model_copy(update={"rotors": column_map.rotors.model_copy(update=update)})))
     return out
 
 

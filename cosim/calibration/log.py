@@ -5,7 +5,8 @@ Readers (by the file's suffix): a CSV (the project's results, whose sidecar
 Parquet file (pyarrow; a field's ``unit`` metadata is its unit) and a PX4
 ULog (``.ulg``, through the optional ``pyulog``: columns ``topic.field``,
 the topics the column map names resampled onto one time base). A CSV's or
-Parquet file's columns are read when used, only those (pyarrow, columnar):
+Parquet file's columns are read when used, only those (:mod:`cosim.columns_io`,
+the signal table's reader too: pyarrow, streamed or columnar):
 a log's memory is that of the columns used, not the file's.
 
 Every column the calibration uses is checked, and the time: a NaN or an
@@ -16,15 +17,14 @@ file, the row (1 = the first data row) and the column
 """
 from __future__ import annotations
 
-import csv
 import json
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from ..columns_io import csv_floats, csv_header, parquet_read, parquet_schema, unique_columns
 from ..errors import ConnectionCheckError, ScenarioError, shown_text
 from ..files import read_text, regular_file
 from .. import units as _units
@@ -188,14 +188,6 @@ def _missing_time(path: Path, time_name: str, names) -> ScenarioError:
                          f"{shown_text(', '.join(names), 200)} (name it with 'time' in --columns)")
 
 
-def _unique(path: Path, names: Sequence[str]) -> None:
-    from ..files import repeated
-
-    twice = repeated(list(names))
-    if twice is not None:  # which of the two would the calibration read? neither, silently
-        raise ScenarioError(f"log {path.name}: two columns named {twice!r}; each name at most once")
-
-
 def _floats(column) -> np.ndarray:
     """A pyarrow column as floats: numbers as they are, a null as NaN, text
     parsed where it is a number and NaN elsewhere (refused only if used)."""
@@ -213,57 +205,32 @@ def _floats(column) -> np.ndarray:
     return out
 
 
+def _row(i: int) -> str:
+    return f"row {i + 1}"  # 1 = the first data row
+
+
 def _read_csv(path: Path, time_name: str):
-    """Its header now; its columns when used, by pyarrow's CSV reader with
-    only those columns kept (``include_columns``), the file read in blocks."""
-    with open(path, newline="", encoding="utf-8", errors="replace") as f:
-        try:
-            raw = next(csv.reader(f))
-        except StopIteration:
-            raise ScenarioError(f"log {path.name}: empty") from None
+    """Its header now; its columns when used, only those, streamed
+    (:func:`cosim.columns_io.csv_floats`)."""
+    where = f"log {path.name}"
+    raw = csv_header(path, where, errors="replace")
+    if not raw:
+        raise ScenarioError(f"{where}: empty")
     header = [h.strip() for h in raw]
-    _unique(path, header)
+    unique_columns(header, where)
     if time_name not in header:
         raise _missing_time(path, time_name, header)
     raw_of = dict(zip(header, raw))
-
     rows: list[int] = []
 
     def read(names: list[str]) -> dict[str, np.ndarray]:
-        import pyarrow as pa
-        import pyarrow.csv as pcsv
-
-        # streamed in blocks, only these columns parsed as floats: the memory is the columns', not the file's
-        options = pcsv.ConvertOptions(include_columns=[raw_of[n] for n in names],
-                                      column_types={raw_of[n]: pa.float64() for n in names})
-        # the rows are known once the time is read: each column then filled in place, block by block
-        out = {n: np.empty(rows[0]) for n in names} if rows else {n: [] for n in names}
-        at = 0
-        try:
-            for batch in pcsv.open_csv(path, read_options=pcsv.ReadOptions(block_size=1 << 20, use_threads=False),
-                                       convert_options=options):
-                for n in names:
-                    block = batch.column(raw_of[n]).to_numpy(zero_copy_only=False)
-                    if rows:
-                        out[n][at:at + block.size] = block
-                    else:
-                        out[n].append(block)
-                at += batch.num_rows
-        except (pa.ArrowInvalid, OSError, ValueError) as exc:  # a row of other width, a text value, not text
-            said = str(exc).splitlines()[0]
-            at = re.match(r"In CSV column #(\d+): Row #(\d+): (.*)", said)
-            if at is not None and int(at[1]) < len(header):  # pyarrow counts columns from 0, rows from the header
-                said = f"row {int(at[2]) - 1}, column {header[int(at[1])]}: {at[3]}"
-            width = re.match(r"CSV parse error: Row #(\d+): Expected (\d+) columns, got (\d+)", said)
-            if width is not None:
-                said = f"row {int(width[1]) - 1}: {width[3]} fields for {width[2]} columns"
-            raise ScenarioError(f"log {path.name}: {shown_text(said, 200)}") from None
-        return {n: v if rows else (np.concatenate(v) if v else np.zeros(0)) for n, v in out.items()}
+        return csv_floats(path, where, {n: raw_of[n] for n in names}, raw, header, _row,
+                          rows[0] if rows else None)
 
     columns = Columns([h for h in header if h != time_name], read)
     times = read([time_name])[time_name]
     if times.size == 0:
-        raise ScenarioError(f"log {path.name}: no rows after the header")
+        raise ScenarioError(f"{where}: no rows after the header")
     rows.append(times.size)
     units: dict[str, str] = {}
     sidecar = path.with_name(path.name + ".json")  # the project's results: columns, units (cosim.recorder)
@@ -279,17 +246,10 @@ def _read_csv(path: Path, time_name: str):
 def _read_parquet(path: Path, time_name: str):
     """Its schema now; its columns when used (Parquet is columnar: a column
     read is that column's pages only)."""
-    import pyarrow.parquet as pq
-
-    def failed(exc) -> ScenarioError:
-        return ScenarioError(f"log {path.name}: not a Parquet file pyarrow reads ({shown_text(str(exc), 200)})")
-
-    try:
-        schema = pq.read_schema(path)
-    except Exception as exc:  # pyarrow's errors are many types: the file is no Parquet we can read
-        raise failed(exc) from None
+    where = f"log {path.name}"
+    schema, _ = parquet_schema(path, where)
     names = schema.names
-    _unique(path, names)
+    unique_columns(names, where)
     if time_name not in names:
         raise _missing_time(path, time_name, names)
     units = {}
@@ -299,10 +259,7 @@ def _read_parquet(path: Path, time_name: str):
             units[f.name] = unit.decode()
 
     def read(wanted: list[str]) -> dict[str, np.ndarray]:
-        try:
-            table = pq.read_table(path, columns=wanted)
-        except Exception as exc:
-            raise failed(exc) from None
+        table = parquet_read(path, where, wanted)
         return {n: _floats(table.column(n)) for n in wanted}
 
     times = read([time_name])[time_name]

@@ -1,4 +1,4 @@
-"""The weighted least-squares fit over segments (scipy's ``least_squares``).
+"""The weighted least-squares fit over segments (:mod:`~cosim.calibration.marquardt`).
 
 Unknowns: the fitted names (parameters, then constant inputs) and, per
 segment, the initial states that are estimated (``initial_states =
@@ -6,7 +6,9 @@ segment, the initial states that are estimated (``initial_states =
 output's noise level ``sigma``: every compared output at every fitted row,
 ``(y_model - y_log) / sigma``; and, for states the log lacks, the
 continuity of consecutive segments, ``(x_end(i) - x_start(i + 1)) / scale``
-(multiple shooting). Bounds: the fitted names' ``min``/``max``.
+(multiple shooting). Bounds: the fitted names' ``min``/``max``; an
+estimated initial state's, its variable's and the parameter's that starts
+it (the tighter: a state the FMU refuses to start from is never tried).
 
 ``sigma`` per output: the settings' ``noise``, else two passes: the first
 with each output's spread over the log, the second from the first's
@@ -21,10 +23,11 @@ from typing import Callable
 
 import numpy as np
 from scipy import sparse
-from scipy.optimize import least_squares
 
 from ..errors import CosimError, FmuCallError, FmuError, ScenarioError, SimulationTerminated
+from .marquardt import INITIAL_DAMPING, levenberg_marquardt
 from .model import LogModel, REL_STEP
+from .problem import _float
 from .segments import Segment
 from .sensitivity import segment_sensitivities
 
@@ -36,7 +39,6 @@ COARSE_TOLERANCE = 1e-8  # the iterations with Jacobians at every stride-th row 
 COARSE_EVALUATIONS = 20  # at most this many simulations with them (their convergence is linear near the optimum)
 METHODS = {"casadi": "forward sensitivities (CasADi, the model's own definition)",
            "derivatives": "forward sensitivities (directional derivatives)", "differences": "central differences"}
-DENSE_LIMIT = 20_000_000  # entries: a Jacobian with estimated initial states up to this size is solved dense
 _MODEL: LogModel | None = None  # a worker's model: inherited from the parent at fork (its own FMU instances)
 
 
@@ -154,9 +156,6 @@ class _Problem:
         self.x0_log, self.sigma = x0_log, sigma
         p = model.problem
         self.nt, self.ne = len(p.fit), int(estimated.sum())
-        n_rows = sum(s.last - s.first for s in segments) * len(model.problem.outputs)
-        # estimated initial states: a dense Jacobian (exact trust-region steps) while it is small, else sparse (lsmr)
-        self.dense = n_rows * (self.nt + self.ne * len(segments)) <= DENSE_LIMIT
         self.method = method
         self.progress = progress
         self.cache: dict = {}
@@ -192,8 +191,8 @@ class _Problem:
                                             f"{_fmu_name(tr)} cannot simulate it: "
                                             f"{tr.reason}") from None
                     # a trial point the FMU cannot simulate (refused, its solver failed, not finite): infinite
-                    # residuals, which the solver rejects (its trust region shrinks), as a step into a region the
-                    # model cannot fly; the one place every way (serial, workers, CasADi) meets it
+                    # residuals, which the solver rejects (its damping grows: a shorter step), as a step into a
+                    # region the model cannot fly; the one place every way (serial, workers, CasADi) meets it
                     tr = self._failed(s)
                 trajs.append(tr)
             self.cache[key] = trajs
@@ -301,7 +300,7 @@ class _Problem:
         indices = np.concatenate([c.ravel() for c in columns])
         J = sparse.csr_matrix((data, indices, indptr), shape=(widths.size, nt + ne * nseg))
         J.eliminate_zeros()  # as the block matrices built it (an exact 0 is no entry)
-        return J.toarray() if self.dense else J
+        return J
 
     def _differences(self, z):
         """Central differences of the residuals (columns of the estimated
@@ -342,7 +341,7 @@ class _Problem:
             if group[0] >= self.nt and self.continuity:
                 self._continuity_columns(J, group, *cols[1.0])
         self.error_estimate = err
-        return sparse.csr_matrix(J) if self.ne and not self.dense else J
+        return sparse.csr_matrix(J) if self.ne else J
 
     def _continuity_base(self) -> int:
         return sum((s.last - s.first) for s in self.segments) * len(self.model.problem.outputs)
@@ -385,9 +384,27 @@ class _Problem:
 
     def bounds(self):
         p = self.model.problem
-        lo = np.concatenate([p.lower, np.full(self.ne * len(self.segments), -np.inf)])
-        hi = np.concatenate([p.upper, np.full(self.ne * len(self.segments), np.inf)])
-        return lo, hi
+        lo, hi = state_bounds(self.model)
+        n = len(self.segments)
+        return (np.concatenate([p.lower, np.tile(lo[self.estimated], n)]),
+                np.concatenate([p.upper, np.tile(hi[self.estimated], n)]))
+
+
+def state_bounds(model: LogModel) -> tuple[np.ndarray, np.ndarray]:
+    """Each state's ``min`` and ``max``: its variable's and, where a
+    parameter starts it (``<state>_0``, Co-Simulation), that parameter's, the
+    tighter of the two (the plant's ``Omega_r_1`` has none, ``Omega_r_1_0``
+    has ``min = 0``: a fit that drove it to -1185 ended in the FMU's
+    refusal, issue 42); ``-inf``/``inf`` where none is declared."""
+    variables = model.cs.variables
+    lo, hi = np.full(len(model.states), -np.inf), np.full(len(model.states), np.inf)
+    for j, s in enumerate(model.states):
+        for name in (s, model.setters.get(s)):
+            v = variables.get(name) if name else None
+            if v is not None:
+                lo[j] = max(lo[j], _float(v.min, -np.inf))
+                hi[j] = min(hi[j], _float(v.max, np.inf))
+    return lo, hi
 
 
 def _spread(values: np.ndarray) -> np.ndarray:
@@ -444,35 +461,40 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
             progress(min(done[0], total), total)
 
     result, prob = None, None
+    damping = INITIAL_DAMPING
     for n in range(passes):
         prob = _Problem(model, segments, estimated, x0_log, sigma, method, progress, pool, symbolic)
         lo, hi = prob.bounds()
         z = np.clip(z, lo, hi)
         scale = np.where(np.abs(z) > 0, np.abs(z), 1.0)
         # an estimated state is scaled by its state's size over the log, not by its first guess: a state logged
-        # near 0 (an angle, a rate) would otherwise be scaled by its noise, a condition number of 1e4 or more
-        # that the sparse solver's iterations (lsmr) pay for at every step
+        # near 0 (an angle, a rate) would otherwise be scaled by its noise (the tolerances xtol and gtol are on
+        # the scaled unknowns)
         scale[prob.nt:] = np.tile(prob.scale_x[estimated], len(segments))
 
         def jac(zz):
             report()
             return prob.jacobian(zz)
 
-        solver = "lsmr" if prob.ne and not prob.dense else "exact"
+        def solve(max_nfev, tol):  # each run from the damping the last one ended with (near the optimum: small)
+            return levenberg_marquardt(prob.residuals, jac, z, lo, hi, scale, prob.nt, prob.ne, ftol=tol, xtol=tol,
+                                       gtol=tol, max_nfev=max_nfev, damping=damping)
+
         used = 0
+        # the first of two passes gives the noise levels only (each output's RMS residual, wanted to a few
+        # digits): it ends where the coarse Jacobians converge (1e-8), the second is the estimate. Where they do
+        # not, the exact ones finish it at 1e-8: on a log the model meets exactly through the generic way's
+        # Magnus step the coarse ones converged linearly (20 simulations left the 6 s log's residuals 1e-6 of
+        # its spread: a second pass), the exact ones reach round-off (the first weights stay)
+        weights_only = n == 0 and passes == 2
         if stride > 1:  # the coarse Jacobians bring the iterate near the optimum, the exact ones finish
             prob.stride = stride
-            coarse = max(tolerance, COARSE_TOLERANCE)
-            result = least_squares(prob.residuals, z, jac=jac, bounds=(lo, hi), x_scale=scale, method="trf",
-                                   ftol=coarse, xtol=coarse, gtol=coarse, tr_solver=solver,
-                                   max_nfev=min(max_iterations, COARSE_EVALUATIONS))
-            z, used = result.x, result.nfev
+            result = solve(min(max_iterations, COARSE_EVALUATIONS), max(tolerance, COARSE_TOLERANCE))
+            z, used, damping = result.x, result.nfev, result.damping
         prob.stride = 1
-        if used < max_iterations:
-            result = least_squares(prob.residuals, z, jac=jac, bounds=(lo, hi), x_scale=scale, method="trf",
-                                   ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=max_iterations - used,
-                                   tr_solver=solver)
-        z = result.x
+        if used < max_iterations and not (weights_only and stride > 1 and result.status > 0):
+            result = solve(max_iterations - used, max(tolerance, COARSE_TOLERANCE) if weights_only else tolerance)
+        z, damping = result.x, result.damping
         if n == 0 and passes == 2:
             r = prob.residuals(z).copy()
             ny = len(p.outputs)
@@ -487,18 +509,18 @@ def _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tole
     J = prob.jacobian(z)
     trajs = prob.simulate(z)
     resid = [tr.outputs - p.output_values[s.first:s.last] for s, tr in zip(segments, trajs)]
-    Jd = J.toarray() if sparse.issparse(J) else J
     n_out = rows.size * len(p.outputs)
-    Jout = Jd[:n_out]
+    Jout = J[:n_out]  # sparse with estimated states: each block taken dense, never the whole (rows x unknowns)
     nt, ne = prob.nt, prob.ne
+    dense = (lambda a: a.toarray()) if sparse.issparse(Jout) else (lambda a: a)  # noqa: E731
     state_blocks = []
     start = 0
     for i, s in enumerate(segments):
         n = (s.last - s.first) * len(p.outputs)
-        state_blocks.append(Jout[start:start + n, nt + i * ne:nt + (i + 1) * ne] if ne else None)
+        state_blocks.append(dense(Jout[start:start + n, nt + i * ne:nt + (i + 1) * ne]) if ne else None)
         start += n
     converged = bool(result.status > 0)
-    return Fit(theta, x0, estimated, sigma, resid, Jout[:, :nt], state_blocks, converged, result.message,
+    return Fit(theta, x0, estimated, sigma, resid, dense(Jout[:, :nt]), state_blocks, converged, result.message,
                prob.evaluations, float(result.cost),
                METHODS[method] + (f", run by {symbolic.source}" if symbolic is not None and
                                   symbolic.source != "compiled" else ""), prob.error_estimate,

@@ -59,7 +59,9 @@ def table_resource(table) -> bytes:
     head = MAGIC + struct.pack("<QQ", len(table.times), n) + flags
     head += bytes((8 - len(head) % 8) % 8)
     values = np.ascontiguousarray(table.values, dtype="<f8").reshape(len(table.times), n)
-    return head + np.ascontiguousarray(table.times, dtype="<f8").tobytes() + values.tobytes()
+    # joined from the arrays' own buffers: one copy of a table that may be millions of rows
+    return b"".join((head, memoryview(np.ascontiguousarray(table.times, dtype="<f8")).cast("B"),
+                     memoryview(values).cast("B")))
 
 
 def build_table_fmu(table, fmi_version: int = 2) -> Path:
@@ -69,7 +71,10 @@ def build_table_fmu(table, fmi_version: int = 2) -> Path:
 
     base = cached_fmu(table_model(table), fmi_version)
     data = table_resource(table)
-    digest = hashlib.sha256(base.read_bytes() + b"\0" + data).hexdigest()[:16]
+    digest = hashlib.sha256(base.read_bytes())
+    digest.update(b"\0")
+    digest.update(data)  # not hashed as one concatenation: that would copy the table again
+    digest = digest.hexdigest()[:16]
     target = cache_root() / "tables" / digest / f"fmi{fmi_version}" / "SignalTable.fmu"
     if target.exists():
         return target

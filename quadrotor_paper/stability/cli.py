@@ -44,6 +44,10 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         help="write only these figures (their names as the report lists them, without .png, e.g. "
                              "gain_sweep bode_outer_hover); --figures alone writes none: the numbers alone, in about "
                              "half the CPU (default: every figure)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="the plant's parameters, as `fnn-cosim run` takes them: fmus.Quadrotor.parameters."
+                             "<name>=VALUE, or fmus.Quadrotor.parameter_set=FILE.ssv (a calibration's); in the plant "
+                             "and the controller's nominal vehicle alike (repeatable; not with --along-flight)")
     parser.add_argument("--workers", type=worker_count, default=None,
                         help="processes: Dask workers for the runs, and with 2 or more the operating points' "
                              "figures drawn in a second process while the study goes on (default: one per core; "
@@ -51,15 +55,18 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return parser
 
 
-def add_parser(subparsers) -> None:
+def add_parser(subparsers, overrides) -> None:
     """Add the ``stability`` subcommand to ``fnn-cosim``'s subcommands
     (``quadrotor_paper.cli._Commands``: its arguments added when it is the
-    one given); its handler is stored as ``func`` (call ``args.func(args)``)."""
+    one given); its handler is stored as ``func`` (call ``args.func(args)``);
+    ``overrides``: the command line's reader of ``--set`` pairs (handed over:
+    this module does not import the command line's)."""
     def arguments(parser: argparse.ArgumentParser) -> None:
         from ..fmu_log_option import fmu_log_option
 
         _arguments(parser)
         fmu_log_option(parser)
+        parser.set_defaults(overrides=overrides)
 
     subparsers.add_parser("stability", arguments, run, description=_DESCRIPTION,
                           help="linear stability analysis of the PD baseline, checked against the co-simulation")
@@ -93,6 +100,9 @@ def _checked(args: argparse.Namespace) -> None:
         check_pd_gains(given.get("kp", 0.0), given.get("kd", 0.0))  # their bounds (the study checks them too)
     except ScenarioError as exc:  # named as the command line names them
         raise ScenarioError(f"--{str(exc).replace('along_every', 'along-every')}") from None
+    if args.set and args.along_flight:  # the learning laws' recorded runs fly the shipped plant
+        raise ScenarioError(f"--set {args.set[0]}: --along-flight analyses the shipped plant; a plant of your own "
+                            f"goes without it")
     if args.along_every is not None and not args.along_flight:
         raise ScenarioError(f"--along-every {args.along_every:g}: applies only with --along-flight")
     if args.figures:
@@ -106,14 +116,15 @@ def _checked(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study for parsed arguments; prints the report's path and verdicts."""
-    from .study import StabilitySettings, run_stability_analysis
+    from .study import StabilitySettings, plant_parameters, run_stability_analysis
 
     _checked(args)
+    plant = plant_parameters(args.overrides(args.set)) if args.set else {}
     workers = default_workers(args.workers)
     along_every = ALONG_EVERY if args.along_every is None else args.along_every
     settings = StabilitySettings(speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
                                  cosim=not args.no_cosim, feedforward=args.feedforward,
-                                 along_flight=args.along_flight, along_every=along_every)
+                                 along_flight=args.along_flight, along_every=along_every, plant=plant)
     study = run_stability_analysis(args.out, settings, workers=workers, show_progress=True, figures=args.figures)
     for a in study.analyses:
         p = a.poles["discrete"]
@@ -145,8 +156,11 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     from ..fmu_log_option import apply_fmu_log, fmu_log_option
 
+    from ..set_option import overrides
+
     parser = _arguments(argparse.ArgumentParser(prog="fnn-cosim stability", description=_DESCRIPTION))
     fmu_log_option(parser)
+    parser.set_defaults(overrides=overrides)
     args = parser.parse_args(argv)
     apply_fmu_log(args.fmu_log)
     return run(args)

@@ -397,9 +397,12 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
 def _section_title(study) -> list[str]:
     """Title with the PD gains, and where the report comes from."""
     kp, kd = study.position.kp, study.position.kd
+    plant = study.operating_points[0].plant_parameters
+    said = (", ".join(f"`{k} = {v:.10g}`" for k, v in plant.items()) + ", in the plant and the controller's "
+            "nominal vehicle (`--set`); the rest Table 1's") if plant else "Table 1's (the defaults)"
     return [f"# Linear stability of the PD baseline (kp = {kp:g}, kd = {kd:g})", "",
             "Written by `fnn-cosim stability` (`quadrotor_paper.stability.run_stability_analysis`); method and "
-            "discussion in `docs/stability.md`.", ""]
+            "discussion in `docs/stability.md`.", "", f"The plant: {said}.", ""]
 
 
 def _section_loop_structure(study) -> list[str]:

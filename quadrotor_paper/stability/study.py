@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -122,6 +122,11 @@ class StabilitySettings:
     sweep_kp, sweep_kd : the grid of the gain sweep.
     cosim : also run the co-simulation checks of the PD (steps, gains, ramp,
         mission).
+    plant : the plant's parameters other than its defaults (``fnn-cosim
+        stability --set``: :func:`plant_parameters`), in the plant and in the
+        controller's nominal vehicle alike, as a scenario ties them (an X's
+        ``arm_angle`` makes the mixer an X); the operating points are
+        trimmed on that plant, the co-simulation checks fly it.
     along_flight : with ``cosim``, also the learning laws (minutes, not
         seconds: docs/stability.md, "What the command costs"): the finite-time
         runs of :mod:`quadrotor_paper.learning_claims` and the learning loop
@@ -142,6 +147,17 @@ class StabilitySettings:
     cosim: bool = True
     along_flight: bool = False
     along_every: float = 1.0
+    plant: Any = field(default_factory=dict)  # plant parameter -> value, over its defaults (plant_parameters)
+
+    @property
+    def vehicle(self):
+        """The controller's nominal vehicle: the plant's (``plant``, else its defaults)."""
+        from dataclasses import fields
+
+        from fnn_controller import VehicleParams
+
+        return VehicleParams(**{f.name: float(self.plant[f.name]) for f in fields(VehicleParams)
+                                if f.name in self.plant})
 
     @property
     def position(self) -> PositionParams:
@@ -149,6 +165,42 @@ class StabilitySettings:
         default = PositionParams()
         return replace(default, kp=default.kp if self.kp is None else self.kp,
                        kd=default.kd if self.kd is None else self.kd, dt=self.dt, feedforward=self.feedforward)
+
+
+def plant_parameters(overrides: Mapping[str, Any]) -> dict[str, float]:
+    """The plant's parameters that ``fnn-cosim stability --set`` gives, read as
+    ``fnn-cosim run`` reads them: ``fmus.Quadrotor.parameters.<name>`` and
+    ``fmus.Quadrotor.parameter_set`` (an SSP parameter set, e.g. a calibration's
+    ``parameters.ssv``) applied to the ``circles`` scenario (names and ranges
+    checked there, one line each), less the values the plant has anyway (the
+    scenario's, the defaults) and the initial states (``<state>_0``: the
+    operating points set the states). Any other key is refused in one line,
+    and so is a motor lag: the loop model takes the rotors as instantaneous
+    (the plant's 12 rigid-body states; ``tau_m > 0`` would leave the rotor
+    commands acting through states it does not carry)."""
+    from cosim.errors import ScenarioError
+    from cosim.scenario import load_scenario
+    from fmu_models.models.quadrotor import QUADROTOR
+
+    from ..controller_component import DEFAULT_PLANT
+
+    prefix = f"fmus.{DEFAULT_PLANT}."
+    for key in overrides:
+        if not (key.startswith(prefix + "parameters.") or key == prefix + "parameter_set"):
+            raise ScenarioError(f"--set {key}: the stability analysis takes the plant's parameters only "
+                                f"({prefix}parameters.<name>=VALUE or {prefix}parameter_set=FILE.ssv)")
+    if not overrides:
+        return {}
+    own = load_scenario("circles").fmus[DEFAULT_PLANT]["parameters"]
+    given = load_scenario("circles", dict(overrides)).fmus[DEFAULT_PLANT]["parameters"]
+    initial = {f"{v.name}_0" for v in QUADROTOR.states}
+    plant = {k: float(v) for k, v in given.items()
+             if k not in initial and float(v) != float(own.get(k, QUADROTOR.variable(k).start))}
+    if plant.get("tau_m", 0.0) != 0.0:
+        raise ScenarioError(f"--set: tau_m = {plant['tau_m']:g} s: the linear analysis takes the rotors as "
+                            f"instantaneous (tau_m = 0; docs/stability.md); add --set "
+                            f"{prefix}parameters.tau_m=0 to analyse this plant without its motor lag")
+    return plant
 
 
 def stability_study(settings: StabilitySettings = StabilitySettings(), *, workers: int = 1,
@@ -176,9 +228,10 @@ def stability_study(settings: StabilitySettings = StabilitySettings(), *, worker
 def _linear(settings: StabilitySettings, analysed=None) -> StabilityStudy:
     """The linear analysis of the PD baseline at the default operating points."""
     dt, speed, position = settings.dt, settings.speed, settings.position
-    geometric = replace(settings.geometric, dt=dt)
+    geometric = replace(settings.geometric, dt=dt, vehicle=settings.vehicle)
     check_pd_gains(position.kp, position.kd, dt, geometric)
-    ops = default_operating_points(speed, settings.wind_speed, position=position, geometric=geometric)
+    ops = default_operating_points(speed, settings.wind_speed, position=position, geometric=geometric,
+                                   plant_parameters=dict(settings.plant))
     analyses = [analyze(op, dt, every_loop=("discrete",)) for op in ops]  # what the report shows
     if analysed is not None:
         analysed(analyses)
@@ -206,7 +259,7 @@ def _cosim_checks(study: StabilityStudy, settings: StabilitySettings) -> None:
     study.gain_checks = [check_gains(hover, f * c * study.position.kp, f * c * study.position.kd, dt=dt)
                          for f in GAIN_FACTORS]
     study.ramp_nonlinear = ramp_lag(hover, speed, dt=dt)[0]
-    study.mission_rmse = pd_mission_rmse()
+    study.mission_rmse = pd_mission_rmse(plant=settings.plant)
 
 
 def _learning(study: StabilityStudy, settings: StabilitySettings, workers: int, show_progress: bool) -> None:

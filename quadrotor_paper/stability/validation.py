@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
@@ -220,16 +221,19 @@ def growth_rate(t: np.ndarray, y: np.ndarray, t_min: float = 0.0) -> float:
     return float(np.polyfit(t[idx], np.log(a[idx]), 1)[0])
 
 
-def pd_mission_rmse(wind_speeds=(0.0, 1.0, 3.0, 5.0), scenario: str = "circles") -> dict[float, float]:
+def pd_mission_rmse(wind_speeds=(0.0, 1.0, 3.0, 5.0), scenario: str = "circles",
+                    plant: Mapping[str, float] | None = None) -> dict[float, float]:
     """Euclidean RMSE (m) of the PD alone on the paper's mission (the shipped
     ``circles`` scenario, §5.2) for each gust speed (m/s) -- Table 2's PD row,
     a study (the case ``pd``, the wind speeds its grid) measured by
-    :func:`quadrotor_paper.experiments.study_metrics`."""
+    :func:`quadrotor_paper.experiments.study_metrics`; ``plant``: the plant's
+    parameters set on every run (the controller's nominal vehicle follows)."""
     from cosim.study import parse_study
 
     from ..experiments import measure
 
     study = parse_study({"scenario": scenario, "name": "pd_mission_rmse", "cases": {"pd": {}},
+                         "set": {f"fmus.{DEFAULT_PLANT}.parameters.{k}": float(v) for k, v in (plant or {}).items()},
                          "sweep": {"grid": {"wind.speed": [float(w) for w in wind_speeds]}}})
     return {row["wind.speed"]: row["rmse_m"] for row in measure(study).rows}
 

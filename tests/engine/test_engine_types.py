@@ -199,7 +199,7 @@ def test_int64_and_uint64_beyond_2_53_pass_exactly_and_narrow_types_refuse_what_
     raw = {"connections": ["inputs.{i,u,s,b} -> F.{Int64_input,UInt64_input,String_input,Binary_input}"],
            "simulation": {"duration": 1.0, "step": 0.25},
            "fmus": {"F": {"path": str(fmu(3, "Feedthrough"))}},
-           "components": {"inputs": {"kind": "signal_table", "file": str(tmp_path / "in.csv"),
+           "components": {"inputs": {"kind": "signal_table", "outside": "hold", "file": str(tmp_path / "in.csv"),
                                      "columns": {"i": {"type": "Int64"}, "u": {"type": "UInt64"},
                                                  "s": {"type": "String"}, "b": {"type": "Binary"}}}},
            "record": {"signals": ["F.Int64_output", "F.UInt64_output", "F.String_output", "F.Binary_output"]}}
@@ -231,7 +231,7 @@ def test_an_fmu_fed_only_through_object_slots_gets_its_inputs_in_either_ordering
     raw = {"connections": ["inputs.{i,s} -> F.{Int64_input,String_input}"],
            "simulation": {"duration": 1.0, "step": 0.25, "ordering": ordering},
            "fmus": {"F": {"path": str(fmu(3, "Feedthrough"))}},
-           "components": {"inputs": {"kind": "signal_table", "file": str(tmp_path / "in.csv"),
+           "components": {"inputs": {"kind": "signal_table", "outside": "hold", "file": str(tmp_path / "in.csv"),
                                      "columns": {"i": {"type": "Int64"}, "s": {"type": "String"}}}},
            "record": {"signals": ["F.Int64_output", "F.String_output"]}}
     with build_master(parse_scenario(raw)) as master:
@@ -281,7 +281,7 @@ def test_statespace_arrays_flown_as_published_whole_and_element_by_element(tmp_p
     base = {"simulation": {"start_time": t0, "duration": stop - t0, "step": h},
             "fmus": {"StateSpace": {"path": str(fmu(3, "StateSpace"))}},
             "record": {"signals": ["StateSpace.y"]}}
-    table = {"table": {"kind": "signal_table", "file": str(tmp_path / "u.csv")}}
+    table = {"table": {"kind": "signal_table", "outside": "hold", "file": str(tmp_path / "u.csv")}}
     for connections, components in (([], {}), (["table.u -> StateSpace.u"], table),
                                      (["table.{c,b,a} -> StateSpace.u[{3,2,1}]"], table)):
         with build_master(parse_scenario({**base, "connections": connections, "components": components})) as m:
@@ -300,7 +300,8 @@ def test_statespace_in_csv_does_not_fit_the_default_shape_and_is_refused_in_one_
     structural parameter's start): connecting them whole is refused naming
     both shapes, an index outside the shape too."""
     base = {"fmus": {"StateSpace": {"path": str(fmu(3, "StateSpace"))}},
-            "components": {"table": {"kind": "signal_table", "file": str(RESULTS / "StateSpace_in.csv")}}}
+            "components": {"table": {"kind": "signal_table", "outside": "hold",
+                                     "file": str(RESULTS / "StateSpace_in.csv")}}}
     with pytest.raises(ConnectionCheckError, match=re.escape(
             "connection table.u -> StateSpace.u: shape mismatch, table.u is an array of shape (2,) but "
             "StateSpace.u is an array of shape (3,)")):
@@ -352,7 +353,7 @@ def test_fan_out_drives_two_inputs_of_an_fmu(tmp_path):
     raw = {"connections": ["table.v -> F.{Float64_continuous_input,Float64_discrete_input}"],
            "simulation": {"duration": 1.0, "step": 0.25},
            "fmus": {"F": {"path": str(fmu(3, "Feedthrough"))}},
-           "components": {"table": {"kind": "signal_table", "file": str(tmp_path / "in.csv")}},
+           "components": {"table": {"kind": "signal_table", "outside": "hold", "file": str(tmp_path / "in.csv")}},
            "record": {"signals": ["F.Float64_continuous_output", "F.Float64_discrete_output"]}}
     with build_master(parse_scenario(raw)) as master:
         result = master.run(1.0)
@@ -380,7 +381,7 @@ def test_the_table_holds_or_interpolates_per_column(tmp_path):
 @pytest.mark.parametrize("text, columns, message", [
     ("time,x\n0,1\n2,1\n1,1\n", {}, "line 4, column time: time = 1 goes back (after 2); the times must not decrease"),
     ("t,x\n0,1\n", {}, "header 't,x': expected 'time,col1,...'"),
-    ("time,x,x\n0,1,2\n", {}, "column name 'x' is empty or repeated"),
+    ("time,x,x\n0,1,2\n", {}, "in.csv': two columns named 'x'; each name at most once"),
     ("time,x\n0,1,2\n", {}, "line 2: 3 fields for 2 columns"),
     ("time,x\n", {}, "no rows after the header"),
     ("time,x\n0,abc\n", {}, "line 2, column x: value = 'abc': expected a number (Float64)"),
@@ -402,6 +403,8 @@ def test_bad_tables_are_refused_in_one_line(tmp_path, text, columns, message):
 
 
 def test_the_table_file_is_bounded(tmp_path, monkeypatch):
+    """Streamed, a CSV is bounded by its rows and the data of its columns
+    read (its size bounds no memory: only the columns played are held)."""
     import cosim.table
     from cosim.table import SignalTable
 
@@ -409,8 +412,10 @@ def test_the_table_file_is_bounded(tmp_path, monkeypatch):
     monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 4)
     with pytest.raises(ScenarioError, match="more than 4 rows; at most 4 are read"):
         SignalTable("t", tmp_path / "in.csv")
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_BYTES", 10)
-    with pytest.raises(ScenarioError, match=r"signal table '.*in.csv': \d+ bytes; at most 10 are read"):
+    monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 5)
+    monkeypatch.setattr(cosim.table, "MAX_TABLE_DATA", 60)  # the time's 40 bytes, then x's 40
+    with pytest.raises(ScenarioError, match=r"signal table '.*in.csv': more than 20 bytes of data in the columns "
+                                            r"used; at most 20 are read"):
         SignalTable("t", tmp_path / "in.csv")
     with pytest.raises(ScenarioError, match="signal table '/dev/null': not a regular file"):
         SignalTable("t", "/dev/null")
@@ -457,7 +462,8 @@ def test_a_python_component_takes_and_gives_typed_values(tmp_path):
     from cosim.table import SignalTable
 
     (tmp_path / "in.csv").write_text(f"time,n,s\n0,1,a\n0.5,{2 ** 62},b\n", encoding="utf-8")
-    table = SignalTable("table", tmp_path / "in.csv", columns={"n": {"type": "Int64"}, "s": {"type": "String"}})
+    table = SignalTable("table", tmp_path / "in.csv", columns={"n": {"type": "Int64"}, "s": {"type": "String"}},
+                        outside="hold")
     with FmuComponent("F", fmu(3, "Feedthrough")) as f:
         master = Master([f], [table, Counter("c")], ["table.{n,s} -> c.{n,s}", "c.big -> F.Boolean_input",
                                                      "c.said -> F.String_input"], 0.25,
@@ -476,7 +482,7 @@ def test_a_snapshot_holds_typed_signals_as_their_values(tmp_path):
     raw = {"connections": ["inputs.{i,s} -> F.{Int64_input,String_input}"],
            "simulation": {"duration": 1.0, "step": 0.25},
            "fmus": {"F": {"path": str(fmu(3, "Feedthrough"))}},
-           "components": {"inputs": {"kind": "signal_table", "file": str(tmp_path / "in.csv"),
+           "components": {"inputs": {"kind": "signal_table", "outside": "hold", "file": str(tmp_path / "in.csv"),
                                      "columns": {"i": {"type": "Int64"}, "s": {"type": "String"}}}},
            "record": {"signals": ["F.Int64_output", "F.String_output"]}}
     with build_master(parse_scenario(raw)) as master:
@@ -533,7 +539,7 @@ def test_recorded_strings_are_bounded_each_and_in_all(tmp_path, monkeypatch):
     (tmp_path / "in.csv").write_text("time,s\n0,short\n0.5,a longer text\n", encoding="utf-8")
     raw = {"connections": ["inputs.s -> F.String_input"], "simulation": {"duration": 1.0, "step": 0.25},
            "fmus": {"F": {"path": str(fmu(3, "Feedthrough"))}},
-           "components": {"inputs": {"kind": "signal_table", "file": str(tmp_path / "in.csv"),
+           "components": {"inputs": {"kind": "signal_table", "outside": "hold", "file": str(tmp_path / "in.csv"),
                                      "columns": {"s": {"type": "String"}}}},
            "record": {"signals": ["F.String_output"]}}
     monkeypatch.setattr(cosim.recorder, "MAX_STRING_BYTES", 8)

@@ -27,13 +27,14 @@ TIMES = (-1.0, 0.0, 0.25, 0.5, 1.0 - 1e-12, 1.0, 1.25, 2.0, 2.5, 3.0, 4.0)
 
 
 def scenario(tmp_path, form: str, **table) -> dict:
-    """The table alone, 4 s at 0.25 s, its outputs recorded."""
+    """The table alone, 4 s at 0.25 s, its outputs recorded; its rows end
+    at 3 s, so it holds the last one (``outside = "hold"``) unless told."""
     (tmp_path / "t.csv").write_text(TABLE, encoding="utf-8")
     return {"simulation": {"duration": 4.0, "step": 0.25},
             "connections": ["table.x -> F.Float64_continuous_input"],  # a scenario has an FMU
             "fmus": {"F": {"path": str(fmu(2, "Feedthrough"))}},
             "components": {"table": {"kind": "signal_table", "file": str(tmp_path / "t.csv"), "form": form,
-                                     "columns": {"y": {"interpolation": "linear"}}, **table}},
+                                     "columns": {"y": {"interpolation": "linear"}}, "outside": "hold", **table}},
             "record": {"signals": ["table.x", "table.y"]}}
 
 
@@ -168,14 +169,37 @@ def test_a_bad_table_exits_2_at_the_cli_in_one_line(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("form", ["python", "fmu"])
-def test_outside_refuse_refuses_a_run_that_leaves_the_table_before_it_starts(tmp_path, form):
-    raw = scenario(tmp_path, form, outside="refuse")  # 0..4 s on a table of 0..3 s
-    with pytest.raises(ScenarioError, match=re.escape("table: the run from t = 0.0 to 4.0 s leaves the table's "
-                                                      "times [0.0, 3.0] s (outside = 'refuse'")):
+def test_a_table_that_does_not_cover_the_run_is_refused_unless_told_to_hold(tmp_path, form):
+    """``outside = "refuse"`` is the default: a run from 0 to 4 s on rows
+    from 0 to 3 s is refused before it starts, in one line naming the table,
+    its file, its rows' span and the run's; ``"hold"`` plays it; a run
+    within the rows plays under the default."""
+    raw = scenario(tmp_path, form)
+    del raw["components"]["table"]["outside"]
+    with pytest.raises(ScenarioError) as info:
         build_master(parse_scenario(raw))
+    assert str(info.value) == (f"table: the run from t = 0 to 4 s leaves signal table {str(tmp_path / 't.csv')!r}, "
+                               f"whose rows run from t = 0 to 3 s (outside = 'refuse'; outside = 'hold' holds its "
+                               f"first and last rows there)")
     raw["simulation"]["duration"] = 3.0
     with build_master(parse_scenario(raw)) as master:
         assert master.run(3.0).status == "ok"
+
+
+def test_a_table_that_starts_after_the_run_exits_2_at_the_cli_unless_told_to_hold(tmp_path, capsys):
+    from quadrotor_paper.cli import main
+
+    (tmp_path / "in.csv").write_text("time,v\n0.5,1\n2,3\n", encoding="utf-8")
+    toml = ('connections = ["t.v -> F.Float64_continuous_input"]\n[simulation]\nduration = 1.0\nstep = 0.5\n'
+            f'[fmus.F]\npath = "{fmu(2, "Feedthrough")}"\n[components.t]\nkind = "signal_table"\nfile = "in.csv"\n')
+    (tmp_path / "s.toml").write_text(toml, encoding="utf-8")
+    assert main(["run", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith("fnn-cosim: error: t: the run from t = 0 to 1 s leaves signal table ")
+    assert err.endswith("in.csv', whose rows run from t = 0.5 to 2 s (outside = 'refuse'; outside = 'hold' holds its "
+                        "first and last rows there)")
+    (tmp_path / "s.toml").write_text(toml + 'outside = "hold"\n', encoding="utf-8")
+    assert main(["run", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 0
 
 
 def _fmpy_extracts_into(tmp_path, monkeypatch):
@@ -227,27 +251,34 @@ def test_parquet_tables_with_units_in_names_or_metadata(tmp_path):
     with pytest.raises(ScenarioError, match=re.escape("row 3, column time: time = 1 goes back (after 2)")):
         load_table(tmp_path / "back.parquet")
     (tmp_path / "junk.parquet").write_bytes(b"not parquet at all")
-    with pytest.raises(ScenarioError, match="not a readable Parquet file"):
+    with pytest.raises(ScenarioError, match="not a Parquet file pyarrow reads"):
         load_table(tmp_path / "junk.parquet")
 
 
 def test_a_parquet_table_is_bounded_by_its_footer_before_it_is_read(tmp_path, monkeypatch):
+    """Rows, and the data of the columns used uncompressed (a zip bomb's
+    kin: small compressed, large read), from the footer; a long column no
+    one uses counts for nothing; the footer's own length, before it is read."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     import cosim.table
 
-    pq.write_table(pa.table([np.arange(5.0), np.ones(5)], names=["time", "x"]), tmp_path / "t.parquet")
+    pq.write_table(pa.table([np.arange(5.0), np.ones(5), [str(i) * 400 for i in range(5)]], names=["time", "x", "s"]),
+                   tmp_path / "t.parquet")
     monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 4)
     with pytest.raises(ScenarioError, match=re.escape("more than 4 rows (5); at most 4 are read")):
-        load_table(tmp_path / "t.parquet")
+        load_table(tmp_path / "t.parquet", use=["x"])
     monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 5)
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_DATA", 10)  # a zip bomb's kin: small compressed, large read
-    with pytest.raises(ScenarioError, match=r"\d+ bytes of data uncompressed; at most 10 are read"):
-        load_table(tmp_path / "t.parquet")
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_BYTES", 10)
-    with pytest.raises(ScenarioError, match=r"\d+ bytes; at most 10 are read"):
-        load_table(tmp_path / "t.parquet")
+    monkeypatch.setattr(cosim.table, "MAX_TABLE_DATA", 1000)
+    assert load_table(tmp_path / "t.parquet", use=["x"]).columns["x"].tolist() == [1.0] * 5
+    with pytest.raises(ScenarioError, match=r"\d+ bytes of data uncompressed in the columns used; at most 1000 are"):
+        load_table(tmp_path / "t.parquet", use=["s"])
+    import cosim.columns_io
+
+    monkeypatch.setattr(cosim.columns_io, "MAX_FOOTER_BYTES", 100)  # the schema itself, before pyarrow parses it
+    with pytest.raises(ScenarioError, match=r"t.parquet': a footer of \d+ bytes; at most 100 are read"):
+        load_table(tmp_path / "t.parquet", use=["x"])
 
 
 def test_the_table_fmu_refuses_a_tampered_resource(tmp_path, monkeypatch):
@@ -309,3 +340,46 @@ def test_a_scenario_key_of_the_table_is_checked_in_one_line(tmp_path):
     with pytest.raises(ScenarioError, match=r"components\.table\.outside = 'clamp'") as info:
         parse_scenario(raw)
     assert "\n" not in str(info.value)
+
+
+def test_only_the_columns_played_are_read(tmp_path):
+    """A wide file whose other columns are not numbers (or empty) plays the
+    column the scenario connects; recording every output (no
+    record.signals) plays, and so reads, every column: then the text is
+    refused, naming its line and column."""
+    (tmp_path / "wide.csv").write_text("time,x,note,y\n0,1,text,\n1,2,more,\n", encoding="utf-8")
+    raw = {"simulation": {"duration": 1.0, "step": 0.5},
+           "connections": ["table.x -> F.Float64_continuous_input"],
+           "fmus": {"F": {"path": str(fmu(2, "Feedthrough"))}},
+           "components": {"table": {"kind": "signal_table", "file": str(tmp_path / "wide.csv"), "form": "python"}},
+           "record": {"signals": ["F.Float64_continuous_output"]}}
+    with build_master(parse_scenario(raw)) as master:
+        assert [p.name for p in master.components["table"].outputs] == ["x"]
+        assert master.run(1.0)["F.Float64_continuous_output"].tolist() == [1.0, 1.0, 2.0]
+    with pytest.raises(ScenarioError, match=re.escape("wide.csv': no column 'z'; its columns are: x, note, y")):
+        load_table(tmp_path / "wide.csv", use=["x", "z"])
+    del raw["record"]
+    with pytest.raises(ScenarioError, match=re.escape("wide.csv': line 2, column note: value = 'text': expected a "
+                                                      "number (Float64)")):
+        build_master(parse_scenario(raw))
+
+
+@pytest.mark.parametrize("header", ["time,x,x", "time,x,x [m]"])
+def test_two_columns_of_one_name_are_one_line_naming_it_and_the_file(tmp_path, header):
+    (tmp_path / "t.csv").write_text(f"{header}\n0,1,2\n", encoding="utf-8")
+    with pytest.raises(ScenarioError) as info:
+        load_table(tmp_path / "t.csv", use=["x"])
+    assert str(info.value) == f"signal table {str(tmp_path / 't.csv')!r}: two columns named 'x'; each name at most once"
+
+
+def test_numbers_read_by_pyarrow_are_python_s_doubles(tmp_path):
+    """The fast reader (pyarrow's float parser) gives the double Python's
+    ``float`` gives, to the bit; a field it does not read (spaces inside,
+    ``1_0``) is read field by field as before."""
+    fields = ["0.1", "1e-320", "-0", "1.7976931348623157e308", "123456789012345678901234567890", "2.5e-3",
+              "0.30000000000000004", "4.9406564584124654e-324", " 7", "+3"]
+    (tmp_path / "n.csv").write_text("time,x\n" + "".join(f"{i},{f}\n" for i, f in enumerate(fields)))
+    got = load_table(tmp_path / "n.csv").columns["x"]
+    assert [v.hex() for v in got] == [float(f).hex() for f in fields]
+    (tmp_path / "u.csv").write_text("time,x\n0,1_0\n")
+    assert load_table(tmp_path / "u.csv").columns["x"].tolist() == [10.0]  # Python's float reads it

@@ -99,8 +99,8 @@ def test_the_replay_exports_to_ssp_and_flies_alike_in_fmpy_and_libcosim(recorded
     # outside = "hold": fmpy's simulate_ssp steps once beyond the stop time (its time accumulates h), which a
     # table that refuses to leave its rows would refuse
     toml = log.with_name("replay.toml")  # beside the log: its file named relative to the scenario
-    toml.write_text(as_toml({**replay(log, outside="hold"), "components": {"log": {
-        "kind": "signal_table", "file": log.name}}}), encoding="utf-8")
+    toml.write_text(as_toml({**replay(log), "components": {"log": {
+        "kind": "signal_table", "file": log.name, "outside": "hold"}}}), encoding="utf-8")
     path = tmp_path / "replay.ssp"
     assert main(["export-ssp", str(toml), "--out", str(path)]) == 0
     log.rename(log.with_name("moved.csv"))  # the archive needs the log no more
