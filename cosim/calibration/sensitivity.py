@@ -35,6 +35,8 @@ def expm_batch(M: np.ndarray) -> np.ndarray:
     relative once the scaled norm is at most 0.25), all at once: one row's
     matrices cost numpy's call overhead only once a stack."""
     norm = float(np.max(np.sum(np.abs(M), axis=2), initial=0.0))
+    if not np.isfinite(norm):  # the Jacobians overflowed (a trial point near escape): not finite, for the solver
+        return np.full(M.shape, np.nan)  # to take its fallback (solve.py), not an OverflowError here
     s = max(0, int(np.ceil(np.log2(norm / 0.25)))) if norm > 0.25 else 0
     A = M / (2.0 ** s)
     eye = np.broadcast_to(np.eye(M.shape[1]), M.shape)

@@ -113,3 +113,14 @@ def test_model_exchange_refuses_a_trial_point_that_escapes_at_once_and_the_fit_g
     assert code in (0, 1) and "internal error" not in err
     assert refused and all("CVODE failed" in r and "|h| = hmin" in r for r in refused)
     assert "[WARNING]" not in err and "t + h = t" not in err  # SUNDIALS's own stderr
+
+
+def test_an_overflowing_jacobian_is_not_finite_for_the_solver_s_fallback_not_an_overflow_error():
+    # the random-start benchmark's plant in Model Exchange (seed 0, run 30): the right-hand side's differences
+    # overflowed at a trial point; the Magnus step's scaling took log2(inf) and ended in an internal error
+    from cosim.calibration.sensitivity import expm_batch
+
+    M = np.zeros((2, 2, 2))
+    M[1, 0, 1] = np.inf
+    assert np.isnan(expm_batch(M)).all()
+    np.testing.assert_array_equal(expm_batch(np.zeros((1, 2, 2))), np.eye(2)[None])
