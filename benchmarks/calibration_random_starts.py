@@ -13,8 +13,8 @@ Two problems, each run many times in this process through the command's
   (and some of them 0 or negative), sometimes unbounded below by a random
   bound, segments of random length.
 
-Printed: the histogram of exit statuses, the count of internal errors, and
-each run that ended otherwise than 0, 1 or 2 or with an internal error, with
+Printed: the histogram of exit statuses, the longest run's CPU seconds, the
+count of internal errors, and each run that ended otherwise than 0, 1 or 2 or with an internal error, with
 its command line and stderr. Never asserted.
 
     .venv/bin/python benchmarks/calibration_random_starts.py [--runs 40] [--seed 0] [--duration 4]
@@ -99,6 +99,7 @@ def main() -> None:
     truth = {"d": 2.66e-2 * 6.55e-6, "Iz": 2.1e-2, **HIDDEN}  # the log's: Table 1's, HIDDEN's changed
     histogram: dict[str, collections.Counter] = {"VanDerPol": collections.Counter(), "Quadrotor": collections.Counter()}
     bad = []
+    longest = dict.fromkeys(histogram, 0.0)  # CPU-s of the longest run of each problem
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         log = noisy(fly_synthetic_log(tmp / "flight", duration=args.duration), 0.01, rng)
@@ -107,11 +108,15 @@ def main() -> None:
             for name in histogram:
                 out = tmp / f"{name}{k}"
                 argv = vanderpol_args(rng, out) if name == "VanDerPol" else plant_args(rng, log, out, truth)
+                cpu = time.process_time()
                 code, err = command(argv)
+                cpu = time.process_time() - cpu
                 internal = "internal error" in err
                 histogram[name]["internal error" if internal else str(code)] += 1
+                longest[name] = max(longest[name], cpu)
                 if args.verbose:
-                    print(f"{name}: exit {code}: {' '.join(argv[3:])}\n    {err.strip()[-300:]}")
+                    print(f"{name}: exit {code}, {cpu:.1f} CPU-s: {' '.join(argv[3:])}\n    {err.strip()[-300:]}",
+                          flush=True)
                 if internal or code not in (0, 1, 2):
                     settings = out / "bounds.toml"
                     bad.append((name, code, " ".join(argv) + (f"  ({settings.name}: {settings.read_text()!r})" if
@@ -119,7 +124,8 @@ def main() -> None:
         wall = time.perf_counter() - t0
     print(f"{args.runs} random starts of each problem, seed {args.seed}, {wall:.0f} s")
     for name, counts in histogram.items():
-        print(f"{name:10s} exit statuses: " + ", ".join(f"{k}: {v}" for k, v in sorted(counts.items())))
+        print(f"{name:10s} exit statuses: " + ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()))
+              + f"; longest run {longest[name]:.1f} CPU-s")
     print(f"runs that ended otherwise than 0, 1 or 2, or in an internal error: {len(bad)}")
     for name, code, argv, err in bad:
         print(f"  {name}: exit {code}: fnn-cosim {argv}\n    {err}")

@@ -21,6 +21,7 @@
  * Its structures and codes are declared once, in cosim/me_system.py, which
  * writes them as me_system_abi.h for this file.
  */
+#include <float.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -39,6 +40,7 @@ typedef void (*SUNErrHandlerFn)(int, const char *, const char *, const char *, i
 #define CV_BDF 2
 #define CV_NORMAL 1
 #define CV_ROOT_RETURN 2
+#define MIN_STEP_ULPS 100.0  /* CVODE's smallest step, in units of the time's last place (cvode_step) */
 
 typedef int (*ctx_create_t)(int, void **);
 typedef int (*ctx_free_t)(void **);
@@ -386,6 +388,15 @@ static int cvode_step(MeSystem *s, double t, double target, int *state_event, do
     MeSundials *f = s->sundials;
     if ((!s->cvode || s->restart) && solver_start(s, t)) return -1;
     ((cv_setreal_t)f->CVodeSetStopTime)(s->cvode, target);
+    /* The smallest step: 100 units in the last place of the time (a step below it is rounded by over 1 % when
+     * added to t; at t + h == t CVODE would go on for its 100000 steps without moving). A trajectory that needs
+     * one (a solution escaping to infinity, a singular right-hand side) fails here at once, deterministically,
+     * with CVODE's error-test or convergence failure at |h| = hmin. Never above a thousandth of the interval
+     * (a communication step itself that short), nor above the largest step. */
+    double hmin = MIN_STEP_ULPS * DBL_EPSILON * fmax(fabs(t), fabs(target));
+    hmin = fmin(hmin, 1e-3 * (target - t));
+    if (s->max_step > 0) hmin = fmin(hmin, s->max_step);
+    ((cv_setreal_t)f->CVodeSetMinStep)(s->cvode, hmin);
     double tret = t;
     s->message[0] = 0;
     const int flag = ((cv_t)f->CVode)(s->cvode, target, s->y, &tret, CV_NORMAL);
@@ -535,6 +546,58 @@ int me_member_step(void *member, double t, double h, int flag) {
     (void)flag;
     if (!m->leader) return 0;
     return me_advance(m->system, t, t + h) ? 3 : 0;
+}
+
+/* A lone member's trajectory over rows (a calibration's segment): at each row its inputs from outside set
+ * (u: a row of n_in each), its outputs read (y: a row of n_out each), then the step to the next row: the calls
+ * me_member_set, me_member_get and me_member_step make one by one, without leaving C. 0, or the failed call's
+ * status (3: the integration's) with its row in *row. */
+int me_member_rows(void *member, double *t, int64_t steps, uint32_t *in_vr, size_t n_in, double *u,
+                   uint32_t *out_vr, size_t n_out, double *y, int64_t *row) {
+    for (int64_t i = 0; i <= steps; i++) {
+        int status;
+        *row = i;
+        if (n_in && (status = me_member_set(member, in_vr, n_in, u + i * (int64_t)n_in)) > 1) return status;
+        if ((status = me_member_get(member, out_vr, n_out, y + i * (int64_t)n_out)) > 1) return status;
+        if (i < steps && me_member_step(member, t[i], t[i + 1] - t[i], 1)) return 3;
+    }
+    return 0;
+}
+
+/* A lone member's right-hand side at n points (a calibration's rows), the member in Continuous-Time Mode: at
+ * point i its time t[i], its continuous states x[i] (nx each) and its inputs u[i] (n_in each, in_vr) set, then
+ * f[i] = [der(x); the outputs out_vr] (nx + n_out each) read; with dd (its fmiXGetDirectionalDerivative), also
+ * jac[i] = d f / d known_k for each of the n_known known_vr (one column of nx + n_out a known, unknown_vr the
+ * derivatives' and the outputs' references). The calls cosim/calibration/model.py's _Fast makes one by one, in
+ * its order. 0, or the failed call's status with its point in *row. */
+int me_member_evaluate_rows(void *member, int64_t n, double *t, double *x, uint32_t *in_vr, size_t n_in, double *u,
+                            uint32_t *out_vr, size_t n_out, double *f, void *dd, uint32_t *unknown_vr,
+                            uint32_t *known_vr, size_t n_known, double *jac, int64_t *row) {
+    MeMember *m = member;
+    const size_t nx = (size_t)m->nx, nf = nx + n_out;
+    const double seed = 1.0;
+    for (int64_t i = 0; i < n; i++) {
+        int status;
+        double *fi = f + i * (int64_t)nf;
+        *row = i;
+        if ((status = ((set_time2_t)m->set_time)(m->component, t[i])) > 1
+            || (status = ((cvector2_t)m->set_states)(m->component, x + i * (int64_t)nx, nx)) > 1
+            || (n_in && (status = set_real(m, in_vr, n_in, u + i * (int64_t)n_in)) > 1)
+            || (status = ((vector2_t)m->get_derivatives)(m->component, fi, nx)) > 1)
+            return status;
+        if (n_out && (status = m->version == 2 ? ((real2_t)m->get_real)(m->component, out_vr, n_out, fi + nx)
+                                               : ((real3_t)m->get_real)(m->component, out_vr, n_out, fi + nx,
+                                                                         n_out)) > 1)
+            return status;
+        for (size_t k = 0; dd && k < n_known; k++) {
+            double *column = jac + (i * (int64_t)n_known + (int64_t)k) * (int64_t)nf;
+            status = m->version == 2
+                ? ((directional2_t)dd)(m->component, unknown_vr, nf, known_vr + k, 1, &seed, column)
+                : ((directional3_t)dd)(m->component, unknown_vr, nf, known_vr + k, 1, &seed, 1, column, nf);
+            if (status > 1) return status;
+        }
+    }
+    return 0;
 }
 
 /* Everything the solver holds freed (a new run builds it again). */

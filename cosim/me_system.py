@@ -131,7 +131,7 @@ _CONNECTION_FIELDS = (
 _SUNDIALS = ("SUNContext_Create", "SUNContext_Free", "SUNContext_ClearErrHandlers", "SUNContext_PushErrHandler", "N_VNew_Serial", "N_VDestroy",
              "N_VGetArrayPointer", "SUNDenseMatrix", "SUNMatDestroy", "SUNLinSol_Dense", "SUNLinSolFree",
              "CVodeCreate", "CVodeInit", "CVodeReInit", "CVodeSVtolerances", "CVodeRootInit", "CVodeSetLinearSolver",
-             "CVodeSetMaxStep", "CVodeSetMaxNumSteps", "CVodeSetNoInactiveRootWarn", "CVodeSetUserData",
+             "CVodeSetMaxStep", "CVodeSetMinStep", "CVodeSetMaxNumSteps", "CVodeSetNoInactiveRootWarn", "CVodeSetUserData",
              "CVodeSetStopTime", "CVode", "CVodeGetRootInfo", "CVodeFree", "CVodeGetReturnFlagName",
              "CVodeSetJacFn", "SUNDenseMatrix_Column")
 _SUNDIALS_FIELDS = tuple((name, _ptr, "") for name in _SUNDIALS)
@@ -216,7 +216,16 @@ _ENTRY_POINTS = (("me_advance", (("s", _SYS), ("t", _f64), ("t_end", _f64))),
                                     ("u", _f64p))),
                  ("me_member_get", (("member", _ptr), ("vr", ctypes.POINTER(_u32)), ("n", ctypes.c_size_t),
                                     ("y", _f64p))),
-                 ("me_member_step", (("member", _ptr), ("t", _f64), ("h", _f64), ("flag", ctypes.c_int))))
+                 ("me_member_step", (("member", _ptr), ("t", _f64), ("h", _f64), ("flag", ctypes.c_int))),
+                 ("me_member_rows", (("member", _ptr), ("t", _f64p), ("steps", _i64), ("in_vr", ctypes.POINTER(_u32)),
+                                     ("n_in", ctypes.c_size_t), ("u", _f64p), ("out_vr", ctypes.POINTER(_u32)),
+                                     ("n_out", ctypes.c_size_t), ("y", _f64p), ("row", _i64p))),
+                 ("me_member_evaluate_rows", (("member", _ptr), ("n", _i64), ("t", _f64p), ("x", _f64p),
+                                              ("in_vr", ctypes.POINTER(_u32)), ("n_in", ctypes.c_size_t),
+                                              ("u", _f64p), ("out_vr", ctypes.POINTER(_u32)),
+                                              ("n_out", ctypes.c_size_t), ("f", _f64p), ("dd", _ptr),
+                                              ("unknown_vr", ctypes.POINTER(_u32)), ("known_vr", ctypes.POINTER(_u32)),
+                                              ("n_known", ctypes.c_size_t), ("jac", _f64p), ("row", _i64p))))
 
 
 def header() -> str:
@@ -539,6 +548,47 @@ class ModelExchangeSystem:
         self._started()
         if library().me_member_step(member._me_member, t, h, 1) > 1:
             raise self.failure()
+
+    def rows(self, member, times: np.ndarray, u: np.ndarray, y: np.ndarray) -> None:
+        """``member`` (alone in its system, its inputs and outputs bound
+        untyped) over the rows ``times``: at row ``i`` its bound inputs set
+        to ``u[i]``, its bound outputs read into ``y[i]``, then the step to
+        row ``i + 1``; the calls :meth:`set_inputs`, :meth:`get_outputs` and
+        :meth:`step` make row by row, in C (``me_member_rows``: a
+        calibration's trajectories). ``times``, ``u``, ``y``: C-contiguous
+        float64, ``u`` rows x bound inputs, ``y`` rows x bound outputs."""
+        self._started()
+        row = _i64(0)
+        u32p = ctypes.POINTER(_u32)
+        status = library().me_member_rows(member._me_member, times.ctypes.data_as(_f64p), times.size - 1,
+                                           ctypes.cast(member._in_vr, u32p), member._n_in, u.ctypes.data_as(_f64p),
+                                           ctypes.cast(member._out_vr, u32p), member._n_out,
+                                           y.ctypes.data_as(_f64p), ctypes.byref(row))
+        if status > 1:
+            raise self.failure()
+        member._t = float(times[-1])
+
+    def evaluate_rows(self, member, times: np.ndarray, x: np.ndarray, u: np.ndarray, in_vr, out_vr, f: np.ndarray,
+                      dd=None, unknown_vr=None, known_vr=None, jac: np.ndarray | None = None) -> None:
+        """``member``'s right-hand side at the points ``(times[i], x[i], u[i])``
+        (C: ``me_member_evaluate_rows``; the member alone in its system, in
+        Continuous-Time Mode): ``f[i] = [der(x); outputs out_vr]``, and with
+        ``dd`` (its bare ``fmiXGetDirectionalDerivative``) ``jac[i, k]`` the
+        directional derivative of the ``unknown_vr`` along ``known_vr[k]``
+        (FMI 2.0 section 3.2.2, FMI 3.0 section 3.2.2). Arrays C-contiguous
+        float64; value references ctypes ``uint32`` arrays. A status above
+        warning is the member's :class:`~cosim.errors.FmuCallError`."""
+        self._started()
+        row, u32p = _i64(0), ctypes.POINTER(_u32)
+        cast = lambda vr: ctypes.cast(vr, u32p) if vr is not None else None  # noqa: E731
+        status = library().me_member_evaluate_rows(
+            member._me_member, times.size, times.ctypes.data_as(_f64p), x.ctypes.data_as(_f64p), cast(in_vr),
+            u.shape[1] if u.ndim == 2 else 0, u.ctypes.data_as(_f64p), cast(out_vr), f.shape[1] - x.shape[1],
+            f.ctypes.data_as(_f64p), ctypes.cast(dd, ctypes.c_void_p) if dd is not None else None, cast(unknown_vr),
+            cast(known_vr), jac.shape[1] if jac is not None else 0,
+            jac.ctypes.data_as(_f64p) if jac is not None else None, ctypes.byref(row))
+        if status > 1:
+            member.check_status(status, f"the right-hand side at t = {float(times[row.value])!r} s")
 
     def set_inputs(self, member, t: float) -> None:
         """``member``'s bound inputs from outside the system (:attr:`u`), held

@@ -180,9 +180,7 @@ def _component(fmu: str | Path, settings: CalibrationSettings, instance: str | N
     interface = None if settings.interface == "auto" else settings.interface
     comp = FmuComponent(instance or "calibrated", fmu, interface=interface, solver=solver)
     if interface is None and comp.interface == "CoSimulation" and comp.model_description.modelExchange is not None:
-        from .symbolic import definition_of
-
-        if definition_of(comp) is None:  # not ours: its Co-Simulation is often a crude fixed step (docs)
+        if _definition(comp) is None:  # not ours: its Co-Simulation is often a crude fixed step (docs)
             comp.close()
             comp = FmuComponent(instance or "calibrated", fmu, interface="ModelExchange", solver=solver)
     if settings.solver is not None and comp.interface != "ModelExchange":
@@ -206,14 +204,28 @@ def _tolerance(cs: FmuComponent, settings: CalibrationSettings) -> float:
 def _symbolic(cs: FmuComponent, model, workers: int):
     """The problem's :class:`~cosim.calibration.symbolic.SymbolicModel` when
     the FMU is one of ours run in Co-Simulation, else why not (a string)."""
-    from .symbolic import definition_of, symbolic_model
+    from .symbolic import symbolic_model
 
     if cs.interface != "CoSimulation":  # the CasADi way is the Co-Simulation's RK4 steps, not a Model Exchange solver
         return "run in Model Exchange here (the CasADi way reproduces its Co-Simulation)"
-    definition = definition_of(cs)
+    definition = _definition(cs)
     if definition is None:
         return "not a model whose CasADi definition is registered (or built with other values)"
     return symbolic_model(model, definition, workers)
+
+
+def _definition(cs: FmuComponent):
+    """The FMU's CasADi definition when it is one of ours
+    (:func:`~cosim.calibration.symbolic.definition_of`, by its GUID), else
+    ``None``; an FMU another tool generated (``generationTool``, FMI 2.0 and
+    3.0 section 2.2.1) is not asked for one: that asks the registry, which
+    loads every plugin's models (a few tenths of a second a small fit need not pay)."""
+    # the generationTool this project's FMUs state (fmu_models/export/model_description.py)
+    if not (cs.model_description.generationTool or "").startswith("fnn-cosim "):
+        return None
+    from .symbolic import definition_of
+
+    return definition_of(cs)
 
 
 def _states(cs: FmuComponent) -> list[str]:

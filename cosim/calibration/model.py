@@ -58,82 +58,40 @@ class Trajectory:
 
 
 class _Fast:
-    """One started Model Exchange instance's evaluation calls, bare (ctypes
-    arrays made once; :meth:`cosim.fmu_component.FmuComponent.bare_call`): the
-    right-hand side and outputs at a point, and directional derivatives. A
-    status above warning is the instance's :class:`~cosim.errors.FmuCallError`."""
+    """One started Model Exchange instance's evaluation calls, bare, at many
+    points in one call into C
+    (:meth:`cosim.me_system.ModelExchangeSystem.evaluate_rows`; the value
+    references made once): the right-hand side and outputs, and directional
+    derivatives. A status above warning is the instance's
+    :class:`~cosim.errors.FmuCallError`."""
 
     def __init__(self, comp: FmuComponent, drive: Sequence[str], outputs: Sequence[str], states: Sequence[str],
                  known_inputs: Sequence[str] = ()):
         import ctypes
 
         self.comp = comp
-        v2 = comp.fmi_version == 2
-        self.v2 = v2
-        self.c = comp.handle
-        f = lambda n2, n3: comp.bare_call(n2 if v2 else n3)  # noqa: E731
-        self._time = f("fmi2SetTime", "fmi3SetTime")
-        self._setx = f("fmi2SetContinuousStates", "fmi3SetContinuousStates")
-        self._setr = f("fmi2SetReal", "fmi3SetFloat64")
-        self._getr = f("fmi2GetReal", "fmi3GetFloat64")
-        self._dx = f("fmi2GetDerivatives", "fmi3GetContinuousStateDerivatives")
-        self._dd = f("fmi2GetDirectionalDerivative", "fmi3GetDirectionalDerivative") if \
-            comp.provides_directional_derivatives else None
+        self._dd = comp.bare_call("fmi2GetDirectionalDerivative" if comp.fmi_version == 2 else
+                                  "fmi3GetDirectionalDerivative") if comp.provides_directional_derivatives else None
         vr = lambda names: (ctypes.c_uint32 * max(len(names), 1))(*[comp.variables[n].valueReference  # noqa: E731
                                                                      for n in names])
-        self.nx, self.nu, self.ny = len(states), len(drive), len(outputs)
-        self.x, self.u, self.dx = np.zeros(max(self.nx, 1)), np.zeros(max(self.nu, 1)), np.zeros(max(self.nx, 1))
-        self.y = np.zeros(max(self.ny, 1))
-        P = ctypes.POINTER(ctypes.c_double)
-        self.px, self.pu, self.pdx, self.py = (a.ctypes.data_as(P) for a in (self.x, self.u, self.dx, self.y))
+        self.nx, self.ny = len(states), len(outputs)
         self.vu, self.vy = vr(drive), vr(outputs)
-        self.n = {k: ctypes.c_size_t(v) for k, v in (("x", self.nx), ("u", self.nu), ("y", self.ny))}
         self.unknowns = vr(comp.derivative_names + list(outputs))
-        self.n_unknowns = ctypes.c_size_t(self.nx + self.ny)
-        self.knowns = [vr([n]) for n in list(states) + list(known_inputs)]
-        self.one = (ctypes.c_double * 1)(1.0)
-        self.col = np.zeros(self.nx + self.ny)
-        self.pcol = self.col.ctypes.data_as(P)
-        self._c_one = ctypes.c_size_t(1)
-        self.ctypes = ctypes
+        self.knowns = vr(list(states) + list(known_inputs))
+        self.n_known = len(states) + len(known_inputs)
 
-    def _check(self, status: int, what: str) -> None:
-        if status > 1:
-            self.comp.check_status(status, what)
-
-    def evaluate(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``[der(x); y]`` at time ``t``, states ``x``, inputs ``u`` (a copy)."""
-        c = self.c
-        self._check(self._time(c, self.ctypes.c_double(t)), "setTime")
-        self.x[:self.nx] = x
-        self._check(self._setx(c, self.px, self.n["x"]), "setContinuousStates")
-        if self.nu:
-            self.u[:self.nu] = u
-            if self.v2:
-                self._check(self._setr(c, self.vu, self.n["u"], self.pu), "setReal")
-            else:
-                self._check(self._setr(c, self.vu, self.n["u"], self.pu, self.n["u"]), "setFloat64")
-        self._check(self._dx(c, self.pdx, self.n["x"]), "getDerivatives")
-        if self.ny:
-            if self.v2:
-                self._check(self._getr(c, self.vy, self.n["y"], self.py), "getReal")
-            else:
-                self._check(self._getr(c, self.vy, self.n["y"], self.py, self.n["y"]), "getFloat64")
-            return np.concatenate([self.dx[:self.nx], self.y[:self.ny]])
-        return self.dx[:self.nx].copy()
-
-    def derivatives(self) -> np.ndarray:
-        """``d[der(x); y] / d[x; u]`` at the point last evaluated, one directional derivative a column."""
-        c, out = self.c, []
-        for known in self.knowns:
-            if self.v2:
-                status = self._dd(c, self.unknowns, self.n_unknowns, known, self._c_one, self.one, self.pcol)
-            else:
-                status = self._dd(c, self.unknowns, self.n_unknowns, known, self._c_one, self.one, self._c_one,
-                                  self.pcol, self.n_unknowns)
-            self._check(status, "getDirectionalDerivative")
-            out.append(self.col.copy())
-        return np.array(out).T if out else np.zeros((self.nx + self.ny, 0))
+    def evaluate_rows(self, t: np.ndarray, x: np.ndarray, u: np.ndarray, derivatives: bool = False):
+        """``[der(x); y]`` at each row of ``t`` (s), states ``x``, inputs
+        ``u`` (``F``: rows x (nx + ny)), and with ``derivatives`` its
+        directional derivatives along the states, then the known inputs
+        (``J``: rows x (nx + ny) x knowns; else None)."""
+        comp, n = self.comp, t.size
+        F = np.empty((n, self.nx + self.ny))
+        jac = np.empty((n, self.n_known, self.nx + self.ny)) if derivatives else None
+        comp.system.evaluate_rows(comp, np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(x, dtype=float),
+                                  np.ascontiguousarray(u, dtype=float), self.vu, self.vy, F,
+                                  self._dd if derivatives else None, self.unknowns, self.knowns, jac)
+        return F, (jac.transpose(0, 2, 1) if derivatives else None)
 
 
 class LogModel:
@@ -221,6 +179,13 @@ class LogModel:
         cs.exit_initialization(float(t[seg.first]))
         if self.model_exchange:
             cs.set_continuous_states(x0)
+            if cs.system is not None and not cs._typed:  # the same calls row by row, in C
+                u = np.empty((steps + 1, len(self.drive)))
+                u[:, :n_in] = p.input_values[seg.first:seg.first + steps + 1]
+                u[:, n_in:] = fitted_u
+                y = np.empty((steps + 1, len(self.read)))
+                cs.system.rows(cs, np.ascontiguousarray(t[seg.first:seg.first + steps + 1], dtype=float), u, y)
+                return Trajectory(y[:, self._x_idx], y[:n_rows, self._out_idx])
         outputs = np.empty((n_rows, len(p.outputs)))
         states = np.empty((steps + 1, len(self.states)))
         y = cs.y
@@ -298,39 +263,43 @@ class LogModel:
     def _fastof(self, comp: FmuComponent) -> _Fast:
         return _Fast(comp, self.drive, comp.output_names, self.states, self.problem.fit_inputs)
 
-    def jacobians(self, theta: np.ndarray, t: float, x: np.ndarray, u_log: np.ndarray):
-        """At one row: ``(A, G, C, D)``: ``A = d der(x)/dx`` (nx x nx),
-        ``G = d der(x)/d theta`` (nx x fitted), ``C = dy/dx``, ``D = dy/d theta``
-        over the compared outputs (a compared state: a row of the identity).
-        A parameter's column by forward differences at ``h = eps^(1/3)
+    def jacobians_at(self, theta: np.ndarray, t: np.ndarray, X: np.ndarray, U_log: np.ndarray):
+        """At the rows given (times ``t``, states ``X``, the log's inputs
+        ``U_log``, one row each), stacked on a leading axis of rows:
+        ``(A, G, C, D)``: ``A = d der(x)/dx`` (nx x nx), ``G = d der(x)/d
+        theta`` (nx x fitted), ``C = dy/dx``, ``D = dy/d theta`` over the
+        compared outputs (a compared state: a row of the identity). A
+        parameter's column by forward differences at ``h = eps^(1/3)
         max(|theta_j|, |default_j|)`` (about 1e-10 relative here, as the
         Jacobian needs), its error estimate against ``2 h`` at every
-        :data:`ERROR_EVERY`-th row."""
-        p = self.problem
-        fast = self._fast
-        u = np.concatenate([u_log, theta[self.n_params:]]) if self.drive else u_log
+        :data:`ERROR_EVERY`-th row. Each instance's calls for all the rows
+        in one call into C."""
+        p, fast = self.problem, self._fast
+        m = t.size
+        U = np.hstack([U_log.reshape(m, -1), np.tile(theta[self.n_params:], (m, 1))]) if self.drive else \
+            np.zeros((m, 0))
         me = fast[id(self._me)]
-        f0 = me.evaluate(t, x, u)
-        J = me.derivatives()  # columns: states, then fitted inputs
+        F0, J = me.evaluate_rows(t, X, U, derivatives=True)  # rows x (nx + ny) x (states, then fitted inputs)
         nx, npar = len(self.states), self.n_params
-        Jt = np.empty((J.shape[0], len(p.fit)))
-        Jt[:, npar:] = J[:, nx:]
-        check = self._rows_seen % ERROR_EVERY == 0
-        self._rows_seen += 1
+        Jt = np.empty((m, J.shape[1], len(p.fit)))
+        Jt[:, :, npar:] = J[:, :, nx:]
+        check = (self._rows_seen + np.arange(m)) % ERROR_EVERY == 0
+        self._rows_seen += m
         for j, (one, two, h) in enumerate(self._pairs):
-            col = (fast[id(one)].evaluate(t, x, u) - f0) / h
-            if check:
-                col2 = (fast[id(two)].evaluate(t, x, u) - f0) / (2 * h)
-                self.derivative_error = max(self.derivative_error, float(np.max(np.abs(col - col2), initial=0.0)))
-            Jt[:, j] = col
+            col = (fast[id(one)].evaluate_rows(t, X, U)[0] - F0) / h
+            if check.any():
+                col2 = (fast[id(two)].evaluate_rows(t[check], X[check], U[check])[0] - F0[check]) / (2 * h)
+                self.derivative_error = max(self.derivative_error,
+                                            float(np.max(np.abs(col[check] - col2), initial=0.0)))
+            Jt[:, :, j] = col
         ny = len(p.outputs)
-        C, D = np.zeros((ny, nx)), np.zeros((ny, len(p.fit)))
+        C, D = np.zeros((m, ny, nx)), np.zeros((m, ny, len(p.fit)))
         for i, k in self._state_rows:
-            C[i, k] = 1.0
+            C[:, i, k] = 1.0
         for i, r in self._other_rows:
-            C[i] = J[r, :nx]
-            D[i] = Jt[r]
-        return J[:nx, :nx], Jt[:nx], C, D
+            C[:, i] = J[:, r, :nx]
+            D[:, i] = Jt[:, r]
+        return J[:, :nx, :nx], Jt[:, :nx], C, D
 
     def close(self) -> None:
         for comp in [self._me] + [c for pair in self._pairs for c in pair[:2]]:

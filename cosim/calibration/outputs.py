@@ -13,8 +13,8 @@
   holds it). ``std`` and ``ci95`` are the ``covariance`` named
   (``"robust"`` when the residuals are not white, else ``"classical"``).
 * ``parameters.ssv``: an SSP 1.0 parameter set (``ssv:ParameterSet``,
-  written with pyssp-standard as :mod:`cosim.ssp_export` writes SSDs, valid against
-  the standard's schema): the fixed values and the identifiable estimates
+  written as pyssp-standard writes one, valid against the standard's
+  schema): the fixed values and the identifiable estimates
   of parameters, by variable name, with their units; what an
   ``ssd:ParameterBinding`` of the FMU's component reads.
 * ``calibration.toml``: the same values as a scenario's override,
@@ -34,6 +34,8 @@ import numpy as np
 from ..files import write_json
 
 __all__ = ["write_outputs", "calibration_document", "write_parameter_set"]
+
+SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"  # declared on the root, as pyssp-standard does
 
 
 def _num(v) -> float | None:
@@ -115,18 +117,23 @@ def _values(cal) -> dict[str, tuple[float, str]]:
 
 
 def write_parameter_set(values: dict[str, tuple[float, str]], path: Path, name: str) -> Path:
-    """An SSP 1.0 ``ssv:ParameterSet`` of Real values (pyssp-standard's
-    classes, written as :mod:`cosim.ssp_export` writes its inline sets)."""
+    """An SSP 1.0 ``ssv:ParameterSet`` of Real values (SSP 1.0 section 6:
+    ``ssv:Parameters/ssv:Parameter/ssv:Real value unit``), written with lxml
+    as pyssp-standard's ``SSVElem`` writes it, byte for byte: importing that
+    package costs over a second of CPU (pint, Dask, xmlschema), more than a
+    small fit's own work."""
     from lxml import etree
-    from pyssp_standard.parameter_types import ParameterType
-    from pyssp_standard.ssv import Parameter, SSVElem
 
-    parameters = []
+    from ..ssv import NS
+
+    ssv = lambda tag: f"{{{NS['ssv']}}}{tag}"  # noqa: E731
+    root = etree.Element(ssv("ParameterSet"), nsmap={"ssv": NS["ssv"], "ssc": SSC}, version="1.0", name=name)
+    parameters = etree.SubElement(root, ssv("Parameters"))
     for key, (value, unit) in values.items():
-        ptype = ParameterType("Real", {"value": repr(float(value)), "unit": unit or None})
-        ptype.parameter = {k: v for k, v in ptype.parameter.items() if v is not None}  # pyssp-standard 0.9.1
-        parameters.append(Parameter(name=key, type_name="Real", type_value=ptype))
-    root = SSVElem(name=name, parameters=parameters).to_xml()
+        real = etree.SubElement(etree.SubElement(parameters, ssv("Parameter"), name=key), ssv("Real"),
+                                value=repr(float(value)))
+        if unit:
+            real.set("unit", unit)
     path.write_bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
     return path
 

@@ -1,6 +1,6 @@
 """Forward sensitivities of a segment's outputs to the unknowns.
 
-With the Jacobians of the right-hand side at each row (:class:`~cosim.calibration.model.LogModel.jacobians`),
+With the Jacobians of the right-hand side at each row (:meth:`~cosim.calibration.model.LogModel.jacobians_at`),
 the sensitivity ``S = dx/d(theta, x0)`` of the states obeys the variational
 equation ``dS/dt = A(t) S + G(t)``, ``S(t_0) = [0, I]`` (the initial state's
 own columns, where it is estimated), carried along the log from row to
@@ -35,6 +35,8 @@ def expm_batch(M: np.ndarray) -> np.ndarray:
     relative once the scaled norm is at most 0.25), all at once: one row's
     matrices cost numpy's call overhead only once a stack."""
     norm = float(np.max(np.sum(np.abs(M), axis=2), initial=0.0))
+    if not np.isfinite(norm):  # the Jacobians overflowed (a trial point near escape): not finite, for the solver
+        return np.full(M.shape, np.nan)  # to take its fallback (solve.py), not an OverflowError here
     s = max(0, int(np.ceil(np.log2(norm / 0.25)))) if norm > 0.25 else 0
     A = M / (2.0 ** s)
     eye = np.broadcast_to(np.eye(M.shape[1]), M.shape)
@@ -67,15 +69,9 @@ def segment_sensitivities(model, theta: np.ndarray, seg, traj, estimated: np.nda
     ny = len(p.outputs)
     at = np.unique(np.concatenate([np.arange(0, steps + 1, max(int(stride), 1)), [steps]]))
     m = at.size
-    A = np.empty((m, nx, nx))
-    G = np.empty((m, nx, nt))
-    C = np.empty((m, ny, nx))
-    D = np.empty((m, ny, nt))
-    empty = np.zeros(0)
-    for q, i in enumerate(at):
-        k = seg.first + int(i)
-        A[q], G[q], C[q], D[q] = model.jacobians(theta, float(t[k]), traj.states[i],
-                                                 p.input_values[k] if p.inputs else empty)
+    rows = seg.first + at
+    A, G, C, D = model.jacobians_at(theta, t[rows], traj.states[at],
+                                    p.input_values[rows] if p.inputs else np.zeros((m, 0)))
     h = np.diff(t[seg.first + at])[:, None, None]
     M = np.zeros((m - 1, nx + nt, nx + nt))
     M[:, :nx, :nx] = 0.5 * h * (A[:-1] + A[1:])

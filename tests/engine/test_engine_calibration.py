@@ -110,8 +110,10 @@ def test_the_command_writes_its_four_files(tmp_path, capsys):
     assert abs(mu["value"] - 1.0) < 1e-6 and mu["identifiable"] and mu["ci95"][0] <= mu["value"] <= mu["ci95"][1]
     assert doc["converged"] and set(doc["residuals"]) == {"x0", "x1"}
     assert "mu = " in (out / "calibration.toml").read_text()
-    from cosim.ssp import ssd_schema_errors  # noqa: F401  (the module that writes SSP files
+    from cosim.ssp import ssd_schema_errors
     from lxml import etree
+
+    assert ssd_schema_errors(out / "parameters.ssv") == []  # SSP 1.0's SystemStructureParameterValues.xsd
 
     ssv = etree.parse(str(out / "parameters.ssv")).getroot()
     assert etree.QName(ssv).localname == "ParameterSet"

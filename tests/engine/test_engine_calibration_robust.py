@@ -79,3 +79,48 @@ def test_the_defaults_on_a_noisy_log_cover_the_truth(tmp_path):
     assert cal.fit.estimated.all()  # every state of every segment estimated
     lo, hi = cal.stats.ci95[0]
     assert lo < truth < hi and hi - lo < 0.1
+
+
+def test_model_exchange_refuses_a_trial_point_that_escapes_at_once_and_the_fit_goes_on(tmp_path, capfd, monkeypatch):
+    # the published log played backwards is VanDerPol at mu = -1 on its unstable limit cycle (x(-t) solves the
+    # equation with -mu): a trial point off it escapes to infinity within the segment; CVODE needs steps below
+    # its smallest (100 units in the last place of t) and fails there at once, the trial point is rejected,
+    # the fit goes on; SUNDIALS prints nothing (no steps at t + h == t)
+    from cosim.calibration.model import LogModel
+    from cosim.errors import FmuCallError
+    from quadrotor_paper.cli import main
+
+    data = np.genfromtxt(PUBLISHED, delimiter=",", names=True)
+    log = tmp_path / "backwards.csv"
+    np.savetxt(log, np.column_stack([data["time"], data["x0"][::-1], -data["x1"][::-1]]), delimiter=",",
+               header="time,x0,x1", comments="", fmt="%.17g")
+    refused = []
+    simulate = LogModel.simulate
+
+    def spy(self, *args):
+        try:
+            return simulate(self, *args)
+        except FmuCallError as exc:
+            refused.append(str(exc))
+            raise
+
+    monkeypatch.setattr(LogModel, "simulate", spy)
+    settings = tmp_path / "settings.toml"
+    settings.write_text("stop = 4.0\nholdout = 0.0\ninitial_states = \"recorded\"\n")
+    code = main(["calibrate", str(log), "--fmu", str(VAN_DER_POL), "--fit", "mu", "--guess", "mu=-0.6", "--segment",
+                 "2", "--settings", str(settings), "--no-plots", "--quiet", "--out", str(tmp_path / "out")])
+    err = capfd.readouterr().err
+    assert code in (0, 1) and "internal error" not in err
+    assert refused and all("CVODE failed" in r and "|h| = hmin" in r for r in refused)
+    assert "[WARNING]" not in err and "t + h = t" not in err  # SUNDIALS's own stderr
+
+
+def test_an_overflowing_jacobian_is_not_finite_for_the_solver_s_fallback_not_an_overflow_error():
+    # the random-start benchmark's plant in Model Exchange (seed 0, run 30): the right-hand side's differences
+    # overflowed at a trial point; the Magnus step's scaling took log2(inf) and ended in an internal error
+    from cosim.calibration.sensitivity import expm_batch
+
+    M = np.zeros((2, 2, 2))
+    M[1, 0, 1] = np.inf
+    assert np.isnan(expm_batch(M)).all()
+    np.testing.assert_array_equal(expm_batch(np.zeros((1, 2, 2))), np.eye(2)[None])
