@@ -20,7 +20,7 @@ its ``out`` (the outputs). The calibrator then makes no FMU call:
 * the segment functions are generated as C and compiled once per
   machine (:func:`cosim.kernel.compiled_library`: the cache keyed by the
   source, so by the model and the RK4 steps a row; a Jacobian's chunk takes
-  one direction a call, :data:`DIRECTIONS`, so not by the directions): the
+  :data:`DIRECTIONS` directions a call, the last padded, so not by their count): the
   simulation and both Jacobians the solver asks for (``n`` RK4 steps a
   row, and the coarse one step) in one library, where the ``step`` and its
   forward derivative they share are compiled once; the segments run side
@@ -57,10 +57,11 @@ __all__ = ["SymbolicModel", "symbolic_model", "definition_of", "CHUNK"]
 # padded)
 CHUNK = 50
 
-# directions of a Jacobian a compiled call takes (SymbolicModel.directions): one, so that the
-# sensitivities' library is the same for every count of directions, compiled once per machine and model
-# (one for four fitted names and another for six was about 1.5 CPU-s of compiler more; docs/calibration.md)
-DIRECTIONS = 1
+# directions of a Jacobian a compiled call takes (SymbolicModel.directions), the last call padded with zero
+# directions: the sensitivities' library is the same for every count of directions, compiled once per machine
+# and model (one for four fitted names and another for six was about 1.5 CPU-s of compiler more), and the
+# trajectory, which each call carries again, is carried a call per eight directions (docs/calibration.md)
+DIRECTIONS = 8
 
 
 def definition_of(cs) -> object | None:
@@ -147,8 +148,8 @@ class SymbolicModel:
                          for o in p.outputs]
         self._functions: dict = {}
         self.compile_seconds = 0.0  # spent generating and compiling C in this process (0 when cached)
-        # directions a compiled Jacobian call takes (None: all of them): one, so that one library serves
-        # every count of directions (the fitted names and the estimated states; docs/calibration.md)
+        # directions a compiled Jacobian call takes (None: all of them, a library per count): DIRECTIONS, so
+        # that one library serves every count (the fitted names and the estimated states; docs/calibration.md)
         self.directions: int | None = DIRECTIONS
         self.source = "compiled"  # or "CasADi's virtual machine" without a C compiler
 
@@ -386,31 +387,35 @@ class SymbolicModel:
         Pd[self.p_fit, np.arange(self.p_fit.size)] = 1.0
         Ud[self.u_fit, m.n_params + np.arange(self.u_fit.size)] = 1.0
         Pd[self.p_setter[est], nt + np.arange(est.size)] = 1.0
-        Pd, Ud = np.ascontiguousarray(Pd.T), np.ascontiguousarray(Ud.T)  # column-major
-        # the compiled chunk takes DIRECTIONS of them a call (one library whatever the fitted names: below)
-        g = nd if self.directions is None else min(self.directions, nd)
-        groups = [slice(i, min(i + g, nd)) for i in range(0, nd, g)]
+        # the compiled chunk takes DIRECTIONS of them a call (one library whatever the fitted names: below), the
+        # last call's padded with zero directions
+        g = nd if self.directions is None else self.directions
+        padded = -(-nd // g) * g
+        Pd, Ud = (np.vstack([a.T, np.zeros((padded - nd, a.shape[0]))]) for a in (Pd, Ud))  # column-major
+        groups = [slice(i, i + g) for i in range(0, padded, g)]
         kind = "coarse" if coarse else "sensitivities"
         start = self._function("start", n, nd)
-        chunks = [self._function(kind, n, sl.stop - sl.start) for sl in groups]
+        chunk = self._function(kind, n, g)
 
         def one(a):
             params, T, U, DT = a
-            x, S = start((params, Pd))  # S: nd x nx (column-major nx x nd)
+            x, S = start((params, Pd[:nd]))  # S: nd x nx (column-major nx x nd)
+            S = np.vstack([S, np.zeros((padded - nd, S.shape[1]))])
             xs = [x.ravel()] * len(groups)  # each group's own (the same) trajectory
             Ss, dys = [S[None]], []
             with np.errstate(all="ignore"):
                 for c in range(0, T.size, CHUNK):
-                    dX, dY = np.empty((CHUNK, nd, S.shape[1])), []
-                    for k, (sl, chunk) in enumerate(zip(groups, chunks)):
+                    dX, dY = np.empty((CHUNK, padded, S.shape[1])), []
+                    for k, sl in enumerate(groups):
                         X, dXg, _, dYg = chunk((xs[k], Ss[-1][-1][sl], params, Pd[sl], Ud[sl], T[c:c + CHUNK],
                                                 U[c:c + CHUNK], DT[c:c + CHUNK]))
-                        dX[:, sl] = dXg.reshape(CHUNK, sl.stop - sl.start, -1)
-                        dY.append(dYg.reshape(CHUNK, sl.stop - sl.start, -1))
+                        dX[:, sl] = dXg.reshape(CHUNK, g, -1)
+                        dY.append(dYg.reshape(CHUNK, g, -1))
                         xs[k] = X[-1]
                     Ss.append(dX)
                     dys.append(np.concatenate(dY, axis=1))
-            return np.concatenate(Ss).transpose(0, 2, 1), np.concatenate(dys)  # rows x states x unknowns
+            # rows x states x unknowns; rows x unknowns x outputs
+            return np.concatenate(Ss)[:, :nd].transpose(0, 2, 1), np.concatenate(dys)[:, :nd]
 
         out = []
         for s, (S, dYr) in zip(segments, self._run(one, args)):

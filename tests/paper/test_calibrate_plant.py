@@ -189,7 +189,8 @@ def test_the_calibration_files_schemas_are_printed_and_agree_with_the_readers(tm
 def test_the_steps_derivative_one_direction_a_call_is_all_directions_at_once_bit_for_bit(flight_log, tmp_path,
                                                                                           monkeypatch):
     # cosim.calibration.symbolic takes the model's step and outputs one direction a call, and its compiled
-    # chunk one direction a call (the C it compiles is the same whatever the directions): each direction the
+    # chunk DIRECTIONS a call, the last call padded (the C it compiles is the same whatever the directions; three
+    # fitted names and the estimated states: one padded call): each direction the
     # same operations as CasADi's forward(nd) of all of them in one chunk, the same Jacobians to the bit
     # (CasADi's virtual machine here, on 0.1 s of the log)
     import numpy as np
@@ -212,8 +213,8 @@ def test_the_steps_derivative_one_direction_a_call_is_all_directions_at_once_bit
     first, (theta, segments, x0, estimated) = asked[0]
     at_once = symbolic.SymbolicModel(first.model, first.definition)
     at_once._one_direction = lambda name: first.definition.functions[name]  # CasADi's forward(nd)
-    at_once.directions = None  # every direction in one call of the chunk (first: one a call)
-    assert first.directions == 1
+    at_once.directions = None  # every direction in one call of the chunk (first: DIRECTIONS a call, padded)
+    assert first.directions == symbolic.DIRECTIONS > 1
     for coarse in (False, True):
         for a, b in zip(first.sensitivities(theta, segments, x0, estimated, coarse=coarse),
                         at_once.sensitivities(theta, segments, x0, estimated, coarse=coarse)):
