@@ -21,7 +21,7 @@ mixer an X as it reads the plant's arm_angle, the same sensors and wind, and
 FIT_AERO fitted: b, d, the three inertias, tau_m, the three rotor
 coefficients, both body drags and the three wind components (wind_z's truth
 is 0: its absolute error is printed). ``--processes N``: N seeds fitted side
-by side (minutes a seed; docs/calibration.md).
+by side on a Dask ``LocalCluster`` (minutes a seed; docs/calibration.md).
 
     .venv/bin/python benchmarks/calibration_coverage.py [--aero] [--seeds 20] [--first 1] [--duration 20] [--processes 2]
 """
@@ -83,18 +83,22 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     jobs = [(seed, args.duration, args.workers, args.aero) for seed in range(args.first, args.first + args.seeds)]
-    pool = None
-    if args.processes > 1:
-        import multiprocessing
+    client = None
+    if args.processes > 1:  # the project's executor for every multi-run job: Dask (a cluster's address works too)
+        from dask.distributed import Client, LocalCluster, as_completed
 
-        pool = multiprocessing.get_context("fork").Pool(args.processes)
-    for seed, r in (pool.imap(_one, jobs) if pool is not None else map(_one, jobs)):
+        client = Client(LocalCluster(n_workers=args.processes, threads_per_worker=1, processes=True,
+                                     dashboard_address=None))
+        results = (f.result() for f in as_completed(client.map(_one, jobs)))
+    else:
+        results = map(_one, jobs)
+    for seed, r in results:
         why = r.pop("_why")
         rows.append(r)
         print(f"seed {seed:2d}: " + ", ".join(f"{n} {e:.1e}{'' if c else ' NOT COVERED'}" for n, (e, c, _) in r.items())
               + ("" if all(v[2] for v in r.values()) else " (not converged)") + f" ({why})", flush=True)
-    if pool is not None:
-        pool.close()
+    if client is not None:
+        client.close()
     for n in (FIT_AERO if args.aero else FIT):
         covered = np.mean([r[n][1] for r in rows])
         worst = max(r[n][0] for r in rows)
