@@ -102,9 +102,9 @@ static void fail(MeSystem *s, int64_t kind, int64_t member, int64_t code, double
         if (status_ > 1) { fail(s, ME_FMI, (m), status_, (t)); return -1; } \
     } while (0)
 
-static int get_real(MeMember *m, uint32_t vr, double *v) {
-    return m->version == 2 ? ((real2_t)m->get_real)(m->component, &vr, 1, v)
-                           : ((real3_t)m->get_real)(m->component, &vr, 1, v, 1);
+static int get_real(MeMember *m, const uint32_t *vr, size_t n, double *v) {
+    return m->version == 2 ? ((real2_t)m->get_real)(m->component, vr, n, v)
+                           : ((real3_t)m->get_real)(m->component, vr, n, v, n);
 }
 
 static int set_real(MeMember *m, const uint32_t *vr, size_t n, const double *v) {
@@ -120,7 +120,7 @@ static int connect(MeSystem *s, double t) {
         const MeConnection *c = &s->connections[k];
         if (c->discrete && !s->event_mode) continue;
         double v;
-        CHECK(get_real(&s->members[c->source], c->source_vr, &v), c->source, t);
+        CHECK(get_real(&s->members[c->source], &c->source_vr, 1, &v), c->source, t);
         if (c->converted) v = c->factor * v + c->offset;
         CHECK(set_real(&s->members[c->destination], &c->destination_vr, 1, &v), c->destination, t);
     }
@@ -535,8 +535,7 @@ int me_member_get(void *member, uint32_t *vr, size_t n, double *y) {
     MeSystem *s = m->system;
     if (s->dirty && connect(s, s->t)) return 3;
     if (!n) return 0;
-    int status = m->version == 2 ? ((real2_t)m->get_real)(m->component, vr, n, y)
-                                 : ((real3_t)m->get_real)(m->component, vr, n, y, n);
+    int status = get_real(m, vr, n, y);
     if (status > 1) fail(s, ME_FMI, m->index, status, s->t);
     return status;
 }
@@ -585,9 +584,7 @@ int me_member_evaluate_rows(void *member, int64_t n, double *t, double *x, uint3
             || (n_in && (status = set_real(m, in_vr, n_in, u + i * (int64_t)n_in)) > 1)
             || (status = ((vector2_t)m->get_derivatives)(m->component, fi, nx)) > 1)
             return status;
-        if (n_out && (status = m->version == 2 ? ((real2_t)m->get_real)(m->component, out_vr, n_out, fi + nx)
-                                               : ((real3_t)m->get_real)(m->component, out_vr, n_out, fi + nx,
-                                                                         n_out)) > 1)
+        if (n_out && (status = get_real(m, out_vr, n_out, fi + nx)) > 1)
             return status;
         for (size_t k = 0; dd && k < n_known; k++) {
             double *column = jac + (i * (int64_t)n_known + (int64_t)k) * (int64_t)nf;
