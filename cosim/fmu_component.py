@@ -1312,6 +1312,13 @@ class FmuComponent:
     # interface="ModelExchange", after start(), in Continuous-Time Mode; sizes from the ModelStructure)
 
     @property
+    def typed_calls(self) -> bool:
+        """Whether the variables :meth:`bind` bound take typed get and set
+        calls (an array, an integer, a string...), not the one-call Float64
+        fast path (which the Model Exchange system's C drives directly)."""
+        return self._typed
+
+    @property
     def state_names(self) -> list[str]:
         """The continuous states, in the order of the FMU's state vector."""
         return [d.variable.derivative.name for d in self.model_description.derivatives]

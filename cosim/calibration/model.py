@@ -179,7 +179,7 @@ class LogModel:
         cs.exit_initialization(float(t[seg.first]))
         if self.model_exchange:
             cs.set_continuous_states(x0)
-            if cs.system is not None and not cs._typed:  # the same calls row by row, in C
+            if cs.system is not None and not cs.typed_calls:  # the same calls row by row, in C
                 u = np.empty((steps + 1, len(self.drive)))
                 u[:, :n_in] = p.input_values[seg.first:seg.first + steps + 1]
                 u[:, n_in:] = fitted_u
