@@ -657,7 +657,7 @@ def _parser() -> argparse.ArgumentParser:
     # the subcommand's own module: argparse only; python-control loads when it runs
     from .stability.cli import add_parser as add_stability_parser
 
-    add_stability_parser(sub, _overrides)
+    add_stability_parser(sub)
     from .calibrate_cli import add_parser as add_calibrate_parser  # its own module: argparse only
 
     add_calibrate_parser(sub, _named_values, _overrides)

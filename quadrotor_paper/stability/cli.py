@@ -55,18 +55,15 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return parser
 
 
-def add_parser(subparsers, overrides) -> None:
+def add_parser(subparsers) -> None:
     """Add the ``stability`` subcommand to ``fnn-cosim``'s subcommands
     (``quadrotor_paper.cli._Commands``: its arguments added when it is the
-    one given); its handler is stored as ``func`` (call ``args.func(args)``);
-    ``overrides``: the command line's reader of ``--set`` pairs (handed over:
-    this module does not import the command line's)."""
+    one given); its handler is stored as ``func`` (call ``args.func(args)``)."""
     def arguments(parser: argparse.ArgumentParser) -> None:
         from ..fmu_log_option import fmu_log_option
 
         _arguments(parser)
         fmu_log_option(parser)
-        parser.set_defaults(overrides=overrides)
 
     subparsers.add_parser("stability", arguments, run, description=_DESCRIPTION,
                           help="linear stability analysis of the PD baseline, checked against the co-simulation")
@@ -116,10 +113,11 @@ def _checked(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study for parsed arguments; prints the report's path and verdicts."""
+    from ..set_option import overrides
     from .study import StabilitySettings, plant_parameters, run_stability_analysis
 
     _checked(args)
-    plant = plant_parameters(args.overrides(args.set)) if args.set else {}
+    plant = plant_parameters(overrides(args.set)) if args.set else {}
     workers = default_workers(args.workers)
     along_every = ALONG_EVERY if args.along_every is None else args.along_every
     settings = StabilitySettings(speed=args.speed, wind_speed=args.wind, kp=args.kp, kd=args.kd,
@@ -156,11 +154,8 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     from ..fmu_log_option import apply_fmu_log, fmu_log_option
 
-    from ..set_option import overrides
-
     parser = _arguments(argparse.ArgumentParser(prog="fnn-cosim stability", description=_DESCRIPTION))
     fmu_log_option(parser)
-    parser.set_defaults(overrides=overrides)
     args = parser.parse_args(argv)
     apply_fmu_log(args.fmu_log)
     return run(args)
