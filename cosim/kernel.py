@@ -25,6 +25,7 @@ import ctypes
 import enum
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -33,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .cache import LIMITS, library_folder, note_written, used
 from .file_lock import exclusive
 
 __all__ = ["KernelFmu", "KernelRun", "KernelStop", "Stop", "Call", "header", "c_header", "load", "prepare",
@@ -194,12 +196,6 @@ def header() -> str:
                     (("cosim_kernel_run", _RUN_ARGS),))
 
 
-def _cache() -> Path:
-    root = os.environ.get("COSIM_CACHE") or os.path.join(os.environ.get("XDG_CACHE_HOME")
-                                                         or os.path.expanduser("~/.cache"), "cosim")
-    return Path(root)
-
-
 def compiled_library(source: bytes, stem: str, flags: tuple[str, ...] = (), include: dict[str, bytes] | None = None
                      ) -> Path | None:
     """The shared library of the C ``source`` (with the headers ``include``,
@@ -213,8 +209,9 @@ def compiled_library(source: bytes, stem: str, flags: tuple[str, ...] = (), incl
     for name, text in sorted((include or {}).items()):
         digest.update(name.encode() + text)
     digest.update(" ".join(flags).encode())
-    target = _cache() / f"{stem}_{digest.hexdigest()[:16]}.so"
+    target = library_folder() / f"{stem}_{digest.hexdigest()[:16]}.so"
     if target.exists():
+        used(target)  # its use renewed: the least recently used go first (cosim.cache.prune)
         return target
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not cc:
@@ -246,7 +243,11 @@ def _compile_library(cc: str, source: bytes, stem: str, flags: tuple[str, ...], 
         os.unlink(tmp)
         raise RuntimeError(f"compiling {stem}.c with {cc} failed: {result.stderr.strip()}")
     os.replace(tmp, target)
+    note_written(target.parent, target.stat().st_size, LIMITS["libraries"], match=_LIBRARY)
     return target
+
+
+_LIBRARY = re.compile(r".+_[0-9a-f]{16}\.(so|lock)")  # a compiled library and its lock, what prune may remove
 
 
 @lru_cache(maxsize=None)

@@ -31,8 +31,6 @@ importing :mod:`importlib.metadata`, took longer than validating a scenario.
 """
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import re
 import sys
@@ -316,21 +314,20 @@ def _plugin_entries() -> list[tuple[str, str]]:
     :data:`PLUGIN_GROUP`: kept in the cache folder while the distributions'
     metadata folders on ``sys.path`` are unchanged (:func:`_path_signature`),
     else read from the distributions' metadata."""
-    from .cache import keep, kept
+    from .cache import drop, key_of, read, write
 
-    folder = cache_folder()
-    key = _path_signature()
-    # one entry per sys.path (python -m and the fnn-cosim script see different ones)
-    entry = folder / "plugins" / f"{hashlib.sha256(json.dumps(key).encode()).hexdigest()[:32]}.json" \
-        if folder is not None else None
-    known = kept(entry) if entry is not None else None
-    if isinstance(known, dict) and known.get("path") == key:
-        return [tuple(e) for e in known["entries"]]
+    signature = _path_signature()
+    key = key_of(signature)  # one entry per sys.path (python -m and the fnn-cosim script see different ones)
+    known = read("plugins", key)
+    if isinstance(known, dict) and known.get("path") == signature:
+        try:
+            return [(name, value) for name, value in known["entries"] if isinstance(name, str) and isinstance(value, str)]
+        except (KeyError, TypeError, ValueError):  # not what this function keeps: read the metadata
+            drop("plugins", key)
     from importlib.metadata import entry_points  # slow to import: only when not kept
 
     entries = [(e.name, e.value) for e in entry_points(group=PLUGIN_GROUP)]
-    if entry is not None:
-        keep(entry, {"path": key, "entries": entries})
+    write("plugins", key, {"path": signature, "entries": entries})
     return entries
 
 

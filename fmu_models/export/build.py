@@ -27,6 +27,8 @@ from typing import Callable, Iterator
 
 import fmpy
 
+from cosim.cache import BUILDS, LIMITS, note_written, used
+
 from ..cache import cache_root
 from .codegen import GENERIC_C_DIR, GENERIC_C_FILES, generate_sources
 from .model import FmuModel
@@ -243,9 +245,14 @@ def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
     compile_flags = [cc, *(f for f in CFLAGS if f != "-shared")]
     objects = {c_file: cache_root() / "objects" / _object_digest(c_file, compile_flags) / f"{c_file.stem}.o"
                for c_file in sorted(sources.glob("*.c"))}
+    missing = [obj for obj in objects.values() if not obj.exists()]
+    for obj in set(objects.values()) - set(missing):
+        used(obj.parent)  # its use renewed: the least recently used go first (cosim.cache.prune)
     _run_compilers([([*compile_flags, f"-I{sources}", "-c", str(c_file), "-o", str(obj)],
                      f"{c_file.name} of {model.identifier} (FMI {fmi_version})")
-                    for c_file, obj in objects.items() if not obj.exists()])
+                    for c_file, obj in objects.items() if obj in missing])
+    if missing:
+        note_written(cache_root() / "objects", sum(o.stat().st_size for o in missing if o.exists()), LIMITS["objects"])
     binary_dir = root / "binaries" / FMI_VERSIONS[fmi_version].binary_dir
     binary_dir.mkdir(parents=True, exist_ok=True)
     out = binary_dir / f"{model.identifier}{fmpy.sharedLibraryExtension}"
@@ -303,8 +310,11 @@ def cached_fmu(model: FmuModel, fmi_version: int = 2) -> Path:
                     digest.update(path.relative_to(root).as_posix().encode())
                     digest.update(path.read_bytes())
         target = cache_root() / digest.hexdigest()[:16] / f"fmi{fmi_version}" / f"{model.identifier}.fmu"
-        if not target.exists():  # the tree just hashed is the one compiled: sources generated once
+        if target.exists():
+            used(target.parents[1])  # its use renewed: the least recently used go first (cosim.cache.prune)
+        else:  # the tree just hashed is the one compiled: sources generated once
             _compile(model, fmi_version, root)
             _zip(root, target)
+            note_written(cache_root(), target.stat().st_size, LIMITS["builds"], match=BUILDS)
     _KNOWN[(id(model), fmi_version)] = (model, target)  # the model held: its id is never reused
     return target

@@ -88,13 +88,12 @@ def test_a_refused_document_is_refused_every_time_and_never_kept(tmp_path, cache
 def test_a_changed_module_validates_the_document_again(tmp_path, cache, validations):
     path = _written(tmp_path, SCENARIO)
     load_scenario(path)
-    entry = json.loads(next((cache / "scenarios").glob("*.json")).read_text())
-    code_file = cache / "code" / f"{entry['code']}.json"
-    files = json.loads(code_file.read_text())
+    entry = json.loads(next((cache / "scenarios").glob("*.json")).read_bytes().partition(b"\n")[2])  # its payload
+    files = cosim.cache.read("code", entry["code"])
     assert any(f[0] == cosim.scenario_tables.__file__ for f in files)  # the code that validated it is listed
     files = [[name, size + 1 if name == cosim.scenario_tables.__file__ else size, mtime]
              for name, size, mtime in files]  # as if the declaration had been edited
-    code_file.write_text(json.dumps(files))
+    cosim.cache.write("code", entry["code"], files)
     cosim.cache._UNCHANGED.clear()  # a new process
     load_scenario(path)
     assert len(validations) == 2
