@@ -37,13 +37,15 @@ import os
 import re
 import shutil
 import sys
+import threading
 import time
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Callable
 
 from .files import write_whole
 
-__all__ = ["read", "write", "drop", "key_of", "used", "prune", "note_written", "LIMITS", "BUILDS", "library_folder",
+__all__ = ["read", "write", "drop", "key_of", "used", "prune", "note_written", "LIMITS", "BUILDS", "library_folder", "FileMemo",
            "code_files", "unchanged", "keep_code", "code_unchanged", "register_cache", "cache_folder"]
 
 _CACHE: list[Callable[[], Path]] = []  # at most one: where derived data may be kept
@@ -249,6 +251,53 @@ def _remove(path: Path, is_dir: bool = False) -> None:
             path.unlink(missing_ok=True)
     except OSError:  # not ours to remove, or removed by another process first
         pass
+
+
+# ---- in memory ---------------------------------------------------------------------------------
+
+class FileMemo:
+    """What this process derived from files (their bytes, their parse), each
+    value valid while its file has the size and modification time it had
+    (the rule Python's bytecode cache trusts); at most ``bound`` files, the
+    least recently used dropped first. Thread-safe."""
+
+    def __init__(self, bound: int) -> None:
+        self.bound = bound
+        self._values: OrderedDict[str, tuple[int, int, Any]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, path: Path | str, info: os.stat_result) -> Any:
+        """The value derived from ``path`` when it had the status ``info``, or ``None``."""
+        with self._lock:
+            found = self._values.get(str(path))
+            if found is None or found[:2] != (info.st_size, info.st_mtime_ns):
+                return None
+            self._values.move_to_end(str(path))
+            return found[2]
+
+    def put(self, path: Path | str, info: os.stat_result, value: Any) -> None:
+        """``value`` derived from ``path`` with the status ``info``."""
+        with self._lock:
+            self._values[str(path)] = (info.st_size, info.st_mtime_ns, value)
+            self._values.move_to_end(str(path))
+            while len(self._values) > self.bound:
+                self._values.popitem(last=False)
+
+    def derived(self, path: Path, derive: Callable[[Path], Any]) -> Any:
+        """``derive(path)``, derived again only when the file changed."""
+        info = os.stat(path)
+        value = self.get(path, info)
+        if value is None:
+            value = derive(path)
+            self.put(path, info, value)
+        return value
+
+    def clear(self) -> None:
+        with self._lock:
+            self._values.clear()
+
+    def __len__(self) -> int:
+        return len(self._values)
 
 
 # ---- the code an entry was derived with --------------------------------------------------------

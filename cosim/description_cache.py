@@ -35,6 +35,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from .cache import FileMemo
+
 __all__ = ["KeptDescription", "kept_description", "keep_description", "claim_extracted", "shared_extraction",
            "in_cache_folder"]
 
@@ -75,7 +77,7 @@ def _classes() -> dict[str, tuple[type, frozenset[str], bool]]:
 
 
 _PYTHON_TYPES = {t.__name__: t for t in (float, int, bool, str, bytes)}  # ModelVariable._python_type
-_MEMO: dict[tuple[str, int, int], KeptDescription] = {}  # path, size, mtime -> read in this process
+_MEMO = FileMemo(256)  # an FMU file -> what was read of it in this process (while its size and mtime are unchanged)
 
 
 def _digest(path: Path) -> tuple[str, os.stat_result] | None:
@@ -107,7 +109,7 @@ def kept_description(path: Path) -> KeptDescription | None:
         info = path.stat()
     except OSError:
         return None
-    memo = _MEMO.get((str(path), info.st_size, info.st_mtime_ns))
+    memo = _MEMO.get(path, info)
     if memo is not None:
         return memo
     found = _digest(path)
@@ -127,7 +129,7 @@ def kept_description(path: Path) -> KeptDescription | None:
     except (TypeError, KeyError, IndexError, ValueError, AttributeError, RecursionError):
         drop("descriptions", found[0])  # not what this module writes: never trusted, the file read again
         return None
-    _MEMO[(str(path), found[1].st_size, found[1].st_mtime_ns)] = out
+    _MEMO.put(path, found[1], out)
     return out
 
 
@@ -145,7 +147,7 @@ def keep_description(path: Path, kept: KeptDescription) -> None:
     except (TypeError, ValueError, RecursionError):  # something fmpy may hold that this format does not carry
         return
     write("descriptions", found[0], {"description": encoded, "period": list(kept.period), "names": list(kept.names)})
-    _MEMO[(str(path), found[1].st_size, found[1].st_mtime_ns)] = replace(kept, digest=found[0])
+    _MEMO.put(path, found[1], replace(kept, digest=found[0]))
 
 
 # ---- the extracted folder -------------------------------------------------------------------

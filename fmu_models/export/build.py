@@ -27,7 +27,7 @@ from typing import Callable, Iterator
 
 import fmpy
 
-from cosim.cache import BUILDS, LIMITS, note_written, used
+from cosim.cache import BUILDS, LIMITS, FileMemo, note_written, used
 
 from ..cache import cache_root
 from .codegen import GENERIC_C_DIR, GENERIC_C_FILES, generate_sources
@@ -98,7 +98,7 @@ def _stage(model: FmuModel, fmi_version: int, root: Path) -> Path:
     return root
 
 
-_READ: dict[Path, tuple[tuple[int, int], bytes]] = {}  # a generic file -> (its size and mtime, its bytes)
+_READ = FileMemo(64)  # a generic C file or FMI header -> its bytes (the eleven of every FMU's sources, and more)
 
 
 def _read(path: Path) -> bytes:
@@ -106,12 +106,7 @@ def _read(path: Path) -> bytes:
     changed: every FMU's sources hold the same eleven files (a first build of the shipped FMUs wrote them 560
     times with ``shutil.copy``, which opens the copy's source too and copies its mode: ~0.2 CPU-s of
     staging); written, they get their mode from the umask, as the other staged files do."""
-    stat = path.stat()
-    key = (stat.st_size, stat.st_mtime_ns)
-    known = _READ.get(path)
-    if known is None or known[0] != key:
-        known = _READ[path] = (key, path.read_bytes())
-    return known[1]
+    return _READ.derived(path, Path.read_bytes)
 
 
 _INCLUDE = re.compile(rb'^\s*#\s*include\s*"([^"]+)"', re.MULTILINE)

@@ -97,3 +97,20 @@ def test_the_code_list_of_a_scenario_is_one_entry_per_code(folder):
     assert cache.keep_code(folder) == digest and len(list((folder / "code").glob("*.json"))) == 1
     files = cache.read("code", digest, folder)
     assert files == json.loads(json.dumps(cache.code_files())) and cache.unchanged(files)
+
+
+def test_a_file_memo_derives_again_when_its_file_changes_and_keeps_at_most_its_bound(tmp_path):
+    memo, reads = cache.FileMemo(2), []
+
+    def derive(path):
+        reads.append(path.name)
+        return path.read_bytes()
+
+    files = [tmp_path / f"{n}.c" for n in range(3)]
+    for f in files:
+        f.write_bytes(b"int x;")
+    assert [memo.derived(files[0], derive) for _ in range(2)] == [b"int x;"] * 2 and reads == ["0.c"]
+    files[0].write_bytes(b"int xy;")  # another size: derived again
+    assert memo.derived(files[0], derive) == b"int xy;" and reads == ["0.c", "0.c"]
+    memo.derived(files[1], derive), memo.derived(files[0], derive), memo.derived(files[2], derive)
+    assert len(memo) == 2 and memo.get(files[1], files[1].stat()) is None  # the least recently used went

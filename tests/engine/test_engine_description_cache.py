@@ -25,7 +25,7 @@ def cache(tmp_path, monkeypatch):
     """An empty cache folder registered for the test, and nothing read in this process yet."""
     folder = tmp_path / "cache"
     monkeypatch.setattr(cosim.cache, "_CACHE", [lambda: folder])
-    monkeypatch.setattr(description_cache, "_MEMO", {})
+    monkeypatch.setattr(description_cache, "_MEMO", cosim.cache.FileMemo(256))
     return folder
 
 
@@ -112,7 +112,7 @@ def test_other_bytes_and_a_foreign_entry_are_read_again(lag_fmu2, cache, parses,
 
 def test_nothing_is_kept_without_a_cache_folder_or_when_validating(lag_fmu2, monkeypatch, parses, tmp_path):
     monkeypatch.setattr(cosim.cache, "_CACHE", [])
-    monkeypatch.setattr(description_cache, "_MEMO", {})
+    monkeypatch.setattr(description_cache, "_MEMO", cosim.cache.FileMemo(256))
     path = tmp_path / "lag.fmu"
     shutil.copyfile(lag_fmu2, path)
     FmuComponent("lag", path).close()
