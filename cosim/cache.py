@@ -45,7 +45,7 @@ from typing import Any, Callable
 
 from .files import write_whole
 
-__all__ = ["read", "write", "drop", "key_of", "used", "prune", "note_written", "LIMITS", "BUILDS", "library_folder", "FileMemo",
+__all__ = ["read", "write", "drop", "key_of", "used", "prune", "note_written", "LIMITS", "BUILDS", "library_folder", "Memo", "FileMemo",
            "code_files", "unchanged", "keep_code", "code_unchanged", "register_cache", "cache_folder"]
 
 _CACHE: list[Callable[[], Path]] = []  # at most one: where derived data may be kept
@@ -255,33 +255,51 @@ def _remove(path: Path, is_dir: bool = False) -> None:
 
 # ---- in memory ---------------------------------------------------------------------------------
 
-class FileMemo:
-    """What this process derived from files (their bytes, their parse), each
-    value valid while its file has the size and modification time it had
-    (the rule Python's bytecode cache trusts); at most ``bound`` files, the
-    least recently used dropped first. Thread-safe."""
+class Memo:
+    """Values this process derived, by a key that names all they depend on;
+    at most ``bound``, the least recently used dropped first. Thread-safe."""
 
     def __init__(self, bound: int) -> None:
         self.bound = bound
-        self._values: OrderedDict[str, tuple[int, int, Any]] = OrderedDict()
+        self._values: OrderedDict[Any, Any] = OrderedDict()
         self._lock = threading.Lock()
 
-    def get(self, path: Path | str, info: os.stat_result) -> Any:
-        """The value derived from ``path`` when it had the status ``info``, or ``None``."""
+    def get(self, key: Any) -> Any:
+        """The value kept under ``key``, or ``None``."""
         with self._lock:
-            found = self._values.get(str(path))
-            if found is None or found[:2] != (info.st_size, info.st_mtime_ns):
-                return None
-            self._values.move_to_end(str(path))
-            return found[2]
+            value = self._values.get(key)
+            if value is not None:
+                self._values.move_to_end(key)
+            return value
 
-    def put(self, path: Path | str, info: os.stat_result, value: Any) -> None:
-        """``value`` derived from ``path`` with the status ``info``."""
+    def put(self, key: Any, value: Any) -> None:
         with self._lock:
-            self._values[str(path)] = (info.st_size, info.st_mtime_ns, value)
-            self._values.move_to_end(str(path))
+            self._values[key] = value
+            self._values.move_to_end(key)
             while len(self._values) > self.bound:
                 self._values.popitem(last=False)
+
+    def clear(self) -> None:
+        with self._lock:
+            self._values.clear()
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+
+class FileMemo(Memo):
+    """A :class:`Memo` of what was derived from files (their bytes, their
+    parse), by path: a value is valid while its file has the size and
+    modification time it had (the rule Python's bytecode cache trusts)."""
+
+    def get(self, path: Path | str, info: os.stat_result) -> Any:  # type: ignore[override]
+        """The value derived from ``path`` when it had the status ``info``, or ``None``."""
+        found = super().get(str(path))
+        return found[2] if found is not None and found[:2] == (info.st_size, info.st_mtime_ns) else None
+
+    def put(self, path: Path | str, info: os.stat_result, value: Any) -> None:  # type: ignore[override]
+        """``value`` derived from ``path`` with the status ``info``."""
+        super().put(str(path), (info.st_size, info.st_mtime_ns, value))
 
     def derived(self, path: Path, derive: Callable[[Path], Any]) -> Any:
         """``derive(path)``, derived again only when the file changed."""
@@ -291,13 +309,6 @@ class FileMemo:
             value = derive(path)
             self.put(path, info, value)
         return value
-
-    def clear(self) -> None:
-        with self._lock:
-            self._values.clear()
-
-    def __len__(self) -> int:
-        return len(self._values)
 
 
 # ---- the code an entry was derived with --------------------------------------------------------
