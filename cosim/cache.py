@@ -66,6 +66,7 @@ LIMITS: dict[str, int] = {  # bytes per kind of entry, beyond which the least re
     "objects": 512 * _MiB,  # their compiled C objects (fmu_models.export.build)
     "tables": 1024 * _MiB,  # signal-table FMUs, a built FMU with a recorded table (fmu_models.models.signal_table)
     "libraries": 256 * _MiB,  # the compiled loop and calibration functions (cosim.kernel.compiled_library)
+    "fmpy-validation": 8 * _MiB,  # fmpy's verdicts on the FMUs the tests validate (tests/fmu_validation.py)
 }
 # A folder or binary may be loaded by another process between its look-up and its use: one used within the
 # last hour is never pruned (a JSON entry removed under a reader is only a miss: no grace for them).
