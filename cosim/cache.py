@@ -54,18 +54,18 @@ FORMAT = 2  # bumped when the entries' header or layout changes: every older ent
 _MAGIC = b"fnn-cosim-cache"
 _MiB = 2 ** 20
 LIMITS: dict[str, int] = {  # bytes per kind of entry, beyond which the least recently used go
-    "plugins": 1 * _MiB,  # the installed plugins' entry points, one per sys.path (cosim.registry)
-    "documents": 16 * _MiB,  # scenario files' TOML parsed, by their text (cosim.scenario)
-    "scenarios": 64 * _MiB,  # validated scenarios (cosim.scenario)
+    "plugins": 1 * _MiB,  # the installed plugins' entry points, one per sys.path (cosim.scenario.registry)
+    "documents": 16 * _MiB,  # scenario files' TOML parsed, by their text (cosim.scenario.definition)
+    "scenarios": 64 * _MiB,  # validated scenarios (cosim.scenario.definition)
     "code": 64 * _MiB,  # the module files a scenario was validated with (code_files, ~180 kB each)
-    "descriptions": 128 * _MiB,  # what was read of FMU files (cosim.description_cache)
-    "quantiles": 1 * _MiB,  # t quantiles per SciPy version (cosim.summary)
+    "descriptions": 128 * _MiB,  # what was read of FMU files (cosim.fmi.description_cache)
+    "quantiles": 1 * _MiB,  # t quantiles per SciPy version (cosim.study.summary)
     "index": 8 * _MiB,  # a model's recipe -> its built FMU (fmu_models.built)
-    "extracted": 1024 * _MiB,  # the run-time entries of built FMUs (cosim.description_cache.claim_extracted)
+    "extracted": 1024 * _MiB,  # the run-time entries of built FMUs (cosim.fmi.description_cache.claim_extracted)
     "builds": 2048 * _MiB,  # the built FMUs, <16 hex digits>/fmi<N>/<model>.fmu (fmu_models.export.build)
     "objects": 512 * _MiB,  # their compiled C objects (fmu_models.export.build)
     "tables": 1024 * _MiB,  # signal-table FMUs, a built FMU with a recorded table (fmu_models.models.signal_table)
-    "libraries": 256 * _MiB,  # the compiled loop and calibration functions (cosim.kernel.compiled_library)
+    "libraries": 256 * _MiB,  # the compiled loop and calibration functions (cosim.native.compiled_library)
     "fmpy-validation": 8 * _MiB,  # fmpy's verdicts on the FMUs the tests validate (tests/fmu_validation.py)
 }
 # A folder or binary may be loaded by another process between its look-up and its use: one used within the
@@ -77,7 +77,7 @@ BUILDS = re.compile(r"[0-9a-f]{16}")  # the FMU builds' folders, directly in the
 def register_cache(folder: Callable[[], Path]) -> None:
     """Where the engine may keep derived data: ``folder()`` is asked each
     time (it may follow the environment). One per process: a second,
-    different one is refused (:func:`cosim.registry.register_cache` is
+    different one is refused (:func:`cosim.scenario.registry.register_cache` is
     this function)."""
     if _CACHE and _CACHE[0] != folder:
         raise ValueError("a cache folder is registered twice, differently")
@@ -91,7 +91,7 @@ def cache_folder() -> Path | None:
 
 
 def library_folder() -> Path:
-    """Where compiled libraries are kept (:func:`cosim.kernel.compiled_library`):
+    """Where compiled libraries are kept (:func:`cosim.native.compiled_library`):
     ``$COSIM_CACHE``, else ``$XDG_CACHE_HOME/cosim``, else ``~/.cache/cosim``:
     beside the user's cache rather than the registered folder, as the engine's
     own loop is compiled before, and without, any registration."""
