@@ -1,6 +1,7 @@
 """The FMU lifecycle: an FMI 2.0 / 3.0 FMU (Co-Simulation or Model Exchange)
 loaded through fmpy, instantiated, set up, stepped and freed
-(:class:`FmuComponent`); its model description read once and kept
+(:class:`FmuComponent`: :mod:`.fmu` reads the file, :mod:`.lifecycle`,
+:mod:`.variables`, :mod:`.state` and :mod:`.step` are its jobs); its model description read once and kept
 (:mod:`.description`, :mod:`.description_cache`); Model Exchange FMUs
 integrated together in C (:mod:`.me_system`, :mod:`.model_exchange`); the
 FMUs' own log (:mod:`.log`), their units (:mod:`.units`) and what the
@@ -16,7 +17,7 @@ from ..surface import lazy_surface
 _SURFACE = {
     "FmuComponent": "fmu",
     "read_description": "fmu",
-    "stream_seed": "fmu",
+    "stream_seed": "lifecycle",
     "fmu_ports": "description",
     "kept_description": "description_cache",
     "ModelExchangeSystem": "me_system",

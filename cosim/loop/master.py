@@ -47,7 +47,8 @@ from ..component import PythonComponent, typed_value
 from .connection import Connection, check_connections, parse_connections
 from ..errors import ConnectionCheckError, CosimError, DivergenceError, FmuCallError, ScenarioError, SimulationTerminated
 from ..time_grid import communication_point, seed_error, whole_steps
-from ..fmi.fmu import FmuComponent, stream_seed
+from ..fmi.fmu import FmuComponent
+from ..fmi.lifecycle import stream_seed
 from .guard import Guard
 from ..names import split_endpoint
 from .plan import ORDERINGS, FmuBlock, PythonBlock, every_output, make_plan
@@ -256,7 +257,7 @@ class Master:
 
         ``seed`` (an integer in [0, 2^53]) goes to every Python component's
         ``start`` and to every FMU's seed parameter (its stream's seed,
-        :func:`cosim.fmi.fmu.stream_seed`). ``csv_path``: the recorded
+        :func:`cosim.fmi.lifecycle.stream_seed`). ``csv_path``: the recorded
         rows are also streamed there as they are produced, ``block_rows`` rows
         at a time, with a JSON sidecar (:mod:`cosim.loop.recorder`); a failed run
         keeps what it wrote. ``progress(done_steps, n_steps)`` is called

@@ -83,7 +83,8 @@ def _fmu_bytes(path: Path) -> bytes:
 def _collect(scenario: Scenario, fmu_files: Mapping[str, Path]) -> list[_Part]:
     """Every FMU's file, connectors, parameter values and units, checked as
     :func:`~cosim.scenario.assembly.build_master` would (without instantiating)."""
-    from ..fmi.fmu import FmuComponent, stream_seed
+    from ..fmi.fmu import FmuComponent
+    from ..fmi.lifecycle import stream_seed
 
     components: dict[str, FmuComponent] = {}  # as build_master makes them (fmu_component), not instantiated
     values: dict[str, dict[str, Any]] = {}

@@ -380,7 +380,7 @@ def test_a_bad_seed_stream_is_refused_naming_the_key(raw, spec, message):
 
 
 def test_stream_seeds_are_the_run_seed_for_stream_0_and_numpys_spawned_children_otherwise():
-    from cosim.fmi.fmu import stream_seed
+    from cosim.fmi.lifecycle import stream_seed
     from cosim.limits import SEED_LIMIT
 
     assert [stream_seed(s, 0) for s in (0, 7, 2 ** 40)] == [0, 7, 2 ** 40]
@@ -394,7 +394,7 @@ def test_stream_seeds_are_the_run_seed_for_stream_0_and_numpys_spawned_children_
 def test_an_fmu_on_a_seed_stream_gets_that_streams_seed_at_start(raw):
     """The master sets the seed parameter to the stream's seed of the run's
     seed (the toy lag's y_0 plays the seed parameter: its first output shows it)."""
-    from cosim.fmi.fmu import stream_seed
+    from cosim.fmi.lifecycle import stream_seed
 
     raw["fmus"]["Lag"].update({"seed_parameter": "y_0", "seed_stream": 3})
     raw["fmus"]["Lag"]["parameters"] = {}

@@ -1,5 +1,5 @@
 """fmpy's classes with each FMI function's C signature worked out once per
-class (cosim.fmi.fmu._fmpy_class): every instance's library functions
+class (cosim.fmi.lifecycle._fmpy_class): every instance's library functions
 get exactly what fmpy's own constructor gives them, in the same order."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 
-from cosim.fmi import fmu as fmu_component
+from cosim.fmi import lifecycle as fmu_component
 from cosim.fmi.fmu import FmuComponent
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import QUADROTOR

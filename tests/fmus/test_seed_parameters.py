@@ -1,7 +1,7 @@
 """Every shipped FMU model that draws random numbers declares its seed
 parameter as the engine expects it: a whole number in [0, SEED_LIMIT], so
 the exporter's limit (``fmu_models.export.variables.SEED_MAX``) and the
-engine's (``cosim.fmi.fmu.SEED_LIMIT``, which bounds the seeds it
+engine's (``cosim.limits.SEED_LIMIT``, which bounds the seeds it
 derives) cannot drift apart."""
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ import pytest
 from tests.fmu_validation import validate_fmu
 from lxml import etree
 
-from cosim.fmi.fmu import stream_seed
+from cosim.fmi.lifecycle import stream_seed
 from cosim.scenario.definition import load_scenario
 from cosim.scenario.assembly import build_master
 from cosim.ssp.archive import COSIM_NAMESPACE, SSD_NAME, load_ssp, ssd_schema_errors
