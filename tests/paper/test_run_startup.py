@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scipy", "pydantic", "pydantic_core",
                  "importlib.metadata", "fnn_controller.fast", "fmu_models.export.build", "cosim.scenario_tables",
                  "quadrotor_paper.section_tables", "lxml",
@@ -134,23 +136,28 @@ def test_the_command_ends_with_its_status_its_output_and_its_exit_handlers(tmp_p
     assert proc.stderr.count("\n") == 1
 
 
-def test_a_command_makes_only_its_own_parser():
+def test_a_command_adds_only_its_own_arguments(capsys):
     """fnn-cosim's parser names every command (usage, --help, the refusal of
-    an unknown one) but makes a command's parser only when it is the one
-    given (cli._Commands)."""
-    import argparse
-
+    an unknown one) but adds a command's arguments only when it is the one
+    given (quadrotor_paper.commands.Commands); its help and what it parses
+    are those of the parser with every command's arguments."""
     from quadrotor_paper.cli import _parser
+    from quadrotor_paper.commands.run import add_commands
 
-    parser = _parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    names = set(sub.choices)
-    assert {"run", "table2", "stability", "calibrate", "linearize"} <= names
-    args = parser.parse_args(["run", "circles", "--no-plots", "--seed", "3"])
-    assert (args.scenario, args.no_plots, args.seed, args.func.__name__) == ("circles", True, 3, "_cmd_run")
-    assert {name for name, made in sub.choices.items() if made is not None} == {"run"}
-    listing = parser.format_help()
-    assert all(name in listing for name in names)
+    argv = ["run", "circles", "--no-plots", "--seed", "3"]
+    parser, full = _parser(argv), _parser()
+    args = parser.parse_args(argv)
+    assert (args.scenario, args.no_plots, args.seed) == ("circles", True, 3)
+    assert args.func.__module__ == add_commands.__module__ and vars(args) == vars(full.parse_args(argv))
+    names = ("run", "table2", "table3", "reproduce", "sweep", "export-ssp", "schema", "scenarios", "build-fmu",
+             "linearize", "stability", "calibrate")
+    assert parser.format_help() == full.format_help() and "{" + ",".join(names) + "}" in parser.format_usage()
+    for name in names[1:]:  # another command's parser: not even its -h added
+        for tree, status in ((parser, 2), (full, 0)):
+            with pytest.raises(SystemExit) as ended:
+                tree.parse_args([name, "--help"])
+            assert ended.value.code == status, (name, status)
+    capsys.readouterr()
 
 
 _ARGPARSE_END = """
