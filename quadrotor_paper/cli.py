@@ -57,17 +57,30 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
-    """``fnn-cosim``'s parser: every command named with its line of help
-    (:mod:`quadrotor_paper.commands`, one module per group). With ``argv``,
-    only the arguments of the command it gives are added (argparse's own
-    parse of ``argv`` finds the command, and ends the process as it would
-    on ``--help``, no command or an unknown one); without, every command's."""
+    """``fnn-cosim``'s parser for the command line ``argv``
+    (:mod:`quadrotor_paper.commands`, one module per group of commands).
+
+    ``fnn-cosim COMMAND ...``, the usual form: the parser of COMMAND alone,
+    with its arguments: argparse gives the rest of the line to the parser of
+    the first positional word, so no other command's parser can be asked
+    for, nor the listing of them all (the top-level refusals print no
+    usage: :class:`_Parser`). Any other line (options first, an unknown
+    command, none): every command named with its line of help, and argparse's
+    own parse of ``argv`` finds the command whose arguments are added (or
+    ends the process as it would: ``--help``, no command, an unknown one).
+    Without ``argv``: every command with its arguments."""
     p = _Parser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     p.set_defaults(start_up_over=_started)  # a command that ends its own start-up calls it (_OWN_START_UP)
-    commands = Commands(p.add_subparsers(dest="command", required=True))
+    commands = Commands()
     for group in GROUPS:
         import_module(f"{__package__}.commands.{group}").add_commands(commands)
+    subparsers = p.add_subparsers(dest="command", required=True)
+    if argv and argv[0] in commands:
+        commands.make(subparsers, argv[0])
+        commands.complete(argv[0])
+        return p
+    commands.make(subparsers)
     commands.complete(None if argv is None else p.parse_known_args(argv)[0].command)
     return p
 

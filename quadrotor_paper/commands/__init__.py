@@ -38,18 +38,21 @@ Arguments = Callable[[argparse.ArgumentParser], None]
 
 
 class Commands:
-    """``fnn-cosim``'s subcommands on argparse's public API
-    (``add_subparsers``, ``add_parser``): every command's parser is made at
-    once with its name and line of help (the usage lines, ``--help`` and
-    the refusal of an unknown command need them), and its arguments are
-    added when asked (:meth:`complete`): the command given, or every one.
-    A run adds neither the tables' options nor imports what their help
-    names (the variants, the option rows). What a command accepts, refuses
-    and prints is the same either way."""
+    """``fnn-cosim``'s subcommands, declared by the groups' modules
+    (:meth:`add`) and made on argparse's public API (``add_subparsers``,
+    ``add_parser``): :meth:`make` adds the parsers of the commands asked for
+    (their names and lines of help: the usage lines, ``--help`` and the
+    refusal of an unknown command list them), :meth:`complete` adds a
+    command's arguments. A run makes its own parser alone, and neither adds
+    the tables' options nor imports what their help names (the variants, the
+    option rows); argparse makes a parser per command, asking gettext for
+    its headings' translations (start-up, docs/cosim.md). What a command
+    accepts, refuses and prints is the same as with every parser made and
+    every command's arguments added."""
 
-    def __init__(self, subparsers) -> None:
-        self._subparsers = subparsers
-        self._pending: dict[str, tuple[argparse.ArgumentParser, Arguments | None, Callable]] = {}
+    def __init__(self) -> None:
+        self._declared: dict[str, tuple[Arguments | None, Callable, dict]] = {}
+        self._made: dict[str, argparse.ArgumentParser] = {}
 
     def add(self, name: str, arguments: Arguments | None, handler: Callable[[argparse.Namespace], int],
             **kwargs) -> None:
@@ -57,16 +60,25 @@ class Commands:
         ``handler(args)`` (``args.func``) runs it and returns the exit
         status; ``kwargs`` go to ``add_parser`` (``help``: its line in the
         listing, ``description``)."""
-        # without its -h until completed: a command's help is its arguments' (see complete)
-        parser = self._subparsers.add_parser(name, add_help=False, **kwargs)
-        self._pending[name] = (parser, arguments, handler)
+        self._declared[name] = (arguments, handler, kwargs)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._declared
+
+    def make(self, subparsers, name: str | None = None) -> None:
+        """Add the parser of the command ``name`` (``None``: of every command,
+        in the order declared) to ``subparsers``, without its arguments."""
+        for command in self._declared if name is None else [name]:
+            # without its -h until completed: a command's help is its arguments' (see complete)
+            self._made[command] = subparsers.add_parser(command, add_help=False, **self._declared[command][2])
 
     def complete(self, name: str | None = None) -> None:
         """Add the arguments of the command ``name`` (``None``: of every
-        command not yet completed): argparse's ``-h`` first, as
-        ``add_help`` puts it, then the command's own."""
-        for command in list(self._pending) if name is None else [name]:
-            parser, arguments, handler = self._pending.pop(command)
+        command made): argparse's ``-h`` first, as ``add_help`` puts it,
+        then the command's own."""
+        for command in list(self._made) if name is None else [name]:
+            parser = self._made.pop(command)
+            arguments, handler, _ = self._declared[command]
             parser.add_argument("-h", "--help", action="help", help="show this help message and exit")
             if arguments is not None:
                 arguments(parser)

@@ -136,11 +136,12 @@ def test_the_command_ends_with_its_status_its_output_and_its_exit_handlers(tmp_p
     assert proc.stderr.count("\n") == 1
 
 
-def test_a_command_adds_only_its_own_arguments(capsys):
-    """fnn-cosim's parser names every command (usage, --help, the refusal of
-    an unknown one) but adds a command's arguments only when it is the one
-    given (quadrotor_paper.commands.Commands); its help and what it parses
-    are those of the parser with every command's arguments."""
+def test_a_run_makes_only_its_own_parser(capsys):
+    """``fnn-cosim run ...`` makes the run's parser alone, with its arguments
+    (quadrotor_paper.commands.Commands): it parses what the parser of every
+    command parses; another command or options first make every command's
+    parser (the listing of --help, the refusal of an unknown command) and
+    add the arguments of the one given."""
     from quadrotor_paper.cli import _parser
     from quadrotor_paper.commands.run import add_commands
 
@@ -151,13 +152,16 @@ def test_a_command_adds_only_its_own_arguments(capsys):
     assert args.func.__module__ == add_commands.__module__ and vars(args) == vars(full.parse_args(argv))
     names = ("run", "table2", "table3", "reproduce", "sweep", "export-ssp", "schema", "scenarios", "build-fmu",
              "linearize", "stability", "calibrate")
-    assert parser.format_help() == full.format_help() and "{" + ",".join(names) + "}" in parser.format_usage()
-    for name in names[1:]:  # another command's parser: not even its -h added
-        for tree, status in ((parser, 2), (full, 0)):
+    for name in names[1:]:  # not made for a run; with every command, each one's help from its own arguments
+        for tree, status in ((parser, 2), (full, 0), (_parser(["--debug", name, "--help"]), 0)):
             with pytest.raises(SystemExit) as ended:
-                tree.parse_args([name, "--help"])
+                tree.parse_args(["--debug", name, "--help"])
             assert ended.value.code == status, (name, status)
     capsys.readouterr()
+    with pytest.raises(SystemExit) as ended:
+        _parser(["--help"])
+    assert ended.value.code == 0 and capsys.readouterr().out == full.format_help()
+    assert "{" + ",".join(names) + "}" in full.format_help()
 
 
 _ARGPARSE_END = """
