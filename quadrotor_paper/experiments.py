@@ -34,9 +34,9 @@ from .controller_component import controller_variant
 from .sections import estimation_spec, metric_signals
 from .run_metrics import BLOCKS, RunMetrics
 
-__all__ = ["run_once", "run_with_files", "results_room", "run_summary", "measure", "study_metrics", "STUDY_METRICS", "ESTIMATION_METRICS",
-           "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics", "PLOT_ROWS",
-           "threads_safe"]
+__all__ = ["run_once", "run_with_files", "results_room", "run_summary", "measure", "study_metrics", "STUDY_METRICS",
+           "ESTIMATION_METRICS", "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics",
+           "PLOT_ROWS", "threads_safe"]
 
 ESTIMATION_METRICS = (*(f"nees_{b}" for b in BLOCKS), "nis_fix", "nis_acc",
                       *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in BLOCKS.items()), "est_rmse_wind_settled_mps",
@@ -84,7 +84,8 @@ def run_with_files(scenario: Scenario, master, out: Path, *, record_every: int =
     the figures (``plots``, a run of more than one row), ``summary.md``, and
     with ``save_learned`` the controller's learned state after the run
     (:func:`~quadrotor_paper.learned.save_learned`; ``resumed_from``: the
-    file it started from, named in the summary).
+    file it started from, named in the summary). ``master`` is closed once
+    the run and its learned state are done, before the figures.
 
     What results.csv will take is checked against the room on ``out``'s
     file system before the run (:func:`results_room`); a state that cannot
@@ -119,6 +120,7 @@ def run_with_files(scenario: Scenario, master, out: Path, *, record_every: int =
             summary["learned_state"] = str(save(master.components["controller"], save_learned))
         except (CosimError, ValueError, OSError) as exc:
             learned_error = summary["learned_state_error"] = f"--save-learned {save_learned}: {one_line(str(exc))}"
+    master.close()  # its FMU instances are done with: freed before the figures are drawn
     figures = []
     if plots:
         from .plots import run_figures  # matplotlib only when there is something to draw
