@@ -12,11 +12,11 @@ from typing import Any
 from ..fmu_log_option import fmu_log_option
 from ..set_option import named_values, overrides
 from ..workers_option import default_workers, worker_count
-from . import DEFAULT_OUT as RESULTS, Commands, out_folder
+from . import DEFAULT_OUT, Commands, out_folder
 
 __all__ = ["add_commands"]
 
-DEFAULT_OUT = "results/stability"
+STABILITY_OUT = str(DEFAULT_OUT / "stability")
 _DESCRIPTION = ("Linear stability report of the PD baseline (poles, margins, Bode/Nyquist/pole-zero plots, "
                 "kp-kd sweep, ramp error), checked against the co-simulation, in seconds; with --along-flight "
                 "also the learning laws (minutes): their finite-time claims on recorded runs and the learning "
@@ -25,7 +25,7 @@ ALONG_EVERY = 1.0  # s: the along-flight study's default
 
 
 def _arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default: {DEFAULT_OUT})")
+    parser.add_argument("--out", default=STABILITY_OUT, help=f"output directory (default: {STABILITY_OUT})")
     parser.add_argument("--kp", type=float, default=None, help="PD proportional gain (default: the paper's 2.5)")
     parser.add_argument("--kd", type=float, default=None, help="PD derivative gain (default: the paper's 0.005)")
     parser.add_argument("--feedforward", type=float, default=0.0,
@@ -74,7 +74,7 @@ def _checked(args: argparse.Namespace) -> None:
 
     from cosim.errors import ScenarioError
     from cosim.files import output_folder
-    from cosim.schema import NonNegative, Number, Positive, Table, validate
+    from cosim.schema import NonNegative, Positive, Table, validate
 
     class Arguments(Table):
         kp: Positive = None  # a PD with kp <= 0 has no operating point to linearize around
@@ -218,7 +218,7 @@ def _linearize(args) -> int:
 
     path, point = _operating_point(args)
     pairs = _bode_pairs(args.bode)
-    out = out_folder(args.out, RESULTS / "linearize")
+    out = out_folder(args.out, DEFAULT_OUT / "linearize")
     try:
         point["inputs"] = point.get("inputs", {}) | named_values(args.input, "--input")
         lin = linearize_fmu(path, start=named_values(args.start, "--start"), method=args.method,

@@ -3,7 +3,6 @@ many runs on Dask (:mod:`quadrotor_paper.report`, :func:`quadrotor_paper.experim
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any, Sequence
 
 from ..set_option import overrides
