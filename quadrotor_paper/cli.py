@@ -17,6 +17,7 @@ Subcommands::
     fnn-cosim linearize INSTANCE --scenario SCENARIO --time T [--set KEY=VALUE ...] [--bode IN:OUT ...] [--out DIR]
     fnn-cosim stability [--out DIR] [--kp KP] [--kd KD] [--speed V] [--wind W] [--no-cosim] [--along-flight [--along-every S]]
                  [--figures [NAME ...]] [--workers N]
+    fnn-cosim calibrate LOG --fmu FILE|MODEL|--scenario SCENARIO [--fit NAMES] [--fix K=V ...] [--columns MAP] [--out DIR]
 
 SCENARIO is a TOML file or the name of a shipped scenario (``circles``, ``circles_sensors``,
 ``figure8``); STUDY a study file (``docs/studies.md``) or the name of a
@@ -29,6 +30,10 @@ scenario, connection or FMU file (a broken archive, no binary for this
 platform, a parameter the FMU refuses) exits with status 2 before anything
 runs; a run that diverges or fails mid-way exits with status 1 and keeps its
 partial results.
+
+This module is the entry point: the top-level parser and :func:`main`. Each
+command's arguments and handler are in :mod:`quadrotor_paper.commands`, one
+module per group of commands.
 """
 from __future__ import annotations
 
