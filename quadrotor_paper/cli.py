@@ -41,10 +41,9 @@ import argparse
 import gc
 import os
 import sys
-from importlib import import_module
 from typing import Sequence
 
-from .commands import EXIT_BAD_INPUT, EXIT_RUN_FAILED, GROUPS, Commands
+from .commands import EXIT_BAD_INPUT, EXIT_RUN_FAILED, declared
 from .fmu_log_option import apply_fmu_log
 
 __all__ = ["main", "EXIT_BAD_INPUT", "EXIT_RUN_FAILED"]
@@ -77,9 +76,7 @@ def _parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     p = _Parser(prog="fnn-cosim", description=__doc__.split("\n\n")[0])
     p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     p.set_defaults(start_up_over=_started)  # a command that ends its own start-up calls it (_OWN_START_UP)
-    commands = Commands()
-    for group in GROUPS:
-        import_module(f"{__package__}.commands.{group}").add_commands(commands)
+    commands = declared()
     subparsers = p.add_subparsers(dest="command", required=True)
     if argv and argv[0] in commands:
         commands.make(subparsers, argv[0])

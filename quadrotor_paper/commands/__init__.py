@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Callable
+from importlib import import_module
+from typing import Callable, Iterator
 
-__all__ = ["GROUPS", "Commands", "out_folder", "output_options", "DEFAULT_OUT", "EXIT_RUN_FAILED", "EXIT_BAD_INPUT"]
+__all__ = ["GROUPS", "Commands", "declared", "out_folder", "output_options", "DEFAULT_OUT", "EXIT_RUN_FAILED", "EXIT_BAD_INPUT"]
 
 GROUPS = ("run", "studies", "files", "stability", "calibrate")
 DEFAULT_OUT = Path("results")
@@ -65,6 +66,10 @@ class Commands:
     def __contains__(self, name: object) -> bool:
         return name in self._declared
 
+    def __iter__(self) -> Iterator[str]:
+        """The commands' names, in the order declared (the listing's)."""
+        return iter(self._declared)
+
     def make(self, subparsers, name: str | None = None) -> None:
         """Add the parser of the command ``name`` (``None``: of every command,
         in the order declared) to ``subparsers``, without its arguments."""
@@ -83,6 +88,15 @@ class Commands:
             if arguments is not None:
                 arguments(parser)
             parser.set_defaults(func=handler)
+
+
+def declared() -> Commands:
+    """Every command of :data:`GROUPS`, declared in their order (made by
+    ``quadrotor_paper.cli``'s parser)."""
+    commands = Commands()
+    for group in GROUPS:
+        import_module(f"{__name__}.{group}").add_commands(commands)
+    return commands
 
 
 def out_folder(given: str | None, default: Path) -> Path:

@@ -143,6 +143,7 @@ def test_a_run_makes_only_its_own_parser(capsys):
     parser (the listing of --help, the refusal of an unknown command) and
     add the arguments of the one given."""
     from quadrotor_paper.cli import _parser
+    from quadrotor_paper.commands import declared
     from quadrotor_paper.commands.run import add_commands
 
     argv = ["run", "circles", "--no-plots", "--seed", "3"]
@@ -161,7 +162,7 @@ def test_a_run_makes_only_its_own_parser(capsys):
     with pytest.raises(SystemExit) as ended:
         _parser(["--help"])
     assert ended.value.code == 0 and capsys.readouterr().out == full.format_help()
-    assert "{" + ",".join(names) + "}" in full.format_help()
+    assert "{" + ",".join(names) + "}" in full.format_help() and tuple(declared()) == names
 
 
 _ARGPARSE_END = """
