@@ -15,11 +15,11 @@ from pathlib import Path
 
 from ..set_option import named_values, overrides
 from ..workers_option import worker_count
-from . import Commands
+from . import DEFAULT_OUT, Commands
 
 __all__ = ["add_commands"]
 
-DEFAULT_OUT = "results/calibration"
+CALIBRATION_OUT = str(DEFAULT_OUT / "calibration")
 COLUMN_MAPS = Path(__file__).resolve().parent.parent / "column_maps"  # the built-in maps: --columns px4, px4-pwm
 
 
@@ -58,7 +58,7 @@ def _arguments(c: argparse.ArgumentParser) -> None:
                    help="the FMU's interface that makes the trajectories (default: the settings', 'auto': "
                         "Co-Simulation where the FMU has it, else Model Exchange)")
     c.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
-    c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
+    c.add_argument("--out", default=None, help=f"output directory (default {CALIBRATION_OUT})")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.add_argument("--no-plots", action="store_true", help="no figures (report.md without them)")
     c.add_argument("--strict", action="store_true", help="exit status 1 when the calibration warns (residuals not "
@@ -107,7 +107,7 @@ def _calibrate(args) -> int:
     if update:
         settings = validate(CalibrationSettings, settings.model_dump(exclude_none=True) | update)
     column_map = read_column_map(_column_map_file(args.columns)) if args.columns else None
-    out = output_folder(args.out or DEFAULT_OUT)
+    out = output_folder(args.out or CALIBRATION_OUT)
     fixed, extra, instance = {}, {}, None
     if args.scenario is not None:
         from cosim.calibration.scenario_instance import scenario_instance
