@@ -19,6 +19,9 @@ each:
 * :mod:`~cosim.calibration.outputs`: ``calibration.json``, ``parameters.ssv``, the TOML override, ``report.md``.
 
 :func:`calibrate` runs them in order and returns a :class:`Calibration`.
+
+May import every other part of the engine (it is the top layer: it flies
+FMUs, reads scenarios and summarizes like a study); nothing imports it.
 """
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from ..errors import ScenarioError
-from ..fmu_component import FmuComponent
+from ..fmi.fmu import FmuComponent
 from ..names import nearest_told
 from .columns import CalibrationSettings, ColumnMap, read_column_map, read_settings
 from .diagnostics import Diagnostic, diagnose
@@ -172,7 +175,7 @@ def _component(fmu: str | Path, settings: CalibrationSettings, instance: str | N
     integrated by the master's solver (``settings.solver``, CVODE at
     :data:`~cosim.calibration.columns.TOLERANCE` unless given). An interface
     the FMU lacks is its :class:`~cosim.errors.FmuLoadError`, in one line."""
-    from ..model_exchange import SolverSettings
+    from ..fmi.model_exchange import SolverSettings
     from .columns import TOLERANCE
 
     given = settings.solver.model_dump() if settings.solver is not None else {}

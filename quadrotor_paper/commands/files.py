@@ -30,8 +30,8 @@ def _export_ssp_arguments(e: argparse.ArgumentParser) -> None:
 def _export_ssp(args) -> int:
     """Write the scenario, every component as an FMU, as an SSP archive."""
     from cosim.files import output_file
-    from cosim.scenario import load_scenario
-    from cosim.ssp_export import export_ssp
+    from cosim.scenario.definition import load_scenario
+    from cosim.ssp.export import export_ssp
 
     from ..portable import all_fmu
 
@@ -51,9 +51,9 @@ def _schema(args) -> int:
     import json
 
     if args.kind == "scenario":
-        from cosim.scenario import scenario_json_schema as schema
+        from cosim.scenario.definition import scenario_json_schema as schema
     elif args.kind == "study":
-        from cosim.study import study_json_schema as schema
+        from cosim.study.definition import study_json_schema as schema
     else:  # fnn-cosim calibrate's files: --settings, --columns
         from cosim.calibration.columns import calibration_schema
 
@@ -70,7 +70,7 @@ def _schema(args) -> int:
 
 
 def _scenarios(args) -> int:
-    from cosim.scenario import load_scenario, shipped_scenarios
+    from cosim.scenario.definition import load_scenario, shipped_scenarios
 
     shipped = sorted(shipped_scenarios().items())
     width = max(len(name) for name, _ in shipped)
@@ -86,10 +86,10 @@ def _build_fmu_arguments(b: argparse.ArgumentParser) -> None:
 def _build_fmu(args) -> int:
     """Build every registered model (the plant, the wind, the references, the
     controller of every variant) in every FMI version the exporter supports,
-    side by side (:func:`cosim.registry.write_fmu_models`); print the path
+    side by side (:func:`cosim.scenario.registry.write_fmu_models`); print the path
     of each FMU written, one per line."""
     from cosim.files import output_folder
-    from cosim.registry import write_fmu_models
+    from cosim.scenario.registry import write_fmu_models
     from fmu_models.export.build import FMI_VERSIONS
 
     for path in write_fmu_models(output_folder(args.out), sorted(FMI_VERSIONS)):

@@ -67,20 +67,20 @@ def _scenario(args):
             if value:
                 raise ScenarioError(f"{flag} {value}: an SSP archive's controller is an FMU it holds, with its "
                                     f"own model and state; give it to a TOML scenario's [controller]")
-        from cosim.ssp import load_ssp
+        from cosim.ssp.archive import load_ssp
 
         return load_ssp(args.scenario, overrides=changes)
     if args.variant:
         changes["controller.variant"] = args.variant
     if args.load_learned:
         changes["controller.learned"] = str(args.load_learned)
-    from cosim.scenario import load_scenario
+    from cosim.scenario.definition import load_scenario
 
     return load_scenario(args.scenario, changes)
 
 
 def _run(args) -> int:
-    from cosim.assembly import build_master
+    from cosim.scenario.assembly import build_master
     from cosim.files import not_others_results, output_file, output_folder, safe_name
     from cosim.notes import release, show_on_stderr
 

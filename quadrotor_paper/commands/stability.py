@@ -74,7 +74,7 @@ def _checked(args: argparse.Namespace) -> None:
 
     from cosim.errors import ScenarioError
     from cosim.files import output_folder
-    from cosim.schema import NonNegative, Positive, Table, validate
+    from cosim.scenario.schema import NonNegative, Positive, Table, validate
 
     class Arguments(Table):
         kp: Positive = None  # a PD with kp <= 0 has no operating point to linearize around
@@ -174,9 +174,9 @@ def _linearize_arguments(lz: argparse.ArgumentParser) -> None:
 def _operating_point(args) -> tuple[Path, dict[str, Any]]:
     """The FMU file and the operating point to linearize at: ``--scenario S
     --time T``, instance ``args.fmu`` at T of S's run
-    (:func:`cosim.linearize.operating_point_of_run`); else the FMU file or
+    (:func:`cosim.linearize.linearization.operating_point_of_run`); else the FMU file or
     built model ``args.fmu`` at ``--parameter``'s values."""
-    from cosim.assembly import fmu_file_or_model
+    from cosim.scenario.assembly import fmu_file_or_model
     from cosim.errors import ScenarioError
 
     if args.scenario is None and args.time is None:
@@ -188,8 +188,8 @@ def _operating_point(args) -> tuple[Path, dict[str, Any]]:
         raise ScenarioError("--parameter: with --scenario the parameters are the run's; set them with --set")
     if args.time is None:
         raise ScenarioError("--scenario: give the time of the run to linearize at with --time")
-    from cosim.linearize import operating_point_of_run
-    from cosim.scenario import load_scenario
+    from cosim.linearize.linearization import operating_point_of_run
+    from cosim.scenario.definition import load_scenario
 
     return operating_point_of_run(load_scenario(args.scenario, overrides(args.set)), args.fmu, args.time,
                                   f"--time {args.time!r}")
@@ -214,7 +214,7 @@ def _linearize(args) -> int:
     the operating point given, or an FMU instance of a scenario at time
     ``--time`` of its run; write the system, its poles and Bode plots."""
     from cosim.errors import ScenarioError
-    from cosim.linearize import LinearizationError, linearize_fmu, save_linearization
+    from cosim.linearize.linearization import LinearizationError, linearize_fmu, save_linearization
 
     path, point = _operating_point(args)
     pairs = _bode_pairs(args.bode)

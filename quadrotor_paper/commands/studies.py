@@ -185,8 +185,8 @@ def _reproduce(args) -> int:
 def _sweep(args) -> int:
     """A study: the base scenario over its cases and sweep, one row per run in runs.csv."""
     from cosim.files import safe_name
-    from cosim.study import load_study
-    from cosim.summary import cell_lines
+    from cosim.study.definition import load_study
+    from cosim.study.summary import cell_lines
 
     from ..experiments import measure
     from ..progress import progress_bar
