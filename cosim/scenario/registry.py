@@ -37,11 +37,11 @@ import sys
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from ..cache import cache_folder, register_cache
 
-__all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
+__all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models", "write_fmu_models",
            "register_section", "register_fmu_model", "register_scenarios", "register_studies", "register_case", "register_cases", "component_kinds",
            "sections", "fmu_models", "cases", "aliases", "scenario_folders", "study_folders", "files_by_name", "scoped", "with_connections", "version",
            "register_table_fmu", "table_fmu", "register_cache", "cache_folder", "signature", "PLUGIN_GROUP"]
@@ -231,6 +231,20 @@ def build_fmu_models(fmi_versions: Sequence[int]) -> list[tuple[str, int, Path]]
     with ThreadPoolExecutor(max(1, len(builds))) as pool:
         paths = list(pool.map(lambda b: b[1].build(b[2]), builds))
     return [(name, version, path) for (name, _, version), path in zip(builds, paths)]
+
+
+def write_fmu_models(out: Path, fmi_versions: Sequence[int]) -> Iterator[Path]:
+    """Every registered model built in each of ``fmi_versions``
+    (:func:`build_fmu_models`) and copied into the folder ``out`` (made) as
+    ``fmi<version>/<name>.fmu``; yields each file written, in the order
+    built (``fnn-cosim build-fmu``)."""
+    import shutil
+
+    for name, version, path in build_fmu_models(fmi_versions):
+        target = Path(out) / f"fmi{version}" / f"{name}.fmu"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, target)
+        yield target
 
 
 def register_table_fmu(build: Callable[[Any, int], Path]) -> None:

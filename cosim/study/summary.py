@@ -18,7 +18,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["summarize", "interval95", "metric_value", "t975", "kept_t975", "STATUSES", "MAX_ERRORS"]
+__all__ = ["summarize", "cell_lines", "interval95", "metric_value", "t975", "kept_t975", "STATUSES", "MAX_ERRORS"]
 
 STATUSES = ("ok", "diverged", "failed")
 MAX_ERRORS = 5  # messages kept per cell: the first ones in plan order
@@ -157,3 +157,15 @@ def summarize(study, rows: Iterable[Mapping[str, Any]], metric_names: Sequence[s
                     "errors": [e for _, e in sorted(errors[c], reverse=True)],
                     "metrics": {m: _statistics(indices[c][m], values[c][m]) for m in metric_names}})
     return out
+
+
+def cell_lines(summary: Mapping[str, Any]) -> list[str]:
+    """A study's summary (``summary.json``: its ``cells``, :func:`summarize`)
+    at a glance, one line per cell: its case, its grid point, its ``ok``
+    runs and each metric's mean over them (a metric with no mean left out)."""
+    lines = []
+    for cell in summary.get("cells", []):
+        point = ", ".join(f"{k}={v}" for k, v in cell["values"].items())
+        means = ", ".join(f"{m} {s['mean']:.4g}" for m, s in cell["metrics"].items() if s["mean"] is not None)
+        lines.append(f"{' / '.join(x for x in (cell['label'], point) if x)}: {cell['ok']} ok; {means}")
+    return lines
