@@ -138,14 +138,16 @@ class Executor:
     def map(self, fn: Callable, *iterables: Iterable) -> list:
         """``fn`` over the items of ``iterables`` (zipped), side by side: the
         results in order. The first failure (:meth:`result`) is raised once
-        every task is done or cancelled, so none runs on behind the caller."""
+        every other task is done or cancelled, so none runs on behind the
+        caller (on a cluster, those not started are cancelled)."""
         futures = [self.submit(fn, *args) for args in zip(*iterables)]
         try:
             return [self.result(f) for f in futures]
         except BaseException:
             for f in futures:
                 f.cancel()
-            self.wait(futures)
+            if self.kind != "dask":  # a cluster's task runs on or not as its worker decides; its result is dropped
+                cf.wait(futures)
             raise
 
     def as_completed(self, futures: Iterable) -> Iterator:
@@ -155,15 +157,6 @@ class Executor:
 
             return iter(as_completed(list(futures)))
         return cf.as_completed(list(futures))
-
-    def wait(self, futures: Iterable) -> None:
-        """Until every one of ``futures`` is done or cancelled."""
-        if self.kind == "dask":
-            from distributed import wait
-
-            wait(list(futures))
-        else:
-            cf.wait(list(futures))
 
 
 @contextmanager
