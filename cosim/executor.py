@@ -167,16 +167,20 @@ def parallel(kind: str, workers: int = 1, *, scheduler: str | None = None, initi
     without ``scheduler``: a local cluster of that many processes).
     ``initializer(*initargs)`` runs once in each worker before its first
     task (threads and processes: what every task shares, pickled once per
-    process). Leaving the block waits for the tasks in flight, cancels the
-    others and stops the workers (a cluster given by address keeps its own)."""
+    process); ``name``: the threads' name prefix. Leaving the block waits
+    for the tasks in flight, cancels the others and stops the workers (a
+    cluster given by address keeps its own)."""
     n = max(1, int(workers))
-    if kind == "threads":
-        with _Threads(n, thread_name_prefix=name, initializer=initializer, initargs=initargs) as pool:
+    if kind in ("threads", "processes"):
+        if kind == "threads":
+            pool = _Threads(n, thread_name_prefix=name, initializer=initializer, initargs=initargs)
+        else:
+            pool = cf.ProcessPoolExecutor(n, mp_context=multiprocessing.get_context(start_method()),
+                                          initializer=initializer, initargs=initargs)
+        try:
             yield Executor(kind, pool, n)
-    elif kind == "processes":
-        context = multiprocessing.get_context(start_method())
-        with cf.ProcessPoolExecutor(n, mp_context=context, initializer=initializer, initargs=initargs) as pool:
-            yield Executor(kind, pool, n)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
     elif kind == "dask":
         if initializer is not None:
             raise ValueError("parallel('dask'): no initializer (a cluster's workers come and go)")
