@@ -28,6 +28,7 @@ by side on a Dask ``LocalCluster`` (minutes a seed; docs/calibration.md).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import tempfile
 from pathlib import Path
 
@@ -83,13 +84,12 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     jobs = [(seed, args.duration, args.workers, args.aero) for seed in range(args.first, args.first + args.seeds)]
-    client = None
-    if args.processes > 1:  # the project's executor for every multi-run job: Dask (a cluster's address works too)
-        from dask.distributed import Client, LocalCluster, as_completed
+    cluster = contextlib.ExitStack()
+    if args.processes > 1:  # the project's executor (cosim.executor): a Dask cluster of processes
+        from cosim.executor import parallel
 
-        client = Client(LocalCluster(n_workers=args.processes, threads_per_worker=1, processes=True,
-                                     dashboard_address=None))
-        results = (f.result() for f in as_completed(client.map(_one, jobs)))
+        pool = cluster.enter_context(parallel("dask", args.processes))
+        results = (pool.result(f) for f in pool.as_completed([pool.submit(_one, job) for job in jobs]))
     else:
         results = map(_one, jobs)
     for seed, r in results:
@@ -97,8 +97,7 @@ def main() -> None:
         rows.append(r)
         print(f"seed {seed:2d}: " + ", ".join(f"{n} {e:.1e}{'' if c else ' NOT COVERED'}" for n, (e, c, _) in r.items())
               + ("" if all(v[2] for v in r.values()) else " (not converged)") + f" ({why})", flush=True)
-    if client is not None:
-        client.close()
+    cluster.close()
     for n in (FIT_AERO if args.aero else FIT):
         covered = np.mean([r[n][1] for r in rows])
         worst = max(r[n][0] for r in rows)

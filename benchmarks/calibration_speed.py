@@ -66,9 +66,16 @@ def truth() -> dict[str, float]:
 
 
 def cpu() -> float:
-    """CPU seconds of this process and its finished children (the workers)."""
+    """CPU seconds of this process, its finished children, and the worker
+    processes its children started and reaped: the workers (cosim.executor)
+    start from a forkserver, whose children they are, not ours; psutil reads
+    the server's count of them."""
+    import psutil
+
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+    alive = [child.cpu_times() for child in psutil.Process().children()]
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime + sum(
+        t.user + t.system + t.children_user + t.children_system for t in alive)
 
 
 def ours(log: Path, fmu: Path, fixed: dict, workers: int, jacobian: str, initial_states: str = "recorded"):

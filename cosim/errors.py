@@ -54,6 +54,17 @@ class CosimError(Exception):
     def __init__(self, *args):
         super().__init__(*(_shown(a) if isinstance(a, str) else a for a in args))
 
+    def __reduce__(self):
+        # pickled whole (from a worker process, cosim.executor): its message and attributes as they are, not
+        # its __init__ called again with the message alone (FmuError's takes three arguments)
+        return _rebuilt, (type(self), self.args, self.__dict__)
+
+
+def _rebuilt(cls: type, args: tuple, state: dict) -> CosimError:
+    error = Exception.__new__(cls, *args)
+    error.__dict__.update(state)
+    return error
+
 
 class ConnectionCheckError(CosimError):
     """A declared connection is wrong (unknown variable, causality, type, unit)."""

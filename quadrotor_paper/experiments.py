@@ -272,30 +272,19 @@ def measure(study: Study, out_dir: str | Path | None = None, *, workers: int = 1
                      worker_timeout=worker_timeout, threads=threads_safe(study, metrics))
 
 
-_FMU_VALUES = ("parameters", "start")  # what a study may change of an [fmus] entry and stay on our FMUs
-
-
 def threads_safe(study: Study, metrics: Callable[[Scenario, Any], Mapping[str, Any]] = study_metrics) -> bool:
     """Whether ``study``'s runs may fly as threads of one process
     (:func:`cosim.study.runner.fly`, ``docs/studies.md``, "Threads or
     processes"): its metrics are :func:`study_metrics` (taken as the rows
     stream: a run's time is its compiled loop, which releases the GIL; an
     analysis's metrics run Python per run, which the GIL would serialize),
-    every ``[fmus]`` entry is a registered model of this project in
-    Co-Simulation (their C keeps no global state and is reentrant, checked
-    on every built binary; a Model Exchange FMU is integrated in Python),
-    and no case, grid or random key gives an FMU another file or interface.
+    and its FMUs are our compiled ones whatever its cases, grid and draws
+    change (the engine's rule, :func:`cosim.executor.compiled_ours`).
     Anything else (an FMU file of someone's, which may keep globals or
     crash) flies in worker processes."""
+    from cosim.executor import compiled_ours
+
     if metrics is not study_metrics:
         return False
-    scenario = study.scenario
-    for spec in scenario.fmus.values():
-        if "model" not in spec or spec.get("interface", "CoSimulation") != "CoSimulation":
-            return False
     keys = [*study.grid, *study.random, *(k for case in study.cases for k in case.overrides)]
-    for key in keys:
-        parts = dotted_key(key)
-        if parts[0] == "fmus" and (len(parts) < 3 or parts[2] not in _FMU_VALUES):
-            return False
-    return True
+    return compiled_ours(study.scenario.fmus, [dotted_key(key) for key in keys])

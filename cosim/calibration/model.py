@@ -29,7 +29,7 @@ right-hand side along them (Model Exchange).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -112,12 +112,24 @@ class LogModel:
         self.n_params = len(p.fit) - len(p.fit_inputs)
         # Model Exchange sets the states themselves (simulate): no start value needed
         self.setters = {} if self.model_exchange else self._initial_setters(dict(initial_parameters or {}))
+        self._initial_parameters = dict(initial_parameters or {})
         self.times = p.log.times
         self._me: FmuComponent | None = None
         self._pairs: list[tuple[FmuComponent, FmuComponent, float]] = []
         self._started_for: np.ndarray | None = None
         self.derivative_error = 0.0
         self._rows_seen = 0  # the largest difference of a parameter column at h against 2 h (last Jacobian)
+
+    def __reduce__(self):
+        """A copy for a worker process (:mod:`cosim.executor`, pickled once
+        to each, :mod:`~cosim.calibration.solve`): the problem and the
+        settings, and an instance of the same FMU file in the same interface
+        and solver made there (an FMU instance is memory of its process).
+        Of the log, its times: the problem holds the rows it uses."""
+        cs, p = self.cs, self.problem
+        solver = cs.solver if cs.interface == "ModelExchange" else None
+        problem = replace(p, fmu=None, log=replace(p.log, columns={}))
+        return _copy, (problem, self._initial_parameters, cs.name, str(cs.path), cs.interface, solver)
 
     # ---- parameters and initial states ------------------------------------------------------------
 
@@ -305,3 +317,10 @@ class LogModel:
         for comp in [self._me] + [c for pair in self._pairs for c in pair[:2]]:
             if comp is not None:
                 comp.close()
+
+
+def _copy(problem: Problem, initial_parameters: dict[str, str], name: str, path: str, interface: str,
+          solver) -> LogModel:
+    """:meth:`LogModel.__reduce__`'s copy, in the worker process."""
+    return LogModel(replace(problem, fmu=FmuComponent(name, path, interface=interface, solver=solver)),
+                    initial_parameters)

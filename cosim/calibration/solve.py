@@ -39,7 +39,7 @@ COARSE_TOLERANCE = 1e-8  # the iterations with Jacobians at every stride-th row 
 COARSE_EVALUATIONS = 20  # at most this many simulations with them (their convergence is linear near the optimum)
 METHODS = {"casadi": "forward sensitivities (CasADi, the model's own definition)",
            "derivatives": "forward sensitivities (directional derivatives)", "differences": "central differences"}
-_MODEL: LogModel | None = None  # a worker's model: inherited from the parent at fork (its own FMU instances)
+_MODEL: LogModel | None = None  # a worker process's model: its copy, pickled to it once (_Workers)
 
 
 def _simulated(model: LogModel, theta, s: Segment, x0):
@@ -83,19 +83,39 @@ def _sensitivities_part(job):
     return out, _MODEL.derivative_error
 
 
+def _start_worker(model: LogModel) -> None:
+    """A worker process's start (:class:`_Workers`): its model, closed when the worker leaves."""
+    from multiprocessing.util import Finalize
+
+    global _MODEL
+    _MODEL = model
+    # not atexit: a worker process leaves by os._exit after multiprocessing's finalizers only (its FMU
+    # instances freed, their extracted folders removed)
+    Finalize(model, _close_worker, (model,), exitpriority=10)
+
+
+def _close_worker(model: LogModel) -> None:
+    model.close()
+    model.cs.close()
+
+
 class _Workers:
-    """Segments shared by ``n`` worker processes, each a fork of this one
-    holding its own copies of the FMU instances (an FMU instance is memory of
-    its process: a forked copy is an instance of its own). Segment ``i`` goes
-    to worker ``i mod n``; the results come back in order."""
+    """Segments shared by ``n`` worker processes (:func:`cosim.executor.parallel`),
+    each holding its own copy of the model with its own FMU instances (an
+    FMU instance is memory of its process), pickled to it once when it
+    starts (:meth:`~cosim.calibration.model.LogModel.__reduce__`): a task
+    carries the point and its segments only. Segment ``i`` goes to part
+    ``i mod n``; the results come back in order."""
 
     def __init__(self, model: LogModel, n: int):
-        import multiprocessing
+        import contextlib
 
-        global _MODEL
-        _MODEL = model
+        from ..executor import parallel
+
         self.n = n
-        self.pool = multiprocessing.get_context("fork").Pool(n)
+        self._workers = contextlib.ExitStack()
+        self.pool = self._workers.enter_context(parallel("processes", n, initializer=_start_worker,
+                                                         initargs=(model,), name="cosim-fit"))
 
     def _parts(self, items):
         return [items[k::self.n] for k in range(self.n)]
@@ -118,8 +138,7 @@ class _Workers:
         return self._merge([r[0] for r in results], len(segments)), error
 
     def close(self):
-        self.pool.terminate()
-        self.pool.join()
+        self._workers.close()
 
 
 @dataclass
@@ -429,9 +448,6 @@ def fit(model: LogModel, segments: list[Segment], estimated: np.ndarray, x0_log:
     if symbolic is not None:
         pass  # its segments run in threads: no processes
     elif workers > 1 and len(segments) > 1 and method != "differences":
-        # the Model Exchange instances made here, before the fork: every worker inherits them (and this
-        # process, which extracted them, removes their folders at the end)
-        model.start_probes(np.asarray(model.problem.guess, dtype=float), float(model.times[0]))
         pool = _Workers(model, min(workers, len(segments)))
     try:
         return _fit(model, segments, estimated, x0_log, noise, method, max_iterations, tolerance, progress, pool,

@@ -327,10 +327,10 @@ class SymbolicModel:
         """``fn`` on each segment's arguments, ``workers`` segments at a time
         (threads: a compiled call releases the interpreter's lock)."""
         if self.workers > 1 and len(arguments) > 1:
-            from concurrent.futures import ThreadPoolExecutor
+            from ..executor import parallel
 
-            with ThreadPoolExecutor(self.workers) as pool:
-                return list(pool.map(fn, arguments))
+            with parallel("threads", self.workers, name="cosim-segment") as pool:
+                return pool.map(fn, arguments)
         return [fn(a) for a in arguments]
 
     # ---- what the solver asks --------------------------------------------------------------------

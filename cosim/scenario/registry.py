@@ -225,11 +225,11 @@ def build_fmu_models(fmi_versions: Sequence[int]) -> list[tuple[str, int, Path]]
     and then waited for its own compiles (the largest, staged late,
     compiled alone at the end). ``fnn-cosim build-fmu`` and the test
     session's first build (tests/conftest.py) use it."""
-    from concurrent.futures import ThreadPoolExecutor
+    from ..executor import parallel
 
     builds = [(name, model, version) for version in fmi_versions for name, model in fmu_models().items()]
-    with ThreadPoolExecutor(max(1, len(builds))) as pool:
-        paths = list(pool.map(lambda b: b[1].build(b[2]), builds))
+    with parallel("threads", len(builds), name="cosim-build") as pool:
+        paths = pool.map(lambda b: b[1].build(b[2]), builds)
     return [(name, version, path) for (name, _, version), path in zip(builds, paths)]
 
 

@@ -63,10 +63,10 @@ it).
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import logging
-import multiprocessing
 import os
 import shutil
 import tempfile
@@ -79,6 +79,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping
 
 from ..errors import CosimError, ScenarioError, one_line
+from ..executor import kind_for, parallel
 from ..limits import WORKER_TIMEOUT
 from ..scenario.definition import Scenario, apply_overrides, parse_scenario
 from ..scenario.assembly import build_master, check_fmu_file, fmu_file, fmu_values
@@ -275,7 +276,6 @@ class MasterCache:
         self._raw = self._raw_text = None
 
 
-LOG_LENGTH = 100  # entries of the local scheduler's diagnostic logs (see _client)
 POLL = 1.0  # s between looks at the cluster while no run finishes
 
 _LOCAL = threading.local()  # a Dask worker's cache, one per thread of the worker (each takes its masters alone)
@@ -400,9 +400,11 @@ def fly(scenario: Scenario, runs: Iterable[Run], workers: int = 1, scheduler: st
         finally:
             cache.close()
         return
-    if threads and scheduler is None:
+    if kind_for(scheduler, gil_free=threads) == "threads":
         yield from _run_threaded(raw, source, runs, workers, metrics)
         return
+    # processes: a Dask LocalCluster (not a concurrent.futures pool, which a dying worker breaks for good),
+    # whose workers are replaced and whose dead batches are flown again (_run_dask)
     yield from _run_dask(raw, source, runs, workers, scheduler, metrics, window, worker_timeout, total)
 
 
@@ -450,11 +452,9 @@ def _run_threaded(raw, source, runs, workers: int, metrics) -> Iterator[dict[str
 
     records: queue.Queue = queue.Queue()
     stop = threading.Event()  # the consumer is gone: the runs not yet started are not flown
-    executor = getattr(dask.threaded, "ContextAwareThreadPoolExecutor", None)
-    if executor is None:  # an older Dask: its threads start with the driver's context anyway
-        from concurrent.futures import ThreadPoolExecutor as executor
     threads = max(1, workers)
-    pool = executor(threads, thread_name_prefix="cosim-run")
+    threaded = contextlib.ExitStack()
+    pool = threaded.enter_context(parallel("threads", threads, name="cosim-run")).pool
     cache = MasterCache(size=max(8, 2 * threads))
 
     def flown(piece: list[Run]) -> None:
@@ -497,59 +497,16 @@ def _run_threaded(raw, source, runs, workers: int, metrics) -> Iterator[dict[str
     finally:
         stop.set()  # the runs in flight finish (a master is never freed under its loop), no other starts
         driver.join()
-        pool.shutdown(wait=True)
+        threaded.close()
         cache.close()
-
-
-def _client(workers: int, scheduler: str | None, scratch: Path | None = None):
-    """A Dask client: of the cluster at ``scheduler``, or of a local cluster of
-    ``workers`` processes whose scratch space (Dask's ``dask-scratch-space``:
-    the workers' folders, its locks) is the folder ``scratch``, which the
-    caller makes and removes: it was left in the system's temporary folder
-    after every study."""
-    import logging
-
-    import dask
-    from dask.distributed import Client, LocalCluster
-
-    if scheduler is not None:
-        try:
-            return Client(scheduler, timeout=30), None
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ScenarioError(f"--scheduler {scheduler}: no Dask scheduler answers there ({_message(exc)})") from None
-    # The local scheduler lives in this process. Its diagnostic logs keep
-    # about 19 kB per task up to 10 000 entries (measured by
-    # benchmarks/study_efficiency.py): short logs keep the driver's memory
-    # flat as a study grows. Its workers start by forkserver where there is
-    # one (POSIX): forked from a server process that runs no threads (so not
-    # the fork of a threaded driver that Python 3.12 warns about), they start
-    # in about half the time of spawn's fresh interpreters and close in a
-    # tenth (a study of 6 short runs on 2 workers: 3.9-5.0 s against 5.1-7.2 s,
-    # alternated on this busy machine). A cluster given by address keeps its own settings.
-    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-    with dask.config.set({"temporary-directory": str(scratch) if scratch else None,
-                          "distributed.admin.log-length": LOG_LENGTH,
-                          "distributed.admin.low-level-log-length": LOG_LENGTH,
-                          "distributed.worker.multiprocessing-method": method}):
-        # no dashboard; the scheduler's HTTP server (which dashboard_address=None put on 8787, with a
-        # warning on stderr when another cluster held that port) on a free port
-        quiet = {"dashboard_address": ":0", "scheduler_kwargs": {"dashboard": False},
-                 "silence_logs": logging.ERROR, "local_directory": scratch}
-        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, **quiet)
-        return Client(cluster), cluster
 
 
 def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
               worker_timeout: float | None, total: int | None) -> Iterator[dict[str, Any]]:
     from dask.distributed import wait
 
-    scratch = Path(tempfile.mkdtemp(prefix="cosim-dask-")) if scheduler is None else None
-    try:
-        client, cluster = _client(workers, scheduler, scratch)
-    except BaseException:
-        if scratch is not None:
-            shutil.rmtree(scratch, ignore_errors=True)
-        raise
+    cluster = contextlib.ExitStack()
+    client = cluster.enter_context(parallel("dask", workers, scheduler=scheduler)).pool
     try:
         pending = iter(runs)
         again: list[Run] = []  # the runs of a batch whose worker died: flown again one by one
@@ -616,8 +573,4 @@ def _run_dask(raw, source, runs, workers, scheduler, metrics, window,
                                  f"them all): the study stops with {in_flight} runs in flight; its table keeps "
                                  f"every run that finished, and running it again resumes it")
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-        if scratch is not None:
-            shutil.rmtree(scratch, ignore_errors=True)
+        cluster.close()

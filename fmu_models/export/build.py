@@ -19,7 +19,6 @@ import tempfile
 import threading
 import uuid
 import zipfile
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -208,8 +207,10 @@ def _run_compilers(commands: list[tuple[list[str], str]]) -> None:
     the largest first; raise naming the first that failed with its output."""
     if not commands:
         return
-    with ThreadPoolExecutor(len(commands)) as pool:
-        results = list(pool.map(_compile_one, [cmd for cmd, _ in commands]))
+    from cosim.executor import parallel
+
+    with parallel("threads", len(commands), name="cosim-compile") as pool:
+        results = pool.map(_compile_one, [cmd for cmd, _ in commands])
     for (cmd, what), result in zip(commands, results):
         if result.returncode != 0:
             raise FmuBuildError(f"compiling {what} failed:\n{' '.join(cmd)}\n{result.stdout}")

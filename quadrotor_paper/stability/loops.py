@@ -142,6 +142,15 @@ class LoopModel:
         self.gains = controller or linearize_controller(op)
         self._built: dict[tuple, ct.StateSpace] = {}
 
+    def __getstate__(self) -> dict:
+        """What a copy in a worker process needs (the operating points'
+        figures are drawn in one: :func:`~quadrotor_paper.stability.report.point_figures_aside`):
+        the point and the linearizations; not the python-control systems
+        built from them (a ``StateSpace`` holds local lambdas, which do not
+        pickle), which the copy builds again when asked, the same."""
+        state = {k: v for k, v in self.__dict__.items() if k in ("op", "dt", "delay_steps", "lin", "gains")}
+        return state | {"_built": {}}
+
     # ---- blocks ----------------------------------------------------------------
 
     @cached_property

@@ -319,42 +319,36 @@ POINT_FIGURES_HERE = 2  # of the operating points' figures, drawn by the command
 
 
 def point_figures_aside(analyses, out_dir: Path, here: int = POINT_FIGURES_HERE, names=None):
-    """Start :func:`point_figures` in a second process (forked: it inherits
-    the analyses, nothing is pickled) and return a function that draws the
-    last ``here`` of them in this process, waits for the second and returns
+    """Start :func:`point_figures` in a worker process
+    (:func:`cosim.executor.parallel`: started by forkserver or spawn, the
+    analyses pickled to it) and return a function that draws the last
+    ``here`` of them in this process, waits for the worker and returns
     name -> path, as :func:`point_figures` would. The study goes on
     meanwhile and the command calls that function once its own figures are
     drawn (:func:`make_figures`): on two cores the 12 figures of the
     operating points cost no wall time. ``here`` balances the two
-    processes: the second has the 12 figures (about 1 s of CPU each), the
+    processes: the worker has the 12 figures (about 1 s of CPU each), the
     command the rest of the study and 3 figures, about 2 s less, hence 2
-    of the 12 drawn here. Where a process cannot be forked, they are all
-    drawn here and now. ``names``: only these (default: every one)."""
-    import multiprocessing
-    import sys
+    of the 12 drawn here. ``names``: only these (default: every one)."""
+    import contextlib
+
+    from cosim.executor import parallel
 
     out = Path(out_dir)
-    if "fork" not in multiprocessing.get_all_start_methods():
-        figures = point_figures(analyses, out, names)
-        return lambda: figures
     paths = {f"{kind}_{a.op.name}": out / f"{kind}_{a.op.name}.png" for a in analyses for kind in _POINT_FIGURES
              if names is None or f"{kind}_{a.op.name}" in names}
     if not paths:
         return lambda: {}  # none asked for: no second process
     split = max(len(paths) - here, 0)
     there, mine = list(paths)[:split], list(paths)[split:]
-    sys.stdout.flush()  # the child would write what is still buffered a second time
-    sys.stderr.flush()
-    child = multiprocessing.get_context("fork").Process(target=point_figures, args=(analyses, out, there),
-                                                        name="stability figures")
-    child.start()
+    worker = contextlib.ExitStack()
+    pool = worker.enter_context(parallel("processes", 1, name="stability-figures"))
+    drawing = pool.submit(point_figures, analyses, out, there)
 
     def drawn() -> dict[str, Path]:
-        point_figures(analyses, out, mine)
-        child.join()
-        if child.exitcode != 0:
-            raise RuntimeError(f"drawing the operating points' figures failed (exit code {child.exitcode}; "
-                               f"its traceback is above)")
+        with worker:  # the worker process stops when its figures are drawn, or this process's failed
+            point_figures(analyses, out, mine)
+            pool.result(drawing)
         return paths
 
     return drawn

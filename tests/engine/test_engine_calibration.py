@@ -318,6 +318,22 @@ def test_an_fmu_with_both_interfaces_is_calibrated_in_model_exchange_when_asked(
     assert abs(cal.fit.theta[0] - 1.0) < 1e-6
 
 
+def test_segments_shared_by_worker_processes_fit_to_the_bits_of_one_process():
+    """``workers = 2``: the segments' trajectories and sensitivities in two
+    worker processes (cosim.executor, started by forkserver or spawn, the
+    model pickled to each once and its FMU instantiated there) give the fit
+    of one process, bit for bit (3 segments of 2.5 s, the last held out; Euler: a cheap fit)."""
+    settings = CalibrationSettings(fit=["mu"], guess={"mu": 1.5}, stop=10.0, segment=2.5, interface="ModelExchange",
+                                   solver={"method": "euler", "step": 0.01})
+    fmu = REFERENCE / "fmi2" / "VanDerPol.fmu"
+    one = calibrate(RESULTS / "VanDerPol_out.csv", fmu, settings)
+    two = calibrate(RESULTS / "VanDerPol_out.csv", fmu, settings.model_copy(update={"workers": 2}))
+    assert len(one.segments) == 3 and one.fit.method.startswith("forward sensitivities") and one.converged
+    assert two.fit.theta.tobytes() == one.fit.theta.tobytes() and two.fit.evaluations == one.fit.evaluations
+    assert two.fit.jacobian.tobytes() == one.fit.jacobian.tobytes()
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(two.fit.residuals, one.fit.residuals))
+
+
 @pytest.mark.parametrize("removed, args, says", [
     (("CoSimulation",), ["--interface", "CoSimulation"],
      "interface = 'CoSimulation': the FMU has no Co-Simulation interface (it has Model Exchange only)"),

@@ -423,7 +423,7 @@ def test_a_local_cluster_of_threads_gives_the_rows_of_this_process_and_frees_its
             made.append(self)
 
     monkeypatch.setattr(dask_runner, "MasterCache", Spied)
-    monkeypatch.setattr(dask_runner, "_client", lambda *args, **kwargs: pytest.fail("a distributed client"))
+    monkeypatch.setattr("cosim.executor._dask", lambda *args, **kwargs: pytest.fail("a distributed client"))
     here = run_study(study, tmp_path / "here", metrics=final_y, metric_names=["final_y"], plots=False)
     there = run_study(study, tmp_path / "threads", workers=2, threads=True, metrics=final_y,
                       metric_names=["final_y"], plots=False)

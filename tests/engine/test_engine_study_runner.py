@@ -10,6 +10,7 @@ and every other run is a row, once. No clock is read: how fast is
 benchmarks/study_efficiency.py's to say."""
 from __future__ import annotations
 
+import contextlib
 import re
 import tomllib
 from pathlib import Path
@@ -209,7 +210,12 @@ class _Cluster:
 
 def test_a_batch_whose_worker_died_is_flown_again_run_by_run_and_only_its_killer_fails(base, monkeypatch):
     cluster = _Cluster(killer=2)
-    monkeypatch.setattr(dask_runner, "_client", lambda workers, scheduler, scratch=None, threads=False: (cluster, None))
+
+    @contextlib.contextmanager
+    def client(workers, scheduler):  # cosim.executor's Dask client, here the cluster above
+        yield cluster
+
+    monkeypatch.setattr("cosim.executor._dask", client)
     monkeypatch.setattr("dask.distributed.wait", lambda futures, timeout, return_when: (set(futures), set()))
     monkeypatch.setattr(dask_runner, "batch_size", lambda left, threads, per_run: 5)
     runs = [_run(i, {"toy_controller.kp": 0.5 + i}) for i in range(7)]
