@@ -6,7 +6,7 @@ of one case of ``fnn-cosim stability --along-every S``, in this process. Prints
 the wall and CPU time of the run and its frozen points (medians of
 ``--repeats``, after one warm-up; the CPU time of this process is the
 steadier figure on a shared machine), the time per frozen point, and the FMU
-instances made per frozen point (every :class:`cosim.fmu_component.FmuComponent`
+instances made per frozen point (every :class:`cosim.fmi.fmu.FmuComponent`
 instantiation counted). Printed, never asserted.
 
     python benchmarks/along_flight_speed.py [--duration 12] [--every 2] [--repeats 3]
@@ -25,8 +25,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
 
-    from cosim.fmu_component import FmuComponent
-    from cosim.scenario import load_scenario
+    from cosim.fmi.fmu import FmuComponent
+    from cosim.scenario.definition import load_scenario
     from quadrotor_paper.stability.along_flight import AlongFlight, along_flight
 
     made = [0]

@@ -50,12 +50,12 @@ from processes import cli, timed
 
 # (label, module, attribute path): a phase of the run, timed around that function in the child process
 PHASES = (("parser", "quadrotor_paper.cli", "_parser"),
-          ("scenario read", "cosim.scenario", "load_scenario"),
-          ("master built", "cosim.assembly", "build_master"),
-          ("  its FMU components (descriptions)", "cosim.fmu_component", "FmuComponent.__init__"),
-          ("  their instances (library, fmiInstantiate)", "cosim.fmu_component", "FmuComponent.instantiate"),
-          ("run", "cosim.master", "Master.run"),
-          ("  results.csv written", "cosim.recorder", "Recorder.flush"),
+          ("scenario read", "cosim.scenario.definition", "load_scenario"),
+          ("master built", "cosim.scenario.assembly", "build_master"),
+          ("  its FMU components (descriptions)", "cosim.fmi.fmu", "FmuComponent.__init__"),
+          ("  their instances (library, fmiInstantiate)", "cosim.fmi.fmu", "FmuComponent.instantiate"),
+          ("run", "cosim.loop.master", "Master.run"),
+          ("  results.csv written", "cosim.loop.recorder", "Recorder.flush"),
           ("summary written", "cosim.files", "write_json"))
 
 # the child: the phases' functions wrapped (an inner call of the same function counted once), then fnn-cosim's

@@ -58,8 +58,8 @@ def main(argv=None) -> int:
     import quadrotor_paper  # noqa: F401  (registers the paper's scenarios)
     from quadrotor_paper.report import table_study
     from quadrotor_paper.experiments import measure
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master, fmu_file
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master, fmu_file
 
     scenario = load_scenario("circles", {"controller.variant": "pd+lm", "wind.speed": 3.0})
     n_steps = int(round(scenario.duration / scenario.step))

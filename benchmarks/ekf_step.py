@@ -2,7 +2,7 @@
 EstimatorGM), and the compiler's CPU for its generated C.
 
 For each model: its FMU (FMI 2.0) as built from this tree (``cached_fmu``,
-the shared cache), instantiated as a run does (``cosim.fmu_component``) and
+the shared cache), instantiated as a run does (``cosim.fmi.fmu``) and
 stepped ``--steps`` times on a straight line with noisy IMU samples and a
 fresh fix every tenth step; the time of ``do_step`` (``fmi2DoStep``) alone per
 step, best of ``--repeats`` runs (the Python call is about a microsecond of it).
@@ -48,7 +48,7 @@ def _step_seconds(model, steps: int, repeats: int) -> float:
     """Best time of one step (``FmuComponent.do_step``: fmi2DoStep) over ``repeats`` runs of ``steps`` steps."""
     import numpy as np
 
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
     from fmu_models.export.build import cached_fmu
 
     names = [v.name for v in model.inputs]

@@ -3,7 +3,7 @@
 ``fnn-cosim build-fmu`` do, from an empty cache.
 
 Builds every registered model in FMI 2.0 and 3.0 with
-:func:`cosim.registry.build_fmu_models` into a fresh, empty FMU cache
+:func:`cosim.scenario.registry.build_fmu_models` into a fresh, empty FMU cache
 (``FNN_COSIM_CACHE`` and ``XDG_CACHE_HOME`` pointed at a temporary folder)
 and prints: the wall time, the CPU time of this process and of its
 children (the compilers), the number of compiler calls and their CPU by
@@ -118,7 +118,7 @@ def main() -> None:
 
     wall0, (own0, kids0) = time.perf_counter(), _cpu()
     import quadrotor_paper  # noqa: F401  (registers the shipped models)
-    from cosim import registry
+    from cosim.scenario import registry
     from fmu_models.export import build, codegen
 
     calls = _Calls()
@@ -158,8 +158,8 @@ def main() -> None:
         span = calls.spans[calls.calls.index((cmd, seconds))]
         print(f"    {seconds:6.2f} s  {_what(cmd):<20} {calls.model(cmd):<32} {span[0] - t:6.1f} -> {span[1] - t:6.1f} s")
     for name in args.export:
-        from cosim.scenario import load_scenario
-        from cosim.ssp_export import export_ssp
+        from cosim.scenario.definition import load_scenario
+        from cosim.ssp.export import export_ssp
         from quadrotor_paper.portable import all_fmu
 
         calls.calls.clear()

@@ -13,7 +13,7 @@ The table (the issue's case): a CSV of the same rows and one column (about
 run`` for 1 s, in its default form (the table FMU, the compiled loop) and
 as the Python component, each process's peak printed beside the file's
 size, a process that runs the plant alone, and the same run with the reader
-before 2026-11-29 (``cosim/table.py`` at commit :data:`BEFORE`, taken from
+before 2026-11-29 (``cosim/scenario/signal_table.py`` at commit :data:`BEFORE`, taken from
 git: it parsed the whole file into Python rows; the issue measured 972 MB).
 
     .venv/bin/python benchmarks/log_memory.py [--rows 3000000] [--columns 2] [--no-before]
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-BEFORE = "f3f8343"  # the last commit whose signal table read a CSV whole (cosim/table.py)
+BEFORE = "f3f8343"  # the last commit whose signal table read a CSV whole (cosim/scenario/signal_table.py)
 
 CHILD = r"""
 import json, sys
@@ -56,13 +56,13 @@ scenario, out, before = sys.argv[1], sys.argv[2], sys.argv[3]
 def peak():
     with open("/proc/self/status") as f:
         return next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmHWM:"))
-if before != "-":  # the reader of commit BEFORE in place of cosim.table, before anything imports it
+if before != "-":  # the reader of commit BEFORE in place of cosim.scenario.signal_table, before anything imports it
     import importlib.util, cosim, cosim.limits
     cosim.limits.MAX_TABLE_BYTES = 256 * 2 ** 20  # its bound, since removed
-    module = importlib.util.module_from_spec(importlib.util.spec_from_loader("cosim.table", loader=None))
+    module = importlib.util.module_from_spec(importlib.util.spec_from_loader("cosim.scenario.signal_table", loader=None))
     module.__package__ = "cosim"
-    sys.modules["cosim.table"] = cosim.table = module
-    exec(compile(open(before).read(), "cosim/table.py@before", "exec"), module.__dict__)
+    sys.modules["cosim.scenario.signal_table"] = cosim.scenario.signal_table = module
+    exec(compile(open(before).read(), "cosim/scenario/signal_table.py@before", "exec"), module.__dict__)
 from quadrotor_paper.cli import main
 code = main(["run", scenario, "--out", out, "--no-plots", "--quiet"])
 print(json.dumps({"code": code, "peak": peak()}))
@@ -116,7 +116,7 @@ def tables(tmp: Path, rows: int, before: bool) -> None:
             ("the Python component", tmp / "python.toml", None)]
     if before:
         old = tmp / "table_before.py"
-        got = subprocess.run(["git", "show", f"{BEFORE}:cosim/table.py"], capture_output=True, text=True,
+        got = subprocess.run(["git", "show", f"{BEFORE}:cosim/scenario/signal_table.py"], capture_output=True, text=True,
                              cwd=Path(__file__).parent)
         if got.returncode:
             print(f"  the reader before (commit {BEFORE}): not in this checkout's history")

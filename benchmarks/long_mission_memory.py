@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{long['csv_bytes'] / 1e9:>9.3f}")
         print(f"peak resident memory, long / {REFERENCE_S:g} s: {ratio:.3f} (target <= {TARGET})")
 
-        from cosim.scenario import load_scenario
+        from cosim.scenario.definition import load_scenario
         from quadrotor_paper.run_metrics import from_results
 
         scenario = load_scenario("circles", {"simulation.duration": args.duration})

@@ -18,7 +18,7 @@ the time per step of:
 3. the shipped circles mission as ``fnn-cosim run circles`` runs it:
    ``Master.run`` on the shipped TOML scenario, whose trajectory and
    controller are their FMUs, so the master runs it in its compiled loop
-   (``cosim/kernel.c``);
+   (``cosim/loop/kernel.c``);
 4. the same with the controller in its Python form (``controller.form =
    "python"``: the CasADi step called in process), which the master runs in
    its Python loop;
@@ -102,8 +102,8 @@ def _time_master(scenario, repeats: int, profile: bool = False):
     """Median-able wall times of ``Master.run`` (after one warm-up run), the
     last result, the profiled runs' phase times per step (us), the ordering
     and which of the master's loops ran."""
-    from cosim import kernel
-    from cosim.assembly import build_master
+    from cosim.loop import kernel
+    from cosim.scenario.assembly import build_master
 
     times, phases = [], {}
     with build_master(scenario) as master:
@@ -222,9 +222,9 @@ def main(argv=None) -> int:
     wall0 = time.perf_counter()
 
     import quadrotor_paper  # noqa: F401  (registers the paper's scenarios)
-    from cosim.scenario import load_scenario
-    from cosim.ssp import load_ssp
-    from cosim.ssp_export import export_ssp
+    from cosim.scenario.definition import load_scenario
+    from cosim.ssp.archive import load_ssp
+    from cosim.ssp.export import export_ssp
     from quadrotor_paper.portable import all_fmu
 
     portable = all_fmu(load_scenario("circles"))

@@ -1,7 +1,7 @@
 """Model Exchange against Co-Simulation, measured: the loop and the whole process.
 
 Two cases, each flown with the same FMUs in Co-Simulation and in Model
-Exchange (``cosim.me_system``: one CVODE over the stacked states of the
+Exchange (``cosim.fmi.me_system``: one CVODE over the stacked states of the
 connected Model Exchange FMUs, its calls in C):
 
 1. the DC motor as three FMUs (``tests/industrial_fmus.py``: a voltage
@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.assembly import build_master
-from cosim.scenario import load_scenario
+from cosim.scenario.assembly import build_master
+from cosim.scenario.definition import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 POSITION = ("Quadrotor.x", "Quadrotor.y", "Quadrotor.z")

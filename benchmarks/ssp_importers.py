@@ -8,7 +8,7 @@ Exports ``circles``, ``circles_sensors``, ``circles_estimated``, ``figure8_lab``
 * our master (the scenario file, and the archive read back by ``load_ssp``),
   in its default ``feedthrough`` ordering, and the archive in the
   ``exchange`` ordering (libcosim's);
-* libcosim (``libcosimpy``, :func:`cosim.ssp.run_libcosim`);
+* libcosim (``libcosimpy``, :func:`cosim.ssp.archive.run_libcosim`);
 * fmpy's ``simulate_ssp`` as a user calls it (``stop_time`` = the duration,
   ``step_size`` = the step), on the archive as exported (its FMUs start from
   the scenario's values) and on the same archive with the stock FMUs (their
@@ -42,10 +42,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master, fmu_file
-from cosim.ssp import load_ssp
-from cosim.ssp_export import export_ssp
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master, fmu_file
+from cosim.ssp.archive import load_ssp
+from cosim.ssp.export import export_ssp
 from quadrotor_paper.metrics import rmse
 from quadrotor_paper.portable import all_fmu
 

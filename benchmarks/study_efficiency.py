@@ -10,7 +10,7 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   study's rows' ``wall_time_s`` and ``benchmarks/loop_speed.py`` time a
   run; the scenario, the master's build and the row are not in it). One
   **round** flies each of Table 2's 27 cells (case and wind speed) once,
-  on the same path as a study's run (:func:`cosim.dask_runner.execute`),
+  on the same path as a study's run (:func:`cosim.study.runner.execute`),
   and weighs each cell by its runs: the round's ``L`` is the mean loop time
   of Table 2's runs. Rounds run before the first study, between the
   repeats and after the last, interleaved with what they are compared
@@ -49,7 +49,7 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   this thread while another thread flies runs of one kernel call each;
 * the driver's peak Python memory (tracemalloc) for a study of 200 and of
   800 one-second runs: the rows are streamed to runs.csv, not held, and the
-  local scheduler's logs are kept short (cosim/dask_runner.py), so the ratio
+  local scheduler's logs are kept short (cosim/study/runner.py), so the ratio
   should stay near 1 (with Dask's default logs it was 2.3 for 50 -> 200 runs).
 
 Printed, never asserted: a slow or busy machine changes the figures, not
@@ -82,8 +82,8 @@ def _table2():
 
 
 def _memory_study(seeds: int):
-    from cosim.scenario import scenario_path
-    from cosim.study import parse_study
+    from cosim.scenario.definition import scenario_path
+    from cosim.study.definition import parse_study
     from fnn_controller.variants import variant_names
 
     raw = {"scenario": str(scenario_path("circles")), "name": "efficiency", "set": {"simulation.duration": 1.0},
@@ -135,7 +135,7 @@ class _Cpu:
 def _run(study, out: Path, workers: int, threads: bool | None = None) -> tuple[float, float, list[float]]:
     """Wall and CPU time of ``measure`` (s; ``threads`` forces the local
     cluster's kind) and the runs' own times."""
-    from cosim.study_run import read_runs
+    from cosim.study.run import read_runs
     from quadrotor_paper import experiments
 
     chosen = experiments.threads_safe
@@ -164,14 +164,14 @@ def _command(out: Path, workers: int, tree: Path | None = None) -> tuple[float, 
 class _Loops:
     """Rounds of ``L``: each of the study's cells (case and grid point) flown
     once on a master built and warmed beforehand, on a study's run path
-    (:func:`cosim.dask_runner.execute`: the lean record, the metrics taken
+    (:func:`cosim.study.runner.execute`: the lean record, the metrics taken
     as the rows stream); a round's ``L`` is the cells' ``Master.run`` times
     weighed by their runs (the mean loop time of the study's runs)."""
 
     def __init__(self, study):
-        from cosim.dask_runner import MasterCache, execute
-        from cosim.scenario import apply_overrides, parse_scenario
-        from cosim.study import cell_of, cells, runs
+        from cosim.study.runner import MasterCache, execute
+        from cosim.scenario.definition import apply_overrides, parse_scenario
+        from cosim.study.definition import cell_of, cells, runs
         from quadrotor_paper.experiments import lean_signals, study_metrics
 
         base = study.scenario
@@ -213,8 +213,8 @@ def _gil_free(runs: int = 5) -> tuple[float, float]:
     of every row), and while it runs a Python loop (which shares the GIL at
     the switch interval). A call that held the GIL would stop the counter
     for each whole run."""
-    from cosim.assembly import build_master
-    from cosim.scenario import load_scenario
+    from cosim.scenario.assembly import build_master
+    from cosim.scenario.definition import load_scenario
 
     scenario = load_scenario("circles")
     master = build_master(scenario)
@@ -274,9 +274,9 @@ def _phases_child(out: str, argv: list[str]) -> int:
     from quadrotor_paper import cli
 
     note("imports done")
-    import cosim.dask_runner as runner
-    import cosim.kernel as kernel
-    import cosim.study_run as study_run
+    import cosim.study.runner as runner
+    import cosim.loop.kernel as kernel
+    import cosim.study.run as study_run
     import quadrotor_paper.report as report
 
     def timed(owner, name: str, what: str) -> None:
@@ -425,7 +425,7 @@ def main() -> None:
         print("note: PYTHONDONTWRITEBYTECODE is set: a module with no bytecode cached yet is compiled in every "
               "process")
 
-    from cosim.study import count
+    from cosim.study.definition import count
 
     study = _table2()
     runs = count(study)

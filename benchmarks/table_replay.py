@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.scenario import load_scenario, parse_scenario
-from cosim.assembly import build_master
+from cosim.scenario.definition import load_scenario, parse_scenario
+from cosim.scenario.assembly import build_master
 
 STATES = [f"Quadrotor.{s}" for s in ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")]
 COMMANDS = [f"controller.Omega_{i}" for i in range(1, 5)]

@@ -1,13 +1,13 @@
 """What the engine keeps in the registered cache folder
-(:func:`cosim.registry.register_cache`): JSON data, written whole, read as
+(:func:`cosim.scenario.registry.register_cache`): JSON data, written whole, read as
 data (never pickle: a cache folder is a place others may write,
 docs/security.md), each entry kept only while what it was derived from is
 unchanged.
 
-Four entries use it: the installed plugins (:mod:`cosim.registry`),
+Four entries use it: the installed plugins (:mod:`cosim.scenario.registry`),
 validated scenarios and the parse of scenario files
-(:func:`cosim.scenario.load_scenario`) and what was read of FMU files
-(:mod:`cosim.description_cache`). Which folder is this
+(:func:`cosim.scenario.definition.load_scenario`) and what was read of FMU files
+(:mod:`cosim.fmi.description_cache`). Which folder is this
 module's to hold (:func:`register_cache`, :func:`cache_folder`), so a module
 below the registry reads it too. An entry that
 cannot be read is derived again; a folder that cannot be written keeps
@@ -32,7 +32,7 @@ _CACHE: list[Callable[[], Path]] = []  # at most one: where derived data may be 
 def register_cache(folder: Callable[[], Path]) -> None:
     """Where the engine may keep derived data: ``folder()`` is asked each
     time (it may follow the environment). One per process: a second,
-    different one is refused (:func:`cosim.registry.register_cache` is
+    different one is refused (:func:`cosim.scenario.registry.register_cache` is
     this function)."""
     if _CACHE and _CACHE[0] != folder:
         raise ValueError("a cache folder is registered twice, differently")

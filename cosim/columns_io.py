@@ -1,7 +1,7 @@
 """Named columns of a CSV or Parquet file, read only where used.
 
 The one reader of the calibration's logs (:mod:`cosim.calibration.log`) and
-of signal tables (:mod:`cosim.table`). A file is data from anyone and may be
+of signal tables (:mod:`cosim.scenario.signal_table`). A file is data from anyone and may be
 hours at hundreds of hertz with dozens of columns (issue 42 item 5), so
 only its header (a CSV's first line, a Parquet file's footer) is read whole;
 the columns a caller names are read by pyarrow -- a CSV streamed in blocks

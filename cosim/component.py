@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Mapping
 
 if TYPE_CHECKING:
-    from .units import Unit
+    from .fmi.units import Unit
 
 __all__ = ["Port", "PythonComponent", "ports", "TYPES", "FLOAT_HELD", "element_ports", "element_of", "typed_value"]
 
@@ -73,7 +73,7 @@ class Port:
     an FMU's input holds its start value; an input without one must be
     connected. ``unit_definition`` is the meaning of ``unit`` the
     component's own description gives (an FMU's ``UnitDefinitions``, read by
-    :mod:`cosim.units`), ``None`` when it gives none: the name is then read
+    :mod:`cosim.fmi.units`), ``None`` when it gives none: the name is then read
     by pint.
     """
 

@@ -1,7 +1,7 @@
 """One holder at a time of a file's lock, across threads and processes.
 
 Used where several builders may make the same thing at once (the FMUs'
-compiled objects, the compiled libraries of :mod:`cosim.kernel`): the first
+compiled objects, the compiled libraries of :mod:`cosim.loop.kernel`): the first
 holder makes it and renames it into place; the others wait, then find it
 made. POSIX ``flock`` on a file each holder opens itself, so two threads of
 one process exclude each other as two processes do. Where there are no

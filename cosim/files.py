@@ -117,7 +117,7 @@ def read_toml(path: str | Path, what: str = "scenario") -> dict[str, Any]:
 def toml_text(text: str, path: str | Path) -> dict[str, Any]:
     """The document of ``text``, the TOML read from the file ``path``
     (:func:`read_toml`'s parse and checks; the one-line refusals name ``path``)."""
-    import tomllib  # here: a scenario kept by the cache is not parsed again (cosim.scenario.load_scenario)
+    import tomllib  # here: a scenario kept by the cache is not parsed again (cosim.scenario.definition.load_scenario)
 
     try:
         doc = _loads_toml(text, str(path), lines=True)
@@ -274,8 +274,8 @@ def _size(n: float) -> str:
     return f"{n:.1f} TB"
 
 
-STUDY_SIDECAR = "study.json"  # what marks a study's folder (cosim.study_run): its definition and progress
-RUN_SIDECAR = "results.csv.json"  # what marks a run's folder: the sidecar of its results.csv (cosim.recorder)
+STUDY_SIDECAR = "study.json"  # what marks a study's folder (cosim.study.run): its definition and progress
+RUN_SIDECAR = "results.csv.json"  # what marks a run's folder: the sidecar of its results.csv (cosim.loop.recorder)
 _MARKS = {"study": STUDY_SIDECAR, "run": RUN_SIDECAR}  # a command -> the file that says its results are there
 
 
@@ -464,7 +464,7 @@ SSD_NAME = "SystemStructure.ssd"  # the system structure at an SSP archive's roo
 
 
 def is_ssp(path: str | Path) -> bool:
-    """Whether ``path`` names an SSP archive for :func:`cosim.ssp.load_ssp` rather than a
+    """Whether ``path`` names an SSP archive for :func:`cosim.ssp.archive.load_ssp` rather than a
     TOML scenario: a ``.ssp`` or ``.ssd`` file, or a folder holding
     ``SystemStructure.ssd`` (an extracted archive)."""
     path = Path(path)

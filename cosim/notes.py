@@ -4,7 +4,7 @@ A default the user did not give (an SSP archive's communication step), an
 element passed over (an SSP annotation this reader does not know, a
 connector with nothing beyond it), a unit taken as another (a rate without
 its radian) is said once, at info level, to the logger of the module that
-decided it (``cosim.ssp``, ``cosim.connection``): an application that
+decided it (``cosim.ssp.archive``, ``cosim.loop.connection``): an application that
 configures logging sees it there. The command line shows the notes on
 stderr as ``note: ...`` lines once the run's inputs are taken
 (:func:`show_on_stderr`, :func:`release`; ``--quiet`` hides them): a
@@ -13,7 +13,11 @@ nothing to note loads none (tests/paper/test_run_startup.py).
 """
 from __future__ import annotations
 
-__all__ = ["note", "show_on_stderr", "release"]
+__all__ = ["note", "show_on_stderr", "release", "FMU_LOGGER", "stderr_handler"]
+
+# The engine logs to "cosim" and its submodules; the FMUs' own log goes to "cosim.fmu.<instance>"
+# (cosim.fmi.log), which a note's handler leaves out.
+FMU_LOGGER = "cosim.fmu"
 
 _ON_STDERR = False
 _HANDLER = None
@@ -63,10 +67,36 @@ def _stderr_handler() -> None:
         return
     import logging
 
-    from .fmu_log import FMU_LOGGER, _Stderr
-
-    handler = _Stderr()
+    handler = stderr_handler()
     handler.setFormatter(logging.Formatter("note: %(message)s"))
     handler.addFilter(lambda record: _ON_STDERR and not record.name.startswith(FMU_LOGGER))  # the latest choice
     logging.getLogger("cosim").addHandler(handler)
     _HANDLER = handler
+
+
+
+_STDERR_CLASS = None
+
+
+def stderr_handler():
+    """A logging handler writing to the ``sys.stderr`` of the moment (a test
+    or an application may replace it after the handler is made); its class
+    is made on first use, so a run with nothing to log imports no
+    ``logging``. The notes and the FMUs' log (:mod:`cosim.fmi.log`) use it."""
+    global _STDERR_CLASS
+    if _STDERR_CLASS is None:
+        import logging
+
+        class StderrHandler(logging.StreamHandler):
+            @property
+            def stream(self):
+                import sys
+
+                return sys.stderr
+
+            @stream.setter
+            def stream(self, value):  # StreamHandler.__init__ sets it; the property always answers sys.stderr
+                pass
+
+        _STDERR_CLASS = StderrHandler
+    return _STDERR_CLASS()

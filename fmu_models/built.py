@@ -7,7 +7,7 @@ CasADi imported). A run of already-built FMUs needs none of that.
 :func:`built_fmu` keeps, beside the cache, an index from a *recipe* to the
 FMU ``cached_fmu`` returned for it: the model's identifier, the FMI version,
 the start values it is built with where they are not its own (an SSP
-archive's self-contained FMUs, :mod:`cosim.ssp_export`), the installed
+archive's self-contained FMUs, :mod:`cosim.ssp.export`), the installed
 CasADi and fmpy (the generated C, the FMI headers: where each is installed,
 its ``__init__.py``'s size and modification time) and the bytes
 of every source file that can change the model or its FMU (the packages

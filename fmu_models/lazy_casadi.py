@@ -9,7 +9,7 @@ start-up, issue 26). The first attribute read (``ca.SX``) imports CasADi;
 
 ``ca`` is a stand-in that imports CasADi by the ordinary import (safe from
 any thread) rather than the standard library's ``LazyLoader``: models are
-built side by side in threads (:func:`cosim.registry.build_fmu_models`), and
+built side by side in threads (:func:`cosim.scenario.registry.build_fmu_models`), and
 under Python 3.11 a second thread reading a ``LazyLoader`` module while the
 first loads it finds it half made (``module 'casadi' has no attribute 'SX'``).
 """

@@ -5,7 +5,7 @@ and 3 beside the paper's, the figures, the report, the linear stability
 analysis and the ``fnn-cosim`` command line.
 
 Importing the package registers its component kinds, sections, FMU models
-and scenarios with :mod:`cosim.registry` (see :mod:`.components`).
+and scenarios with :mod:`cosim.scenario.registry` (see :mod:`.components`).
 """
 from .components import register
 

@@ -78,13 +78,13 @@ def _column_map_file(given: str) -> Path:
 
 
 def run(args) -> int:
-    from cosim.assembly import fmu_file_or_model
+    from cosim.scenario.assembly import fmu_file_or_model
     from cosim.calibration import calibrate, read_column_map, read_settings
     from cosim.calibration.columns import CalibrationSettings
     from cosim.calibration.outputs import write_outputs
     from cosim.errors import ScenarioError
     from cosim.files import output_folder
-    from cosim.schema import validate
+    from cosim.scenario.schema import validate
 
     from .progress import progress_bar
 

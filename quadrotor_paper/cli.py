@@ -78,7 +78,7 @@ def _results_room(scenario, master, out: Path, every: int, quiet: bool) -> None:
     output folder's file system cannot hold it (memory does not grow with
     the run: disk is the only bound, and it is the user's; docs/security.md)."""
     from cosim.files import room_for
-    from cosim.recorder import csv_bytes
+    from cosim.loop.recorder import csv_bytes
 
     rows = int(round(scenario.duration / scenario.step)) + 1
     written = -(-rows // every)
@@ -90,7 +90,7 @@ def _results_room(scenario, master, out: Path, every: int, quiet: bool) -> None:
               f"(--record-every K writes every K-th)", file=sys.stderr)
 
 def _cmd_run(args) -> int:
-    from cosim.scenario import load_scenario
+    from cosim.scenario.definition import load_scenario
     from cosim.files import write_json
 
     from .experiments import run_once
@@ -111,7 +111,7 @@ def _cmd_run(args) -> int:
             if value:
                 raise ScenarioError(f"{flag} {value}: an SSP archive's controller is an FMU it holds, with its "
                                     f"own model and state; give it to a TOML scenario's [controller]")
-        from cosim.ssp import load_ssp
+        from cosim.ssp.archive import load_ssp
 
         scenario = load_ssp(args.scenario, overrides=overrides)
     else:
@@ -120,7 +120,7 @@ def _cmd_run(args) -> int:
         if args.load_learned:
             overrides["controller.learned"] = str(args.load_learned)
         scenario = load_scenario(args.scenario, overrides)
-    from cosim.assembly import build_master
+    from cosim.scenario.assembly import build_master
 
     with build_master(scenario) as master:  # every input refused before anything is written
         _started()
@@ -237,7 +237,7 @@ def _cell_means(summary) -> str:
 
 def _cmd_sweep(args) -> int:
     """A study: the base scenario over its cases and sweep, one row per run in runs.csv."""
-    from cosim.study import load_study
+    from cosim.study.definition import load_study
 
     from .experiments import measure
     from .progress import progress_bar
@@ -259,8 +259,8 @@ def _cmd_sweep(args) -> int:
 
 def _cmd_export_ssp(args) -> int:
     """Write the scenario, every component as an FMU, as an SSP archive."""
-    from cosim.scenario import load_scenario
-    from cosim.ssp_export import export_ssp
+    from cosim.scenario.definition import load_scenario
+    from cosim.ssp.export import export_ssp
 
     from .portable import all_fmu
 
@@ -276,9 +276,9 @@ def _cmd_schema(args) -> int:
     import json
 
     if args.kind == "scenario":
-        from cosim.scenario import scenario_json_schema as schema
+        from cosim.scenario.definition import scenario_json_schema as schema
     elif args.kind == "study":
-        from cosim.study import study_json_schema as schema
+        from cosim.study.definition import study_json_schema as schema
     else:  # fnn-cosim calibrate's files: --settings, --columns
         from cosim.calibration.columns import calibration_schema
 
@@ -295,7 +295,7 @@ def _cmd_schema(args) -> int:
 
 
 def _cmd_scenarios(args) -> int:
-    from cosim.scenario import load_scenario, shipped_scenarios
+    from cosim.scenario.definition import load_scenario, shipped_scenarios
 
     shipped = sorted(shipped_scenarios().items())
     width = max(len(name) for name, _ in shipped)
@@ -309,11 +309,11 @@ def _cmd_scenarios(args) -> int:
 def _cmd_build_fmu(args) -> int:
     """Build every registered model (the plant, the wind, the references, the
     controller of every variant) in every FMI version the exporter supports,
-    side by side (:func:`cosim.registry.build_fmu_models`); print the path
+    side by side (:func:`cosim.scenario.registry.build_fmu_models`); print the path
     of each FMU written, one per line."""
     import shutil
 
-    from cosim import registry
+    from cosim.scenario import registry
     from fmu_models.export.build import FMI_VERSIONS
 
     from cosim.files import output_folder
@@ -351,10 +351,10 @@ def _named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
 
 def _operating_point_of_run(args) -> tuple[Path, dict[str, Any]]:
     """``--scenario S --time T``: the FMU file of instance ``args.fmu`` and its
-    operating point at T of S's run (:func:`cosim.linearize.operating_point_of_run`)."""
+    operating point at T of S's run (:func:`cosim.linearize.linearization.operating_point_of_run`)."""
     from cosim.errors import ScenarioError
-    from cosim.linearize import operating_point_of_run
-    from cosim.scenario import load_scenario
+    from cosim.linearize.linearization import operating_point_of_run
+    from cosim.scenario.definition import load_scenario
 
     if args.parameter:
         raise ScenarioError("--parameter: with --scenario the parameters are the run's; set them with --set")
@@ -368,9 +368,9 @@ def _cmd_linearize(args) -> int:
     """Linearize an FMU file or a registered model (built as FMI ``--fmi``) at
     the operating point given, or an FMU instance of a scenario at time
     ``--time`` of its run; write the system, its poles and Bode plots."""
-    from cosim.assembly import fmu_file_or_model
+    from cosim.scenario.assembly import fmu_file_or_model
     from cosim.errors import ScenarioError
-    from cosim.linearize import LinearizationError, linearize_fmu, save_linearization
+    from cosim.linearize.linearization import LinearizationError, linearize_fmu, save_linearization
 
     if args.scenario is not None or args.time is not None:
         if args.scenario is None:

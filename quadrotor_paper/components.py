@@ -22,7 +22,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any, Mapping
 
-from cosim import registry
+from cosim.scenario import registry
 from cosim.errors import ScenarioError
 
 from .models import controller_fmu_model, fmu_model, variant_sources
@@ -36,7 +36,7 @@ CONTROLLER_INSTANCE = "controller"
 def _trajectory_table(name: str):
     """The declaration of a trajectory's table: its dataclass's fields (the
     reference FMU's parameters, whose ranges the dataclass checks)."""
-    from cosim.schema import dataclass_table
+    from cosim.scenario.schema import dataclass_table
 
     from .trajectories import TRAJECTORIES
 
@@ -45,8 +45,8 @@ def _trajectory_table(name: str):
 
 def _trajectory_kind(name: str) -> registry.ComponentKind:
     def build(instance: str, params: Mapping[str, Any], context) -> Any:
-        from cosim.fmu_component import FmuComponent
-        from cosim.assembly import fmu_file
+        from cosim.fmi.fmu import FmuComponent
+        from cosim.scenario.assembly import fmu_file
 
         entry = _trajectory_entry(name, params)
         return FmuComponent(instance, fmu_file(entry), parameters=entry["parameters"])
@@ -79,7 +79,7 @@ def fmu_entry(instance: str, spec: Mapping[str, Any], context) -> dict[str, Any]
     if kind in TRAJECTORIES:
         return _trajectory_entry(kind, params)
     if kind == "signal_table":  # the engine's table, as its table FMU with the table inside
-        from cosim.table import fmu_entry as table_entry
+        from cosim.scenario.signal_table import fmu_entry as table_entry
 
         return table_entry(instance, params, context, registry.table_fmu())
     if kind == "fnn_controller":

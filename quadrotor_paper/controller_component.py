@@ -3,7 +3,7 @@
 A scenario's ``[controller]`` runs as the controller FMU of its variant
 (``form = "fmu"``, the default: :mod:`fnn_controller.controller_fmu`, the
 parametric step compiled, built on demand), so a mission of FMUs only runs
-in the master's compiled loop (:mod:`cosim.kernel`). Its learned state
+in the master's compiled loop (:mod:`cosim.loop.kernel`). Its learned state
 starts from the run's seed, or from a saved one (``learned``,
 :mod:`quadrotor_paper.learned`).
 
@@ -55,7 +55,7 @@ import numpy as np
 
 from cosim.component import Port, PythonComponent
 from cosim.errors import DivergenceError, ScenarioError
-from cosim.parameters import Given
+from cosim.scenario.parameters import Given
 from fnn_controller.variants import DEFAULT_VARIANT
 
 __all__ = ["ControllerComponent", "ControllerSettings", "controller_settings", "controller_variant",
@@ -130,7 +130,7 @@ def _parameters(cls, value: Any, where: str, base: Any = None) -> Any:
         return cls() if base is None else base
     if hasattr(value, "applied"):  # a validated table (ParameterTable, Given)
         return value.applied(cls() if base is None else base)
-    from cosim.schema import dataclass_table, validate
+    from cosim.scenario.schema import dataclass_table, validate
 
     return validate(dataclass_table(cls), dict(value), where).applied(base)
 
@@ -144,7 +144,7 @@ def _unknown_variant(name: Any) -> str | None:
 
 
 def _known_variant(name: str) -> str:
-    from cosim.schema import refuse
+    from cosim.scenario.schema import refuse
 
     if (why := _unknown_variant(name)) is not None:
         raise refuse(why, value=name)
@@ -152,7 +152,7 @@ def _known_variant(name: str) -> str:
 
 
 def _no_vehicle(value: Any) -> Any:
-    from cosim.schema import refuse
+    from cosim.scenario.schema import refuse
 
     if isinstance(value, Mapping) and "vehicle" in value:
         raise refuse("the nominal vehicle is the plant's (the controller's plant); set a deliberate mismatch in "
@@ -169,7 +169,7 @@ def controller_table() -> type[Table]:
     FMI version, a learned state to resume from."""
     from pydantic import AfterValidator, BeforeValidator, Field, WithJsonSchema, model_validator
 
-    from cosim.schema import Number, Table, dataclass_table, one_of, refuse
+    from cosim.scenario.schema import Number, Table, dataclass_table, one_of, refuse
     from fnn_controller import GeometricParams, PositionParams, VehicleParams
     from fnn_controller.position_parameters import check_one_step
     from fnn_controller.variants import variant_names
@@ -282,12 +282,12 @@ class ControllerComponent(PythonComponent):
         on purpose (model mismatch). The vehicle is not set through
         ``geometric.vehicle``: one way to say it. ``validated``: ``parameters``
         are a validated table's values (a scenario's, which validated them
-        with the whole document): read as they are (:class:`cosim.parameters.Given`).
+        with the whole document): read as they are (:class:`cosim.scenario.parameters.Given`).
         """
         if validated:
             table = Given(parameters, _DEFAULTS)
         else:
-            from cosim.schema import validate
+            from cosim.scenario.schema import validate
 
             table = validate(controller_table(), parameters, name)
         nominal = {}

@@ -2,7 +2,7 @@
 
 Every multi-run command (``table2``, ``table3``, ``reproduce``, ``sweep``)
 and every one-off analysis that flies missions is a study
-(:mod:`cosim.study`) run by :func:`measure`: the engine's runner, in this
+(:mod:`cosim.study.definition`) run by :func:`measure`: the engine's runner, in this
 process or on Dask, recording only the signals the metrics read, each row
 measured by :func:`study_metrics` (Euclidean RMSE, largest and final error
 between the ``[metrics]`` signals). :func:`run_once` is the single run of
@@ -19,13 +19,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from cosim.errors import FmuError, ScenarioError
-from cosim.scenario import Scenario, dotted_key
-from cosim.assembly import build_master, fmu_error_in_scenario
+from cosim.scenario.definition import Scenario, dotted_key
+from cosim.scenario.assembly import build_master, fmu_error_in_scenario
 from cosim.limits import WORKER_TIMEOUT
 
 if TYPE_CHECKING:
-    from cosim.study import Study
-    from cosim.study_run import StudyResult
+    from cosim.study.definition import Study
+    from cosim.study.run import StudyResult
 
 from fmu_models.models.estimator_outputs import COUNTS
 
@@ -49,7 +49,7 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
     """Run ``scenario`` once; with ``out_dir``, stream ``results.csv`` there
     (every ``record_every``-th row).
 
-    Returns ``(result, summary)``: the :class:`~cosim.master.RunResult`
+    Returns ``(result, summary)``: the :class:`~cosim.loop.master.RunResult`
     (keeping ``keep`` rows: ``Master.run``) and a JSON-ready summary
     (:func:`run_summary`), its metrics taken over every row as they streamed.
     """
@@ -136,7 +136,7 @@ def study_metrics(scenario: Scenario, result) -> dict[str, Any]:
     return {k: summary.get(k) for k in study_metric_names(scenario)}
 
 
-study_metrics.observe = RunMetrics  # a study streams each run's rows to one (cosim.dask_runner.execute)
+study_metrics.observe = RunMetrics  # a study streams each run's rows to one (cosim.study.runner.execute)
 
 
 def lean_signals(scenario: Scenario) -> list[str]:
@@ -176,13 +176,13 @@ def measure(study: Study, out_dir: str | Path | None = None, *, workers: int = 1
             metric_names: Sequence[str] | None = None, record: Sequence[str] | None = None,
             progress: Callable[[int, int], None] | None = None, plots: bool = False,
             resume: bool = True, worker_timeout: float | None = WORKER_TIMEOUT) -> StudyResult:
-    """Run ``study`` the paper's way: :func:`cosim.study_run.run_study`
+    """Run ``study`` the paper's way: :func:`cosim.study.run.run_study`
     measuring each row with ``metrics`` and recording only what they read
     (``record``, default :func:`lean_signals`); ``metric_names`` default
     :func:`study_metric_names` of the study's scenario. A local cluster is
     of threads in this process when :func:`threads_safe` says so, else of
     processes."""
-    from cosim.study_run import run_study  # the study machinery: not loaded by a single run
+    from cosim.study.run import run_study  # the study machinery: not loaded by a single run
 
     return run_study(study, out_dir, workers=workers, scheduler=scheduler, metrics=metrics,
                      metric_names=study_metric_names(study.scenario) if metric_names is None else metric_names,
@@ -196,7 +196,7 @@ _FMU_VALUES = ("parameters", "start")  # what a study may change of an [fmus] en
 
 def threads_safe(study: Study, metrics: Callable[[Scenario, Any], Mapping[str, Any]] = study_metrics) -> bool:
     """Whether ``study``'s runs may fly as threads of one process
-    (:func:`cosim.dask_runner.fly`, ``docs/studies.md``, "Threads or
+    (:func:`cosim.study.runner.fly`, ``docs/studies.md``, "Threads or
     processes"): its metrics are :func:`study_metrics` (taken as the rows
     stream: a run's time is its compiled loop, which releases the GIL; an
     analysis's metrics run Python per run, which the GIL would serialize),

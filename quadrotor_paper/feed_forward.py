@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from cosim.study import Study, parse_study
+from cosim.study.definition import Study, parse_study
 from fmu_models.catalog import model
 from fnn_controller import GeometricParams
 

@@ -16,7 +16,7 @@ importer may set between steps, docs/stability.md "Discrete states"; the
 FMU's own parameters, seed and clock untouched); after a run they are read
 by name. The FMU checks a value set like any input (``docs/fmi-export.md``);
 a value it refuses is a one-line :class:`~cosim.errors.FmuCallError` naming
-it and quoting its log (:meth:`~cosim.fmu_component.FmuComponent.set_reals`).
+it and quoting its log (:meth:`~cosim.fmi.fmu.FmuComponent.set_reals`).
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from functools import cache
 from cosim.errors import ScenarioError
 from cosim.files import output_file, read_json
 from cosim.limits import MAX_STATE
-from cosim.fmu_component import FmuComponent
+from cosim.fmi.fmu import FmuComponent
 
 __all__ = ["FORMAT", "save_learned", "learned_variant", "load_learned", "LearnedControllerFmu", "state_of", "write_learned"]
 
@@ -68,7 +68,7 @@ def _file_table():
 
     from pydantic import Field
 
-    from cosim.schema import Number, Strings, Table, one_of
+    from cosim.scenario.schema import Number, Strings, Table, one_of
 
     class LearnedStateFile(Table):
         """A learned-state file (the module's docstring): its declaration."""
@@ -92,7 +92,7 @@ def load_learned(path: str | Path, variant: str) -> np.ndarray:
     doc = read_json(path, "learned state")
     if not isinstance(doc, dict) or doc.get("format") != FORMAT or doc.get("version") != VERSION:
         raise ScenarioError(f"{where}: not a '{FORMAT}' file of version {VERSION}")
-    from cosim.schema import validate
+    from cosim.scenario.schema import validate
 
     doc = validate(_file_table(), doc, where)
     if doc.variant != variant:

@@ -337,7 +337,7 @@ def default_runs(variants=CLAIM_VARIANTS, kp: float | None = None, kd: float | N
     per mission and variant): a 1 m step of the x reference from hover (20 s,
     no wind), and the paper's mission (50 s, 3 m/s gust); PD gains of the
     ``circles`` scenario (the paper's) unless given."""
-    from cosim.study import parse_study
+    from cosim.study.definition import parse_study
 
     from .experiments import measure
 

@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 
-from cosim.study import Study, parse_study
+from cosim.study.definition import Study, parse_study
 from fnn_controller.variants import variants
 
 from .experiments import measure

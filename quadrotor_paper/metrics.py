@@ -39,9 +39,9 @@ def squared_error(result, position: Sequence[str], reference: Sequence[str]) -> 
 
 def rmse(result, position: Sequence[str], reference: Sequence[str]) -> float:
     """Euclidean RMSE (m) over all recorded rows (NaN without rows), summed as
-    a run's streamed metrics sum (:class:`cosim.online.Sum`: numpy's
+    a run's streamed metrics sum (:class:`cosim.loop.online.Sum`: numpy's
     ``mean`` to the bit up to its 65 536 values)."""
-    from cosim.online import Sum
+    from cosim.loop.online import Sum
 
     total = Sum()
     total.add(squared_error(result, position, reference))

@@ -1,5 +1,5 @@
 """The project's FMU models as the engine's registered models
-(:class:`cosim.registry.RegisteredModel`): the models of ``fmu_models``' catalog
+(:class:`cosim.scenario.registry.RegisteredModel`): the models of ``fmu_models``' catalog
 and every controller variant's FMU, whole and split. A model is imported
 (and its CasADi functions built) only when a scenario checks one of its
 parameters or needs an FMU of it that is not built yet: an FMU already built
@@ -11,7 +11,7 @@ from functools import partial
 from pathlib import Path
 from typing import Mapping
 
-from cosim import registry
+from cosim.scenario import registry
 
 __all__ = ["fmu_model", "controller_fmu_model", "variant_sources"]
 

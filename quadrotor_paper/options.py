@@ -3,7 +3,7 @@
 An option is data: a registered variant flown with a few scenario overrides
 (dotted keys, as ``--set`` takes them) and, where it needs a signal the
 shipped scenarios do not wire, the connections it adds: a
-:class:`cosim.registry.Case`, registered with the controller variants (one
+:class:`cosim.scenario.registry.Case`, registered with the controller variants (one
 case per variant, flying it as it is) so that study files and the tables
 name both alike (``[cases.lm-bl]``, ``--options lm-bl``). The tables show an
 option below the paper's rows, with "–" in the paper's columns; the paper's
@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from cosim.registry import Case
+from cosim.scenario.registry import Case
 
 __all__ = ["OPTIONS", "DEFAULT_OPTIONS", "OPTION_SEEDS", "option_names", "variant_case", "VARIANT_KEY",
            "ACCELERATION_CONNECTION"]

@@ -53,10 +53,10 @@ def _save(fig, path: Path) -> Path:
 def wind_series(scenario, speeds=(1.0, 3.0, 5.0)) -> dict[float, np.ndarray]:
     """The WindGust FMU of ``scenario`` simulated alone for each speed:
     ``speed -> array (n, 4)`` of t, v_wind_x, v_wind_y, v_wind_z (one
-    instance, :class:`cosim.fmu_component.FmuComponent`, the tool's one FMU
+    instance, :class:`cosim.fmi.fmu.FmuComponent`, the tool's one FMU
     lifecycle, reset between speeds)."""
-    from cosim.fmu_component import FmuComponent
-    from cosim.assembly import fmu_file
+    from cosim.fmi.fmu import FmuComponent
+    from cosim.scenario.assembly import fmu_file
 
     name = scenario.sections["wind"]["fmu"]
     spec = scenario.fmus[name]

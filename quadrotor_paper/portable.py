@@ -6,10 +6,10 @@ libcosim runs), so the loop flies exactly as the scenario does (``docs/ssp.md``)
 """
 from __future__ import annotations
 
-from cosim import registry
-from cosim.registry import BuildContext
-from cosim.scenario import Scenario, parse_scenario
-from cosim.assembly import fmu_file
+from cosim.scenario import registry
+from cosim.scenario.registry import BuildContext
+from cosim.scenario.definition import Scenario, parse_scenario
+from cosim.scenario.assembly import fmu_file
 
 __all__ = ["all_fmu"]
 
@@ -17,7 +17,7 @@ __all__ = ["all_fmu"]
 def all_fmu(scenario: Scenario) -> Scenario:
     """``scenario`` with its components as FMUs; a component with no FMU form
     is refused, naming it."""
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     from .components import fmu_entry
 

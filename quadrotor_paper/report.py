@@ -19,12 +19,12 @@ import time
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from cosim import registry
+from cosim.scenario import registry
 from cosim.limits import WORKER_TIMEOUT
 from cosim.files import read_toml
-from cosim.scenario import load_scenario
-from cosim.study import Study, parse_study, study_path
-from cosim.study_run import write_json
+from cosim.scenario.definition import load_scenario
+from cosim.study.definition import Study, parse_study, study_path
+from cosim.study.run import write_json
 from fnn_controller.variants import variant, variant_names
 
 from .experiments import measure, run_once

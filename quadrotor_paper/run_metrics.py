@@ -1,6 +1,6 @@
-"""A run's metrics, taken as its rows stream (:mod:`cosim.recorder`): in
+"""A run's metrics, taken as its rows stream (:mod:`cosim.loop.recorder`): in
 memory that does not grow with the run, and to the bits a reduction over
-all its rows gives (:mod:`cosim.online`), so the summary of a run equals the
+all its rows gives (:mod:`cosim.loop.online`), so the summary of a run equals the
 one recomputed from its results file (:func:`from_results`).
 
 :class:`RunMetrics` of a scenario is an observer of its run
@@ -25,7 +25,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from cosim.online import ColumnSum, Last, Maximum, Sum, finite
+from cosim.loop.online import ColumnSum, Last, Maximum, Sum, finite
 
 from fmu_models.models.estimator_outputs import COUNTS, COVARIANCE_BLOCKS, covariance_output
 
@@ -227,7 +227,7 @@ class RunMetrics:
         self.rows = 0
 
     def add(self, rows) -> None:
-        """The next rows (:class:`cosim.recorder.Rows`, or a result that kept them all)."""
+        """The next rows (:class:`cosim.loop.recorder.Rows`, or a result that kept them all)."""
         if len(rows.time):
             self.rows += len(rows.time)
             for part in self.parts:
@@ -243,8 +243,8 @@ class RunMetrics:
 
 def from_results(scenario, path: str | Path, block_rows: int = 4096) -> dict[str, float | None]:
     """:meth:`RunMetrics.values` of ``scenario`` recomputed from a results
-    file (:func:`cosim.recorder.iter_results`): what the run's summary says."""
-    from cosim.recorder import iter_results
+    file (:func:`cosim.loop.recorder.iter_results`): what the run's summary says."""
+    from cosim.loop.recorder import iter_results
 
     metrics = RunMetrics(scenario)
     for rows in iter_results(path, block_rows):

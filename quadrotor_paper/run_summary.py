@@ -23,7 +23,7 @@ class _Shown:
 def summary_lines(scenario, result, summary: Mapping[str, Any], figures: Sequence[Path],
                   learned_error: str | None) -> list[str]:
     """The lines of ``summary.md`` for a run of ``scenario`` (its
-    :class:`~cosim.master.RunResult` ``result`` and its summary ``summary``,
+    :class:`~cosim.loop.master.RunResult` ``result`` and its summary ``summary``,
     :func:`quadrotor_paper.experiments.run_summary`), with the figures drawn
     and the reason a learned state could not be saved."""
     simulated = result.span[1] - result.span[0] if result.span else 0.0

@@ -11,8 +11,8 @@ from typing import Annotated, Any
 from pydantic import Field, model_validator
 
 from cosim.errors import ScenarioError
-from cosim.scenario_tables import check_fmu_parameters
-from cosim.schema import NonNegative, NonNegativeInt, Strings, Table, numbers, refuse
+from cosim.scenario.tables import check_fmu_parameters
+from cosim.scenario.schema import NonNegative, NonNegativeInt, Strings, Table, numbers, refuse
 
 from .sections import WIND_KEYS
 

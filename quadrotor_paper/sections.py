@@ -28,7 +28,7 @@ Their declarations and how a validated one applies: :mod:`.section_tables`
 """
 from __future__ import annotations
 
-from cosim.scenario import Scenario
+from cosim.scenario.definition import Scenario
 from fmu_models.models.estimator_outputs import counts_of
 
 __all__ = ["WIND_KEYS", "metric_signals", "estimation_spec"]

@@ -10,11 +10,11 @@ __all__ = ["overrides"]
 
 def overrides(pairs: Sequence[str]) -> dict[str, Any]:
     """``--set KEY=VALUE`` pairs as dotted keys and values, each checked as a
-    document's key and value are (:func:`cosim.scenario.dotted_key`,
+    document's key and value are (:func:`cosim.scenario.definition.dotted_key`,
     :func:`cosim.files.toml_value`): a bare word is text."""
     from cosim.errors import ScenarioError, shown_text
     from cosim.files import toml_value
-    from cosim.scenario import dotted_key
+    from cosim.scenario.definition import dotted_key
 
     from cosim.names import partition_top
 

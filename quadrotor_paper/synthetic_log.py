@@ -38,8 +38,8 @@ def fly_synthetic_log(out: str | Path, duration: float = 10.0, hidden: Mapping[s
     """Fly the log into the folder ``out``; returns its ``results.csv``.
     ``extra``: more overrides of the scenario (dotted keys)."""
     from cosim.files import output_folder
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master
 
     from .experiments import run_once
 

@@ -2,7 +2,7 @@
 
 The tables are studies (``quadrotor_paper/studies/table2.toml``,
 ``table3.toml``); this module only formats their summary
-(:func:`cosim.study_run.summary_of`): one row per case (the controller
+(:func:`cosim.study.run.summary_of`): one row per case (the controller
 variants, then the option rows), one column pair per wind speed. Cells are
 the Euclidean RMSE (m), mean ± sample standard deviation [95 % interval of
 the mean] over the runs (seeds of f_ij(0)). The reduction over PD is

@@ -36,8 +36,8 @@ from pathlib import Path
 import fmpy
 
 import quadrotor_paper  # noqa: F401  (registers the shipped models)
-from cosim import registry
-from cosim.fmu_component import _fmpy_class, _load_functions
+from cosim.scenario import registry
+from cosim.fmi.lifecycle import _fmpy_class, _load_functions
 from fmu_models.export.build import cached_fmu
 
 __all__ = ["catalog_fmu", "extracted", "fmpy_class", "loaded", "remove_extracted", "simulated"]
@@ -87,7 +87,7 @@ _LOADED: dict[tuple[type, int], tuple[ctypes.CDLL, dict]] = {}
 
 @functools.cache
 def fmpy_class(base: type) -> type:
-    """fmpy's ``base`` as the tool makes it (:func:`cosim.fmu_component._fmpy_class`), taking the
+    """fmpy's ``base`` as the tool makes it (:func:`cosim.fmi.lifecycle._fmpy_class`), taking the
     function table of a library it loaded before (see ``_LOADED``). Each instance had its library
     mapped and relocated again (the last instance's freeInstance had unloaded it) and its table made
     again, a ``dlsym`` and three attributes a function: 1200 instances of the plant made and freed in

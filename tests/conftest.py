@@ -3,7 +3,7 @@ cache, so an unchanged model is not rebuilt across sessions either).
 
 With several workers (``make test``: pytest-xdist) the controller builds
 every shipped FMU before the workers start, side by side on every core
-(:func:`cosim.registry.build_fmu_models`): each FMU is built once, not by
+(:func:`cosim.scenario.registry.build_fmu_models`): each FMU is built once, not by
 whichever workers first need it at the same time, and a fresh clone's first
 build takes the compilers' time over the cores. A run on one process builds
 what its tests use, when they use it."""
@@ -19,7 +19,7 @@ from fmu_models.models.quadrotor import QUADROTOR
 def pytest_sessionstart(session):
     if session.config.pluginmanager.has_plugin("dsession"):  # the xdist controller, before its workers
         import quadrotor_paper  # noqa: F401  (registers the shipped models)
-        from cosim import registry
+        from cosim.scenario import registry
         from fmu_models.export.build import FMI_VERSIONS
 
         registry.build_fmu_models(sorted(FMI_VERSIONS))
@@ -127,12 +127,12 @@ def pytest_sessionfinish(session):
 def one_extraction():
     """A module's masters load the libraries of the FMUs this tool built
     from the one folder the cache extracted them to, as a study's masters do
-    (:func:`cosim.description_cache.shared_extraction`; they keep no
+    (:func:`cosim.fmi.description_cache.shared_extraction`; they keep no
     writable global state): a master built after the first in a process
     extracted each of its FMUs again and removed it when closed (about 5 ms
     an FMU). A module asks for it with
     ``pytestmark = pytest.mark.usefixtures("one_extraction")``."""
-    from cosim.description_cache import shared_extraction
+    from cosim.fmi.description_cache import shared_extraction
 
     with shared_extraction():
         yield

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Sequence
 
 from cosim.errors import CosimError, ScenarioError
-from cosim.ssp import load_ssp
+from cosim.ssp.archive import load_ssp
 
 __all__ = ["run_libcosim"]
 
@@ -21,7 +21,7 @@ def run_libcosim(path: str | Path, signals: Sequence[str], *, step: float | None
     """Run an SSP archive (or its extracted folder) in libcosim and record
     ``signals`` (``Component.variable``) at every communication point, t0
     (after libcosim's initialization) included; return a
-    :class:`~cosim.master.RunResult` like the master's (``data[:, 0]`` is time).
+    :class:`~cosim.loop.master.RunResult` like the master's (``data[:, 0]`` is time).
 
     Needs ``libcosimpy``. The step is the archive's (its OSP annotation)
     unless ``step`` is given; the duration the default experiment's unless
@@ -44,7 +44,7 @@ def run_libcosim(path: str | Path, signals: Sequence[str], *, step: float | None
         raise ImportError(f"running an SSP archive in libcosim needs libcosimpy ({exc})") from None
     from fmpy import read_model_description
 
-    from cosim.master import RunResult
+    from cosim.loop.master import RunResult
 
     overrides = {k: v for k, v in (("simulation.step", step), ("simulation.duration", duration)) if v is not None}
     with tempfile.TemporaryDirectory(prefix="ssp-libcosim-") as tmp:

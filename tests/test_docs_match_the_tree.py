@@ -31,8 +31,16 @@ def _modules(folder: Path) -> set[str]:
 COSIM_DOC = (ROOT / "docs" / "cosim.md").read_text()
 README = (ROOT / "README.md").read_text()
 
+def _before_subsections(text: str, heading: str) -> str:
+    """The text under ``heading`` before its first subheading."""
+    section = _section(text, heading)
+    return section[:re.search(r"^#+ ", section, re.MULTILINE).start()]
+
+
+ENGINE_PACKAGES = ("fmi", "loop", "scenario", "study", "ssp", "linearize")
 CASES = {
-    "cosim": (_section(COSIM_DOC, "Engine modules"), ROOT / "cosim"),
+    "cosim": (_before_subsections(COSIM_DOC, "Engine layout") + _section(COSIM_DOC, "Foundation"), ROOT / "cosim"),
+    **{f"cosim/{p}": (_section(COSIM_DOC, f"`cosim/{p}/`"), ROOT / "cosim" / p) for p in ENGINE_PACKAGES},
     "quadrotor_paper": (_section(COSIM_DOC, "Application modules"), ROOT / "quadrotor_paper"),
     "fmu_models/models": (_section(README, "Architecture"), ROOT / "fmu_models" / "models"),
     "fmu_models/export": (_section(README, "Architecture"), ROOT / "fmu_models" / "export"),
@@ -47,7 +55,7 @@ def test_every_module_is_named_in_the_docs(package):
     assert sorted(_modules(folder) - named) == []
 
 
-@pytest.mark.parametrize("doc", ["cosim", "quadrotor_paper"])
+@pytest.mark.parametrize("doc", ["cosim", *(f"cosim/{p}" for p in ENGINE_PACKAGES), "quadrotor_paper"])
 def test_every_module_a_table_names_exists(doc):
     text, folder = CASES[doc]
     rows = [line for line in text.splitlines() if line.startswith("| `")]

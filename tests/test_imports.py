@@ -218,7 +218,7 @@ def _imports_when_loaded(module: str, path: Path) -> list[tuple[str, str | None]
 
 def test_collecting_the_suite_imports_no_python_control():
     """python-control (with scipy.signal and matplotlib.pyplot, which it imports: 2-3 s of CPU) is
-    imported where a linear system is made, as cosim.linearize does: no test module, nor what it
+    imported where a linear system is made, as cosim.linearize.linearization does: no test module, nor what it
     imports when loaded (the project's modules, the tests' helpers, ``quadrotor_paper.stability``'s
     lazy names resolved to their modules), imports it, so collecting the suite does not, and a worker
     that runs no stability test never does. Read from the sources (imports by a computed name other
@@ -248,3 +248,65 @@ def test_collecting_the_suite_imports_no_python_control():
                 todo += [".".join(parts[:i]) for i in range(1, len(parts) + 1) if ".".join(parts[:i]) in modules]
     assert "quadrotor_paper.stability.loops" in loaded and "tests.paper.test_stability_linear" in loaded
     assert "control" not in third_party, f"{third_party['control']} imports python-control when loaded"
+
+
+# The engine's layers, lowest first (docs/cosim.md, "Layout"): a module imports only from its own
+# package or a lower layer; packages of one layer do not import each other. The foundation is the
+# modules at the top of cosim/ (errors, files, cache, native, executor, component, ...).
+ENGINE_LAYERS = (("cosim",), ("cosim.fmi",), ("cosim.loop",), ("cosim.scenario",),
+                 ("cosim.study", "cosim.ssp", "cosim.linearize"), ("cosim.calibration",))
+
+
+def _engine_package(module: str) -> str:
+    """``cosim.loop.master`` -> ``cosim.loop``; a foundation module -> ``cosim``."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if len(parts) > 1 and (ROOT / "cosim" / parts[1]).is_dir() else "cosim"
+
+
+def _layer(package: str) -> int:
+    return next(i for i, layer in enumerate(ENGINE_LAYERS) if package in layer)
+
+
+def test_every_engine_package_has_a_layer():
+    folders = {f"cosim.{p.name}" for p in (ROOT / "cosim").iterdir() if (p / "__init__.py").exists()}
+    assert folders == {p for layer in ENGINE_LAYERS for p in layer} - {"cosim"}
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    """``a -> b`` edges of the engine where ``b``'s package is not below ``a``'s."""
+    found = []
+    for module, targets in graph.items():
+        if not module.startswith("cosim"):
+            continue
+        here = _engine_package(module)
+        for target in targets:
+            there = _engine_package(target)
+            if there != here and not _layer(there) < _layer(here):
+                found.append(f"{module} -> {target}")
+    return sorted(found)
+
+
+def test_the_engine_imports_only_downward(graph):
+    assert upward_imports(graph) == []
+
+
+def test_an_upward_import_is_found(graph):
+    """The rule catches what it is for: the loop reading a scenario, the FMU layer using the loop's
+    kernel (the FMU's C structures were moved from the kernel into cosim.fmi.c_calls for this)."""
+    graph = {**graph, "cosim.loop.master": graph["cosim.loop.master"] | {"cosim.scenario.definition"},
+             "cosim.fmi.fmu": graph["cosim.fmi.fmu"] | {"cosim.loop.kernel"},
+             "cosim.study.run": graph["cosim.study.run"] | {"cosim.ssp.archive"}}
+    assert upward_imports(graph) == ["cosim.fmi.fmu -> cosim.loop.kernel", "cosim.loop.master -> cosim.scenario.definition",
+                                     "cosim.study.run -> cosim.ssp.archive"]
+
+
+@pytest.mark.parametrize("package", [p for layer in ENGINE_LAYERS[1:] for p in layer])
+def test_each_engine_package_names_its_surface(package):
+    """Its ``__init__`` says what it owns and may import, and every name of its surface is there."""
+    import importlib
+
+    module = importlib.import_module(package)
+    assert "May import" in (module.__doc__ or "") or "may import" in (module.__doc__ or "")
+    assert module.__all__
+    for name in module.__all__:
+        assert getattr(module, name) is not None, f"{package}.{name}"

@@ -1,4 +1,4 @@
-"""The files a user writes for a calibration, declared once (pydantic, :mod:`cosim.schema`).
+"""The files a user writes for a calibration, declared once (pydantic, :mod:`cosim.scenario.schema`).
 
 * the **column map** (``--columns MAP.toml``): which column of the log is
   which variable of the FMU, in which unit, and which column is the time;
@@ -17,8 +17,8 @@ from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
 
 from ..errors import ScenarioError
 from ..files import read_toml
-from ..scenario_tables import Solver
-from ..schema import NonNegative, Number, Positive, Count, Names, Table, json_schema, one_of, refuse, validate
+from ..scenario.tables import Solver
+from ..scenario.schema import NonNegative, Number, Positive, Count, Names, Table, json_schema, one_of, refuse, validate
 
 __all__ = ["Column", "ColumnMap", "Attitude", "Frames", "Rotors", "CalibrationSettings", "read_column_map",
            "read_settings", "INITIAL_STATES", "JACOBIANS", "INTERFACES", "TOLERANCE", "WORLDS", "BODIES",

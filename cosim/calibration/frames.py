@@ -24,7 +24,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from ..errors import ConnectionCheckError, ScenarioError
-from .. import units as _units
+from ..fmi import units as _units
 from .columns import POSITIONS, Column, ColumnMap
 from .diagnostics import Diagnostic
 from .log import Columns, Log

@@ -27,7 +27,7 @@ import numpy as np
 from ..columns_io import csv_floats, csv_header, parquet_read, parquet_schema, unique_columns
 from ..errors import ConnectionCheckError, ScenarioError, shown_text
 from ..files import read_text, regular_file
-from .. import units as _units
+from ..fmi import units as _units
 
 __all__ = ["Log", "Columns", "read_log", "GAP_FACTOR"]
 
@@ -233,7 +233,7 @@ def _read_csv(path: Path, time_name: str):
         raise ScenarioError(f"{where}: no rows after the header")
     rows.append(times.size)
     units: dict[str, str] = {}
-    sidecar = path.with_name(path.name + ".json")  # the project's results: columns, units (cosim.recorder)
+    sidecar = path.with_name(path.name + ".json")  # the project's results: columns, units (cosim.loop.recorder)
     if sidecar.is_file():
         try:
             meta = json.loads(read_text(sidecar, "log sidecar"))

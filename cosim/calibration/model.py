@@ -15,7 +15,7 @@ right-hand side along them (Model Exchange).
   whatever the start values' rules. In Co-Simulation the FMU's own
   integrator makes the trajectory (a model fitted to a log it produced
   itself meets it to round-off); in Model Exchange the master's
-  (:mod:`cosim.model_exchange`, through the FMU component's ``do_step``),
+  (:mod:`cosim.fmi.model_exchange`, through the FMU component's ``do_step``),
   at the settings' tolerance.
 * **Right-hand side Jacobians** at each row, on Model Exchange instances of
   the same FMU set to the row's states and inputs: ``A = d der(x)/dx``,
@@ -35,9 +35,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import FmuCallError, ScenarioError
-from ..fmu_component import FmuComponent
-from ..fmu_description import start_value_rule
-from ..model_exchange import SolverSettings
+from ..fmi.fmu import FmuComponent
+from ..fmi.description import start_value_rule
+from ..fmi.model_exchange import SolverSettings
 from .problem import Problem
 from .segments import Segment
 
@@ -60,7 +60,7 @@ class Trajectory:
 class _Fast:
     """One started Model Exchange instance's evaluation calls, bare, at many
     points in one call into C
-    (:meth:`cosim.me_system.ModelExchangeSystem.evaluate_rows`; the value
+    (:meth:`cosim.fmi.me_system.ModelExchangeSystem.evaluate_rows`; the value
     references made once): the right-hand side and outputs, and directional
     derivatives. A status above warning is the instance's
     :class:`~cosim.errors.FmuCallError`."""

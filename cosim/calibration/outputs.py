@@ -124,7 +124,7 @@ def write_parameter_set(values: dict[str, tuple[float, str]], path: Path, name: 
     small fit's own work."""
     from lxml import etree
 
-    from ..ssv import NS
+    from ..scenario.parameter_set import NS
 
     ssv = lambda tag: f"{{{NS['ssv']}}}{tag}"  # noqa: E731
     root = etree.Element(ssv("ParameterSet"), nsmap={"ssv": NS["ssv"], "ssc": SSC}, version="1.0", name=name)

@@ -26,7 +26,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import ConnectionCheckError, ScenarioError, shown_text
-from .. import units as _units
+from ..fmi import units as _units
 from ..names import nearest_told, split_variable
 from .log import Log
 
@@ -37,7 +37,7 @@ __all__ = ["Problem", "bind_problem", "log_instance"]
 class Problem:
     """What is fitted to what (module docstring). Arrays are over the log's rows."""
 
-    fmu: object  # cosim.fmu_component.FmuComponent (Co-Simulation), read-only here
+    fmu: object  # cosim.fmi.fmu.FmuComponent (Co-Simulation), read-only here
     log: Log
     inputs: list[str]  # FMU inputs driven by the log
     input_values: np.ndarray  # rows x inputs, in the inputs' units

@@ -28,9 +28,9 @@ def scenario_instance(scenario_name: str | Path, instance: str | None, fit, over
     scenario's FMU instance ``instance`` (default: the one FMU that has every
     name of ``fit``); ``interface``: the one the scenario runs it in
     (``"CoSimulation"`` or ``"ModelExchange"``)."""
-    from ..connection import parse_connections
-    from ..scenario import load_scenario
-    from ..assembly import build_master
+    from ..loop.connection import parse_connections
+    from ..scenario.definition import load_scenario
+    from ..scenario.assembly import build_master
 
     scenario = load_scenario(scenario_name, overrides)
     with build_master(scenario) as master:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..summary import t975
+from ..study.summary import t975
 
 __all__ = ["Statistics", "statistics", "residual_statistics", "whiteness", "at_bounds", "NULL_COMPONENT", "AT_BOUND",
            "NEAR_BOUND_STD"]

@@ -18,7 +18,7 @@ its ``out`` (the outputs). The calibrator then makes no FMU call:
   graph, all directions at once: the derivatives of the discrete
   trajectory itself (no Magnus step, no differences: exact to round-off);
 * the segment functions are generated as C and compiled once per
-  machine (:func:`cosim.kernel.compiled_library`: the cache keyed by the
+  machine (:func:`cosim.native.compiled_library`: the cache keyed by the
   source, so by the model and the RK4 steps a row; a Jacobian's chunk takes
   :data:`DIRECTIONS` directions a call, the last padded, so not by their count): the
   simulation and both Jacobians the solver asks for (``n`` RK4 steps a
@@ -66,13 +66,13 @@ DIRECTIONS = 8
 
 def definition_of(cs) -> object | None:
     """The CasADi definition of the FMU ``cs`` (a
-    :class:`~cosim.fmu_component.FmuComponent`) when it is one of ours: the
+    :class:`~cosim.fmi.fmu.FmuComponent`) when it is one of ours: the
     registered model of its identifier, built as this FMI version, has its
     GUID (a digest of the generated model: any other FMU, or ours with other
     built-in values, differs); else ``None``."""
     from fmpy import read_model_description
 
-    from .. import registry
+    from ..scenario import registry
 
     md = cs.model_description
     interface = md.coSimulation or md.modelExchange
@@ -303,11 +303,11 @@ class SymbolicModel:
 
     def _compile(self, fns: list) -> list:
         """``fns`` generated as C into one library, compiled once per machine
-        (:func:`cosim.kernel.compiled_library`), each a callable; without a C
+        (:func:`cosim.native.compiled_library`), each a callable; without a C
         compiler, run by CasADi's virtual machine."""
         import casadi as ca
 
-        from ..kernel import compiled_library
+        from ..native import compiled_library
 
         cg = ca.CodeGenerator(f"{fns[0].name()}.c")
         for fn in fns:

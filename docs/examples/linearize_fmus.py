@@ -7,8 +7,8 @@ import sys
 
 import numpy as np
 
-from cosim import registry
-from cosim.linearize import linearize_fmu, save_linearization
+from cosim.scenario import registry
+from cosim.linearize.linearization import linearize_fmu, save_linearization
 from fmu_models.models.quadrotor import hover_rotor_speed
 
 out = sys.argv[1] if len(sys.argv) > 1 else "results/linearize-example"

@@ -140,7 +140,7 @@ def _object_digest(c_file: Path, compiler: list[str]) -> str:
 
 class _CompilerSlots:
     """One compiler per core in the whole process, however many builds run at
-    once (:func:`cosim.registry.build_fmu_models` builds every FMU on a
+    once (:func:`cosim.scenario.registry.build_fmu_models` builds every FMU on a
     thread of its own): a thread waiting for a slot holds none, so builds
     never wait on each other. A slot that frees goes to the largest compile
     waiting (its C file's size estimates its time), not to the first come:

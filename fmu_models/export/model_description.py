@@ -43,7 +43,7 @@ def derivative_unit(unit: str) -> str:
 # "Sampled-data period"): the FMI 2.0 <VendorAnnotations><Tool name=...> and the
 # FMI 3.0 <Annotations><Annotation type=...> of this name hold
 # <SampledData periodParameter="..."/>, the parameter whose value is the one
-# communication step the FMU takes. cosim.fmu_component reads it (by the same
+# communication step the FMU takes. cosim.fmi.fmu reads it (by the same
 # name: the engine does not import the exporter).
 PERIOD_ANNOTATION = "fnn-cosim.sampled-data"
 

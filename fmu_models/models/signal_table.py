@@ -1,10 +1,10 @@
 """The signal table as an FMU: the engine's ``kind = "signal_table"``
-(:mod:`cosim.table`) for the compiled loop and for SSP archives.
+(:mod:`cosim.scenario.signal_table`) for the compiled loop and for SSP archives.
 
 One generic model: no states, no inputs, one Float64 output per column. Its
 binary knows no table; it reads ``resources/signal_table.bin`` at
 instantiation (``fmu_models/export/c/signal_table.h``: the format, the
-checks, and the lookup, the same operations as :meth:`cosim.table.SignalTable.values_at`).
+checks, and the lookup, the same operations as :meth:`cosim.scenario.signal_table.SignalTable.values_at`).
 So the FMU of a table is the built FMU of its columns (names and units, built
 once per set of columns by the project's builder and cached like every FMU)
 with the table's file added under ``resources/``: self-contained, it flies in
@@ -33,7 +33,7 @@ MAGIC = b"FNNTAB01"
 
 
 def table_model(table) -> FmuModel:
-    """The FMU model of ``table``'s columns (a :class:`cosim.table.TableData`):
+    """The FMU model of ``table``'s columns (a :class:`cosim.scenario.signal_table.TableData`):
     an output per column, its unit (one of :data:`UNITS`, else its SI
     definition as the engine read it) and description."""
     variables = []

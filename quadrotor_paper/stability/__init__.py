@@ -24,7 +24,7 @@ The names below load their module on first use, so that ``fnn-cosim`` can
 add the ``stability`` subcommand without paying for them in every other
 command. python-control (with the scipy.signal and matplotlib.pyplot it
 imports, 2-3 s of CPU) is imported by the functions that make a linear
-system, not with the modules (as ``cosim.linearize``): importing them, e.g.
+system, not with the modules (as ``cosim.linearize.linearization``): importing them, e.g.
 a test worker collecting the suite, does not load it (tests/test_imports.py).
 """
 from importlib import import_module

@@ -2,7 +2,7 @@
 "Along the flight").
 
 Every ``every`` seconds of a mission the run is frozen (the master's
-snapshots: every FMU's state, :class:`cosim.master.Snapshot`) and the
+snapshots: every FMU's state, :class:`cosim.loop.master.Snapshot`) and the
 closed loop is linearized there from the FMUs themselves
 (:func:`~.fmu_loop.snapshot_loop`: the plant held over the controller's
 period, the controller's one-period map with its learned FNN state as part
@@ -30,13 +30,13 @@ plant-state difference is compared with the linear loop's prediction
 ``C A^n (delta, 0)``, both as a rate ln(gain)/check (1/s). A second check
 perturbs along the loop's least stable mode (its eigenvector, learned state
 included, set in the controller's FMU state:
-:meth:`cosim.fmu_component.FmuComponent.state_with`). Every FMU state is
+:meth:`cosim.fmi.fmu.FmuComponent.state_with`). Every FMU state is
 read, edited and linearized on the master's own live instances (each left
 in its state): the only instance made per frozen point is the plant's Model
 Exchange instance the linearizer evaluates.
 and compares the growth of the whole state's difference with ``A^n``'s.
 
-The study is one :mod:`cosim.study` per mission (cases: variant x law), run
+The study is one :mod:`cosim.study.definition` per mission (cases: variant x law), run
 by :func:`~quadrotor_paper.experiments.measure`, so on Dask like every
 multi-run command; the metric, :class:`AlongFlight`, asks the runner for
 the snapshots.
@@ -49,8 +49,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from cosim.scenario import Scenario
-from cosim.assembly import build_master
+from cosim.scenario.definition import Scenario
+from cosim.scenario.assembly import build_master
 from fnn_controller.variants import variant_names
 
 from ..controller_component import controller_settings
@@ -189,7 +189,7 @@ class AlongFlight:
         """(linear, nonlinear) rates over ``check`` s of the perturbation
         ``delta`` of the ``plant``'s state, then of a perturbation along the
         least stable mode; FMU states read and edited on the master's instances
-        ``fmus`` (name -> :class:`~cosim.fmu_component.FmuComponent`)."""
+        ``fmus`` (name -> :class:`~cosim.fmi.fmu.FmuComponent`)."""
         h = master.step
         n = int(round(self.check / h))
         start = {k: v for k, v in loop.plant.operating_point.items() if k in loop.plant.system.state_labels}
@@ -297,7 +297,7 @@ def along_flight_plan(missions: Sequence[str] = MISSIONS, variants: Sequence[str
     """The runs, frozen points and estimated time of :func:`along_flight_study`
     with the same arguments, counted from the scenarios before anything runs
     (the estimate: points x :data:`SECONDS_PER_POINT` / the workers that get a run)."""
-    from cosim.scenario import load_scenario
+    from cosim.scenario.definition import load_scenario
 
     runs = points = 0
     for mission in missions:
@@ -317,7 +317,7 @@ def along_flight_study(missions: Sequence[str] = MISSIONS, variants: Sequence[st
     mission run by :func:`~quadrotor_paper.experiments.measure`; ``overrides``
     (dotted keys) set for every run, e.g. a shorter ``simulation.duration``;
     ``progress(done, total)`` counts the runs of all missions together."""
-    from cosim.study import parse_study
+    from cosim.study.definition import parse_study
 
     from ..experiments import measure
 

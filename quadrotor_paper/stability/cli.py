@@ -77,7 +77,7 @@ def _checked(args: argparse.Namespace) -> None:
 
     from cosim.errors import ScenarioError
     from cosim.files import output_folder
-    from cosim.schema import NonNegative, Number, Positive, Table, validate
+    from cosim.scenario.schema import NonNegative, Number, Positive, Table, validate
 
     class Arguments(Table):
         kp: Positive = None  # a PD with kp <= 0 has no operating point to linearize around

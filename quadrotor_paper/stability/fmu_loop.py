@@ -1,6 +1,6 @@
 """The sampled closed loop from the FMUs themselves: the plant FMU and a
 controller FMU of any variant, each linearized by the engine's linearizer
-(:func:`cosim.linearize.linearize_fmu`), joined with ``control.interconnect``.
+(:func:`cosim.linearize.linearization.linearize_fmu`), joined with ``control.interconnect``.
 
 * plant: Model Exchange directional derivatives (all its states: the 12 of
   the rigid body and the 4 rotor speeds, inert at tau_m = 0), discretized
@@ -18,7 +18,7 @@ Two operating points, one join (:func:`join_loop`):
 
 * :func:`fmu_closed_loop`: a trimmed :class:`~.operating_points.OperatingPoint`,
   the controller at its initial state or a given FMU state;
-* :func:`snapshot_loop`: a run frozen at time t (a :class:`cosim.master.Snapshot`):
+* :func:`snapshot_loop`: a run frozen at time t (a :class:`cosim.loop.master.Snapshot`):
   plant and controller at their FMU states, inputs at their values then.
 
 Discrete states the step neither changes nor reads (a PD's unused FNN
@@ -34,7 +34,7 @@ from typing import Mapping
 
 import numpy as np
 
-from cosim.linearize import Linearization, linearize_fmu
+from cosim.linearize.linearization import Linearization, linearize_fmu
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import QUADROTOR
 from fnn_controller.controller_fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS, controller_model
@@ -150,14 +150,14 @@ def fmu_closed_loop(op: OperatingPoint, variant: str = "pd", fmi_version: int = 
 def snapshot_loop(snapshot, plant_fmu: str | Path, controller_fmu: str | Path, plant: str = DEFAULT_PLANT,
                   controller: str = CONTROLLER_INSTANCE, instances: Mapping | None = None) -> FmuLoop:
     """The sampled closed loop of a run frozen at ``snapshot.time``
-    (:class:`cosim.master.Snapshot`, taken by ``Master.run(snapshots=...)``):
+    (:class:`cosim.loop.master.Snapshot`, taken by ``Master.run(snapshots=...)``):
     the controller's one-period map from its FMU state with its inputs at
     that time (the learned weights as they were then), the plant linearized
     at its state then (read from its FMU state) with its inputs then (the
     wind as it blew, the rotor commands given at that time). ``plant_fmu``,
     ``controller_fmu``: the FMU files the run flew, instances ``plant`` and
     ``controller``; ``instances``: the run's live instances by name (the
-    master's :class:`~cosim.fmu_component.FmuComponent`), on which the
+    master's :class:`~cosim.fmi.fmu.FmuComponent`), on which the
     snapshot's FMU states are then read and stepped (each left in its own
     state) instead of new ones."""
     instances = instances or {}

@@ -4,7 +4,7 @@ the one source of truth.
 * Plant: ``QUADROTOR.functions["jac"]`` (CasADi AD of the equations the FMU
   is generated from), rows der(x), columns [x, u] -- or, from the plant
   FMU (FMI 2.0 or 3.0), the engine's linearizer
-  :func:`cosim.linearize.linearize_fmu` in Model Exchange
+  :func:`cosim.linearize.linearization.linearize_fmu` in Model Exchange
   (:func:`linearize_plant_fmu`). A test checks that the two agree.
 
   .. math:: \\delta\\dot x = A\\,\\delta x + B_\\Omega\\,\\delta\\Omega + B_w\\,\\delta w
@@ -92,11 +92,11 @@ def linearize_plant(op: OperatingPoint) -> PlantLinearization:
 
 def linearize_plant_fmu(fmu_path: str | Path, op: OperatingPoint) -> PlantLinearization:
     """A and B of the plant FMU (FMI 2.0 or 3.0) at ``op`` by the engine's
-    linearizer, :func:`cosim.linearize.linearize_fmu`, in Model Exchange
+    linearizer, :func:`cosim.linearize.linearization.linearize_fmu`, in Model Exchange
     (directional derivatives where the FMU provides them): states ``op.x``
     and ``op.omega``, inputs ``op.plant_u``, parameters
     ``op.plant_parameters``; rows and columns picked by the quadrotor's names."""
-    from cosim.linearize import linearize_fmu
+    from cosim.linearize.linearization import linearize_fmu
 
     start = dict(zip((v.name for v in QUADROTOR.states), np.concatenate([op.x, op.omega])))
     lin = linearize_fmu(fmu_path, start=start, inputs=dict(zip(INPUT_NAMES, op.plant_u)),

@@ -18,7 +18,7 @@ Time. Continuous time (``dt=None``) is the analogue loop. In discrete time
 (``dt = h``) the plant is ``control.c2d(plant, h, "zoh")``: that is exactly
 what the co-simulation master does. At ``t_n`` it reads the plant's state,
 evaluates the controller at ``t_n`` (direct feedthrough, no computational
-delay: ``cosim/master.py``, steps 1-2 of its algorithm) and holds the
+delay: ``cosim/loop/master.py``, steps 1-2 of its algorithm) and holds the
 rotor speeds over ``[t_n, t_n + h)`` while the FMU integrates. So the
 discrete loop of the master has **no one-step delay**; ``delay_steps = n``
 adds n unit delays on the rotor commands to show what a delay would cost.

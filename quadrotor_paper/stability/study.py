@@ -173,7 +173,7 @@ def plant_parameters(overrides: Mapping[str, Any]) -> dict[str, float]:
     (the plant's 12 rigid-body states; ``tau_m > 0`` would leave the rotor
     commands acting through states it does not carry)."""
     from cosim.errors import ScenarioError
-    from cosim.scenario import load_scenario
+    from cosim.scenario.definition import load_scenario
     from fmu_models.models.quadrotor import QUADROTOR
 
     from ..controller_component import DEFAULT_PLANT
@@ -268,7 +268,7 @@ def _learning(study: StabilityStudy, settings: StabilitySettings, workers: int, 
 def _along_flight(study: StabilityStudy, kp: float | None, kd: float | None, every: float, workers: int,
                   show_progress: bool) -> None:
     """The learning loop along the missions into ``study`` (its plan printed first when ``show_progress``)."""
-    from cosim.scenario import load_scenario
+    from cosim.scenario.definition import load_scenario
 
     from ..progress import progress_bar
     from .along_flight import MISSIONS, AlongFlight, along_flight_plan, along_flight_study, flight_events

@@ -2,7 +2,7 @@
 
 The nonlinear side is the real thing: the plant FMU (FMI 2.0 co-simulation,
 ``fmu_models.export.build.cached_fmu``) and the controller, run by the
-co-simulation master (:class:`cosim.master.Master`, h = 0.01 s). The linear
+co-simulation master (:class:`cosim.loop.master.Master`, h = 0.01 s). The linear
 side is :class:`~quadrotor_paper.stability.loops.LoopModel` in discrete time at the same
 step, simulated by ``control.forced_response``. Both start at the operating
 point and see the same reference from t = 0, so their samples at t_n can be
@@ -35,8 +35,8 @@ from fnn_controller.geometric import initial_velocity_state
 from cosim.component import Port, PythonComponent
 from ..components import CONTROLLER_INSTANCE
 from ..controller_component import DEFAULT_PLANT, ControllerComponent
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master
+from cosim.fmi.fmu import FmuComponent
+from cosim.loop.master import Master
 from ..trajectories import Hover, ReferenceComponent
 from .loops import LoopModel
 from .operating_points import STATE_NAMES, OperatingPoint
@@ -228,7 +228,7 @@ def pd_mission_rmse(wind_speeds=(0.0, 1.0, 3.0, 5.0), scenario: str = "circles",
     a study (the case ``pd``, the wind speeds its grid) measured by
     :func:`quadrotor_paper.experiments.study_metrics`; ``plant``: the plant's
     parameters set on every run (the controller's nominal vehicle follows)."""
-    from cosim.study import parse_study
+    from cosim.study.definition import parse_study
 
     from ..experiments import measure
 

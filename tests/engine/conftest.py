@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import toy_models
-from cosim import registry
+from cosim.scenario import registry
 
 
 @pytest.fixture(scope="module")

@@ -39,7 +39,7 @@ def undocumented(obj) -> list[str]:
 
 
 def test_the_entry_points_are_listed():
-    assert {"cosim.master.Master", "cosim.master.Master.run", "cosim.scenario.load_scenario"} <= set(ENTRY_POINTS)
+    assert {"cosim.loop.Master", "cosim.loop.Master.run", "cosim.scenario.load_scenario"} <= set(ENTRY_POINTS)
 
 
 @pytest.mark.parametrize("dotted", ENTRY_POINTS)

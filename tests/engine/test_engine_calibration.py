@@ -110,7 +110,7 @@ def test_the_command_writes_its_four_files(tmp_path, capsys):
     assert abs(mu["value"] - 1.0) < 1e-6 and mu["identifiable"] and mu["ci95"][0] <= mu["value"] <= mu["ci95"][1]
     assert doc["converged"] and set(doc["residuals"]) == {"x0", "x1"}
     assert "mu = " in (out / "calibration.toml").read_text()
-    from cosim.ssp import ssd_schema_errors
+    from cosim.ssp.archive import ssd_schema_errors
     from lxml import etree
 
     assert ssd_schema_errors(out / "parameters.ssv") == []  # SSP 1.0's SystemStructureParameterValues.xsd
@@ -382,7 +382,7 @@ def test_differences_give_the_continuity_rows_of_each_segments_own_start(me_only
     from cosim.calibration.problem import bind_problem
     from cosim.calibration.segments import split
     from cosim.calibration.solve import _Problem
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     _, fmu, log = me_only_log
     settings = CalibrationSettings(fit=["mu"], initial_states="estimated", stop=3.0)

@@ -48,7 +48,7 @@ def test_a_first_guess_whose_simulation_is_not_finite_is_one_line_naming_it_exit
 def test_auto_takes_model_exchange_for_a_foreign_fmu_with_both_and_co_simulation_for_ours():
     # a foreign FMU's Co-Simulation is often a crude fixed step (VanDerPol's forward Euler: mu 4.5 % low on an
     # accurate log); ours is its CasADi definition's RK4 steps, which the CasADi way reproduces exactly
-    from cosim.calibration import _component
+    from cosim.calibration.pipeline import _component
     from fmu_models.built import built_fmu
     from fmu_models.catalog import model
 

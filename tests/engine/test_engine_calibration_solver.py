@@ -140,7 +140,7 @@ def test_the_plants_estimated_states_are_bounded_by_the_model_description():
     class Model:  # what state_bounds reads of a LogModel
         pass
 
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     comp = FmuComponent("plant", built_fmu("Quadrotor", 2, lambda: catalog_model("Quadrotor")))
     try:

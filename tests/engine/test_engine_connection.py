@@ -1,4 +1,4 @@
-"""cosim.connection on its own: parsing, brace expansion and every refusal of
+"""cosim.loop.connection on its own: parsing, brace expansion and every refusal of
 check_connections, with stand-in components that only carry Port tuples."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import pytest
 
 from cosim.component import Port, ports
-from cosim.connection import Connection, Endpoint, check_connections, parse_connection, parse_connections
+from cosim.loop.connection import Connection, Endpoint, check_connections, parse_connection, parse_connections
 from cosim.errors import ConnectionCheckError, CosimError
 
 

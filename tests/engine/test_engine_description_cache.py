@@ -1,5 +1,5 @@
 """What an FMU component reads of an FMU file is kept under the file's
-content hash (cosim.description_cache): read again, the same bytes give
+content hash (cosim.fmi.description_cache): read again, the same bytes give
 fmpy's same description (every field, shared variables shared), the same
 declared period and entry names, without parsing the XML; other bytes are
 read again; a kept entry that is not what the module writes is read again,
@@ -14,9 +14,9 @@ import pytest
 from fmpy import read_model_description
 
 import cosim.cache
-import cosim.description_cache as description_cache
-import cosim.fmu_component as fmu_component
-from cosim.fmu_component import FmuComponent
+import cosim.fmi.description_cache as description_cache
+import cosim.fmi.fmu as fmu_component
+from cosim.fmi.fmu import FmuComponent
 from toy_models import lag_fmu2, lag_fmu3  # noqa: F401  (fixtures)
 
 
@@ -178,7 +178,7 @@ def test_an_fmu_of_the_cache_read_before_runs_from_one_extracted_folder(lag_fmu2
 
 
 def test_within_shared_extraction_every_instance_loads_the_one_extracted_folder(lag_fmu2, cache, monkeypatch):
-    """A study's masters (cosim.dask_runner.MasterCache) build their FMUs
+    """A study's masters (cosim.study.runner.MasterCache) build their FMUs
     within shared_extraction: a later instance of an FMU of the cache,
     live or after the first was freed, loads the folder the first claimed
     (nothing extracted of its own, nothing removed when closed), the same

@@ -1,9 +1,9 @@
-"""The FMU's own log (cosim.fmu_component): FMUs are instantiated with
+"""The FMU's own log (cosim.fmi.lifecycle): FMUs are instantiated with
 logging on, their messages go to the Python logger ``cosim.fmu.<instance>``
 with their log categories chosen by its level, every one-line error quotes
 the FMU's own reason, and no message shows the temporary folder the FMU was
-extracted to. One FMU lifecycle: no module but cosim/fmu_component.py and
-cosim/files.py imports fmpy's FMI layers, and the linearizer extracts FMUs
+extracted to. One FMU lifecycle: no module but the FMU component's
+(cosim/fmi/fmu.py and its parts) and cosim/files.py imports fmpy's FMI layers, and the linearizer extracts FMUs
 within the same limits as the master.
 
 The foreign FMUs are PythonFMUs built here with pythonfmu (a test extra): an
@@ -24,8 +24,8 @@ from pathlib import Path
 import pytest
 
 from cosim.errors import FmuCallError, FmuLoadError, ScenarioError
-from cosim.fmu_component import FmuComponent
-from cosim.fmu_log import fmu_log
+from cosim.fmi.fmu import FmuComponent
+from cosim.fmi.log import fmu_log
 from tests.source_trees import nodes
 
 REPO = Path(__file__).resolve().parents[2]
@@ -215,7 +215,9 @@ def test_the_cli_takes_the_level_per_run(talker, tmp_path, capsys):
 
 # ---- one FMU lifecycle -------------------------------------------------------------------------
 
-_OWNERS = {"cosim/fmu_component.py", "cosim/files.py"}
+# the FMU component (its class and the parts it is made of) and the file guard
+_OWNERS = {"cosim/fmi/fmu.py", "cosim/fmi/lifecycle.py", "cosim/fmi/variables.py", "cosim/fmi/state.py",
+           "cosim/fmi/step.py", "cosim/files.py"}
 _FORBIDDEN = ("fmpy.fmi2", "fmpy.fmi3", "fmpy.fmi1")  # fmi1 holds FMICallException: status codes -> exceptions
 
 
@@ -239,7 +241,8 @@ def _imports(path: Path):
 
 
 def test_only_the_fmu_component_and_the_file_guard_import_fmpys_fmi_layers_or_extract():
-    """No module outside cosim/fmu_component.py and cosim/files.py imports
+    """No module outside the FMU component's (cosim/fmi/fmu.py and its
+    parts, _OWNERS) and cosim/files.py imports
     fmpy.fmi2, fmpy.fmi3, fmpy.extract, or fmpy's FMICallException (the FMI
     status codes become this tool's exceptions in one place). tests/ may:
     they check the FMUs through fmpy independently."""
@@ -247,7 +250,7 @@ def test_only_the_fmu_component_and_the_file_guard_import_fmpys_fmi_layers_or_ex
     folders = ("cosim", "quadrotor_paper", "fmu_models", "fnn_controller", "benchmarks")
     assert sum(1 for folder in folders for _ in (REPO / folder).rglob("*.py")) > 50
     sources = _naming_fmpy(folders)
-    assert REPO / "cosim" / "fmu_component.py" in sources  # the owner that imports them is read
+    assert all(REPO / owner in sources for owner in _OWNERS - {"cosim/files.py"})  # the owners that import them are read
     for path in sources:
         rel = path.relative_to(REPO).as_posix()
         if rel in _OWNERS:
@@ -279,7 +282,7 @@ def test_the_linearizer_extracts_within_the_same_limits_as_the_master(tmp_path):
     An FMU with an entry that expands like a zip bomb is refused by the
     linearizer in one line before anything is extracted."""
     from cosim.limits import MAX_RATIO
-    from cosim.linearize import linearize_fmu
+    from cosim.linearize.linearization import linearize_fmu
     from toy_models import lag_fmu_path
 
     bomb = tmp_path / "Bomb.fmu"

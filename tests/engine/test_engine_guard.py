@@ -1,4 +1,4 @@
-"""cosim.guard on its own: every watched signal finite, bounded ones inside
+"""cosim.loop.guard on its own: every watched signal finite, bounded ones inside
 their envelope, the first violation named in the DivergenceError."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cosim.errors import CosimError, DivergenceError
-from cosim.guard import UNBOUNDED, Guard
+from cosim.loop.guard import UNBOUNDED, Guard
 
 NAMES = ["a", "b", "c"]
 

@@ -14,8 +14,8 @@ from __future__ import annotations
 import pytest
 
 from cosim.errors import ConnectionCheckError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master
+from cosim.fmi.fmu import FmuComponent
+from cosim.loop.master import Master
 from toy_models import sum_fmu_path
 
 

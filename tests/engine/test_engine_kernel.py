@@ -1,4 +1,4 @@
-"""The compiled loop for systems of FMUs only (cosim.kernel): the same run as
+"""The compiled loop for systems of FMUs only (cosim.loop.kernel): the same run as
 the Python loop, bit for bit, in both orderings and both FMI versions, FMU
 local variables recorded and bounded alike; the same errors, at the same
 point, with the same rows kept; its C header lays the structures out as
@@ -14,12 +14,12 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from cosim import kernel
+from cosim.loop import kernel
 from cosim.errors import DivergenceError, FmuCallError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master
-from cosim.model_exchange import SolverSettings
-from cosim.recorder import read_results
+from cosim.fmi.fmu import FmuComponent
+from cosim.loop.master import Master
+from cosim.fmi.model_exchange import SolverSettings
+from cosim.loop.recorder import read_results
 from toy_models import lag_fmu_path, sum_fmu_path
 
 H = 0.01
@@ -129,7 +129,7 @@ def test_a_run_with_no_csv_and_no_progress_returns_to_python_once_a_chunk(monkey
     flies a whole chunk of the recorder per call, and the observers get the
     same rows, in the same chunks, as from the Python loop (a study's
     metrics, to the bit)."""
-    from cosim.recorder import CHUNK_ROWS
+    from cosim.loop.recorder import CHUNK_ROWS
 
     calls = []
     fast, fast_chunks = _observed(monkeypatch, True, 50.0, calls)
@@ -153,7 +153,7 @@ def test_a_divergence_mid_chunk_stops_at_the_same_row_in_both_loops(monkeypatch)
 def test_a_profiled_run_and_a_python_component_take_the_python_loop(monkeypatch):
     """Profiling times phases of the Python loop; a Python component needs it;
     the run says why it took that loop (the plan decides, Plan.python_loop_for)."""
-    from cosim.plan import NO_COMPILED_LOOP, PROFILED
+    from cosim.loop.plan import NO_COMPILED_LOOP, PROFILED
 
     with _master(2, "feedthrough") as master:
         profiled = master.run(0.1, profile=True)
@@ -218,7 +218,7 @@ def test_the_c_header_lays_the_structures_out_as_ctypes_does(tmp_path, library):
     """The header kernel.c (and me_system.c) is compiled with, generated from
     the ctypes structures: every field at the same offset, every structure of
     the same size."""
-    from cosim import me_system
+    from cosim.fmi import me_system
 
     module, structures = {"kernel": (kernel, (kernel.KernelFmu, kernel.KernelRun, kernel.KernelStop)),
                           "me_system": (me_system, (me_system.MeMember, me_system.MeConnection,
@@ -248,7 +248,7 @@ def test_fmus_the_kernel_cannot_call_are_driven_through_their_python_calls(monke
     """Stair as Model Exchange with an Int32 output (it ends the simulation
     at 9 s) and Feedthrough taking an Int32: the compiled loop calls them
     through their Python calls; VanDerPol as Model Exchange (its system's
-    calls, cosim/me_system.c) and Dahlquist in C; the run is the Python
+    calls, cosim/fmi/me_system.c) and Dahlquist in C; the run is the Python
     loop's, bit for bit, ended at the same row."""
     def build() -> Master:
         fmus = [FmuComponent("V", REFERENCE / "fmi3" / "VanDerPol.fmu", interface="ModelExchange",

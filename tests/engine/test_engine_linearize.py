@@ -1,4 +1,4 @@
-"""Known answers of the generic linearizer (cosim.linearize): linear FMUs
+"""Known answers of the generic linearizer (cosim.linearize.linearization): linear FMUs
 exported by the project's exporter from random A, B, C, D come back.
 
 Continuous (Model Exchange): der(x) = A x + B u, y = C x + D u, exactly with
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.linearize import LinearizationError, linearize_fmu
+from cosim.linearize.linearization import LinearizationError, linearize_fmu
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel, Sampled
 from fmu_models.export.variables import discrete, input_, output, parameter, state
@@ -157,7 +157,7 @@ def test_the_components_model_exchange_calls_on_the_reference_fmus(version):
     BouncingBall (der(h) = v, der(v) = -g; one event indicator, h) and
     VanDerPol (der(x0) = x1, der(x1) = mu (1 - x0^2) x1 - x0; directional
     derivatives, FMI 3.0's flag read from the XML, fmpy 0.3 misreads it)."""
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     with FmuComponent("ball", _REFERENCE / f"fmi{version}" / "BouncingBall.fmu", interface="ModelExchange") as ball:
         ball.start(0.0)

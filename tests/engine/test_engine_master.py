@@ -1,6 +1,6 @@
 """The master end to end on a toy loop: a P controller around a first-order lag FMU.
 
-Step semantics (``cosim/master.py``): at ``t_n = t0 + n h`` the FMU outputs
+Step semantics (``cosim/loop/master.py``): at ``t_n = t0 + n h`` the FMU outputs
 are those at ``t_n``; the Python components are evaluated at ``t_n`` in the
 order of their connections (direct feedthrough); then every FMU gets its
 inputs taken at ``t_n`` and steps to ``t_{n+1}`` with them held. For the loop
@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 
 from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master
-from cosim.recorder import read_results, sidecar_path
+from cosim.fmi.fmu import FmuComponent
+from cosim.loop.master import Master
+from cosim.loop.recorder import read_results, sidecar_path
 from toy_models import (LAG_K, LAG_TAU, Constant, Failing, Gain, PController, Probe, Step, lag_fmu2,  # noqa: F401
                         lag_fmu3, lag_step)
 

@@ -1,4 +1,4 @@
-"""Model Exchange FMUs solved together (cosim/me_system.py, me_system.c):
+"""Model Exchange FMUs solved together (cosim/fmi/me_system.py, me_system.c):
 connected Model Exchange FMUs are one system, their connections evaluated
 inside the right-hand side, both loops give the same rows bit for bit, an
 algebraic loop between them is refused by name (exit 2)."""
@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim import kernel
-from cosim.connection import Connection, Endpoint
+from cosim.loop import kernel
+from cosim.loop.connection import Connection, Endpoint
 from cosim.errors import ConnectionCheckError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master
-from cosim.model_exchange import SolverSettings
+from cosim.fmi.fmu import FmuComponent
+from cosim.loop.master import Master
+from cosim.fmi.model_exchange import SolverSettings
 from quadrotor_paper.cli import main
 from tests.industrial_fmus import DC_MOTOR, DC_MOTOR_CONNECTIONS, algebraic_loop_specs, dc_motor_exact, dc_motor_specs
 

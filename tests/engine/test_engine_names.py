@@ -13,7 +13,7 @@ import pytest
 
 from cosim.errors import ConnectionCheckError
 from cosim.names import array_element, is_name, resolve, split_endpoint, split_top
-from cosim.recorder import read_results
+from cosim.loop.recorder import read_results
 from quadrotor_paper.cli import main
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
@@ -111,7 +111,7 @@ def test_a_connection_to_no_variable_offers_the_nearest_names():
     from types import SimpleNamespace
 
     from cosim.component import Port
-    from cosim.connection import check_connections, parse_connections
+    from cosim.loop.connection import check_connections, parse_connections
 
     comps = {"V": SimpleNamespace(inputs=(), outputs=(Port("x[1]"), Port("x[2]"), Port("'u, in'"))),
              "F": SimpleNamespace(inputs=(Port("'u, in'"),), outputs=())}
@@ -156,7 +156,7 @@ def test_a_scenario_without_record_signals_records_every_output(tmp_path, fmus, 
 
 
 def test_set_keys_and_named_values_take_the_name_as_the_fmu_writes_it():
-    from cosim.scenario import dotted_key
+    from cosim.scenario.definition import dotted_key
     from quadrotor_paper.cli import _named_values, _overrides
 
     assert dotted_key("fmus.V.parameters.a.b[2,3]") == ["fmus", "V", "parameters", "a.b[2,3]"]
@@ -173,7 +173,7 @@ def test_structured_names_survive_a_group_and_an_endpoint():
     and the variable of an endpoint."""
     from hypothesis import given, settings, strategies as st
 
-    from cosim.connection import parse_connection
+    from cosim.loop.connection import parse_connection
 
     b_name = st.tuples(st.sampled_from("ax_"), st.text(st.sampled_from("b1_"), max_size=3)).map("".join) | \
         st.text(st.sampled_from("ab ,.[]{}()='->"), min_size=1, max_size=6).map(

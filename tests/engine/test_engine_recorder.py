@@ -1,4 +1,4 @@
-"""cosim.recorder on its own: blocks flushed every block_rows rows, the sidecar's
+"""cosim.loop.recorder on its own: blocks flushed every block_rows rows, the sidecar's
 status, and read_results on complete, partial and broken files."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from decimal import Decimal
 import numpy as np
 import pytest
 
-from cosim.recorder import Recorder, read_results, shortest_rows, sidecar_path
+from cosim.loop.recorder import Recorder, read_results, shortest_rows, sidecar_path
 
 
 def data_lines(path) -> list[str]:

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from cosim.recorder import read_results
+from cosim.loop.recorder import read_results
 from quadrotor_paper.cli import main
 from tests.catalog_fmus import simulated
 from tests.strict_json import read_summary
@@ -270,7 +270,7 @@ def test_fmi_1_0_is_refused_in_one_line(tmp_path):
     import zipfile
 
     from cosim.errors import FmuLoadError
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     path = tmp_path / "Old.fmu"
     with zipfile.ZipFile(path, "w") as archive:
@@ -286,9 +286,9 @@ def test_a_model_exchange_run_resumes_from_its_snapshot(version):
     """A snapshot of a Model Exchange FMU holds its continuous and discrete
     states; resumed from it, an Euler run is the same run to the last bit,
     a CVODE run (restarted there) lands within its tolerance."""
-    from cosim.fmu_component import FmuComponent
-    from cosim.master import Master
-    from cosim.model_exchange import SolverSettings
+    from cosim.fmi.fmu import FmuComponent
+    from cosim.loop.master import Master
+    from cosim.fmi.model_exchange import SolverSettings
 
     for solver, within in ((SolverSettings("euler", step=EULER_STEP["BouncingBall"]), 0.0),
                            (SolverSettings(relative_tolerance=CVODE_TOLERANCE), 1e-7)):
@@ -305,10 +305,10 @@ def test_an_archive_keeps_how_the_master_runs_an_fmu(tmp_path):
     values, and the Model Exchange coupling (SSP 1.0 has no place for them:
     this engine's annotation), and
     the archive read back flies the same run."""
-    from cosim.scenario import parse_scenario
-    from cosim.assembly import build_master
-    from cosim.ssp import load_ssp
-    from cosim.ssp_export import export_ssp
+    from cosim.scenario.definition import parse_scenario
+    from cosim.scenario.assembly import build_master
+    from cosim.ssp.archive import load_ssp
+    from cosim.ssp.export import export_ssp
 
     raw = {"simulation": {"duration": 2.0, "step": 0.01, "coupling": "loose"},
            "fmus": {"Ball": {"path": str(fmu(3, "BouncingBall")), "interface": "ModelExchange",

@@ -15,8 +15,8 @@ import pytest
 import cosim
 import toy_models
 from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError, ScenarioError
-from cosim.scenario import load_scenario, parse_scenario
-from cosim.assembly import build_master, fmu_error_in_scenario
+from cosim.scenario.definition import load_scenario, parse_scenario
+from cosim.scenario.assembly import build_master, fmu_error_in_scenario
 from toy_models import BUILDS, Constant, Gain, PController, Step, lag_fmu2, lag_step  # noqa: F401
 
 TOL = 1e-9
@@ -380,7 +380,7 @@ def test_a_bad_seed_stream_is_refused_naming_the_key(raw, spec, message):
 
 
 def test_stream_seeds_are_the_run_seed_for_stream_0_and_numpys_spawned_children_otherwise():
-    from cosim.fmu_component import stream_seed
+    from cosim.fmi.lifecycle import stream_seed
     from cosim.limits import SEED_LIMIT
 
     assert [stream_seed(s, 0) for s in (0, 7, 2 ** 40)] == [0, 7, 2 ** 40]
@@ -394,7 +394,7 @@ def test_stream_seeds_are_the_run_seed_for_stream_0_and_numpys_spawned_children_
 def test_an_fmu_on_a_seed_stream_gets_that_streams_seed_at_start(raw):
     """The master sets the seed parameter to the stream's seed of the run's
     seed (the toy lag's y_0 plays the seed parameter: its first output shows it)."""
-    from cosim.fmu_component import stream_seed
+    from cosim.fmi.lifecycle import stream_seed
 
     raw["fmus"]["Lag"].update({"seed_parameter": "y_0", "seed_stream": 3})
     raw["fmus"]["Lag"]["parameters"] = {}
@@ -425,7 +425,7 @@ def _sum_scenario(version: int, step: float, parameters: dict, fmu: Path | None 
 
 @pytest.mark.parametrize("version", [2, 3])
 def test_a_sampled_data_fmu_declares_its_period_and_a_continuous_one_none(version):
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     assert FmuComponent("Sum", toy_models.sum_fmu_path(version)).sample_period == "dt"
     assert FmuComponent("Lag", toy_models.lag_fmu_path(version)).sample_period is None

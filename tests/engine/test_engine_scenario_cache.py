@@ -1,5 +1,5 @@
 """A scenario validated before, by the same code, is served from the cache
-folder (cosim.cache, cosim.scenario.load_scenario): the same Scenario as a
+folder (cosim.cache, cosim.scenario.definition.load_scenario): the same Scenario as a
 validation gives, never a refusal skipped, never for a document whose
 validation reads a file, and validated again once any module it was
 validated with changes. The installed plugins are kept the same way."""
@@ -11,10 +11,10 @@ import shutil
 import pytest
 
 import cosim.cache
-import cosim.scenario_tables
-from cosim import registry
+import cosim.scenario.tables
+from cosim.scenario import registry
 from cosim.errors import ScenarioError
-from cosim.scenario import Scenario, load_scenario, parse_scenario
+from cosim.scenario.definition import Scenario, load_scenario, parse_scenario
 from test_engine_scenario import SCENARIO  # the toy scenario
 from toy_models import lag_fmu2  # noqa: F401  (a fixture)
 
@@ -32,15 +32,15 @@ def cache(tmp_path, monkeypatch):
 
 @pytest.fixture
 def validations(monkeypatch):
-    """The documents validated from now on (cosim.scenario_tables.derived_state's calls)."""
+    """The documents validated from now on (cosim.scenario.tables.derived_state's calls)."""
     calls = []
-    derive = cosim.scenario_tables.derived_state
+    derive = cosim.scenario.tables.derived_state
 
     def counted(document, source, name):
         calls.append(document)
         return derive(document, source, name)
 
-    monkeypatch.setattr(cosim.scenario_tables, "derived_state", counted)
+    monkeypatch.setattr(cosim.scenario.tables, "derived_state", counted)
     return calls
 
 
@@ -91,8 +91,8 @@ def test_a_changed_module_validates_the_document_again(tmp_path, cache, validati
     entry = json.loads(next((cache / "scenarios").glob("*.json")).read_text())
     code_file = cache / "code" / f"{entry['code']}.json"
     files = json.loads(code_file.read_text())
-    assert any(f[0] == cosim.scenario_tables.__file__ for f in files)  # the code that validated it is listed
-    files = [[name, size + 1 if name == cosim.scenario_tables.__file__ else size, mtime]
+    assert any(f[0] == cosim.scenario.tables.__file__ for f in files)  # the code that validated it is listed
+    files = [[name, size + 1 if name == cosim.scenario.tables.__file__ else size, mtime]
              for name, size, mtime in files]  # as if the declaration had been edited
     code_file.write_text(json.dumps(files))
     cosim.cache._UNCHANGED.clear()  # a new process
@@ -132,9 +132,9 @@ def test_the_installed_plugins_are_kept_while_the_distributions_are_unchanged(ca
 
 
 def test_an_entry_point_value_names_its_object():
-    assert registry._load_entry("cosim.registry:ComponentKind") is registry.ComponentKind
-    assert registry._load_entry("cosim.registry:Case.applied_to") is registry.Case.applied_to
-    assert registry._load_entry("cosim.registry") is registry
+    assert registry._load_entry("cosim.scenario.registry:ComponentKind") is registry.ComponentKind
+    assert registry._load_entry("cosim.scenario.registry:Case.applied_to") is registry.Case.applied_to
+    assert registry._load_entry("cosim.scenario.registry") is registry
     with pytest.raises(ValueError, match="expected 'module:attribute'"):
         registry._load_entry("not a value")
 
@@ -143,11 +143,11 @@ def test_a_scenario_file_is_parsed_once_for_its_text(tmp_path, cache, monkeypatc
     """The TOML of a scenario file is parsed once for a text (its document
     kept under the text's digest): read again, the same document; another
     text, parsed again; a text that is no TOML, refused in its own words."""
-    import cosim.scenario
+    import cosim.scenario.definition
 
     parsed = []
-    parse = cosim.scenario.toml_text
-    monkeypatch.setattr(cosim.scenario, "toml_text", lambda text, path: parsed.append(text) or parse(text, path))
+    parse = cosim.scenario.definition.toml_text
+    monkeypatch.setattr(cosim.scenario.definition, "toml_text", lambda text, path: parsed.append(text) or parse(text, path))
     path = _written(tmp_path, SCENARIO)
     first, again = load_scenario(path), load_scenario(path)
     assert len(parsed) == 1 and _as_data(first) == _as_data(again) and first.duration == 3.0

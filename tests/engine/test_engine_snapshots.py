@@ -1,4 +1,4 @@
-"""The master's snapshots (cosim.master.Snapshot): every FMU's state and
+"""The master's snapshots (cosim.loop.master.Snapshot): every FMU's state and
 every signal at chosen communication points, taken without changing the
 run, the same in the compiled and the Python loop; a run resumed from one
 continues the run it was taken from."""
@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim import kernel
+from cosim.loop import kernel
 from cosim.errors import ConnectionCheckError, FmuCallError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master
+from cosim.fmi.fmu import FmuComponent
+from cosim.loop.master import Master
 from toy_models import lag_fmu_path, sum_fmu_path
 
 H = 0.01

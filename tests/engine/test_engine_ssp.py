@@ -20,15 +20,15 @@ from lxml import etree
 
 import cosim
 import toy_models
-from cosim.connection import parse_connections
+from cosim.loop.connection import parse_connections
 from cosim.errors import ConnectionCheckError, ScenarioError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master
-from cosim.scenario import apply_overrides, parse_scenario
-from cosim.assembly import build_master
-from cosim.ssp import (COSIM_ANNOTATION, COSIM_NAMESPACE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, load_ssp,
+from cosim.fmi.fmu import FmuComponent
+from cosim.loop.master import Master
+from cosim.scenario.definition import apply_overrides, parse_scenario
+from cosim.scenario.assembly import build_master
+from cosim.ssp.archive import (COSIM_ANNOTATION, COSIM_NAMESPACE, NS, OSP_ANNOTATION, OSP_NAMESPACE, SSD_NAME, load_ssp,
                        ssd_schema_errors)
-from cosim.ssp_export import export_ssp
+from cosim.ssp.export import export_ssp
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel
 from fmu_models.export.variables import input_, output, parameter, state
@@ -502,7 +502,7 @@ def test_an_external_parameter_set_is_read(archive, tmp_path):
 
 def test_cosim_ssp_imports_nothing_of_the_application_nor_pyssp():
     """pyssp-standard (and its pint, xmlschema) is imported by the export only."""
-    code = ("import cosim.ssp, cosim.ssp_export, sys; print(sorted({m.split('.')[0] for m in sys.modules} & "
+    code = ("import cosim.ssp.archive, cosim.ssp.export, sys; print(sorted({m.split('.')[0] for m in sys.modules} & "
             "{'quadrotor_paper', 'fnn_controller', 'fmu_models', 'pyssp_standard', 'libcosimpy', 'pint'}))")
     root = Path(cosim.__file__).resolve().parents[1]
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=60)

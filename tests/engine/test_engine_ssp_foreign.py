@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.assembly import build_master
-from cosim.connection import parse_connections
+from cosim.scenario.assembly import build_master
+from cosim.loop.connection import parse_connections
 from cosim.errors import ScenarioError
-from cosim.scenario import load_scenario
-from cosim.ssp import load_ssp, ssd_schema_errors
+from cosim.scenario.definition import load_scenario
+from cosim.ssp.archive import load_ssp, ssd_schema_errors
 
 REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference-fmus"
 pytestmark = pytest.mark.skipif(not REFERENCE.is_dir(), reason=f"the Reference FMUs are not at {REFERENCE}")
@@ -171,7 +171,7 @@ def test_the_editors_archive_is_valid_ssp_1_0():
 
 
 def test_the_nested_archive_is_flattened(foreign, caplog):
-    with caplog.at_level(logging.INFO, logger="cosim.ssp"):
+    with caplog.at_level(logging.INFO, logger="cosim.ssp.archive"):
         scenario = load_ssp(foreign)
     fmus = scenario.fmus
     assert list(fmus) == ["Source", "SuT.edrive_mass", "SuT.osc", "Sink"]
@@ -314,7 +314,7 @@ def test_the_command_line_flies_it_at_the_users_step(foreign, tmp_path, capsys):
 def test_exported_again_it_reads_back_the_same(foreign, tmp_path):
     """Our writer puts the flattened system in one ssd:System (instances keep their dotted names): it reads
     back to the same scenario, schema-valid."""
-    from cosim.ssp_export import export_ssp
+    from cosim.ssp.export import export_ssp
 
     nested = load_ssp(foreign)
     again = load_ssp(export_ssp(nested, tmp_path / "again.ssp"))
@@ -345,7 +345,7 @@ ONE = """<?xml version="1.0" encoding="UTF-8"?>
 ])
 def test_without_a_step_the_default_is_said(tmp_path, caplog, fmu, stop, step, origin):
     path = _archive(tmp_path / "one.ssp", ONE.format(fmu=fmu, stop=stop))
-    with caplog.at_level(logging.INFO, logger="cosim.ssp"):
+    with caplog.at_level(logging.INFO, logger="cosim.ssp.archive"):
         scenario = load_ssp(path)
     assert scenario.step == step
     assert any(origin in r.getMessage() for r in caplog.records), [r.getMessage() for r in caplog.records]

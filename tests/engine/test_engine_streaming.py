@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from cosim.online import HELD, ColumnSum, Last, Maximum, Sum, finite
-from cosim.recorder import CHUNK_ROWS, Recorder, iter_results, read_results, sidecar_path
+from cosim.loop.online import HELD, ColumnSum, Last, Maximum, Sum, finite
+from cosim.loop.recorder import CHUNK_ROWS, Recorder, iter_results, read_results, sidecar_path
 
 
 def fed(accumulator, values, rng, largest=5000):

@@ -1,4 +1,4 @@
-"""Studies (cosim.study, cosim.study_run) on the toy loop: the plan (cases,
+"""Studies (cosim.study.definition, cosim.study.run) on the toy loop: the plan (cases,
 grid, random draws, seeds; generated lazily), refusals naming the study key,
 failed runs as rows, the one summary, resuming a killed study, the folder's
 lock, and the same rows from a local Dask cluster as in this process."""
@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 import toy_models
-from cosim import registry
+from cosim.scenario import registry
 from cosim.errors import ScenarioError
 from cosim.limits import MAX_RUNS
-from cosim.study import count, load_study, parse_study, plan, runs
-from cosim.study_run import LOCK, read_runs, run_study
-from cosim.summary import summarize
+from cosim.study.definition import count, load_study, parse_study, plan, runs
+from cosim.study.run import LOCK, read_runs, run_study
+from cosim.study.summary import summarize
 from tests.strict_json import read_summary
 
 pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
@@ -203,7 +203,8 @@ def test_the_t_quantiles_are_scipys_to_the_bit_and_kept_so_a_later_summary_impor
     code = textwrap.dedent(f"""
         import sys
         from pathlib import Path
-        from cosim import cache, summary
+        from cosim import cache
+        from cosim.study import summary
         cache.register_cache(lambda: Path({str(tmp_path)!r}))
         print(repr([summary.t975(d) for d in (1, 2, 9, 19)]), "scipy.special" in sys.modules)
     """)
@@ -407,7 +408,7 @@ def test_a_local_cluster_of_threads_gives_the_rows_of_this_process_and_frees_its
     each), to the same bits as one after the other here; the cache is closed
     when the study ends (its FMUs freed, its extracted files removed), and
     no ``distributed`` cluster was started."""
-    from cosim import dask_runner
+    from cosim.study import runner as dask_runner
 
     (folder / "toy_by_path.toml").write_text(toy_models.LOOP_BY_PATH.format(lag=toy_models.lag_fmu_path(2)))
     body = ('scenario = "toy_by_path.toml"\n[sweep]\nseeds = 3\n[sweep.grid]\n"components.ctrl.kp" = [0.5, 1.5]\n'

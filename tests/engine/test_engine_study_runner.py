@@ -1,4 +1,4 @@
-"""The runner of studies (cosim.dask_runner) at the loop's cost, on the toy
+"""The runner of studies (cosim.study.runner) at the loop's cost, on the toy
 loop: batches of runs give the records of runs flown one by one; a worker's
 master serves other values of the FMU parameters no component read (the
 FMUs reset, then set), to the same bits as a new master, and a master whose
@@ -18,11 +18,12 @@ from typing import Any
 import pytest
 
 import toy_models
-from cosim import dask_runner, registry
-from cosim.dask_runner import MasterCache, batch_size, execute, execute_batch, fly
-from cosim.registry import BuildContext
-from cosim.scenario import apply_overrides, parse_scenario
-from cosim.study import Run
+from cosim.study import runner as dask_runner
+from cosim.scenario import registry
+from cosim.study.runner import MasterCache, batch_size, execute, execute_batch, fly
+from cosim.scenario.registry import BuildContext
+from cosim.scenario.definition import apply_overrides, parse_scenario
+from cosim.study.definition import Run
 
 pytestmark = pytest.mark.usefixtures("toys")  # tests/engine/conftest.py
 
@@ -232,7 +233,7 @@ def test_fmus_instantiated_by_two_threads_at_once_leave_the_working_directory_as
     import threading
     import time
 
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     real = os.chdir
 

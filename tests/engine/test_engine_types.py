@@ -28,11 +28,11 @@ import numpy as np
 import pytest
 
 from cosim.component import Port, PythonComponent
-from cosim.connection import Connection, Endpoint, parse_connection
+from cosim.loop.connection import Connection, Endpoint, parse_connection
 from cosim.errors import ConnectionCheckError, ScenarioError
-from cosim.fmu_component import FmuComponent
-from cosim.scenario import parse_scenario
-from cosim.assembly import build_master
+from cosim.fmi.fmu import FmuComponent
+from cosim.scenario.definition import parse_scenario
+from cosim.scenario.assembly import build_master
 from tests.strict_json import read_summary
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -364,7 +364,7 @@ def test_fan_out_drives_two_inputs_of_an_fmu(tmp_path):
 # ---- the signal table --------------------------------------------------------------------------------
 
 def test_the_table_holds_or_interpolates_per_column(tmp_path):
-    from cosim.table import SignalTable
+    from cosim.scenario.signal_table import SignalTable
 
     (tmp_path / "t.csv").write_text("time,x,y,k\n0,0,0,1\n1,10,10,2\n1,20,20,3\n3,0,0,4\n", encoding="utf-8")
     table = SignalTable("t", tmp_path / "t.csv", "hold", {"y": {"interpolation": "linear"},
@@ -394,7 +394,7 @@ def test_the_table_holds_or_interpolates_per_column(tmp_path):
      "t.columns.x.interpolation = 'linear': a Int32 column is held ('hold')"),
 ])
 def test_bad_tables_are_refused_in_one_line(tmp_path, text, columns, message):
-    from cosim.table import SignalTable
+    from cosim.scenario.signal_table import SignalTable
 
     (tmp_path / "in.csv").write_text(text, encoding="utf-8")
     with pytest.raises(ScenarioError, match=re.escape(message)) as info:
@@ -405,15 +405,15 @@ def test_bad_tables_are_refused_in_one_line(tmp_path, text, columns, message):
 def test_the_table_file_is_bounded(tmp_path, monkeypatch):
     """Streamed, a CSV is bounded by its rows and the data of its columns
     read (its size bounds no memory: only the columns played are held)."""
-    import cosim.table
-    from cosim.table import SignalTable
+    import cosim.scenario.signal_table
+    from cosim.scenario.signal_table import SignalTable
 
     (tmp_path / "in.csv").write_text("time,x\n" + "".join(f"{i},1\n" for i in range(5)), encoding="utf-8")
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 4)
+    monkeypatch.setattr(cosim.scenario.signal_table, "MAX_TABLE_ROWS", 4)
     with pytest.raises(ScenarioError, match="more than 4 rows; at most 4 are read"):
         SignalTable("t", tmp_path / "in.csv")
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 5)
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_DATA", 60)  # the time's 40 bytes, then x's 40
+    monkeypatch.setattr(cosim.scenario.signal_table, "MAX_TABLE_ROWS", 5)
+    monkeypatch.setattr(cosim.scenario.signal_table, "MAX_TABLE_DATA", 60)  # the time's 40 bytes, then x's 40
     with pytest.raises(ScenarioError, match=r"signal table '.*in.csv': more than 20 bytes of data in the columns "
                                             r"used; at most 20 are read"):
         SignalTable("t", tmp_path / "in.csv")
@@ -458,8 +458,8 @@ class Counter(PythonComponent):
 
 
 def test_a_python_component_takes_and_gives_typed_values(tmp_path):
-    from cosim.master import Master
-    from cosim.table import SignalTable
+    from cosim.loop.master import Master
+    from cosim.scenario.signal_table import SignalTable
 
     (tmp_path / "in.csv").write_text(f"time,n,s\n0,1,a\n0.5,{2 ** 62},b\n", encoding="utf-8")
     table = SignalTable("table", tmp_path / "in.csv", columns={"n": {"type": "Int64"}, "s": {"type": "String"}},
@@ -534,7 +534,7 @@ def test_the_table_feeds_the_fmu_as_fmpy_simulate_fmu_does(version, interface):
 
 
 def test_recorded_strings_are_bounded_each_and_in_all(tmp_path, monkeypatch):
-    import cosim.recorder
+    import cosim.loop.recorder
 
     (tmp_path / "in.csv").write_text("time,s\n0,short\n0.5,a longer text\n", encoding="utf-8")
     raw = {"connections": ["inputs.s -> F.String_input"], "simulation": {"duration": 1.0, "step": 0.25},
@@ -542,14 +542,14 @@ def test_recorded_strings_are_bounded_each_and_in_all(tmp_path, monkeypatch):
            "components": {"inputs": {"kind": "signal_table", "outside": "hold", "file": str(tmp_path / "in.csv"),
                                      "columns": {"s": {"type": "String"}}}},
            "record": {"signals": ["F.String_output"]}}
-    monkeypatch.setattr(cosim.recorder, "MAX_STRING_BYTES", 8)
+    monkeypatch.setattr(cosim.loop.recorder, "MAX_STRING_BYTES", 8)
     with build_master(parse_scenario(raw)) as master:
         result = master.run(1.0, raise_on_error=False)
     assert result.status == "failed" and result.error == (
         "recording F.String_output: a value of 13 bytes; at most 8 bytes each are recorded")
     assert list(result["F.String_output"]) == ["short", "short"]  # the rows before are kept
-    monkeypatch.setattr(cosim.recorder, "MAX_STRING_BYTES", 100)
-    monkeypatch.setattr(cosim.recorder, "MAX_RECORD_BYTES", 5 * 2 * 8 + 12)
+    monkeypatch.setattr(cosim.loop.recorder, "MAX_STRING_BYTES", 100)
+    monkeypatch.setattr(cosim.loop.recorder, "MAX_RECORD_BYTES", 5 * 2 * 8 + 12)
     with build_master(parse_scenario(raw)) as master:
         result = master.run(1.0, raise_on_error=False)
     assert result.status == "failed" and result.error.startswith(

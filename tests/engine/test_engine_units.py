@@ -1,4 +1,4 @@
-"""Units by meaning (cosim.units): parsing, equivalence, conversion; the
+"""Units by meaning (cosim.fmi.units): parsing, equivalence, conversion; the
 modelDescription's UnitDefinitions (also through a declaredType) winning over
 the name; connections that convert, in the compiled and the Python loop
 alike; the explicit conversion and the unchecked marker of a scenario."""
@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from cosim import kernel
+from cosim.loop import kernel
 from cosim.component import Port, ports
-from cosim.connection import check_connections, parse_connections
+from cosim.loop.connection import check_connections, parse_connections
 from cosim.errors import ConnectionCheckError, ScenarioError
-from cosim.fmu_component import FmuComponent
-from cosim.fmu_description import fmu_ports
-from cosim.master import Master
-from cosim.scenario import parse_scenario
-from cosim.assembly import build_master
-from cosim.units import BASE_UNITS, Unit, conversion, definitions, parse, unit_of
+from cosim.fmi.fmu import FmuComponent
+from cosim.fmi.description import fmu_ports
+from cosim.loop.master import Master
+from cosim.scenario.definition import parse_scenario
+from cosim.scenario.assembly import build_master
+from cosim.fmi.units import BASE_UNITS, Unit, conversion, definitions, parse, unit_of
 from toy_models import LAG_K, LAG_TAU, Constant, Probe, lag_fmu_path, lag_step
 
 H = 0.01
@@ -82,7 +82,7 @@ def test_a_name_of_base_units_is_read_without_pint_as_pint_reads_it(name):
     """Names written with the FMI base units alone are read from the name
     (no pint registry to build): the same Unit, factor and offset included,
     as pint's reading; other names (N here) go to pint."""
-    from cosim import units
+    from cosim.fmi import units
 
     assert units.parse(name) == Unit(name, *_by_pint(name))
     plain = units._base_units_only(name)
@@ -90,7 +90,7 @@ def test_a_name_of_base_units_is_read_without_pint_as_pint_reads_it(name):
 
 
 def _by_pint(name):
-    from cosim import units
+    from cosim.fmi import units
 
     units.parse.cache_clear()
     real = units._base_units_only
@@ -104,7 +104,7 @@ def _by_pint(name):
 
 
 def test_names_that_only_look_like_base_units_go_to_pint():
-    from cosim.units import _base_units_only
+    from cosim.fmi.units import _base_units_only
 
     for name in ("ms", "Hz", "km/h", "m/s/s", "kg/(m.s)", "degC", "mm", "furlongs_per_blob", "m s"):
         assert _base_units_only(name) is None, name
@@ -201,7 +201,7 @@ def test_a_connection_that_drops_the_radian_is_told_at_info_level_and_hz_is_refu
     comps = {"src": _stand_in(outputs=ports(("w", "rad/s"), ("f", "Hz"))),
              "sink": _stand_in(inputs=(Port("w", "radian / second", unit_definition=Unit("radian / second",
                                                                                            parse("1/s").exponents)),))}
-    with caplog.at_level(logging.INFO, logger="cosim.connection"):
+    with caplog.at_level(logging.INFO, logger="cosim.loop.connection"):
         (w,) = check_connections(parse_connections(["src.w -> sink.w"]), comps)
     assert w.conversion is None and "connection src.w -> sink.w:" in caplog.text and "radian" in caplog.text
     with pytest.raises(ConnectionCheckError, match="connection src.f -> sink.w: unit mismatch.*Hz counts cycles"):
@@ -351,7 +351,7 @@ def test_a_scenario_states_a_conversion_and_refuses_a_wrong_table(tmp_path):
 
 
 def test_the_scenario_schema_declares_connection_tables():
-    from cosim.scenario import scenario_json_schema
+    from cosim.scenario.definition import scenario_json_schema
 
     schema = scenario_json_schema()
     items = schema["properties"]["connections"]["items"]["oneOf"]
@@ -399,7 +399,7 @@ signals = ["A.y", "B.y", "C.y", "B.u", "C.u"]
 def converted_archive(toys, tmp_path):
     import tomllib
 
-    from cosim.ssp_export import export_ssp
+    from cosim.ssp.export import export_ssp
 
     scenario = parse_scenario(tomllib.loads(SSP_SCENARIO))
     return scenario, export_ssp(scenario, tmp_path / "converted.ssp")
@@ -408,14 +408,14 @@ def converted_archive(toys, tmp_path):
 def _ssd(path: Path):
     from lxml import etree
 
-    from cosim.ssp import SSD_NAME
+    from cosim.ssp.archive import SSD_NAME
 
     with zipfile.ZipFile(path) as z:
         return etree.fromstring(z.read(SSD_NAME))
 
 
 def test_an_archive_carries_the_conversions_the_ssp_way_and_reads_them_back(converted_archive):
-    from cosim.ssp import NS, load_ssp, ssd_schema_errors
+    from cosim.ssp.archive import NS, load_ssp, ssd_schema_errors
 
     scenario, archive = converted_archive
     root = _ssd(archive)
@@ -441,7 +441,7 @@ def test_a_transformation_applies_after_the_connectors_unit_conversion(converted
     """SSP 1.0: without suppressUnitConversion, the connectors' units convert first, then the transformation."""
     from lxml import etree
 
-    from cosim.ssp import NS, SSD_NAME, load_ssp
+    from cosim.ssp.archive import NS, SSD_NAME, load_ssp
 
     _, archive = converted_archive
     folder = tmp_path / "edited"
@@ -508,8 +508,8 @@ def test_an_archive_defines_a_unit_the_fmu_only_names(toys, tmp_path):
     so that an importer converts as our master does."""
     import tomllib
 
-    from cosim.ssp import NS
-    from cosim.ssp_export import export_ssp
+    from cosim.ssp.archive import NS
+    from cosim.ssp.export import export_ssp
 
     no_m = _with_unit_definition(tmp_path, 2, '<Unit name="m"><BaseUnit m="1"/></Unit>', "")
     text = SSP_SCENARIO.replace('model = "toy_FirstOrderLag"', f'path = "{no_m}"')
@@ -542,7 +542,7 @@ def test_the_dc_motors_speed_without_its_radian_connects_checked(tmp_path, caplo
         xml.write_text(model_description(dc_motor_specs()[name], "{0}"))
         ports_ = fmu_ports(read_model_description(str(xml)))
         comps[name] = _stand_in(inputs=ports_["input"], outputs=ports_["output"])
-    with caplog.at_level(logging.INFO, logger="cosim.connection"):
+    with caplog.at_level(logging.INFO, logger="cosim.loop.connection"):
         (c,) = check_connections(parse_connections(["DCMotor_Mechanical.w -> DCMotor_Electrical.w"]), comps)
     assert c.conversion is None and not c.unchecked
     assert "connection DCMotor_Mechanical.w -> DCMotor_Electrical.w: rad/s (SI s-1) and rad/s (SI s-1.rad)" \

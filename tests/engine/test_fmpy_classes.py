@@ -1,5 +1,5 @@
 """fmpy's classes with each FMI function's C signature worked out once per
-class (cosim.fmu_component._fmpy_class): every instance's library functions
+class (cosim.fmi.lifecycle._fmpy_class): every instance's library functions
 get exactly what fmpy's own constructor gives them, in the same order."""
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 
-from cosim import fmu_component
-from cosim.fmu_component import FmuComponent
+from cosim.fmi import lifecycle as fmu_component
+from cosim.fmi.fmu import FmuComponent
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import QUADROTOR
 
@@ -51,7 +51,7 @@ def test_the_kept_signatures_drive_a_run(quadrotor_fmu2):
     instance of the plant flies the same first second as the first."""
     import numpy as np
 
-    from cosim.master import Master
+    from cosim.loop.master import Master
 
     results = []
     for _ in range(2):

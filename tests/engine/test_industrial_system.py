@@ -19,8 +19,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from cosim.assembly import build_master
-from cosim.ssp import load_ssp, ssd_schema_errors
+from cosim.scenario.assembly import build_master
+from cosim.ssp.archive import load_ssp, ssd_schema_errors
 from tests.industrial_fmus import DC_MOTOR, dc_motor_rhs, dc_motor_specs
 
 R = 1.5  # Ohm: the archive's parameter set, not the FMU's start value (1 Ohm)

@@ -1,4 +1,4 @@
-"""The signal table (``kind = "signal_table"``, cosim/table.py): a recorded
+"""The signal table (``kind = "signal_table"``, cosim/scenario/signal_table.py): a recorded
 CSV or Parquet file played as outputs, hold or linear per column, units from
 the header, the results sidecar or the scenario, the time column checked,
 and its two forms -- the Python component and the table FMU -- giving the
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from cosim.errors import ScenarioError
-from cosim.registry import table_fmu
-from cosim.scenario import parse_scenario
-from cosim.assembly import build_master
-from cosim.table import SignalTable, check_times, load_table, split_unit
+from cosim.scenario.registry import table_fmu
+from cosim.scenario.definition import parse_scenario
+from cosim.scenario.assembly import build_master
+from cosim.scenario.signal_table import SignalTable, check_times, load_table, split_unit
 
 from tests.engine.test_engine_types import REFERENCE, fmu
 
@@ -119,8 +119,8 @@ def test_a_unit_from_the_header_is_converted_on_the_connection(tmp_path, form):
             return np.array(u, dtype=float)
 
     (tmp_path / "t.csv").write_text(TABLE, encoding="utf-8")
-    from cosim.master import Master
-    from cosim.table import table_component
+    from cosim.loop.master import Master
+    from cosim.scenario.signal_table import table_component
 
     table = table_component("table", {"file": str(tmp_path / "t.csv"), "form": form}, builder=table_fmu())
     with Master([table] if form == "fmu" else [], [Sink("sink")] + ([table] if form == "python" else []),
@@ -219,7 +219,7 @@ def test_the_table_fmu_refuses_a_step_beyond_its_rows_itself(tmp_path, monkeypat
 
     _fmpy_extracts_into(tmp_path, monkeypatch)
 
-    from cosim.table import fmu_entry
+    from cosim.scenario.signal_table import fmu_entry
 
     path = fmu_entry("table", {"file": str(_write(tmp_path)), "outside": "refuse"}, builder=table_fmu())["path"]
     with pytest.raises(Exception, match="(?i)dostep"):
@@ -262,15 +262,15 @@ def test_a_parquet_table_is_bounded_by_its_footer_before_it_is_read(tmp_path, mo
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    import cosim.table
+    import cosim.scenario.signal_table
 
     pq.write_table(pa.table([np.arange(5.0), np.ones(5), [str(i) * 400 for i in range(5)]], names=["time", "x", "s"]),
                    tmp_path / "t.parquet")
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 4)
+    monkeypatch.setattr(cosim.scenario.signal_table, "MAX_TABLE_ROWS", 4)
     with pytest.raises(ScenarioError, match=re.escape("more than 4 rows (5); at most 4 are read")):
         load_table(tmp_path / "t.parquet", use=["x"])
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_ROWS", 5)
-    monkeypatch.setattr(cosim.table, "MAX_TABLE_DATA", 1000)
+    monkeypatch.setattr(cosim.scenario.signal_table, "MAX_TABLE_ROWS", 5)
+    monkeypatch.setattr(cosim.scenario.signal_table, "MAX_TABLE_DATA", 1000)
     assert load_table(tmp_path / "t.parquet", use=["x"]).columns["x"].tolist() == [1.0] * 5
     with pytest.raises(ScenarioError, match=r"\d+ bytes of data uncompressed in the columns used; at most 1000 are"):
         load_table(tmp_path / "t.parquet", use=["s"])
@@ -288,7 +288,7 @@ def test_the_table_fmu_refuses_a_tampered_resource(tmp_path, monkeypatch):
 
     from fmpy import simulate_fmu
 
-    from cosim.table import fmu_entry
+    from cosim.scenario.signal_table import fmu_entry
     from fmu_models.models.signal_table import RESOURCE
 
     _fmpy_extracts_into(tmp_path, monkeypatch)
@@ -324,7 +324,7 @@ def test_the_table_fmu_validates_and_keeps_the_file_s_units(tmp_path, version):
     the project's models do not use (km/h) is defined by its SI meaning."""
     from fmpy import read_model_description
 
-    from cosim.table import fmu_entry
+    from cosim.scenario.signal_table import fmu_entry
     from tests.fmu_validation import validate_fmu
 
     path = fmu_entry("table", {"file": str(_write(tmp_path)), "fmi_version": version}, builder=table_fmu())["path"]

@@ -22,7 +22,7 @@ The Python components (:class:`Constant`, :class:`Step`, :class:`PController`
 parameters and return to their base values when a run gives none.
 
 :func:`register_toys` registers toy component kinds, an alias section, a
-section and the toy FMU model in :mod:`cosim.registry`, every name prefixed
+section and the toy FMU model in :mod:`cosim.scenario.registry`, every name prefixed
 ``toy_`` so nothing can clash with an application's registrations.
 """
 from __future__ import annotations
@@ -37,11 +37,11 @@ import pytest
 
 from pydantic import Field, create_model
 
-from cosim import registry
+from cosim.scenario import registry
 from cosim.component import PythonComponent, ports
 from cosim.errors import ScenarioError
-from cosim.scenario import check_fmu_parameters
-from cosim.schema import Number, Table
+from cosim.scenario.definition import check_fmu_parameters
+from cosim.scenario.schema import Number, Table
 from fmu_models.export.build import cached_fmu
 from fmu_models.export.model import FmuModel, Sampled
 from fmu_models.export.variables import discrete, input_, output, parameter, state
@@ -269,7 +269,7 @@ class ToySumFmu(Table):
 
 
 def _build_sum_fmu(name: str, params: Mapping[str, Any], context: registry.BuildContext):
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     table = dict(params)
     parameters = {"dt": float(table["dt"])} if table.get("dt") is not None else {}

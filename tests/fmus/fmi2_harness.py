@@ -10,7 +10,7 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 
-from cosim.fmu_component import fmi2_callbacks
+from cosim.fmi.lifecycle import fmi2_callbacks
 from fmu_models.models.quadrotor import STATE_NAMES
 from tests.catalog_fmus import fmpy_class
 
@@ -51,7 +51,7 @@ def _value_references(md) -> dict[str, int]:
 
 class LogCollector:
     """Receives the log messages of one FMI 2.0 instance (see
-    :func:`cosim.fmu_component.fmi2_callbacks`, which holds ``receive`` weakly: keep the
+    :func:`cosim.fmi.lifecycle.fmi2_callbacks`, which holds ``receive`` weakly: keep the
     collector alive as long as the instance)."""
 
     def __init__(self) -> None:
@@ -66,7 +66,7 @@ class Fmi2Instance:
     """One instantiated, initialized FMI 2.0 instance (CS by default).
 
     Made of fmpy's ``FMU2Slave`` (``FMU2Model``) as the tool makes its
-    instances (:func:`cosim.fmu_component._fmpy_class`): the same class
+    instances (:func:`cosim.fmi.lifecycle._fmpy_class`): the same class
     with each FMI function's C signature worked out once per process, not
     by ``inspect`` for every instance (about 2 ms of the 3 ms an instance
     took; the test of every parameter of every model makes some 1200), the

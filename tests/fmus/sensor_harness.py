@@ -10,7 +10,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from tests.catalog_fmus import catalog_fmu, fmpy_class, loaded
 
-from cosim.fmu_component import fmi2_callbacks
+from cosim.fmi.lifecycle import fmi2_callbacks
 from fmu_models.models.sensors import MEASUREMENT_12
 
 __all__ = ["DT", "Sensor"]
@@ -20,7 +20,7 @@ DT = 0.01
 
 class Sensor:
     """One initialized instance of a sensor FMU through fmpy (its classes as
-    the tool makes its instances, :func:`cosim.fmu_component._fmpy_class`:
+    the tool makes its instances, :func:`cosim.fmi.lifecycle._fmpy_class`:
     the FMI functions' C signatures worked out once per process, which fmpy's
     own constructor does by ``inspect`` for each instance, 10-20 ms of an
     FMI 3.0 one)."""

@@ -9,7 +9,7 @@ from ctypes import POINTER, c_double
 import numpy as np
 import pytest
 
-from cosim.linearize import linearize_fmu
+from cosim.linearize.linearization import linearize_fmu
 from fmu_models.models.quadrotor import DEFAULTS, QUADROTOR, hover_rotor_speed
 from fmu_models.models.rotor import rotor_speeds_squared, thrust_and_torques
 

@@ -106,7 +106,7 @@ def _shipped_models() -> list:
     parameter; the full sweep (about 3 CPU-s of CasADi's code generation) is
     slow but for a staged EKF (MX step, SX pieces, entries) and the plant."""
     import quadrotor_paper  # noqa: F401  (registers the shipped models)
-    from cosim import registry
+    from cosim.scenario import registry
 
     quick = {"Estimator", "Quadrotor"}
     return [pytest.param(name, marks=() if name in quick else pytest.mark.slow)
@@ -128,7 +128,7 @@ def test_every_pattern_of_the_spelling_matches_the_c_casadi_generates_for_a_ship
     not spelled); the select's definition comes before the first function;
     for the GUID's text of a staged model, every entry point is found and
     kept as CasADi wrote it, every function it calls without null checks."""
-    from cosim import registry
+    from cosim.scenario import registry
     from fmu_models.export.codegen import casadi_sources
 
     functions = registry.fmu_models()[name].definition().functions

@@ -325,8 +325,8 @@ def fmi2_circles():
 
 
 def _fly_circles(overrides):
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master
 
     scenario = load_scenario("circles", overrides)
     with build_master(scenario) as master:
@@ -341,7 +341,7 @@ def _fly_circles(overrides):
 def test_our_master_flies_circles_with_the_clocked_controller_bit_for_bit(fmi2_circles, interface):
     """The whole circles mission (50 s), its controller the clocked FMI 3.0
     FMU, in Co-Simulation with Event Mode or in Model Exchange (the Python
-    loop: cosim.master), is the FMI 2.0 controller's flight to the last bit."""
+    loop: cosim.loop.master), is the FMI 2.0 controller's flight to the last bit."""
     run = _fly_circles({"controller.fmi_version": 3, "controller.interface": interface})
     assert run.status == fmi2_circles.status == "ok" and run.columns == fmi2_circles.columns
     assert run.data.shape[0] == 5001
@@ -353,7 +353,7 @@ def test_an_interface_the_fmu_lacks_is_refused_by_name():
     """Model Exchange is for any FMU that has it (the master integrates it);
     the controller's FMI 2.0 form is Co-Simulation only."""
     from cosim.errors import FmuLoadError
-    from cosim.fmu_component import FmuComponent
+    from cosim.fmi.fmu import FmuComponent
 
     with pytest.raises(FmuLoadError, match="interface = 'ModelExchange': the FMU has no Model Exchange interface "
                                            r"\(it has Co-Simulation only\)"):
@@ -365,8 +365,8 @@ def test_a_clocked_controller_is_snapshotted_and_resumed_like_any_fmu(interface)
     """A snapshot taken at a tick (the clocked FMU in Event Mode there) leaves
     the run as it was, and a run resumed from it continues the run: the
     first row exactly, the rest to round-off of the resumed time grid."""
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master
 
     scenario = load_scenario("circles", {"controller.fmi_version": 3, "controller.interface": interface,
                                          "simulation.duration": 5.0})

@@ -14,7 +14,7 @@ from tests.catalog_fmus import fmpy_class, loaded
 from tests.fmu_validation import validate_fmu
 
 import fnn_controller as fc
-from cosim.fmu_component import fmi2_callbacks
+from cosim.fmi.lifecycle import fmi2_callbacks
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import STATE_NAMES
 from fnn_controller.step import OUTPUTS

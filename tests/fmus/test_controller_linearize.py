@@ -8,7 +8,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from cosim.linearize import linearize_fmu
+from cosim.linearize.linearization import linearize_fmu
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import STATE_NAMES
 from fnn_controller.controller_fmu import ACCELERATION_INPUTS, REFERENCE_INPUTS, controller_model

@@ -3,7 +3,7 @@
 token (the GUID), and deserializing or setting it refuses, with a log message
 naming what is wrong, a state of another model, a blob of the wrong size, and
 a value that a set or initialization would refuse. A valid state still
-round-trips exactly. Through :class:`cosim.fmu_component.FmuComponent` (fmpy's
+round-trips exactly. Through :class:`cosim.fmi.fmu.FmuComponent` (fmpy's
 ``FMU2Slave``/``FMU3Slave``), FMI 2.0 and 3.0, on the shipped controllers;
 every bad state is made here from a good one."""
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from cosim.errors import FmuCallError
-from cosim.fmu_component import FmuComponent
+from cosim.fmi.fmu import FmuComponent
 from fmu_models.export.build import cached_fmu
 from fnn_controller.controller_fmu import controller_model
 

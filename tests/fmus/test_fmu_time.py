@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.fmu_component import FmuComponent
+from cosim.fmi.fmu import FmuComponent
 from fmu_models.export.build import FMI_VERSIONS, cached_fmu
 from fmu_models.models.reference import OUTPUT_NAMES, REFERENCE_FIGURE_EIGHT, evaluate_outputs
 from fmu_models.models.sensors import COMMAND_LINK_4

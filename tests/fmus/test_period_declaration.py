@@ -12,7 +12,7 @@ import pytest
 from lxml import etree
 
 import fnn_controller as fc
-from cosim.fmu_component import FmuComponent
+from cosim.fmi.fmu import FmuComponent
 from fmu_models.catalog import MODELS
 from tests.catalog_fmus import catalog_fmu
 from fnn_controller.controller_fmu import controller_model

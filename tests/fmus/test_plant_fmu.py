@@ -787,8 +787,8 @@ def test_closed_loop_circles_with_a_20_ms_motor_lag_fly_without_diverging():
     with tau_m = 20 ms: 5 s without the guard tripping, the rotor speeds
     really lag the commands, and the flight stays close to the one with
     instantaneous rotors."""
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master
 
     def fly(tau_m):
         base = load_scenario("circles", {"fmus.Quadrotor.parameters.tau_m": tau_m, "simulation.duration": 5.0})

@@ -12,7 +12,7 @@ from tests.catalog_fmus import simulated
 from tests.fmu_validation import validate_fmu
 
 from cosim.errors import FmuCallError
-from cosim.fmu_component import FmuComponent
+from cosim.fmi.fmu import FmuComponent
 from fmu_models.catalog import MODELS
 from fmu_models.export.build import FMI_VERSIONS, cached_fmu
 from fmu_models.models.reference import (OUTPUT_NAMES, REFERENCE_FIGURE_EIGHT, REFERENCE_HOVER, REFERENCE_MODELS,

@@ -1,11 +1,11 @@
 """Every shipped FMU model that draws random numbers declares its seed
 parameter as the engine expects it: a whole number in [0, SEED_LIMIT], so
 the exporter's limit (``fmu_models.export.variables.SEED_MAX``) and the
-engine's (``cosim.fmu_component.SEED_LIMIT``, which bounds the seeds it
+engine's (``cosim.limits.SEED_LIMIT``, which bounds the seeds it
 derives) cannot drift apart."""
 from __future__ import annotations
 
-from cosim import registry
+from cosim.scenario import registry
 from cosim.limits import SEED_LIMIT
 from fmu_models.catalog import MODEL_NAMES, model
 from fnn_controller.controller_fmu import controller_model, fmu_identifier

@@ -209,8 +209,8 @@ def _noisy_circles(sigma: float, seed: int, duration: float = 5.0):
     controller (built in the test only; no shipped scenario changes)."""
     import tomllib
 
-    from cosim.scenario import parse_scenario, scenario_path
-    from cosim.assembly import build_master
+    from cosim.scenario.definition import parse_scenario, scenario_path
+    from cosim.scenario.assembly import build_master
 
     raw = tomllib.loads(scenario_path("circles").read_text(encoding="utf-8"))
     states = ",".join(IN12)

@@ -12,10 +12,10 @@ import pytest
 from tests.fmu_validation import validate_fmu
 from lxml import etree
 
-from cosim.fmu_component import stream_seed
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master
-from cosim.ssp import COSIM_NAMESPACE, SSD_NAME, load_ssp, ssd_schema_errors
+from cosim.fmi.lifecycle import stream_seed
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master
+from cosim.ssp.archive import COSIM_NAMESPACE, SSD_NAME, load_ssp, ssd_schema_errors
 
 pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
 

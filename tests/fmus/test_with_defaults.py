@@ -10,7 +10,7 @@ from fmpy import read_model_description
 from tests.fmu_validation import validate_fmu
 
 from cosim.errors import FmuCallError
-from cosim.fmu_component import FmuComponent
+from cosim.fmi.fmu import FmuComponent
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import QUADROTOR
 from fnn_controller.controller_fmu import controller_model

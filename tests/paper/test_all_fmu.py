@@ -13,9 +13,9 @@ import copy
 import numpy as np
 import pytest
 
-from cosim.fmu_component import FmuComponent
-from cosim.scenario import load_scenario, parse_scenario
-from cosim.assembly import build_master
+from cosim.fmi.fmu import FmuComponent
+from cosim.scenario.definition import load_scenario, parse_scenario
+from cosim.scenario.assembly import build_master
 from fnn_controller.variants import variant_names
 from quadrotor_paper.portable import all_fmu
 from quadrotor_paper.trajectories import ReferenceComponent, make_trajectory

@@ -16,7 +16,7 @@ import pytest
 
 from cosim.errors import ScenarioError
 from cosim.limits import MAX_RATIO
-from cosim.scenario import scenario_path
+from cosim.scenario.definition import scenario_path
 from quadrotor_paper.cli import EXIT_BAD_INPUT, EXIT_RUN_FAILED, main
 from tests.strict_json import read_summary
 
@@ -433,8 +433,8 @@ def test_an_archive_saves_its_controllers_learned_state(archive, sandbox, capsys
 
 
 def test_save_learned_refuses_before_the_run_a_controller_that_is_none_of_ours():
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master
     from quadrotor_paper.learned import learned_variant
 
     sc = load_scenario("circles", {"simulation.duration": 0.1})
@@ -470,8 +470,8 @@ def test_an_archive_takes_no_load_learned(archive, sandbox, capsys):
 # ---- the engine's own API ------------------------------------------------------------------------
 
 def test_a_seed_beyond_2_53_is_refused_by_the_master_whatever_the_form():
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master
 
     sc = load_scenario("circles", {"simulation.duration": 0.1, "controller.form": "python"})
     with build_master(sc) as master:
@@ -482,7 +482,7 @@ def test_a_seed_beyond_2_53_is_refused_by_the_master_whatever_the_form():
 
 def test_the_results_sidecar_counts_rows_as_blocks_are_flushed(tmp_path, monkeypatch):
     """A run killed mid-way leaves a sidecar that says how many rows are on disk."""
-    import cosim.recorder as recorder
+    import cosim.loop.recorder as recorder
 
     monkeypatch.setattr(recorder, "SIDECAR_EVERY", 0.0)
     rec = recorder.Recorder(("time", "x"), ("s", "m"), 1000, tmp_path / "r.csv", block_rows=10)
@@ -559,7 +559,7 @@ def test_a_name_given_twice_is_refused_where_it_is_read(sandbox, capsys, tmp_pat
 
 
 def test_a_brace_group_is_expanded_in_linear_time_and_capped():
-    from cosim.connection import ConnectionCheckError, parse_connection
+    from cosim.loop.connection import ConnectionCheckError, parse_connection
     from cosim.limits import MAX_GROUP
 
     names = ",".join(f"v{i}" for i in range(MAX_GROUP))

@@ -125,8 +125,8 @@ def test_a_column_in_a_unit_of_another_quantity_is_refused(tmp_path, flight_log,
 
 
 def test_the_calibrated_parameter_set_flies_in_a_run_and_in_an_exported_archive(tmp_path, flight_log, capsys):
-    from cosim.scenario import load_scenario
-    from cosim.ssp import load_ssp
+    from cosim.scenario.definition import load_scenario
+    from cosim.ssp.archive import load_ssp
 
     # four fitted names (the segment libraries of the tests above); b stays fixed, to check it is carried
     fix = [a for k, v in HIDDEN.items() if k not in ("Ix", "tau_m") for a in ("--fix", f"{k}={v}")]

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from quadrotor_paper.cli import EXIT_BAD_INPUT, EXIT_RUN_FAILED, main
-from cosim.recorder import read_results
+from cosim.loop.recorder import read_results
 from tests.strict_json import read_summary
 
 
@@ -101,8 +101,8 @@ def test_the_command_line_loads_no_analysis_or_plotting_library_it_does_not_use(
 # statistics, plots (--no-plots), the linear analysis, the FMU builder, the
 # in-process controller's CasADi function, the split controller, SSP archives.
 NOT_FOR_A_RUN = ("dask", "distributed", "matplotlib", "control", "scipy", "casadi.casadi", "fmu_models.export.build",
-                 "fmu_models.export.codegen", "fnn_controller.fast", "fnn_controller.split", "cosim.study",
-                 "cosim.study_run", "cosim.ssp", "cosim.ssp_export")
+                 "fmu_models.export.codegen", "fnn_controller.fast", "fnn_controller.split", "cosim.study.definition",
+                 "cosim.study.run", "cosim.ssp.archive", "cosim.ssp.export")
 
 
 def test_a_run_of_built_fmus_builds_no_model_and_loads_no_study_or_plotting_library(tmp_path):
@@ -110,6 +110,6 @@ def test_a_run_of_built_fmus_builds_no_model_and_loads_no_study_or_plotting_libr
     assert main([*argv, "--out", str(tmp_path / "first")]) == 0  # the FMUs built (or found) and recorded
     proc, modules = _imported_modules(*argv, "--out", str(tmp_path / "run"), cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert {"fmpy", "cosim.master", "quadrotor_paper.controller_component"} <= modules  # the listing sees the run
+    assert {"fmpy", "cosim.loop.master", "quadrotor_paper.controller_component"} <= modules  # the listing sees the run
     loaded = sorted(m for m in modules if any(m == name or m.startswith(name + ".") for name in NOT_FOR_A_RUN))
     assert loaded == []

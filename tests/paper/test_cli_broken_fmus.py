@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from quadrotor_paper.cli import EXIT_BAD_INPUT, main
-from cosim.scenario import scenario_path
+from cosim.scenario.definition import scenario_path
 from fmu_models.export.build import cached_fmu
 from fmu_models.catalog import MODELS
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from cosim.errors import ScenarioError
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master
 from fmu_models.models.quadrotor import DEFAULTS
 from fnn_controller import VehicleParams, initial_state, variant
 from fnn_controller.fnn import AXIS_STATE_PORTS, F

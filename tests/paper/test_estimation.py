@@ -8,9 +8,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master
-from cosim.ssp import SSD_NAME, load_ssp, ssd_schema_errors
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master
+from cosim.ssp.archive import SSD_NAME, load_ssp, ssd_schema_errors
 from quadrotor_paper.experiments import estimation_signals, lean_signals, study_metric_names
 from quadrotor_paper.metrics import nees, settled, wrap_angle
 
@@ -95,7 +95,7 @@ def test_a_variant_row_flies_its_variant_on_a_scenario_cut_at_v_star():
     """Table 3's rows on the laboratory's scenarios (no [controller]; the
     ground controller an outer-loop FMU) set that FMU's model, so
     ``fnn-cosim table3 --scenario figure8_lab_estimated`` compares variants."""
-    from cosim import registry
+    from cosim.scenario import registry
 
     for name in ("figure8_lab", "figure8_lab_estimated"):
         raw = load_scenario(name).raw

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from pydantic import Field, create_model
 
-from cosim import registry
+from cosim.scenario import registry
 from cosim.component import PythonComponent, ports
-from cosim.scenario import load_scenario, parse_scenario
-from cosim.assembly import build_master
-from cosim.schema import Number, Table
+from cosim.scenario.definition import load_scenario, parse_scenario
+from cosim.scenario.assembly import build_master
+from cosim.scenario.schema import Number, Table
 from fmu_models.models.estimator import ESTIMATOR, chi2_quantile_even
 from tests.fmus.sensor_harness import DT, Sensor  # DT: the step of the data rows and of the FMU alike
 
@@ -256,8 +256,8 @@ def test_fmpy_simulate_ssp_flies_circles_estimated_without_chasing_its_first_fix
     (tests/paper/test_ssp_importers.py)."""
     from fmpy.ssp.simulation import simulate_ssp
 
-    from cosim.ssp import load_ssp
-    from cosim.ssp_export import export_ssp
+    from cosim.ssp.archive import load_ssp
+    from cosim.ssp.export import export_ssp
     from quadrotor_paper.portable import all_fmu
 
     scenario, ours = ours

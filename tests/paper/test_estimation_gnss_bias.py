@@ -164,8 +164,8 @@ def test_circles_estimated_flies_the_correlated_receiver_consistently():
     receiver's error (a single run has one correlated error per axis: a
     loose bound), and the steady wind's NEES, of the horizontal wind's 2
     degrees of freedom, is finite and its error small."""
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master
     from quadrotor_paper.experiments import estimation_metrics
 
     scenario = load_scenario("circles_estimated", {"simulation.seed": 1})

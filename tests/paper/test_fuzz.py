@@ -31,8 +31,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lxml import etree
 
-from cosim.description_cache import shared_extraction
-from cosim.scenario import scenario_path
+from cosim.fmi.description_cache import shared_extraction
+from cosim.scenario.definition import scenario_path
 from quadrotor_paper.cli import main
 
 MEMORY_BOUND = 4 * 2 ** 30  # bytes of resident memory the test process may reach (the limits keep it far lower)
@@ -77,7 +77,7 @@ def _listing(folder: Path, outside: Path) -> set[str]:
 def check(args: list[str], sandbox: Path, capsys) -> int:
     """Run the CLI on ``args`` from ``sandbox`` and assert the property.
 
-    Within :func:`~cosim.description_cache.shared_extraction`: every case
+    Within :func:`~cosim.fmi.description_cache.shared_extraction`: every case
     loads the built FMUs from the one folder the cache extracted them to,
     as each case's own ``fnn-cosim`` process would (its first instance of an
     FMU is served that folder); without it, every case after the first in

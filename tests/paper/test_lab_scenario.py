@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master
 from fnn_controller.split import outer_identifier
 
 REALISM_OFF = {
@@ -53,7 +53,7 @@ def test_the_lab_loop_as_an_ssp_archive_flies_in_libcosim_as_in_our_master(tmp_p
     reference) in an independent master: libcosim flies the archive as our
     master does in its ordering, the Wi-Fi delay and the noise included."""
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed: libcosim cannot be run")
-    from cosim.ssp import load_ssp
+    from cosim.ssp.archive import load_ssp
     from libcosim_runner import run_libcosim
     from quadrotor_paper.cli import main
 

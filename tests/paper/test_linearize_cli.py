@@ -74,9 +74,9 @@ def test_linearize_an_instance_of_a_run_at_time_t_is_the_snapshots_linearization
     """``--scenario S --time T``: the controller FMU at its state, inputs and
     parameters at T of the run, the same map as linearize_fmu on the
     master's snapshot; the plant at its state then (z of the run, not z_0)."""
-    from cosim.linearize import linearize_fmu
-    from cosim.scenario import load_scenario
-    from cosim.assembly import build_master
+    from cosim.linearize.linearization import linearize_fmu
+    from cosim.scenario.definition import load_scenario
+    from cosim.scenario.assembly import build_master
 
     sets = ["--set", "simulation.duration=3.0", "--set", "controller.variant=pd+lm"]
     assert main(["linearize", "controller", "--scenario", "circles", "--time", "2.5", "--out", str(tmp_path / "c")]

@@ -10,9 +10,9 @@ import warnings
 import numpy as np
 import pytest
 
-from cosim.recorder import read_results
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master
+from cosim.loop.recorder import read_results
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master
 from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 from quadrotor_paper.experiments import run_once
 from quadrotor_paper.run_metrics import RunMetrics, from_results

@@ -15,11 +15,11 @@ import pytest
 
 from cosim.component import Port, PythonComponent, ports
 from cosim.errors import ConnectionCheckError, DivergenceError, FmuCallError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master
-from cosim.recorder import read_results, sidecar_path
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master
+from cosim.fmi.fmu import FmuComponent
+from cosim.loop.master import Master
+from cosim.loop.recorder import read_results, sidecar_path
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master
 from fmu_models.export.build import cached_fmu
 from fmu_models.catalog import MODELS
 from fmu_models.models.quadrotor import hover_rotor_speed
@@ -255,7 +255,7 @@ def test_killed_run_leaves_a_readable_partial_result(tmp_path, fmu_paths):
         import sys
         sys.path.insert(0, {str(Path(__file__).parent)!r})
         from test_master_with_the_plant import ConstantRotors, _master
-        from cosim.fmu_component import FmuComponent
+        from cosim.fmi.fmu import FmuComponent
 
         class WaitsToBeKilled(ConstantRotors):
             def step(self, n, t, u):

@@ -12,8 +12,8 @@ import tomllib
 import numpy as np
 import pytest
 
-from cosim.scenario import parse_scenario
-from cosim.assembly import build_master
+from cosim.scenario.definition import parse_scenario
+from cosim.scenario.assembly import build_master
 
 pythonfmu = pytest.importorskip("pythonfmu", reason="pythonfmu (a test extra) is not installed")
 

@@ -2,7 +2,7 @@
 before, starts only what it needs (issue 26): no CasADi, Dask, matplotlib or
 python-control, no pydantic (the scenario served from the cache, the
 controller built from its validated values) and no lxml (the FMUs' model
-descriptions served from the cache, cosim.description_cache), and writes
+descriptions served from the cache, cosim.fmi.description_cache), and writes
 what a validated run writes. What is imported is checked here, in a fresh interpreter
 (``sys.modules``); the time it takes, by ``benchmarks/cli_startup.py``."""
 from __future__ import annotations
@@ -13,12 +13,12 @@ import sys
 from pathlib import Path
 
 NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scipy", "pydantic", "pydantic_core",
-                 "importlib.metadata", "fnn_controller.fast", "fmu_models.export.build", "cosim.scenario_tables",
+                 "importlib.metadata", "fnn_controller.fast", "fmu_models.export.build", "cosim.scenario.tables",
                  "quadrotor_paper.section_tables", "lxml",
                  # nor what only another path uses: TOML parsed (the document kept), an archive opened, a log shown
-                 "tomllib", "zipfile", "logging", "cosim.fmu_log",
+                 "tomllib", "zipfile", "logging", "cosim.fmi.log",
                  # the cases (a study's), a Model Exchange solver (the shipped FMUs are Co-Simulation), a results reader
-                 "quadrotor_paper.options", "cosim.model_exchange", "cosim.me_system", "csv")
+                 "quadrotor_paper.options", "cosim.fmi.model_exchange", "cosim.fmi.me_system", "csv")
 
 _RUN = """
 import json, sys
@@ -39,7 +39,7 @@ def test_a_run_of_the_shipped_mission_imports_no_casadi_dask_matplotlib_pydantic
     first_code, _ = _run(tmp_path / "first", tmp_path)  # builds or finds the FMUs, keeps the validated scenario
     code, modules = _run(tmp_path / "again", tmp_path)
     assert first_code == code == 0
-    assert {"fmpy", "cosim.master", "quadrotor_paper.controller_component"} <= modules  # the run is seen
+    assert {"fmpy", "cosim.loop.master", "quadrotor_paper.controller_component"} <= modules  # the run is seen
     loaded = sorted(m for m in modules if any(m == name or m.startswith(name + ".") for name in NOT_FOR_A_RUN))
     assert loaded == []
     # the two runs write the same, to the bit
@@ -53,8 +53,8 @@ def test_a_run_of_the_shipped_mission_imports_no_casadi_dask_matplotlib_pydantic
 
 def test_the_shipped_mission_served_from_the_cache_is_the_validated_one(tmp_path):
     """What the run above reads instead of validating: the kept scenario and
-    the controller built from its values as they are (cosim.parameters.Given)."""
-    from cosim.scenario import Scenario, load_scenario, parse_scenario
+    the controller built from its values as they are (cosim.scenario.parameters.Given)."""
+    from cosim.scenario.definition import Scenario, load_scenario, parse_scenario
     from quadrotor_paper.controller_component import ControllerComponent
 
     for overrides in ({}, {"controller.position.kd": 2.5, "controller.position.nu": [0.5, 0.5, 0.1],

@@ -7,10 +7,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from cosim import registry
+from cosim.scenario import registry
 from cosim.errors import ConnectionCheckError, ScenarioError
-from cosim.scenario import apply_overrides, load_scenario, parse_scenario, shipped_scenarios
-from cosim.assembly import build_master
+from cosim.scenario.definition import apply_overrides, load_scenario, parse_scenario, shipped_scenarios
+from cosim.scenario.assembly import build_master
 
 
 def _raw(name="circles"):

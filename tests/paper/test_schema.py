@@ -12,9 +12,9 @@ import jsonschema
 import pytest
 
 from cosim.errors import ScenarioError
-from cosim.scenario import load_scenario, parse_scenario, shipped_scenarios
-from cosim.study import parse_study
-from cosim.study_run import run_study
+from cosim.scenario.definition import load_scenario, parse_scenario, shipped_scenarios
+from cosim.study.definition import parse_study
+from cosim.study.run import run_study
 from quadrotor_paper.cli import main
 from quadrotor_paper.portable import all_fmu
 

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from cosim.dask_runner import MasterCache, execute
-from cosim.scenario import apply_overrides, parse_scenario
-from cosim.study import load_study, runs
+from cosim.study.runner import MasterCache, execute
+from cosim.scenario.definition import apply_overrides, parse_scenario
+from cosim.study.definition import load_study, runs
 from quadrotor_paper.experiments import lean_signals, measure, study_metrics
 
 REFERENCE = json.loads((Path(__file__).parent / "data" / "reference_runs.json").read_text())["studies"]

@@ -13,9 +13,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from cosim.scenario import load_scenario, parse_scenario
-from cosim.assembly import build_master
-from cosim.ssp import load_ssp
+from cosim.scenario.definition import load_scenario, parse_scenario
+from cosim.scenario.assembly import build_master
+from cosim.ssp.archive import load_ssp
 
 STATES = [f"Quadrotor.{s}" for s in ("x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")]
 COMMANDS = [f"controller.Omega_{i}" for i in range(1, 5)]

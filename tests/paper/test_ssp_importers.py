@@ -15,10 +15,10 @@ from tests.fmu_validation import validate_fmu
 from lxml import etree
 
 import quadrotor_paper
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master, fmu_file
-from cosim.ssp import NS, SSD_NAME
-from cosim.ssp_export import export_ssp
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master, fmu_file
+from cosim.ssp.archive import NS, SSD_NAME
+from cosim.ssp.export import export_ssp
 from quadrotor_paper.metrics import rmse
 from quadrotor_paper.portable import all_fmu
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from cosim.errors import ScenarioError
-from cosim.scenario import load_scenario, parse_scenario
-from cosim.assembly import build_master
-from cosim.ssp import SSD_NAME, load_ssp, ssd_schema_errors
-from cosim.ssp_export import export_ssp
+from cosim.scenario.definition import load_scenario, parse_scenario
+from cosim.scenario.assembly import build_master
+from cosim.ssp.archive import SSD_NAME, load_ssp, ssd_schema_errors
+from cosim.ssp.export import export_ssp
 from fmu_models.models.quadrotor import hover_rotor_speed
 
 POSITION = ["Quadrotor.x", "Quadrotor.y", "Quadrotor.z"]

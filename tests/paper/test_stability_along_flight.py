@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from cosim.scenario import load_scenario
-from cosim.assembly import build_master
+from cosim.scenario.definition import load_scenario
+from cosim.scenario.assembly import build_master
 from quadrotor_paper.stability import hover
 from quadrotor_paper.stability.along_flight import (SECONDS_PER_POINT, AlongFlight, along_flight, along_flight_plan,
                                                     along_flight_study, flight_events, learned_state_names)

@@ -24,7 +24,7 @@ TOLERANCE = 0.01  # of the step: the stated agreement of linear model and co-sim
 def record_run(name: str, variant: str, scenario: str = "circles", overrides: dict | None = None) -> Recording:
     """Run ``scenario`` (shipped name or path, with dotted ``overrides``) with
     the controller ``variant`` and record what the claims need."""
-    from cosim.scenario import load_scenario
+    from cosim.scenario.definition import load_scenario
     from quadrotor_paper.experiments import run_once
 
     sc = load_scenario(scenario, {**(overrides or {}), "controller.variant": variant,

@@ -135,7 +135,7 @@ def test_plant_fmu_central_differences_agree_with_the_casadi_jacobian(quadrotor_
     """The linearizer's fallback on the same FMU: central differences, names
     and units from the modelDescription, and an error estimate that bounds
     the actual error's order."""
-    from cosim.linearize import linearize_fmu
+    from cosim.linearize.linearization import linearize_fmu
 
     op = ops["forward_wind"]
     start = dict(zip((v.name for v in QUADROTOR.states), np.concatenate([op.x, op.omega])))

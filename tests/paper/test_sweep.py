@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from cosim.scenario import load_scenario
-from cosim.study import load_study, plan
-from cosim.study_run import read_runs
+from cosim.scenario.definition import load_scenario
+from cosim.study.definition import load_study, plan
+from cosim.study.run import read_runs
 from quadrotor_paper.cli import main
 from quadrotor_paper.experiments import run_once
 from tests.strict_json import read_summary
@@ -122,7 +122,7 @@ def test_studies_of_our_registered_fmus_fly_on_threads_others_on_worker_processe
 
     assert threads_safe(load_study(study)) and threads_safe(table_study(2)) and threads_safe(table_study(3))
     assert not threads_safe(load_study(study), metrics=lambda scenario, result: {})
-    from cosim.assembly import fmu_file
+    from cosim.scenario.assembly import fmu_file
 
     plant = fmu_file(load_scenario("circles").fmus["Quadrotor"])
     for extra in (f'[set]\n"fmus.Quadrotor" = {{ path = "{plant}", parameters = {{ z_0 = -15.0 }} }}\n',

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from cosim.study import load_study, plan
-from cosim.study_run import read_runs
+from cosim.study.definition import load_study, plan
+from cosim.study.run import read_runs
 from quadrotor_paper.cli import main
 from quadrotor_paper.report import table_study
 from quadrotor_paper.tables import PAPER_TABLE2, cell, deviations, table2_markdown, table3_markdown
@@ -153,7 +153,7 @@ def test_unknown_option_is_refused_naming_it(capsys):
 
 
 def test_options_are_cases_with_names_apart_from_the_variants():
-    from cosim import registry
+    from cosim.scenario import registry
     from fnn_controller.variants import variant_names
     from quadrotor_paper.options import DEFAULT_OPTIONS, OPTIONS, VARIANT_KEY
 

@@ -8,7 +8,7 @@ import json
 import pytest
 
 import toy_variant
-from cosim import registry
+from cosim.scenario import registry
 from fnn_controller.variants import unregister_variant, variant_names
 from quadrotor_paper.tables import cell
 from tests.strict_json import read_summary

@@ -15,7 +15,7 @@
  *   times                         rows x float64
  *   values                        rows x columns float64, row after row
  *
- * The values at time t are those of cosim/table.py (docs/cosim.md, "The
+ * The values at time t are those of cosim/scenario/signal_table.py (docs/cosim.md, "The
  * signal table"): row i is the last whose time is <= t, a time within 1e-9
  * relative of t counting as <= t (Python's math.isclose); hold gives row i,
  * linear row i + w (row i+1 - row i) with w = max(0, (t - t_i) / (t_i+1 - t_i)),

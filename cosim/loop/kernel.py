@@ -1,0 +1,165 @@
+"""The compiled step loop (``kernel.c``) and its one definition of what
+crosses between Python and C.
+
+When every block a plan evaluates at t_n is an FMU (with no signal held
+as an object: :attr:`Plan.compiled <cosim.loop.plan.Plan.compiled>`), the master's loop makes nothing but FMI
+calls, copies between the signal array and the FMUs, the recording and the
+guard: the master hands this loop the plan (:func:`prepare`) and each block
+of communication points (:func:`load` compiles ``kernel.c`` once per machine,
+content-addressed beside the user's cache, with the C compiler FMUs are built
+with). The master still plans the run and raises every error; the compiled
+loop only runs what the Python loop would, and gives the same results bit for
+bit (tests/engine/test_engine_kernel.py). Without a C compiler the Python
+loop runs (``load`` returns ``None``); ``COSIM_PYTHON_LOOP=1`` forces it.
+
+One definition: the structures (:class:`KernelRun`, :class:`KernelStop`,
+and the FMU's :class:`~cosim.fmi.c_calls.KernelFmu`), the codes
+(:class:`Stop`, :class:`~cosim.fmi.c_calls.Call`) and the prototype of
+``cosim_kernel_run`` are declared in Python, here and in
+:mod:`cosim.fmi.c_calls`, and
+:func:`header` writes them as the C header ``kernel.c`` is compiled with; the
+compiled library is addressed by the hash of both, so the two sides cannot
+drift apart (a prototype that does not match is a compile error).
+"""
+from __future__ import annotations
+
+import ctypes
+import enum
+import os
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ..fmi.c_calls import FMU_FIELDS, Call, KernelFmu
+from ..native import c_header, compiled_library
+
+__all__ = ["KernelRun", "KernelStop", "Stop", "header", "load", "prepare"]
+
+_SOURCE = Path(__file__).with_name("kernel.c")
+_HEADER = "kernel_abi.h"
+
+
+class Stop(enum.IntEnum):
+    """Why ``cosim_kernel_run`` returned."""
+
+    OK = 0  # the block of points ran
+    GUARD = 1  # a guarded signal left its envelope (or is not finite)
+    FMU = 2  # an FMI call failed (KernelStop says which FMU, which call, which status)
+    TERMINATE = 3  # an FMI 3.0 FMU's doStep asked to terminate the simulation (KernelStop says which, when)
+
+
+_i64, _f64, _ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
+_u32p, _i64p, _f64p = (ctypes.POINTER(t) for t in (ctypes.c_uint32, ctypes.c_int64, ctypes.c_double))
+
+_RUN_FIELDS = (
+    ("fmus", ctypes.POINTER(KernelFmu), "every FMU, in stepping order"),
+    ("n_fmus", _i64, "how many"),
+    ("order", _i64p, "the FMUs evaluated at t_n, in order (indices into fmus)"),
+    ("n_order", _i64, "how many"),
+    ("signals", _f64p, "the signal array (slot 0 is the time)"),
+    ("t0", _f64, "start time (s)"),
+    ("h", _f64, "communication step (s)"),
+    ("n_steps", _i64, "steps of the run: points 0 .. n_steps"),
+    ("data", _f64p, "the recorder's rows in memory, n_columns each"),
+    ("data_first", _i64, "the point whose row is data[0] (the recorder's chunk)"),
+    ("n_columns", _i64, "recorded columns"),
+    ("record_idx", _i64p, "their slots"),
+    ("n_guard", _i64, "guarded signals"),
+    ("guard_idx", _i64p, "their slots"),
+    ("low", _f64p, "their inclusive bounds (finite)"),
+    ("high", _f64p, ""),
+    ("n_derived", _i64, "converted inputs recorded or bounded (Plan.derived)"),
+    ("derived_slot", _i64p, "their own slots"),
+    ("derived_source", _i64p, "the slots of their sources"),
+    ("derived_factor", _f64p, "slot = factor * source + offset, before each row is recorded"),
+    ("derived_offset", _f64p, ""),
+)
+
+
+class KernelRun(ctypes.Structure):
+    """A whole run: the plan's arrays and the run's time grid."""
+
+    _fields_ = [(name, kind) for name, kind, _ in _RUN_FIELDS]
+
+
+_STOP_FIELDS = (
+    ("n", _i64, "the communication point it stopped at"),
+    ("fmu", _i64, "Stop.FMU: which FMU (index into fmus)"),
+    ("call", _i64, "Stop.FMU: which Call"),
+    ("status", _i64, "Stop.FMU: the FMI status"),
+    ("recorded", _i64, "the row of point n was recorded before it stopped"),
+)
+
+
+class KernelStop(ctypes.Structure):
+    """Where and why a block of points stopped early."""
+
+    _fields_ = [(name, kind) for name, kind, _ in _STOP_FIELDS]
+
+
+# the compiled entry point: runs points first .. last of the run, returns a Stop
+_RUN_ARGS = (("run", ctypes.POINTER(KernelRun)), ("first", _i64), ("last", _i64),
+             ("stop", ctypes.POINTER(KernelStop)))
+
+def header() -> str:
+    """The C header of this module's definitions, as ``kernel.c`` includes it."""
+    return c_header("COSIM_KERNEL_ABI_H", "cosim/loop/kernel.py", (("KERNEL", Stop), ("CALL", Call)),
+                    ((KernelFmu, FMU_FIELDS), (KernelRun, _RUN_FIELDS), (KernelStop, _STOP_FIELDS)),
+                    (("cosim_kernel_run", _RUN_ARGS),))
+
+
+@lru_cache(maxsize=None)
+def load():
+    """The compiled ``cosim_kernel_run``, or ``None`` (no C compiler, or the
+    Python loop asked for); a source that does not compile raises."""
+    if os.environ.get("COSIM_PYTHON_LOOP"):
+        return None
+    # -ffp-contract=off: u = factor * v + offset rounds twice, as numpy does in the Python loop
+    target = compiled_library(_SOURCE.read_bytes(), "cosim_kernel",
+                              ("-O2", "-std=c99", "-ffp-contract=off", "-Wall", "-Werror"),
+                              {_HEADER: header().encode()})
+    if target is None:
+        return None
+    run = ctypes.CDLL(str(target)).cosim_kernel_run
+    run.argtypes = [kind for _, kind in _RUN_ARGS]
+    run.restype = ctypes.c_int
+    return run
+
+
+def _array(values, dtype) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=dtype)
+
+
+def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, high: np.ndarray,
+            t0: float, h: float, n_steps: int) -> KernelRun:
+    """The :class:`KernelRun` of ``plan`` for the bound ``fmus`` (the master's,
+    in the plan's order); it holds the arrays it points into."""
+    entries = (KernelFmu * len(fmus))(*(fmu.kernel_entry(b.direct, b.sources, python=b.name in plan.python_calls,
+                                                         time=signals)
+                                        for fmu, b in zip(fmus, plan.fmus)))
+    order = _array([b.index for b in plan.at_tn], np.int64)
+    record, guard = _array(plan.record_slots, np.int64), _array(plan.watch_slots, np.int64)
+    low, high = _array(low, np.float64), _array(high, np.float64)
+
+    def p(array, kind):
+        return array.ctypes.data_as(kind)
+
+    kept = []  # the conversions' arrays, alive as long as the run
+    for entry, b in zip(entries, plan.fmus):
+        if b.converted:
+            index, factor, offset = (_array(column, kind) for column, kind in
+                                     zip(zip(*b.converted), (np.int64, np.float64, np.float64)))
+            entry.n_conv, entry.conv_idx = len(index), p(index, _i64p)
+            entry.conv_factor, entry.conv_offset = p(factor, _f64p), p(offset, _f64p)
+            kept += [index, factor, offset]
+    slot, source, factor, offset = (_array(column, kind) for column, kind in
+                                    zip(zip(*plan.derived) if plan.derived else ((),) * 4,
+                                        (np.int64, np.int64, np.float64, np.float64)))
+    kept += [slot, source, factor, offset]
+    run = KernelRun(entries, len(fmus), p(order, _i64p), len(order), p(signals, _f64p), float(t0), float(h),
+                    int(n_steps), p(data, _f64p), 0, len(record), p(record, _i64p), len(guard), p(guard, _i64p),
+                    p(low, _f64p), p(high, _f64p), len(slot), p(slot, _i64p), p(source, _i64p),
+                    p(factor, _f64p), p(offset, _f64p))
+    run.arrays = (entries, order, record, guard, low, high, signals, data, kept)  # alive as long as the run
+    return run
