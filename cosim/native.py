@@ -9,11 +9,13 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import tempfile
 from pathlib import Path
 
+from .cache import LIMITS, library_folder, note_written, used
 from .file_lock import exclusive
 
 __all__ = ["c_header", "compiled_library"]
@@ -60,12 +62,6 @@ def c_header(guard: str, source: str, enums, structs, prototypes) -> str:
     return "\n".join(lines)
 
 
-def _cache() -> Path:
-    root = os.environ.get("COSIM_CACHE") or os.path.join(os.environ.get("XDG_CACHE_HOME")
-                                                         or os.path.expanduser("~/.cache"), "cosim")
-    return Path(root)
-
-
 def compiled_library(source: bytes, stem: str, flags: tuple[str, ...] = (), include: dict[str, bytes] | None = None
                      ) -> Path | None:
     """The shared library of the C ``source`` (with the headers ``include``,
@@ -79,8 +75,9 @@ def compiled_library(source: bytes, stem: str, flags: tuple[str, ...] = (), incl
     for name, text in sorted((include or {}).items()):
         digest.update(name.encode() + text)
     digest.update(" ".join(flags).encode())
-    target = _cache() / f"{stem}_{digest.hexdigest()[:16]}.so"
+    target = library_folder() / f"{stem}_{digest.hexdigest()[:16]}.so"
     if target.exists():
+        used(target)  # its use renewed: the least recently used go first (cosim.cache.prune)
         return target
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not cc:
@@ -112,4 +109,8 @@ def _compile_library(cc: str, source: bytes, stem: str, flags: tuple[str, ...], 
         os.unlink(tmp)
         raise RuntimeError(f"compiling {stem}.c with {cc} failed: {result.stderr.strip()}")
     os.replace(tmp, target)
+    note_written(target.parent, target.stat().st_size, LIMITS["libraries"], match=_LIBRARY)
     return target
+
+
+_LIBRARY = re.compile(r".+_[0-9a-f]{16}\.(so|lock)")  # a compiled library and its lock, what prune may remove

@@ -21,11 +21,12 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 from functools import lru_cache
 from importlib.machinery import PathFinder
 from pathlib import Path
 from typing import Callable, Iterable, Mapping
+
+from cosim.cache import drop, read, used, write
 
 from .cache import cache_root
 
@@ -74,7 +75,7 @@ def _recipe(identifier: str, fmi_version: int, extra: Iterable[Path],
     _digest_files(digest, sorted({Path(p).resolve() for p in extra}))
     if values is not None:  # repr: a float's exact digits; sorted: the table, not the mapping, orders them
         digest.update(f"\0values {sorted((k, float(v)) for k, v in values.items())!r}".encode())
-    return digest.hexdigest()[:32]
+    return digest.hexdigest()
 
 
 def built_fmu(identifier: str, fmi_version: int, load: Callable[[], object], extra: Iterable[Path] = (),
@@ -87,21 +88,22 @@ def built_fmu(identifier: str, fmi_version: int, load: Callable[[], object], ext
     the model with (``FmuModel.with_defaults``: an SSP archive's
     self-contained FMUs), part of the recipe; a value ``load()`` refuses is
     refused at every call (no FMU is recorded for it)."""
-    entry = cache_root() / "index" / _recipe(identifier, fmi_version, extra, values)
-    try:
-        known = Path(entry.read_text())
-        if known.is_file():
-            return known
-    except OSError:
-        pass  # not yet recorded, or the cache moved: build (or find) it as cached_fmu does
+    root, recipe = cache_root(), _recipe(identifier, fmi_version, extra, values)
+    known = read("index", recipe, root)  # the FMU's path in the cache, as recorded below
+    if isinstance(known, str):
+        built = (root / known).resolve()
+        # a built FMU of the cache only (a recorded path reaches nothing else), still there
+        if built.is_relative_to(root.resolve()) and built.suffix == ".fmu" and built.is_file():
+            used(built.parents[1])  # its build's use renewed (cosim.cache.prune)
+            return built
+        drop("index", recipe, root)  # not yet recorded, or the cache moved: build (or find) it as cached_fmu does
     from .export.build import cached_fmu, staging
 
     with staging():  # building the model's CasADi functions is staging too: one builder thread at a time
         model = load()
     path = cached_fmu(model, fmi_version)
-    entry.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=entry.parent, suffix=".part")  # parallel runs never read half an entry
-    with os.fdopen(fd, "w") as f:
-        f.write(str(path.resolve()))
-    os.replace(tmp, entry)
+    try:
+        write("index", recipe, path.resolve().relative_to(root.resolve()).as_posix(), root)
+    except ValueError:  # an FMU outside the cache ($FNN_COSIM_CACHE changed meanwhile): not recorded
+        pass
     return path

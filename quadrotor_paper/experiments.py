@@ -6,7 +6,8 @@ and every one-off analysis that flies missions is a study
 process or on Dask, recording only the signals the metrics read, each row
 measured by :func:`study_metrics` (Euclidean RMSE, largest and final error
 between the ``[metrics]`` signals). :func:`run_once` is the single run of
-``fnn-cosim run`` and of the figures, with its results CSV.
+``fnn-cosim run`` and of the figures, with its results CSV; :func:`run_with_files`
+the whole of ``fnn-cosim run``'s (summary, figures, learned state).
 
 Both take the metrics as the rows stream (:class:`~quadrotor_paper.run_metrics.RunMetrics`,
 an observer of the run): a run's memory does not grow with its duration; a
@@ -33,9 +34,9 @@ from .controller_component import controller_variant
 from .sections import estimation_spec, metric_signals
 from .run_metrics import BLOCKS, RunMetrics
 
-__all__ = ["run_once", "run_summary", "measure", "study_metrics", "STUDY_METRICS", "ESTIMATION_METRICS",
-           "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics", "PLOT_ROWS",
-           "threads_safe"]
+__all__ = ["run_once", "run_with_files", "results_room", "run_summary", "measure", "study_metrics", "STUDY_METRICS",
+           "ESTIMATION_METRICS", "study_metric_names", "lean_signals", "estimation_signals", "estimation_metrics",
+           "PLOT_ROWS", "threads_safe"]
 
 ESTIMATION_METRICS = (*(f"nees_{b}" for b in BLOCKS), "nis_fix", "nis_acc",
                       *(f"est_rmse_{b}_{unit}" for b, (_, _, unit) in BLOCKS.items()), "est_rmse_wind_settled_mps",
@@ -72,6 +73,86 @@ def run_once(scenario: Scenario, out_dir: Path | None = None, seed: int | None =
         if own:
             master.close()
     return result, run_summary(scenario, result, metrics)
+
+
+def run_with_files(scenario: Scenario, master, out: Path, *, record_every: int = 1, profile: bool = False,
+                   save_learned: Path | None = None, resumed_from: str | None = None, plots: bool = True,
+                   quiet: bool = False) -> tuple[dict[str, Any], list[str], str | None]:
+    """The run of ``fnn-cosim run``: ``scenario`` flown once by ``master``
+    (built, every input taken) into the folder ``out`` (checked): its
+    ``results.csv`` (every ``record_every``-th row, streamed), ``summary.json``,
+    the figures (``plots``, a run of more than one row), ``summary.md``, and
+    with ``save_learned`` the controller's learned state after the run
+    (:func:`~quadrotor_paper.learned.save_learned`; ``resumed_from``: the
+    file it started from, named in the summary). ``master`` is closed once
+    the run and its learned state are done, before the figures.
+
+    What results.csv will take is checked against the room on ``out``'s
+    file system before the run (:func:`results_room`); a state that cannot
+    be saved loses nothing else: the run's results are written first.
+    ``quiet``: no progress bar, no note. Returns the summary, the lines of
+    ``summary.md`` and the run's failure (its error, else the learned
+    state's; ``None``: none)."""
+    from cosim.errors import CosimError, one_line
+    from cosim.files import write_json
+
+    from .progress import progress_bar
+    from .run_summary import summary_lines
+
+    if save_learned is not None:
+        from .learned import learned_variant, save_learned as save
+
+        if "controller" not in master.components:
+            raise ScenarioError(f"--save-learned {save_learned}: the scenario has no controller")
+        learned_variant(master.components["controller"], f"--save-learned {save_learned}")
+    results_room(scenario, master, out, record_every, quiet=quiet)
+    with progress_bar(f"run {scenario.name}", enabled=not quiet, unit="step") as bar:
+        result, summary = run_once(scenario, out, progress=bar, master=master, profile=profile,
+                                   record_every=record_every)
+    if resumed_from:
+        summary["resumed_from"] = str(resumed_from)
+    plots = plots and summary["rows"] > 1
+    if plots or save_learned is not None:  # the run's results first, kept if an optional part below fails
+        write_json(out / "summary.json", summary)
+    learned_error = None
+    if save_learned is not None:
+        try:  # a state that cannot be saved (not finite after a diverged run) loses nothing else
+            summary["learned_state"] = str(save(master.components["controller"], save_learned))
+        except (CosimError, ValueError, OSError) as exc:
+            learned_error = summary["learned_state_error"] = f"--save-learned {save_learned}: {one_line(str(exc))}"
+    master.close()  # its FMU instances are done with: freed before the figures are drawn
+    figures = []
+    if plots:
+        from .plots import run_figures  # matplotlib only when there is something to draw
+
+        figures = run_figures(out, result, scenario)
+    summary["figures"] = [str(p) for p in figures]
+    write_json(out / "summary.json", summary)
+    lines = summary_lines(scenario, result, summary, figures, learned_error)
+    (out / "summary.md").write_text("\n".join(lines))
+    failure = summary["error"] if summary["status"] != "ok" else learned_error  # the run's own first
+    return summary, lines, failure
+
+
+def results_room(scenario: Scenario, master, out: Path, every: int, quiet: bool = False) -> None:
+    """What results.csv will take (every ``every``-th row of ``scenario``'s
+    run by ``master``, :func:`cosim.loop.recorder.csv_bytes`), said before the
+    run when over 100 MB (not ``quiet``), and refused when the file system
+    of ``out`` cannot hold it (memory does not grow with the run: disk is
+    the only bound, and it is the user's; docs/security.md)."""
+    import sys
+
+    from cosim.files import room_for
+    from cosim.loop.recorder import csv_bytes
+
+    rows = int(round(scenario.duration / scenario.step)) + 1
+    written = -(-rows // every)
+    need = csv_bytes(written, master.record_columns, master.plan.record_types)
+    room_for(out, need, f"results.csv: {written} rows of {len(master.record_columns)} columns",
+             "write every K-th row: --record-every K, or record fewer signals")
+    if not quiet and need > 100e6:  # a long mission: say what it will write before it starts
+        print(f"results.csv: {written} rows of {len(master.record_columns)} columns, up to {need / 1e9:.1f} GB "
+              f"(--record-every K writes every K-th)", file=sys.stderr)
 
 
 def _check_recorded(scenario: Scenario, recorded) -> None:

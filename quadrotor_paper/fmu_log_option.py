@@ -1,6 +1,6 @@
 """``--fmu-log [INSTANCE=]LEVEL``: the option every ``fnn-cosim`` command
-that runs FMUs takes (``quadrotor_paper.cli`` and ``quadrotor_paper.stability.cli``
-alike), and its effect (:func:`cosim.fmi.log.fmu_log`)."""
+that runs FMUs takes (:mod:`quadrotor_paper.commands`), and its effect
+(:func:`cosim.fmi.log.fmu_log`)."""
 from __future__ import annotations
 
 from typing import Sequence

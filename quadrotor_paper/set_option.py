@@ -1,11 +1,13 @@
 """``--set KEY=VALUE``: dotted scenario keys and their values, read once for
-every ``fnn-cosim`` command that takes them (``quadrotor_paper.cli``, its
-``calibrate``, and ``quadrotor_paper.stability.cli`` alike)."""
+every ``fnn-cosim`` command that takes them (:mod:`quadrotor_paper.commands`);
+and ``NAME=VALUE`` pairs of an FMU's variables (``linearize``'s
+``--parameter``, ``calibrate``'s ``--fix``)."""
 from __future__ import annotations
 
+import math
 from typing import Any, Sequence
 
-__all__ = ["overrides"]
+__all__ = ["overrides", "named_values"]
 
 
 def overrides(pairs: Sequence[str]) -> dict[str, Any]:
@@ -26,4 +28,23 @@ def overrides(pairs: Sequence[str]) -> dict[str, Any]:
         key = key.strip()
         parts = dotted_key(key, f"--set {shown_text(key)!r}")
         out[key] = toml_value(value.strip(), f"--set {shown_text(key)}", len(parts))
+    return out
+
+
+def named_values(pairs: Sequence[str], option: str) -> dict[str, float]:
+    """``NAME=VALUE`` pairs of ``option``, every value a finite number (one line otherwise)."""
+    from cosim.errors import ScenarioError, shown_text
+    from cosim.names import partition_top
+
+    out = {}
+    for pair in pairs:  # a variable name as FMI writes it: x[1], der(x), 'a=b' (cosim.names)
+        name, eq, text = partition_top(pair, "=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not eq or not name.strip() or not math.isfinite(value):
+            raise ScenarioError(f"{option} {shown_text(pair)!r}: expected NAME=VALUE with a finite number, e.g. "
+                                f"{option} m=1.2")
+        out[name.strip()] = value
     return out

@@ -1,6 +1,5 @@
 """``--workers N``: the local worker processes of every ``fnn-cosim`` command
-that flies many runs (``quadrotor_paper.cli`` and
-``quadrotor_paper.stability.cli`` alike).
+that flies many runs (:mod:`quadrotor_paper.commands`).
 
 A local cluster gets from 1 to as many workers as the machine has cores
 (``os.cpu_count()``; at least 2, the tables' default, which a one-core

@@ -32,10 +32,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import json
-import os
 import re
-import tempfile
 from pathlib import Path
 from unittest import mock
 
@@ -43,6 +40,7 @@ import fmpy
 import lark
 from fmpy.validation import validate_fmu as _fmpy_validate_fmu
 
+from cosim.cache import read, write
 from fmu_models.cache import cache_root
 
 __all__ = ["validate_fmu"]
@@ -106,16 +104,10 @@ def validate_fmu(filename: str) -> list[str]:
     path = Path(filename)
     if not path.is_file():
         return _validated(filename)
-    digest = hashlib.sha256(fmpy.__version__.encode() + b"\0" + path.read_bytes()).hexdigest()[:32]
-    verdict = cache_root() / "fmpy-validation" / f"{digest}.json"
-    try:
-        return json.loads(verdict.read_text())
-    except (OSError, ValueError):
-        pass
+    digest = hashlib.sha256(fmpy.__version__.encode() + b"\0" + path.read_bytes()).hexdigest()
+    verdict = read("fmpy-validation", digest, cache_root())  # checked against its key (cosim.cache)
+    if isinstance(verdict, list) and all(isinstance(problem, str) for problem in verdict):
+        return verdict
     problems = _validated(filename)
-    verdict.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=verdict.parent, suffix=".part")  # the other test process never reads half
-    with os.fdopen(fd, "w") as f:
-        json.dump(problems, f)
-    os.replace(tmp, verdict)
+    write("fmpy-validation", digest, problems, cache_root())
     return problems

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..files import write_json
 
-__all__ = ["write_outputs", "calibration_document", "write_parameter_set"]
+__all__ = ["write_outputs", "calibration_document", "write_parameter_set", "estimate_lines"]
 
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"  # declared on the root, as pyssp-standard does
 
@@ -281,3 +281,20 @@ def write_outputs(cal, out: Path, log_path, fmu_path, instance: str | None = Non
     (out / "report.md").write_text(_report(cal, doc, figures))
     written.append(out / "report.md")
     return written + [out / n for n in figures]
+
+
+def estimate_lines(cal) -> list[str]:
+    """The estimates of ``cal`` at a glance, one line per fitted name: its
+    value and 95 % interval, or that it sits at its bound (no interval), or
+    that the log does not identify it (what ``fnn-cosim calibrate`` prints)."""
+    lines = []
+    for name, value in cal.estimates().items():
+        j = cal.problem.fit.index(name)
+        if value is None:
+            lines.append(f"{name}: not identifiable from this log")
+        elif cal.stats.at_bound is not None and cal.stats.at_bound[j]:
+            lines.append(f"{name} = {value:.10g} (at bound: no interval)")
+        else:
+            lo, hi = cal.stats.ci95[j]
+            lines.append(f"{name} = {value:.10g} (95 % interval [{lo:.6g}, {hi:.6g}])")
+    return lines

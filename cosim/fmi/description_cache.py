@@ -8,8 +8,8 @@ declares (an annotation fmpy does not read) and the archive's entry names
 entries of an FMU this tool built, extracted there once
 (:func:`claim_extracted`). docs/cosim.md, "Start-up of a run".
 
-The entry is JSON data (``descriptions/<sha256>.json``, written whole by
-:func:`cosim.cache.keep`), never pickle: decoding makes objects of fmpy's
+The entry is JSON data (``descriptions/<sha256>.json``, written whole and
+checked against its key when read by :func:`cosim.cache.read`), never pickle: decoding makes objects of fmpy's
 own model-description classes only (:func:`_classes`) and sets only their
 declared fields, so a file in a folder others may write can at worst
 describe an FMU wrongly, as a modelDescription.xml could (docs/security.md).
@@ -19,7 +19,8 @@ against (:mod:`cosim.limits`). A file is kept only after it was read and
 checked in full (:func:`cosim.fmi.fmu.read_description`), so the same
 bytes give the same answer and the same refusals; a validated reading
 (``validate=True``) is never served from here. An entry that cannot be read
-or decoded is derived again; a cache that cannot be written keeps nothing.
+or decoded is deleted and derived again; a cache that cannot be written
+keeps nothing; both kinds are bounded and pruned by :mod:`cosim.cache`.
 """
 from __future__ import annotations
 
@@ -33,6 +34,8 @@ import threading
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
+
+from ..cache import FileMemo
 
 __all__ = ["KeptDescription", "kept_description", "keep_description", "claim_extracted", "shared_extraction",
            "in_cache_folder"]
@@ -74,7 +77,7 @@ def _classes() -> dict[str, tuple[type, frozenset[str], bool]]:
 
 
 _PYTHON_TYPES = {t.__name__: t for t in (float, int, bool, str, bytes)}  # ModelVariable._python_type
-_MEMO: dict[tuple[str, int, int], KeptDescription] = {}  # path, size, mtime -> read in this process
+_MEMO = FileMemo(256)  # an FMU file -> what was read of it in this process (while its size and mtime are unchanged)
 
 
 def _digest(path: Path) -> tuple[str, os.stat_result] | None:
@@ -99,31 +102,6 @@ def _digest(path: Path) -> tuple[str, os.stat_result] | None:
     return h.hexdigest(), info
 
 
-def _entry(digest: str) -> Path | None:
-    from ..cache import cache_folder
-
-    folder = cache_folder()
-    return folder / "descriptions" / f"{digest}.json" if folder is not None else None
-
-
-def _read(where: Path) -> Any:
-    """The JSON at ``where`` (orjson, a third of the time of :func:`json.loads`;
-    a value orjson does not read, such as a NaN, by :func:`json.loads`),
-    or ``None``."""
-    import orjson
-
-    try:
-        text = where.read_bytes()
-    except OSError:
-        return None
-    try:
-        return orjson.loads(text)
-    except orjson.JSONDecodeError:
-        from ..cache import kept
-
-        return kept(where)
-
-
 def kept_description(path: Path) -> KeptDescription | None:
     """What was kept of the FMU file ``path`` (its bytes), or ``None``."""
     path = Path(path)
@@ -131,40 +109,45 @@ def kept_description(path: Path) -> KeptDescription | None:
         info = path.stat()
     except OSError:
         return None
-    memo = _MEMO.get((str(path), info.st_size, info.st_mtime_ns))
+    memo = _MEMO.get(path, info)
     if memo is not None:
         return memo
     found = _digest(path)
-    where = _entry(found[0]) if found is not None else None
-    if where is None:
+    if found is None:
         return None
-    data = _read(where)
+    from ..cache import drop, read
+
+    data = read("descriptions", found[0])
+    if data is None:
+        return None
     try:
         out = KeptDescription(_decode(data["description"], _classes(), []),
                               (bool(data["period"][0]), data["period"][1]), tuple(data["names"]), found[0])
         if not (type(out.model_description) is _classes()["ModelDescription"][0]
                 and isinstance(out.period[1], (str, type(None))) and all(isinstance(n, str) for n in out.names)):
-            return None
+            raise ValueError("not a model description")
     except (TypeError, KeyError, IndexError, ValueError, AttributeError, RecursionError):
-        return None  # nothing kept, or not what this module writes: read the file
-    _MEMO[(str(path), found[1].st_size, found[1].st_mtime_ns)] = out
+        drop("descriptions", found[0])  # not what this module writes: never trusted, the file read again
+        return None
+    _MEMO.put(path, found[1], out)
     return out
 
 
 def keep_description(path: Path, kept: KeptDescription) -> None:
     """Keep what was read of the FMU file ``path``, checked in full."""
     found = _digest(Path(path))
-    where = _entry(found[0]) if found is not None else None
-    if where is None:
+    if found is None:
         return
-    from ..cache import keep
+    from ..cache import cache_folder, write
 
+    if cache_folder() is None:
+        return
     try:
         encoded = _encode(kept.model_description, {}, _classes())
     except (TypeError, ValueError, RecursionError):  # something fmpy may hold that this format does not carry
         return
-    keep(where, {"description": encoded, "period": list(kept.period), "names": list(kept.names)})
-    _MEMO[(str(path), found[1].st_size, found[1].st_mtime_ns)] = replace(kept, digest=found[0])
+    write("descriptions", found[0], {"description": encoded, "period": list(kept.period), "names": list(kept.names)})
+    _MEMO.put(path, found[1], replace(kept, digest=found[0]))
 
 
 # ---- the extracted folder -------------------------------------------------------------------
@@ -219,7 +202,7 @@ def claim_extracted(path: Path, kept: KeptDescription, names: set[str]) -> Path 
     before (a study's second run in a process starts from a fresh library,
     not from what the first left in it); within :func:`shared_extraction`,
     every instance that asks gets the folder."""
-    from ..cache import cache_folder
+    from ..cache import LIMITS, cache_folder, note_written, used
 
     folder = cache_folder()
     if folder is None or not kept.digest or not in_cache_folder(path):
@@ -228,7 +211,9 @@ def claim_extracted(path: Path, kept: KeptDescription, names: set[str]) -> Path 
     with _CLAIM:
         if str(target) in _CLAIMED and not _SHARED.get():
             return None
-        if not target.is_dir():
+        if target.is_dir():
+            used(target)  # its use renewed: the least recently used go first (cosim.cache.prune)
+        else:
             import shutil
             import tempfile
 
@@ -247,6 +232,8 @@ def claim_extracted(path: Path, kept: KeptDescription, names: set[str]) -> Path 
                 return None
             if not target.is_dir():
                 return None
+            note_written(target.parent, sum(f.stat().st_size for f in target.rglob("*") if f.is_file()),
+                         LIMITS["extracted"])
         _CLAIMED.add(str(target))
     return target
 

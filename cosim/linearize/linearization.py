@@ -31,6 +31,7 @@ the method used and an estimate of its error.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
@@ -92,6 +93,21 @@ class Linearization:
     @property
     def D(self) -> np.ndarray:
         return np.asarray(self.system.D)
+
+    @cached_property
+    def poles(self) -> np.ndarray:
+        """The eigenvalues of ``A`` (none for a system without states)."""
+        return np.linalg.eigvals(self.A) if self.system.nstates else np.zeros(0, dtype=complex)
+
+    def stability_measure(self) -> tuple[str, float] | None:
+        """What decides the system's stability, named: a sampled-data
+        system's spectral radius (stable below 1), a continuous one's largest
+        real part of a pole (stable below 0); ``None`` without states."""
+        if not self.system.nstates:
+            return None
+        if self.system.dt:
+            return "spectral radius", float(np.max(np.abs(self.poles)))
+        return "largest real part", float(np.max(self.poles.real))
 
 
 def _check_values(what: str, values: Mapping[str, float], variables: Mapping, allowed: Sequence[str]) -> None:
@@ -440,7 +456,7 @@ def save_linearization(lin: Linearization, out_dir: str | Path, bode: Sequence[t
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     dt = float(sys_.dt) if sys_.dt else 0.0
-    poles = np.linalg.eigvals(lin.A) if states else np.zeros(0, dtype=complex)
+    poles = lin.poles
     written = [out_dir / f"{stem}.npz", out_dir / f"{stem}.json"]
     np.savez(written[0], A=lin.A, B=lin.B, C=lin.C, D=lin.D, dt=dt, states=np.array(states, dtype=str),
              inputs=np.array(ins, dtype=str), outputs=np.array(outs, dtype=str))

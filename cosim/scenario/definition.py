@@ -28,7 +28,7 @@ from types import MappingProxyType
 from typing import Any, Mapping
 
 from . import registry
-from ..cache import code_unchanged, keep, keep_code, kept
+from ..cache import code_unchanged, drop, keep_code, key_of, read, write
 from ..errors import ScenarioError, shown_text
 from ..files import is_ssp, read_text, read_toml, toml_text
 from ..limits import MAX_NESTING
@@ -229,12 +229,16 @@ def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None 
     if folder is None:
         return Scenario(json.loads(json.dumps(apply_overrides(read_toml(path), overrides or {}))), path)
     document = json.loads(json.dumps(apply_overrides(_read_document(folder, path), overrides or {})))
-    entry = folder / "scenarios" / f"{_state_key(document, path)}.json"
-    state = _kept_state(folder, entry)
-    if state is None:
-        state = _state(document, path, None)
-        if _keepable(document, state):
-            keep(entry, {"code": keep_code(folder), "state": state})
+    key = _state_key(document, path)
+    state = _kept_state(folder, key)
+    if state is not None:
+        try:
+            return Scenario._of(document, path, state)
+        except (KeyError, TypeError, ValueError, AttributeError):  # not what this module keeps: validated again
+            drop("scenarios", key, folder)
+    state = _state(document, path, None)
+    if _keepable(document, state):
+        write("scenarios", key, {"code": keep_code(folder), "state": state}, folder)
     return Scenario._of(document, path, state)
 
 
@@ -247,14 +251,14 @@ def _read_document(folder: Path, path: Path) -> dict[str, Any]:
     if is_ssp(path):
         return read_toml(path)  # its refusal
     text = read_text(path, "scenario")
-    entry = folder / "documents" / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.json"
-    document = kept(entry)
+    key = hashlib.sha256(text.encode()).hexdigest()
+    document = read("documents", key, folder)
     if isinstance(document, dict):
         return document
     document = toml_text(text, path)
     try:
         if _same(json.loads(json.dumps(document)), document):
-            keep(entry, document)
+            write("documents", key, document, folder)
     except (TypeError, ValueError):  # a value JSON does not hold
         pass
     return document
@@ -271,12 +275,11 @@ _STATE_FORMAT = 1
 
 
 def _state_key(document: Mapping[str, Any], source: Path) -> str:
-    text = json.dumps([_STATE_FORMAT, document, str(source), registry.signature()])
-    return hashlib.sha256(text.encode()).hexdigest()[:32]
+    return key_of(_STATE_FORMAT, document, str(source), registry.signature())
 
 
-def _kept_state(folder: Path, entry: Path) -> dict[str, Any] | None:
-    kept_entry = kept(entry)
+def _kept_state(folder: Path, key: str) -> dict[str, Any] | None:
+    kept_entry = read("scenarios", key, folder)
     if not isinstance(kept_entry, dict) or not code_unchanged(folder, kept_entry.get("code")):
         return None
     state = kept_entry.get("state")

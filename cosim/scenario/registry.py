@@ -31,19 +31,17 @@ importing :mod:`importlib.metadata`, took longer than validating a scenario.
 """
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import re
 import sys
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from ..cache import cache_folder, register_cache
 
-__all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models",
+__all__ = ["ComponentKind", "Section", "RegisteredModel", "Case", "BuildContext", "register_component_kind", "build_fmu_models", "write_fmu_models",
            "register_section", "register_fmu_model", "register_scenarios", "register_studies", "register_case", "register_cases", "component_kinds",
            "sections", "fmu_models", "cases", "aliases", "scenario_folders", "study_folders", "files_by_name", "scoped", "with_connections", "version",
            "register_table_fmu", "table_fmu", "register_cache", "cache_folder", "signature", "PLUGIN_GROUP"]
@@ -235,6 +233,20 @@ def build_fmu_models(fmi_versions: Sequence[int]) -> list[tuple[str, int, Path]]
     return [(name, version, path) for (name, _, version), path in zip(builds, paths)]
 
 
+def write_fmu_models(out: Path, fmi_versions: Sequence[int]) -> Iterator[Path]:
+    """Every registered model built in each of ``fmi_versions``
+    (:func:`build_fmu_models`) and copied into the folder ``out`` (made) as
+    ``fmi<version>/<name>.fmu``; yields each file written, in the order
+    built (``fnn-cosim build-fmu``)."""
+    import shutil
+
+    for name, version, path in build_fmu_models(fmi_versions):
+        target = Path(out) / f"fmi{version}" / f"{name}.fmu"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, target)
+        yield target
+
+
 def register_table_fmu(build: Callable[[Any, int], Path]) -> None:
     """The builder of the signal table's FMU form (``kind = "signal_table"``,
     :mod:`cosim.scenario.signal_table`): ``build(table, fmi_version)`` returns the path of an
@@ -316,21 +328,20 @@ def _plugin_entries() -> list[tuple[str, str]]:
     :data:`PLUGIN_GROUP`: kept in the cache folder while the distributions'
     metadata folders on ``sys.path`` are unchanged (:func:`_path_signature`),
     else read from the distributions' metadata."""
-    from ..cache import keep, kept
+    from ..cache import drop, key_of, read, write
 
-    folder = cache_folder()
-    key = _path_signature()
-    # one entry per sys.path (python -m and the fnn-cosim script see different ones)
-    entry = folder / "plugins" / f"{hashlib.sha256(json.dumps(key).encode()).hexdigest()[:32]}.json" \
-        if folder is not None else None
-    known = kept(entry) if entry is not None else None
-    if isinstance(known, dict) and known.get("path") == key:
-        return [tuple(e) for e in known["entries"]]
+    signature = _path_signature()
+    key = key_of(signature)  # one entry per sys.path (python -m and the fnn-cosim script see different ones)
+    known = read("plugins", key)
+    if isinstance(known, dict) and known.get("path") == signature:
+        try:
+            return [(name, value) for name, value in known["entries"] if isinstance(name, str) and isinstance(value, str)]
+        except (KeyError, TypeError, ValueError):  # not what this function keeps: read the metadata
+            drop("plugins", key)
     from importlib.metadata import entry_points  # slow to import: only when not kept
 
     entries = [(e.name, e.value) for e in entry_points(group=PLUGIN_GROUP)]
-    if entry is not None:
-        keep(entry, {"path": key, "entries": entries})
+    write("plugins", key, {"path": signature, "entries": entries})
     return entries
 
 

@@ -18,7 +18,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["summarize", "interval95", "metric_value", "t975", "kept_t975", "STATUSES", "MAX_ERRORS"]
+__all__ = ["summarize", "cell_lines", "interval95", "metric_value", "t975", "kept_t975", "STATUSES", "MAX_ERRORS"]
 
 STATUSES = ("ok", "diverged", "failed")
 MAX_ERRORS = 5  # messages kept per cell: the first ones in plan order
@@ -41,46 +41,44 @@ def t975(dof: int) -> float:
         from scipy.special import stdtrit
 
         _T975[dof] = float(stdtrit(dof, 0.975))
-        path = _quantiles_file()
-        if path is not None:
-            from ..cache import keep
+        key = _quantiles_key()
+        if key is not None:
+            from ..cache import write
 
-            keep(path, {str(k): v for k, v in sorted({**kept_t975(), **_T975}.items())})
+            write("quantiles", key, {str(k): v for k, v in sorted({**kept_t975(), **_T975}.items())})
     return _T975[dof]
 
 
-def _quantiles_file():
-    """Where the t quantiles of the installed SciPy are kept: the registered
-    cache folder's ``quantiles/t975-<hash of scipy/version.py>.json`` (its
-    version and commit, read without importing SciPy), or ``None`` (no
-    cache folder, no SciPy found)."""
+def _quantiles_key():
+    """The key the t quantiles of the installed SciPy are kept under in the
+    registered cache folder (``quantiles/``, :mod:`cosim.cache`): the SHA-256
+    of ``scipy/version.py`` (its version and commit, read without importing
+    SciPy), or ``None`` (no cache folder, no SciPy found)."""
     import hashlib
     import importlib.util
 
     from ..cache import cache_folder
 
-    folder = cache_folder()
     try:
         spec = importlib.util.find_spec("scipy")
         version = next(iter(spec.submodule_search_locations or ()), None) if spec is not None else None
-        if folder is None or version is None:
+        if cache_folder() is None or version is None:
             return None
         with open(f"{version}/version.py", "rb") as f:
-            digest = hashlib.sha256(f.read()).hexdigest()[:16]
+            return hashlib.sha256(f.read()).hexdigest()
     except (OSError, ValueError, ImportError):
         return None
-    return folder / "quantiles" / f"t975-{digest}.json"
 
 
 def kept_t975() -> dict[int, float]:
     """The t quantiles kept for the installed SciPy (:func:`t975`), by
     degrees of freedom; none when nothing is kept (or cannot be read)."""
-    path = _quantiles_file()
-    if path is None:
+    key = _quantiles_key()
+    if key is None:
         return {}
-    from ..cache import kept
+    from ..cache import read
 
-    data = kept(path)
+    data = read("quantiles", key)
     if not isinstance(data, dict):
         return {}
     try:
@@ -159,3 +157,15 @@ def summarize(study, rows: Iterable[Mapping[str, Any]], metric_names: Sequence[s
                     "errors": [e for _, e in sorted(errors[c], reverse=True)],
                     "metrics": {m: _statistics(indices[c][m], values[c][m]) for m in metric_names}})
     return out
+
+
+def cell_lines(summary: Mapping[str, Any]) -> list[str]:
+    """A study's summary (``summary.json``: its ``cells``, :func:`summarize`)
+    at a glance, one line per cell: its case, its grid point, its ``ok``
+    runs and each metric's mean over them (a metric with no mean left out)."""
+    lines = []
+    for cell in summary.get("cells", []):
+        point = ", ".join(f"{k}={v}" for k, v in cell["values"].items())
+        means = ", ".join(f"{m} {s['mean']:.4g}" for m, s in cell["metrics"].items() if s["mean"] is not None)
+        lines.append(f"{' / '.join(x for x in (cell['label'], point) if x)}: {cell['ok']} ok; {means}")
+    return lines

@@ -27,6 +27,8 @@ from typing import Callable, Iterator
 
 import fmpy
 
+from cosim.cache import BUILDS, LIMITS, FileMemo, note_written, used
+
 from ..cache import cache_root
 from .codegen import GENERIC_C_DIR, GENERIC_C_FILES, generate_sources
 from .model import FmuModel
@@ -96,7 +98,7 @@ def _stage(model: FmuModel, fmi_version: int, root: Path) -> Path:
     return root
 
 
-_READ: dict[Path, tuple[tuple[int, int], bytes]] = {}  # a generic file -> (its size and mtime, its bytes)
+_READ = FileMemo(64)  # a generic C file or FMI header -> its bytes (the eleven of every FMU's sources, and more)
 
 
 def _read(path: Path) -> bytes:
@@ -104,12 +106,7 @@ def _read(path: Path) -> bytes:
     changed: every FMU's sources hold the same eleven files (a first build of the shipped FMUs wrote them 560
     times with ``shutil.copy``, which opens the copy's source too and copies its mode: ~0.2 CPU-s of
     staging); written, they get their mode from the umask, as the other staged files do."""
-    stat = path.stat()
-    key = (stat.st_size, stat.st_mtime_ns)
-    known = _READ.get(path)
-    if known is None or known[0] != key:
-        known = _READ[path] = (key, path.read_bytes())
-    return known[1]
+    return _READ.derived(path, Path.read_bytes)
 
 
 _INCLUDE = re.compile(rb'^\s*#\s*include\s*"([^"]+)"', re.MULTILINE)
@@ -243,9 +240,14 @@ def _compile(model: FmuModel, fmi_version: int, root: Path) -> None:
     compile_flags = [cc, *(f for f in CFLAGS if f != "-shared")]
     objects = {c_file: cache_root() / "objects" / _object_digest(c_file, compile_flags) / f"{c_file.stem}.o"
                for c_file in sorted(sources.glob("*.c"))}
+    missing = [obj for obj in objects.values() if not obj.exists()]
+    for obj in set(objects.values()) - set(missing):
+        used(obj.parent)  # its use renewed: the least recently used go first (cosim.cache.prune)
     _run_compilers([([*compile_flags, f"-I{sources}", "-c", str(c_file), "-o", str(obj)],
                      f"{c_file.name} of {model.identifier} (FMI {fmi_version})")
-                    for c_file, obj in objects.items() if not obj.exists()])
+                    for c_file, obj in objects.items() if obj in missing])
+    if missing:
+        note_written(cache_root() / "objects", sum(o.stat().st_size for o in missing if o.exists()), LIMITS["objects"])
     binary_dir = root / "binaries" / FMI_VERSIONS[fmi_version].binary_dir
     binary_dir.mkdir(parents=True, exist_ok=True)
     out = binary_dir / f"{model.identifier}{fmpy.sharedLibraryExtension}"
@@ -303,8 +305,11 @@ def cached_fmu(model: FmuModel, fmi_version: int = 2) -> Path:
                     digest.update(path.relative_to(root).as_posix().encode())
                     digest.update(path.read_bytes())
         target = cache_root() / digest.hexdigest()[:16] / f"fmi{fmi_version}" / f"{model.identifier}.fmu"
-        if not target.exists():  # the tree just hashed is the one compiled: sources generated once
+        if target.exists():
+            used(target.parents[1])  # its use renewed: the least recently used go first (cosim.cache.prune)
+        else:  # the tree just hashed is the one compiled: sources generated once
             _compile(model, fmi_version, root)
             _zip(root, target)
+            note_written(cache_root(), target.stat().st_size, LIMITS["builds"], match=BUILDS)
     _KNOWN[(id(model), fmi_version)] = (model, target)  # the model held: its id is never reused
     return target

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.cache import LIMITS, note_written, used
+
 from ..cache import cache_root
 from ..export.model import FmuModel
 from ..export.variables import UNITS, Variable
@@ -77,6 +79,7 @@ def build_table_fmu(table, fmi_version: int = 2) -> Path:
     digest = digest.hexdigest()[:16]
     target = cache_root() / "tables" / digest / f"fmi{fmi_version}" / "SignalTable.fmu"
     if target.exists():
+        used(target.parents[1])  # its use renewed: the least recently used go first (cosim.cache.prune)
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(suffix=".fmu.part", dir=target.parent)
@@ -89,4 +92,5 @@ def build_table_fmu(table, fmi_version: int = 2) -> Path:
         os.replace(tmp, target)
     finally:
         Path(tmp).unlink(missing_ok=True)
+    note_written(target.parents[2], target.stat().st_size, LIMITS["tables"])
     return target

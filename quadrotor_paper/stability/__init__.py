@@ -15,10 +15,10 @@ Modules, one job each:
 * :mod:`~quadrotor_paper.stability.fmu_loop` -- the sampled loop from the FMUs, at a trimmed
   point or at a run's snapshot; :mod:`~quadrotor_paper.stability.along_flight` -- the
   learning loop of every variant along the missions, checked by perturbations;
-* :mod:`~quadrotor_paper.stability.study`, :mod:`~quadrotor_paper.stability.report`,
-  :mod:`~quadrotor_paper.stability.cli` -- all of it (with the learning laws' bounds,
-  eqs. 53, 66, 70, on recorded runs: :mod:`quadrotor_paper.learning_claims`), the
-  report, the command.
+* :mod:`~quadrotor_paper.stability.study`, :mod:`~quadrotor_paper.stability.report`
+  -- all of it (with the learning laws' bounds, eqs. 53, 66, 70, on recorded
+  runs: :mod:`quadrotor_paper.learning_claims`), the report; the command is
+  :mod:`quadrotor_paper.commands.stability`.
 
 The names below load their module on first use, so that ``fnn-cosim`` can
 add the ``stability`` subcommand without paying for them in every other

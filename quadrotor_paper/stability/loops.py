@@ -35,6 +35,8 @@ from functools import cached_property, wraps
 
 import numpy as np
 
+from cosim.cache import Memo
+
 from .linearize import (INPUT_NAMES, ControllerLinearization, PlantLinearization, linearize_controller,
                         linearize_plant)
 from .operating_points import STATE_NAMES, OperatingPoint
@@ -66,8 +68,7 @@ def _static(D, inputs, outputs, name, dt):
 # same loop is asked for by several LoopModels of the same point and gains (an analysis, the ramp and circle
 # errors, the critical gain factors, the feed-forward comparison): the same blocks give the same system, to
 # the bit, so it is made once per process. Never changed by a caller (they negate or copy it).
-_INTERCONNECTED: dict[tuple, object] = {}
-_KEEP = 256  # systems kept, the oldest dropped first (about 10 kB each)
+_INTERCONNECTED = Memo(256)  # systems kept, the least recently used dropped first (about 10 kB each)
 
 
 def _content(block) -> tuple:
@@ -215,9 +216,7 @@ class LoopModel:
                 blocks, connections=conns, inplist=list(inputs), outlist=list(outputs),
                 inputs=[s.split(".")[1] for s in inputs], outputs=[s.split(".")[1] for s in outputs],
                 check_unused=False, name=name)
-            if len(_INTERCONNECTED) >= _KEEP:
-                _INTERCONNECTED.pop(next(iter(_INTERCONNECTED)))  # the oldest
-            _INTERCONNECTED[key] = found
+            _INTERCONNECTED.put(key, found)
         return found
 
     @_built_once

@@ -207,7 +207,7 @@ def _px4_topics(skip: str = ""):
 def test_a_ulog_read_with_the_px4_map_topics_resampled_on_the_local_positions_instants(tmp_path):
     pytest.importorskip("pyulog")
     from cosim.calibration import read_column_map
-    from quadrotor_paper.calibrate_cli import _column_map_file
+    from quadrotor_paper.commands.calibrate import _column_map_file
 
     topics = _px4_topics()
     path = write_ulog(tmp_path / "flight.ulg", topics)

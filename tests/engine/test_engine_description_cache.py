@@ -25,7 +25,7 @@ def cache(tmp_path, monkeypatch):
     """An empty cache folder registered for the test, and nothing read in this process yet."""
     folder = tmp_path / "cache"
     monkeypatch.setattr(cosim.cache, "_CACHE", [lambda: folder])
-    monkeypatch.setattr(description_cache, "_MEMO", {})
+    monkeypatch.setattr(description_cache, "_MEMO", cosim.cache.FileMemo(256))
     return folder
 
 
@@ -97,10 +97,11 @@ def test_other_bytes_and_a_foreign_entry_are_read_again(lag_fmu2, cache, parses,
     assert len(parses) == 2 and len(list((cache / "descriptions").glob("*.json"))) == 2
     # an entry naming what fmpy's classes are not, or a field they do not have: read the file again
     shutil.copyfile(lag_fmu2, path)
-    kept = json.loads(entry.read_text())
+    header, _, payload = entry.read_bytes().partition(b"\n")
+    key, kept = header.split()[2].decode(), json.loads(payload)  # the entry as cosim.cache wrote it
     for foreign in ({"o": ["Path", {}]}, {"o": ["ModelDescription", {"__class__": 1}]}, {"x": 1},
                     {"o": ["Unit", {}]}, {"r": 3}, [1, 2]):
-        entry.write_text(json.dumps({**kept, "description": foreign}))
+        cosim.cache.write("descriptions", key, {**kept, "description": foreign})  # well formed, and foreign
         description_cache._MEMO.clear()
         fmu_component._parsed_model_description.cache_clear()
         fmu = FmuComponent("lag", path)
@@ -111,7 +112,7 @@ def test_other_bytes_and_a_foreign_entry_are_read_again(lag_fmu2, cache, parses,
 
 def test_nothing_is_kept_without_a_cache_folder_or_when_validating(lag_fmu2, monkeypatch, parses, tmp_path):
     monkeypatch.setattr(cosim.cache, "_CACHE", [])
-    monkeypatch.setattr(description_cache, "_MEMO", {})
+    monkeypatch.setattr(description_cache, "_MEMO", cosim.cache.FileMemo(256))
     path = tmp_path / "lag.fmu"
     shutil.copyfile(lag_fmu2, path)
     FmuComponent("lag", path).close()
@@ -126,11 +127,11 @@ def test_nothing_is_kept_without_a_cache_folder_or_when_validating(lag_fmu2, mon
 def test_an_entry_is_read_with_what_json_holds_beyond_orjson(tmp_path):
     """orjson reads an entry unless it holds what Python's json writes and
     orjson refuses (a NaN start value): then Python's json reads it."""
-    where = tmp_path / "entry.json"
-    where.write_text(json.dumps({"start": float("nan"), "x": [1.5, "a"]}))
-    data = description_cache._read(where)
+    key = cosim.cache.key_of("an entry")
+    cosim.cache.write("descriptions", key, {"start": float("nan"), "x": [1.5, "a"]}, tmp_path)
+    data = cosim.cache.read("descriptions", key, tmp_path)
     assert data["start"] != data["start"] and data["x"] == [1.5, "a"]
-    assert description_cache._read(tmp_path / "missing.json") is None
+    assert cosim.cache.read("descriptions", cosim.cache.key_of("another"), tmp_path) is None
 
 
 def _flown(fmu: FmuComponent) -> dict[str, float]:

@@ -157,14 +157,14 @@ def test_a_scenario_without_record_signals_records_every_output(tmp_path, fmus, 
 
 def test_set_keys_and_named_values_take_the_name_as_the_fmu_writes_it():
     from cosim.scenario.definition import dotted_key
-    from quadrotor_paper.cli import _named_values, _overrides
+    from quadrotor_paper.set_option import named_values, overrides
 
     assert dotted_key("fmus.V.parameters.a.b[2,3]") == ["fmus", "V", "parameters", "a.b[2,3]"]
     assert dotted_key("fmus.V.start.'x y'") == ["fmus", "V", "start", "'x y'"]
     assert dotted_key("fmus.V.start.der(a.b)") == ["fmus", "V", "start", "der(a.b)"]
     assert dotted_key('envelope."Q.phi"') == ["envelope", "Q.phi"]  # any other key: TOML's dotted keys
-    assert _overrides(["fmus.V.start.'a=b'=2.5"]) == {"fmus.V.start.'a=b'": 2.5}
-    assert _named_values(["x[1]=2", "'a=b'=3"], "--input") == {"x[1]": 2.0, "'a=b'": 3.0}
+    assert overrides(["fmus.V.start.'a=b'=2.5"]) == {"fmus.V.start.'a=b'": 2.5}
+    assert named_values(["x[1]=2", "'a=b'=3"], "--input") == {"x[1]": 2.0, "'a=b'": 3.0}
 
 
 def test_structured_names_survive_a_group_and_an_endpoint():

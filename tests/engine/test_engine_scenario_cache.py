@@ -88,13 +88,12 @@ def test_a_refused_document_is_refused_every_time_and_never_kept(tmp_path, cache
 def test_a_changed_module_validates_the_document_again(tmp_path, cache, validations):
     path = _written(tmp_path, SCENARIO)
     load_scenario(path)
-    entry = json.loads(next((cache / "scenarios").glob("*.json")).read_text())
-    code_file = cache / "code" / f"{entry['code']}.json"
-    files = json.loads(code_file.read_text())
+    entry = json.loads(next((cache / "scenarios").glob("*.json")).read_bytes().partition(b"\n")[2])  # its payload
+    files = cosim.cache.read("code", entry["code"])
     assert any(f[0] == cosim.scenario.tables.__file__ for f in files)  # the code that validated it is listed
     files = [[name, size + 1 if name == cosim.scenario.tables.__file__ else size, mtime]
              for name, size, mtime in files]  # as if the declaration had been edited
-    code_file.write_text(json.dumps(files))
+    cosim.cache.write("code", entry["code"], files)
     cosim.cache._UNCHANGED.clear()  # a new process
     load_scenario(path)
     assert len(validations) == 2
@@ -156,3 +155,32 @@ def test_a_scenario_file_is_parsed_once_for_its_text(tmp_path, cache, monkeypatc
     path.write_text(SCENARIO + "\n[toy_lag\n")
     with pytest.raises(ScenarioError, match="not valid TOML"):
         load_scenario(path)
+
+
+def test_the_scenario_cache_is_pruned_beyond_its_limit(tmp_path, cache, validations, monkeypatch):
+    """Validated scenarios are a kind of cosim.cache like the others: beyond
+    its size limit, the least recently used go (it was never pruned before)."""
+    path = _written(tmp_path, SCENARIO)
+    load_scenario(path, {"toy_controller.kp": 1.0})
+    size = next((cache / "scenarios").glob("*.json")).stat().st_size
+    monkeypatch.setitem(cosim.cache.LIMITS, "scenarios", 2 * size + size // 2)  # two entries
+    monkeypatch.setattr(cosim.cache, "_WRITTEN", {})
+    for kp in (2.0, 3.0, 4.0):
+        load_scenario(path, {"toy_controller.kp": kp})
+    assert len(list((cache / "scenarios").glob("*.json"))) == 2
+    load_scenario(path, {"toy_controller.kp": 4.0})  # the last kept: served
+    assert len(validations) == 4
+
+
+def test_a_kept_state_that_is_not_what_is_kept_is_validated_again(tmp_path, cache, validations):
+    """An entry well formed for its key but not a scenario's state (a forged
+    or older one) is dropped and the document validated: never trusted."""
+    path = _written(tmp_path, SCENARIO)
+    first = load_scenario(path)
+    entry = next((cache / "scenarios").glob("*.json"))
+    key = entry.read_bytes().split(b" ", 3)[2].decode()
+    kept = cosim.cache.read("scenarios", key)
+    cosim.cache.write("scenarios", key, {**kept, "state": {"name": "forged"}})
+    again = load_scenario(path)
+    assert len(validations) == 2 and _as_data(again) == _as_data(first)
+    assert cosim.cache.read("scenarios", key)["state"]["name"] == "toy_loop"  # kept again, as validated

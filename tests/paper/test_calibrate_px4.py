@@ -27,7 +27,7 @@ def test_the_built_in_maps_state_px4s_x_and_the_plants_spins(name):
     from cosim.calibration import read_column_map
     from cosim.calibration.frames import matching_first_angles
     from fmu_models.models.rotor import SPIN
-    from quadrotor_paper.calibrate_cli import _column_map_file
+    from quadrotor_paper.commands.calibrate import _column_map_file
 
     rotors = read_column_map(_column_map_file(name)).rotors
     assert {"positions": rotors.positions, "spins": rotors.spins} == PX4_X

@@ -9,17 +9,16 @@ value beyond what a document may hold (5001 digits, a key of 40 parts, a
 date), a name given twice, a physically invalid gain; a number option out of
 its range (``--workers``, ``--seeds``, ``--kp``); a Dask scheduler that is no
 address. Each is refused before anything runs, so the walk takes seconds.
-The commands are read from the parser: a new one must be walked here.
+The commands are read from their declarations: a new one must be walked here.
 """
 from __future__ import annotations
 
-import argparse
 import os
 from pathlib import Path
 
 import pytest
 
-from quadrotor_paper.cli import EXIT_BAD_INPUT, _parser, main
+from quadrotor_paper.cli import EXIT_BAD_INPUT, main
 
 DEVICE = "/dev/zero"
 
@@ -117,9 +116,9 @@ CASES += [
 
 
 def _commands() -> set[str]:
-    parser = _parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return set(sub.choices)
+    from quadrotor_paper.commands import declared
+
+    return set(declared())
 
 
 def test_every_command_is_walked():

@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 NOT_FOR_A_RUN = ("casadi", "dask", "distributed", "matplotlib", "control", "scipy", "pydantic", "pydantic_core",
                  "importlib.metadata", "fnn_controller.fast", "fmu_models.export.build", "cosim.scenario.tables",
                  "quadrotor_paper.section_tables", "lxml",
@@ -134,23 +136,33 @@ def test_the_command_ends_with_its_status_its_output_and_its_exit_handlers(tmp_p
     assert proc.stderr.count("\n") == 1
 
 
-def test_a_command_makes_only_its_own_parser():
-    """fnn-cosim's parser names every command (usage, --help, the refusal of
-    an unknown one) but makes a command's parser only when it is the one
-    given (cli._Commands)."""
-    import argparse
-
+def test_a_run_makes_only_its_own_parser(capsys):
+    """``fnn-cosim run ...`` makes the run's parser alone, with its arguments
+    (quadrotor_paper.commands.Commands): it parses what the parser of every
+    command parses; another command or options first make every command's
+    parser (the listing of --help, the refusal of an unknown command) and
+    add the arguments of the one given."""
     from quadrotor_paper.cli import _parser
+    from quadrotor_paper.commands import declared
+    from quadrotor_paper.commands.run import add_commands
 
-    parser = _parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    names = set(sub.choices)
-    assert {"run", "table2", "stability", "calibrate", "linearize"} <= names
-    args = parser.parse_args(["run", "circles", "--no-plots", "--seed", "3"])
-    assert (args.scenario, args.no_plots, args.seed, args.func.__name__) == ("circles", True, 3, "_cmd_run")
-    assert {name for name, made in sub.choices.items() if made is not None} == {"run"}
-    listing = parser.format_help()
-    assert all(name in listing for name in names)
+    argv = ["run", "circles", "--no-plots", "--seed", "3"]
+    parser, full = _parser(argv), _parser()
+    args = parser.parse_args(argv)
+    assert (args.scenario, args.no_plots, args.seed) == ("circles", True, 3)
+    assert args.func.__module__ == add_commands.__module__ and vars(args) == vars(full.parse_args(argv))
+    names = ("run", "table2", "table3", "reproduce", "sweep", "export-ssp", "schema", "scenarios", "build-fmu",
+             "linearize", "stability", "calibrate")
+    for name in names[1:]:  # not made for a run; with every command, each one's help from its own arguments
+        for tree, status in ((parser, 2), (full, 0), (_parser(["--debug", name, "--help"]), 0)):
+            with pytest.raises(SystemExit) as ended:
+                tree.parse_args(["--debug", name, "--help"])
+            assert ended.value.code == status, (name, status)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as ended:
+        _parser(["--help"])
+    assert ended.value.code == 0 and capsys.readouterr().out == full.format_help()
+    assert "{" + ",".join(names) + "}" in full.format_help() and tuple(declared()) == names
 
 
 _ARGPARSE_END = """

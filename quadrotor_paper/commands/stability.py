@@ -1,19 +1,22 @@
-"""``fnn-cosim stability``: the linear stability report of the PD baseline.
-
-Usable on its own (``python -m quadrotor_paper.stability.cli --out DIR``) and as a
-subcommand: :func:`add_parser` adds it to the ``fnn-cosim`` parser.
+"""``fnn-cosim linearize`` and ``stability``: linear systems from FMUs.
+``linearize``: any FMU, or an FMU instance of a scenario at a time of its
+run (:mod:`cosim.linearize`); ``stability``: the linear stability report of
+the PD baseline (:mod:`quadrotor_paper.stability`).
 """
 from __future__ import annotations
 
 import argparse
-import sys
-from typing import Sequence
+from pathlib import Path
+from typing import Any
 
+from ..fmu_log_option import fmu_log_option
+from ..set_option import named_values, overrides
 from ..workers_option import default_workers, worker_count
+from . import DEFAULT_OUT, Commands, out_folder
 
-__all__ = ["add_parser", "run", "main"]
+__all__ = ["add_commands"]
 
-DEFAULT_OUT = "results/stability"
+STABILITY_OUT = str(DEFAULT_OUT / "stability")
 _DESCRIPTION = ("Linear stability report of the PD baseline (poles, margins, Bode/Nyquist/pole-zero plots, "
                 "kp-kd sweep, ramp error), checked against the co-simulation, in seconds; with --along-flight "
                 "also the learning laws (minutes): their finite-time claims on recorded runs and the learning "
@@ -21,8 +24,8 @@ _DESCRIPTION = ("Linear stability report of the PD baseline (poles, margins, Bod
 ALONG_EVERY = 1.0  # s: the along-flight study's default
 
 
-def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    parser.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default: {DEFAULT_OUT})")
+def _arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default=STABILITY_OUT, help=f"output directory (default: {STABILITY_OUT})")
     parser.add_argument("--kp", type=float, default=None, help="PD proportional gain (default: the paper's 2.5)")
     parser.add_argument("--kd", type=float, default=None, help="PD derivative gain (default: the paper's 0.005)")
     parser.add_argument("--feedforward", type=float, default=0.0,
@@ -52,21 +55,15 @@ def _arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         help="processes: Dask workers for the runs, and with 2 or more the operating points' "
                              "figures drawn in a second process while the study goes on (default: one per core; "
                              "1 runs everything in this process)")
-    return parser
+    fmu_log_option(parser)
 
 
-def add_parser(subparsers) -> None:
-    """Add the ``stability`` subcommand to ``fnn-cosim``'s subcommands
-    (``quadrotor_paper.cli._Commands``: its arguments added when it is the
-    one given); its handler is stored as ``func`` (call ``args.func(args)``)."""
-    def arguments(parser: argparse.ArgumentParser) -> None:
-        from ..fmu_log_option import fmu_log_option
-
-        _arguments(parser)
-        fmu_log_option(parser)
-
-    subparsers.add_parser("stability", arguments, run, description=_DESCRIPTION,
-                          help="linear stability analysis of the PD baseline, checked against the co-simulation")
+def add_commands(commands: Commands) -> None:
+    commands.add("linearize", _linearize_arguments, _linearize,
+                 help="linearize an FMU (Model Exchange, or a sampled-data Co-Simulation FMU's step): system (.npz, "
+                      ".json), poles, Bode plots")
+    commands.add("stability", _arguments, _stability, description=_DESCRIPTION,
+                 help="linear stability analysis of the PD baseline, checked against the co-simulation")
 
 
 def _checked(args: argparse.Namespace) -> None:
@@ -77,7 +74,7 @@ def _checked(args: argparse.Namespace) -> None:
 
     from cosim.errors import ScenarioError
     from cosim.files import output_folder
-    from cosim.scenario.schema import NonNegative, Number, Positive, Table, validate
+    from cosim.scenario.schema import NonNegative, Positive, Table, validate
 
     class Arguments(Table):
         kp: Positive = None  # a PD with kp <= 0 has no operating point to linearize around
@@ -90,7 +87,7 @@ def _checked(args: argparse.Namespace) -> None:
 
     names = ("kp", "kd", "feedforward", "speed", "wind", "along_every", "workers")
     given = {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
-    from .study import check_pd_gains
+    from ..stability.study import check_pd_gains
 
     try:
         validate(Arguments, given)
@@ -103,7 +100,7 @@ def _checked(args: argparse.Namespace) -> None:
     if args.along_every is not None and not args.along_flight:
         raise ScenarioError(f"--along-every {args.along_every:g}: applies only with --along-flight")
     if args.figures:
-        from .report import FIGURES
+        from ..stability.report import FIGURES
 
         unknown = [name for name in args.figures if name not in FIGURES]
         if unknown:
@@ -111,10 +108,9 @@ def _checked(args: argparse.Namespace) -> None:
     output_folder(args.out)
 
 
-def run(args: argparse.Namespace) -> int:
+def _stability(args: argparse.Namespace) -> int:
     """Run the study for parsed arguments; prints the report's path and verdicts."""
-    from ..set_option import overrides
-    from .study import StabilitySettings, plant_parameters, run_stability_analysis
+    from ..stability.study import StabilitySettings, plant_parameters, run_stability_analysis
 
     _checked(args)
     plant = plant_parameters(overrides(args.set)) if args.set else {}
@@ -139,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
               f"trim {case.ramp.trim:.4f} m" + (f", co-simulation {cosim:.4f} m" if cosim is not None else "")
               + f"; circle RMS {case.circle.rms:.4f} m; outer GM >= {min(case.outer_gain_margin.values()):.3g}")
     if study.along_flight:
-        from .along_flight import verdict
+        from ..stability.along_flight import verdict
 
         for f in study.along_flight:
             v = verdict(f, study.dt)
@@ -151,15 +147,92 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    from ..fmu_log_option import apply_fmu_log, fmu_log_option
 
-    parser = _arguments(argparse.ArgumentParser(prog="fnn-cosim stability", description=_DESCRIPTION))
-    fmu_log_option(parser)
-    args = parser.parse_args(argv)
-    apply_fmu_log(args.fmu_log)
-    return run(args)
+# ---- linearize -------------------------------------------------------------------------
+
+def _linearize_arguments(lz: argparse.ArgumentParser) -> None:
+    lz.add_argument("fmu", help="an FMU file, or the name of a model fnn-cosim builds (e.g. Quadrotor, ControllerPDLM); "
+                    "with --scenario, an FMU instance of the scenario (e.g. Quadrotor, controller)")
+    lz.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
+    lz.add_argument("--parameter", action="append", default=[], metavar="NAME=VALUE", help="a parameter (repeatable)")
+    lz.add_argument("--input", action="append", default=[], metavar="NAME=VALUE", help="an input (repeatable)")
+    lz.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
+                    help="a continuous (ME) or discrete (CS) state (repeatable)")
+    lz.add_argument("--method", choices=("auto", "derivatives", "differences"), default="auto")
+    lz.add_argument("--interface", choices=("auto", "me", "cs"), default="auto")
+    lz.add_argument("--bode", action="append", default=[], metavar="INPUT:OUTPUT", help="a Bode plot (repeatable)")
+    lz.add_argument("--scenario", default=None, metavar="NAME|FILE",
+                    help="take the operating point from a run of this scenario at --time: the instance's FMU state, "
+                         "inputs and parameters then")
+    lz.add_argument("--time", type=float, default=None, metavar="T", help="the run's time (s) for --scenario")
+    lz.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a value of --scenario (repeatable)")
+    lz.add_argument("--out", default=None, help="output directory (default results/linearize)")
+    fmu_log_option(lz)
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def _operating_point(args) -> tuple[Path, dict[str, Any]]:
+    """The FMU file and the operating point to linearize at: ``--scenario S
+    --time T``, instance ``args.fmu`` at T of S's run
+    (:func:`cosim.linearize.linearization.operating_point_of_run`); else the FMU file or
+    built model ``args.fmu`` at ``--parameter``'s values."""
+    from cosim.scenario.assembly import fmu_file_or_model
+    from cosim.errors import ScenarioError
+
+    if args.scenario is None and args.time is None:
+        return fmu_file_or_model(args.fmu, args.fmi, "linearize"), dict(parameters=named_values(args.parameter,
+                                                                                                "--parameter"))
+    if args.scenario is None:
+        raise ScenarioError("--time: give the run's scenario with --scenario")
+    if args.parameter:
+        raise ScenarioError("--parameter: with --scenario the parameters are the run's; set them with --set")
+    if args.time is None:
+        raise ScenarioError("--scenario: give the time of the run to linearize at with --time")
+    from cosim.linearize.linearization import operating_point_of_run
+    from cosim.scenario.definition import load_scenario
+
+    return operating_point_of_run(load_scenario(args.scenario, overrides(args.set)), args.fmu, args.time,
+                                  f"--time {args.time!r}")
+
+
+def _bode_pairs(pairs: list[str]) -> list[tuple[str, str]]:
+    """``--bode INPUT:OUTPUT`` pairs (a name as FMI writes it: ``x[1]``, ``'a:b'``)."""
+    from cosim.errors import ScenarioError
+    from cosim.names import partition_top
+
+    out = []
+    for pair in pairs:
+        i, colon, o = partition_top(pair, ":")
+        if not colon or not i or not o:
+            raise ScenarioError(f"--bode {pair!r}: expected INPUT:OUTPUT, e.g. --bode Omega_1:z")
+        out.append((i, o))
+    return out
+
+
+def _linearize(args) -> int:
+    """Linearize an FMU file or a registered model (built as FMI ``--fmi``) at
+    the operating point given, or an FMU instance of a scenario at time
+    ``--time`` of its run; write the system, its poles and Bode plots."""
+    from cosim.errors import ScenarioError
+    from cosim.linearize.linearization import LinearizationError, linearize_fmu, save_linearization
+
+    path, point = _operating_point(args)
+    pairs = _bode_pairs(args.bode)
+    out = out_folder(args.out, DEFAULT_OUT / "linearize")
+    try:
+        point["inputs"] = point.get("inputs", {}) | named_values(args.input, "--input")
+        lin = linearize_fmu(path, start=named_values(args.start, "--start"), method=args.method,
+                            interface=args.interface, **point)
+        written = save_linearization(lin, out, pairs, stem=path.stem)
+    except LinearizationError as exc:
+        raise ScenarioError(str(exc)) from None
+    system = lin.system
+    kind = f"discrete, dt = {system.dt:g} s" if system.dt else "continuous"
+    print(f"{path.name}: {system.nstates} states, {system.ninputs} inputs, {system.noutputs} outputs ({kind}); "
+          f"{lin.method}, error estimate {lin.error_estimate:.3g}")
+    measure = lin.stability_measure()
+    if measure is not None:
+        print(f"poles: {measure[0]} {measure[1]:.6g}")
+    for f in written:
+        print(f)
+    return 0

@@ -11,29 +11,25 @@ from __future__ import annotations
 
 import argparse
 import sys
-from functools import partial
 from pathlib import Path
 
-from .workers_option import worker_count
+from ..set_option import named_values, overrides
+from ..workers_option import worker_count
+from . import DEFAULT_OUT, Commands
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_commands"]
 
-DEFAULT_OUT = "results/calibration"
-COLUMN_MAPS = Path(__file__).resolve().parent / "column_maps"  # the built-in maps: --columns px4, px4-pwm
-
-
-def add_parser(sub, named_values, overrides) -> None:
-    """The subcommand on ``sub`` (``fnn-cosim``'s subcommands,
-    ``quadrotor_paper.cli._Commands``: its arguments added when it is the
-    one given); ``named_values`` and ``overrides``: the command line's
-    readers of ``K=V`` and ``--set`` pairs (``fnn-cosim``'s, handed over:
-    this module does not import the command line's)."""
-    sub.add_parser("calibrate", partial(_arguments, named_values=named_values, overrides=overrides), run,
-                   help="fit an FMU's parameters to a log: estimates, intervals, identifiability, an SSP parameter "
-                        "set")
+CALIBRATION_OUT = str(DEFAULT_OUT / "calibration")
+COLUMN_MAPS = Path(__file__).resolve().parent.parent / "column_maps"  # the built-in maps: --columns px4, px4-pwm
 
 
-def _arguments(c: argparse.ArgumentParser, named_values, overrides) -> None:
+def add_commands(commands: Commands) -> None:
+    commands.add("calibrate", _arguments, _calibrate,
+                 help="fit an FMU's parameters to a log: estimates, intervals, identifiability, an SSP parameter "
+                      "set")
+
+
+def _arguments(c: argparse.ArgumentParser) -> None:
     c.add_argument("log", help="the log: the project's results (CSV, Parquet), any CSV with --columns, a PX4 ULog "
                    "(.ulg, needs pyulog)")
     where = c.add_mutually_exclusive_group(required=True)
@@ -62,13 +58,12 @@ def _arguments(c: argparse.ArgumentParser, named_values, overrides) -> None:
                    help="the FMU's interface that makes the trajectories (default: the settings', 'auto': "
                         "Co-Simulation where the FMU has it, else Model Exchange)")
     c.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built model (default 2)")
-    c.add_argument("--out", default=None, help=f"output directory (default {DEFAULT_OUT})")
+    c.add_argument("--out", default=None, help=f"output directory (default {CALIBRATION_OUT})")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.add_argument("--no-plots", action="store_true", help="no figures (report.md without them)")
     c.add_argument("--strict", action="store_true", help="exit status 1 when the calibration warns (residuals not "
                    "white, held-out error, Jacobian error, an estimate at its bound, an unmatched column), after "
                    "writing every file")
-    c.set_defaults(named_values=named_values, overrides=overrides)
 
 
 def _column_map_file(given: str) -> Path:
@@ -77,18 +72,17 @@ def _column_map_file(given: str) -> Path:
     return builtin if "/" not in given and not given.endswith(".toml") and builtin.is_file() else Path(given)
 
 
-def run(args) -> int:
+def _calibrate(args) -> int:
     from cosim.scenario.assembly import fmu_file_or_model
     from cosim.calibration import calibrate, read_column_map, read_settings
     from cosim.calibration.columns import CalibrationSettings
-    from cosim.calibration.outputs import write_outputs
+    from cosim.calibration.outputs import estimate_lines, write_outputs
     from cosim.errors import ScenarioError
     from cosim.files import output_folder
     from cosim.scenario.schema import validate
 
-    from .progress import progress_bar
+    from ..progress import progress_bar
 
-    _named_values, _overrides = args.named_values, args.overrides
     settings = read_settings(args.settings) if args.settings else CalibrationSettings()
     update = {}
     if args.fit is not None:
@@ -99,9 +93,9 @@ def run(args) -> int:
             raise ScenarioError(f"--fit {args.fit!r}: expected comma-separated names, e.g. --fit m,Ix")
         update["fit"] = names
     if args.fix:
-        update["fix"] = {**settings.fix, **_named_values(args.fix, "--fix")}
+        update["fix"] = {**settings.fix, **named_values(args.fix, "--fix")}
     if args.guess:
-        update["guess"] = {**settings.guess, **_named_values(args.guess, "--guess")}
+        update["guess"] = {**settings.guess, **named_values(args.guess, "--guess")}
     if args.segment is not None:
         if not args.segment > 0:
             raise ScenarioError(f"--segment {args.segment!r}: must be positive")
@@ -113,13 +107,13 @@ def run(args) -> int:
     if update:
         settings = validate(CalibrationSettings, settings.model_dump(exclude_none=True) | update)
     column_map = read_column_map(_column_map_file(args.columns)) if args.columns else None
-    out = output_folder(args.out or DEFAULT_OUT)
+    out = output_folder(args.out or CALIBRATION_OUT)
     fixed, extra, instance = {}, {}, None
     if args.scenario is not None:
         from cosim.calibration.scenario_instance import scenario_instance
 
         instance, fmu, fixed, extra, interface = scenario_instance(args.scenario, args.instance, settings.fit,
-                                                                   _overrides(args.set))
+                                                                   overrides(args.set))
         if settings.interface == "auto":  # the interface the scenario flies it in
             settings = settings.model_copy(update={"interface": interface})
     else:
@@ -130,15 +124,8 @@ def run(args) -> int:
         cal = calibrate(args.log, fmu, settings, column_map, instance=instance, extra_columns=extra, fixed=fixed,
                         progress=update_bar)
     written = write_outputs(cal, out, args.log, fmu, instance, plots=not args.no_plots)
-    for name, value in cal.estimates().items():
-        j = cal.problem.fit.index(name)
-        if value is None:
-            print(f"{name}: not identifiable from this log")
-        elif cal.stats.at_bound is not None and cal.stats.at_bound[j]:
-            print(f"{name} = {value:.10g} (at bound: no interval)")
-        else:
-            lo, hi = cal.stats.ci95[j]
-            print(f"{name} = {value:.10g} (95 % interval [{lo:.6g}, {hi:.6g}])")
+    for line in estimate_lines(cal):
+        print(line)
     for path in written[:4]:
         print(path)
     for d in cal.diagnostics:
