@@ -60,13 +60,11 @@ _POSITION = PositionParams()  # the defaults: one (frozen) instance for every si
 from .variants.registry import Variant
 
 __all__ = [
-    "STATE_SIZE", "FNN_STATE", "VEL_STATE", "PLANT_STATE_NAMES", "OUTPUTS", "Y_PARTS", "Y_SLICES", "STEP_INPUT_NAMES",
+    "STATE_SIZE", "PLANT_STATE_NAMES", "OUTPUTS", "Y_PARTS", "Y_SLICES", "STEP_INPUT_NAMES",
     "state_size", "state_ports", "check_state", "step_symbols", "initial_state", "raise_non_finite",
 ]
 
 STATE_SIZE = FNN_STATE_SIZE + VEL_STATE_SIZE  # the paper's variants
-FNN_STATE = slice(0, FNN_STATE_SIZE)
-VEL_STATE = slice(FNN_STATE_SIZE, STATE_SIZE)
 
 
 def state_ports(variant: Variant) -> tuple[tuple[str, str, str], ...]:

@@ -191,11 +191,6 @@ def _law_terms(run: Recording, axis: int, gamma: float, alpha_bar: float):
     return (w, *(np.array(o).ravel() for o in out[1:]))
 
 
-def _lm_terms(run: Recording, axis: int, gamma: float, alpha_bar: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """W^T W, delta (eq. 62) and the decrease rate at every sample of ``axis`` of ``run``."""
-    return _law_terms(run, axis, gamma, alpha_bar)[1:]
-
-
 def _regressor_steps(w: np.ndarray) -> np.ndarray:
     """``||W_n - W_{n-1}||_inf`` from the third sample on: from step 2 the
     centre law has moved every centre with its input (eqs. 33-34), so ``x - c``

@@ -60,20 +60,15 @@ def _rewrite_share(session, index: int, count: int) -> None:
     CPU-s each: parsing, the rewrite, compiling ~1 MB of tests), so each
     first writes its share (:func:`_share`), and then finds the other's
     written as it collects: a file not written yet is rewritten at its
-    import as before. Pytest's own functions do the rewrite, so the
-    bytecode is the one its import would write; without them (another
-    pytest), nothing is done here. docs/fmi-export.md, "The test modules'
-    assertion rewriting"."""
+    import as before. Pytest's own functions do the rewrite
+    (:func:`_write_rewritten`), so the bytecode is the one its import would
+    write. docs/fmi-export.md, "The test modules' assertion rewriting"."""
     config = session.config
     if config.getoption("assertmode", "rewrite") != "rewrite":
         return
+    from fnmatch import fnmatch
+
     try:
-        import importlib.util
-        from fnmatch import fnmatch
-
-        from _pytest.assertion.rewrite import (PYC_TAIL, _rewrite_test, _write_pyc, assertstate_key,
-                                               get_cache_dir, try_makedirs)
-
         patterns = [p for p in config.getini("python_files") if "/" not in p] + ["conftest.py"]
         files = set()
         for arg in config.args:
@@ -81,26 +76,40 @@ def _rewrite_share(session, index: int, count: int) -> None:
             found = path.rglob("*.py") if path.is_dir() else [path]
             files.update(f.resolve() for f in found
                          if "__pycache__" not in f.parts and any(fnmatch(f.name, p) for p in patterns))
-        state = config.stash[assertstate_key]
         for fn in _share(files, index, count):
-            cache_dir = get_cache_dir(fn)
-            pyc = cache_dir / (fn.name[:-3] + PYC_TAIL)
             try:
-                with open(pyc, "rb") as fp:
-                    head = fp.read(16)
-                if head[:4] == importlib.util.MAGIC_NUMBER and \
-                        head[8:16] == importlib.util.source_hash(fn.read_bytes())[:8]:
-                    continue  # written already (a warm tree, or the other worker)
-            except OSError:
-                pass
-            try:
-                if try_makedirs(cache_dir):
-                    source_hash, co = _rewrite_test(fn, config)
-                    _write_pyc(state, co, source_hash, pyc)
+                _write_rewritten(fn, config)
             except (OSError, SyntaxError, ValueError):  # its import says why, as before
                 continue
-    except (ImportError, AttributeError, KeyError, OSError):  # another pytest
-        return
+    except (ImportError, AttributeError, KeyError, OSError):  # another pytest: its imports rewrite, as before
+        return  # (and tests/test_private_apis.py fails, naming what changed)
+
+
+def _write_rewritten(fn, config) -> bool:
+    """The test module ``fn``'s asserts rewritten and written to its
+    ``__pycache__`` as pytest's import writes them; ``False`` when the file
+    there is already the one for ``fn``'s source (a warm tree, or the other
+    worker). Pytest has no public API for this: its private functions are
+    used, pinned by tests/test_private_apis.py (docs/dependencies.md)."""
+    import importlib.util
+
+    from _pytest.assertion.rewrite import (PYC_TAIL, _rewrite_test, _write_pyc, assertstate_key, get_cache_dir,
+                                           try_makedirs)
+
+    cache_dir = get_cache_dir(fn)
+    pyc = cache_dir / (fn.name[:-3] + PYC_TAIL)
+    try:
+        with open(pyc, "rb") as fp:
+            head = fp.read(16)
+        if head[:4] == importlib.util.MAGIC_NUMBER and \
+                head[8:16] == importlib.util.source_hash(fn.read_bytes())[:8]:
+            return False
+    except OSError:
+        pass
+    if not try_makedirs(cache_dir):
+        return False
+    source_hash, co = _rewrite_test(fn, config)
+    return _write_pyc(config.stash[assertstate_key], co, source_hash, pyc)
 
 
 def pytest_sessionfinish(session):
@@ -194,6 +203,10 @@ LONGEST_FIRST = (
 
 
 def _shares_module_fixture(item) -> bool:
+    """Whether ``item`` uses a fixture made once for its module, class or
+    package (pytest has no public API for a test's fixture definitions: its
+    ``_fixtureinfo`` is read, pinned by tests/test_private_apis.py; without
+    it, no test moves with its module)."""
     info = getattr(item, "_fixtureinfo", None)
     return info is not None and any(
         d.scope in ("module", "class", "package") for defs in info.name2fixturedefs.values() for d in defs)

@@ -32,7 +32,7 @@ import subprocess
 import tempfile
 import uuid
 import zipfile
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -628,8 +628,3 @@ def algebraic_loop_specs(a: float = 0.5, b: float = 0.5, c: float = 1.0,
             partials="    if (unknown == VR_y && known == VR_u) return K_1_1;",
             interfaces=tuple(interfaces), description="a gain with direct feedthrough")
     return {"GainA": gain("GainA", a, c), "GainB": gain("GainB", b, 0.0)}
-
-
-def with_interfaces(spec: ModelSpec, *interfaces: str) -> ModelSpec:
-    """``spec`` with other interfaces (e.g. Co-Simulation added)."""
-    return replace(spec, interfaces=tuple(interfaces))

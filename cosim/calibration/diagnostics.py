@@ -47,13 +47,11 @@ import numpy as np
 from ..names import base_variable, nearest, nearest_told, split_variable
 from .problem import log_instance
 
-__all__ = ["Diagnostic", "diagnose", "log_noise", "JACOBIAN_ERROR", "NOISE_FREE", "KINDS"]
+__all__ = ["Diagnostic", "diagnose", "log_noise", "JACOBIAN_ERROR", "NOISE_FREE"]
 
 JACOBIAN_ERROR = 1e-2  # central differences agree with their 2h twin to ~h^2 (1e-10 relative); 1 % is a kink
 NOISE_FREE = 0.1  # residuals below this share of the log's own noise level (log_noise) are not tested: measured on
 # the plant's log, noisy outputs 0.6-1.0, its noise-free rotor speeds 7e-5-6e-4, a published run 1e-12
-KINDS = ("residuals-not-white", "held-out-error", "jacobian-error", "at-bound", "unmatched-column",
-         "mirror-fits-better")
 
 
 @dataclass(frozen=True)
@@ -69,8 +67,8 @@ class Diagnostic:
 
 
 def diagnose(cal, column_map=None) -> list[Diagnostic]:
-    """The warnings of the calibration ``cal`` (module docstring), in the
-    order of :data:`KINDS`; ``column_map``: the one the log was read with."""
+    """The warnings of the calibration ``cal``, in the order of the module
+    docstring's kinds; ``column_map``: the one the log was read with."""
     return (_whiteness(cal) + _held_out(cal) + _jacobian(cal) + _at_bound(cal)
             + _unmatched(cal, column_map))
 

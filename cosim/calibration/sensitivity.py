@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["segment_sensitivities", "expm_small"]
+__all__ = ["segment_sensitivities", "expm_batch"]
 
 
 def expm_batch(M: np.ndarray) -> np.ndarray:

@@ -57,11 +57,10 @@ class Statistics:
     bandwidth: float = 0.0  # the sandwich's Bartlett bandwidth S, rows
     covariance: str = "classical"  # which one std and ci95 are: "classical" or "robust"
     std_classical: np.ndarray = None  # s^2 F^-1's, whichever std is
-    ci95_classical: np.ndarray = None
 
     def __post_init__(self):
         if self.std_classical is None:
-            self.std_classical, self.ci95_classical = self.std, self.ci95
+            self.std_classical = self.std
 
     def use_robust(self) -> None:
         """Report the sandwich's standard errors and intervals (residuals that are not white)."""

@@ -1,8 +1,8 @@
 """The compiled step loop (``kernel.c``) and its one definition of what
 crosses between Python and C.
 
-When every block a plan evaluates at t_n is an FMU (:attr:`Plan.fmus_only
-<cosim.loop.plan.Plan.fmus_only>`), the master's loop makes nothing but FMI
+When every block a plan evaluates at t_n is an FMU (with no signal held
+as an object: :attr:`Plan.compiled <cosim.loop.plan.Plan.compiled>`), the master's loop makes nothing but FMI
 calls, copies between the signal array and the FMUs, the recording and the
 guard: the master hands this loop the plan (:func:`prepare`) and each block
 of communication points (:func:`load` compiles ``kernel.c`` once per machine,

@@ -187,11 +187,6 @@ class Plan:
     derived: tuple[tuple[int, int, float, float], ...] = ()
 
     @property
-    def fmus_only(self) -> bool:
-        """Every block at t_n is an FMU (no Python component)."""
-        return all(isinstance(b, FmuBlock) for b in self.at_tn)
-
-    @property
     def compiled(self) -> bool:
         """The compiled kernel can run the plan: nothing in
         :attr:`python_loop`, the reasons the plan takes the Python loop

@@ -216,7 +216,6 @@ class Recorder:
         self.objects = np.full((self.chunk, len(objects)), None, dtype=object)
         self.first = 0  # the run's row of data[0]
         self.n_rows = 0  # rows recorded so far (the run's)
-        self.planned = n_rows
         self.every = every
         self.observers = tuple(observers)
         self._kept = _Kept(n_rows if keep is None else keep, len(self.columns), len(objects), self._texts,

@@ -23,7 +23,7 @@ from fmu_models.lazy_casadi import ca
 from . import spelling
 from .model import FmuModel
 
-__all__ = ["generate_sources", "GENERIC_C_DIR", "GENERIC_C_FILES", "value_references"]
+__all__ = ["casadi_sources", "generate_sources", "GENERIC_C_DIR", "GENERIC_C_FILES", "value_references"]
 
 GENERIC_C_DIR = Path(__file__).parent / "c"
 GENERIC_C_FILES = ("fmu_core.h", "fmu_core.c", "numpy_random.h", "numpy_random.c", "signal_table.h", "signal_table.c")
@@ -130,6 +130,17 @@ const ModelDescriptor fmu_model = {{
 """
 
 
+def casadi_sources(functions) -> dict[str, bytes]:
+    """``model_generated.c`` and ``model_generated.h`` of ``functions`` (name ->
+    CasADi function) as CasADi writes them, before :mod:`spelling`."""
+    generator = ca.CodeGenerator("model_generated.c", {"with_header": True, "with_export": False})
+    for function in functions.values():
+        generator.add(function)
+    with tempfile.TemporaryDirectory() as folder:
+        generator.generate(folder + "/")
+        return {name: (Path(folder) / name).read_bytes() for name in ("model_generated.c", "model_generated.h")}
+
+
 # functions object -> (it, its generated files, the GUID's digest so far (of its C), work sizes): the second FMI
 # version of a model, and a model with other start values (the same functions), reuse the C generated for
 # the first (the EKFs': ~2 s of CPU each time). The functions are held, so their id is never reused.
@@ -145,12 +156,7 @@ def _generated(functions) -> tuple[dict[str, bytes], "hashlib._Hash", dict[str, 
     known = _GENERATED.get(id(functions))
     if known is not None and known[0] is functions:
         return known[1:]
-    generator = ca.CodeGenerator("model_generated.c", {"with_header": True, "with_export": False})
-    for function in functions.values():
-        generator.add(function)
-    with tempfile.TemporaryDirectory() as folder:
-        generator.generate(folder + "/")
-        generated = {name: (Path(folder) / name).read_bytes() for name in ("model_generated.c", "model_generated.h")}
+    generated = casadi_sources(functions)
     c = generated["model_generated.c"]
     staged = any(f.class_name() == "MXFunction" for f in functions.values())  # else every function is an entry
     identity = hashlib.sha256(spelling.without_null_checks(c) if staged else c)  # copied for each GUID

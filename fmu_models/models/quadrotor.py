@@ -42,7 +42,7 @@ from ..export.model import FmuModel
 from .rotor import rotor_positions, thrust_and_torques
 from ..export.variables import input_, output, parameter, state
 
-__all__ = ["QUADROTOR", "STATE_NAMES", "BODY_STATES", "ROTOR_STATE_NAMES", "rotation_matrix", "euler_rate_matrix",
+__all__ = ["QUADROTOR", "STATE_NAMES", "ROTOR_STATE_NAMES", "rotation_matrix", "euler_rate_matrix",
            "aerodynamic_drag", "rotor_aerodynamics", "body_angular_acceleration", "rotor_clip",
            "hover_rotor_speed", "DEFAULTS"]
 
@@ -90,7 +90,6 @@ _STATES = (
 # The 12 rigid-body states in table order: the one list of the plant state's
 # names (what the controller reads and the stability analysis linearizes).
 STATE_NAMES: tuple[str, ...] = tuple(v.name for v in _STATES)
-BODY_STATES = _STATES  # their Variables (QUADROTOR.states also holds the rotor states)
 # Motor dynamics: the four rotor speeds, states of the FMU after the 12 above.
 _ROTOR_STATES = tuple(
     state(f"Omega_r_{i}", "rad/s",

@@ -98,12 +98,6 @@ class StabilityStudy:
     report_path: Path | None = None
     figures: dict[str, Path] = field(default_factory=dict)
 
-    def analysis(self, name: str) -> OperatingPointAnalysis:
-        for a in self.analyses:
-            if a.op.name == name:
-                return a
-        raise KeyError(f"no operating point {name!r}; have {[a.op.name for a in self.analyses]}")
-
 
 @dataclass(frozen=True)
 class StabilitySettings:

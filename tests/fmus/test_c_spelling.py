@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import re
 import struct
 import subprocess
 import tempfile
@@ -98,3 +99,56 @@ def test_a_spelled_function_computes_what_casadis_c_computes(tmp_path):
         casadi, ours = outputs
         nan = np.isnan(casadi)  # a NaN's sign and payload are the compiler's choice in either C: not compared
         assert (np.isnan(ours) == nan).all() and casadi[~nan].tobytes() == ours[~nan].tobytes(), inputs
+
+
+def _shipped_models() -> list:
+    """Every registered model (the FMUs ``fnn-cosim build-fmu`` builds), each a
+    parameter; the full sweep (about 3 CPU-s of CasADi's code generation) is
+    slow but for a staged EKF (MX step, SX pieces, entries) and the plant."""
+    import quadrotor_paper  # noqa: F401  (registers the shipped models)
+    from cosim.scenario import registry
+
+    quick = {"Estimator", "Quadrotor"}
+    return [pytest.param(name, marks=() if name in quick else pytest.mark.slow)
+            for name, model in sorted(registry.fmu_models().items()) if model.definition is not None]
+
+
+_FUNCTION_BODY = re.compile(rb"^static int (casadi_f\d+)\((.*?)^}$", re.M | re.S)  # looser than spelling's
+_NULL_CHECK = re.compile(rb"arg\[\d+\]\s*\?|res\[\d+\]\s*!=\s*0")  # as CasADi 3.8 writes them, spaces aside
+_MX_READ = re.compile(rb"^\s*\w+ = arg\[(\d+)\] \? arg\[\1\](\[0\])? : (0|casadi_zeros);$")
+
+
+@pytest.mark.parametrize("name", _shipped_models())
+def test_every_pattern_of_the_spelling_matches_the_c_casadi_generates_for_a_shipped_model(name):
+    """The spelling edits CasADi's C by pattern: were CasADi to write it
+    otherwise, the text would pass unchanged and only the builds slow down.
+    On the C the build generates (:func:`codegen.casadi_sources`), every
+    function body is found; no conditional is left in the spelled C but the
+    reads of an MX step's inputs (``w = arg[i] ? ... : 0``, one per input,
+    not spelled); the select's definition comes before the first function;
+    for the GUID's text of a staged model, every entry point is found and
+    kept as CasADi wrote it, every function it calls without null checks."""
+    from cosim.scenario import registry
+    from fmu_models.export.codegen import casadi_sources
+
+    functions = registry.fmu_models()[name].definition().functions
+    c = casadi_sources(functions)["model_generated.c"]
+    bodies = _FUNCTION_BODY.findall(c)
+    assert bodies and len(spelling._BODY.findall(c)) == len(bodies), "CasADi's function bodies are written otherwise"
+    assert not spelling._NULL_PASSED.search(c)  # so every null check goes
+    mx_inputs = sum(f.n_in() for f in functions.values() if f.class_name() == "MXFunction")
+    spelled = spelling.spelled(c)
+    left = [line for _, body in _FUNCTION_BODY.findall(spelled) for line in body.split(b"\n")
+            if b"?" in line or b"!=0" in line]
+    assert len(left) == mx_inputs and all(_MX_READ.match(line) for line in left), left[:5]
+    if b"if_else_zero(" in spelled:
+        assert spelled.index(spelling.IF_ELSE_ZERO.lstrip()) < spelled.index(b"static int casadi_f")
+    if mx_inputs:
+        entries = set(spelling._ENTRY.findall(c))
+        assert len(entries) == len(functions), "CasADi's entry points are written otherwise"
+        identity = dict(_FUNCTION_BODY.findall(spelling.without_null_checks(c)))
+        for f, body in bodies:
+            if f in entries:
+                assert identity[f] == body
+            else:
+                assert not _NULL_CHECK.search(identity[f]), f

@@ -19,7 +19,6 @@ from fmu_models.models.sensors import GNSS_6
 from tests.fmus.sensor_harness import DT, Sensor
 
 G = 9.81
-IMU_IN = [v.name for v in IMU.inputs]  # u v w phi theta psi p q r
 
 
 def _imu(parameters, inputs):

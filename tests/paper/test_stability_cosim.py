@@ -208,15 +208,15 @@ def test_lm_terms_are_the_controllers_law():
     fnn_controller.learning: with alpha_bar below W^T W (>= 1/9), delta is
     W^T W and the rate is the proof's gamma/2; with alpha_bar above it, delta
     is alpha_bar and the rate gamma W^T W/(alpha_bar + W^T W)."""
-    from quadrotor_paper.learning_claims import _lm_terms
+    from quadrotor_paper.learning_claims import _law_terms
 
     t = np.arange(0, 1.0 + H / 2, H)
     zeros = np.zeros((t.size, 3))
     run = _synthetic_run("pd+lm", zeros, zeros, t)
-    wtw, delta, rate = _lm_terms(run, 0, 1.5, 1e-3)
+    _, wtw, delta, rate = _law_terms(run, 0, 1.5, 1e-3)
     assert np.all(wtw >= 1 / 9 - 1e-12) and np.all(delta == wtw)
     assert rate == pytest.approx(0.75, rel=1e-12)
-    wtw, delta, rate = _lm_terms(run, 0, 1.5, 2.0)
+    _, wtw, delta, rate = _law_terms(run, 0, 1.5, 2.0)
     assert np.all(delta == 2.0)
     assert rate == pytest.approx(1.5 * wtw / (2.0 + wtw), rel=1e-12)
 
