@@ -328,11 +328,6 @@ class Stepping:
         status goes to :meth:`check_status`."""
         return _bare(self._slave, name)
 
-    @property
-    def handle(self) -> ctypes.c_void_p:
-        """The instance's FMI handle (``fmi2Component``, ``fmi3Instance``), the first argument of a bare call."""
-        return ctypes.c_void_p(self._slave.component)
-
     def check_status(self, status: int, what: str) -> None:
         """A bare call's status: above warning, the :class:`~cosim.errors.FmuCallError`
         of this instance quoting its log (the one place status codes become exceptions)."""
