@@ -73,12 +73,42 @@ import threading
 import time
 import tracemalloc
 from pathlib import Path
+from typing import Any
 
 
 def _table2():
     from quadrotor_paper.report import table_study
 
     return table_study(2)
+
+
+SHORT_STUDY = """# benchmarks/study_efficiency.py: many short runs (a Monte Carlo over the vehicle's mass and the wind)
+scenario = "circles"
+name = "short_runs"
+description = "The circles cut to 10 s: two variants x {samples} draws of the plant's mass and the wind speed"
+
+[set]
+"simulation.duration" = 10.0
+"controller.plant" = ""   # the controller keeps its nominal (Table 1) vehicle: the drawn mass is a mismatch
+
+[sweep.grid]
+"controller.variant" = ["pd", "pd+lm"]
+
+[sweep.random]
+samples = {samples}
+seed = 0
+"fmus.Quadrotor.parameters.m" = {{ uniform = [0.856, 1.284] }}
+"wind.speed" = {{ uniform = [0.0, 5.0] }}
+"""
+
+
+def _short_study(runs: int, folder: Path):
+    """The study of ``runs`` short runs (:data:`SHORT_STUDY`), written as a study file into ``folder`` and read."""
+    from cosim.study import load_study
+
+    path = folder / "short_runs.toml"
+    path.write_text(SHORT_STUDY.format(samples=max(1, runs // 2)), encoding="utf-8")
+    return load_study(path)
 
 
 def _memory_study(seeds: int):
@@ -245,6 +275,70 @@ def _gil_free(runs: int = 5) -> tuple[float, float]:
         master.close()
 
 
+def _short_runs(runs: int, workers: int, tmp: Path) -> dict[str, float]:
+    """The study of ``runs`` short runs (:data:`SHORT_STUDY`) as ``measure``
+    flies it on ``workers`` (threads: the project's FMUs), against its
+    ideal, ``runs x L / workers``, ``L`` its runs' mean loop time
+    (:class:`_Loops`: rounds before and after, their median)."""
+    study = _short_study(runs, tmp)
+    loops = _Loops(study)
+    try:
+        loops.sample()
+        wall, cpu, times = _run(study, tmp / "short", workers)
+        loops.sample()
+        loops.sample()
+    finally:
+        loops.close()
+    loop = statistics.median(loops.rounds)
+    from cosim.study import count
+
+    n = count(study)
+    ideal = n * loop / workers
+    return {"runs": n, "loop_s": loop, "loop_rounds_s": loops.rounds, "wall_s": wall, "cpu_s": cpu,
+            "ideal_s": ideal, "wall_over_ideal": wall / ideal, "cpu_over_runs_x_loop": cpu / (n * loop),
+            "sum_of_run_times_s": sum(times), "rows": len(times)}
+
+
+def _on_a_cluster(runs: int, workers: int, tmp: Path) -> dict[str, Any]:
+    """The short study on a Dask cluster started by address: ``dask
+    scheduler`` and ``workers`` ``dask worker tcp://...`` processes of one
+    thread each, given to ``measure`` as ``scheduler``; its summary's cells
+    against those of the same study flown on threads here (``_short_runs``'s)."""
+    from quadrotor_paper import experiments
+
+    study = _short_study(runs, tmp)
+    dask = str(Path(sys.executable).with_name("dask"))
+    info = tmp / "scheduler.json"
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    started = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                                 "--scheduler-file", str(info)], **quiet)]
+    try:
+        deadline = time.monotonic() + 60
+        while not info.exists() or not info.stat().st_size:
+            if time.monotonic() > deadline or started[0].poll() is not None:
+                raise SystemExit("--cluster: the Dask scheduler did not start")
+            time.sleep(0.1)
+        time.sleep(0.2)  # the file is written at once, not atomically
+        address = json.loads(info.read_text())["address"]
+        started += [subprocess.Popen([dask, "worker", address, "--nthreads", "1", "--no-nanny",
+                                      "--no-dashboard"], **quiet) for _ in range(workers)]
+        with _Cpu() as cpu:
+            t = time.perf_counter()
+            there = experiments.measure(study, tmp / "cluster", scheduler=address)
+            wall = time.perf_counter() - t
+    finally:
+        for process in reversed(started):
+            process.terminate()
+        for process in started:
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+    here = json.loads((tmp / "short" / "summary.json").read_text())
+    return {"address": address, "wall_s": wall, "driver_cpu_s": cpu.cpu, "counts": there.counts,
+            "same_summary": here["cells"] == there.summary["cells"]}
+
+
 def _driver_peak_bytes(study, out: Path, workers: int) -> int:
     tracemalloc.start()
     try:
@@ -408,6 +502,38 @@ def _print_phases(phases: dict[str, list[dict[str, float]]], ideal: float, loop:
               f"{runs - ideal:+.2f} s) + after the last {end:.2f} s = {start + runs + end - ideal:+.2f} s")
 
 
+def _short_and_cluster(args, tmp: Path) -> dict[str, Any]:
+    short = _short_runs(args.short_runs, args.workers, tmp)
+    if args.cluster:
+        short["cluster"] = _on_a_cluster(args.short_runs, args.workers, tmp)
+    return short
+
+
+def _short_only(args) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory() as tmp:
+        short = _short_and_cluster(args, Path(tmp))
+    _print_short(short, args.workers, None)
+    return short
+
+
+def _print_short(short: dict[str, Any], workers: int, table2: float | None) -> None:
+    n, loop = short["runs"], short["loop_s"]
+    print(f"short runs: {n} runs of the circles cut to 10 s (2 variants x random mass and wind), on {workers} threads")
+    print(f"  one run's loop time L (median of {len(short['loop_rounds_s'])} rounds: "
+          f"{', '.join(f'{r * 1e3:.1f}' for r in short['loop_rounds_s'])} ms)  {loop * 1e3:6.2f} ms")
+    print(f"  wall {short['wall_s']:8.2f} s, ideal (runs x L / workers) {short['ideal_s']:7.2f} s: "
+          f"{short['wall_over_ideal']:5.2f} x ideal (target <= 1.3)"
+          + (f";  Table 2 above: {table2:.2f} x ideal (must stay <= 1.1)" if table2 is not None else ""))
+    print(f"  CPU  {short['cpu_s']:8.2f} s = {short['cpu_s'] / n * 1e3:.2f} ms a run = "
+          f"{short['cpu_over_runs_x_loop']:.2f} x runs x L;  rows {short['rows']}, their runs' times sum to "
+          f"{short['sum_of_run_times_s']:.2f} s")
+    cluster = short.get("cluster")
+    if cluster is not None:
+        print(f"  on a Dask cluster by address ({cluster['address']}, {workers} worker processes started by "
+              f"`dask worker`): wall {cluster['wall_s']:.2f} s, driver CPU {cluster['driver_cpu_s']:.2f} s, "
+              f"{cluster['counts']}; the same summary as on threads: {cluster['same_summary']}")
+
+
 def main() -> None:
     if len(sys.argv) > 2 and sys.argv[1] == PHASES_CHILD:
         raise SystemExit(_phases_child(sys.argv[2], sys.argv[3:]))
@@ -419,8 +545,18 @@ def main() -> None:
     p.add_argument("--phases", action="store_true", help="also time the command's phases (one more run a repeat)")
     p.add_argument("--before", type=Path, default=None, metavar="TREE",
                    help="also time the command with this checkout's packages first on PYTHONPATH")
+    p.add_argument("--short-runs", type=int, default=10_000, metavar="N",
+                   help="runs of the short-run study (the circles cut to 10 s; default 10 000; 0: none)")
+    p.add_argument("--short-only", action="store_true", help="only the short-run study (no Table 2)")
+    p.add_argument("--cluster", action="store_true",
+                   help="also fly the short-run study on a Dask cluster of --workers processes started by address")
     p.add_argument("--json", help="also write the figures to this JSON file")
     args = p.parse_args()
+    if args.short_only:
+        short = _short_only(args)
+        if args.json:
+            Path(args.json).write_text(json.dumps(short, indent=2))
+        return
     if os.environ.get("PYTHONDONTWRITEBYTECODE"):
         print("note: PYTHONDONTWRITEBYTECODE is set: a module with no bytecode cached yet is compiled in every "
               "process")
@@ -462,6 +598,7 @@ def main() -> None:
                     for tag, tree in order:
                         phases[tag].append(_phases(args.workers, tmp, tree, f"{tag}{i}"))
                     loops.sample()
+            short = _short_and_cluster(args, tmp) if args.short_runs > 0 else None
             if not args.no_memory:
                 small, large = _memory_study(40), _memory_study(160)
                 peak_small = _driver_peak_bytes(small, tmp / "small", args.workers)
@@ -524,6 +661,9 @@ def main() -> None:
               f"in-process" + ("  (target <= 1.6 on 2 workers)" if tag == "after" else ""))
     if args.phases:
         _print_phases(phases, ideal, loop)
+    if short is not None:
+        figures["short_runs"] = short
+        _print_short(short, args.workers, dask_wall / ideal)
     beside_kernel, beside_python = _gil_free()
     figures.update({"counts_per_s_beside_the_kernel": beside_kernel, "counts_per_s_beside_python": beside_python})
     print(f"the GIL during the compiled loop: a Python counter in another thread {beside_kernel:,.0f}/s while a "
