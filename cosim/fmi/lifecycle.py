@@ -364,7 +364,7 @@ class Lifecycle:
         from fmpy.simulation import settable_in_instantiated
 
         later = {k: v for k, v in parameters.items() if not settable_in_instantiated(self.variables[k])}
-        self._set_start_values({k: v for k, v in parameters.items() if k not in later})
+        self._set_start_values({k: v for k, v in parameters.items() if k not in later}, together=True)
         self._initial_parameters = parameters
         try:
             if self.fmi_version == 2:

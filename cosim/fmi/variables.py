@@ -46,9 +46,25 @@ class VariableAccess:
     """Values by name and type of :class:`cosim.fmi.fmu.FmuComponent`'s
     instance (a part of that class, not used alone)."""
 
-    def _set_start_values(self, values: Mapping[str, Any]) -> None:
+    def _set_start_values(self, values: Mapping[str, Any], together: bool = False) -> None:
         """Each start value by its type's set call (:meth:`_set_typed`), one by
-        one, so a refusal names the variable and quotes the FMU."""
+        one, so a refusal names the variable and quotes the FMU. ``together``
+        (the instance just instantiated or reset): first all of them by one
+        call per type (a study's run sets about 60, and each call releases
+        the GIL, which the thread then waits to take back from the study's
+        other threads); when the FMU refuses that call, it is reset (out of
+        whatever state the refusal left it in, FMI 2.0 §4.2.4 / FMI 3.0
+        §2.3.4) and given them one by one, to name the refused one."""
+        if together and len(values) > 1:
+            try:
+                self._set_typed(values)
+                return
+            except FMICallException:
+                try:
+                    self._slave.reset()
+                except FMICallException as exc:
+                    raise self._fail("reset", exc) from None
+                self.messages.clear()
         for key, value in values.items():
             try:
                 self._set_typed({key: value})
