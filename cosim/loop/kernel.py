@@ -26,6 +26,8 @@ from __future__ import annotations
 import ctypes
 import enum
 import os
+import threading
+from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
 
@@ -34,7 +36,7 @@ import numpy as np
 from ..fmi.c_calls import FMU_FIELDS, Call, KernelFmu
 from ..native import c_header, compiled_library
 
-__all__ = ["KernelRun", "KernelStop", "Stop", "header", "load", "prepare"]
+__all__ = ["KernelRun", "KernelStop", "Stop", "header", "load", "prepare", "python_turn", "off_turn"]
 
 _SOURCE = Path(__file__).with_name("kernel.c")
 _HEADER = "kernel_abi.h"
@@ -163,3 +165,44 @@ def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, 
                     p(factor, _f64p), p(offset, _f64p))
     run.arrays = (entries, order, record, guard, low, high, signals, data, kept)  # alive as long as the run
     return run
+
+
+_TURN = threading.local()  # the lock a thread's Python holds while it runs a study's run (python_turn)
+
+
+@contextmanager
+def python_turn(lock: threading.Lock):
+    """This thread's Python runs holding ``lock``, handed over while the
+    compiled loop runs (:func:`off_turn`): threads that fly runs side by
+    side (a study on threads, :func:`cosim.study.runner.fly`) take turns at
+    the Python around their loops, each turn whole. Without turns, the GIL
+    changes hands at every FMI call a run's start makes (each releases it):
+    two threads' Python interleaves call by call, both threads reach their
+    loops together and come back together, and a core idles while the other
+    thread's Python runs (a study of 10 s runs took 2.6x its ideal on 2
+    cores: docs/cosim.md, "Many short runs on threads"). With turns, one thread's Python
+    runs while the other's loop does."""
+    lock.acquire()
+    _TURN.lock = lock
+    try:
+        yield
+    finally:
+        _TURN.lock = None
+        lock.release()
+
+
+@contextmanager
+def off_turn():
+    """This thread's turn at Python (:func:`python_turn`) handed over for
+    the block and taken back after: around a call into the compiled loop,
+    and around a master's build (long, much of it in C: loading libraries,
+    instantiating), whose Python may interleave with the other threads'."""
+    lock = getattr(_TURN, "lock", None)
+    if lock is None:
+        yield
+        return
+    lock.release()
+    try:
+        yield
+    finally:
+        lock.acquire()

@@ -618,7 +618,8 @@ class Master:
             last = min((n // span + 1) * span - 1, n_steps)  # the Python loop flushes at the same rows
             last = min([last] + [m - 1 for m in marks if m > n])  # a snapshot is taken between kernel calls
             args.data_first = n - n % chunk  # the recorder's chunk in memory (a call never crosses one)
-            code = run(ctypes.byref(args), n, last, ctypes.byref(stop))
+            with kernel.off_turn():  # another thread's Python runs meanwhile (kernel.python_turn)
+                code = run(ctypes.byref(args), n, last, ctypes.byref(stop))
             if code != kernel.Stop.OK:
                 recorder.n_rows = int(stop.n) + int(stop.recorded)
                 t = t0 + int(stop.n) * h

@@ -83,6 +83,7 @@ from ..executor import kind_for, parallel
 from ..limits import WORKER_TIMEOUT
 from ..scenario.definition import Scenario, apply_overrides, parse_scenario
 from ..scenario.assembly import build_master, check_fmu_file, fmu_file, fmu_values
+from ..loop.kernel import off_turn, python_turn
 from .definition import Run
 
 __all__ = ["MasterCache", "fly", "execute", "execute_batch", "batch_size", "pieces", "structure_key", "BATCH_SECONDS"]
@@ -229,7 +230,7 @@ class MasterCache:
             from ..fmi.description_cache import shared_extraction
 
             reads: set[str] = set()
-            with shared_extraction():  # the FMUs this tool built: one extracted folder for every master
+            with off_turn(), shared_extraction():  # the FMUs this tool built: one extracted folder for every master
                 built = _Built(build_master(scenario, dirs, reads=reads), reads, values)
         master = built.master
         with self._lock:
@@ -457,12 +458,15 @@ def _run_threaded(raw, source, runs, workers: int, metrics) -> Iterator[dict[str
     pool = threaded.enter_context(parallel("threads", threads, name="cosim-run")).pool
     cache = MasterCache(size=max(8, 2 * threads))
 
+    turn = threading.Lock()  # the threads' Python around their loops, one at a time (kernel.python_turn)
+
     def flown(piece: list[Run]) -> None:
         for run in piece:
             if stop.is_set():
                 return
             try:
-                record = execute(raw, source, run, metrics, cache)
+                with python_turn(turn):
+                    record = execute(raw, source, run, metrics, cache)
             except BaseException as exc:  # execute keeps a run's failures in its record: this is a bug
                 record = _failed(run, f"worker: {_message(exc)}", os.getpid())
             records.put(record)

@@ -273,3 +273,31 @@ def test_fmus_the_kernel_cannot_call_are_driven_through_their_python_calls(monke
     assert fast.time[-1] == pytest.approx(8.95) and fast["S.counter"][-1] == 9
     np.testing.assert_array_equal(fast["F.Int32_output"], fast["S.counter"])  # through F, at the same instant
     assert np.ptp(fast["V.x0"]) > 3  # the oscillator ran
+
+
+def test_threads_take_turns_at_python_and_hand_them_over_while_the_compiled_loop_runs(monkeypatch):
+    """``kernel.python_turn``: a thread flying a study's run holds its turn
+    at Python (the lock) except inside the compiled loop's calls
+    (``off_turn``), where another thread's turn may run; the run's numbers
+    are those flown without turns; without a turn, ``off_turn`` is nothing."""
+    import threading
+
+    turn, seen = threading.Lock(), []
+    loop = kernel.load()
+
+    def spied(*args):
+        seen.append(turn.locked())
+        return loop(*args)
+
+    with _master(2, "feedthrough") as master:
+        alone = master.run(2.0, raise_on_error=False)
+        monkeypatch.setattr(kernel, "load", lambda: spied)
+        with kernel.python_turn(turn):
+            assert turn.locked()
+            taken = master.run(2.0, raise_on_error=False)
+            assert turn.locked()
+    assert seen and not any(seen)  # free in every call into the loop
+    assert not turn.locked()
+    np.testing.assert_array_equal(taken.data, alone.data)
+    with kernel.off_turn():  # no turn taken: nothing to hand over
+        assert not turn.locked()
