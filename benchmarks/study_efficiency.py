@@ -1,4 +1,4 @@
-"""A study at the loop's cost: Table 2's overhead per run and wall time against the ideal, measured in one run.
+"""A study at the loop's cost: Table 2's and many short runs' wall time against the ideal, measured in one run.
 
 Prints, for Table 2 (the shipped study ``table2``: 186 runs of the 50 s
 circles, every variant and option row at 1, 3 and 5 m/s):
@@ -47,6 +47,18 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   split into the start, the runs and the end;
 * whether the compiled loop leaves the GIL free: a Python counter in
   this thread while another thread flies runs of one kernel call each;
+* **short runs** (``--short-runs N``, default 10 000; 0: none): a study
+  written by this script into a temporary folder (:data:`SHORT_STUDY`:
+  the circles cut to 10 s, two variants x N/2 draws of the plant's mass
+  and the wind speed), flown by ``measure`` on ``--workers`` threads (what
+  it chooses for the project's FMUs), wall and CPU against its ideal
+  ``runs x L / workers`` (``L`` its runs' mean loop time, rounds as
+  above): target <= 1.3x on 2 workers, printed beside Table 2's figure
+  (<= 1.1x). ``--short-only`` runs that study alone (no Table 2);
+  ``--cluster`` also flies it on a Dask cluster started by address (``dask
+  scheduler`` and ``--workers`` ``dask worker tcp://...`` processes of one
+  thread each, given to ``measure`` as ``scheduler``) and says whether its
+  summary is the threads' one;
 * the driver's peak Python memory (tracemalloc) for a study of 200 and of
   800 one-second runs: the rows are streamed to runs.csv, not held, and the
   local scheduler's logs are kept short (cosim/study/runner.py), so the ratio
@@ -58,7 +70,7 @@ the Dask figures are the median of the repeats. Run it with the bytecode
 cache on (``PYTHONDONTWRITEBYTECODE`` unset), as users run.
 
     .venv/bin/python benchmarks/study_efficiency.py [--workers 2] [--repeats 1] [--no-memory] [--no-processes]
-        [--phases] [--before TREE] [--json out.json]
+        [--phases] [--before TREE] [--short-runs N] [--short-only] [--cluster] [--json out.json]
 """
 from __future__ import annotations
 
