@@ -116,7 +116,7 @@ seed = 0
 
 def _short_study(runs: int, folder: Path):
     """The study of ``runs`` short runs (:data:`SHORT_STUDY`), written as a study file into ``folder`` and read."""
-    from cosim.study import load_study
+    from cosim.study.definition import load_study
 
     path = folder / "short_runs.toml"
     path.write_text(SHORT_STUDY.format(samples=max(1, runs // 2)), encoding="utf-8")
@@ -302,7 +302,7 @@ def _short_runs(runs: int, workers: int, tmp: Path) -> dict[str, float]:
     finally:
         loops.close()
     loop = statistics.median(loops.rounds)
-    from cosim.study import count
+    from cosim.study.definition import count
 
     n = count(study)
     ideal = n * loop / workers
