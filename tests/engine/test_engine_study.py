@@ -401,6 +401,32 @@ def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, m
     assert here.summary["cells"] == there.summary["cells"]
 
 
+@pytest.mark.slow  # a cluster's start and its distributed import: about 9 s of CPU in this process
+def test_a_cluster_of_two_worker_processes_given_by_address_gives_the_summary_of_this_process(folder, tmp_path,
+                                                                                                monkeypatch):
+    """``--scheduler ADDRESS``: a running cluster (here a LocalCluster of two
+    worker processes, one thread each, given by its address as ``dask
+    worker tcp://...`` processes would be) flies the study's runs, to the
+    rows and the summary flown here."""
+    from dask.distributed import LocalCluster
+
+    (folder / "toy_by_path.toml").write_text(toy_models.LOOP_BY_PATH.format(lag=toy_models.lag_fmu_path(2)))
+    body = ('scenario = "toy_by_path.toml"\n[sweep]\nseeds = 2\n[sweep.random]\nsamples = 2\n'
+            '"fmus.Lag.parameters.tau" = { uniform = [0.2, 0.4] }\n')
+    (folder / "address.toml").write_text(body)
+    study = load_study(folder / "address.toml")
+    here = run_study(study, tmp_path / "here", metrics=final_y, metric_names=["final_y"], plots=False)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(Path(toy_models.__file__).parent),
+                                                      os.environ.get("PYTHONPATH", "")]))
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                      local_directory=tmp_path / "scratch") as cluster:
+        there = run_study(study, tmp_path / "there", scheduler=cluster.scheduler_address, metrics=final_y,
+                          metric_names=["final_y"], plots=False)
+    assert (there.total, there.counts) == (4, {"ok": 4})
+    _same_rows(tmp_path / "here", tmp_path / "there")
+    assert here.summary["cells"] == there.summary["cells"]
+
+
 def test_a_local_cluster_of_threads_gives_the_rows_of_this_process_and_frees_its_masters(folder, tmp_path,
                                                                                           monkeypatch):
     """``threads``: the runs fly on threads of this process (Dask's threaded
