@@ -334,6 +334,10 @@ def _on_a_cluster(runs: int, workers: int, tmp: Path) -> dict[str, Any]:
         address = json.loads(info.read_text())["address"]
         started += [subprocess.Popen([dask, "worker", address, "--nthreads", "1", "--no-nanny",
                                       "--no-dashboard"], **quiet) for _ in range(workers)]
+        from dask.distributed import Client
+
+        with Client(address, timeout=60) as client:  # the study starts on a cluster with its workers
+            client.wait_for_workers(workers, timeout=60)
         with _Cpu() as cpu:
             t = time.perf_counter()
             there = experiments.measure(study, tmp / "cluster", scheduler=address)
@@ -347,7 +351,7 @@ def _on_a_cluster(runs: int, workers: int, tmp: Path) -> dict[str, Any]:
             except subprocess.TimeoutExpired:
                 process.kill()
     here = json.loads((tmp / "short" / "summary.json").read_text())
-    return {"address": address, "wall_s": wall, "driver_cpu_s": cpu.cpu, "counts": there.counts,
+    return {"address": address, "wall_s": wall, "cpu_s": cpu.cpu, "counts": there.counts,
             "same_summary": here["cells"] == there.summary["cells"]}
 
 
@@ -542,7 +546,8 @@ def _print_short(short: dict[str, Any], workers: int, table2: float | None) -> N
     cluster = short.get("cluster")
     if cluster is not None:
         print(f"  on a Dask cluster by address ({cluster['address']}, {workers} worker processes started by "
-              f"`dask worker`): wall {cluster['wall_s']:.2f} s, driver CPU {cluster['driver_cpu_s']:.2f} s, "
+              f"`dask worker`): wall {cluster['wall_s']:.2f} s, CPU {cluster['cpu_s']:.2f} s (this process, the "
+              f"scheduler and the workers), "
               f"{cluster['counts']}; the same summary as on threads: {cluster['same_summary']}")
 
 
