@@ -384,9 +384,10 @@ def _same_rows(a: Path, b: Path) -> None:
                                                                            if c != "wall_time_s"}
 
 
-def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, monkeypatch):
-    """The engine's Dask path on toy models: the workers (separate processes)
-    find the toy components by their factory on PYTHONPATH and the FMU by path."""
+def _flown_here_for_workers(folder, tmp_path, monkeypatch):
+    """The toy study of models by path, flown in this process (``here``);
+    worker processes then find the toy components by their factory on
+    PYTHONPATH and the FMU by path."""
     (folder / "toy_by_path.toml").write_text(toy_models.LOOP_BY_PATH.format(lag=toy_models.lag_fmu_path(2)))
     body = ('scenario = "toy_by_path.toml"\n[sweep]\nseeds = 2\n[sweep.grid]\n"components.ctrl.kp" = [0.5, 1.5]\n'
             '[sweep.random]\nsamples = 2\n"fmus.Lag.parameters.tau" = { uniform = [0.2, 0.4] }\n')
@@ -395,6 +396,13 @@ def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, m
     here = run_study(study, tmp_path / "here", metrics=final_y, metric_names=["final_y"], plots=False)
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(Path(toy_models.__file__).parent),
                                                       os.environ.get("PYTHONPATH", "")]))
+    return study, here
+
+
+def test_a_local_dask_cluster_gives_the_rows_of_this_process(folder, tmp_path, monkeypatch):
+    """The engine's Dask path on toy models: the workers (separate processes)
+    find the toy components by their factory on PYTHONPATH and the FMU by path."""
+    study, here = _flown_here_for_workers(folder, tmp_path, monkeypatch)
     there = run_study(study, tmp_path / "dask", workers=2, metrics=final_y, metric_names=["final_y"], plots=False)
     assert (here.total, there.total, there.counts) == (8, 8, {"ok": 8})
     _same_rows(tmp_path / "here", tmp_path / "dask")
@@ -410,19 +418,12 @@ def test_a_cluster_of_two_worker_processes_given_by_address_gives_the_summary_of
     rows and the summary flown here."""
     from dask.distributed import LocalCluster
 
-    (folder / "toy_by_path.toml").write_text(toy_models.LOOP_BY_PATH.format(lag=toy_models.lag_fmu_path(2)))
-    body = ('scenario = "toy_by_path.toml"\n[sweep]\nseeds = 2\n[sweep.random]\nsamples = 2\n'
-            '"fmus.Lag.parameters.tau" = { uniform = [0.2, 0.4] }\n')
-    (folder / "address.toml").write_text(body)
-    study = load_study(folder / "address.toml")
-    here = run_study(study, tmp_path / "here", metrics=final_y, metric_names=["final_y"], plots=False)
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(Path(toy_models.__file__).parent),
-                                                      os.environ.get("PYTHONPATH", "")]))
+    study, here = _flown_here_for_workers(folder, tmp_path, monkeypatch)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                       local_directory=tmp_path / "scratch") as cluster:
         there = run_study(study, tmp_path / "there", scheduler=cluster.scheduler_address, metrics=final_y,
                           metric_names=["final_y"], plots=False)
-    assert (there.total, there.counts) == (4, {"ok": 4})
+    assert (there.total, there.counts) == (8, {"ok": 8})
     _same_rows(tmp_path / "here", tmp_path / "there")
     assert here.summary["cells"] == there.summary["cells"]
 
