@@ -7,7 +7,7 @@ import pytest
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 
-from cosim.fmi import lifecycle as fmu_component
+from cosim.fmi import lifecycle
 from cosim.fmi.fmu import FmuComponent
 from fmu_models.export.build import cached_fmu
 from fmu_models.models.quadrotor import QUADROTOR
@@ -31,9 +31,9 @@ def test_every_instance_gets_the_signatures_fmpy_gives(fmi_version, interface):
         for c in components:
             c.instantiate()
         slaves = [c._slave for c in components]
-        assert all(type(s) is fmu_component._fmpy_class(base) is not base and isinstance(s, base) for s in slaves)
+        assert all(type(s) is lifecycle._fmpy_class(base) is not base and isinstance(s, base) for s in slaves)
         assert type(slaves[0]).__name__ == base.__name__  # fmpy picks the FMI version's prefix by it
-        assert base in fmu_component._SIGNATURES  # kept by the first instance, used by the others
+        assert base in lifecycle._SIGNATURES  # kept by the first instance, used by the others
         own = base(guid=components[0].model_description.guid, unzipDirectory=str(components[0]._unzipdir),
                    modelIdentifier=components[0].kind.modelIdentifier, instanceName="fmpy's own")
         expected = _signatures(own)
