@@ -216,12 +216,14 @@ def _size(entry: os.DirEntry) -> int:
     return total
 
 
-def prune(folder: Path, limit: int, *, match: re.Pattern | None = None, grace: float = GRACE_S) -> None:
+def prune(folder: Path, limit: int, *, match: re.Pattern | None = None, grace: float = GRACE_S,
+          now: float | None = None) -> None:
     """Remove the entries of ``folder`` (its files and folders whose name
     ``match`` matches in full, default every one not starting with a dot)
     least recently used first (:func:`used`) until they take at most
-    ``limit`` bytes; none used within ``grace`` seconds. A folder is renamed
-    out of the way before it is deleted: no reader finds half of one."""
+    ``limit`` bytes; none used within ``grace`` seconds of ``now`` (the
+    clock's, unless given). A folder is renamed out of the way before it is
+    deleted: no reader finds half of one."""
     try:
         with os.scandir(folder) as found:
             entries = []
@@ -232,7 +234,7 @@ def prune(folder: Path, limit: int, *, match: re.Pattern | None = None, grace: f
     except OSError:
         return
     total = sum(size for _, size, _, _ in entries)
-    now = time.time()
+    now = time.time() if now is None else now
     for mtime, size, name, is_dir in sorted(entries):
         if total <= limit:
             break

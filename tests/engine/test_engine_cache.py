@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 
 import pytest
 
@@ -47,9 +46,9 @@ def test_a_kind_is_pruned_beyond_its_limit_least_recently_used_first(folder):
     keys = [cache.key_of(n) for n in range(6)]
     for key in keys:
         cache.write("documents", key, {"pad": "x" * 1000}, folder)
-    now = time.time()
+    then = 1.0e9  # 2001: every entry older than any clock this runs under
     for age, key in zip(range(6, 0, -1), keys):  # keys[0] the oldest
-        os.utime(folder / "documents" / f"{key[:32]}.json", (now - 100 * age, now - 100 * age))
+        os.utime(folder / "documents" / f"{key[:32]}.json", (then - 100 * age, then - 100 * age))
     assert cache.read("documents", keys[0], folder) is not None  # used now: the most recent
     size = (folder / "documents" / f"{keys[1][:32]}.json").stat().st_size  # each the same
     cache.prune(folder / "documents", 3 * size, grace=0.0)
@@ -59,8 +58,8 @@ def test_a_kind_is_pruned_beyond_its_limit_least_recently_used_first(folder):
     for name, age in (("0123456789abcdef", 7200), ("fedcba9876543210", 10), ("objects", 7200)):
         (folder / name).mkdir()
         (folder / name / "x.fmu").write_bytes(b"\0" * 1000)
-        os.utime(folder / name, (now - age, now - age))
-    cache.prune(folder, 0, match=cache.BUILDS)
+        os.utime(folder / name, (then - age, then - age))
+    cache.prune(folder, 0, match=cache.BUILDS, now=then)  # judged at a given time: no clock read
     assert sorted(p.name for p in folder.iterdir() if not p.name.startswith(".")) == \
         ["documents", "fedcba9876543210", "objects"]
 
