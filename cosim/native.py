@@ -18,7 +18,12 @@ from pathlib import Path
 from .cache import LIMITS, library_folder, note_written, used
 from .file_lock import exclusive
 
-__all__ = ["c_header", "compiled_library"]
+__all__ = ["c_header", "compiled_library", "I64", "F64", "PTR", "U32", "I64P", "F64P", "U32P", "I32P"]
+
+# The C types the engine's structures are made of (cosim.loop.kernel, cosim.fmi.c_calls,
+# cosim.fmi.me_system), spelled once; c_header writes them back as C.
+I64, F64, PTR, U32 = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p, ctypes.c_uint32
+I64P, F64P, U32P, I32P = (ctypes.POINTER(t) for t in (I64, F64, U32, ctypes.c_int32))
 
 _C_SCALARS = {ctypes.c_int64: "int64_t", ctypes.c_double: "double", ctypes.c_void_p: "void *",
               ctypes.c_uint32: "uint32_t", ctypes.c_int: "int", ctypes.c_size_t: "size_t", ctypes.c_char: "char"}

@@ -9,10 +9,9 @@ from __future__ import annotations
 import ctypes
 import enum
 
-__all__ = ["Call", "KernelFmu", "FMU_FIELDS"]
+from ..native import F64P, I64, I64P, PTR, U32P
 
-_i64, _f64, _ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
-_u32p, _i64p, _f64p = (ctypes.POINTER(t) for t in (ctypes.c_uint32, ctypes.c_int64, ctypes.c_double))
+__all__ = ["Call", "KernelFmu", "FMU_FIELDS"]
 
 
 class Call(enum.IntEnum):
@@ -29,24 +28,24 @@ class Call(enum.IntEnum):
 
 # (name, ctypes type, what it is): the fields of each structure, in order
 FMU_FIELDS = (
-    ("version", _i64, "FMI 2 or 3"),
-    ("component", _ptr, "the fmi2Component / fmi3Instance"),
-    ("set", _ptr, "fmi2SetReal / fmi3SetFloat64"),
-    ("get", _ptr, "fmi2GetReal / fmi3GetFloat64"),
-    ("step", _ptr, "fmi2DoStep / fmi3DoStep"),
-    ("in_vr", _u32p, "value references of the bound inputs"),
-    ("n_in", _i64, "how many"),
-    ("in_idx", _i64p, "signal slots of their sources"),
-    ("u", _f64p, "the inputs, gathered"),
-    ("out_vr", _u32p, "value references of the outputs and internals read"),
-    ("n_out", _i64, "how many"),
-    ("y", _f64p, "their slots in the signal array (contiguous)"),
-    ("direct", _i64, "evaluated at t_n (feedthrough ordering), else its inputs are set at the exchange"),
-    ("n_conv", _i64, "inputs with a unit conversion (FmuBlock.converted)"),
-    ("conv_idx", _i64p, "their indices among the bound inputs"),
-    ("conv_factor", _f64p, "u = factor * source + offset"),
-    ("conv_offset", _f64p, ""),
-    ("python", _i64, "driven by Python calls (Plan.python_calls): set, get and step called even with nothing bound"),
+    ("version", I64, "FMI 2 or 3"),
+    ("component", PTR, "the fmi2Component / fmi3Instance"),
+    ("set", PTR, "fmi2SetReal / fmi3SetFloat64"),
+    ("get", PTR, "fmi2GetReal / fmi3GetFloat64"),
+    ("step", PTR, "fmi2DoStep / fmi3DoStep"),
+    ("in_vr", U32P, "value references of the bound inputs"),
+    ("n_in", I64, "how many"),
+    ("in_idx", I64P, "signal slots of their sources"),
+    ("u", F64P, "the inputs, gathered"),
+    ("out_vr", U32P, "value references of the outputs and internals read"),
+    ("n_out", I64, "how many"),
+    ("y", F64P, "their slots in the signal array (contiguous)"),
+    ("direct", I64, "evaluated at t_n (feedthrough ordering), else its inputs are set at the exchange"),
+    ("n_conv", I64, "inputs with a unit conversion (FmuBlock.converted)"),
+    ("conv_idx", I64P, "their indices among the bound inputs"),
+    ("conv_factor", F64P, "u = factor * source + offset"),
+    ("conv_offset", F64P, ""),
+    ("python", I64, "driven by Python calls (Plan.python_calls): set, get and step called even with nothing bound"),
 )
 
 

@@ -56,16 +56,13 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import ConnectionCheckError, CosimError
-from ..native import c_header, compiled_library
+from ..native import F64, F64P, I32P, I64, I64P, PTR, U32, c_header, compiled_library
 from .model_exchange import COUPLINGS, IntegrationError, SolverSettings
 
 __all__ = ["ModelExchangeSystem", "systems", "COUPLINGS", "library"]
 
 _SOURCE = Path(__file__).with_name("me_system.c")
 _HEADER = "me_system_abi.h"
-
-_i64, _f64, _ptr, _u32 = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p, ctypes.c_uint32
-_f64p, _i64p, _i32p = ctypes.POINTER(_f64), ctypes.POINTER(_i64), ctypes.POINTER(ctypes.c_int32)
 
 
 class MeError(enum.IntEnum):
@@ -92,40 +89,40 @@ _FMI_NAMES = {
         "fmi3SetFloat64")}
 
 _MEMBER_FIELDS = (
-    ("version", _i64, "FMI 2 or 3"),
-    ("component", _ptr, "the fmi2Component / fmi3Instance"),
-    *((name, _ptr, text) for name, text in zip(_FMI_CALLS, _FMI_NAMES[2])),
-    ("nx", _i64, "continuous states"),
-    ("nz", _i64, "event indicators"),
-    ("x_offset", _i64, "its first state in the stacked states"),
-    ("z_offset", _i64, "its first indicator in the stacked indicators"),
-    ("needs_completed_step", _i64, "completedIntegratorStep after every solver step"),
-    ("leader", _i64, "its step advances the system (one member per system)"),
-    ("index", _i64, "its place among the members"),
-    ("system", _ptr, "the MeSystem it belongs to"),
-    ("u_set", _f64p, "its inputs from outside the system as last set"),
-    ("u_known", _i64, "u_set holds values (else the next set is a change)"),
-    ("discrete_in", _i64p, "per input from outside: 1 if discrete (set in Event Mode)"),
-    ("directional", _ptr, "fmi2GetDirectionalDerivative / fmi3GetDirectionalDerivative (jacobian = directional)"),
-    ("state_vr", ctypes.POINTER(_u32), "its states' value references"),
-    ("unknown_vr", ctypes.POINTER(_u32), "its derivatives', then its outputs' that feed other members"),
-    ("n_unknowns", _i64, ""),
-    ("n_linked", _i64, "its continuous inputs fed by other members"),
-    ("linked_vr", ctypes.POINTER(_u32), "their value references"),
-    ("linked_connection", _i64p, "the connection feeding each"),
-    ("jac_columns", _f64p, "d(unknowns)/d(state j, then linked input q), column by column"),
+    ("version", I64, "FMI 2 or 3"),
+    ("component", PTR, "the fmi2Component / fmi3Instance"),
+    *((name, PTR, text) for name, text in zip(_FMI_CALLS, _FMI_NAMES[2])),
+    ("nx", I64, "continuous states"),
+    ("nz", I64, "event indicators"),
+    ("x_offset", I64, "its first state in the stacked states"),
+    ("z_offset", I64, "its first indicator in the stacked indicators"),
+    ("needs_completed_step", I64, "completedIntegratorStep after every solver step"),
+    ("leader", I64, "its step advances the system (one member per system)"),
+    ("index", I64, "its place among the members"),
+    ("system", PTR, "the MeSystem it belongs to"),
+    ("u_set", F64P, "its inputs from outside the system as last set"),
+    ("u_known", I64, "u_set holds values (else the next set is a change)"),
+    ("discrete_in", I64P, "per input from outside: 1 if discrete (set in Event Mode)"),
+    ("directional", PTR, "fmi2GetDirectionalDerivative / fmi3GetDirectionalDerivative (jacobian = directional)"),
+    ("state_vr", ctypes.POINTER(U32), "its states' value references"),
+    ("unknown_vr", ctypes.POINTER(U32), "its derivatives', then its outputs' that feed other members"),
+    ("n_unknowns", I64, ""),
+    ("n_linked", I64, "its continuous inputs fed by other members"),
+    ("linked_vr", ctypes.POINTER(U32), "their value references"),
+    ("linked_connection", I64P, "the connection feeding each"),
+    ("jac_columns", F64P, "d(unknowns)/d(state j, then linked input q), column by column"),
 )
 
 _CONNECTION_FIELDS = (
-    ("source", _i64, "member whose output is read"),
-    ("source_vr", _u32, "its value reference"),
-    ("destination", _i64, "member whose input is set"),
-    ("destination_vr", _u32, ""),
-    ("factor", _f64, "converted: destination = factor * source + offset"),
-    ("offset", _f64, ""),
-    ("converted", _i64, "the connection carries a unit conversion"),
-    ("discrete", _i64, "a discrete input: set in Event Mode only"),
-    ("source_slot", _i64, "the source output's place among its member's unknowns after the derivatives"),
+    ("source", I64, "member whose output is read"),
+    ("source_vr", U32, "its value reference"),
+    ("destination", I64, "member whose input is set"),
+    ("destination_vr", U32, ""),
+    ("factor", F64, "converted: destination = factor * source + offset"),
+    ("offset", F64, ""),
+    ("converted", I64, "the connection carries a unit conversion"),
+    ("discrete", I64, "a discrete input: set in Event Mode only"),
+    ("source_slot", I64, "the source output's place among its member's unknowns after the derivatives"),
 )
 
 _SUNDIALS = ("SUNContext_Create", "SUNContext_Free", "SUNContext_ClearErrHandlers", "SUNContext_PushErrHandler", "N_VNew_Serial", "N_VDestroy",
@@ -134,7 +131,7 @@ _SUNDIALS = ("SUNContext_Create", "SUNContext_Free", "SUNContext_ClearErrHandler
              "CVodeSetMaxStep", "CVodeSetMinStep", "CVodeSetMaxNumSteps", "CVodeSetNoInactiveRootWarn", "CVodeSetUserData",
              "CVodeSetStopTime", "CVode", "CVodeGetRootInfo", "CVodeFree", "CVodeGetReturnFlagName",
              "CVodeSetJacFn", "SUNDenseMatrix_Column")
-_SUNDIALS_FIELDS = tuple((name, _ptr, "") for name in _SUNDIALS)
+_SUNDIALS_FIELDS = tuple((name, PTR, "") for name in _SUNDIALS)
 
 
 class MeMember(ctypes.Structure):
@@ -157,44 +154,44 @@ class MeSundials(ctypes.Structure):
 
 _SYSTEM_FIELDS = (
     ("members", ctypes.POINTER(MeMember), "the member FMUs"),
-    ("n_members", _i64, ""),
+    ("n_members", I64, ""),
     ("connections", ctypes.POINTER(MeConnection), "the connections between them, in dependency order"),
-    ("n_connections", _i64, ""),
+    ("n_connections", I64, ""),
     ("sundials", ctypes.POINTER(MeSundials), ""),
-    ("euler", _i64, "1: forward Euler; 0: CVODE"),
-    ("relative_tolerance", _f64, "CVODE's"),
-    ("max_step", _f64, "CVODE's largest step (0: unbounded)"),
-    ("euler_step", _f64, "Euler's step (0: the communication step)"),
-    ("max_events", _i64, "events allowed in one communication step"),
-    ("nx", _i64, "stacked states"),
-    ("nz", _i64, "stacked event indicators"),
-    ("x", _f64p, "Euler's states, derivatives, indicators now and before"),
-    ("dx", _f64p, ""),
-    ("z", _f64p, ""),
-    ("z_before", _f64p, ""),
-    ("root_info", _i32p, "CVODE's roots found"),
-    ("t", _f64, "the system's time (its last communication point or event)"),
-    ("next_event_time", _f64, "the earliest member's next time event"),
-    ("has_next_event", _i64, ""),
-    ("events", _i64, "events handled since the start"),
-    ("restart", _i64, "the solver restarts before its next step"),
-    ("dirty", _i64, "an input changed: the connections are evaluated before the next get"),
-    ("event_mode", _i64, "the members are in Event Mode"),
-    ("cvode", _ptr, "CVODE's memory, context, vectors, matrix and linear solver"),
-    ("context", _ptr, ""),
-    ("y", _ptr, ""),
-    ("abstol", _ptr, ""),
-    ("matrix", _ptr, ""),
-    ("linear_solver", _ptr, ""),
-    ("error_kind", _i64, "MeError"),
-    ("error_member", _i64, "the member at fault (-1: the system)"),
-    ("error_code", _i64, "the FMI status, CVODE's flag or the limit passed"),
-    ("error_time", _f64, ""),
+    ("euler", I64, "1: forward Euler; 0: CVODE"),
+    ("relative_tolerance", F64, "CVODE's"),
+    ("max_step", F64, "CVODE's largest step (0: unbounded)"),
+    ("euler_step", F64, "Euler's step (0: the communication step)"),
+    ("max_events", I64, "events allowed in one communication step"),
+    ("nx", I64, "stacked states"),
+    ("nz", I64, "stacked event indicators"),
+    ("x", F64P, "Euler's states, derivatives, indicators now and before"),
+    ("dx", F64P, ""),
+    ("z", F64P, ""),
+    ("z_before", F64P, ""),
+    ("root_info", I32P, "CVODE's roots found"),
+    ("t", F64, "the system's time (its last communication point or event)"),
+    ("next_event_time", F64, "the earliest member's next time event"),
+    ("has_next_event", I64, ""),
+    ("events", I64, "events handled since the start"),
+    ("restart", I64, "the solver restarts before its next step"),
+    ("dirty", I64, "an input changed: the connections are evaluated before the next get"),
+    ("event_mode", I64, "the members are in Event Mode"),
+    ("cvode", PTR, "CVODE's memory, context, vectors, matrix and linear solver"),
+    ("context", PTR, ""),
+    ("y", PTR, ""),
+    ("abstol", PTR, ""),
+    ("matrix", PTR, ""),
+    ("linear_solver", PTR, ""),
+    ("error_kind", I64, "MeError"),
+    ("error_member", I64, "the member at fault (-1: the system)"),
+    ("error_code", I64, "the FMI status, CVODE's flag or the limit passed"),
+    ("error_time", F64, ""),
     ("message", ctypes.c_char * 512, "CVODE's error message"),
     ("flag_name", ctypes.c_char * 64, "me_flag_name's answer"),
-    ("directional", _i64, "CVODE's Jacobian from the members' directional derivatives"),
-    ("jac_dense", _f64p, "nx * nx, column-major"),
-    ("jac_du", _f64p, "n_connections * nx: d(input)/d(states) of each connection"),
+    ("directional", I64, "CVODE's Jacobian from the members' directional derivatives"),
+    ("jac_dense", F64P, "nx * nx, column-major"),
+    ("jac_du", F64P, "n_connections * nx: d(input)/d(states) of each connection"),
 )
 
 
@@ -205,27 +202,27 @@ class MeSystem(ctypes.Structure):
 
 
 _SYS = ctypes.POINTER(MeSystem)
-_ENTRY_POINTS = (("me_advance", (("s", _SYS), ("t", _f64), ("t_end", _f64))),
-                 ("me_event", (("s", _SYS), ("t", _f64))),
-                 ("me_enter_event_mode", (("s", _SYS), ("t", _f64))),
-                 ("me_finish_event", (("s", _SYS), ("t", _f64))),
+_ENTRY_POINTS = (("me_advance", (("s", _SYS), ("t", F64), ("t_end", F64))),
+                 ("me_event", (("s", _SYS), ("t", F64))),
+                 ("me_enter_event_mode", (("s", _SYS), ("t", F64))),
+                 ("me_finish_event", (("s", _SYS), ("t", F64))),
                  ("me_free", (("s", _SYS),)),
-                 ("me_flag_name", (("s", _SYS), ("flag", _i64))),
-                 ("me_jacobian", (("s", _SYS), ("t", _f64), ("out", _f64p))),
-                 ("me_member_set", (("member", _ptr), ("vr", ctypes.POINTER(_u32)), ("n", ctypes.c_size_t),
-                                    ("u", _f64p))),
-                 ("me_member_get", (("member", _ptr), ("vr", ctypes.POINTER(_u32)), ("n", ctypes.c_size_t),
-                                    ("y", _f64p))),
-                 ("me_member_step", (("member", _ptr), ("t", _f64), ("h", _f64), ("flag", ctypes.c_int))),
-                 ("me_member_rows", (("member", _ptr), ("t", _f64p), ("steps", _i64), ("in_vr", ctypes.POINTER(_u32)),
-                                     ("n_in", ctypes.c_size_t), ("u", _f64p), ("out_vr", ctypes.POINTER(_u32)),
-                                     ("n_out", ctypes.c_size_t), ("y", _f64p), ("row", _i64p))),
-                 ("me_member_evaluate_rows", (("member", _ptr), ("n", _i64), ("t", _f64p), ("x", _f64p),
-                                              ("in_vr", ctypes.POINTER(_u32)), ("n_in", ctypes.c_size_t),
-                                              ("u", _f64p), ("out_vr", ctypes.POINTER(_u32)),
-                                              ("n_out", ctypes.c_size_t), ("f", _f64p), ("dd", _ptr),
-                                              ("unknown_vr", ctypes.POINTER(_u32)), ("known_vr", ctypes.POINTER(_u32)),
-                                              ("n_known", ctypes.c_size_t), ("jac", _f64p), ("row", _i64p))))
+                 ("me_flag_name", (("s", _SYS), ("flag", I64))),
+                 ("me_jacobian", (("s", _SYS), ("t", F64), ("out", F64P))),
+                 ("me_member_set", (("member", PTR), ("vr", ctypes.POINTER(U32)), ("n", ctypes.c_size_t),
+                                    ("u", F64P))),
+                 ("me_member_get", (("member", PTR), ("vr", ctypes.POINTER(U32)), ("n", ctypes.c_size_t),
+                                    ("y", F64P))),
+                 ("me_member_step", (("member", PTR), ("t", F64), ("h", F64), ("flag", ctypes.c_int))),
+                 ("me_member_rows", (("member", PTR), ("t", F64P), ("steps", I64), ("in_vr", ctypes.POINTER(U32)),
+                                     ("n_in", ctypes.c_size_t), ("u", F64P), ("out_vr", ctypes.POINTER(U32)),
+                                     ("n_out", ctypes.c_size_t), ("y", F64P), ("row", I64P))),
+                 ("me_member_evaluate_rows", (("member", PTR), ("n", I64), ("t", F64P), ("x", F64P),
+                                              ("in_vr", ctypes.POINTER(U32)), ("n_in", ctypes.c_size_t),
+                                              ("u", F64P), ("out_vr", ctypes.POINTER(U32)),
+                                              ("n_out", ctypes.c_size_t), ("f", F64P), ("dd", PTR),
+                                              ("unknown_vr", ctypes.POINTER(U32)), ("known_vr", ctypes.POINTER(U32)),
+                                              ("n_known", ctypes.c_size_t), ("jac", F64P), ("row", I64P))))
 
 
 def header() -> str:
@@ -440,7 +437,7 @@ class ModelExchangeSystem:
             u_set = np.zeros(max(fmu._n_in, 1))
             discrete = np.array([fmu.variables[n].variability != "continuous" for n in fmu.input_names] or [0],
                                 dtype=np.int64)
-            entry.u_set, entry.discrete_in = u_set.ctypes.data_as(_f64p), discrete.ctypes.data_as(_i64p)
+            entry.u_set, entry.discrete_in = u_set.ctypes.data_as(F64P), discrete.ctypes.data_as(I64P)
             kept += [u_set, discrete]
             if settings.jacobian == "directional":
                 kept += self._jacobian_tables(i, fmu, entry)
@@ -468,11 +465,11 @@ class ModelExchangeSystem:
         system.euler_step = settings.step if settings.method == "euler" and settings.step is not None else 0.0
         system.max_events = settings.max_events
         system.nx, system.nz = nx, nz
-        system.x, system.dx, system.z, system.z_before = (b.ctypes.data_as(_f64p) for b in buffers)
-        system.root_info = roots.ctypes.data_as(_i32p)
+        system.x, system.dx, system.z, system.z_before = (b.ctypes.data_as(F64P) for b in buffers)
+        system.root_info = roots.ctypes.data_as(I32P)
         if settings.jacobian == "directional" and settings.method == "cvode":
             dense, du = np.zeros(max(nx * nx, 1)), np.zeros(max(len(self.connections) * nx, 1))
-            system.directional, system.jac_dense, system.jac_du = 1, dense.ctypes.data_as(_f64p), du.ctypes.data_as(_f64p)
+            system.directional, system.jac_dense, system.jac_du = 1, dense.ctypes.data_as(F64P), du.ctypes.data_as(F64P)
             kept += [dense, du]
         system.t, system.restart, system.event_mode = t0, 1, 1
         pointer = ctypes.pointer(system)
@@ -507,11 +504,11 @@ class ModelExchangeSystem:
         if entry.nx or linked:
             entry.directional = ctypes.cast(getattr(fmu._slave.dll, f"fmi{fmu.fmi_version}GetDirectionalDerivative"),
                                             ctypes.c_void_p).value
-        u32p = ctypes.POINTER(_u32)
+        u32p = ctypes.POINTER(U32)
         entry.state_vr, entry.unknown_vr = state_vr.ctypes.data_as(u32p), unknown_vr.ctypes.data_as(u32p)
         entry.n_unknowns, entry.n_linked = len(unknowns), len(linked)
-        entry.linked_vr, entry.linked_connection = linked_vr.ctypes.data_as(u32p), linked_connection.ctypes.data_as(_i64p)
-        entry.jac_columns = columns.ctypes.data_as(_f64p)
+        entry.linked_vr, entry.linked_connection = linked_vr.ctypes.data_as(u32p), linked_connection.ctypes.data_as(I64P)
+        entry.jac_columns = columns.ctypes.data_as(F64P)
         return [state_vr, unknown_vr, linked_vr, linked_connection, columns]
 
     def close(self) -> None:
@@ -558,12 +555,12 @@ class ModelExchangeSystem:
         calibration's trajectories). ``times``, ``u``, ``y``: C-contiguous
         float64, ``u`` rows x bound inputs, ``y`` rows x bound outputs."""
         self._started()
-        row = _i64(0)
-        u32p = ctypes.POINTER(_u32)
-        status = library().me_member_rows(member._me_member, times.ctypes.data_as(_f64p), times.size - 1,
-                                           ctypes.cast(member._in_vr, u32p), member._n_in, u.ctypes.data_as(_f64p),
+        row = I64(0)
+        u32p = ctypes.POINTER(U32)
+        status = library().me_member_rows(member._me_member, times.ctypes.data_as(F64P), times.size - 1,
+                                           ctypes.cast(member._in_vr, u32p), member._n_in, u.ctypes.data_as(F64P),
                                            ctypes.cast(member._out_vr, u32p), member._n_out,
-                                           y.ctypes.data_as(_f64p), ctypes.byref(row))
+                                           y.ctypes.data_as(F64P), ctypes.byref(row))
         if status > 1:
             raise self.failure()
         member._t = float(times[-1])
@@ -579,14 +576,14 @@ class ModelExchangeSystem:
         float64; value references ctypes ``uint32`` arrays. A status above
         warning is the member's :class:`~cosim.errors.FmuCallError`."""
         self._started()
-        row, u32p = _i64(0), ctypes.POINTER(_u32)
+        row, u32p = I64(0), ctypes.POINTER(U32)
         cast = lambda vr: ctypes.cast(vr, u32p) if vr is not None else None  # noqa: E731
         status = library().me_member_evaluate_rows(
-            member._me_member, times.size, times.ctypes.data_as(_f64p), x.ctypes.data_as(_f64p), cast(in_vr),
-            u.shape[1] if u.ndim == 2 else 0, u.ctypes.data_as(_f64p), cast(out_vr), f.shape[1] - x.shape[1],
-            f.ctypes.data_as(_f64p), ctypes.cast(dd, ctypes.c_void_p) if dd is not None else None, cast(unknown_vr),
+            member._me_member, times.size, times.ctypes.data_as(F64P), x.ctypes.data_as(F64P), cast(in_vr),
+            u.shape[1] if u.ndim == 2 else 0, u.ctypes.data_as(F64P), cast(out_vr), f.shape[1] - x.shape[1],
+            f.ctypes.data_as(F64P), ctypes.cast(dd, ctypes.c_void_p) if dd is not None else None, cast(unknown_vr),
             cast(known_vr), jac.shape[1] if jac is not None else 0,
-            jac.ctypes.data_as(_f64p) if jac is not None else None, ctypes.byref(row))
+            jac.ctypes.data_as(F64P) if jac is not None else None, ctypes.byref(row))
         if status > 1:
             member.check_status(status, f"the right-hand side at t = {float(times[row.value])!r} s")
 
@@ -636,7 +633,7 @@ class ModelExchangeSystem:
         self._started()
         nx = int(self._c[0].contents.nx)
         out = np.zeros((nx, nx), order="F")
-        self._call(library().me_jacobian, t, out.ctypes.data_as(_f64p))
+        self._call(library().me_jacobian, t, out.ctypes.data_as(F64P))
         return out
 
     def failure(self) -> Exception:

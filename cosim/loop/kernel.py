@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ..fmi.c_calls import FMU_FIELDS, Call, KernelFmu
-from ..native import c_header, compiled_library
+from ..native import F64, F64P, I64, I64P, c_header, compiled_library
 
 __all__ = ["KernelRun", "KernelStop", "Stop", "header", "load", "prepare", "python_turn", "off_turn"]
 
@@ -51,31 +51,28 @@ class Stop(enum.IntEnum):
     TERMINATE = 3  # an FMI 3.0 FMU's doStep asked to terminate the simulation (KernelStop says which, when)
 
 
-_i64, _f64, _ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
-_u32p, _i64p, _f64p = (ctypes.POINTER(t) for t in (ctypes.c_uint32, ctypes.c_int64, ctypes.c_double))
-
 _RUN_FIELDS = (
     ("fmus", ctypes.POINTER(KernelFmu), "every FMU, in stepping order"),
-    ("n_fmus", _i64, "how many"),
-    ("order", _i64p, "the FMUs evaluated at t_n, in order (indices into fmus)"),
-    ("n_order", _i64, "how many"),
-    ("signals", _f64p, "the signal array (slot 0 is the time)"),
-    ("t0", _f64, "start time (s)"),
-    ("h", _f64, "communication step (s)"),
-    ("n_steps", _i64, "steps of the run: points 0 .. n_steps"),
-    ("data", _f64p, "the recorder's rows in memory, n_columns each"),
-    ("data_first", _i64, "the point whose row is data[0] (the recorder's chunk)"),
-    ("n_columns", _i64, "recorded columns"),
-    ("record_idx", _i64p, "their slots"),
-    ("n_guard", _i64, "guarded signals"),
-    ("guard_idx", _i64p, "their slots"),
-    ("low", _f64p, "their inclusive bounds (finite)"),
-    ("high", _f64p, ""),
-    ("n_derived", _i64, "converted inputs recorded or bounded (Plan.derived)"),
-    ("derived_slot", _i64p, "their own slots"),
-    ("derived_source", _i64p, "the slots of their sources"),
-    ("derived_factor", _f64p, "slot = factor * source + offset, before each row is recorded"),
-    ("derived_offset", _f64p, ""),
+    ("n_fmus", I64, "how many"),
+    ("order", I64P, "the FMUs evaluated at t_n, in order (indices into fmus)"),
+    ("n_order", I64, "how many"),
+    ("signals", F64P, "the signal array (slot 0 is the time)"),
+    ("t0", F64, "start time (s)"),
+    ("h", F64, "communication step (s)"),
+    ("n_steps", I64, "steps of the run: points 0 .. n_steps"),
+    ("data", F64P, "the recorder's rows in memory, n_columns each"),
+    ("data_first", I64, "the point whose row is data[0] (the recorder's chunk)"),
+    ("n_columns", I64, "recorded columns"),
+    ("record_idx", I64P, "their slots"),
+    ("n_guard", I64, "guarded signals"),
+    ("guard_idx", I64P, "their slots"),
+    ("low", F64P, "their inclusive bounds (finite)"),
+    ("high", F64P, ""),
+    ("n_derived", I64, "converted inputs recorded or bounded (Plan.derived)"),
+    ("derived_slot", I64P, "their own slots"),
+    ("derived_source", I64P, "the slots of their sources"),
+    ("derived_factor", F64P, "slot = factor * source + offset, before each row is recorded"),
+    ("derived_offset", F64P, ""),
 )
 
 
@@ -86,11 +83,11 @@ class KernelRun(ctypes.Structure):
 
 
 _STOP_FIELDS = (
-    ("n", _i64, "the communication point it stopped at"),
-    ("fmu", _i64, "Stop.FMU: which FMU (index into fmus)"),
-    ("call", _i64, "Stop.FMU: which Call"),
-    ("status", _i64, "Stop.FMU: the FMI status"),
-    ("recorded", _i64, "the row of point n was recorded before it stopped"),
+    ("n", I64, "the communication point it stopped at"),
+    ("fmu", I64, "Stop.FMU: which FMU (index into fmus)"),
+    ("call", I64, "Stop.FMU: which Call"),
+    ("status", I64, "Stop.FMU: the FMI status"),
+    ("recorded", I64, "the row of point n was recorded before it stopped"),
 )
 
 
@@ -101,8 +98,9 @@ class KernelStop(ctypes.Structure):
 
 
 # the compiled entry point: runs points first .. last of the run, returns a Stop
-_RUN_ARGS = (("run", ctypes.POINTER(KernelRun)), ("first", _i64), ("last", _i64),
+_RUN_ARGS = (("run", ctypes.POINTER(KernelRun)), ("first", I64), ("last", I64),
              ("stop", ctypes.POINTER(KernelStop)))
+
 
 def header() -> str:
     """The C header of this module's definitions, as ``kernel.c`` includes it."""
@@ -152,17 +150,17 @@ def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, 
         if b.converted:
             index, factor, offset = (_array(column, kind) for column, kind in
                                      zip(zip(*b.converted), (np.int64, np.float64, np.float64)))
-            entry.n_conv, entry.conv_idx = len(index), p(index, _i64p)
-            entry.conv_factor, entry.conv_offset = p(factor, _f64p), p(offset, _f64p)
+            entry.n_conv, entry.conv_idx = len(index), p(index, I64P)
+            entry.conv_factor, entry.conv_offset = p(factor, F64P), p(offset, F64P)
             kept += [index, factor, offset]
     slot, source, factor, offset = (_array(column, kind) for column, kind in
                                     zip(zip(*plan.derived) if plan.derived else ((),) * 4,
                                         (np.int64, np.int64, np.float64, np.float64)))
     kept += [slot, source, factor, offset]
-    run = KernelRun(entries, len(fmus), p(order, _i64p), len(order), p(signals, _f64p), float(t0), float(h),
-                    int(n_steps), p(data, _f64p), 0, len(record), p(record, _i64p), len(guard), p(guard, _i64p),
-                    p(low, _f64p), p(high, _f64p), len(slot), p(slot, _i64p), p(source, _i64p),
-                    p(factor, _f64p), p(offset, _f64p))
+    run = KernelRun(entries, len(fmus), p(order, I64P), len(order), p(signals, F64P), float(t0), float(h),
+                    int(n_steps), p(data, F64P), 0, len(record), p(record, I64P), len(guard), p(guard, I64P),
+                    p(low, F64P), p(high, F64P), len(slot), p(slot, I64P), p(source, I64P),
+                    p(factor, F64P), p(offset, F64P))
     run.arrays = (entries, order, record, guard, low, high, signals, data, kept)  # alive as long as the run
     return run
 
