@@ -40,7 +40,7 @@ def parses(monkeypatch):
         return parse(path, *args, **kwargs)
 
     monkeypatch.setattr(fmu_component, "read_model_description", counted)
-    fmu_component._parsed_model_description.cache_clear()
+    fmu_component._PARSED.clear()
     return calls
 
 
@@ -103,7 +103,7 @@ def test_other_bytes_and_a_foreign_entry_are_read_again(lag_fmu2, cache, parses,
                     {"o": ["Unit", {}]}, {"r": 3}, [1, 2]):
         cosim.cache.write("descriptions", key, {**kept, "description": foreign})  # well formed, and foreign
         description_cache._MEMO.clear()
-        fmu_component._parsed_model_description.cache_clear()
+        fmu_component._PARSED.clear()
         fmu = FmuComponent("lag", path)
         assert type(fmu.model_description).__name__ == "ModelDescription" and fmu.outputs
         fmu.close()
