@@ -33,8 +33,8 @@ scheduler is given; threads for work that is our compiled FMUs
 keeps no global state); processes for anything else (someone's FMU may keep
 globals or crash; a Python FMU or component holds the GIL).
 
-A foundation module: it imports only the standard library,
-:mod:`cosim.errors` and :mod:`cosim.limits`.
+A foundation module: it imports only the standard library and
+:mod:`cosim.errors`.
 """
 from __future__ import annotations
 
