@@ -351,8 +351,11 @@ class Lifecycle:
             self.system.entering(self)
         self._tick_pending = False  # a clocked FMU ticks from Event Mode on, after initialization
         parameters = dict(parameters or {})
+        rules = self._start_rules
         for key, value in parameters.items():
-            why = start_value_rule(self.variables.get(key))
+            if key not in rules:
+                rules[key] = self._start_rule(key)
+            why = rules[key][0]
             if why:
                 raise FmuCallError(self.name, self.path, f"{key!r} {why}", key, value)
         try:
@@ -361,9 +364,7 @@ class Lifecycle:
         except FMICallException as exc:
             raise self._fail("reset", exc) from None
         self._initialized_once = True  # from here on, parameters may be set: the next start resets
-        from fmpy.simulation import settable_in_instantiated
-
-        later = {k: v for k, v in parameters.items() if not settable_in_instantiated(self.variables[k])}
+        later = {k: v for k, v in parameters.items() if not rules[k][1]}
         self._set_start_values({k: v for k, v in parameters.items() if k not in later}, together=True)
         self._initial_parameters = parameters
         try:
@@ -378,6 +379,18 @@ class Lifecycle:
         self._set_start_values(later)
         self._initializing = True
         self.read_outputs(t0)
+
+    def _start_rule(self, name: str) -> tuple[str | None, bool]:
+        """Whether the variable ``name`` takes a start value (why not:
+        :func:`start_value_rule`) and whether in the Instantiated state
+        (fmpy's ``settable_in_instantiated``; else in Initialization Mode):
+        facts of the model description, asked once per variable (a study
+        starts an FMU with the same 20 names thousands of times)."""
+        from fmpy.simulation import settable_in_instantiated
+
+        variable = self.variables.get(name)
+        why = start_value_rule(variable)
+        return why, why is None and settable_in_instantiated(variable)
 
     def exit_initialization(self, t0: float) -> None:
         """Leave Initialization Mode at ``t0`` (a Model Exchange instance: the

@@ -193,6 +193,13 @@ class Stepping:
         fast path (which the Model Exchange system's C drives directly)."""
         return self._typed
 
+    def kernel_parts(self) -> tuple:
+        """What :meth:`kernel_entry` points into: the instance's calls, its
+        buffers and value references, its Model Exchange system and member.
+        While these are the same objects, an entry made before still holds
+        (a master keeps its compiled loop's structure from run to run)."""
+        return (self._api, self.system, self._me_member, self._u_ptr, self._y_ptr, self._in_vr, self._out_vr)
+
     def kernel_entry(self, direct: bool, in_idx: np.ndarray, python: bool = False,
                      time: np.ndarray | None = None) -> KernelFmu:
         """This FMU as the compiled loop sees it (:mod:`cosim.loop.kernel`):

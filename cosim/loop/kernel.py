@@ -36,7 +36,7 @@ import numpy as np
 from ..fmi.c_calls import FMU_FIELDS, Call, KernelFmu
 from ..native import F64, F64P, I64, I64P, c_header, compiled_library
 
-__all__ = ["KernelRun", "KernelStop", "Stop", "header", "load", "prepare", "python_turn", "off_turn"]
+__all__ = ["KernelRun", "KernelStop", "Stop", "header", "load", "prepare", "restarted", "python_turn", "off_turn"]
 
 _SOURCE = Path(__file__).with_name("kernel.c")
 _HEADER = "kernel_abi.h"
@@ -162,6 +162,15 @@ def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, 
                     p(low, F64P), p(high, F64P), len(slot), p(slot, I64P), p(source, I64P),
                     p(factor, F64P), p(offset, F64P))
     run.arrays = (entries, order, record, guard, low, high, signals, data, kept)  # alive as long as the run
+    return run
+
+
+def restarted(run: KernelRun, data: np.ndarray, t0: float, n_steps: int) -> KernelRun:
+    """``run`` (:func:`prepare`'s, whose plan and FMUs are unchanged) made
+    the next run's: from ``t0``, ``n_steps`` steps, its rows into ``data``."""
+    run.t0, run.n_steps, run.data_first = float(t0), int(n_steps), 0
+    run.data = data.ctypes.data_as(F64P)
+    run.arrays = (*run.arrays[:7], data, run.arrays[8])
     return run
 
 

@@ -601,8 +601,7 @@ class Master:
         recorder = blocks.recorder
         h, signals, block, chunk = self.step, self.signals, recorder.block_rows, recorder.chunk
         span = block if recorder.path is not None or blocks.progress is not None else chunk  # rows a call flies
-        low, high = self.guard.limits
-        args = kernel.prepare(self.plan, self.fmus, signals, recorder.data, low, high, t0, h, n_steps)
+        args = self._kernel_run(kernel, recorder.data, t0, n_steps)
         stop = kernel.KernelStop()
         if self.plan.transfer:  # exchange ordering; no Python component, so no first_transfer
             self._initial_transfer(self.plan.transfer, t0)
@@ -631,6 +630,22 @@ class Master:
             blocks.written(last + 1)
             n = last + 1
         blocks.finished()
+
+    def _kernel_run(self, kernel, data: np.ndarray, t0: float, n_steps: int):
+        """The run's :class:`~cosim.loop.kernel.KernelRun`, into the recorder's
+        ``data``: made once (:func:`~cosim.loop.kernel.prepare`) and kept
+        while the plan, the guard and every FMU's instance and buffers are
+        the objects it points into (:meth:`~cosim.fmi.fmu.FmuComponent.kernel_parts`);
+        the next run of this master changes its start, its length and its
+        rows only (a study's run on a cached master: :mod:`cosim.study.runner`)."""
+        parts = (self.plan, self.signals, self.guard, *(part for f in self.fmus for part in f.kernel_parts()))
+        kept = getattr(self, "_kernel_kept", None)
+        if kept is not None and len(kept[0]) == len(parts) and all(a is b for a, b in zip(kept[0], parts)):
+            return kernel.restarted(kept[1], data, t0, n_steps)
+        low, high = self.guard.limits
+        args = kernel.prepare(self.plan, self.fmus, self.signals, data, low, high, t0, self.step, n_steps)
+        self._kernel_kept = (parts, args)  # the parts held too: no id of a freed one is taken for theirs
+        return args
 
     def _loop_python(self, t0: float, n_steps: int, blocks: "_Blocks", phase_times: dict[str, float] | None,
                      snap: Callable[[int], None] | None = None) -> None:
@@ -692,6 +707,7 @@ class Master:
         blocks.finished()
 
     def close(self) -> None:
+        self._kernel_kept = None
         for f in self.fmus:
             f.close()
 

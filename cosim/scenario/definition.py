@@ -61,9 +61,14 @@ def _state(document: dict[str, Any], source: Path | None, name: str | None) -> d
 
 # ---- the scenario ----------------------------------------------------------------------------------
 
+_LEAVES = frozenset((str, float, int, bool, type(None)))
+
+
 def _frozen(value: Any) -> Any:
     """A read-only view of nested tables (lists become tuples)."""
-    if isinstance(value, Mapping):
+    if type(value) in _LEAVES:  # the common cases first: an ABC's isinstance is slow
+        return value
+    if type(value) is dict or isinstance(value, Mapping):
         return MappingProxyType({k: _frozen(v) for k, v in value.items()})
     if isinstance(value, list):
         return tuple(_frozen(v) for v in value)
@@ -86,8 +91,9 @@ class Scenario:
                  "coupling", "fmus", "components", "connections", "record", "block_rows", "envelope", "sections")
 
     def __init__(self, raw: Mapping[str, Any], source: Path | None = None, name: str | None = None):
-        document = json.loads(json.dumps(raw))  # the one copy (a TOML document is JSON data)
-        self._adopt(document, source, _state(document, source, name))
+        text = json.dumps(raw)
+        document = json.loads(text)  # the one copy (a TOML document is JSON data)
+        self._adopt(document, source, _state(document, source, name), text)
 
     @classmethod
     def _of(cls, document: dict[str, Any], source: Path | None, state: Mapping[str, Any]) -> "Scenario":
@@ -97,9 +103,11 @@ class Scenario:
         scenario._adopt(document, source, state)
         return scenario
 
-    def _adopt(self, document: dict[str, Any], source: Path | None, state: Mapping[str, Any]) -> None:
+    def _adopt(self, document: dict[str, Any], source: Path | None, state: Mapping[str, Any],
+               text: str | None = None) -> None:
+        """Hold ``state``, and ``document`` as its JSON ``text`` (made here when not given)."""
         set_ = object.__setattr__
-        set_(self, "_document", json.dumps(document))
+        set_(self, "_document", json.dumps(document) if text is None else text)
         set_(self, "source", source)
         for key in ("name", "description", "duration", "step", "seed", "start_time", "ordering", "coupling",
                     "block_rows"):
@@ -174,16 +182,26 @@ def _few_parts(parts: list[str], where: str) -> list[str]:
 
 
 def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
-    """A copy of ``raw`` with dotted keys set, e.g. ``{"simulation.duration": 5.0}``
-    (:func:`dotted_key`)."""
-    out = copy.deepcopy(dict(raw))
+    """A new document: ``raw`` with dotted keys set, e.g. ``{"simulation.duration": 5.0}``
+    (:func:`dotted_key`). ``raw`` is left as it was: the result's tables
+    along each key are new, and the rest is ``raw``'s, shared rather than
+    copied (a study's run applies a few keys to a whole document;
+    a :class:`Scenario` copies the document it validates). Change the
+    result only along its keys, or copy it first."""
+    out = dict(raw)
+    own = {id(out)}  # the tables of out made here, not raw's
     for dotted, value in overrides.items():
         keys = dotted_key(dotted)
         node = out
         for k in keys[:-1]:
-            nxt = node.setdefault(k, {})
-            if not isinstance(nxt, dict):
+            nxt = node.get(k) if k in node else None
+            if k not in node:
+                nxt = node[k] = {}
+            elif not isinstance(nxt, dict):
                 raise ScenarioError(f"{dotted} = {value!r}: {k!r} is not a table")
+            elif id(nxt) not in own:
+                nxt = node[k] = dict(nxt)
+            own.add(id(nxt))
             node = nxt
         node[keys[-1]] = copy.deepcopy(value)
     return out

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import math
+import weakref
 from typing import Annotated, Any, ClassVar, Iterable, Mapping
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, WithJsonSchema, model_validator
@@ -48,6 +49,9 @@ def refuse(message: str, *, key: str | None = None, value: Any = _MISSING) -> Py
     return PydanticCustomError("refused", "{message}", ctx)
 
 
+_KNOWN: "weakref.WeakKeyDictionary[type, frozenset[str]]" = weakref.WeakKeyDictionary()  # a Table's known keys
+
+
 class Table(BaseModel):
     """A table of a file a user writes: strict types, frozen, unknown keys
     refused naming the known ones (sorted, or in declaration order when
@@ -68,7 +72,9 @@ class Table(BaseModel):
     def _a_table_of_known_keys(cls, data: Any) -> Any:
         if not isinstance(data, Mapping):
             raise PydanticCustomError("not_a_table", "expected a table")
-        known = set(cls.known_keys()) | ({cls.selector} if cls.selector else set())
+        known = _KNOWN.get(cls)
+        if known is None:  # a table's keys are its class's: found once (every run of a study validates them)
+            known = _KNOWN[cls] = frozenset(cls.known_keys()) | ({cls.selector} if cls.selector else set())
         for key in data:
             if key not in known:
                 raise PydanticCustomError("unknown_key", "unknown key", {"key": key,

@@ -13,13 +13,16 @@ type, unit and range: the declarations below.
 from __future__ import annotations
 
 import functools
+import json
 import math
 from pathlib import Path
 from typing import Annotated, Any, Mapping, Union
 
-from pydantic import AfterValidator, BeforeValidator, Discriminator, Field, Tag, ValidationError, create_model, model_validator
+from pydantic import (AfterValidator, BeforeValidator, Discriminator, Field, Tag, ValidationError, WrapValidator,
+                      create_model, model_validator)
 
 from . import registry
+from ..cache import Memo
 from ..errors import ScenarioError
 from ..fmi.model_exchange import COUPLINGS, JACOBIANS, METHODS
 from ..loop.plan import ORDERINGS  # the master's (docs/cosim.md)
@@ -321,13 +324,56 @@ class _ScenarioBase(Table):
 
 _MODELS: dict[int, type[Table]] = {}
 
+TABLES_KEPT = 512  # validated tables a declaration keeps (_kept): a study's cases and grid points, and more
+
+
+def _kept(table: Any, memo: Memo, reads_files: Any = lambda value: False) -> Any:
+    """``table``'s type, its validated value kept in ``memo`` by the
+    document's text of it (and the scenario file, which relative paths
+    start from): the runs of a study differ in a few drawn values, and each
+    of their documents is validated whole (one path, the same errors), but a
+    table validated before, unchanged, is not validated again. Only a table
+    that was accepted is kept: a refused one is validated, and refused,
+    every time. ``reads_files(value)``: validating ``value`` reads files (an
+    FMU by path, a parameter set, a signal table), which may change between
+    two validations: never kept. A value JSON does not hold exactly (a TOML
+    date) is validated every time too. The tables are frozen (:class:`~cosim.scenario.schema.Table`),
+    so one validated value may serve many scenarios."""
+
+    def validate(value: Any, handler, info) -> Any:
+        if reads_files(value):
+            return handler(value)
+        try:  # no default=: a value JSON does not hold raises, and is validated every time
+            key = (id(table), json.dumps(value, allow_nan=False), str(_source(info)))
+        except (TypeError, ValueError):
+            return handler(value)
+        found = memo.get(key)
+        if found is None:
+            found = handler(value)
+            memo.put(key, found)
+        return found
+
+    return Annotated[table, WrapValidator(validate)]
+
+
+def _names_files(spec: Any) -> bool:
+    """An ``[fmus.<Name>]`` table whose validation reads a file (its FMU by path, its parameter set)."""
+    return not isinstance(spec, Mapping) or "path" in spec or "parameter_set" in spec
+
+
+def _kind_reads_files(value: Any) -> bool:
+    kind = registry.component_kinds().get(value.get("kind")) if isinstance(value, Mapping) else None
+    return not isinstance(value, Mapping) or (kind is not None and kind.reads_files)
+
 
 def scenario_model() -> type[Table]:
     """The declaration of a scenario file: the generic tables and what the
-    registry holds now (component kinds, their short sections, sections)."""
+    registry holds now (component kinds, their short sections, sections);
+    a declaration keeps the tables it accepted (:func:`_kept`)."""
     version = registry.version()
     if version not in _MODELS:
         kinds = list(registry.component_kinds().values())
+        memo = Memo(TABLES_KEPT)
         fields: dict[str, Any] = {
             "name": (Annotated[str, Field(strict=True)], Field(None, description="default: the file's name")),
             "description": (Annotated[str, Field(strict=True)], ""),
@@ -336,18 +382,21 @@ def scenario_model() -> type[Table]:
                 "{ connect = 'A.out -> B.in', factor = .., offset = .. } (a unit conversion) or "
                 "{ connect = .., units = 'unchecked' }"))),
             "simulation": (Simulation, Field(default_factory=Simulation)),
-            "fmus": (dict[str, FmuSpec], Field(default_factory=dict, description="the FMU instances")),
-            "components": (dict[str, _component_union(kinds)], Field(default_factory=dict,
-                                                                      description="the Python components")),
+            "fmus": (dict[str, _kept(FmuSpec, memo, _names_files)], Field(default_factory=dict,
+                                                                            description="the FMU instances")),
+            "components": (dict[str, _kept(_component_union(kinds), memo, _kind_reads_files)],
+                           Field(default_factory=dict, description="the Python components")),
             "record": (Record, Field(default_factory=Record)),
             "envelope": (dict[str, Bounds], Field(default_factory=dict,
                                                   description="divergence bounds [low, high] per signal")),
         }
         for alias, members in registry.aliases().items():
-            fields[alias] = (_alias_type(members), Field(None, description=f"short for [components."
-                                                                          f"{members[0].instance or alias}]"))
+            files = any(kind.reads_files for kind in members)
+            fields[alias] = (_kept(_alias_type(members), memo, lambda value, files=files: files),
+                             Field(None, description=f"short for [components.{members[0].instance or alias}]"))
         for name, section in registry.sections().items():
-            fields[name] = (section.parameters(), Field(None, description=section.description or None))
+            fields[name] = (_kept(section.parameters(), memo, lambda value, s=section: s.reads_files),
+                            Field(None, description=section.description or None))
         _MODELS.clear()
         _MODELS[version] = create_model("Scenario", __base__=_ScenarioBase, **fields)
     return _MODELS[version]

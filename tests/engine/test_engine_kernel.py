@@ -141,6 +141,28 @@ def test_a_run_with_no_csv_and_no_progress_returns_to_python_once_a_chunk(monkey
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_master_flown_again_is_a_new_master_bit_for_bit(monkeypatch):
+    """A master keeps its compiled loop's structure from run to run
+    (Master._kernel_run): a later run of another length and start, and a
+    run after its FMUs were freed and instantiated again, equal the run of
+    a master built for it."""
+    monkeypatch.setenv("COSIM_PYTHON_LOOP", "")
+    kernel.load.cache_clear()
+
+    def fresh(duration, t0):
+        with _master(2, "feedthrough") as master:
+            return master.run(duration, t0=t0)["B.y"]
+
+    with _master(2, "feedthrough") as master:
+        master.run(2.0)
+        np.testing.assert_array_equal(master.run(0.5, t0=1.0)["B.y"], fresh(0.5, 1.0))
+        kept = master._kernel_kept[1]
+        for fmu in master.fmus:  # a new instance: the kept structure points into the freed one
+            fmu.close()
+        np.testing.assert_array_equal(master.run(1.0)["B.y"], fresh(1.0, 0.0))
+        assert master._kernel_kept[1] is not kept
+
+
 def test_a_divergence_mid_chunk_stops_at_the_same_row_in_both_loops(monkeypatch):
     bounds = {"A.y": (-10.0, 0.9)}
     fast, fast_chunks = _observed(monkeypatch, True, 50.0, [], bounds=bounds)

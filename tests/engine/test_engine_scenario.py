@@ -333,6 +333,68 @@ def test_an_fmu_file_relative_to_the_scenario(file_scenario):
     np.testing.assert_allclose(result["Lag.y"], loop_answer(10), rtol=0, atol=TOL)
 
 
+def test_a_table_naming_a_file_is_validated_again_every_time(file_scenario):
+    path = file_scenario('path = "lag.fmu"')
+    load_scenario(path)
+    (path.parent / "lag.fmu").unlink()
+    with pytest.raises(ScenarioError, match=re.escape("fmus.Lag.path = 'lag.fmu': no such file")):
+        load_scenario(path)
+
+
+# ---- tables validated once (cosim.scenario.tables._kept) ----------------------------------------
+
+VALIDATED: list[float] = []  # the toy_counted tables validated, by their value
+
+
+def _counted_table():
+    from pydantic import model_validator
+
+    from cosim.scenario.schema import Number, Table, refuse
+
+    class ToyCounted(Table):
+        value: Number = 0.0
+
+        @model_validator(mode="after")
+        def _counted(self):
+            VALIDATED.append(self.value)
+            if self.value < 0:
+                raise refuse("must not be negative", key="value", value=self.value)
+            return self
+    return ToyCounted
+
+
+@pytest.fixture
+def counted(raw):
+    from cosim.scenario import registry
+
+    with registry.scoped():
+        registry.register_section(registry.Section("toy_counted", _counted_table, lambda where, table, fmus: table.value))
+        VALIDATED.clear()
+        yield raw
+
+
+def test_a_table_accepted_before_is_not_validated_again(counted):
+    counted["toy_counted"] = {"value": 1.0}
+    for seed in (1, 2, 3):  # another table changes: this one is the same
+        counted["simulation"]["seed"] = seed
+        assert parse_scenario(counted).sections["toy_counted"] == 1.0
+    counted["toy_counted"] = {"value": 2.0}
+    assert parse_scenario(counted).sections["toy_counted"] == 2.0
+    counted["toy_counted"] = {"value": 2}  # another document (an integer), validated as such
+    parse_scenario(counted)
+    assert VALIDATED == [1.0, 2.0, 2.0]
+
+
+def test_a_refused_table_is_refused_every_time_in_the_same_words(counted):
+    counted["toy_counted"] = {"value": -1.0}
+    messages = []
+    for _ in range(2):
+        with pytest.raises(ScenarioError) as info:
+            parse_scenario(counted)
+        messages.append(str(info.value))
+    assert messages == ["toy_counted.value = -1.0: must not be negative"] * 2 and VALIDATED == [-1.0, -1.0]
+
+
 def test_an_fmu_file_of_another_fmi_version_is_refused(file_scenario):
     sc = load_scenario(file_scenario('path = "lag.fmu"\nfmi_version = 3'))
     with pytest.raises(ScenarioError, match=r"fmus\.Lag\.fmi_version = 3: the FMU file .*lag\.fmu is FMI 2\.0"):
