@@ -54,7 +54,13 @@ circles, every variant and option row at 1, 3 and 5 m/s):
   it chooses for the project's FMUs), wall and CPU against its ideal
   ``runs x L / workers`` (``L`` its runs' mean loop time, rounds as
   above): target <= 1.3x on 2 workers, printed beside Table 2's figure
-  (<= 1.1x). ``--short-only`` runs that study alone (no Table 2);
+  (<= 1.1x); and the wall time against the runs' own loop times (their
+  ``Master.run`` in the study, summed, / workers), the same ratio with the
+  loop timed during the study itself: on a machine whose speed changes
+  from minute to minute (one invocation's rounds of ``L`` went from 17 to
+  10 ms), the rounds' ``L`` may be another machine's than the study's,
+  this figure is not (Table 2's counterpart: its ``efficiency``, the
+  inverse). ``--short-only`` runs that study alone (no Table 2);
   ``--cluster`` also flies it on a Dask cluster started by address (``dask
   scheduler`` and ``--workers`` ``dask worker tcp://...`` processes of one
   thread each, given to ``measure`` as ``scheduler``) and says whether its
@@ -324,7 +330,8 @@ def _short_runs(runs: int, workers: int, tmp: Path) -> dict[str, float]:
     return {"runs": n, "loop_s": loop, "loop_rounds_s": loops.rounds, "loop_round_runs": loops.repeat * len(loops.first),
             "wall_s": wall, "cpu_s": cpu,
             "ideal_s": ideal, "wall_over_ideal": wall / ideal, "cpu_over_runs_x_loop": cpu / (n * loop),
-            "sum_of_run_times_s": sum(times), "rows": len(times)}
+            "sum_of_run_times_s": sum(times), "rows": len(times),
+            "wall_over_own_loops": wall * workers / sum(times)}
 
 
 def _on_a_cluster(runs: int, workers: int, tmp: Path) -> dict[str, Any]:
@@ -559,6 +566,9 @@ def _print_short(short: dict[str, Any], workers: int, table2: float | None) -> N
     print(f"  CPU  {short['cpu_s']:8.2f} s = {short['cpu_s'] / n * 1e3:.2f} ms a run = "
           f"{short['cpu_over_runs_x_loop']:.2f} x runs x L;  rows {short['rows']}, their runs' times sum to "
           f"{short['sum_of_run_times_s']:.2f} s")
+    print(f"  wall against the runs' own loop times (their Master.run in the study, summed / workers: timed with "
+          f"the study, so a change of the machine's speed between L's rounds and the study does not move it): "
+          f"{short['wall_over_own_loops']:.2f} x")
     cluster = short.get("cluster")
     if cluster is not None:
         print(f"  on a Dask cluster by address ({cluster['address']}, {workers} worker processes started by "

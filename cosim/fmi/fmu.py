@@ -190,6 +190,7 @@ class FmuComponent(Lifecycle, VariableAccess, StateAccess, Stepping):
         self.internals = groups["local"]  # recorded and bounded like outputs, read with them (cosim.loop.plan)
         self.variables = {v.name: v for v in md.modelVariables}
         self._start_rules: dict[str, tuple[str | None, bool]] = {}  # lifecycle's, by variable: its model's facts
+        self._float_refs: dict[tuple[str, ...], list[int] | None] = {}  # variables', by a set of names
         self.sample_period = self._declared_period()
         self.clock = self._input_clock()
         self.model_exchange = interface == "ModelExchange" and self.clock is None  # integrated by the master

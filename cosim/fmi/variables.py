@@ -137,9 +137,15 @@ class VariableAccess:
         """Set ``values`` (by variable or array element name) with one set
         call per type, an array whole: its elements not given keep their
         start values. A value the type cannot hold is refused in one line
-        (:func:`cosim.component.typed_value`), never rounded."""
+        (:func:`cosim.component.typed_value`), never rounded. Numbers for
+        Float64 scalars only (a start's usual values) take the one-call
+        fast path, their references found once per set of names."""
+        if all(type(v) is float or type(v) is int for v in values.values()):  # not a bool, a str, bytes
+            refs = self._float_references(tuple(values))
+            if refs is not None:
+                return self.real_calls()[1](refs, [float(v) for v in values.values()])
         arrays: dict[int, list] = {}
-        by_type: dict[str, list] = {}
+        by_type: dict[str, dict[int, Any]] = {}  # type -> its variables by id, in the order first given
         for name, value in values.items():
             var, k = self._element(name)
             port_type = TYPE_OF.get(var.type, var.type)
@@ -147,9 +153,7 @@ class VariableAccess:
                 value = typed_value(port_type, value, f"{self.name}.{name}")
             except ValueError as exc:
                 raise FmuCallError(self.name, self.path, str(exc), name, value) from None
-            group = by_type.setdefault(port_type, [])
-            if var not in group:
-                group.append(var)
+            by_type.setdefault(port_type, {})[id(var)] = var
             if var.dimensions:
                 if id(var) not in arrays:
                     arrays[id(var)] = array_start(var, self.name)
@@ -160,8 +164,21 @@ class VariableAccess:
             else:
                 arrays[id(var)] = [value]
         for port_type, variables in by_type.items():
-            flat = [x for v in variables for x in arrays[id(v)]]
-            self._calls(port_type)[1]([v.valueReference for v in variables], flat)
+            flat = [x for v in variables.values() for x in arrays[id(v)]]
+            self._calls(port_type)[1]([v.valueReference for v in variables.values()], flat)
+
+    def _float_references(self, names: tuple[str, ...]) -> list[int] | None:
+        """The value references of ``names`` when each is a Float64 scalar
+        variable, else ``None`` (:func:`takes_typed_calls`); kept per set of
+        names (a study starts an FMU with the same names thousands of times;
+        a few sets are kept)."""
+        kept = self._float_refs
+        if names not in kept:
+            if len(kept) >= 16:
+                kept.clear()
+            kept[names] = None if takes_typed_calls(self.variables, names) else \
+                [self.variables[n].valueReference for n in names]
+        return kept[names]
 
     def set_inputs(self, values: Mapping[str, float], t: float) -> None:
         """Set some inputs by name (the slow path, outside the step loop);

@@ -337,8 +337,9 @@ def _kept(table: Any, memo: Memo, reads_files: Any = lambda value: False) -> Any
     every time. ``reads_files(value)``: validating ``value`` reads files (an
     FMU by path, a parameter set, a signal table), which may change between
     two validations: never kept. A value JSON does not hold exactly (a TOML
-    date) is validated every time too. The tables are frozen (:class:`~cosim.scenario.schema.Table`),
-    so one validated value may serve many scenarios."""
+    date) is validated every time too. One validated value serves many
+    scenarios: the tables are frozen (:class:`~cosim.scenario.schema.Table`),
+    and :func:`derived_state` copies the lists and tables it takes from them."""
 
     def validate(value: Any, handler, info) -> Any:
         if reads_files(value):
@@ -377,17 +378,17 @@ def scenario_model() -> type[Table]:
         fields: dict[str, Any] = {
             "name": (Annotated[str, Field(strict=True)], Field(None, description="default: the file's name")),
             "description": (Annotated[str, Field(strict=True)], ""),
-            "connections": (list[ConnectionEntry], Field(default_factory=list, description=(
+            "connections": (_kept(list[ConnectionEntry], memo), Field(default_factory=list, description=(
                 "'A.out -> B.in' strings (brace groups expand: 'A.{x,y} -> B.{x,y}'), or tables "
                 "{ connect = 'A.out -> B.in', factor = .., offset = .. } (a unit conversion) or "
                 "{ connect = .., units = 'unchecked' }"))),
-            "simulation": (Simulation, Field(default_factory=Simulation)),
+            "simulation": (_kept(Simulation, memo), Field(default_factory=Simulation)),
             "fmus": (dict[str, _kept(FmuSpec, memo, _names_files)], Field(default_factory=dict,
                                                                             description="the FMU instances")),
             "components": (dict[str, _kept(_component_union(kinds), memo, _kind_reads_files)],
                            Field(default_factory=dict, description="the Python components")),
-            "record": (Record, Field(default_factory=Record)),
-            "envelope": (dict[str, Bounds], Field(default_factory=dict,
+            "record": (_kept(Record, memo), Field(default_factory=Record)),
+            "envelope": (_kept(dict[str, Bounds], memo), Field(default_factory=dict,
                                                   description="divergence bounds [low, high] per signal")),
         }
         for alias, members in registry.aliases().items():
