@@ -353,6 +353,41 @@ def test_a_threaded_study_flies_every_run_once_to_the_bits_of_this_process_witho
     assert all(_same_record(r, _fresh(base, runs[r["key"]])) for r in records)
 
 
+def test_the_scenarios_of_a_few_runs_are_made_before_they_fly_and_a_refused_one_fails_its_run_only(base, monkeypatch):
+    """:func:`cosim.study.runner.flown`: the scenarios of ``AHEAD`` runs are
+    made together, then those runs fly; a refused scenario is its run's
+    record, in the words of the run flown alone."""
+    order = []
+    real_scenarios, real_execute = dask_runner.scenarios, dask_runner.execute
+    monkeypatch.setattr(dask_runner, "scenarios", lambda raw, source, group, cache: (
+        order.append(("made", [r.index for r in group])) or real_scenarios(raw, source, group, cache)))
+    monkeypatch.setattr(dask_runner, "execute", lambda raw, source, run, *args: (
+        order.append(("flown", run.index)) or real_execute(raw, source, run, *args)))
+    runs = [_run(i, {"toy_controller.kp": "fast" if i == 3 else 0.5 + i}) for i in range(dask_runner.AHEAD + 2)]
+    records = list(fly(base, runs, metrics=trace))
+    ahead = dask_runner.AHEAD
+    assert order == [("made", list(range(ahead))), *(("flown", i) for i in range(ahead)),
+                     ("made", [ahead, ahead + 1]), ("flown", ahead), ("flown", ahead + 1)]
+    assert all(_same_record(r, _fresh(base, run)) for r, run in zip(records, runs))
+    assert records[3]["error"].startswith("invalid scenario: toy_controller.kp = 'fast'")
+
+
+def test_a_run_that_breaks_the_runner_on_threads_fails_alone_and_its_task_flies_on(base, monkeypatch):
+    real = dask_runner.execute
+
+    def broken(raw, source, run, *args):
+        if run.index == 1:
+            raise RuntimeError("a bug")
+        return real(raw, source, run, *args)
+
+    monkeypatch.setattr(dask_runner, "execute", broken)
+    runs = [Run(i, "one", (), None, i, {}, {}) for i in range(6)]  # one case: tasks of consecutive runs
+    records = {r["key"]: r for r in fly(base, runs, workers=2, metrics=trace, threads=True, total=len(runs))}
+    assert sorted(records) == list(range(6))
+    assert records[1]["status"] == "failed" and records[1]["error"] == "worker: RuntimeError: a bug"
+    assert all(records[i]["status"] == "ok" for i in (0, 2, 3, 4, 5))
+
+
 def test_a_threaded_study_stopped_by_its_reader_starts_no_other_run_and_frees_its_masters(base, monkeypatch):
     """A reader that stops (a driver interrupted mid-study) ends the flight:
     the runs in flight finish, no other starts, the study's masters are
