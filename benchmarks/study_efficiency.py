@@ -695,7 +695,8 @@ def main() -> None:
         print(f"  measure on {args.workers} {kind:9s} (median of {args.repeats}): wall {wall:8.2f} s = "
               f"{wall / ideal:5.2f} x ideal;  CPU {cpu:6.2f} s = {cpu / here_cpu:4.2f} x in-process")
     print(f"    threads: overhead per run (workers x wall - runs) {dask_overhead * 1e3:6.1f} ms = "
-          f"{dask_overhead / loop:5.0%} of L;  efficiency {figures['efficiency']:.2f}")
+          f"{dask_overhead / loop:5.0%} of L;  efficiency {figures['efficiency']:.2f}, i.e. wall "
+          f"{1 / figures['efficiency']:.2f} x the runs' own loop times / workers (timed with the study: no drift)")
     for tag in trees:
         wall, cpu = med(commands[tag]), med(command_cpus[tag])
         name = "fnn-cosim table2 (a new process)" if tag == "after" else f"  the same, {args.before.name}"

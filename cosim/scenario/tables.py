@@ -344,8 +344,8 @@ def _kept(table: Any, memo: Memo, reads_files: Any = lambda value: False) -> Any
     def validate(value: Any, handler, info) -> Any:
         if reads_files(value):
             return handler(value)
-        try:  # no default=: a value JSON does not hold raises, and is validated every time
-            key = (id(table), json.dumps(value, allow_nan=False), str(_source(info)))
+        try:  # no default=: a value JSON does not hold raises, and is validated every time (no argument: the
+            key = (id(table), json.dumps(value), str(_source(info)))  # module's encoder, not a new one per call)
         except (TypeError, ValueError):
             return handler(value)
         found = memo.get(key)
