@@ -37,7 +37,7 @@ benchmark: $(VENV)/.installed
 	$(BIN)/python benchmarks/cosim_speed.py
 	$(BIN)/python benchmarks/loop_speed.py
 	$(BIN)/python benchmarks/model_exchange.py
-	$(BIN)/python benchmarks/study_efficiency.py --seeds 8
+	$(BIN)/python benchmarks/study_efficiency.py
 	$(BIN)/python benchmarks/ssp_importers.py
 	$(BIN)/python benchmarks/table_replay.py
 	$(BIN)/python benchmarks/stability_speed.py
