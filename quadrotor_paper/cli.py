@@ -44,7 +44,7 @@ import sys
 from typing import Sequence
 
 from .commands import EXIT_BAD_INPUT, EXIT_RUN_FAILED, declared
-from .fmu_log_option import apply_fmu_log
+from .commands.options import apply_fmu_log
 
 __all__ = ["main", "EXIT_BAD_INPUT", "EXIT_RUN_FAILED"]
 

@@ -14,8 +14,8 @@ application's modules) with what the command line says.
 
 :data:`GROUPS` lists them in the order ``fnn-cosim --help`` lists their
 commands. A group's module imports argparse and the options the commands
-share at most (:mod:`quadrotor_paper.set_option`,
-:mod:`quadrotor_paper.workers_option`, :mod:`quadrotor_paper.fmu_log_option`);
+share at most (:mod:`quadrotor_paper.commands.options`: ``--set``,
+``--workers``, ``--fmu-log``);
 what a command's options or its run need is imported when its arguments are
 added or it runs, so a command pays for no other's (docs/cosim.md,
 "Start-up of a run"). The top-level parser and ``main`` are
@@ -109,7 +109,7 @@ def out_folder(given: str | None, default: Path) -> Path:
 def output_options(parser: argparse.ArgumentParser) -> None:
     """``--out``, ``--fmu-log`` and ``--quiet``: what every command that flies
     runs into a results folder takes."""
-    from ..fmu_log_option import fmu_log_option
+    from .options import fmu_log_option
 
     parser.add_argument("--out", help="output directory (default: under results/)")
     fmu_log_option(parser)

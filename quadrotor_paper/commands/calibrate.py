@@ -13,8 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..set_option import named_values, overrides
-from ..workers_option import worker_count
+from .options import named_values, overrides, worker_count
 from . import DEFAULT_OUT, Commands
 
 __all__ = ["add_commands"]

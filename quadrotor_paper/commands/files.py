@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..set_option import overrides
+from .options import overrides
 from . import Commands
 
 __all__ = ["add_commands"]

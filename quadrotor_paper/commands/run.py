@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..set_option import overrides
+from .options import overrides
 from . import DEFAULT_OUT, EXIT_RUN_FAILED, Commands, output_options
 
 __all__ = ["add_commands"]

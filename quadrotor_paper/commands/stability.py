@@ -9,9 +9,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..fmu_log_option import fmu_log_option
-from ..set_option import named_values, overrides
-from ..workers_option import default_workers, worker_count
+from .options import fmu_log_option, named_values, overrides, default_workers, worker_count
 from . import DEFAULT_OUT, Commands, out_folder
 
 __all__ = ["add_commands"]

@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any, Sequence
 
-from ..set_option import overrides
-from ..workers_option import TABLE_WORKERS, default_workers, worker_count
+from .options import overrides, TABLE_WORKERS, default_workers, worker_count
 from . import DEFAULT_OUT, Commands, out_folder, output_options
 
 __all__ = ["add_commands"]

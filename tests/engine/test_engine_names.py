@@ -157,7 +157,7 @@ def test_a_scenario_without_record_signals_records_every_output(tmp_path, fmus, 
 
 def test_set_keys_and_named_values_take_the_name_as_the_fmu_writes_it():
     from cosim.scenario.definition import dotted_key
-    from quadrotor_paper.set_option import named_values, overrides
+    from quadrotor_paper.commands.options import named_values, overrides
 
     assert dotted_key("fmus.V.parameters.a.b[2,3]") == ["fmus", "V", "parameters", "a.b[2,3]"]
     assert dotted_key("fmus.V.start.'x y'") == ["fmus", "V", "start", "'x y'"]
