@@ -194,13 +194,14 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any]) -> dic
         keys = dotted_key(dotted)
         node = out
         for k in keys[:-1]:
-            nxt = node.get(k) if k in node else None
             if k not in node:
                 nxt = node[k] = {}
-            elif not isinstance(nxt, dict):
-                raise ScenarioError(f"{dotted} = {value!r}: {k!r} is not a table")
-            elif id(nxt) not in own:
-                nxt = node[k] = dict(nxt)
+            else:
+                nxt = node[k]
+                if not isinstance(nxt, dict):
+                    raise ScenarioError(f"{dotted} = {value!r}: {k!r} is not a table")
+                if id(nxt) not in own:
+                    nxt = node[k] = dict(nxt)
             own.add(id(nxt))
             node = nxt
         node[keys[-1]] = copy.deepcopy(value)

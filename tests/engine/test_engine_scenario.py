@@ -116,6 +116,18 @@ def test_toy_scenario_runs_to_the_known_answer(scenario_file, tmp_path):
     np.testing.assert_allclose(result["ctrl.u"], 1.5 * (1.0 - loop_answer(30)), rtol=0, atol=TOL)
 
 
+def test_overrides_make_new_tables_along_their_keys_and_leave_the_document_as_it_was():
+    from cosim.scenario.definition import apply_overrides
+
+    raw = {"a": {"b": {"c": 1}, "d": [1]}, "e": 5}
+    out = apply_overrides(raw, {"a.b.c": 2, "a.b.f": 3, "x.y": 4})
+    assert out == {"a": {"b": {"c": 2, "f": 3}, "d": [1]}, "e": 5, "x": {"y": 4}}
+    assert raw == {"a": {"b": {"c": 1}, "d": [1]}, "e": 5}
+    assert out["a"]["d"] is raw["a"]["d"]  # what no key reaches is shared, not copied
+    with pytest.raises(ScenarioError, match=re.escape("e.z = 1: 'e' is not a table")):
+        apply_overrides(raw, {"e.z": 1})
+
+
 def test_overrides_reach_the_run(scenario_file):
     sc = load_scenario(scenario_file, {"toy_controller.kp": 3.0, "simulation.duration": 1.0,
                                        "fmus.Lag.fmi_version": 2, "envelope": {"Lag.y": [-1.0, 0.5]}})
