@@ -161,7 +161,8 @@ def prepare(plan, fmus, signals: np.ndarray, data: np.ndarray, low: np.ndarray, 
                     int(n_steps), p(data, F64P), 0, len(record), p(record, I64P), len(guard), p(guard, I64P),
                     p(low, F64P), p(high, F64P), len(slot), p(slot, I64P), p(source, I64P),
                     p(factor, F64P), p(offset, F64P))
-    run.arrays = (entries, order, record, guard, low, high, signals, data, kept)  # alive as long as the run
+    run.arrays = (entries, order, record, guard, low, high, signals, kept)  # alive as long as the run
+    run.rows = data  # the recorder's rows, alive as long as the run (restarted replaces them)
     return run
 
 
@@ -170,7 +171,7 @@ def restarted(run: KernelRun, data: np.ndarray, t0: float, n_steps: int) -> Kern
     the next run's: from ``t0``, ``n_steps`` steps, its rows into ``data``."""
     run.t0, run.n_steps, run.data_first = float(t0), int(n_steps), 0
     run.data = data.ctypes.data_as(F64P)
-    run.arrays = (*run.arrays[:7], data, run.arrays[8])
+    run.rows = data
     return run
 
 

@@ -205,6 +205,7 @@ class Master:
         self.connections = check_connections(conns, self.components)
         self.coupling = coupling
         self.me_systems = []  # the Model Exchange FMUs, each in the system that integrates it (cosim.fmi.me_system)
+        self._kernel_kept = None  # the compiled loop's structure and what it points into (_kernel_run)
         if any(f.model_exchange for f in self.fmus):
             from ..fmi.me_system import systems
 
@@ -639,7 +640,7 @@ class Master:
         the next run of this master changes its start, its length and its
         rows only (a study's run on a cached master: :mod:`cosim.study.runner`)."""
         parts = (self.plan, self.signals, self.guard, *(part for f in self.fmus for part in f.kernel_parts()))
-        kept = getattr(self, "_kernel_kept", None)
+        kept = self._kernel_kept
         if kept is not None and len(kept[0]) == len(parts) and all(a is b for a, b in zip(kept[0], parts)):
             return kernel.restarted(kept[1], data, t0, n_steps)
         low, high = self.guard.limits
