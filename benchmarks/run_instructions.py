@@ -31,17 +31,25 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Sequence
 
 CHILD = "--child"
 WARM_UP = 10
 
 
-def _child(runs: int, duration: float) -> None:
-    """Fly ``WARM_UP`` runs, then ``runs`` more, of the short study's cells (its scenario, its draws)."""
-    import random
+def _child(runs: int, counted: int, duration: float) -> None:
+    """Fly the first run of each cell of the short study of ``runs`` runs
+    (:func:`study_efficiency._short_study`: its scenario, its plan and
+    draws) until ``WARM_UP`` runs have flown, then the first ``counted`` runs
+    of its plan, each ``duration`` seconds long, with its lean record and
+    metrics (as ``measure`` flies them)."""
+    import itertools
 
-    from cosim.scenario.definition import apply_overrides, load_scenario, parse_scenario
-    from cosim.study.definition import Run
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from study_efficiency import _short_study
+
+    from cosim.scenario.definition import apply_overrides, parse_scenario
+    from cosim.study.definition import cell_of, runs as plan_of
     from cosim.study.runner import MasterCache, execute
     from quadrotor_paper.experiments import lean_signals, study_metrics
 
@@ -51,49 +59,52 @@ def _child(runs: int, duration: float) -> None:
         def flown(raw, source, runs, metrics, cache):
             return (execute(raw, source, run, metrics, cache) for run in runs)
 
-    base = load_scenario("circles", {"simulation.duration": duration, "controller.plant": ""})
-    base = parse_scenario(apply_overrides(base.raw, {"record.signals": lean_signals(base)}), source=base.source)
-    draw = random.Random(0)
-
-    def run(i: int) -> Run:
-        return Run(i, None, (), 0, 0, {}, {"controller.variant": ("pd", "pd+lm")[i % 2],
-                                           "fmus.Quadrotor.parameters.m": draw.uniform(0.856, 1.284),
-                                           "wind.speed": draw.uniform(0.0, 5.0)})
-
+    with tempfile.TemporaryDirectory() as folder:
+        study = _short_study(runs, Path(folder))
+    base = study.scenario
+    base = parse_scenario(apply_overrides(base.raw, {"simulation.duration": duration,
+                                                     "record.signals": lean_signals(base)}), source=base.source)
+    plan = list(plan_of(study))
+    first = {}
+    for run in plan:
+        first.setdefault(cell_of(study, run.index), run)
+    warm_up = list(itertools.islice(itertools.cycle(first.values()), WARM_UP))  # every cell's master built
     cache = MasterCache()
     try:
-        for record in flown(base.raw, str(base.source), map(run, range(WARM_UP + runs)), study_metrics, cache):
+        for record in flown(base.raw, str(base.source), warm_up + plan[:counted], study_metrics, cache):
             if record["status"] != "ok":
                 raise SystemExit(f"run {record['key']}: {record['status']}: {record['error']}")
     finally:
         cache.close()
 
 
-def _count(tree: Path | None, runs: int, duration: float, valgrind: bool = True) -> int:
-    """Instructions of a child process flying ``runs`` runs after the
-    warm-up (callgrind's ``I refs``); without ``valgrind``, the same child
-    flown plainly (its FMUs built, its scenarios kept, before any count),
-    and 0."""
+def _flown(tree: Path | None, runs: int, counted: int, duration: float, tool: Sequence[str] = ()):
+    """A child process (:func:`_child`) with ``tree``'s packages first on
+    ``PYTHONPATH``, run under ``tool``; its completed process."""
     env = dict(os.environ, PYTHONHASHSEED="0")
     if tree is not None:
         env["PYTHONPATH"] = str(tree.resolve())
-    tool = ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null"] if valgrind else []
     with tempfile.TemporaryDirectory() as cwd:  # not this checkout's folder: PYTHONPATH decides the packages
-        out = subprocess.run([*tool, sys.executable, str(Path(__file__).resolve()), CHILD, str(runs), repr(duration)],
-                             cwd=cwd, env=env, capture_output=True, text=True)
-    if not valgrind:
-        if out.returncode != 0:
-            raise SystemExit(f"the runs failed: exit {out.returncode}\n{out.stderr[-2000:]}")
-        return 0
-    found = re.search(r"I\s+refs:\s+([\d,]+)", out.stderr)
-    if out.returncode != 0 or found is None:
-        raise SystemExit(f"valgrind: exit {out.returncode}\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}")
+        done = subprocess.run([*tool, sys.executable, str(Path(__file__).resolve()), CHILD, str(runs), str(counted),
+                               repr(duration)], cwd=cwd, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(tool) or 'the runs'}: exit {done.returncode}\n{done.stdout[-2000:]}\n"
+                         f"{done.stderr[-2000:]}")
+    return done
+
+
+def _count(tree: Path | None, runs: int, counted: int, duration: float) -> int:
+    """Instructions of a child flying ``counted`` runs after the warm-up (callgrind's ``I refs``)."""
+    done = _flown(tree, runs, counted, duration, ("valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null"))
+    found = re.search(r"I\s+refs:\s+([\d,]+)", done.stderr)
+    if found is None:
+        raise SystemExit(f"valgrind printed no count\n{done.stderr[-2000:]}")
     return int(found.group(1).replace(",", ""))
 
 
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == CHILD:
-        return _child(int(sys.argv[2]), float(sys.argv[3]))
+        return _child(int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4]))
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--runs", type=int, default=200, help="runs counted (default 200)")
     p.add_argument("--duration", type=float, default=0.01, help="a run's simulated seconds (default 0.01: one step)")
@@ -104,11 +115,12 @@ def main() -> None:
     from cosim.executor import parallel
 
     trees = {"this tree": None, **({args.before.name: args.before} if args.before is not None else {})}
-    for tree in trees.values():
-        _count(tree, 0, args.duration, valgrind=False)
+    for tree in trees.values():  # its FMUs built and its scenarios kept before anything is counted
+        _flown(tree, args.runs, 0, args.duration)
     jobs = [(tag, n) for tag in trees for n in (0, args.runs)]
     with parallel("threads", 2, name="valgrind") as executor:  # each job is a process; a thread waits for it
-        counts = dict(zip(jobs, executor.map(lambda job: _count(trees[job[0]], job[1], args.duration), jobs)))
+        counts = dict(zip(jobs, executor.map(lambda job: _count(trees[job[0]], args.runs, job[1], args.duration),
+                                             jobs)))
     print(f"instructions a run ({args.runs} runs of the short study's circles, {args.duration:g} s each, after "
           f"{WARM_UP} warm-up runs; callgrind):")
     for tag in trees:
