@@ -188,9 +188,9 @@ class VariableAccess:
             return
         if self._tick_pending:
             self._activate_clock(t)
-        if takes_typed_calls(self.variables, values):
+        vrs = self._float_references(tuple(values))
+        if vrs is None:
             return self._set_values(values, t)
-        vrs = [self.variables[name].valueReference for name in values]
         set_values = lambda: self.real_calls()[1](vrs, [float(v) for v in values.values()])  # noqa: E731
         try:
             self._set_in_mode(set_values, values, t)
